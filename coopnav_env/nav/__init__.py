@@ -1,0 +1,25 @@
+"""Navigation: standalone WLS, virtual-centroid cooperative solver (SDT/DDT), master-slave."""
+
+from coopnav_env.nav.cooperative import (
+    CooperativeSolution,
+    MasterSlaveSolution,
+    solve_cooperative,
+    solve_cooperative_samples,
+    solve_master_slave,
+)
+from coopnav_env.nav.types import GnssObservations, NavStatus, RelativePositions, VirtualPoint
+from coopnav_env.nav.wls import StandaloneSolution, solve_standalone
+
+__all__ = [
+    "CooperativeSolution",
+    "GnssObservations",
+    "MasterSlaveSolution",
+    "NavStatus",
+    "RelativePositions",
+    "StandaloneSolution",
+    "VirtualPoint",
+    "solve_cooperative",
+    "solve_cooperative_samples",
+    "solve_master_slave",
+    "solve_standalone",
+]

@@ -1,0 +1,295 @@
+"""Inputs and outputs of the navigation solvers.
+
+The solvers consume one epoch of the whole swarm: every UAV's pseudoranges (paper Eq. 1, after
+the ionosphere-free combination), the satellite positions, the error model's standard deviations
+(Eq. 3-8) and the relative position measurements between UAVs (Eq. 9). Everything is in ECEF
+metres; :meth:`RelativePositions.from_enu` converts sensor outputs given in a local ENU frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from coopnav_env.constants import SYSTEMS
+
+__all__ = [
+    "GnssObservations",
+    "NavStatus",
+    "RelativePositions",
+    "VirtualPoint",
+]
+
+
+class NavStatus(IntEnum):
+    """Outcome of one position fix. Degenerate cases are reported here, never raised.
+
+    Attributes
+    ----------
+    OK
+        A valid fix with its covariance.
+    TOO_FEW_SATELLITES
+        Fewer usable measurements than unknowns (standalone needs ``3 + N_const``; the
+        cooperative DDT needs one satellite at the centroid UAV, SDT ``3 + N_const`` there).
+    SINGULAR_GEOMETRY
+        Enough measurements, but the normal matrix is numerically singular.
+    NOT_CONVERGED
+        The Gauss-Newton iteration did not converge within ``max_iter``; the last iterate is
+        returned.
+    NO_RELATIVE_POSITION
+        The UAV has no relative position measurement to a shared centroid (or master), so it
+        cannot be located from it.
+    """
+
+    OK = 0
+    TOO_FEW_SATELLITES = 1
+    SINGULAR_GEOMETRY = 2
+    NOT_CONVERGED = 3
+    NO_RELATIVE_POSITION = 4
+
+
+def _as_float_array(name: str, value, shape: tuple[int | None, ...]) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    return arr
+
+
+@dataclass(frozen=True)
+class GnssObservations:
+    """One epoch of pseudoranges for a swarm of ``n_rx`` receivers and ``n_sv`` satellites.
+
+    Parameters
+    ----------
+    pr_m : ndarray, shape (n_rx, n_sv)
+        Ionosphere-free pseudoranges [m] (paper Eq. 1); NaN where a satellite is not received.
+    sv_ecef_m : ndarray, shape (n_sv, 3)
+        Satellite positions in ECEF [m].
+    system : ndarray of int, shape (n_sv,)
+        Constellation index of each satellite into :data:`coopnav_env.constants.SYSTEMS`.
+    sigma_user_m : ndarray, shape (n_rx, n_sv)
+        Receiver-specific (multipath + noise, Eq. 6-8) standard deviation [m].
+    sigma_common_m : ndarray, shape (n_sv,)
+        Standard deviation [m] of the errors common to all receivers for one satellite
+        (clock/ephemeris and troposphere, Eq. 4-5); 0 with differential correction.
+    el_deg : ndarray, shape (n_rx, n_sv)
+        Elevation [deg] of each satellite at each receiver (pivot selection for DDT).
+    n_systems : int
+        Number of constellations in the clock state (``N_const``); default ``len(SYSTEMS)``.
+    """
+
+    pr_m: np.ndarray
+    sv_ecef_m: np.ndarray
+    system: np.ndarray
+    sigma_user_m: np.ndarray
+    sigma_common_m: np.ndarray
+    el_deg: np.ndarray
+    n_systems: int = len(SYSTEMS)
+    visible: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        pr = np.asarray(self.pr_m, dtype=float)
+        if pr.ndim != 2:
+            raise ValueError(f"pr_m must have shape (n_rx, n_sv), got {pr.shape}")
+        n_rx, n_sv = pr.shape
+        sv = _as_float_array("sv_ecef_m", self.sv_ecef_m, (n_sv, 3))
+        system = np.asarray(self.system)
+        if system.shape != (n_sv,) or not np.issubdtype(system.dtype, np.integer):
+            raise ValueError(f"system must be an integer array of shape ({n_sv},), got {system!r}")
+        if not isinstance(self.n_systems, int | np.integer) or self.n_systems < 1:
+            raise ValueError(f"n_systems must be a positive integer, got {self.n_systems!r}")
+        if n_sv and (system.min() < 0 or system.max() >= self.n_systems):
+            raise ValueError(
+                f"system indices must lie in [0, {self.n_systems - 1}], got {np.unique(system)}"
+            )
+        su = _as_float_array("sigma_user_m", self.sigma_user_m, (n_rx, n_sv))
+        sc = _as_float_array("sigma_common_m", self.sigma_common_m, (n_sv,))
+        el = _as_float_array("el_deg", self.el_deg, (n_rx, n_sv))
+        if not np.all(np.isfinite(sv)):
+            raise ValueError("sv_ecef_m contains NaN or inf")
+        visible = np.isfinite(pr)
+        if np.any(np.isinf(pr)):
+            raise ValueError("pr_m contains inf; use NaN for a satellite that is not received")
+        if np.any(~np.isfinite(su[visible])) or np.any(su[visible] <= 0):
+            bad = su[visible][~(np.isfinite(su[visible]) & (su[visible] > 0))][:3]
+            raise ValueError(
+                f"sigma_user_m must be finite and > 0 for every received satellite, got {bad}"
+            )
+        if np.any(~np.isfinite(sc)) or np.any(sc < 0):
+            raise ValueError(f"sigma_common_m must be finite and >= 0, got {sc[~(sc >= 0)][:3]}")
+        if np.any(~np.isfinite(el[visible])):
+            raise ValueError("el_deg must be finite for every received satellite")
+        # Values at satellites that are not received are irrelevant: store NaN there so that
+        # nothing downstream can use them by accident.
+        su = np.where(visible, su, np.nan)
+        el = np.where(visible, el, np.nan)
+        for name, arr in (
+            ("pr_m", pr),
+            ("sv_ecef_m", sv),
+            ("system", system.astype(np.int64)),
+            ("sigma_user_m", su),
+            ("sigma_common_m", sc),
+            ("el_deg", el),
+        ):
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "visible", visible)
+
+    @property
+    def n_rx(self) -> int:
+        """Number of receivers (UAVs)."""
+        return self.pr_m.shape[0]
+
+    @property
+    def n_sv(self) -> int:
+        """Number of satellites (visible or not) in the arrays."""
+        return self.pr_m.shape[1]
+
+    @classmethod
+    def from_epoch(cls, epoch, n_systems: int = len(SYSTEMS)) -> GnssObservations:
+        """Build from a :class:`coopnav_env.gnss.PseudorangeEpoch` (the simulator's output)."""
+        return cls(
+            pr_m=epoch.pr_m,
+            sv_ecef_m=epoch.sv_ecef_m,
+            system=epoch.system,
+            sigma_user_m=epoch.sigma_user_m,
+            sigma_common_m=epoch.sigma_common_m,
+            el_deg=epoch.el_deg,
+            n_systems=n_systems,
+        )
+
+    def subset_receivers(self, idx) -> GnssObservations:
+        """The observations of the receivers ``idx`` only."""
+        idx = np.atleast_1d(idx)
+        return GnssObservations(
+            pr_m=self.pr_m[idx],
+            sv_ecef_m=self.sv_ecef_m,
+            system=self.system,
+            sigma_user_m=self.sigma_user_m[idx],
+            sigma_common_m=self.sigma_common_m,
+            el_deg=self.el_deg[idx],
+            n_systems=self.n_systems,
+        )
+
+
+def _check_cov(name: str, cov: np.ndarray) -> None:
+    if not np.all(np.isfinite(cov)):
+        raise ValueError(f"{name} contains NaN or inf")
+    if not np.allclose(cov, np.swapaxes(cov, -1, -2), rtol=1e-9, atol=1e-12):
+        raise ValueError(f"{name} must be symmetric")
+    if cov.size:
+        eig_min = np.linalg.eigvalsh(cov).min()
+        scale = max(float(np.abs(cov).max()), 1e-300)
+        if eig_min < -1e-9 * scale:
+            raise ValueError(f"{name} must be positive semi-definite (min eigenvalue {eig_min:g})")
+
+
+@dataclass(frozen=True)
+class RelativePositions:
+    """Pairwise relative position measurements between the UAVs (paper Eq. 9), in ECEF.
+
+    Parameters
+    ----------
+    rel_ecef_m : ndarray, shape (n_rx, n_rx, 3)
+        ``rel_ecef_m[b, q]`` is the measured position of UAV ``q`` relative to UAV ``b``
+        (``p_q - p_b + eps_bq``) [m]. The diagonal is zero.
+    cov_ecef_m2 : ndarray, shape (n_rx, n_rx, 3, 3)
+        Covariance ``C_d`` of each measurement [m^2]; the diagonal blocks are zero. Different
+        pairs have independent errors (the paper's assumption, Appendix A case 2).
+    available : ndarray of bool, shape (n_rx, n_rx)
+        Whether the pair is within sensing range. The diagonal is ignored (a UAV always knows
+        its own offset, zero).
+    """
+
+    rel_ecef_m: np.ndarray
+    cov_ecef_m2: np.ndarray
+    available: np.ndarray
+
+    def __post_init__(self) -> None:
+        rel = np.asarray(self.rel_ecef_m, dtype=float)
+        if rel.ndim != 3 or rel.shape[0] != rel.shape[1] or rel.shape[2] != 3:
+            raise ValueError(f"rel_ecef_m must have shape (n, n, 3), got {rel.shape}")
+        n = rel.shape[0]
+        cov = _as_float_array("cov_ecef_m2", self.cov_ecef_m2, (n, n, 3, 3))
+        avail = np.asarray(self.available)
+        if avail.shape != (n, n) or avail.dtype != bool:
+            raise ValueError(f"available must be a bool array of shape ({n}, {n})")
+        avail = avail.copy()
+        np.fill_diagonal(avail, True)
+        if not np.all(np.isfinite(rel[avail])):
+            raise ValueError("rel_ecef_m contains NaN or inf for an available pair")
+        _check_cov("cov_ecef_m2", cov[avail])
+        object.__setattr__(self, "rel_ecef_m", rel)
+        object.__setattr__(self, "cov_ecef_m2", cov)
+        object.__setattr__(self, "available", avail)
+
+    @property
+    def n_rx(self) -> int:
+        """Number of UAVs."""
+        return self.rel_ecef_m.shape[0]
+
+    @classmethod
+    def from_enu(
+        cls,
+        rel_enu_m: np.ndarray,
+        cov_enu_m2: np.ndarray,
+        available: np.ndarray,
+        lat_deg: float,
+        lon_deg: float,
+    ) -> RelativePositions:
+        """Rotate ENU measurements (e.g. from :func:`coopnav_env.sim.swarm.measure_relative_positions`)
+        into ECEF using the local frame at ``(lat_deg, lon_deg)``."""
+        from coopnav_env.gnss.frames import enu_rotation
+
+        r = enu_rotation(lat_deg, lon_deg)  # d_enu = R d_ecef
+        rel = np.einsum("ji,abj->abi", r, np.asarray(rel_enu_m, dtype=float))
+        cov = np.einsum("ji,abjk,kl->abil", r, np.asarray(cov_enu_m2, dtype=float), r)
+        return cls(rel_ecef_m=rel, cov_ecef_m2=cov, available=np.asarray(available, dtype=bool))
+
+    @classmethod
+    def exact(cls, pos_ecef_m: np.ndarray) -> RelativePositions:
+        """Error-free, all-available relative positions of the given true positions (tests)."""
+        pos = np.asarray(pos_ecef_m, dtype=float)
+        n = pos.shape[0]
+        return cls(
+            rel_ecef_m=pos[None, :, :] - pos[:, None, :],
+            cov_ecef_m2=np.zeros((n, n, 3, 3)),
+            available=np.ones((n, n), dtype=bool),
+        )
+
+
+@dataclass(frozen=True)
+class VirtualPoint:
+    """A fixed virtual centroid that is not a UAV (paper Section 3.1, "a fixed point").
+
+    Parameters
+    ----------
+    rel_ecef_m : ndarray, shape (n_rx, 3)
+        Measured position of each UAV relative to the virtual point (``p_q - p_v + eps_q``) [m].
+    cov_ecef_m2 : ndarray, shape (n_rx, 3, 3)
+        Covariance of each of those measurements [m^2]; errors independent across UAVs.
+    available : ndarray of bool, shape (n_rx,)
+        Which UAVs have the measurement.
+    """
+
+    rel_ecef_m: np.ndarray
+    cov_ecef_m2: np.ndarray
+    available: np.ndarray
+
+    def __post_init__(self) -> None:
+        rel = np.asarray(self.rel_ecef_m, dtype=float)
+        if rel.ndim != 2 or rel.shape[1] != 3:
+            raise ValueError(f"VirtualPoint.rel_ecef_m must have shape (n, 3), got {rel.shape}")
+        n = rel.shape[0]
+        cov = _as_float_array("VirtualPoint.cov_ecef_m2", self.cov_ecef_m2, (n, 3, 3))
+        avail = np.asarray(self.available)
+        if avail.shape != (n,) or avail.dtype != bool:
+            raise ValueError(f"VirtualPoint.available must be a bool array of shape ({n},)")
+        if not np.all(np.isfinite(rel[avail])):
+            raise ValueError("VirtualPoint.rel_ecef_m contains NaN or inf for an available UAV")
+        _check_cov("VirtualPoint.cov_ecef_m2", cov[avail])
+        object.__setattr__(self, "rel_ecef_m", rel)
+        object.__setattr__(self, "cov_ecef_m2", cov)
+        object.__setattr__(self, "available", avail)

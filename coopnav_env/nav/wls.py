@@ -1,0 +1,177 @@
+"""Standalone weighted least squares (paper Eq. 14-17), vectorised over receivers.
+
+Each receiver solves for its ECEF position and one clock bias per constellation it sees
+(state length ``3 + N_const``) from its own pseudoranges, weighted by ``W = C^-1`` with the
+diagonal covariance of Eq. 3 (``sigma_URE^2 + sigma_tropo^2 + sigma_user^2``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from coopnav_env.nav.types import GnssObservations, NavStatus
+
+__all__ = ["StandaloneSolution", "solve_standalone"]
+
+#: A normal matrix whose diagonally scaled condition number exceeds this is reported singular.
+COND_LIMIT = 1e10
+
+
+@dataclass(frozen=True)
+class StandaloneSolution:
+    """Standalone fixes of ``n_rx`` receivers.
+
+    Attributes
+    ----------
+    pos_ecef_m : ndarray, shape (n_rx, 3)
+        Estimated positions [m]; NaN where ``status`` is TOO_FEW_SATELLITES or SINGULAR_GEOMETRY.
+    cov_ecef_m2 : ndarray, shape (n_rx, 3, 3)
+        Position block of ``H = (G^T C^-1 G)^-1`` (Eq. 17) [m^2]; NaN where no fix.
+    clock_m : ndarray, shape (n_rx, n_systems)
+        Receiver clock bias per constellation [m]; NaN for a constellation not seen.
+    status : ndarray of int, shape (n_rx,)
+        :class:`NavStatus` values.
+    n_used : ndarray of int, shape (n_rx,)
+        Number of pseudoranges used.
+    n_iter : int
+        Gauss-Newton iterations run.
+    """
+
+    pos_ecef_m: np.ndarray
+    cov_ecef_m2: np.ndarray
+    clock_m: np.ndarray
+    status: np.ndarray
+    n_used: np.ndarray
+    n_iter: int
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Boolean mask of receivers with a valid fix (OK or NOT_CONVERGED excluded)."""
+        return self.status == NavStatus.OK
+
+
+def _safe_inverse(info: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Invert a batch of symmetric normal matrices, reporting singular ones.
+
+    Parameters
+    ----------
+    info : ndarray, shape (B, P, P)
+        Normal matrices; rows/columns of parameters without data must already carry a unit
+        diagonal so that they do not make the matrix singular.
+    usable : ndarray of bool, shape (B,)
+        Batch elements worth inverting.
+
+    Returns
+    -------
+    inv : ndarray, shape (B, P, P)
+        Inverses (identity where singular or not usable).
+    singular : ndarray of bool, shape (B,)
+    """
+    d = np.sqrt(np.clip(np.einsum("bii->bi", info), 1e-300, None))
+    scaled = info / d[:, :, None] / d[:, None, :]
+    eig = np.linalg.eigvalsh(np.where(usable[:, None, None], scaled, np.eye(info.shape[-1])))
+    singular = usable & ((eig[:, 0] <= 0) | (eig[:, -1] > COND_LIMIT * eig[:, 0]))
+    good = usable & ~singular
+    safe = np.where(good[:, None, None], scaled, np.eye(info.shape[-1]))
+    inv = np.linalg.inv(safe) / d[:, :, None] / d[:, None, :]
+    return inv, singular
+
+
+def solve_standalone(
+    obs: GnssObservations,
+    x0_ecef_m: np.ndarray | None = None,
+    *,
+    max_iter: int = 10,
+    tol_m: float = 1e-4,
+) -> StandaloneSolution:
+    """Standalone WLS position fix of every receiver (paper Eq. 14-17).
+
+    Gauss-Newton iterations of ``dp = (G^T W G)^-1 G^T W a`` (Eq. 15) with
+    ``W = C^-1`` (Eq. 16), ``C = diag(sigma_common^2 + sigma_user^2)`` (Eq. 3) and the
+    geometry matrix ``G = [-1^T, e_sys]`` (Eq. 14). The iteration starts from zero (the
+    paper's choice, the Earth's centre) unless ``x0_ecef_m`` is given. The returned
+    covariance is ``H = (G^T C^-1 G)^-1`` (Eq. 17) at the solution.
+
+    Parameters
+    ----------
+    obs : GnssObservations
+        Pseudoranges of ``n_rx`` receivers.
+    x0_ecef_m : ndarray, shape (n_rx, 3) or (3,), optional
+        Initial positions [m]. Default: zeros.
+    max_iter : int
+        Maximum Gauss-Newton iterations (default 10; from zero about 6 are needed).
+    tol_m : float
+        Convergence threshold on the position update norm [m].
+
+    Returns
+    -------
+    StandaloneSolution
+        Receivers that see fewer than ``3 + (number of constellations seen)`` satellites get
+        ``TOO_FEW_SATELLITES``; a numerically singular normal matrix gives
+        ``SINGULAR_GEOMETRY``; both have NaN positions. Nothing is raised for such cases.
+    """
+    if max_iter < 1:
+        raise ValueError(f"max_iter must be >= 1, got {max_iter}")
+    if not tol_m > 0:
+        raise ValueError(f"tol_m must be > 0, got {tol_m}")
+    n_rx, n_sv = obs.pr_m.shape
+    n_sys = obs.n_systems
+    vis = obs.visible
+    w = np.where(vis, 1.0 / (obs.sigma_user_m**2 + obs.sigma_common_m[None, :] ** 2), 0.0)
+    pr = np.where(vis, obs.pr_m, 0.0)
+    onehot = np.eye(n_sys)[obs.system]  # (n_sv, n_sys)
+    seen = np.einsum("rs,sk->rk", vis.astype(float), onehot) > 0  # (n_rx, n_sys)
+    n_used = vis.sum(axis=1)
+    too_few = n_used < 3 + seen.sum(axis=1)
+
+    pos = np.zeros((n_rx, 3))
+    if x0_ecef_m is not None:
+        pos = pos + np.asarray(x0_ecef_m, dtype=float)
+        if not np.all(np.isfinite(pos)):
+            raise ValueError("x0_ecef_m contains NaN or inf")
+    clock = np.zeros((n_rx, n_sys))
+    converged = np.zeros(n_rx, dtype=bool)
+    usable = ~too_few
+    n_iter = 0
+    singular = np.zeros(n_rx, dtype=bool)
+    inv = np.zeros((n_rx, 3 + n_sys, 3 + n_sys))
+    for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is reported
+        diff = obs.sv_ecef_m[None, :, :] - pos[:, None, :]
+        rng_m = np.linalg.norm(diff, axis=-1)
+        los = diff / rng_m[..., None]
+        # Rows of satellites not received carry zero weight (w = 0), so they drop out.
+        g = np.concatenate([-los, np.broadcast_to(onehot, (n_rx, n_sv, n_sys))], axis=-1)
+        resid = pr - rng_m - clock @ onehot.T
+        info = np.einsum("rsp,rs,rsq->rpq", g, w, g)
+        # Clock columns of constellations a receiver does not see carry no data.
+        idx = np.arange(3, 3 + n_sys)
+        info[:, idx, idx] += ~seen
+        rhs = np.einsum("rsp,rs,rs->rp", g, w, resid)
+        inv, singular = _safe_inverse(info, usable)
+        dx = np.einsum("rpq,rq->rp", inv, rhs)
+        dx[~usable | singular] = 0.0
+        pos = pos + dx[:, :3]
+        clock = clock + dx[:, 3:]
+        step = np.linalg.norm(dx[:, :3], axis=1)
+        converged = step < tol_m
+        if np.all(converged | ~usable | singular):
+            break
+    status = np.full(n_rx, NavStatus.OK, dtype=np.int64)
+    status[~converged] = NavStatus.NOT_CONVERGED
+    status[singular] = NavStatus.SINGULAR_GEOMETRY
+    status[too_few] = NavStatus.TOO_FEW_SATELLITES
+    failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)
+    pos[failed] = np.nan
+    cov = inv[:, :3, :3].copy()
+    cov[failed] = np.nan
+    clock = np.where(seen & ~failed[:, None], clock, np.nan)
+    return StandaloneSolution(
+        pos_ecef_m=pos,
+        cov_ecef_m2=cov,
+        clock_m=clock,
+        status=status,
+        n_used=n_used,
+        n_iter=n_iter,
+    )
