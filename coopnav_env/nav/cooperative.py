@@ -41,9 +41,10 @@ transferred measurement ``(q, k)`` is, from the independent sources (common erro
 satellite, user error ``e_u`` per receiver and satellite, relative error ``eps_q``):
 
 * SDT: ``e_c^k + e_u,q^k + 1_q^k . eps_q`` (and ``-dt_q``, estimated);
-* DDT, ``q`` not the reference ``r``: ``e_c^k + e_u,q^k - e_u,q^j + e_u,r^j + (1_q^k - 1_q^j) . eps_q``
-  -- the relative error projects on a *difference* of LOS vectors and the pivot errors
-  ``e_u,q^j`` (within a UAV) and ``e_u,r^j`` (across all UAVs) correlate rows;
+* DDT, ``q`` not the reference ``r``:
+  ``e_c^k + e_u,q^k - e_u,q^j + e_u,r^j + (1_q^k - 1_q^j) . eps_q`` -- the relative error
+  projects on a *difference* of LOS vectors and the pivot errors ``e_u,q^j`` (within a UAV)
+  and ``e_u,r^j`` (across all UAVs) correlate rows;
 * rows of a UAV that is its own centroid carry no relative error at all.
 
 ``C* = B Sigma B^T`` over those sources. The DDT estimate with this exact ``C*`` is identical to
@@ -424,9 +425,10 @@ def _structured_normal(
     flat = lambda z: z.reshape(b, n * s, z.shape[-1])  # noqa: E731
     atpx = np.swapaxes(flat(A), 1, 2) @ flat(px[..., : p_dim + 1])  # (B, P, P + 1)
     # E^T P E = sig sig^T * sum_n P_n
-    sum_p = -(np.swapaxes(wtm, 1, 2).reshape(b, s, n * r_dim) @ np.swapaxes(wt, 1, 2).reshape(
-        b, s, n * r_dim
-    ).swapaxes(1, 2))
+    sum_p = -(
+        np.swapaxes(wtm, 1, 2).reshape(b, s, n * r_dim)
+        @ np.swapaxes(wt, 1, 2).reshape(b, s, n * r_dim).swapaxes(1, 2)
+    )
     sum_p[:, np.arange(s), np.arange(s)] += w.sum(axis=1)
     mg = np.eye(s) + sig_c[:, :, None] * sum_p * sig_c[:, None, :]
     ape = pa.sum(axis=1).swapaxes(1, 2) * sig_c[:, None, :]  # (B, P, S)
@@ -655,7 +657,6 @@ def solve_cooperative(
         raise ValueError(f"tol_m must be > 0, got {tol_m}")
     st = _setup(obs, rel, centroid, transfer, sdt_min_centroid_sats)
     n_b = st.ref.shape[0]
-    n = obs.n_rx
     x0 = np.zeros((n_b, 3))
     if x0_ecef_m is not None:
         x0 = x0 + np.asarray(x0_ecef_m, dtype=float)
@@ -701,9 +702,7 @@ def _finish(obs, st, pos, clk, inv, cross, converged, singular, lin):
     c_status[~converged] = NavStatus.NOT_CONVERGED
     c_status[singular] = NavStatus.SINGULAR_GEOMETRY
     c_status[too_few] = NavStatus.TOO_FEW_SATELLITES
-    failed = (c_status == NavStatus.TOO_FEW_SATELLITES) | (
-        c_status == NavStatus.SINGULAR_GEOMETRY
-    )
+    failed = (c_status == NavStatus.TOO_FEW_SATELLITES) | (c_status == NavStatus.SINGULAR_GEOMETRY)
     h_star = inv[:, :3, :3].copy()
     c_pos = pos.copy()
     c_pos[failed] = np.nan
@@ -770,8 +769,13 @@ def solve_cooperative_samples(
         raise ValueError(f"rel_samples_m must have shape ({k}, {obs.n_rx}, 3)")
     if isinstance(centroid, str):
         raise ValueError("solve_cooperative_samples needs one shared centroid (int/VirtualPoint)")
-    st = _setup(obs, rel if isinstance(rel, RelativePositions) else None, centroid, transfer,
-                sdt_min_centroid_sats)
+    st = _setup(
+        obs,
+        rel if isinstance(rel, RelativePositions) else None,
+        centroid,
+        transfer,
+        sdt_min_centroid_sats,
+    )
     if np.any(np.isfinite(pr_samples_m) != obs.visible[None]):
         raise ValueError("pr_samples_m must be finite exactly where obs.pr_m is")
     rep = {f: np.repeat(getattr(st, f), k, axis=0) for f in st.__dataclass_fields__}
@@ -834,8 +838,9 @@ def solve_master_slave(
     if isinstance(master, str):
         if master != "best":
             raise ValueError(f"master must be a UAV index or 'best', got {master!r}")
-        tr = np.where(sa.ok, np.trace(np.nan_to_num(sa.cov_ecef_m2, nan=np.inf), axis1=1, axis2=2),
-                      np.inf)
+        tr = np.where(
+            sa.ok, np.trace(np.nan_to_num(sa.cov_ecef_m2, nan=np.inf), axis1=1, axis2=2), np.inf
+        )
         m = int(np.argmin(tr))
     else:
         if not 0 <= int(master) < n:

@@ -239,8 +239,11 @@ class RelativePositions:
         lat_deg: float,
         lon_deg: float,
     ) -> RelativePositions:
-        """Rotate ENU measurements (e.g. from :func:`coopnav_env.sim.swarm.measure_relative_positions`)
-        into ECEF using the local frame at ``(lat_deg, lon_deg)``."""
+        """Rotate ENU measurements into ECEF using the local frame at ``(lat_deg, lon_deg)``.
+
+        The ENU inputs are what :func:`coopnav_env.sim.swarm.measure_relative_positions`
+        returns: ``rel_enu_m`` (n, n, 3), ``cov_enu_m2`` (n, n, 3, 3), ``available`` (n, n).
+        """
         from coopnav_env.gnss.frames import enu_rotation
 
         r = enu_rotation(lat_deg, lon_deg)  # d_enu = R d_ecef

@@ -116,7 +116,7 @@ def make_scenario(
     differential=False,
     sigma_d=0.5,
     canyon_uav=None,
-    canyon_hd=np.sqrt(3),
+    canyon_hd=3**0.5,
     colocated=False,
     max_open=None,
 ):
