@@ -364,6 +364,17 @@ def _linearize(
 # --------------------------------------------------------------------------------------------
 
 
+def _inv_sym3(m: np.ndarray) -> np.ndarray:
+    """Closed-form inverse of a batch of symmetric positive definite 3x3 matrices."""
+    a, b, c = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    d, e, f = m[..., 1, 1], m[..., 1, 2], m[..., 2, 2]
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    out = np.stack([c00, c01, c02, c01, c11, c12, c02, c12, c22], axis=-1)
+    return out.reshape(m.shape) / det[..., None, None]
+
+
 def _structured_normal(
     w: np.ndarray,
     A: np.ndarray,
@@ -377,70 +388,73 @@ def _structured_normal(
 
     The row covariance is ``C = blockdiag_n(diag(1/w_n) + lam_n lam_n^T) + E E^T`` where
     ``E[(n, k), k'] = sig_c[k] delta_kk'`` (errors common to all blocks for one satellite), and
-    each block ``n`` has flat-prior nuisance parameters with design ``nuis_n``.
+    each block ``n`` has flat-prior nuisance parameters with design ``nuis_n`` (one-hot rows:
+    each row belongs to at most one nuisance, e.g. its constellation's clock).
 
-    Each low-rank term is a latent variable with a unit prior. The per-block latent and the
-    per-block nuisances are eliminated together: with ``T_n = [lam_n, nuis_n]`` and
-    ``Pi = diag(I_L, 0_Q)``, the block weight after elimination is
-    ``P_n = W_n - W_n T_n (Pi + T_n^T W_n T_n)^-1 T_n^T W_n`` (an ``(L+Q) x (L+Q)`` solve per
-    block). The common errors are then eliminated with one ``S x S`` solve per batch element:
-    ``A^T C~^-1 A = A^T P A - (A^T P E)(I + E^T P E)^-1 (E^T P A)``.
+    Each low-rank term is a latent variable with a unit prior; nuisances and latents are
+    eliminated in closed form, never by forming ``C``:
+
+    1. per block, the nuisance clocks: ``N^T W N`` is diagonal for one-hot rows, so
+       ``P0 = W - W N (N^T W N)^-1 N^T W`` costs a division;
+    2. per block, the rank-3 relative-error latent (Woodbury with a closed-form 3x3 inverse):
+       ``P = P0 - P0 lam (I + lam^T P0 lam)^-1 lam^T P0``;
+    3. the common errors, with one ``S x S`` solve per batch element:
+       ``A^T C~^-1 A = A^T P A - (A^T P E)(I + E^T P E)^-1 (E^T P A)``.
 
     Parameters
     ----------
     w : (B, N, S) inverse variances of the diagonal part; 0 marks an absent row.
     A : (B, N, S, P) design of the global parameters.
     a : (B, N, S) residuals.
-    nuis : (B, N, S, Q) design of the per-block nuisance parameters.
-    lam : (B, N, S, L) per-block low-rank loadings.
+    nuis : (B, N, S, Q) one-hot design of the per-block nuisance parameters.
+    lam : (B, N, S, 3) per-block low-rank loadings.
     sig_c : (B, S) common-error standard deviations.
-    eps_load : (B, N, S, L) loadings of the per-block relative error for the cross-covariance.
+    eps_load : (B, N, S, 3) loadings of the per-block relative error for the cross-covariance.
 
     Returns
     -------
     info : (B, P, P) ``A^T C~^-1 A`` with nuisances eliminated.
     rhs : (B, P) ``A^T C~^-1 a``.
-    cross : (B, N, P, L) ``A^T C~^-1 eps_load_n`` per block.
+    cross : (B, N, P, 3) ``A^T C~^-1 eps_load_n`` per block.
     """
     b, n, s = w.shape
-    l_dim, q_dim, p_dim = lam.shape[-1], nuis.shape[-1], A.shape[-1]
-    t = np.concatenate([lam, nuis], axis=-1) if q_dim else lam  # (B, N, S, R)
-    r_dim = t.shape[-1]
-    wt = w[..., None] * t
-    m = np.swapaxes(t, -1, -2) @ wt  # (B, N, R, R)
-    idx = np.arange(r_dim)
-    prior = np.zeros(r_dim)
-    prior[:l_dim] = 1.0
-    m[..., idx, idx] += prior
+    q_dim, p_dim = nuis.shape[-1], A.shape[-1]
+    x = np.concatenate([lam, A, a[..., None], eps_load], axis=-1)  # (B, N, S, 3 + P + 1 + 3)
+    p0x = w[..., None] * x
     if q_dim:
-        # nuisance columns without data (a constellation the UAV does not see) are inert
-        empty = np.einsum("bnsq,bns->bnq", np.abs(nuis), (w > 0).astype(float)) == 0
-        m[..., idx[l_dim:], idx[l_dim:]] += empty
-    wtm = wt @ np.linalg.inv(m)  # (B, N, S, R);  P X = W X - wtm (wt^T X)
-
-    x = np.concatenate([A, a[..., None], eps_load], axis=-1)  # (B, N, S, P + 1 + L)
-    px = w[..., None] * x - wtm @ (np.swapaxes(wt, -1, -2) @ x)
+        wn = w[..., None] * nuis  # (B, N, S, Q)
+        d = wn.sum(axis=2)  # diagonal of N^T W N; 0 for a constellation the UAV lacks
+        dinv = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
+        wnd = wn * dinv[:, :, None, :]
+        p0x -= wnd @ (np.swapaxes(wn, -1, -2) @ x)
+    p0lam, x_rest, p0_rest = p0x[..., :3], x[..., 3:], p0x[..., 3:]
+    m3inv = _inv_sym3(np.eye(3) + np.swapaxes(lam, -1, -2) @ p0lam)  # (B, N, 3, 3)
+    g3 = p0lam @ m3inv  # (B, N, S, 3)
+    px = p0_rest - g3 @ (np.swapaxes(p0lam, -1, -2) @ x_rest)
     pa, pr, pe = px[..., :p_dim], px[..., p_dim], px[..., p_dim + 1 :]
     # A^T P [A, a] summed over blocks
-    flat = lambda z: z.reshape(b, n * s, z.shape[-1])  # noqa: E731
-    atpx = np.swapaxes(flat(A), 1, 2) @ flat(px[..., : p_dim + 1])  # (B, P, P + 1)
-    # E^T P E = sig sig^T * sum_n P_n
-    sum_p = -(
-        np.swapaxes(wtm, 1, 2).reshape(b, s, n * r_dim)
-        @ np.swapaxes(wt, 1, 2).reshape(b, s, n * r_dim).swapaxes(1, 2)
-    )
-    sum_p[:, np.arange(s), np.arange(s)] += w.sum(axis=1)
-    mg = np.eye(s) + sig_c[:, :, None] * sum_p * sig_c[:, None, :]
+    a_flat = A.reshape(b, n * s, p_dim)
+    atpx = np.swapaxes(a_flat, 1, 2) @ px[..., : p_dim + 1].reshape(b, n * s, p_dim + 1)
+    # sum_n P_n = diag(sum_n w_n) - sum_n [W N D^-1 N^T W]_n - sum_n [P0 lam M^-1 lam^T P0]_n
+    left = g3.swapaxes(1, 2).reshape(b, s, n * 3)
+    right = p0lam.swapaxes(1, 2).reshape(b, s, n * 3)
+    sum_p = -(left @ right.swapaxes(1, 2))
+    if q_dim:
+        sum_p -= wnd.swapaxes(1, 2).reshape(b, s, n * q_dim) @ wn.swapaxes(1, 2).reshape(
+            b, s, n * q_dim
+        ).swapaxes(1, 2)
+    diag = np.arange(s)
+    sum_p[:, diag, diag] += w.sum(axis=1)
+    mg = sig_c[:, :, None] * sum_p * sig_c[:, None, :]
+    mg[:, diag, diag] += 1.0  # I + E^T P E: SPD
     ape = pa.sum(axis=1).swapaxes(1, 2) * sig_c[:, None, :]  # (B, P, S)
     epr = sig_c * pr.sum(axis=1)  # (B, S)
-    rhs_stack = np.concatenate([np.swapaxes(ape, 1, 2), epr[..., None]], axis=-1)
-    sol = np.linalg.solve(mg, rhs_stack)  # Mg^-1 [E^T P A, E^T P a]
-    info = atpx[..., :p_dim] - ape @ sol[..., :p_dim]
-    rhs = atpx[..., p_dim] - np.einsum("bps,bs->bp", ape, sol[..., p_dim])
+    mg_inv = np.linalg.inv(mg)
+    g = ape @ mg_inv  # (B, P, S)
+    info = atpx[..., :p_dim] - g @ np.swapaxes(ape, 1, 2)
+    rhs = atpx[..., p_dim] - (g @ epr[..., None])[..., 0]
     # cross-covariance terms A^T P~ eps_n = A^T P_n eps_n - (A^T P E) Mg^-1 (E^T P_n eps_n)
-    cross = np.swapaxes(A, -1, -2) @ pe  # (B, N, P, L)
-    g = ape @ np.linalg.inv(mg)  # (B, P, S)
-    cross -= g[:, None] @ (sig_c[:, None, :, None] * pe)
+    cross = np.swapaxes(A, -1, -2) @ pe - g[:, None] @ (sig_c[:, None, :, None] * pe)
     return info, rhs, cross
 
 
@@ -448,11 +462,11 @@ def _weights(
     obs: GnssObservations, st: _Setup, lin: _Linear, covariance: CovarianceModel
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``w, lam, sig_c, eps_load`` of the structured covariance for the rows of ``lin``."""
+    # rows that are absent get zero weight; nothing else needs masking (see _structured_normal)
     w = np.where(lin.rows, 1.0 / obs.sigma_user_m[None] ** 2, 0.0)
-    f = st.froot_paper if covariance == "paper" else st.froot
-    lam = np.einsum("bnsi,bnij->bnsj", lin.u, f) * lin.rows[..., None]
     # Eq. 21-22: the relative error of UAV q loads its own rows with 1^k (paper and exact SDT)
-    eps_load = np.einsum("bnsi,bnij->bnsj", lin.u, st.froot) * lin.rows[..., None]
+    eps_load = lin.u @ st.froot
+    lam = lin.u @ st.froot_paper if covariance == "paper" else eps_load
     sig_c = np.broadcast_to(obs.sigma_common_m, (w.shape[0], obs.n_sv))
     return w, lam, sig_c, eps_load
 

@@ -1,0 +1,106 @@
+"""Benchmark: one cooperative WLS solve with the full covariance C*, structured vs dense.
+
+Two figures per swarm size N (every UAV sees ``--sats`` satellites, centroid at UAV 0, exact
+covariance, DDT):
+
+* **solve** -- the WLS of Eq. 15-17 over all m transferred measurements at a given
+  linearisation point: normal equations ``G^T C*^-1 G``, ``G^T C*^-1 a`` and their solution with
+  ``H*`` (plus the cross-covariances needed for every UAV's ``H_p``). Structured: the block /
+  low-rank elimination of :func:`coopnav_env.nav.cooperative._structured_normal`. Reference:
+  the same quantities with C* formed densely and inverted by ``numpy.linalg.inv``
+  (:func:`coopnav_env.nav.cooperative._dense_normal`).
+* **call** -- one whole public call ``solve_cooperative(..., max_iter=1)`` (set-up, one
+  Gauss-Newton step, every UAV's position and covariance), structured vs ``method="dense"``.
+
+Both run in this process, interleaved; medians of repeated timings; the ratio is printed.
+Usage: ``python benchmarks/bench_solver.py [--repeats 50] [--sats 20] [--sizes 5 20 50]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from coopnav_env.nav import cooperative as coop  # noqa: E402
+from coopnav_env.nav import solve_cooperative  # noqa: E402
+from coopnav_env.nav.wls import _safe_inverse  # noqa: E402
+from tests.nav.scenario import make_scenario  # noqa: E402
+
+
+def _median_time(fn, repeats: int) -> float:
+    fn()  # warm-up
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        samples.append(time.perf_counter() - t0)
+    return statistics.median(samples)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--repeats", type=int, default=50, help="timed repetitions (median)")
+    ap.add_argument("--sats", type=int, default=20, help="satellites in view of every UAV")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[5, 20, 50], help="swarm sizes")
+    args = ap.parse_args(argv)
+    rng = np.random.default_rng(0)
+    head = (
+        f"{'N':>4} {'m':>5} | {'solve struct':>12} {'solve dense':>12} {'ratio':>7} | "
+        f"{'call struct':>11} {'call dense':>11} {'ratio':>7}   (microseconds)"
+    )
+    print(head)
+    worst = {}
+    for n in args.sizes:
+        sc = make_scenario(n_uav=n, n_sv=args.sats, canyon_uav=0, spread_m=60.0)
+        obs = sc.observations(rng)
+        rel = sc.relative(rng)
+        x0 = sc.pos_ecef[0] + 1.0
+        st = coop._setup(obs, rel, 0, "ddt", None)
+        ok = np.ones(1, dtype=bool)
+        lin_ud = coop._linearize(obs, st, x0[None], np.zeros((1, 2)), literal_ddt=False)
+        lin_dd = coop._linearize(obs, st, x0[None], np.zeros((1, 2)), literal_ddt=True)
+
+        def solve_structured(lin=lin_ud):
+            w, lam, sig_c, eps = coop._weights(obs, st, lin, "exact")
+            info, rhs, cross = coop._structured_normal(w, lin.A, lin.a, lin.nuis, lam, sig_c, eps)
+            inv, _ = _safe_inverse(info, ok)
+            return inv @ rhs[..., None]
+
+        def solve_dense(lin=lin_dd):
+            info, rhs, cross = coop._dense_normal(obs, st, lin, "ddt", "exact")
+            inv, _ = _safe_inverse(info, ok)
+            return inv @ rhs[..., None]
+
+        assert np.allclose(solve_structured(), solve_dense(), atol=1e-6)
+        few = max(3, args.repeats // 10)
+        t_s = _median_time(solve_structured, args.repeats)
+        t_d = _median_time(solve_dense, few)
+        kw = dict(centroid=0, x0_ecef_m=x0, max_iter=1)
+        c_s = _median_time(lambda: solve_cooperative(obs, rel, **kw), args.repeats)
+        c_d = _median_time(lambda: solve_cooperative(obs, rel, method="dense", **kw), few)
+        m = int(lin_dd.rows.sum())
+        print(
+            f"{n:>4} {m:>5} | {t_s * 1e6:>12.0f} {t_d * 1e6:>12.0f} {t_d / t_s:>6.1f}x | "
+            f"{c_s * 1e6:>11.0f} {c_d * 1e6:>11.0f} {c_d / c_s:>6.1f}x"
+        )
+        worst[n] = (t_s, t_d / t_s)
+    if 50 in worst:
+        t_s, ratio = worst[50]
+        print(
+            f"\nN=50: structured solve {t_s * 1e3:.3f} ms (target < 0.5 ms), "
+            f"{ratio:.0f}x faster than the dense inverse of C* (target >= 20x)"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,57 @@
+"""The urban world: buildings, visibility and the UAV swarm (no PettingZoo import).
+
+``city``   buildings, street grid, 3-D line of sight, skyline mask, the paper's analytic
+           canyon mask (Eq. 25) and NLOS reception.
+``swarm``  UAV kinematics, building and inter-UAV collisions, relative (UWB-like) sensing.
+
+Everything is in a local ENU frame in metres (x East, y North, z Up, ground at z = 0);
+satellites are unit direction vectors.
+"""
+
+from __future__ import annotations
+
+from coopnav_env.sim.city import (
+    DEFAULT_CANYON_GAPS_DEG,
+    Buildings,
+    CanyonMask,
+    City,
+    CityConfig,
+    canyon_city,
+    draw_nlos,
+    generate_city,
+    is_inside_building,
+    line_of_sight,
+    mask_elevation_deg,
+)
+from coopnav_env.sim.swarm import (
+    KinematicsConfig,
+    RelativeSensingConfig,
+    building_collisions,
+    measure_relative_positions,
+    pairwise_ranges_m,
+    separation_violations,
+    step_kinematics,
+    swept_collisions,
+)
+
+__all__ = [
+    "DEFAULT_CANYON_GAPS_DEG",
+    "Buildings",
+    "CanyonMask",
+    "City",
+    "CityConfig",
+    "KinematicsConfig",
+    "RelativeSensingConfig",
+    "building_collisions",
+    "canyon_city",
+    "draw_nlos",
+    "generate_city",
+    "is_inside_building",
+    "line_of_sight",
+    "mask_elevation_deg",
+    "measure_relative_positions",
+    "pairwise_ranges_m",
+    "separation_violations",
+    "step_kinematics",
+    "swept_collisions",
+]
