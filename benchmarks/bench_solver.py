@@ -28,10 +28,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from coopnav_env.nav import cooperative as coop  # noqa: E402
-from coopnav_env.nav import solve_cooperative  # noqa: E402
-from coopnav_env.nav.wls import _safe_inverse  # noqa: E402
-from tests.nav.scenario import make_scenario  # noqa: E402
+from coopnav_env.nav import cooperative as coop
+from coopnav_env.nav import solve_cooperative
+from coopnav_env.nav.wls import _safe_inverse
+from tests.nav.scenario import make_scenario
 
 
 def _median_time(fn, repeats: int) -> float:
@@ -71,12 +71,12 @@ def main(argv: list[str] | None = None) -> int:
 
         def solve_structured(lin=lin_ud):
             w, lam, sig_c, eps = coop._weights(obs, st, lin, "exact")
-            info, rhs, cross = coop._structured_normal(w, lin.A, lin.a, lin.nuis, lam, sig_c, eps)
+            info, rhs, _ = coop._structured_normal(w, lin.A, lin.a, lin.nuis, lam, sig_c, eps)
             inv, _ = _safe_inverse(info, ok)
             return inv @ rhs[..., None]
 
         def solve_dense(lin=lin_dd):
-            info, rhs, cross = coop._dense_normal(obs, st, lin, "ddt", "exact")
+            info, rhs, _ = coop._dense_normal(obs, st, lin, "ddt", "exact")
             inv, _ = _safe_inverse(info, ok)
             return inv @ rhs[..., None]
 
