@@ -1,0 +1,47 @@
+"""The console script: help works without optional dependencies, the demo runs."""
+
+from __future__ import annotations
+
+import pytest
+
+from training.cli import build_parser, main
+from training.demo import run_demo
+
+
+def test_help_lists_commands(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "demo" in out
+
+
+def test_every_subcommand_has_help(capsys):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name in sub.choices:
+        with pytest.raises(SystemExit) as exc:
+            main([name, "--help"])
+        assert exc.value.code == 0, name
+    capsys.readouterr()
+
+
+def test_demo_cooperative_beats_standalone():
+    res = run_demo(n_epochs=30, seed=1, progress=False)
+    import numpy as np
+
+    both = np.isfinite(res.standalone_err_m) & np.isfinite(res.coop_err_m)
+    assert both.sum() >= 25
+    assert np.sqrt(np.mean(res.coop_err_m[both] ** 2)) < np.sqrt(
+        np.mean(res.standalone_err_m[both] ** 2)
+    )
+
+
+def test_demo_is_deterministic_and_validates():
+    a = run_demo(n_epochs=5, seed=3, progress=False)
+    b = run_demo(n_epochs=5, seed=3, progress=False)
+    import numpy as np
+
+    assert np.array_equal(a.coop_err_m, b.coop_err_m, equal_nan=True)
+    with pytest.raises(ValueError, match="n_epochs must be >= 1"):
+        run_demo(n_epochs=0)
