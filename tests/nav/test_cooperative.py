@@ -281,3 +281,26 @@ def test_bad_solver_arguments_raise():
         RelativePositions(rel.rel_ecef_m, bad, rel.available)
     with pytest.raises(ValueError, match="max_iter must be >= 1"):
         solve_standalone(obs, max_iter=0)
+
+
+def test_singular_geometry_is_reported():
+    """Satellites all along nearly one line of sight: enough of them, but no geometry."""
+    sc = make_scenario(n_sv=8, seed=6)
+    base_dir = sc.sv_ecef[0] - sc.pos_ecef.mean(axis=0)
+    base_dir /= np.linalg.norm(base_dir)
+    sc.sv_ecef = sc.pos_ecef.mean(axis=0) + base_dir * 2.2e7 + np.arange(8)[:, None] * 1e-3
+    obs = sc.observations(noise=False)
+    sa = solve_standalone(obs, sc.pos_ecef)
+    assert np.all(sa.status == NavStatus.SINGULAR_GEOMETRY)
+    assert np.all(np.isnan(sa.pos_ecef_m))
+    coop = solve_cooperative(obs, sc.relative(noise=False), x0_ecef_m=sc.pos_ecef)
+    assert np.all(coop.status == NavStatus.SINGULAR_GEOMETRY)
+
+
+def test_non_convergence_is_reported():
+    sc = make_scenario()
+    obs = sc.observations(noise=False)
+    assert np.all(solve_standalone(obs, max_iter=1).status == NavStatus.NOT_CONVERGED)
+    coop = solve_cooperative(obs, sc.relative(noise=False), max_iter=1)
+    assert np.all(coop.status == NavStatus.NOT_CONVERGED)
+    assert np.all(np.isfinite(coop.pos_ecef_m))  # the last iterate is returned
