@@ -78,7 +78,7 @@ from typing import Literal
 import numpy as np
 
 from coopnav_env.nav.types import GnssObservations, NavStatus, RelativePositions, VirtualPoint
-from coopnav_env.nav.wls import _safe_inverse
+from coopnav_env.nav.wls import StandaloneSolution, _safe_inverse, solve_standalone
 
 __all__ = [
     "CooperativeSolution",
@@ -822,7 +822,7 @@ def solve_master_slave(
     rel: RelativePositions,
     *,
     master: int | Literal["best"] = "best",
-    standalone=None,
+    standalone: StandaloneSolution | None = None,
     x0_ecef_m: np.ndarray | None = None,
 ) -> MasterSlaveSolution:
     """The "traditional" cooperative scheme of Section 4.2: slaves use the master's fix.
@@ -843,8 +843,6 @@ def solve_master_slave(
     x0_ecef_m : ndarray, optional
         Initial positions for the standalone solve.
     """
-    from coopnav_env.nav.wls import solve_standalone
-
     n = obs.n_rx
     if rel.n_rx != n:
         raise ValueError(f"relative positions are for {rel.n_rx} UAVs, observations for {n}")
