@@ -1,0 +1,148 @@
+"""Configuration of the ``urban_canyon_v0`` environment: one typed, frozen, validated dataclass.
+
+:class:`UrbanCanyonConfig` extends the world's :class:`~coopnav_env.sim.scenario.ScenarioConfig`
+(city, satellites, errors, kinematics, sensing, navigation, task) with what only the
+environment needs (episode length, observation, reward, rendering). Every keyword argument of
+``urban_canyon_v0.parallel_env(...)`` is a field of it; unknown names are rejected with the list
+of valid ones (:func:`make_config`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Any, Literal
+
+from coopnav_env.sim.city import _check_int, _check_real
+from coopnav_env.sim.scenario import ScenarioConfig, _check_choice
+
+__all__ = ["UrbanCanyonConfig", "config_field_names", "make_config"]
+
+
+@dataclass(frozen=True)
+class UrbanCanyonConfig(ScenarioConfig):
+    """Every setting of ``urban_canyon_v0`` (world fields inherited from ScenarioConfig).
+
+    A bad value raises ``ValueError`` naming the field, the value and the allowed range. The
+    world fields (``n_uavs``, ``city``, ``city_config``, ``city_seed``, ``canyon_*``, origin,
+    ``t0_s``, ``systems``, ``elevation_mask_deg``, ``max_sats``, ``error_model``, NLOS,
+    ``kinematics``, ``relative_sensing``, ``transfer``, ``centroid``, ``covariance``, ...,
+    ``goal_radius_m``) are documented in :class:`~coopnav_env.sim.scenario.ScenarioConfig`.
+
+    Parameters
+    ----------
+    max_steps : int, default 200
+        Episode length; reaching it truncates every agent, in [1, 100000].
+    obs_neighbours : int, default 4
+        Neighbour slots ``K`` in each observation (nearest first, padded), in [0, 64].
+    obs_sky_azimuths : int, default 8
+        Azimuths of the sky-openness observation, evenly spaced from North, in [1, 72].
+    obs_sigma_max_m : float, default 20.0
+        Predicted sigma per axis at which the SIG observation saturates at 1, in (0, 1e4] [m].
+    nav_reward : {"error", "sigma"}, default "error"
+        Navigation reward from the true 3-D error of the estimate a UAV uses, or from its
+        predicted 3-D sigma ``sqrt(trace(H_p))``.
+    nav_reward_weight : float, default 1.0
+        Weight of the navigation term, in [0, 1000].
+    nav_reward_scale_m : float, default 10.0
+        Error (or sigma) that costs one ``nav_reward_weight``, in (0, 1e4] [m].
+    nav_reward_cap_m : float, default 50.0
+        The error (or sigma) is capped here before scaling, in (0, 1e5] [m].
+    progress_reward_weight : float, default 1.0
+        Weight of the progress term (decrease of the true horizontal distance to the goal per
+        step, divided by ``max_speed_mps * dt_s``, so at most 1), in [0, 1000].
+    collision_penalty : float, default 10.0
+        Subtracted from a UAV that hits a building (the episode ends), in [0, 1e5].
+    separation_penalty : float, default 1.0
+        Subtracted per step from each UAV closer than ``min_separation_m`` to another, in
+        [0, 1e5].
+    contact_penalty : float, default 0.5
+        Subtracted per step from each UAV with no other UAV in relative-sensing range, in
+        [0, 1e5].
+    goal_bonus : float, default 10.0
+        Added to every UAV when all UAVs are in the goal area (the episode ends), in [0, 1e5].
+    render_sky_uav : int, default -1
+        UAV shown in the sky plot of a rendered frame; -1: the UAV that receives the fewest
+        satellites at that epoch. In [-1, n_uavs - 1].
+    render_width_px, render_height_px : int, default 1280, 640
+        Size of a rendered frame, each in [320, 4096] [pixel].
+    """
+
+    max_steps: int = 200
+    obs_neighbours: int = 4
+    obs_sky_azimuths: int = 8
+    obs_sigma_max_m: float = 20.0
+    nav_reward: Literal["error", "sigma"] = "error"
+    nav_reward_weight: float = 1.0
+    nav_reward_scale_m: float = 10.0
+    nav_reward_cap_m: float = 50.0
+    progress_reward_weight: float = 1.0
+    collision_penalty: float = 10.0
+    separation_penalty: float = 1.0
+    contact_penalty: float = 0.5
+    goal_bonus: float = 10.0
+    render_sky_uav: int = -1
+    render_width_px: int = 1280
+    render_height_px: int = 640
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        o = type(self).__name__
+        _check_int(o, "max_steps", self.max_steps, 1, 100_000)
+        _check_int(o, "obs_neighbours", self.obs_neighbours, 0, 64)
+        _check_int(o, "obs_sky_azimuths", self.obs_sky_azimuths, 1, 72)
+        _check_real(o, "obs_sigma_max_m", self.obs_sigma_max_m, 0.0, 1e4, lo_open=True)
+        _check_choice(o, "nav_reward", self.nav_reward, ("error", "sigma"))
+        _check_real(o, "nav_reward_weight", self.nav_reward_weight, 0.0, 1000.0)
+        _check_real(o, "nav_reward_scale_m", self.nav_reward_scale_m, 0.0, 1e4, lo_open=True)
+        _check_real(o, "nav_reward_cap_m", self.nav_reward_cap_m, 0.0, 1e5, lo_open=True)
+        _check_real(o, "progress_reward_weight", self.progress_reward_weight, 0.0, 1000.0)
+        _check_real(o, "collision_penalty", self.collision_penalty, 0.0, 1e5)
+        _check_real(o, "separation_penalty", self.separation_penalty, 0.0, 1e5)
+        _check_real(o, "contact_penalty", self.contact_penalty, 0.0, 1e5)
+        _check_real(o, "goal_bonus", self.goal_bonus, 0.0, 1e5)
+        _check_int(o, "render_sky_uav", self.render_sky_uav, -1, self.n_uavs - 1)
+        _check_int(o, "render_width_px", self.render_width_px, 320, 4096)
+        _check_int(o, "render_height_px", self.render_height_px, 320, 4096)
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one agent's observation vector: ``14 + obs_sky_azimuths + 4 K``."""
+        return 14 + self.obs_sky_azimuths + 4 * self.obs_neighbours
+
+    @property
+    def state_dim(self) -> int:
+        """Length of the global state vector: ``13 N + 4``."""
+        return 13 * self.n_uavs + 4
+
+
+def config_field_names() -> list[str]:
+    """Names of every :class:`UrbanCanyonConfig` field, in declaration order."""
+    return [f.name for f in fields(UrbanCanyonConfig)]
+
+
+def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> UrbanCanyonConfig:
+    """Build (or update) a config from keyword arguments, rejecting unknown names.
+
+    Parameters
+    ----------
+    config : UrbanCanyonConfig, optional
+        Starting point; default ``UrbanCanyonConfig()``.
+    **overrides
+        Field values.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name (the message lists the valid ones) or a bad value.
+    """
+    if config is not None and not isinstance(config, UrbanCanyonConfig):
+        raise ValueError(f"config must be an UrbanCanyonConfig or None, got {config!r}")
+    valid = config_field_names()
+    unknown = sorted(set(overrides) - set(valid))
+    if unknown:
+        raise ValueError(
+            f"unknown urban_canyon_v0 argument(s) {unknown}; valid arguments are "
+            f"render_mode, config, {', '.join(valid)}"
+        )
+    base = config if config is not None else UrbanCanyonConfig()
+    return replace(base, **overrides) if overrides else base

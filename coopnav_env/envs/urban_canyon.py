@@ -1,0 +1,440 @@
+"""The PettingZoo parallel environment ``urban_canyon_v0`` (the adapter around the world).
+
+The world itself (city, satellites, measurements, navigation) is
+:class:`coopnav_env.sim.scenario.UrbanWorld`; this module turns its epochs into observations,
+rewards, terminations and frames. The user documentation (agents, spaces, rewards, episode
+end, arguments, version history) is the docstring of :mod:`coopnav_env.urban_canyon_v0`.
+
+Observation layout
+------------------
+One float32 vector per agent, ``14 + A + 4 K`` long (``A = obs_sky_azimuths``, default 8;
+``K = obs_neighbours``, default 4; 38 by default). Every entry is clipped to its bounds, so the
+observation is always inside ``observation_space``. ``L`` is the larger side of the city
+extent [m]. Only what a UAV can know on board: never its true position.
+
+| Index            | Meaning                                          | Units / scale | Bounds  |
+|------------------|--------------------------------------------------|---------------|---------|
+| 0-2              | estimated position minus goal centre, E N U      | m / L         | [-1, 1] |
+| 3-5              | velocity E N U                                   | m/s / v_max   | [-1, 1] |
+| 6-8              | predicted sigma E N U of the estimate (H_p)      | m / sigma_max | [0, 1]  |
+| 9                | satellites received / above the cut-off          | count ratio   | [0, 1]  |
+| 10               | distinct satellites of it + UAVs in range        | count ratio   | [0, 1]  |
+| 11..10+A         | skyline elevation at azimuth 360 i / A           | deg / 90      | [0, 1]  |
+| 11+A+4k..13+A+4k | neighbour k (nearest first): relative E N U      | m / range_max | [-1, 1] |
+| 14+A+4k          | neighbour k present (1) or empty slot (0)        | flag          | {0, 1}  |
+| 11+A+4K          | the estimate is a cooperative fix                | flag          | {0, 1}  |
+| 12+A+4K          | the estimate is a fresh fix (not dead reckoning) | flag          | {0, 1}  |
+| 13+A+4K          | steps left / max_steps                           | ratio         | [0, 1]  |
+
+``L``: the larger side of the city extent [m]; ``v_max``: ``kinematics.max_speed_mps``;
+``sigma_max``: ``obs_sigma_max_m``; ``range_max``: ``relative_sensing.max_range_m``. Azimuths
+are clockwise from North; the sigma is from the covariance of the estimate the UAV uses
+(``H_p`` of Eq. 19-23 for a cooperative fix).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from coopnav_env.envs.config import UrbanCanyonConfig, make_config
+from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
+
+__all__ = ["REWARD_TERMS", "UrbanCanyonEnv", "aec_env", "parallel_env"]
+
+REWARD_TERMS: tuple[str, ...] = ("nav", "progress", "collision", "separation", "contact", "goal")
+"""Names of the reward terms in ``infos[agent]["reward_terms"]`` (their sum is the reward)."""
+
+
+class UrbanCanyonEnv(ParallelEnv, EzPickle):
+    """A UAV swarm crossing a city with cooperative GNSS navigation (PettingZoo ParallelEnv).
+
+    See :mod:`coopnav_env.urban_canyon_v0` for the documentation page.
+
+    Parameters
+    ----------
+    config : UrbanCanyonConfig, optional
+        Complete configuration; default ``UrbanCanyonConfig()``.
+    render_mode : {None, "rgb_array", "human"}
+        ``"rgb_array"``: :meth:`render` returns an ``(H, W, 3)`` uint8 frame; ``"human"``: it
+        shows the frame in a matplotlib window (and every step draws it).
+    **overrides
+        Any :class:`UrbanCanyonConfig` field, applied on top of ``config``. An unknown name
+        raises ``ValueError`` listing the valid ones.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "urban_canyon_v0",
+        "render_modes": ["human", "rgb_array"],
+        "is_parallelizable": True,
+        "render_fps": 4,
+    }
+
+    def __init__(
+        self,
+        config: UrbanCanyonConfig | None = None,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        cfg = make_config(config, **overrides)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, "
+                f"got {render_mode!r}"
+            )
+        EzPickle.__init__(self, config=cfg, render_mode=render_mode)
+        self.config = cfg
+        self.render_mode = render_mode
+        self.possible_agents = [f"uav_{i}" for i in range(cfg.n_uavs)]
+        self.agents: list[str] = []
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self.world = UrbanWorld(cfg)
+        self._rng: np.random.Generator | None = None  # created at the first reset
+        self._epoch: Epoch | None = None
+        self._steps = 0
+        self._trail: list[np.ndarray] = []
+        self._window: Any = None
+
+        lo, hi = _observation_bounds(cfg)
+        self.observation_spaces = {
+            a: spaces.Box(lo, hi, dtype=np.float32) for a in self.possible_agents
+        }
+        self.action_spaces = {
+            a: spaces.Box(-1.0, 1.0, (3,), dtype=np.float32) for a in self.possible_agents
+        }
+        s_lo, s_hi = _state_bounds(cfg)
+        self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
+        self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
+
+    # ---- spaces -----------------------------------------------------------------------------
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        """The observation space of ``agent`` (the same object at every call)."""
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Box:
+        """The action space of ``agent``: ``Box(-1, 1, (3,), float32)``, the same object."""
+        return self.action_spaces[agent]
+
+    # ---- episode ----------------------------------------------------------------------------
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
+        """Start an episode; ``seed`` reseeds the environment's only generator.
+
+        The infos hold the first epoch's figures under ``"initial"`` (see the documentation
+        page). Without a seed the episode continues the generator's stream (a new city, start and
+        goal); the very first reset without a seed draws the generator from OS entropy, so that
+        copies of a fresh environment (e.g. made by a vector wrapper) do not share a stream.
+        ``options`` is accepted for API compatibility and ignored.
+        """
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        elif self._rng is None:
+            self._rng = np.random.default_rng()
+        self.agents = self.possible_agents[:]
+        self._steps = 0
+        self._epoch = self.world.reset(self._rng)
+        self._city_scale_m = _city_scale_m(self.world)
+        self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
+        terms = {t: np.zeros(self.config.n_uavs) for t in REWARD_TERMS}
+        obs = self._observations()
+        first = self._infos(terms, self._epoch.goal_distance_m <= self.config.goal_radius_m)
+        # nested: SuperSuit merges reset infos into the terminal step's infos at auto-reset
+        infos = {a: {"initial": info} for a, info in first.items()}
+        if self.render_mode == "human":
+            self.render()
+        return obs, infos
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[
+        dict[str, np.ndarray],
+        dict[str, float],
+        dict[str, bool],
+        dict[str, bool],
+        dict[str, dict[str, Any]],
+    ]:
+        """Apply one velocity command per live agent and advance one epoch.
+
+        Actions outside ``[-1, 1]`` are clipped. A missing or unknown agent, a wrong shape or a
+        non-finite value raises ``ValueError``.
+        """
+        if self._epoch is None:
+            raise ValueError("step() called before reset(): call reset() first")
+        if not self.agents:
+            raise ValueError("step() called after the episode ended: call reset() first")
+        cmd = self._action_array(actions)
+        cfg = self.config
+        prev = self._epoch
+        ep = self.world.step(cmd, self._rng)
+        self._epoch = ep
+        self._steps += 1
+        if self.render_mode is not None:
+            self._trail.append(ep.pos_enu_m)
+            self._trail = self._trail[-60:]
+
+        # reward terms, shape (N,) each
+        d_prev, d_now = prev.goal_distance_m, ep.goal_distance_m
+        in_goal = d_now <= cfg.goal_radius_m
+        crash = bool(ep.collided.any())
+        reached = bool(in_goal.all()) and not crash
+        if cfg.nav_reward == "error":
+            nav_m = ep.nav_error_m
+        else:
+            nav_m = np.sqrt(np.clip(np.trace(ep.nav_cov_enu_m2, axis1=1, axis2=2), 0.0, None))
+        n = cfg.n_uavs
+        terms = {
+            "nav": -cfg.nav_reward_weight
+            * np.minimum(nav_m, cfg.nav_reward_cap_m)
+            / cfg.nav_reward_scale_m,
+            "progress": cfg.progress_reward_weight
+            * (d_prev - d_now)
+            / (cfg.kinematics.max_speed_mps * cfg.dt_s),
+            "collision": -cfg.collision_penalty * ep.collided,
+            "separation": -cfg.separation_penalty * ep.separation_violation,
+            "contact": -cfg.contact_penalty * ep.out_of_contact,
+            "goal": np.full(n, cfg.goal_bonus if reached else 0.0),
+        }
+        reward = np.sum([terms[t] for t in REWARD_TERMS], axis=0)
+
+        terminated = crash or reached
+        truncated = (self._steps >= cfg.max_steps) and not terminated
+        obs = self._observations()
+        infos = self._infos(terms, in_goal)
+        agents = self.agents
+        rewards = dict(zip(agents, reward.tolist()))
+        terms_d = dict.fromkeys(agents, terminated)
+        truncs_d = dict.fromkeys(agents, truncated)
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terms_d, truncs_d, infos
+
+    def _action_array(self, actions: dict[str, Any]) -> np.ndarray:
+        if not isinstance(actions, dict):
+            raise ValueError(
+                f"actions must be a dict {{agent: action}}, got {type(actions).__name__}"
+            )
+        missing = [a for a in self.agents if a not in actions]
+        unknown = [a for a in actions if a not in self._index]
+        if missing or unknown:
+            raise ValueError(
+                f"actions must hold one action per live agent; missing: {missing}, "
+                f"unknown: {unknown}"
+            )
+        try:
+            cmd = np.array([np.asarray(actions[a], dtype=np.float64) for a in self.agents])
+        except (TypeError, ValueError) as exc:
+            shapes = {a: np.shape(actions[a]) for a in self.agents}
+            raise ValueError(
+                f"every action must be a numeric array of shape (3,), got shapes {shapes}"
+            ) from exc
+        if cmd.shape != (len(self.agents), 3):
+            bad = {a: np.shape(actions[a]) for a in self.agents if np.shape(actions[a]) != (3,)}
+            raise ValueError(f"every action must have shape (3,), got {bad}")
+        if not np.all(np.isfinite(cmd)):
+            bad = [a for a, row in zip(self.agents, cmd) if not np.all(np.isfinite(row))]
+            raise ValueError(f"actions contain NaN or inf for {bad}")
+        return np.clip(cmd, -1.0, 1.0)
+
+    # ---- observations, infos, state ---------------------------------------------------------
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        cfg = self.config
+        ep = self._epoch
+        n = cfg.n_uavs
+        big = self._city_scale_m
+        k = cfg.obs_neighbours
+        n_open = max(ep.n_above_mask, 1)
+        sky = self.world.city.mask_elevation_deg(ep.pos_enu_m, self._az_deg) / 90.0
+
+        # neighbour slots: nearest (measured) first
+        rel, avail = ep.rel_enu_m, ep.rel_available
+        dist = np.where(avail, np.linalg.norm(rel, axis=2), np.inf)
+        m = min(k, n)
+        order = np.argsort(dist, axis=1, kind="stable")[:, :m]
+        present = np.take_along_axis(avail, order, axis=1)
+        rel_k = np.take_along_axis(rel, order[:, :, None], axis=1)
+        rel_k = np.where(present[:, :, None], rel_k / cfg.relative_sensing.max_range_m, 0.0)
+        slots = np.zeros((n, k, 4))
+        slots[:, :m, :3] = rel_k
+        slots[:, :m, 3] = present
+
+        obs = np.concatenate(
+            [
+                (ep.nav_pos_enu_m - ep.goal_enu_m) / big,
+                ep.vel_enu_mps / cfg.kinematics.max_speed_mps,
+                ep.nav_sigma_enu_m / cfg.obs_sigma_max_m,
+                (ep.n_sats / n_open)[:, None],
+                (ep.n_sats_swarm / n_open)[:, None],
+                sky,
+                slots.reshape(n, 4 * k),
+                (ep.nav_source == NavSource.COOPERATIVE)[:, None],
+                (ep.nav_source != NavSource.DEAD_RECKONING)[:, None],
+                np.full((n, 1), 1.0 - self._steps / cfg.max_steps),
+            ],
+            axis=1,
+        )
+        space = self.observation_spaces[self.possible_agents[0]]
+        obs = np.clip(obs, space.low, space.high).astype(np.float32)
+        return dict(zip(self.possible_agents, obs))
+
+    def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
+        ep = self._epoch
+        inf = float("inf")
+
+        def fin(x: np.ndarray) -> list[float]:
+            return np.where(np.isfinite(x), x, inf).tolist()
+
+        sig = ep.nav_sigma_enu_m
+        cols = {
+            "nav_error_m": ep.nav_error_m.tolist(),
+            "coop_error_m": fin(ep.coop_error_m),
+            "standalone_error_m": fin(ep.standalone_error_m),
+            "sig_e_m": sig[:, 0].tolist(),
+            "sig_n_m": sig[:, 1].tolist(),
+            "sig_u_m": sig[:, 2].tolist(),
+            "sig_3d_m": np.sqrt((sig**2).sum(axis=1)).tolist(),
+            "n_sats": ep.n_sats.tolist(),
+            "n_sats_swarm": ep.n_sats_swarm.tolist(),
+            "n_sats_open_sky": [ep.n_above_mask] * ep.n_uavs,
+            "coop_status": ep.coop_status.tolist(),
+            "standalone_status": ep.standalone_status.tolist(),
+            "nav_source": ep.nav_source.tolist(),
+            "goal_distance_m": ep.goal_distance_m.tolist(),
+            "in_goal": np.asarray(in_goal, dtype=bool).tolist(),
+            "collided": ep.collided.tolist(),
+            "separation_violation": ep.separation_violation.tolist(),
+            "out_of_contact": ep.out_of_contact.tolist(),
+        }
+        term_cols = {t: np.asarray(v, dtype=float).tolist() for t, v in terms.items()}
+        infos = {}
+        for i, a in enumerate(self.possible_agents):
+            info = {key: col[i] for key, col in cols.items()}
+            info["reward_terms"] = {t: col[i] for t, col in term_cols.items()}
+            info["step"] = self._steps
+            infos[a] = info
+        return infos
+
+    def state(self) -> np.ndarray:
+        """Global state for centralised critics (truth included), inside ``state_space``.
+
+        ``[(pos - goal) / L (3N), vel / max_speed (3N), (goal - city centre) / (L / 2) (3),
+        (estimate - pos) / nav_reward_cap_m (3N), sigma / obs_sigma_max_m (3N),
+        satellites received / above cut-off (N), steps left / max_steps (1)]``, float32.
+        """
+        if self._epoch is None:
+            raise ValueError("state() called before reset(): call reset() first")
+        cfg = self.config
+        ep = self._epoch
+        big = self._city_scale_m
+        x0, x1, y0, y1 = self.world.city.extent_m
+        centre = np.array([(x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0])
+        parts = [
+            ((ep.pos_enu_m - ep.goal_enu_m) / big).ravel(),
+            (ep.vel_enu_mps / cfg.kinematics.max_speed_mps).ravel(),
+            (ep.goal_enu_m - centre) / (big / 2.0),
+            ((ep.nav_pos_enu_m - ep.pos_enu_m) / cfg.nav_reward_cap_m).ravel(),
+            (ep.nav_sigma_enu_m / cfg.obs_sigma_max_m).ravel(),
+            ep.n_sats / max(ep.n_above_mask, 1),
+            [1.0 - self._steps / cfg.max_steps],
+        ]
+        s = np.concatenate([np.asarray(p, dtype=float) for p in parts])
+        return np.clip(s, self.state_space.low, self.state_space.high).astype(np.float32)
+
+    # ---- rendering --------------------------------------------------------------------------
+
+    def render(self) -> np.ndarray | None:
+        """Draw the current epoch (see the documentation page); ``None`` without render_mode."""
+        if self.render_mode is None:
+            return None
+        if self._epoch is None:
+            raise ValueError("render() called before reset(): call reset() first")
+        from coopnav_env.envs.render import render_frame, show_frame
+
+        frame = render_frame(
+            self.world,
+            self._epoch,
+            trail=self._trail,
+            sky_uav=self.config.render_sky_uav,
+            step=self._steps,
+            max_steps=self.config.max_steps,
+            size_px=(self.config.render_width_px, self.config.render_height_px),
+        )
+        if self.render_mode == "human":
+            self._window = show_frame(frame, self._window, self.metadata["render_fps"])
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Close the human-mode window, if any."""
+        if self._window is not None:
+            from coopnav_env.envs.render import close_window
+
+            close_window(self._window)
+            self._window = None
+
+    # ---- pickling ---------------------------------------------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = EzPickle.__getstate__(self)
+        state["_runtime"] = {k: v for k, v in self.__dict__.items() if k != "_window"}
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        EzPickle.__setstate__(self, state)
+        self.__dict__.update(state["_runtime"])
+        self._window = None
+
+
+def parallel_env(
+    render_mode: str | None = None, config: UrbanCanyonConfig | None = None, **fields: Any
+) -> UrbanCanyonEnv:
+    """The parallel environment; every keyword is an :class:`UrbanCanyonConfig` field."""
+    return UrbanCanyonEnv(config=config, render_mode=render_mode, **fields)
+
+
+def aec_env(
+    render_mode: str | None = None, config: UrbanCanyonConfig | None = None, **fields: Any
+) -> AECEnv:
+    """The AEC version: :func:`parallel_to_aec` (which adds ``OrderEnforcingWrapper``).
+
+    No out-of-bounds action wrapper is added: the environment clips actions itself.
+    """
+    return parallel_to_aec(parallel_env(render_mode=render_mode, config=config, **fields))
+
+
+def _city_scale_m(world: UrbanWorld) -> float:
+    x0, x1, y0, y1 = world.city.extent_m
+    return float(max(x1 - x0, y1 - y0))
+
+
+def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Per-index bounds of the observation vector (see the module docstring)."""
+    a, k = cfg.obs_sky_azimuths, cfg.obs_neighbours
+    lo = np.concatenate(
+        [
+            -np.ones(6),  # position vs goal, velocity
+            np.zeros(5 + a),  # sigma, satellite counts, sky
+            np.tile([-1.0, -1.0, -1.0, 0.0], k),  # neighbour slots
+            np.zeros(3),  # flags, time left
+        ]
+    )
+    hi = np.ones(cfg.obs_dim)
+    assert lo.shape == hi.shape
+    return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def _state_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:
+    n = cfg.n_uavs
+    lo = np.concatenate([-np.ones(6 * n + 3 + 3 * n), np.zeros(3 * n + n + 1)])
+    hi = np.ones(cfg.state_dim)
+    return lo.astype(np.float32), hi.astype(np.float32)

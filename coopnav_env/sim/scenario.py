@@ -1,0 +1,945 @@
+"""One epoch of the urban world: world -> measurements -> navigation solutions.
+
+This module is the engine of the ``urban_canyon_v0`` environment without any PettingZoo: a
+swarm of UAVs flies through a city from a start area to a goal area while the GNSS satellites
+move overhead, and at every epoch each UAV measures pseudoranges to the satellites it can see,
+relative positions to the UAVs in sensing range, and navigates standalone and cooperatively.
+
+The flow of one epoch (:meth:`UrbanWorld.step`)
+-----------------------------------------------
+1. **Kinematics.** The velocity commands move the UAVs
+   (:func:`~coopnav_env.sim.swarm.step_kinematics`: point masses, speed and acceleration
+   limits, altitude band). The horizontal position is clamped to the city extent (a virtual
+   fence; the velocity component pushing out is zeroed).
+   A UAV whose swept sphere touches a building (:func:`~coopnav_env.sim.swarm.swept_collisions`)
+   has *crashed*: it stays where it was at the start of the step with zero velocity, and the
+   flag ``collided`` is set (the environment ends the episode). UAVs closer than
+   ``min_separation_m`` are flagged (``separation_violation``); they do not bounce.
+2. **Satellites.** The nominal GPS + BeiDou-3 constellation
+   (:func:`~coopnav_env.gnss.default_constellation`) at ``t = t0 + k dt``; one step advances the
+   GNSS epoch by the kinematic time step ``dt_s`` (default 1 s).
+3. **Visibility.** Azimuth and elevation of every satellite at the geodetic origin give its ENU
+   direction (the city spans a few hundred metres, where directions differ by micro-radians);
+   a satellite is in line of sight of a UAV when it is above ``elevation_mask_deg`` and the
+   ray toward it misses every building (:func:`~coopnav_env.sim.city.line_of_sight`).
+   Optionally a blocked satellite is still received through a reflection with probability
+   ``nlos_probability`` and a positive range bias (:func:`~coopnav_env.sim.city.draw_nlos`);
+   the navigation does not know which measurements are NLOS. Optionally a receiver tracks only
+   its ``max_sats`` highest satellites (:func:`~coopnav_env.gnss.select_highest`).
+4. **Measurements.** Pseudoranges by :func:`~coopnav_env.gnss.simulate_pseudoranges` (paper
+   Eq. 1-8; the common clock/ephemeris/troposphere error is drawn once per satellite and
+   shared by the swarm, and redrawn each epoch; the NLOS bias goes in ``extra_bias_m``);
+   receiver clock biases are drawn once per episode. Relative positions by
+   :func:`~coopnav_env.sim.swarm.measure_relative_positions` (Eq. 9), rotated to ECEF by
+   :meth:`~coopnav_env.nav.RelativePositions.from_enu`.
+5. **Navigation.** :func:`~coopnav_env.nav.solve_standalone` for every UAV and
+   :func:`~coopnav_env.nav.solve_cooperative` (paper Eq. 10-23) with the configured transfer
+   (DDT/SDT), covariance model (exact/paper) and centroid:
+
+   * ``"self"`` (the paper's choice): every UAV is its own centroid and gets its own solution
+     from all UAVs in range of it. Its cost grows as ``N^2`` (solver time on a laptop-class
+     core: about 4-5 ms for 5 UAVs, 0.1 s for 50).
+   * ``"shared"``: one centroid at the UAV that sees the most satellites (ties: lowest index);
+     every UAV in range of it is located from it. Its cost grows as ``N`` (about 3 ms for
+     5 UAVs, 4-6 ms for 50).
+   * ``"auto"`` (default): ``"self"`` up to :data:`AUTO_SHARED_MIN_UAVS` - 1 UAVs,
+     ``"shared"`` from :data:`AUTO_SHARED_MIN_UAVS` on.
+
+   Both solvers are warm-started from each UAV's previous estimate moved by its velocity
+   times ``dt`` (a UAV knows its own velocity), so they converge in one or two Gauss-Newton
+   iterations; the first epoch of an episode starts from the known launch positions (the
+   converged fix does not depend on the start point, only the iteration count does).
+
+   The estimate a UAV *uses* (``nav_*``, what the environment observes and rewards) is its
+   cooperative fix when that is valid, else its standalone fix (a UAV out of relative range of
+   its centroid navigates standalone), else dead reckoning: the previous estimate moved by the
+   velocity, with its covariance grown by ``(dead_reckoning_sigma_mps * dt)^2`` per axis.
+   Degenerate geometry is a reported :class:`~coopnav_env.nav.NavStatus`, never an exception.
+
+Random draws per step, in this order: NLOS (only when ``nlos_probability > 0``), pseudoranges,
+relative positions. Every draw comes from the generator passed to :meth:`UrbanWorld.reset` /
+:meth:`UrbanWorld.step`; the same generator state gives the same epoch bit for bit.
+
+Frames: the city's local ENU frame at the geodetic origin ``(lat_deg, lon_deg, alt_m)``, metres,
+``z`` up with the ground at 0. Navigation solutions are computed in ECEF and reported in ENU.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from enum import IntEnum
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from coopnav_env.constants import SHANGHAI_ALT_M, SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG, SYSTEMS
+from coopnav_env.gnss import (
+    ErrorModel,
+    azimuth_elevation,
+    default_constellation,
+    direction_enu,
+    draw_clock_biases,
+    enu_rotation,
+    geodetic_to_ecef,
+    select_highest,
+    simulate_pseudoranges,
+)
+from coopnav_env.gnss.errors import DEFAULT_CLOCK_SIGMA_M
+from coopnav_env.nav import (
+    GnssObservations,
+    NavStatus,
+    RelativePositions,
+    solve_cooperative,
+    solve_standalone,
+)
+from coopnav_env.sim.city import (
+    BoolArray,
+    Buildings,
+    City,
+    CityConfig,
+    FloatArray,
+    _check_int,
+    _check_real,
+    canyon_city,
+    draw_nlos,
+    generate_city,
+)
+from coopnav_env.sim.swarm import (
+    KinematicsConfig,
+    RelativeSensingConfig,
+    measure_relative_positions,
+    separation_violations,
+    step_kinematics,
+    swept_collisions,
+)
+
+__all__ = [
+    "AUTO_SHARED_MIN_UAVS",
+    "Epoch",
+    "NavSource",
+    "ScenarioConfig",
+    "UrbanWorld",
+    "formation_offsets",
+    "make_city",
+]
+
+AUTO_SHARED_MIN_UAVS: int = 11
+"""With ``centroid="auto"``, swarms of at least this many UAVs use one shared centroid (cost
+linear in N) instead of one centroid per UAV (cost quadratic in N)."""
+
+CityKind = Literal["grid", "canyon"]
+CentroidMode = Literal["auto", "self", "shared"]
+
+
+class NavSource(IntEnum):
+    """Where the position estimate a UAV uses comes from (``Epoch.nav_source``)."""
+
+    COOPERATIVE = 0
+    """A valid cooperative fix (virtual-centroid solution)."""
+    STANDALONE = 1
+    """No valid cooperative fix (or no relative link to the centroid): the UAV's own WLS fix."""
+    DEAD_RECKONING = 2
+    """No fix at all: the previous estimate moved by the velocity, covariance grown."""
+
+
+# --------------------------------------------------------------------------------------------
+# configuration
+# --------------------------------------------------------------------------------------------
+
+
+def _check_choice(owner: str, name: str, value: Any, allowed: tuple[Any, ...]) -> Any:
+    if isinstance(value, bool) or value not in allowed:
+        raise ValueError(f"{owner}.{name} must be one of {allowed}, got {value!r}")
+    return value
+
+
+def _check_bool(owner: str, name: str, value: Any) -> bool:
+    if not isinstance(value, bool | np.bool_):
+        raise ValueError(f"{owner}.{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def _coerce_sub_config(owner: str, name: str, value: Any, cls: type) -> Any:
+    """Accept an instance of the dataclass ``cls`` or a dict of its fields (e.g. from YAML)."""
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, dict):
+        valid = [f.name for f in fields(cls)]
+        unknown = sorted(set(value) - set(valid))
+        if unknown:
+            raise ValueError(
+                f"{owner}.{name}: unknown {cls.__name__} field(s) {unknown}; valid: {valid}"
+            )
+        return cls(**value)
+    raise ValueError(f"{owner}.{name} must be a {cls.__name__} or a dict, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """Configuration of the urban world (validated on construction; frozen).
+
+    Sub-configurations (``city_config``, ``kinematics``, ``relative_sensing``,
+    ``error_model``) may be given as the dataclass or as a dict of its fields.
+
+    Parameters
+    ----------
+    n_uavs : int, default 5
+        Number of UAVs, in [1, 256].
+    city : {"grid", "canyon"}, default "grid"
+        ``"grid"``: a random street grid with open squares (:func:`generate_city` with
+        ``city_config``). ``"canyon"``: the paper's single straight canyon (Section 4.1,
+        :func:`canyon_city` with the ``canyon_*`` fields).
+    city_config : CityConfig, default CityConfig()
+        Street grid parameters (``city="grid"`` only): 6 x 6 blocks of 60 m, 20 m streets,
+        roofs 10-150 m (mean 45 m), 10 % open squares; 500 m x 500 m.
+    city_seed : int or None, default None
+        ``None``: a new grid city is drawn from the episode generator at every reset (domain
+        randomisation). An int in [0, 2**63): the same city in every episode.
+    canyon_h_over_d : float, default sqrt(3)
+        ``h/d`` of the canyon at its reference altitude of 15 m (Eq. 25), in (0, 100].
+    canyon_street_width_m : float, default 20.0
+        Wall-to-wall width of the canyon, in [4, 1000] [m].
+    canyon_length_m : float, default 400.0
+        Length of the canyon, in [50, 100000] [m].
+    lat_deg, lon_deg, alt_m : float, default the paper's Shanghai site
+        Geodetic origin of the city's ENU frame [deg, deg, m]; ``lat_deg`` in [-85, 85].
+    t0_s : float, default 0.0
+        GNSS time of the first epoch, seconds after the constellation's reference epoch, in
+        [0, 1e9] [s].
+    t0_random_s : float, default 0.0
+        Each episode starts at ``t0_s + U(0, t0_random_s)`` (varies the sky), in [0, 1e7] [s].
+    systems : tuple of str, default ("GPS", "BDS")
+        Constellations, a non-empty subset of ``SYSTEMS``.
+    elevation_mask_deg : float, default 10.0
+        Elevation cut-off [deg], in [0, 60].
+    max_sats : int or None, default None
+        Receiver channel limit (the highest satellites are kept), in [4, 200]; None: no limit.
+    error_model : ErrorModel, default ErrorModel()
+        Pseudorange error budget (Eq. 3-8): sigma_URE 1 m, troposphere, iono-free.
+    clock_sigma_m : float, default 3e4
+        Standard deviation of the receiver clock biases drawn at reset, in [0, 1e7] [m].
+    nlos_probability : float, default 0.0
+        Probability that a blocked satellite is received through a reflection, in [0, 1].
+    nlos_bias_mean_m, nlos_bias_floor_m : float, default 15.0, 1.0
+        NLOS range bias ``floor + Exp(mean)`` [m], each in [0, 1000].
+    kinematics : KinematicsConfig, default KinematicsConfig()
+        1 s step, 10 m/s, 4 m/s^2, altitude band 5-30 m, radius 1 m, separation 3 m.
+    relative_sensing : RelativeSensingConfig, default RelativeSensingConfig()
+        200 m range, per-axis sigma 0.1 m + 0.002 m/m.
+    transfer : {"ddt", "sdt"}, default "ddt"
+        Measurement transfer to the centroid (Eq. 12-13 or Eq. 10-11).
+    centroid : {"auto", "self", "shared"}, default "auto"
+        Centroid choice, see the module docstring.
+    covariance : {"exact", "paper"}, default "exact"
+        Covariance of the transferred measurements (exact, or Eq. 18-19 as printed).
+    nav_max_iter : int, default 10
+        Gauss-Newton iteration limit of both solvers, in [1, 50].
+    dead_reckoning_sigma_mps : float, default 1.0
+        Growth of the per-axis position sigma while dead reckoning, in [0, 100] [m/s].
+    start_prior_sigma_m : float, default 10.0
+        Per-axis sigma of the known launch position, used only when a UAV has no fix at the
+        first epoch, in (0, 1000] [m].
+    formation_spacing_m : float, default 5.0
+        Lattice spacing of the initial formation, in [min_separation_m, 100] [m].
+    start_altitude_m : float, default 15.0
+        Altitude of the formation centre and of the goal; inside the altitude band [m].
+    goal_distance_min_m : float, default 200.0
+        Smallest horizontal distance from the start to the goal, in [0, 1e5] [m]; when the
+        city is too small, the farthest of 256 candidate street points is taken.
+    goal_radius_m : float, default 25.0
+        A UAV is in the goal area when its true horizontal distance to the goal is at most
+        this, in (0, 1000] [m].
+    """
+
+    n_uavs: int = 5
+    city: CityKind = "grid"
+    city_config: CityConfig = field(default_factory=CityConfig)
+    city_seed: int | None = None
+    canyon_h_over_d: float = math.sqrt(3.0)
+    canyon_street_width_m: float = 20.0
+    canyon_length_m: float = 400.0
+    lat_deg: float = SHANGHAI_LAT_DEG
+    lon_deg: float = SHANGHAI_LON_DEG
+    alt_m: float = SHANGHAI_ALT_M
+    t0_s: float = 0.0
+    t0_random_s: float = 0.0
+    systems: tuple[str, ...] = SYSTEMS
+    elevation_mask_deg: float = 10.0
+    max_sats: int | None = None
+    error_model: ErrorModel = field(default_factory=ErrorModel)
+    clock_sigma_m: float = DEFAULT_CLOCK_SIGMA_M
+    nlos_probability: float = 0.0
+    nlos_bias_mean_m: float = 15.0
+    nlos_bias_floor_m: float = 1.0
+    kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
+    relative_sensing: RelativeSensingConfig = field(default_factory=RelativeSensingConfig)
+    transfer: Literal["ddt", "sdt"] = "ddt"
+    centroid: CentroidMode = "auto"
+    covariance: Literal["exact", "paper"] = "exact"
+    nav_max_iter: int = 10
+    dead_reckoning_sigma_mps: float = 1.0
+    start_prior_sigma_m: float = 10.0
+    formation_spacing_m: float = 5.0
+    start_altitude_m: float = 15.0
+    goal_distance_min_m: float = 200.0
+    goal_radius_m: float = 25.0
+
+    def __post_init__(self) -> None:
+        o = type(self).__name__
+        setv = object.__setattr__
+        _check_int(o, "n_uavs", self.n_uavs, 1, 256)
+        _check_choice(o, "city", self.city, ("grid", "canyon"))
+        setv(
+            self, "city_config", _coerce_sub_config(o, "city_config", self.city_config, CityConfig)
+        )
+        if self.city_seed is not None:
+            _check_int(o, "city_seed", self.city_seed, 0, 2**63 - 1)
+        _check_real(o, "canyon_h_over_d", self.canyon_h_over_d, 0.0, 100.0, lo_open=True)
+        _check_real(o, "canyon_street_width_m", self.canyon_street_width_m, 4.0, 1000.0)
+        _check_real(o, "canyon_length_m", self.canyon_length_m, 50.0, 100_000.0)
+        _check_real(o, "lat_deg", self.lat_deg, -85.0, 85.0)
+        _check_real(o, "lon_deg", self.lon_deg, -180.0, 360.0)
+        _check_real(o, "alt_m", self.alt_m, -500.0, 10_000.0)
+        _check_real(o, "t0_s", self.t0_s, 0.0, 1e9)
+        _check_real(o, "t0_random_s", self.t0_random_s, 0.0, 1e7)
+        systems = self.systems
+        if isinstance(systems, str):
+            systems = (systems,)
+        try:
+            systems = tuple(systems)
+        except TypeError:
+            raise ValueError(f"{o}.systems must be a tuple of names from {SYSTEMS}") from None
+        if not systems or len(set(systems)) != len(systems) or set(systems) - set(SYSTEMS):
+            raise ValueError(
+                f"{o}.systems must be a non-empty tuple of distinct names from {SYSTEMS}, "
+                f"got {self.systems!r}"
+            )
+        setv(self, "systems", systems)
+        _check_real(o, "elevation_mask_deg", self.elevation_mask_deg, 0.0, 60.0)
+        if self.max_sats is not None:
+            _check_int(o, "max_sats", self.max_sats, 4, 200)
+        setv(
+            self, "error_model", _coerce_sub_config(o, "error_model", self.error_model, ErrorModel)
+        )
+        _check_real(o, "clock_sigma_m", self.clock_sigma_m, 0.0, 1e7)
+        _check_real(o, "nlos_probability", self.nlos_probability, 0.0, 1.0)
+        _check_real(o, "nlos_bias_mean_m", self.nlos_bias_mean_m, 0.0, 1000.0)
+        _check_real(o, "nlos_bias_floor_m", self.nlos_bias_floor_m, 0.0, 1000.0)
+        kin = _coerce_sub_config(o, "kinematics", self.kinematics, KinematicsConfig)
+        setv(self, "kinematics", kin)
+        setv(
+            self,
+            "relative_sensing",
+            _coerce_sub_config(o, "relative_sensing", self.relative_sensing, RelativeSensingConfig),
+        )
+        _check_choice(o, "transfer", self.transfer, ("ddt", "sdt"))
+        _check_choice(o, "centroid", self.centroid, ("auto", "self", "shared"))
+        _check_choice(o, "covariance", self.covariance, ("exact", "paper"))
+        _check_int(o, "nav_max_iter", self.nav_max_iter, 1, 50)
+        _check_real(o, "dead_reckoning_sigma_mps", self.dead_reckoning_sigma_mps, 0.0, 100.0)
+        _check_real(o, "start_prior_sigma_m", self.start_prior_sigma_m, 0.0, 1000.0, lo_open=True)
+        _check_real(o, "formation_spacing_m", self.formation_spacing_m, kin.min_separation_m, 100.0)
+        _check_real(
+            o, "start_altitude_m", self.start_altitude_m, kin.altitude_min_m, kin.altitude_max_m
+        )
+        _check_real(o, "goal_distance_min_m", self.goal_distance_min_m, 0.0, 1e5)
+        _check_real(o, "goal_radius_m", self.goal_radius_m, 0.0, 1000.0, lo_open=True)
+
+    @property
+    def dt_s(self) -> float:
+        """Time step of the kinematics and of the GNSS epochs [s]."""
+        return float(self.kinematics.dt_s)
+
+    @property
+    def centroid_mode(self) -> Literal["self", "shared"]:
+        """The centroid mode actually used (``"auto"`` resolved for ``n_uavs``)."""
+        if self.centroid == "auto":
+            return "self" if self.n_uavs < AUTO_SHARED_MIN_UAVS else "shared"
+        return self.centroid  # type: ignore[return-value]
+
+    def scenario_fields(self) -> dict[str, Any]:
+        """The :class:`ScenarioConfig` fields of this config (also for subclasses)."""
+        return {f.name: getattr(self, f.name) for f in fields(ScenarioConfig)}
+
+
+# --------------------------------------------------------------------------------------------
+# city, formation, start and goal
+# --------------------------------------------------------------------------------------------
+
+
+def make_city(config: ScenarioConfig, rng: np.random.Generator) -> City:
+    """The city of one episode.
+
+    ``city="canyon"``: :func:`canyon_city` (deterministic). ``city="grid"`` with ``city_seed``:
+    the same generated city every time (its own generator, ``rng`` untouched); without:
+    :func:`generate_city` drawing from ``rng``.
+    """
+    if config.city == "canyon":
+        return canyon_city(
+            h_over_d=config.canyon_h_over_d,
+            street_width_m=config.canyon_street_width_m,
+            length_m=config.canyon_length_m,
+        )
+    if config.city_seed is not None:
+        return generate_city(config.city_config, np.random.default_rng(config.city_seed))
+    return generate_city(config.city_config, rng)
+
+
+def formation_offsets(
+    n: int,
+    spacing_m: float,
+    half_width_m: float,
+    z_centre_m: float,
+    z_min_m: float,
+    z_max_m: float,
+) -> FloatArray:
+    """Compact lattice formation in street coordinates (along, across, up).
+
+    Lattice points ``spacing * (i, j, k)`` with ``|across| <= half_width_m`` and the altitude
+    in ``[z_min_m, z_max_m]`` are sorted by a distance from the centre that counts vertical
+    offsets 1.5 times (formations spread horizontally first); the ``n`` nearest are taken.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        ``(along, across, altitude)`` [m]; ``altitude`` absolute.
+    """
+    n_across = math.floor(half_width_m / spacing_m)
+    k_lo = math.ceil((z_min_m - z_centre_m) / spacing_m - 1e-9)
+    k_hi = math.floor((z_max_m - z_centre_m) / spacing_m + 1e-9)
+    k_lo, k_hi = min(k_lo, 0), max(k_hi, 0)
+    per_slice = (2 * n_across + 1) * (k_hi - k_lo + 1)
+    n_along = math.ceil(n / per_slice / 2.0) + 1
+    i, j, k = np.meshgrid(
+        np.arange(-n_along, n_along + 1),
+        np.arange(-n_across, n_across + 1),
+        np.arange(k_lo, k_hi + 1),
+        indexing="ij",
+    )
+    lattice = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1).astype(float) * spacing_m
+    key = lattice[:, 0] ** 2 + lattice[:, 1] ** 2 + (1.5 * lattice[:, 2]) ** 2
+    order = np.argsort(key, kind="stable")[:n]
+    out = lattice[order]
+    out[:, 2] += z_centre_m
+    return out
+
+
+def _street_frames(
+    city: City, rng: np.random.Generator, n: int, margin_m: float
+) -> tuple[FloatArray, BoolArray]:
+    """``n`` random street points (E, N) and whether each lies on a north-south street.
+
+    The same law as :meth:`City.random_street_points` (streets weighted by length), with the
+    street orientation returned so that a formation can be laid along it.
+    """
+    x0, x1, y0, y1 = city.extent_m
+    cx, cy = city.street_centres_x_m, city.street_centres_y_m
+    lengths = np.r_[np.full(cx.size, y1 - y0), np.full(cy.size, x1 - x0)]
+    street = rng.choice(lengths.size, size=n, p=lengths / lengths.sum())
+    along01 = rng.random(n)
+    ns = street < cx.size
+    centre = np.r_[cx, cy][street]
+    y_along = y0 + margin_m + along01 * (y1 - y0 - 2.0 * margin_m)
+    x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
+    xy = np.stack([np.where(ns, centre, x_along), np.where(ns, y_along, centre)], axis=1)
+    return xy, ns
+
+
+def _place_formation(
+    city: City, centre_xy: FloatArray, north_south: bool, config: ScenarioConfig
+) -> FloatArray:
+    """True start positions (N, 3) of a formation centred on a street point, along the street."""
+    kin = config.kinematics
+    margin = kin.uav_radius_m + 1.0
+    half_width = max(float(city.street_width_m) / 2.0 - margin, 0.0)
+    off = formation_offsets(
+        config.n_uavs,
+        config.formation_spacing_m,
+        half_width,
+        config.start_altitude_m,
+        kin.altitude_min_m + kin.uav_radius_m,
+        kin.altitude_max_m - kin.uav_radius_m,
+    )
+    x0, x1, y0, y1 = city.extent_m
+    a_lo, a_hi = off[:, 0].min(), off[:, 0].max()
+    if north_south:
+        c = np.clip(centre_xy[1], y0 + margin - a_lo, y1 - margin - a_hi)
+        xy = np.stack([centre_xy[0] + off[:, 1], c + off[:, 0]], axis=1)
+    else:
+        c = np.clip(centre_xy[0], x0 + margin - a_lo, x1 - margin - a_hi)
+        xy = np.stack([c + off[:, 0], centre_xy[1] + off[:, 1]], axis=1)
+    return np.column_stack([xy, off[:, 2]])
+
+
+# --------------------------------------------------------------------------------------------
+# one epoch
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Epoch:
+    """Everything that happened at one epoch (ENU [m] unless stated; N UAVs, S satellites).
+
+    Attributes
+    ----------
+    t_s : float
+        GNSS time [s] (seconds after the constellation's reference epoch).
+    pos_enu_m, vel_enu_mps : ndarray, shape (N, 3)
+        True positions [m] and velocities [m/s].
+    goal_enu_m : ndarray, shape (3,)
+        Centre of the goal area [m].
+    sv_az_deg, sv_el_deg : ndarray, shape (S,)
+        Satellite azimuth and elevation at the origin [deg]. Only the ``S`` satellites above
+        the elevation cut-off appear in the per-satellite arrays.
+    system : ndarray of int, shape (S,)
+        Constellation index into ``SYSTEMS``.
+    sv_index : ndarray of int, shape (S,)
+        Index of each satellite in the world's constellation (``UrbanWorld.constellation``).
+    los : ndarray of bool, shape (N, S)
+        Line of sight (not blocked by a building).
+    received : ndarray of bool, shape (N, S)
+        Satellites whose pseudorange the UAV uses (line of sight or NLOS, channel limit).
+    nlos : ndarray of bool, shape (N, S)
+        Received through a reflection (biased; unknown to the navigation).
+    n_above_mask : int
+        ``S``: satellites above the elevation cut-off (what an open-sky receiver would see).
+    n_sats : ndarray of int, shape (N,)
+        Satellites received by each UAV.
+    n_sats_swarm : ndarray of int, shape (N,)
+        Distinct satellites received by the UAV or by a UAV in relative range of it.
+    rel_enu_m : ndarray, shape (N, N, 3)
+        Measured relative positions, ``rel[b, q] ~ pos[q] - pos[b]`` [m]; 0 where unavailable.
+    rel_available : ndarray of bool, shape (N, N)
+        Relative measurement available (within range; False on the diagonal).
+    standalone_pos_enu_m, coop_pos_enu_m, nav_pos_enu_m : ndarray, shape (N, 3)
+        Standalone fix, cooperative fix (NaN where not OK) and the estimate used [m].
+    standalone_cov_enu_m2, coop_cov_enu_m2, nav_cov_enu_m2 : ndarray, shape (N, 3, 3)
+        Their covariances in ENU [m^2]; the cooperative one is ``H_p`` (Eq. 19-23).
+    standalone_status, coop_status : ndarray of int, shape (N,)
+        :class:`~coopnav_env.nav.NavStatus` of each fix.
+    nav_source : ndarray of int, shape (N,)
+        :class:`NavSource` of the estimate used.
+    centroid_uav : int
+        UAV of the shared centroid, or -1 when every UAV is its own centroid.
+    collided : ndarray of bool, shape (N,)
+        The UAV hit a building during this step (it is stopped where the step started).
+    separation_violation : ndarray of bool, shape (N,)
+        Another UAV is closer than the minimum separation.
+    out_of_contact : ndarray of bool, shape (N,)
+        No other UAV in relative-sensing range (always False for a single UAV).
+    n_iter_standalone, n_iter_coop : int
+        Gauss-Newton iterations run by the two solvers (1-2 when warm-started).
+    """
+
+    t_s: float
+    pos_enu_m: FloatArray
+    vel_enu_mps: FloatArray
+    goal_enu_m: FloatArray
+    sv_az_deg: FloatArray
+    sv_el_deg: FloatArray
+    system: np.ndarray
+    sv_index: np.ndarray
+    los: BoolArray
+    received: BoolArray
+    nlos: BoolArray
+    n_above_mask: int
+    n_sats: np.ndarray
+    n_sats_swarm: np.ndarray
+    rel_enu_m: FloatArray
+    rel_available: BoolArray
+    standalone_pos_enu_m: FloatArray
+    standalone_cov_enu_m2: FloatArray
+    standalone_status: np.ndarray
+    coop_pos_enu_m: FloatArray
+    coop_cov_enu_m2: FloatArray
+    coop_status: np.ndarray
+    nav_pos_enu_m: FloatArray
+    nav_cov_enu_m2: FloatArray
+    nav_source: np.ndarray
+    centroid_uav: int
+    collided: BoolArray
+    separation_violation: BoolArray
+    out_of_contact: BoolArray
+    n_iter_standalone: int
+    n_iter_coop: int
+
+    @property
+    def n_uavs(self) -> int:
+        """Number of UAVs N."""
+        return int(self.pos_enu_m.shape[0])
+
+    @property
+    def coop_ok(self) -> BoolArray:
+        """Valid cooperative fix, shape (N,)."""
+        return self.coop_status == NavStatus.OK
+
+    @property
+    def standalone_ok(self) -> BoolArray:
+        """Valid standalone fix, shape (N,)."""
+        return self.standalone_status == NavStatus.OK
+
+    @property
+    def coop_error_m(self) -> FloatArray:
+        """3-D error of the cooperative fix [m], shape (N,); NaN without a valid fix."""
+        return np.linalg.norm(self.coop_pos_enu_m - self.pos_enu_m, axis=1)
+
+    @property
+    def standalone_error_m(self) -> FloatArray:
+        """3-D error of the standalone fix [m], shape (N,); NaN without a valid fix."""
+        return np.linalg.norm(self.standalone_pos_enu_m - self.pos_enu_m, axis=1)
+
+    @property
+    def nav_error_m(self) -> FloatArray:
+        """3-D error of the estimate used [m], shape (N,); always finite."""
+        return np.linalg.norm(self.nav_pos_enu_m - self.pos_enu_m, axis=1)
+
+    @property
+    def nav_sigma_enu_m(self) -> FloatArray:
+        """Predicted standard deviation per ENU axis of the estimate used [m], shape (N, 3)."""
+        return np.sqrt(np.clip(np.einsum("nii->ni", self.nav_cov_enu_m2), 0.0, None))
+
+    @property
+    def goal_distance_m(self) -> FloatArray:
+        """True horizontal distance of each UAV to the goal centre [m], shape (N,)."""
+        d = self.pos_enu_m[:, :2] - self.goal_enu_m[None, :2]
+        return np.hypot(d[:, 0], d[:, 1])
+
+
+# --------------------------------------------------------------------------------------------
+# the world
+# --------------------------------------------------------------------------------------------
+
+
+class UrbanWorld:
+    """The urban world of one swarm: state plus the epoch pipeline of the module docstring.
+
+    The world holds the episode state (city, true positions and velocities, clocks, previous
+    estimates) and advances it with :meth:`step`; all randomness comes from the generator
+    passed to :meth:`reset` and :meth:`step`. Instances pickle (the state is plain arrays and
+    frozen dataclasses).
+
+    Parameters
+    ----------
+    config : ScenarioConfig
+        Any :class:`ScenarioConfig` (subclasses such as the environment's config included).
+    city : City, optional
+        A fixed city for every episode, overriding ``config.city`` (tests, hand-made maps).
+    """
+
+    def __init__(self, config: ScenarioConfig, city: City | None = None) -> None:
+        if not isinstance(config, ScenarioConfig):
+            raise ValueError(f"config must be a ScenarioConfig, got {type(config).__name__}")
+        if city is not None and not isinstance(city, City):
+            raise ValueError(f"city must be a City or None, got {type(city).__name__}")
+        self.config = config
+        self.fixed_city = city
+        self.constellation = default_constellation(config.systems)
+        self.origin_ecef_m = geodetic_to_ecef(config.lat_deg, config.lon_deg, config.alt_m)
+        self.rot_enu = enu_rotation(config.lat_deg, config.lon_deg)  # d_enu = R d_ecef
+        self.city: City | None = None
+        self.last: Epoch | None = None
+
+    # ---- frames -----------------------------------------------------------------------------
+
+    def enu_to_ecef(self, pos_enu_m: np.ndarray) -> np.ndarray:
+        """ENU (..., 3) of this world's origin to ECEF [m] (NaN propagates)."""
+        return self.origin_ecef_m + pos_enu_m @ self.rot_enu
+
+    def ecef_to_enu(self, pos_ecef_m: np.ndarray) -> np.ndarray:
+        """ECEF (..., 3) to this world's ENU [m] (NaN propagates)."""
+        return (pos_ecef_m - self.origin_ecef_m) @ self.rot_enu.T
+
+    def cov_ecef_to_enu(self, cov_ecef_m2: np.ndarray) -> np.ndarray:
+        """Covariances (..., 3, 3) from ECEF to ENU [m^2] (NaN propagates)."""
+        return self.rot_enu @ cov_ecef_m2 @ self.rot_enu.T
+
+    def _relative_ecef(
+        self,
+        rel_enu_m: np.ndarray,
+        cov_enu_m2: np.ndarray,
+        available: np.ndarray,
+        row: int | None = None,
+    ) -> RelativePositions:
+        """:meth:`RelativePositions.from_enu` at the origin, with the rotation as matmuls.
+
+        Same result as ``from_enu`` (the tests check it), without its three-operand einsum,
+        which costs a few milliseconds for 50 UAVs. With ``row = a`` only the measurements
+        relative to UAV ``a`` are kept (all a shared centroid at ``a`` needs); the other pairs
+        are marked unavailable.
+        """
+        r = self.rot_enu
+        if row is None:
+            return RelativePositions(
+                rel_ecef_m=rel_enu_m @ r, cov_ecef_m2=r.T @ cov_enu_m2 @ r, available=available
+            )
+        n = available.shape[0]
+        rel = np.zeros((n, n, 3))
+        cov = np.zeros((n, n, 3, 3))
+        avail = np.zeros((n, n), dtype=bool)
+        rel[row] = rel_enu_m[row] @ r
+        cov[row] = r.T @ cov_enu_m2[row] @ r
+        avail[row] = available[row]
+        return RelativePositions(rel_ecef_m=rel, cov_ecef_m2=cov, available=avail)
+
+    # ---- episode ----------------------------------------------------------------------------
+
+    def reset(
+        self,
+        rng: np.random.Generator,
+        *,
+        start_pos_enu_m: ArrayLike | None = None,
+        goal_enu_m: ArrayLike | None = None,
+    ) -> Epoch:
+        """Start an episode: city, formation, goal, clocks, first epoch.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+            Source of every random draw of the episode.
+        start_pos_enu_m : array_like, shape (N, 3), optional
+            True start positions [m] instead of a random formation on a street.
+        goal_enu_m : array_like, shape (3,), optional
+            Goal centre [m] instead of a random street point.
+
+        Returns
+        -------
+        Epoch
+            The first epoch (cold-started solvers).
+        """
+        cfg = self.config
+        n = cfg.n_uavs
+        self.city = self.fixed_city if self.fixed_city is not None else make_city(cfg, rng)
+        city = self.city
+        self.t_s = cfg.t0_s + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
+        margin = cfg.kinematics.uav_radius_m + 1.0
+        cand, ns = _street_frames(city, rng, 256, margin)
+        if start_pos_enu_m is None:
+            pos = _place_formation(city, cand[0], bool(ns[0]), cfg)
+        else:
+            pos = np.array(start_pos_enu_m, dtype=float)
+            if pos.shape != (n, 3) or not np.all(np.isfinite(pos)):
+                raise ValueError(f"start_pos_enu_m must be finite with shape ({n}, 3)")
+        if goal_enu_m is None:
+            centre = pos[:, :2].mean(axis=0)
+            dist = np.hypot(*(cand[1:] - centre).T)
+            ok = dist >= cfg.goal_distance_min_m
+            pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
+            goal = np.r_[cand[1 + pick], cfg.start_altitude_m]
+        else:
+            goal = np.array(goal_enu_m, dtype=float)
+            if goal.shape != (3,) or not np.all(np.isfinite(goal)):
+                raise ValueError("goal_enu_m must be finite with shape (3,)")
+        self.goal_enu_m = goal
+        self.start_enu_m = pos.copy()
+        self.pos_enu_m = pos
+        self.vel_enu_mps = np.zeros((n, 3))
+        self.clock_bias_m = draw_clock_biases(rng, n, len(SYSTEMS), cfg.clock_sigma_m)
+        # prior of the dead-reckoning fallback at the first epoch: the known launch position
+        self.nav_pos_enu_m = pos.copy()
+        self.nav_cov_enu_m2 = np.broadcast_to(
+            np.eye(3) * cfg.start_prior_sigma_m**2, (n, 3, 3)
+        ).copy()
+        self._warm = False
+        zeros = np.zeros(n, dtype=bool)
+        self.last = self._epoch(rng, zeros, zeros)
+        return self.last
+
+    def step(self, cmd: ArrayLike, rng: np.random.Generator) -> Epoch:
+        """Advance one time step with velocity commands ``cmd`` (N, 3) in [-1, 1] (clipped).
+
+        Returns
+        -------
+        Epoch
+        """
+        if self.last is None:
+            raise RuntimeError("UrbanWorld.step called before reset")
+        cfg = self.config
+        kin = cfg.kinematics
+        cmd = np.asarray(cmd, dtype=float)
+        pos0, vel0 = self.pos_enu_m, self.vel_enu_mps
+        pos1, vel1 = step_kinematics(pos0, vel0, cmd, kin)
+        # virtual fence at the city extent
+        x0, x1, y0, y1 = self.city.extent_m
+        r = kin.uav_radius_m
+        lo = np.array([x0 + r, y0 + r])
+        hi = np.array([x1 - r, y1 - r])
+        out = (pos1[:, :2] < lo) | (pos1[:, :2] > hi)
+        pos1[:, :2] = np.clip(pos1[:, :2], lo, hi)
+        vel1[:, :2] = np.where(out, 0.0, vel1[:, :2])
+        hit = _swept_collisions_culled(self.city.buildings, pos0, pos1, r)
+        pos1[hit] = pos0[hit]
+        vel1[hit] = 0.0
+        sep = separation_violations(pos1, kin.min_separation_m)
+        self.pos_enu_m, self.vel_enu_mps = pos1, vel1
+        self.t_s = self.t_s + cfg.dt_s
+        self.last = self._epoch(rng, hit, sep)
+        return self.last
+
+    # ---- measurements and navigation ---------------------------------------------------------
+
+    def _epoch(self, rng: np.random.Generator, collided: BoolArray, sep: BoolArray) -> Epoch:
+        cfg = self.config
+        n = cfg.n_uavs
+        pos = self.pos_enu_m
+        dt = cfg.dt_s
+
+        # satellites and visibility
+        # Only the satellites above the cut-off (at the origin) enter the arrays: the others
+        # can never be received, and dropping them makes everything downstream cheaper.
+        sv_all = self.constellation.positions_ecef(self.t_s)
+        az_all, el_all = azimuth_elevation(self.origin_ecef_m[None], sv_all)
+        sv_index = np.flatnonzero(el_all[0] > cfg.elevation_mask_deg)
+        sv_ecef = sv_all[sv_index]
+        system = np.asarray(self.constellation.system)[sv_index]
+        az, el = az_all[0, sv_index], el_all[0, sv_index]
+        los = self.city.line_of_sight(pos, direction_enu(az, el))
+        if cfg.nlos_probability > 0.0:
+            received, bias = draw_nlos(
+                rng, ~los, cfg.nlos_probability, cfg.nlos_bias_mean_m, cfg.nlos_bias_floor_m
+            )
+        else:
+            received, bias = los, None
+        if cfg.max_sats is not None:
+            received = select_highest(np.broadcast_to(el, received.shape), received, cfg.max_sats)
+        nlos = received & ~los
+
+        # measurements
+        rx_ecef = self.enu_to_ecef(pos)
+        pr = simulate_pseudoranges(
+            rng,
+            rx_ecef,
+            sv_ecef,
+            system,
+            received,
+            cfg.error_model,
+            clock_bias_m=self.clock_bias_m,
+            extra_bias_m=bias,
+        )
+        obs = GnssObservations.from_epoch(pr)
+        rel_enu, rel_cov_enu, avail = measure_relative_positions(rng, pos, cfg.relative_sensing)
+
+        # warm start: the previous estimates moved by the velocity; at the first epoch of an
+        # episode, the known launch positions
+        pred_enu = self.nav_pos_enu_m + self.vel_enu_mps * dt if self._warm else self.nav_pos_enu_m
+        x0 = self.enu_to_ecef(pred_enu)
+
+        sa = solve_standalone(obs, x0, max_iter=cfg.nav_max_iter)
+        n_sats = received.sum(axis=1)
+        if cfg.centroid_mode == "shared" or n == 1:
+            a = int(np.argmax(n_sats))
+            rel = self._relative_ecef(rel_enu, rel_cov_enu, avail, row=a)
+            co = solve_cooperative(
+                obs,
+                rel,
+                transfer=cfg.transfer,
+                centroid=a,
+                covariance=cfg.covariance,
+                x0_ecef_m=x0[a],
+                max_iter=cfg.nav_max_iter,
+            )
+            linked = avail[a].copy()
+            linked[a] = True
+            centroid_uav = a
+        else:
+            rel = self._relative_ecef(rel_enu, rel_cov_enu, avail)
+            co = solve_cooperative(
+                obs,
+                rel,
+                transfer=cfg.transfer,
+                centroid="self",
+                covariance=cfg.covariance,
+                x0_ecef_m=x0,
+                max_iter=cfg.nav_max_iter,
+            )
+            # a UAV out of range of every other one navigates standalone
+            linked = avail.any(axis=1) | (n == 1)
+            centroid_uav = -1
+
+        sa_ok = sa.status == NavStatus.OK
+        co_status = np.where(linked, co.status, NavStatus.NO_RELATIVE_POSITION)
+        co_ok = co_status == NavStatus.OK
+        sa_pos = np.where(sa_ok[:, None], self.ecef_to_enu(sa.pos_ecef_m), np.nan)
+        sa_cov = np.where(sa_ok[:, None, None], self.cov_ecef_to_enu(sa.cov_ecef_m2), np.nan)
+        co_pos = np.where(co_ok[:, None], self.ecef_to_enu(co.pos_ecef_m), np.nan)
+        co_cov = np.where(co_ok[:, None, None], self.cov_ecef_to_enu(co.cov_ecef_m2), np.nan)
+
+        source = np.where(
+            co_ok,
+            NavSource.COOPERATIVE,
+            np.where(sa_ok, NavSource.STANDALONE, NavSource.DEAD_RECKONING),
+        ).astype(np.int64)
+        dr_pos = pred_enu
+        dr_cov = self.nav_cov_enu_m2 + np.eye(3) * (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (
+            1.0 if self._warm else 0.0
+        )
+        nav_pos = np.where(co_ok[:, None], co_pos, np.where(sa_ok[:, None], sa_pos, dr_pos))
+        nav_cov = np.where(
+            co_ok[:, None, None], co_cov, np.where(sa_ok[:, None, None], sa_cov, dr_cov)
+        )
+        self.nav_pos_enu_m, self.nav_cov_enu_m2 = nav_pos, nav_cov
+        self._warm = True
+
+        link_or_self = avail | np.eye(n, dtype=bool)
+        n_swarm = (link_or_self.astype(np.int64) @ received.astype(np.int64) > 0).sum(axis=1)
+        return Epoch(
+            t_s=float(self.t_s),
+            pos_enu_m=pos.copy(),
+            vel_enu_mps=self.vel_enu_mps.copy(),
+            goal_enu_m=self.goal_enu_m.copy(),
+            sv_az_deg=az,
+            sv_el_deg=el,
+            system=system,
+            sv_index=sv_index,
+            los=los,
+            received=received,
+            nlos=nlos,
+            n_above_mask=int(sv_index.size),
+            n_sats=n_sats,
+            n_sats_swarm=n_swarm,
+            rel_enu_m=rel_enu,
+            rel_available=avail,
+            standalone_pos_enu_m=sa_pos,
+            standalone_cov_enu_m2=sa_cov,
+            standalone_status=np.asarray(sa.status, dtype=np.int64),
+            coop_pos_enu_m=co_pos,
+            coop_cov_enu_m2=co_cov,
+            coop_status=np.asarray(co_status, dtype=np.int64),
+            nav_pos_enu_m=nav_pos,
+            nav_cov_enu_m2=nav_cov,
+            nav_source=source,
+            centroid_uav=centroid_uav,
+            collided=np.asarray(collided, dtype=bool),
+            separation_violation=np.asarray(sep, dtype=bool),
+            out_of_contact=~avail.any(axis=1) if n > 1 else np.zeros(n, dtype=bool),
+            n_iter_standalone=int(sa.n_iter),
+            n_iter_coop=int(co.n_iter),
+        )
+
+
+def _swept_collisions_culled(
+    buildings: Buildings, start_enu_m: FloatArray, end_enu_m: FloatArray, radius_m: float
+) -> BoolArray:
+    """:func:`swept_collisions` restricted to the (UAV, building) pairs whose boxes overlap.
+
+    The bounding box of each swept sphere is tested against every building box first (a cheap
+    ``(N, n_b)`` test); the exact segment-box distance then only runs on the UAVs and buildings
+    of overlapping pairs. The result equals :func:`swept_collisions` (the exact test is run on
+    a superset of the pairs that can collide).
+    """
+    n = start_enu_m.shape[0]
+    lo = np.minimum(start_enu_m, end_enu_m) - radius_m
+    hi = np.maximum(start_enu_m, end_enu_m) + radius_m
+    overlap = np.all(
+        (lo[:, None, :] <= buildings.max_m[None]) & (hi[:, None, :] >= buildings.min_m[None]),
+        axis=2,
+    )  # (N, n_b)
+    hit = np.zeros(n, dtype=bool)
+    uav = np.flatnonzero(overlap.any(axis=1))
+    if uav.size == 0:
+        return hit
+    bld = np.flatnonzero(overlap.any(axis=0))
+    sub = Buildings(buildings.min_m[bld], buildings.max_m[bld])
+    hit[uav] = swept_collisions(sub, start_enu_m[uav], end_enu_m[uav], radius_m)
+    return hit

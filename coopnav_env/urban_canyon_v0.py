@@ -1,0 +1,253 @@
+"""
+# Urban Canyon
+
+A swarm of UAVs crosses a city from a start area to a goal area. Tall buildings block the
+GNSS satellites, so a UAV in a street canyon sees few of them and its standalone position fix
+degrades or fails; the swarm navigates cooperatively instead, transferring every UAV's
+pseudoranges to a virtual centroid with the measured relative positions (SDT/DDT, paper
+Sections 2-3). The policy decides where each UAV flies: toward the goal, but also where the sky
+is open enough for the swarm to know where it is.
+
+| Import             | `from coopnav_env import urban_canyon_v0`                   |
+|--------------------|-------------------------------------------------------------|
+| Actions            | Continuous                                                  |
+| Parallel API       | Yes (`parallel_env`; `env` is the AEC version)              |
+| Manual Control     | No                                                          |
+| Agents             | `agents = ['uav_0', 'uav_1', ..., 'uav_{N-1}']`             |
+| Agents             | N = `n_uavs` (default 5; 50 works)                          |
+| Action Shape       | (3,)                                                        |
+| Action Values      | [-1, 1] (float32)                                           |
+| Observation Shape  | (14 + A + 4K,) = (38,) by default                           |
+| Observation Values | each entry in [-1, 1] or [0, 1] (float32), see the table    |
+| State Shape        | (13 N + 4,) = (69,) for 5 UAVs                              |
+
+```python
+from coopnav_env import urban_canyon_v0
+
+env = urban_canyon_v0.parallel_env(n_uavs=5, render_mode="rgb_array")
+observations, infos = env.reset(seed=42)
+while env.agents:
+    actions = {agent: env.action_space(agent).sample() for agent in env.agents}
+    observations, rewards, terminations, truncations, infos = env.step(actions)
+frame = env.render()  # (640, 1280, 3) uint8
+env.close()
+```
+
+## Description
+
+The world (`coopnav_env.sim.scenario.UrbanWorld`) is a random street grid with open squares
+(`city="grid"`, a new city every episode unless `city_seed` is set) or the paper's single
+straight canyon (`city="canyon"`), in a local East-North-Up frame at a geodetic origin near the
+paper's Shanghai site. At reset the swarm stands in a compact lattice formation on a random
+street (the start area) and the goal is a random street point at least `goal_distance_min_m`
+away. Each step is one GNSS epoch of `dt_s` (1 s): the UAVs move (kinematic point masses with
+speed and acceleration limits, altitude band 5-30 m below most roofs), the nominal GPS and
+BeiDou-3 satellites move, each UAV receives the satellites in line of sight (ray-box test against
+the buildings, 10 deg cut-off; optional NLOS reflections with an unknown bias), measures
+pseudoranges (paper Eq. 1-8) and the relative positions of the UAVs within 200 m (Eq. 9), and
+navigates: standalone WLS and the cooperative virtual-centroid solution (DDT by default, exact
+covariance; one centroid per UAV up to 10 UAVs, one shared centroid at the UAV with the most
+satellites from 11 on). A UAV uses its cooperative fix, else its standalone fix, else dead
+reckoning.
+
+## Action Space
+
+`Box(-1, 1, (3,), float32)` per agent: the desired velocity East, North, Up as a fraction of
+`kinematics.max_speed_mps` (10 m/s). The horizontal command is further limited to that speed in
+norm, and the velocity moves toward it by at most `max_accel_mps2 * dt_s`. Values outside
+[-1, 1] are clipped. A missing or unknown agent, a shape other than (3,), or a NaN/inf entry
+raises `ValueError`.
+
+## Observation Space
+
+One float32 vector per agent, containing only what a UAV can know on board (never its true
+position). Every entry is clipped to its bounds, so observations always lie in
+`observation_space(agent)`. `A = obs_sky_azimuths` (8), `K = obs_neighbours` (4), `L` the
+larger side of the city [m].
+
+| Index            | Meaning                                          | Units / scale | Bounds  |
+|------------------|--------------------------------------------------|---------------|---------|
+| 0-2              | estimated position minus goal centre, E N U      | m / L         | [-1, 1] |
+| 3-5              | velocity E N U                                   | m/s / v_max   | [-1, 1] |
+| 6-8              | predicted sigma E N U of the estimate (H_p)      | m / sigma_max | [0, 1]  |
+| 9                | satellites received / above the cut-off          | count ratio   | [0, 1]  |
+| 10               | distinct satellites of it + UAVs in range        | count ratio   | [0, 1]  |
+| 11..10+A         | skyline elevation at azimuth 360 i / A           | deg / 90      | [0, 1]  |
+| 11+A+4k..13+A+4k | neighbour k (nearest first): relative E N U      | m / range_max | [-1, 1] |
+| 14+A+4k          | neighbour k present (1) or empty slot (0)        | flag          | {0, 1}  |
+| 11+A+4K          | the estimate is a cooperative fix                | flag          | {0, 1}  |
+| 12+A+4K          | the estimate is a fresh fix (not dead reckoning) | flag          | {0, 1}  |
+| 13+A+4K          | steps left / max_steps                           | ratio         | [0, 1]  |
+
+`L`: the larger side of the city extent [m]; `v_max`: `kinematics.max_speed_mps`;
+`sigma_max`: `obs_sigma_max_m`; `range_max`: `relative_sensing.max_range_m`. Azimuths
+are clockwise from North; the sigma is from the covariance of the estimate the UAV uses
+(`H_p` of Eq. 19-23 for a cooperative fix).
+
+With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts, 11-18 sky,
+19-34 four neighbour slots, 35-37 flags and time.
+
+`state()` returns the global state for centralised critics (truth included), float32 in
+`state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
+(3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
+`satellites received / above cut-off` (N), `steps left / max_steps` (1); each clipped to
+[-1, 1] or [0, 1].
+
+## Rewards
+
+Per agent, the sum of six terms, each also reported in `infos[agent]["reward_terms"]`:
+
+* `nav` = `-nav_reward_weight * min(e, nav_reward_cap_m) / nav_reward_scale_m` (defaults 1,
+  50 m, 10 m), where `e` is the true 3-D error of the estimate the UAV uses
+  (`nav_reward="error"`, default) or its predicted 3-D sigma `sqrt(trace H_p)`
+  (`nav_reward="sigma"`);
+* `progress` = `progress_reward_weight * (d_prev - d_now) / (max_speed_mps * dt_s)` (weight 1),
+  `d` the true horizontal distance to the goal centre: at most 1 per step;
+* `collision` = `-collision_penalty` (10) for a UAV that hits a building;
+* `separation` = `-separation_penalty` (1) for a UAV closer than `min_separation_m` (3 m) to
+  another;
+* `contact` = `-contact_penalty` (0.5) for a UAV with no other UAV in relative-sensing range;
+* `goal` = `+goal_bonus` (10) for every UAV when all UAVs are in the goal area (not on a step
+  where a UAV crashes).
+
+## Infos
+
+`infos[agent]` holds python numbers: `nav_error_m`, `coop_error_m`, `standalone_error_m` (true
+3-D errors [m]; `inf` where that fix does not exist), `sig_e_m`, `sig_n_m`, `sig_u_m`,
+`sig_3d_m` (predicted sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`,
+`n_sats_open_sky`, `coop_status` and `standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK,
+1 too few satellites, 2 singular, 3 not converged, 4 no relative position), `nav_source`
+(`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
+`goal_distance_m`, `in_goal`, `collided`, `separation_violation`, `out_of_contact`, `step`, and
+`reward_terms`.
+
+`reset()` returns, per agent, `{"initial": {...}}`: the same figures for the first epoch,
+nested so that SuperSuit's automatic reset, which merges the reset infos into the terminal
+step's infos (`{**step_info, **reset_info}`), does not overwrite the terminal step's figures.
+
+## Starting State
+
+A lattice formation (spacing `formation_spacing_m`, 5 m) centred on a random street point at
+`start_altitude_m` (15 m), laid along the street, at rest. The first epoch's solvers start
+from the known launch positions; later ones are warm-started from the previous estimates moved
+by the velocity.
+
+## Episode End
+
+* Termination (all agents): a UAV hits a building (swept-sphere test). The crashed UAV is
+  stopped where the step started. Ending the episode for everyone keeps every agent alive
+  until the end, which SuperSuit's vector wrappers (`pettingzoo_env_to_vec_env_v1`) require;
+  no black-death wrapper is needed.
+* Termination (all agents): every UAV is within `goal_radius_m` (25 m) of the goal centre
+  horizontally; every UAV gets `goal_bonus`.
+* Truncation (all agents): `max_steps` (200) steps.
+
+UAVs cannot leave the city extent (a virtual fence clamps them) nor the altitude band.
+
+## Arguments
+
+```python
+urban_canyon_v0.parallel_env(render_mode=None, config=None, **fields)
+```
+
+`config` is an `coopnav_env.envs.UrbanCanyonConfig`; every keyword is one of its fields and
+overrides it. An unknown keyword raises `ValueError` listing the valid ones; a bad value raises
+`ValueError` naming the field, the value and the allowed range. Sub-configurations
+(`city_config`, `kinematics`, `relative_sensing`, `error_model`) accept the dataclass or a dict.
+`env(...)` and `raw_env(...)` take the same arguments: `raw_env` is the `ParallelEnv` class
+itself, `env(...)` is `pettingzoo.utils.parallel_to_aec(parallel_env(...))` (AEC, with
+`OrderEnforcingWrapper`; no out-of-bounds action wrapper, the environment clips itself).
+
+`render_mode` (None): `"rgb_array"` or `"human"`.
+
+`n_uavs` (5): number of UAVs, in [1, 256].
+
+`city` (`"grid"`): `"grid"`, a random street grid, or `"canyon"`, the paper's canyon.
+
+`city_config` (`CityConfig()`): the grid: 6 x 6 blocks of 60 m, 20 m streets, roofs 10-150 m
+(mean 45 m), 10 % of the blocks open squares; 500 m x 500 m.
+
+`city_seed` (None): None draws a new city every episode; an int keeps one city.
+
+`canyon_h_over_d`, `canyon_street_width_m`, `canyon_length_m` (sqrt(3), 20, 400): the canyon;
+`h/d` holds at 15 m altitude (Eq. 25), so the roofs are 32.3 m high.
+
+`lat_deg`, `lon_deg`, `alt_m` (31.0252, 121.4337, 10): geodetic origin, the paper's site.
+
+`t0_s`, `t0_random_s` (0, 0): GNSS time of the first epoch and its random spread [s].
+
+`systems` (`("GPS", "BDS")`): constellations.
+
+`elevation_mask_deg` (10): elevation cut-off [deg].
+
+`max_sats` (None): receiver channel limit (the highest satellites are kept).
+
+`error_model` (`ErrorModel()`): pseudorange errors, paper Eq. 3-8.
+
+`clock_sigma_m` (3e4): sigma of the receiver clock biases drawn at reset [m].
+
+`nlos_probability`, `nlos_bias_mean_m`, `nlos_bias_floor_m` (0, 15, 1): reception of blocked
+satellites through reflections, with a bias `floor + Exp(mean)` [m].
+
+`kinematics` (`KinematicsConfig()`): 1 s step, 10 m/s, 4 m/s^2, altitude 5-30 m, radius 1 m,
+minimum separation 3 m.
+
+`relative_sensing` (`RelativeSensingConfig()`): 200 m range, sigma 0.1 m + 0.002 m/m per axis.
+
+`transfer` (`"ddt"`): `"ddt"` or `"sdt"` measurement transfer.
+
+`centroid` (`"auto"`): `"self"` (one centroid per UAV, the paper's choice, cost ~N^2),
+`"shared"` (one centroid at the UAV with the most satellites, cost ~N) or `"auto"` (`"self"`
+up to 10 UAVs, `"shared"` from 11).
+
+`covariance` (`"exact"`): `"exact"` or `"paper"` (Eq. 18-19 as printed).
+
+`nav_max_iter` (10): Gauss-Newton iteration limit.
+
+`dead_reckoning_sigma_mps` (1): sigma growth while dead reckoning [m/s].
+
+`start_prior_sigma_m` (10): sigma of the launch position if the first epoch has no fix [m].
+
+`formation_spacing_m`, `start_altitude_m` (5, 15): start formation [m].
+
+`goal_distance_min_m`, `goal_radius_m` (200, 25): goal placement and size [m].
+
+`max_steps` (200): truncation.
+
+`obs_neighbours`, `obs_sky_azimuths`, `obs_sigma_max_m` (4, 8, 20): observation layout.
+
+`nav_reward` (`"error"`), `nav_reward_weight`, `nav_reward_scale_m`, `nav_reward_cap_m`
+(1, 10, 50), `progress_reward_weight` (1), `collision_penalty` (10), `separation_penalty` (1),
+`contact_penalty` (0.5), `goal_bonus` (10): rewards, above.
+
+`render_sky_uav` (-1): the UAV of the sky plot; -1 picks the one with the fewest satellites.
+
+`render_width_px`, `render_height_px` (1280, 640): frame size [pixel].
+
+## Rendering
+
+`render_mode="rgb_array"`: `render()` returns an (H, W, 3) uint8 frame: the city map with
+buildings shaded by roof height, the start and goal areas and the UAV tracks; a close-up of the
+swarm with each estimate's 2-sigma error ellipse (horizontal block of its covariance); a sky
+plot of one UAV (skyline, satellites by constellation, blocked ones grey, NLOS ringed), like the
+paper's Figure 6; and the per-UAV standalone and cooperative errors (`docs/render_example.png`
+is a frame of a default episode half-way). `render_mode="human"` shows the same frame in a
+matplotlib window. matplotlib is imported only when rendering (about 1 s per frame).
+
+## Seeding, determinism and pickling
+
+The environment owns one `numpy.random.Generator`, reseeded only by `reset(seed=...)`; the same
+seed gives the same episode bit for bit. `reset()` without a seed continues the stream (a new
+episode). The environment pickles (EzPickle with every argument, plus the generator and the
+world state): a restored copy continues exactly like the original.
+
+## Version History
+
+* v0: Initial release (coopnav 0.1.0).
+"""
+
+from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env
+from coopnav_env.envs.urban_canyon import aec_env as env
+from coopnav_env.envs.urban_canyon import parallel_env
+
+__all__ = ["env", "parallel_env", "raw_env"]

@@ -1,0 +1,398 @@
+"""The PettingZoo environment urban_canyon_v0: API, spaces, determinism, pickling, vector
+wrappers, rewards, errors and rendering."""
+
+from __future__ import annotations
+
+import math
+import pickle
+import re
+import warnings
+
+import numpy as np
+import pytest
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
+
+import coopnav_env.envs.urban_canyon as urban_canyon_module
+from coopnav_env import urban_canyon_v0
+from coopnav_env.envs import REWARD_TERMS, UrbanCanyonConfig, UrbanCanyonEnv, config_field_names
+from coopnav_env.nav import NavStatus
+
+
+def _zeros(env) -> dict:
+    return {a: np.zeros(3, dtype=np.float32) for a in env.agents}
+
+
+def _run_random(env, steps: int, seed: int, check) -> int:
+    """Random actions for ``steps`` steps, resetting at episode ends; returns episode count."""
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    check(obs)
+    episodes = 1
+    for _ in range(steps):
+        actions = {a: rng.uniform(-1.2, 1.2, 3).astype(np.float32) for a in env.agents}
+        obs, rewards, _, _, infos = env.step(actions)
+        check(obs)
+        assert all(math.isfinite(r) for r in rewards.values())
+        assert all(math.isfinite(i["nav_error_m"]) for i in infos.values())
+        if not env.agents:
+            obs, _ = env.reset()
+            check(obs)
+            episodes += 1
+    return episodes
+
+
+def _checker(env):
+    def check(obs: dict) -> None:
+        assert set(obs) == set(env.possible_agents)
+        for agent, o in obs.items():
+            space = env.observation_space(agent)
+            assert o.dtype == np.float32 and o.shape == space.shape
+            assert not np.any(np.isnan(o))
+            assert space.contains(o), (agent, o[(o < space.low) | (o > space.high)])
+
+    return check
+
+
+# ---- PettingZoo's own tests ---------------------------------------------------------------------
+
+
+def test_parallel_api() -> None:
+    parallel_api_test(urban_canyon_v0.parallel_env(), num_cycles=300)
+
+
+def test_parallel_seed() -> None:
+    parallel_seed_test(lambda: urban_canyon_v0.parallel_env(city="canyon"), num_cycles=50)
+
+
+def test_aec_api() -> None:
+    api_test(urban_canyon_v0.env(), num_cycles=200)
+
+
+def test_metadata_spaces_and_shim() -> None:
+    env = urban_canyon_v0.parallel_env()
+    assert isinstance(env, urban_canyon_v0.raw_env)
+    assert env.metadata["name"] == "urban_canyon_v0"
+    assert env.metadata["is_parallelizable"] is True
+    assert set(env.metadata["render_modes"]) == {"human", "rgb_array"}
+    assert env.possible_agents == [f"uav_{i}" for i in range(5)]
+    for a in env.possible_agents:
+        assert env.observation_space(a) is env.observation_space(a)
+        assert env.action_space(a) is env.action_space(a)
+        assert env.observation_space(a).shape == (38,)
+        assert env.observation_space(a).dtype == np.float32
+        assert env.action_space(a).shape == (3,)
+    assert urban_canyon_v0.__all__ == ["env", "parallel_env", "raw_env"]
+
+
+def test_documented_observation_table_matches_the_code() -> None:
+    """The shim's documentation page and the env module carry the same observation table."""
+
+    def table(doc: str) -> list[str]:
+        return [line for line in doc.splitlines() if re.match(r"^\| [0-9]", line)]
+
+    rows = table(urban_canyon_v0.__doc__)
+    assert rows and rows == table(urban_canyon_module.__doc__)
+    cfg = UrbanCanyonConfig()
+    a, k = cfg.obs_sky_azimuths, cfg.obs_neighbours
+    assert cfg.obs_dim == 13 + a + 4 * k + 1 == 38
+    for name in config_field_names():
+        assert f"`{name}`" in urban_canyon_v0.__doc__, name
+
+
+# ---- observations --------------------------------------------------------------------------------
+
+
+def test_observations_stay_in_their_space_n5() -> None:
+    env = urban_canyon_v0.parallel_env()
+    episodes = _run_random(env, 1000, seed=0, check=_checker(env))
+    assert episodes > 1
+
+
+@pytest.mark.slow
+def test_observations_stay_in_their_space_n50() -> None:
+    env = urban_canyon_v0.parallel_env(n_uavs=50)
+    _run_random(env, 1000, seed=1, check=_checker(env))
+
+
+def test_fifty_uavs_run() -> None:
+    env = urban_canyon_v0.parallel_env(n_uavs=50)
+    check = _checker(env)
+    obs, _ = env.reset(seed=3)
+    check(obs)
+    for _ in range(5):
+        obs, *_ = env.step(_zeros(env))
+        check(obs)
+    assert env.state().shape == (13 * 50 + 4,)
+
+
+def test_observation_contents() -> None:
+    env = urban_canyon_v0.parallel_env(max_steps=10)
+    obs, _ = env.reset(seed=5)
+    ep = env.unwrapped._epoch
+    cfg = env.config
+    o = obs["uav_2"]
+    L = env.unwrapped._city_scale_m
+    np.testing.assert_allclose(o[0:3], (ep.nav_pos_enu_m[2] - ep.goal_enu_m) / L, atol=1e-6)
+    np.testing.assert_allclose(o[6:9], ep.nav_sigma_enu_m[2] / cfg.obs_sigma_max_m, atol=1e-6)
+    assert o[9] == np.float32(ep.n_sats[2] / ep.n_above_mask)
+    # neighbours: nearest first, all present in a 5 m formation
+    slots = o[19:35].reshape(4, 4)
+    assert np.all(slots[:, 3] == 1.0)
+    d = np.linalg.norm(slots[:, :3], axis=1)
+    assert np.all(np.diff(d) >= 0)
+    assert o[37] == 1.0
+    obs, *_ = env.step(_zeros(env))
+    assert obs["uav_2"][37] == np.float32(0.9)
+
+
+def test_state_is_inside_state_space() -> None:
+    env = urban_canyon_v0.parallel_env()
+    env.reset(seed=0)
+    for _ in range(3):
+        s = env.state()
+        assert s.dtype == np.float32 and env.state_space.contains(s)
+        env.step(_zeros(env))
+
+
+# ---- determinism and pickling --------------------------------------------------------------------
+
+
+def _episode(env, seed: int, steps: int) -> list:
+    out = [env.reset(seed=seed)]
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        if not env.agents:
+            break
+        out.append(env.step({a: rng.uniform(-0.5, 0.5, 3) for a in env.agents}))
+    return out
+
+
+def _assert_same(a, b) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert pickle.dumps(x) == pickle.dumps(y)  # bit for bit, infos included
+
+
+def test_same_seed_same_episode_bit_for_bit() -> None:
+    env1 = urban_canyon_v0.parallel_env(nlos_probability=0.2)
+    env2 = urban_canyon_v0.parallel_env(nlos_probability=0.2)
+    _assert_same(_episode(env1, 7, 20), _episode(env2, 7, 20))
+    # reseeding the same environment repeats the episode too
+    _assert_same(_episode(env1, 7, 20), _episode(env2, 7, 20))
+    a, b = _episode(env1, 7, 5), _episode(env1, 8, 5)
+    assert not np.array_equal(a[0][0]["uav_0"], b[0][0]["uav_0"])
+
+
+def test_pickled_env_continues_identically() -> None:
+    env = urban_canyon_v0.parallel_env(render_mode="rgb_array")
+    env.reset(seed=1)
+    for _ in range(3):
+        env.step({a: np.array([0.0, 0.2, 0.05]) for a in env.agents})
+    clone = pickle.loads(pickle.dumps(env))
+    assert clone.config == env.config and clone.render_mode == "rgb_array"
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        act = {a: rng.uniform(-0.3, 0.3, 3) for a in env.agents}
+        assert pickle.dumps(env.step(act)) == pickle.dumps(clone.step(act))
+    # the next episode (unseeded reset) continues the same generator stream
+    assert pickle.dumps(env.reset()) == pickle.dumps(clone.reset())
+
+
+def test_fresh_copies_do_not_share_a_stream() -> None:
+    env = urban_canyon_v0.parallel_env()
+    a, b = pickle.loads(pickle.dumps(env)), pickle.loads(pickle.dumps(env))
+    assert not np.array_equal(a.reset()[0]["uav_0"], b.reset()[0]["uav_0"])
+
+
+# ---- vector wrappers -----------------------------------------------------------------------------
+
+
+def test_supersuit_sb3_vec_env_with_crashes() -> None:
+    ss = pytest.importorskip("supersuit")
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.vec_env import VecEnv
+
+    env = urban_canyon_v0.parallel_env(city="canyon", max_steps=50)
+    vec = ss.pettingzoo_env_to_vec_env_v1(env)
+    vec = ss.concat_vec_envs_v1(vec, num_vec_envs=2, num_cpus=1, base_class="stable_baselines3")
+    assert isinstance(vec, VecEnv)
+    n = 2 * 5
+    assert vec.num_envs == n
+    obs = vec.reset()
+    assert obs.shape == (n, 38) and obs.dtype == np.float32
+    east = np.tile([1.0, 0.0, 0.0], (n, 1)).astype(np.float32)  # into the canyon's east wall
+    crashes = 0
+    for _ in range(25):
+        obs, rewards, dones, infos = vec.step(east)
+        assert obs.shape == (n, 38) and rewards.shape == (n,) and dones.shape == (n,)
+        assert np.all(np.isfinite(obs)) and np.all(np.isfinite(rewards))
+        assert vec.observation_space.contains(obs[0])
+        if dones.any():
+            # a crash ends the episode for every agent of that sub-environment at once
+            assert dones[:5].all() == dones[:5].any() and dones[5:].all() == dones[5:].any()
+            done_infos = [infos[i] for i in np.flatnonzero(dones)]
+            assert all("terminal_observation" in i for i in done_infos)
+            crashes += any(i["collided"] for i in done_infos)
+    assert crashes >= 2  # crashed, reset automatically, and crashed again
+    vec.close()
+
+
+# ---- episode end and rewards ---------------------------------------------------------------------
+
+
+def test_truncation_at_max_steps() -> None:
+    env = urban_canyon_v0.parallel_env(max_steps=3, city="canyon")
+    env.reset(seed=0)
+    for _ in range(3):
+        _, _, terms, truncs, _ = env.step(_zeros(env))
+    assert all(truncs.values()) and not any(terms.values())
+    assert env.agents == []
+    with pytest.raises(ValueError, match="episode ended"):
+        env.step({})
+
+
+def test_goal_terminates_with_bonus() -> None:
+    env = urban_canyon_v0.parallel_env(goal_distance_min_m=0.0, goal_radius_m=1000.0)
+    env.reset(seed=0)
+    _, _, terms, truncs, infos = env.step(_zeros(env))
+    assert all(terms.values()) and not any(truncs.values())
+    for a in env.possible_agents:
+        assert infos[a]["reward_terms"]["goal"] == 10.0 and infos[a]["in_goal"]
+
+
+def test_crash_terminates_everyone_with_a_penalty() -> None:
+    env = urban_canyon_v0.parallel_env(city="canyon")
+    env.reset(seed=0)
+    for _ in range(10):
+        _, _, terms, _, infos = env.step({a: [1.0, 0.0, 0.0] for a in env.agents})
+        if any(terms.values()):
+            break
+    assert all(terms.values())
+    crashed = [a for a in infos if infos[a]["collided"]]
+    assert crashed
+    for a in crashed:
+        assert infos[a]["reward_terms"]["collision"] == -10.0
+
+
+def test_reward_is_the_sum_of_its_terms_and_infos_are_python_numbers() -> None:
+    env = urban_canyon_v0.parallel_env(nav_reward="sigma", separation_penalty=2.0)
+    env.reset(seed=2)
+    _, rewards, _, _, infos = env.step({a: [0.3, 0.3, 0.0] for a in env.agents})
+    for a in env.possible_agents:
+        info = infos[a]
+        assert set(info["reward_terms"]) == set(REWARD_TERMS)
+        assert rewards[a] == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
+        expected = -min(info["sig_3d_m"], 50.0) / 10.0
+        assert info["reward_terms"]["nav"] == pytest.approx(expected)
+        for key in ("nav_error_m", "coop_error_m", "standalone_error_m", "sig_3d_m"):
+            assert type(info[key]) is float and not math.isnan(info[key])
+        for key in ("n_sats", "n_sats_swarm", "coop_status", "standalone_status", "nav_source"):
+            assert type(info[key]) is int
+        assert type(rewards[a]) is float
+        if info["coop_status"] != NavStatus.OK:
+            assert info["coop_error_m"] == math.inf
+
+
+# ---- errors --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"n_uavs": 0}, r"UrbanCanyonConfig\.n_uavs must be an integer in \[1, 256\], got 0"),
+        ({"max_steps": 0}, r"UrbanCanyonConfig\.max_steps .*\[1, 100000\]"),
+        ({"nav_reward": "speed"}, r"nav_reward must be one of \('error', 'sigma'\)"),
+        ({"goal_bonus": -1.0}, r"goal_bonus must be in \[0.0, 100000.0\], got -1.0"),
+        ({"obs_neighbours": 100}, r"obs_neighbours must be an integer in \[0, 64\]"),
+        ({"render_sky_uav": 5}, r"render_sky_uav must be an integer in \[-1, 4\]"),
+        ({"render_mode": "ascii"}, r"render_mode must be None or one of"),
+        ({"n_drones": 3}, r"unknown urban_canyon_v0 argument\(s\) \['n_drones'\].*n_uavs"),
+    ],
+)
+def test_bad_configuration_raises(kwargs, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        urban_canyon_v0.parallel_env(**kwargs)
+
+
+def test_unknown_argument_message_lists_every_valid_name() -> None:
+    with pytest.raises(ValueError) as exc:
+        urban_canyon_v0.env(speed=3)
+    for name in config_field_names():
+        assert name in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    ("bad", "match"),
+    [
+        ({"uav_0": [np.nan, 0.0, 0.0]}, r"NaN or inf for \['uav_0'\]"),
+        ({"uav_0": [0.0, 0.0]}, r"shape \(3,\).*'uav_0': \(2,\)"),
+        ({"uav_0": "fast"}, r"numeric array of shape \(3,\)"),
+        ({"uav_9": [0.0, 0.0, 0.0]}, r"unknown: \['uav_9'\]"),
+        ("drop", r"missing: \['uav_1'\]"),
+    ],
+)
+def test_bad_actions_raise(bad, match) -> None:
+    env = urban_canyon_v0.parallel_env()
+    env.reset(seed=0)
+    actions = _zeros(env)
+    if bad == "drop":
+        del actions["uav_1"]
+    else:
+        actions.update(bad)
+    with pytest.raises(ValueError, match=match):
+        env.step(actions)
+
+
+def test_step_before_reset_raises() -> None:
+    with pytest.raises(ValueError, match="before reset"):
+        urban_canyon_v0.parallel_env().step({})
+
+
+def test_out_of_bounds_actions_are_clipped() -> None:
+    a, b = urban_canyon_v0.parallel_env(), urban_canyon_v0.parallel_env()
+    a.reset(seed=4)
+    b.reset(seed=4)
+    big = {u: np.array([5.0, -7.0, 2.0]) for u in a.agents}
+    clipped = {u: np.array([1.0, -1.0, 1.0]) for u in a.agents}
+    assert pickle.dumps(a.step(big)) == pickle.dumps(b.step(clipped))
+
+
+def test_config_object_and_overrides() -> None:
+    cfg = UrbanCanyonConfig(n_uavs=3, city="canyon")
+    env = urban_canyon_v0.parallel_env(config=cfg, max_steps=7)
+    assert env.config.n_uavs == 3 and env.config.max_steps == 7
+    assert isinstance(urban_canyon_v0.raw_env(cfg), UrbanCanyonEnv)
+
+
+# ---- rendering -----------------------------------------------------------------------------------
+
+
+def test_rgb_array_frame_to_png(tmp_path) -> None:
+    plt_image = pytest.importorskip("matplotlib.image")
+    env = urban_canyon_v0.parallel_env(render_mode="rgb_array", nlos_probability=0.3)
+    env.reset(seed=3)
+    for _ in range(3):
+        env.step({a: [0.2, 0.2, 0.0] for a in env.agents})
+    frame = env.render()
+    assert frame.shape == (640, 1280, 3) and frame.dtype == np.uint8
+    assert frame.std() > 10  # not blank
+    path = tmp_path / "frame.png"
+    plt_image.imsave(path, frame)
+    assert path.stat().st_size > 10_000
+    assert urban_canyon_v0.parallel_env().render() is None  # no render_mode: nothing
+
+
+def test_human_render_mode_headless(monkeypatch) -> None:
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    monkeypatch.setattr(plt, "pause", lambda interval: None)  # no window, no waiting
+    env = urban_canyon_v0.parallel_env(render_mode="human", city="canyon", n_uavs=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # Agg is non-interactive
+        env.reset(seed=0)
+        assert env.render() is None
+        env.step(_zeros(env))
+    env.close()
+    assert env.unwrapped._window is None
