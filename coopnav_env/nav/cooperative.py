@@ -177,7 +177,7 @@ class _Setup:
     base: np.ndarray  # (B, N, 3) measured baseline of q from the centroid
     bcov: np.ndarray  # (B, N, 3, 3) its covariance
     froot: np.ndarray  # (B, N, 3, 3) symmetric square root of bcov
-    froot_paper: np.ndarray  # (B, N, 3, 3) square root used by Eq. 18 (centroid rows get C_d)
+    froot_paper: np.ndarray | None  # (B, N, 3, 3) root used by Eq. 18 (covariance="paper")
     used: np.ndarray  # (B, N, S) measurement used (before the DDT pivot exclusion)
     has_clock: np.ndarray  # (B, n_sys) centroid clock column estimable
     pivot: np.ndarray  # (B, N, n_sys) DDT pivot satellite index (-1: none)
@@ -197,6 +197,7 @@ def _setup(
     centroid: str | int | VirtualPoint,
     transfer: Transfer,
     sdt_min_centroid_sats: int | None,
+    covariance: CovarianceModel = "exact",
 ) -> _Setup:
     n = obs.n_rx
     if isinstance(centroid, VirtualPoint):
@@ -274,15 +275,17 @@ def _setup(
         too_few = np.where(cen >= 0, n_ref < need, ref < 0)
 
     froot = _sqrtm_psd(bcov)
-    # Eq. 18 adds sigma_d^2 to every row, the centroid UAV's own rows included: give those rows
-    # the mean relative covariance of the other available UAVs.
-    own = np.zeros((n_b, n), dtype=bool)
-    own[bidx[cen >= 0], cen[cen >= 0]] = True
-    others = bavail & ~own
-    cnt = np.maximum(others.sum(axis=1), 1)
-    mean_cov = np.einsum("bn,bnij->bij", others.astype(float), bcov) / cnt[:, None, None]
-    bcov_paper = np.where(own[..., None, None], mean_cov[:, None], bcov)
-    froot_paper = _sqrtm_psd(bcov_paper)
+    froot_paper = None
+    if covariance == "paper":
+        # Eq. 18 adds sigma_d^2 to every row, the centroid UAV's own rows included: give those
+        # rows the mean relative covariance of the other available UAVs.
+        own = np.zeros((n_b, n), dtype=bool)
+        own[bidx[cen >= 0], cen[cen >= 0]] = True
+        others = bavail & ~own
+        cnt = np.maximum(others.sum(axis=1), 1)
+        mean_cov = np.einsum("bn,bnij->bij", others.astype(float), bcov) / cnt[:, None, None]
+        bcov_paper = np.where(own[..., None, None], mean_cov[:, None], bcov)
+        froot_paper = _sqrtm_psd(bcov_paper)
     return _Setup(
         centroid_uav=cen,
         ref=ref,
@@ -669,7 +672,7 @@ def solve_cooperative(
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
     if not tol_m > 0:
         raise ValueError(f"tol_m must be > 0, got {tol_m}")
-    st = _setup(obs, rel, centroid, transfer, sdt_min_centroid_sats)
+    st = _setup(obs, rel, centroid, transfer, sdt_min_centroid_sats, covariance)
     n_b = st.ref.shape[0]
     x0 = np.zeros((n_b, 3))
     if x0_ecef_m is not None:
@@ -789,10 +792,15 @@ def solve_cooperative_samples(
         centroid,
         transfer,
         sdt_min_centroid_sats,
+        covariance,
     )
     if np.any(np.isfinite(pr_samples_m) != obs.visible[None]):
         raise ValueError("pr_samples_m must be finite exactly where obs.pr_m is")
-    rep = {f: np.repeat(getattr(st, f), k, axis=0) for f in st.__dataclass_fields__}
+    rep = {
+        f: np.repeat(getattr(st, f), k, axis=0)
+        for f in st.__dataclass_fields__
+        if getattr(st, f) is not None
+    }
     rep["base"] = np.where(st.avail[0][None, :, None], rel_samples_m, 0.0)
     rep["pr"] = np.where(obs.visible[None], pr_samples_m, 0.0)
     st = replace(st, **rep)

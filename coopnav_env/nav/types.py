@@ -246,9 +246,9 @@ class RelativePositions:
         """
         from coopnav_env.gnss.frames import enu_rotation
 
-        r = enu_rotation(lat_deg, lon_deg)  # d_enu = R d_ecef
-        rel = np.einsum("ji,abj->abi", r, np.asarray(rel_enu_m, dtype=float))
-        cov = np.einsum("ji,abjk,kl->abil", r, np.asarray(cov_enu_m2, dtype=float), r)
+        r = enu_rotation(lat_deg, lon_deg)  # d_enu = R d_ecef, so d_ecef = R^T d_enu
+        rel = np.asarray(rel_enu_m, dtype=float) @ r
+        cov = r.T @ np.asarray(cov_enu_m2, dtype=float) @ r
         return cls(rel_ecef_m=rel, cov_ecef_m2=cov, available=np.asarray(available, dtype=bool))
 
     @classmethod
