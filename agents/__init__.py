@@ -1,0 +1,78 @@
+"""Policies for ``urban_canyon_v0`` behind one small protocol (:class:`agents.base.Policy`).
+
+========================  ==================================================================
+name                      policy
+========================  ==================================================================
+``random``                uniform random velocity commands (:mod:`agents.random_policy`)
+``formation``             the swarm flies the street network to the goal in a rigid
+                          formation, ignoring navigation quality (:mod:`agents.heuristics`)
+``sky``                   like ``formation``, but each UAV steers toward open sky while
+                          keeping contact with its neighbours (:mod:`agents.heuristics`)
+``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
+========================  ==================================================================
+
+>>> from coopnav_env import urban_canyon_v0  # doctest: +SKIP
+>>> env = urban_canyon_v0.parallel_env()  # doctest: +SKIP
+>>> policy = make_policy("formation", env)  # doctest: +SKIP
+>>> obs, infos = env.reset(seed=1); policy.reset(seed=1)  # doctest: +SKIP
+>>> obs, rewards, terms, truncs, infos = env.step(policy.act(obs))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from agents.base import Policy, clip_actions
+
+__all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy"]
+
+POLICY_NAMES: tuple[str, ...] = ("random", "formation", "sky", "ppo:<path>")
+"""Names :func:`make_policy` accepts."""
+
+
+def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
+    """Make the policy called ``name`` for ``env``.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`POLICY_NAMES`; ``ppo:<path>`` loads the SB3 model at ``<path>``.
+    env : pettingzoo.ParallelEnv
+        The environment the policy acts in (spaces; map and goal for the heuristics).
+    **kwargs
+        Passed to the policy's constructor (e.g. ``seed`` for ``random``, ``device`` for
+        ``ppo``).
+
+    Returns
+    -------
+    Policy
+
+    Raises
+    ------
+    ValueError
+        Unknown name (the message lists the valid ones), or an empty ``ppo:`` path.
+    FileNotFoundError
+        ``ppo:<path>`` names a checkpoint that does not exist.
+    """
+    if not isinstance(name, str):
+        raise ValueError(f"policy name must be a string, got {name!r}")
+    if name == "random":
+        from agents.random_policy import RandomPolicy
+
+        return RandomPolicy(env, **kwargs)
+    if name == "formation":
+        from agents.heuristics import FormationPolicy
+
+        return FormationPolicy(env, **kwargs)
+    if name == "sky":
+        from agents.heuristics import SkySeekingPolicy
+
+        return SkySeekingPolicy(env, **kwargs)
+    if name.startswith("ppo:"):
+        path = name[len("ppo:") :]
+        if not path:
+            raise ValueError("policy 'ppo:<path>' needs the path of a saved model")
+        from agents.ppo import PPOPolicy
+
+        return PPOPolicy(env, path, **kwargs)
+    raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICY_NAMES)}")

@@ -1,0 +1,435 @@
+"""Hand-written swarm policies for ``urban_canyon_v0``: a formation follower and a sky seeker.
+
+Both fly the street network to the goal as a *column* (a line formation along the street
+centre line, ``spacing_m`` between slots), which keeps every UAV far from the walls and in
+relative-sensing range of its neighbours. They use what a real swarm would have on board: the
+city map and the goal (from the environment's world, planned once per episode), and each UAV's
+own observation: its *estimated* position and velocity, its sky openness and its neighbours.
+They never read the true positions.
+
+* :class:`FormationPolicy` ignores navigation quality: fixed altitude (the start altitude),
+  centre line. It is the baseline a navigation-aware policy has to beat.
+* :class:`SkySeekingPolicy` flies the same route but steers toward open sky: it climbs to
+  near the ceiling of the altitude band (more of the sky clears the roofs) and shifts each UAV
+  across the street away from the side whose skyline is higher (observation indices
+  ``11 .. 10+A``), while the column keeps every UAV in contact with its neighbours and waits
+  for a UAV that loses contact.
+
+Route: the street grid is a Manhattan graph (every street spans the city), so the shortest
+route from one street point to another has at most two turns (:func:`street_route`). The
+column advances along it at ``cruise_speed_mps``, slows down before corners so that the turn
+stays inside the intersection, and stops centred on the goal.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FormationPolicy", "Polyline", "SkySeekingPolicy", "street_route"]
+
+
+# --------------------------------------------------------------------------------------------
+# route planning on the street grid
+# --------------------------------------------------------------------------------------------
+
+
+def _street_of(xy: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> tuple[str, float]:
+    """The street a point is on: ``("ns", x_centre)`` or ``("ew", y_centre)``, the nearest."""
+    dx = np.abs(cx - xy[0]) if cx.size else np.array([np.inf])
+    dy = np.abs(cy - xy[1]) if cy.size else np.array([np.inf])
+    if dx.min() <= dy.min():
+        return "ns", float(cx[int(np.argmin(dx))])
+    return "ew", float(cy[int(np.argmin(dy))])
+
+
+def street_route(city: Any, start_xy: np.ndarray, goal_xy: np.ndarray) -> np.ndarray:
+    """Shortest route along street centre lines from ``start_xy`` to ``goal_xy``.
+
+    Parameters
+    ----------
+    city : coopnav_env.sim.city.City
+        Streets: north-south centre lines ``street_centres_x_m`` and east-west ones
+        ``street_centres_y_m``, each spanning the whole city.
+    start_xy, goal_xy : ndarray, shape (2,)
+        East/North of the start and the goal [m]; each is snapped to its nearest street
+        centre line.
+
+    Returns
+    -------
+    ndarray, shape (k, 2)
+        Waypoints [m], from the snapped start to the snapped goal, without repeated points.
+    """
+    cx = np.asarray(city.street_centres_x_m, dtype=float)
+    cy = np.asarray(city.street_centres_y_m, dtype=float)
+    s_kind, s_c = _street_of(np.asarray(start_xy, float), cx, cy)
+    g_kind, g_c = _street_of(np.asarray(goal_xy, float), cx, cy)
+    sx, sy = (s_c, start_xy[1]) if s_kind == "ns" else (start_xy[0], s_c)
+    gx, gy = (g_c, goal_xy[1]) if g_kind == "ns" else (goal_xy[0], g_c)
+    pts: list[tuple[float, float]] = [(sx, sy)]
+    if s_kind == g_kind == "ns":
+        if not math.isclose(sx, gx) and cy.size:
+            b = cy[int(np.argmin(np.abs(cy - sy) + np.abs(cy - gy)))]
+            pts += [(sx, b), (gx, b)]
+    elif s_kind == g_kind == "ew":
+        if not math.isclose(sy, gy) and cx.size:
+            b = cx[int(np.argmin(np.abs(cx - sx) + np.abs(cx - gx)))]
+            pts += [(b, sy), (b, gy)]
+    elif s_kind == "ns":
+        pts.append((sx, gy))
+    else:
+        pts.append((gx, sy))
+    pts.append((gx, gy))
+    out = [pts[0]]
+    for p in pts[1:]:
+        if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
+            out.append(p)
+    return np.array(out, dtype=float).reshape(-1, 2)
+
+
+class Polyline:
+    """A 2-D polyline parametrised by arc length.
+
+    Parameters
+    ----------
+    points : ndarray, shape (k, 2)
+        Vertices [m]; consecutive duplicates are not allowed (k >= 1).
+    """
+
+    def __init__(self, points: np.ndarray):
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if pts.shape[0] == 1:
+            pts = np.vstack([pts, pts + np.array([1e-3, 0.0])])
+        self.points = pts
+        seg = np.diff(pts, axis=0)
+        self.seg_len = np.linalg.norm(seg, axis=1)
+        self.seg_dir = seg / self.seg_len[:, None]
+        self.s = np.r_[0.0, np.cumsum(self.seg_len)]  # arc length at each vertex
+        self.length = float(self.s[-1])
+
+    def _seg(self, s: np.ndarray) -> np.ndarray:
+        return np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.seg_len.size - 1)
+
+    def point(self, s: np.ndarray) -> np.ndarray:
+        """Points at arc lengths ``s`` (clamped to the ends), shape ``s.shape + (2,)``."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        k = self._seg(s)
+        return self.points[k] + self.seg_dir[k] * (s - self.s[k])[..., None]
+
+    def tangent(self, s: np.ndarray) -> np.ndarray:
+        """Unit tangents at arc lengths ``s``, shape ``s.shape + (2,)``."""
+        return self.seg_dir[self._seg(np.clip(np.asarray(s, dtype=float), 0.0, self.length))]
+
+    def distance_to_corner(self, s: np.ndarray) -> np.ndarray:
+        """Arc length from ``s`` to the next interior vertex (inf after the last one)."""
+        s = np.asarray(s, dtype=float)
+        corners = self.s[1:-1]
+        if corners.size == 0:
+            return np.full(s.shape, np.inf)
+        ahead = corners[None, :] - s.reshape(-1, 1)
+        ahead = np.where(ahead >= -1e-9, ahead, np.inf)
+        return ahead.min(axis=1).reshape(s.shape)
+
+    def project(self, xy: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Arc length of the nearest point of the polyline within ``[lo, hi]``, per point.
+
+        Parameters
+        ----------
+        xy : ndarray, shape (n, 2)
+        lo, hi : ndarray, shape (n,)
+            Window of admissible arc lengths (keeps the projection from jumping to another
+            leg of the route).
+        """
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        rel = xy[:, None, :] - self.points[None, :-1, :]  # (n, m, 2)
+        t = np.clip(np.einsum("nmk,mk->nm", rel, self.seg_dir), 0.0, self.seg_len[None, :])
+        s = self.s[None, :-1] + t
+        s = np.clip(s, lo[:, None], hi[:, None])
+        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.seg_len.size - 1)
+        pts = self.points[k] + self.seg_dir[k] * (s - self.s[k])[..., None]
+        d = np.linalg.norm(pts - xy[:, None, :], axis=2)
+        best = np.argmin(d, axis=1)
+        return s[np.arange(xy.shape[0]), best]
+
+
+def _extend(points: np.ndarray, back_m: float, fwd_m: float, extent: tuple) -> np.ndarray:
+    """Prepend/append straight extensions along the first/last leg, kept inside ``extent``."""
+    pts = np.asarray(points, dtype=float)
+    if pts.shape[0] < 2:
+        d0 = d1 = np.array([0.0, 1.0])
+    else:
+        d0 = pts[1] - pts[0]
+        d0 /= np.linalg.norm(d0)
+        d1 = pts[-1] - pts[-2]
+        d1 /= np.linalg.norm(d1)
+    x0, x1, y0, y1 = extent
+    lo, hi = np.array([x0 + 2.0, y0 + 2.0]), np.array([x1 - 2.0, y1 - 2.0])
+    first = np.clip(pts[0] - d0 * back_m, lo, hi)
+    last = np.clip(pts[-1] + d1 * fwd_m, lo, hi)
+    out = [first] if np.linalg.norm(first - pts[0]) > 1e-6 else []
+    out += list(pts)
+    if np.linalg.norm(last - pts[-1]) > 1e-6:
+        out.append(last)
+    return np.array(out)
+
+
+# --------------------------------------------------------------------------------------------
+# the column follower
+# --------------------------------------------------------------------------------------------
+
+
+def _world_of(env: Any) -> Any:
+    base = getattr(env, "unwrapped", env)
+    world = getattr(base, "world", None)
+    config = getattr(base, "config", None)
+    if world is None or config is None or not hasattr(config, "obs_sky_azimuths"):
+        raise ValueError(
+            "the formation and sky heuristics need an urban_canyon_v0 environment (a world with "
+            f"a city map and a goal); got {type(base).__name__}"
+        )
+    return base
+
+
+class _ColumnFollower:
+    """Shared machinery: plan the route, keep the column, track the slots (see module doc)."""
+
+    name = "column"
+
+    def __init__(
+        self,
+        env: Any,
+        spacing_m: float = 7.0,
+        cruise_speed_mps: float = 7.0,
+        turn_speed_mps: float = 2.0,
+        brake_mps2: float = 1.0,
+        gain_per_s: float = 0.6,
+        max_lag_m: float = 10.0,
+    ):
+        self.env = env
+        self.base = _world_of(env)
+        cfg = self.base.config
+        self.cfg = cfg
+        self.spacing_m = float(spacing_m)
+        self.cruise_speed_mps = float(min(cruise_speed_mps, cfg.kinematics.max_speed_mps))
+        self.turn_speed_mps = float(turn_speed_mps)
+        self.brake_mps2 = float(brake_mps2)
+        self.gain_per_s = float(gain_per_s)
+        self.max_lag_m = float(max_lag_m)
+        self._index = {a: i for i, a in enumerate(self.base.possible_agents)}
+        a, k = cfg.obs_sky_azimuths, cfg.obs_neighbours
+        self._sky = slice(11, 11 + a)
+        self._neigh0 = 11 + a
+        self._n_neigh = k
+        self._az_deg = np.arange(a) * (360.0 / a)
+        self._path: Polyline | None = None
+
+    # -- to be specialised ----------------------------------------------------------------
+
+    def _altitude_m(self) -> float:
+        return float(self.cfg.start_altitude_m)
+
+    def _lateral_offsets_m(self, obs: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+        return np.zeros(obs.shape[0])
+
+    # -- protocol -------------------------------------------------------------------------
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the route: it is planned at the first :meth:`act` of the episode."""
+        self._path = None
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Velocity commands that keep each UAV on its slot of the column."""
+        agents = list(observations)
+        if not agents:
+            return {}
+        base = self.base
+        world = base.world
+        city = world.city
+        goal = np.asarray(world.goal_enu_m, dtype=float)
+        x0, x1, y0, y1 = city.extent_m
+        scale = float(max(x1 - x0, y1 - y0))
+        vmax = float(self.cfg.kinematics.max_speed_mps)
+        idx = np.array([self._index[a] for a in agents])
+        obs = np.stack([np.asarray(observations[a], dtype=np.float64) for a in agents])
+        est = goal + obs[:, 0:3] * scale  # estimated positions, never the truth
+        if self._path is None or self._n != len(self._index):
+            self._plan(est, idx, city, goal)
+        path = self._path
+        assert path is not None
+        slot = self._slot[idx]
+        self._cur_idx = idx
+
+        # progress of every UAV along the route (window around its last value)
+        s_prev = self._s[idx]
+        s = path.project(est[:, :2], s_prev - 20.0, s_prev + 40.0)
+        self._s[idx] = s
+
+        # advance the head of the column: cruise, brake before corners, wait for laggards
+        slot_s = self._head - slot * self.spacing_m
+        ref = np.minimum(np.maximum(slot_s, 0.0), s)
+        v_corner = v_corner_at(
+            path, ref, self.turn_speed_mps, self.brake_mps2, self.cruise_speed_mps
+        )
+        speed = float(np.min(v_corner))
+        lag = float(np.max(slot_s - s))
+        if lag > self.max_lag_m:
+            speed *= max(0.0, 1.0 - (lag - self.max_lag_m) / self.max_lag_m)
+        speed *= self._contact_factor(obs)
+        self._head = min(self._head + speed * float(self.cfg.dt_s), self._head_end)
+        if self._head >= self._head_end:
+            speed = 0.0
+
+        slot_s = self._head - slot * self.spacing_m
+        tangent = path.tangent(slot_s)
+        normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)  # left of travel
+        target_xy = path.point(slot_s) + normal * self._lateral_offsets_m(obs, tangent)[:, None]
+        v = np.zeros((len(agents), 3))
+        v[:, :2] = tangent * speed + self.gain_per_s * (target_xy - est[:, :2])
+        v[:, 2] = self.gain_per_s * (self._altitude_m() - est[:, 2])
+        h = np.linalg.norm(v[:, :2], axis=1)
+        cap = v_corner_at(path, s, self.turn_speed_mps, self.brake_mps2, vmax)
+        v[:, :2] *= np.minimum(1.0, cap / np.maximum(h, 1e-9))[:, None]
+        cmd = np.clip(v / vmax, -1.0, 1.0).astype(np.float32)
+        return {a: cmd[i] for i, a in enumerate(agents)}
+
+    def _contact_factor(self, obs: np.ndarray) -> float:
+        return 1.0
+
+    def _plan(self, est: np.ndarray, idx: np.ndarray, city: Any, goal: np.ndarray) -> None:
+        n = len(self._index)
+        self._n = n
+        centre = est[:, :2].mean(axis=0)
+        route = street_route(city, centre, goal[:2])
+        back = (n + 1) * self.spacing_m + 10.0
+        fwd = (n - 1) * self.spacing_m / 2.0 + 5.0
+        pts = _extend(route, back, fwd, city.extent_m)
+        path = Polyline(pts)
+        # arc length of the (snapped) goal on the extended path
+        s_goal = float(path.project(route[-1:], np.zeros(1), np.full(1, path.length))[0])
+        s0 = path.project(est[:, :2], np.zeros(len(idx)), np.full(len(idx), s_goal))
+        order = np.argsort(-s0, kind="stable")  # the UAV farthest along leads
+        slot = np.zeros(n)
+        self._s = np.zeros(n)
+        slot[idx[order]] = np.arange(len(idx))
+        self._s[idx] = s0
+        self._slot = slot
+        self._head = float(np.mean(s0 + slot[idx] * self.spacing_m))
+        self._head_end = min(s_goal + (n - 1) * self.spacing_m / 2.0, path.length)
+        self._path = path
+
+
+def v_corner_at(
+    path: Polyline, s: np.ndarray, v_turn: float, brake: float, vmax: float
+) -> np.ndarray:
+    """Speed limit before the next corner, at most ``vmax``.
+
+    ``v_turn + sqrt(2 brake (d - 3 m))`` at an arc length ``d`` before the corner: the 3 m
+    margin accounts for the step of travel before the next command (``dt = 1 s``).
+    """
+    d = path.distance_to_corner(np.maximum(s, 0.0))
+    d = np.where(np.isfinite(d), np.maximum(d - 3.0, 0.0), 1e9)
+    return np.minimum(vmax, v_turn + np.sqrt(2.0 * brake * d))
+
+
+class FormationPolicy(_ColumnFollower):
+    """Fixed column along the street centre line at the start altitude, to the goal.
+
+    Ignores navigation quality (see the module docstring).
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+    spacing_m : float, default 7.0
+        Distance between consecutive UAVs of the column [m] (a column of 5 spans 28 m and
+        stops centred on the goal, inside the default 25 m goal radius).
+    cruise_speed_mps : float, default 7.0
+        Speed of the column on straight legs [m/s].
+    turn_speed_mps, brake_mps2 : float, default 2.0, 1.0
+        Speed at a corner and deceleration used to approach it.
+    gain_per_s : float, default 0.6
+        Proportional gain from slot error to velocity [1/s].
+    max_lag_m : float, default 10.0
+        The column slows down when a UAV is farther than this behind its slot.
+    """
+
+    name = "formation"
+
+
+class SkySeekingPolicy(_ColumnFollower):
+    """Column along the route that climbs and shifts each UAV toward the open side of the sky.
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+    max_offset_m : float, default 4.0
+        Largest lateral shift from the street centre line [m].
+    ceiling_margin_m : float, default 2.0
+        Altitude kept below the top of the altitude band [m].
+    smoothing : float, default 0.7
+        Low-pass factor of the lateral shift between steps, in [0, 1).
+    **kwargs
+        As :class:`FormationPolicy`.
+
+    Notes
+    -----
+    Skyline elevation per azimuth comes from the observation (``obs[11 : 11 + A] * 90`` deg).
+    For each UAV the skylines to the left and right of its direction of travel are
+    interpolated; the shift is ``-max_offset_m * tanh(4 (left - right))`` (away from the
+    higher side). A UAV with no neighbour in relative range holds the column (the head stops)
+    until contact is back.
+    """
+
+    name = "sky"
+
+    def __init__(
+        self,
+        env: Any,
+        max_offset_m: float = 4.0,
+        ceiling_margin_m: float = 2.0,
+        smoothing: float = 0.7,
+        **kwargs: Any,
+    ):
+        super().__init__(env, **kwargs)
+        self.max_offset_m = float(max_offset_m)
+        self.ceiling_margin_m = float(ceiling_margin_m)
+        self.smoothing = float(smoothing)
+        self._offset = np.zeros(len(self._index))
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the route and the lateral shifts."""
+        super().reset(seed)
+        self._offset = np.zeros(len(self._index))
+
+    def _altitude_m(self) -> float:
+        kin = self.cfg.kinematics
+        return float(max(kin.altitude_max_m - self.ceiling_margin_m, self.cfg.start_altitude_m))
+
+    def _sky_at(self, sky: np.ndarray, az_deg: np.ndarray) -> np.ndarray:
+        """Skyline (fraction of 90 deg) per UAV at azimuths ``az_deg``, circular interpolation."""
+        a = sky.shape[1]
+        pos = np.mod(az_deg, 360.0) / (360.0 / a)
+        k0 = np.floor(pos).astype(int) % a
+        k1 = (k0 + 1) % a
+        w = pos - np.floor(pos)
+        rows = np.arange(sky.shape[0])
+        return (1.0 - w) * sky[rows, k0] + w * sky[rows, k1]
+
+    def _lateral_offsets_m(self, obs: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+        sky = obs[:, self._sky]
+        az_travel = np.degrees(np.arctan2(tangent[:, 0], tangent[:, 1]))  # from North, cw
+        left = self._sky_at(sky, az_travel - 90.0)
+        right = self._sky_at(sky, az_travel + 90.0)
+        want = -self.max_offset_m * np.tanh(4.0 * (left - right))
+        idx = self._cur_idx
+        new = self.smoothing * self._offset[idx] + (1.0 - self.smoothing) * want
+        self._offset[idx] = new
+        return new
+
+    def _contact_factor(self, obs: np.ndarray) -> float:
+        if self._n_neigh == 0 or obs.shape[0] < 2:
+            return 1.0
+        flags = obs[:, self._neigh0 + 3 : self._neigh0 + 4 * self._n_neigh : 4]
+        return 0.0 if np.any(flags.max(axis=1) < 0.5) else 1.0

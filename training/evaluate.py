@@ -1,0 +1,772 @@
+"""``coopnav evaluate``: navigation error, goal rate and collisions per policy.
+
+Each policy flies the same held-out episodes (reset seeds ``EVAL_SEED_START + i``, never used
+in training: ``coopnav train`` keeps its reset seeds below :data:`EVAL_SEED_START`) and is
+scored on every UAV at every step:
+
+* cooperative and standalone 3-D position error (true minus estimated): mean, median, 95th
+  percentile over the agent-steps that have a fix, and P(error < 3 m) over all agent-steps
+  (a step without a fix counts as a failure), the statistic of the paper's Figure 8;
+* the goal rate (episodes in which the swarm reached the goal: every UAV in the goal area at
+  once, which ends the episode), the UAV goal rate (UAVs that entered the goal area at some
+  step), collisions (episodes ended by a crash), satellites received per UAV and by the UAV
+  with its neighbours, the error of the estimate each UAV actually used (cooperative, else
+  standalone, else dead reckoning), episode return and length.
+
+Outputs in ``--out DIR``: ``report.json``, ``report.csv``, ``report.md`` (the table printed on
+the terminal), ``errors.npz`` (every error sample), ``error_cdf.png`` (empirical CDF of the
+error per policy) and ``trajectories_<policy>.png`` (top-down view of the first episode).
+Results are deterministic for fixed seeds: the env and every stochastic policy are reseeded
+with the episode seed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import re
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "DEFAULT_EPISODES",
+    "EVAL_SEED_START",
+    "EpisodeRecord",
+    "PolicyStats",
+    "Report",
+    "add_arguments",
+    "evaluate",
+    "heldout_seeds",
+    "run",
+]
+
+EVAL_SEED_START: int = 1_000_000
+"""First held-out evaluation seed. Training reset seeds are ``< EVAL_SEED_START``."""
+
+DEFAULT_EPISODES: int = 20
+"""Episodes per policy when no seeds are given."""
+
+ERROR_THRESHOLD_M: float = 3.0
+"""Threshold of the availability statistic P(3-D error < 3 m) (the paper's Figure 8)."""
+
+
+def heldout_seeds(n: int, start: int = EVAL_SEED_START) -> list[int]:
+    """``n`` held-out evaluation seeds ``start, start + 1, ...``.
+
+    Raises
+    ------
+    ValueError
+        ``n < 1`` or ``start < EVAL_SEED_START`` (such seeds may have been seen in training).
+    """
+    if int(n) < 1:
+        raise ValueError(f"the number of evaluation episodes must be >= 1, got {n}")
+    if int(start) < EVAL_SEED_START:
+        raise ValueError(
+            f"evaluation seeds must be >= {EVAL_SEED_START} (training uses the seeds below), "
+            f"got {start}"
+        )
+    return [int(start) + i for i in range(int(n))]
+
+
+# --------------------------------------------------------------------------------------------
+# results
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class EpisodeRecord:
+    """What one policy did in one episode (arrays over steps ``t`` and agents ``i``).
+
+    Attributes
+    ----------
+    seed : int
+    coop_error_m, standalone_error_m : ndarray, shape (T, N)
+        3-D errors of the cooperative and standalone fixes [m]; NaN where there was none.
+    n_sats, n_sats_swarm : ndarray, shape (T, N)
+    nav_error_m : ndarray, shape (T, N)
+        3-D error of the estimate each UAV used [m]; NaN where the env does not report it.
+    pos_enu_m : ndarray, shape (T + 1, N, 3) or None
+        True positions from the reset on (for the trajectory plot); None if unknown.
+    goal_reached : ndarray of bool, shape (N,)
+        Whether each UAV was in the goal area at some step.
+    success : bool
+        Whether the episode ended with every UAV in the goal area (and no collision).
+    collided : bool
+        Whether the episode ended in a collision.
+    episode_return : float
+        Sum of the rewards of all UAVs, divided by N.
+    length : int
+        Steps.
+    """
+
+    seed: int
+    coop_error_m: np.ndarray
+    standalone_error_m: np.ndarray
+    n_sats: np.ndarray
+    n_sats_swarm: np.ndarray
+    nav_error_m: np.ndarray
+    pos_enu_m: np.ndarray | None
+    goal_reached: np.ndarray
+    success: bool
+    collided: bool
+    episode_return: float
+    length: int
+
+
+@dataclass
+class PolicyStats:
+    """Summary of one policy over all evaluation episodes (see the module docstring)."""
+
+    policy: str
+    episodes: int
+    agent_steps: int
+    coop_error_mean_m: float
+    coop_error_median_m: float
+    coop_error_p95_m: float
+    p_coop_error_lt_3m: float
+    coop_fix_rate: float
+    standalone_error_mean_m: float
+    standalone_error_median_m: float
+    standalone_error_p95_m: float
+    p_standalone_error_lt_3m: float
+    standalone_fix_rate: float
+    nav_error_mean_m: float
+    nav_error_median_m: float
+    goal_rate: float
+    uav_goal_rate: float
+    collisions: int
+    collision_rate: float
+    n_sats_mean: float
+    n_sats_swarm_mean: float
+    return_mean: float
+    length_mean: float
+    wall_s: float
+
+    @classmethod
+    def from_episodes(cls, policy: str, eps: Sequence[EpisodeRecord], wall_s: float) -> PolicyStats:
+        """Aggregate episode records."""
+        coop = np.concatenate([e.coop_error_m.ravel() for e in eps])
+        alone = np.concatenate([e.standalone_error_m.ravel() for e in eps])
+        sats = np.concatenate([e.n_sats.ravel() for e in eps])
+        sats_sw = np.concatenate([e.n_sats_swarm.ravel() for e in eps])
+        goals = np.concatenate([e.goal_reached.ravel() for e in eps])
+        used = _error_stats(np.concatenate([e.nav_error_m.ravel() for e in eps]))
+        collisions = int(sum(e.collided for e in eps))
+        c, s = _error_stats(coop), _error_stats(alone)
+        return cls(
+            policy=policy,
+            episodes=len(eps),
+            agent_steps=int(coop.size),
+            coop_error_mean_m=c["mean"],
+            coop_error_median_m=c["median"],
+            coop_error_p95_m=c["p95"],
+            p_coop_error_lt_3m=c["p_lt"],
+            coop_fix_rate=c["fix_rate"],
+            standalone_error_mean_m=s["mean"],
+            standalone_error_median_m=s["median"],
+            standalone_error_p95_m=s["p95"],
+            p_standalone_error_lt_3m=s["p_lt"],
+            standalone_fix_rate=s["fix_rate"],
+            nav_error_mean_m=used["mean"],
+            nav_error_median_m=used["median"],
+            goal_rate=float(np.mean([e.success for e in eps])),
+            uav_goal_rate=float(goals.mean()) if goals.size else math.nan,
+            collisions=collisions,
+            collision_rate=collisions / len(eps),
+            n_sats_mean=_nanmean(sats),
+            n_sats_swarm_mean=_nanmean(sats_sw),
+            return_mean=float(np.mean([e.episode_return for e in eps])),
+            length_mean=float(np.mean([e.length for e in eps])),
+            wall_s=round(float(wall_s), 3),
+        )
+
+
+def _nanmean(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(x.mean()) if x.size else math.nan
+
+
+def _error_stats(err: np.ndarray) -> dict[str, float]:
+    """mean/median/p95 over finite errors; P(< 3 m) and fix rate over all samples."""
+    fin = err[np.isfinite(err)]
+    n = max(err.size, 1)
+    return {
+        "mean": float(fin.mean()) if fin.size else math.nan,
+        "median": float(np.median(fin)) if fin.size else math.nan,
+        "p95": float(np.percentile(fin, 95)) if fin.size else math.nan,
+        "p_lt": float(np.sum(fin < ERROR_THRESHOLD_M) / n),
+        "fix_rate": float(fin.size / n),
+    }
+
+
+#: (column title, PolicyStats field, format) of the Markdown/terminal table
+_TABLE: tuple[tuple[str, str, str], ...] = (
+    ("policy", "policy", "{}"),
+    ("coop mean [m]", "coop_error_mean_m", "{:.2f}"),
+    ("coop median [m]", "coop_error_median_m", "{:.2f}"),
+    ("coop p95 [m]", "coop_error_p95_m", "{:.2f}"),
+    ("P(coop < 3 m)", "p_coop_error_lt_3m", "{:.3f}"),
+    ("alone mean [m]", "standalone_error_mean_m", "{:.2f}"),
+    ("alone median [m]", "standalone_error_median_m", "{:.2f}"),
+    ("alone p95 [m]", "standalone_error_p95_m", "{:.2f}"),
+    ("P(alone < 3 m)", "p_standalone_error_lt_3m", "{:.3f}"),
+    ("goal rate", "goal_rate", "{:.3f}"),
+    ("collisions", "collisions", "{:d}"),
+    ("sats/UAV", "n_sats_mean", "{:.1f}"),
+    ("return", "return_mean", "{:.1f}"),
+)
+
+
+@dataclass
+class Report:
+    """The evaluation of several policies on the same episodes.
+
+    Attributes
+    ----------
+    stats : list of PolicyStats
+        One per policy, in the order given.
+    seeds : list of int
+    env_kwargs : dict
+    env_id : str
+    episodes : dict of str to list of EpisodeRecord
+        Raw records per policy (not written to JSON; errors go to ``errors.npz``).
+    files : dict of str to Path
+        What was written (empty when ``out`` was None).
+    """
+
+    stats: list[PolicyStats]
+    seeds: list[int]
+    env_kwargs: dict[str, Any]
+    env_id: str
+    episodes: dict[str, list[EpisodeRecord]] = field(default_factory=dict, repr=False)
+    files: dict[str, Path] = field(default_factory=dict)
+
+    def __getitem__(self, policy: str) -> PolicyStats:
+        for s in self.stats:
+            if s.policy == policy:
+                return s
+        raise KeyError(policy)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable summary (NaN written as null)."""
+        return {
+            "env_id": self.env_id,
+            "env_kwargs": _jsonable(self.env_kwargs),
+            "seeds": list(self.seeds),
+            "error_threshold_m": ERROR_THRESHOLD_M,
+            "policies": [_jsonable(asdict(s)) for s in self.stats],
+        }
+
+    def to_markdown(self) -> str:
+        """The summary table in GitHub Markdown."""
+        head = [t for t, _, _ in _TABLE]
+        rows = [[_fmt(getattr(s, f), fmt) for _, f, fmt in _TABLE] for s in self.stats]
+        lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+        lines += ["| " + " | ".join(r) + " |" for r in rows]
+        return "\n".join(lines)
+
+
+def _fmt(value: Any, fmt: str) -> str:
+    if isinstance(value, float) and not math.isfinite(value):
+        return "n/a"
+    return fmt.format(value)
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def _slug(name: str) -> str:
+    """A file-name-safe form of a policy name (``ppo:runs/a/final_model.zip`` -> ...)."""
+    name = re.sub(r"\.zip$", "", name)
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "policy"
+
+
+# --------------------------------------------------------------------------------------------
+# running episodes
+# --------------------------------------------------------------------------------------------
+
+
+def _make_env(env_id: str, env_kwargs: Mapping[str, Any]) -> Any:
+    from training.train import make_env_fn
+
+    return make_env_fn(env_id, env_kwargs)()
+
+
+def _true_positions(env: Any, infos: Mapping[str, Mapping[str, Any]]) -> np.ndarray | None:
+    """True ENU positions of all possible agents, shape (N, 3), or None if unavailable."""
+    agents = env.possible_agents
+    if all("pos_enu_m" in infos.get(a, {}) for a in agents):
+        return np.array([np.asarray(infos[a]["pos_enu_m"], float)[:3] for a in agents])
+    base = getattr(env, "unwrapped", env)
+    for owner in (getattr(base, "world", None), base):
+        val = getattr(owner, "pos_enu_m", None)
+        if val is not None:
+            arr = np.asarray(val, dtype=float)
+            if arr.shape == (len(agents), 3):
+                return arr.copy()
+    return None
+
+
+def _in_goal(info: Mapping[str, Any]) -> bool:
+    """Whether a UAV is in the goal area (``in_goal``; ``goal_reached`` for other envs)."""
+    return bool(info.get("in_goal", info.get("goal_reached", False)))
+
+
+def _info_float(info: Mapping[str, Any], key: str) -> float:
+    v = info.get(key)
+    try:
+        return float(v) if v is not None else math.nan
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) -> EpisodeRecord:
+    """Fly one episode of ``policy`` in ``env`` from ``reset(seed=seed)``.
+
+    Parameters
+    ----------
+    env : pettingzoo.ParallelEnv
+    policy : Policy
+    seed : int
+        Reset seed of the env and of the policy.
+    max_steps : int or None
+        Safety limit on the number of steps (the env's own ``max_steps`` truncates first).
+
+    Returns
+    -------
+    EpisodeRecord
+    """
+    agents = list(env.possible_agents)
+    n = len(agents)
+    obs, infos = env.reset(seed=int(seed))
+    policy.reset(seed=int(seed))
+    rows: dict[str, list[np.ndarray]] = {
+        k: []
+        for k in ("coop_error_m", "standalone_error_m", "n_sats", "n_sats_swarm", "nav_error_m")
+    }
+    pos0 = _true_positions(env, infos)
+    positions = [pos0] if pos0 is not None else None
+    goal = np.zeros(n, dtype=bool)
+    at_goal = np.zeros(n, dtype=bool)
+    collided = False
+    total = 0.0
+    steps = 0
+    limit = max_steps if max_steps is not None else 1_000_000
+    while env.agents and steps < limit:
+        actions = policy.act({a: obs[a] for a in env.agents})
+        obs, rewards, _terms, _truncs, infos = env.step(actions)
+        steps += 1
+        total += float(sum(rewards.values()))
+        for key, lst in rows.items():
+            lst.append(np.array([_info_float(infos.get(a, {}), key) for a in agents]))
+        at_goal = np.array([_in_goal(infos.get(a, {})) for a in agents])
+        goal |= at_goal
+        collided |= any(bool(infos.get(a, {}).get("collided", False)) for a in agents)
+        if positions is not None:
+            p = _true_positions(env, infos)
+            if p is None:
+                positions = None
+            else:
+                positions.append(p)
+    arr = {k: np.array(v, dtype=float).reshape(-1, n) for k, v in rows.items()}
+    success = bool(steps > 0 and at_goal.all() and not collided)
+    return EpisodeRecord(
+        seed=int(seed),
+        coop_error_m=arr["coop_error_m"],
+        standalone_error_m=arr["standalone_error_m"],
+        n_sats=arr["n_sats"],
+        n_sats_swarm=arr["n_sats_swarm"],
+        nav_error_m=arr["nav_error_m"],
+        pos_enu_m=np.array(positions) if positions is not None else None,
+        goal_reached=goal,
+        success=success,
+        collided=collided,
+        episode_return=total / n,
+        length=steps,
+    )
+
+
+def evaluate(
+    policies: Sequence[str],
+    seeds: Sequence[int],
+    env_kwargs: Mapping[str, Any] | None = None,
+    out: str | Path | None = None,
+    *,
+    env_id: str = "urban_canyon_v0",
+    plots: bool = True,
+    verbose: bool = False,
+) -> Report:
+    """Evaluate named policies on the same held-out episodes.
+
+    Parameters
+    ----------
+    policies : sequence of str
+        Registry names (:data:`agents.POLICY_NAMES`), e.g. ``["random", "formation", "sky",
+        "ppo:runs/quick/final_model.zip"]``; all are made (and checkpoints checked) before any
+        episode runs.
+    seeds : sequence of int
+        Reset seeds, one episode each (see :func:`heldout_seeds`).
+    env_kwargs : mapping or None
+        Environment settings (must match those a PPO policy was trained with).
+    out : path or None
+        Directory for the report files and plots; None writes nothing.
+    env_id : str, default "urban_canyon_v0"
+        As in :class:`training.train.TrainConfig`.
+    plots : bool, default True
+        Write the CDF and trajectory plots (needs matplotlib).
+    verbose : bool, default False
+        Print progress per policy.
+
+    Returns
+    -------
+    Report
+
+    Raises
+    ------
+    ValueError
+        No policy, no seed, a duplicated or unknown policy name, bad env settings.
+    FileNotFoundError
+        A ``ppo:<path>`` checkpoint does not exist.
+    """
+    from agents import make_policy
+
+    policies = list(policies)
+    seeds = [int(s) for s in seeds]
+    if not policies:
+        raise ValueError("give at least one policy to evaluate")
+    if not seeds:
+        raise ValueError("give at least one evaluation seed")
+    if len(set(policies)) != len(policies):
+        raise ValueError(f"policy names must be unique, got {policies}")
+    env_kwargs = dict(env_kwargs or {})
+    envs = {name: _make_env(env_id, env_kwargs) for name in policies}
+    made = {name: make_policy(name, envs[name]) for name in policies}
+
+    stats: list[PolicyStats] = []
+    records: dict[str, list[EpisodeRecord]] = {}
+    for name in policies:
+        t0 = time.perf_counter()
+        eps = [run_episode(envs[name], made[name], s) for s in seeds]
+        wall = time.perf_counter() - t0
+        records[name] = eps
+        stats.append(PolicyStats.from_episodes(name, eps, wall))
+        if verbose:
+            print(f"  {name}: {len(eps)} episodes in {wall:.1f} s", file=sys.stderr)
+
+    report = Report(stats, seeds, env_kwargs, env_id, records)
+    if out is not None:
+        _write(report, Path(out), envs[policies[0]], plots)
+    for env in envs.values():
+        env.close()
+    return report
+
+
+# --------------------------------------------------------------------------------------------
+# writing
+# --------------------------------------------------------------------------------------------
+
+
+def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    files = report.files
+    files["json"] = out / "report.json"
+    files["json"].write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+    files["csv"] = out / "report.csv"
+    names = [f.name for f in PolicyStats.__dataclass_fields__.values()]
+    with files["csv"].open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(names)
+        for s in report.stats:
+            w.writerow([_csv_cell(getattr(s, k)) for k in names])
+    files["md"] = out / "report.md"
+    files["md"].write_text(_markdown_document(report))
+    files["npz"] = out / "errors.npz"
+    arrays = {}
+    for name, eps in report.episodes.items():
+        arrays[f"{_slug(name)}__coop_error_m"] = np.concatenate(
+            [e.coop_error_m.ravel() for e in eps]
+        )
+        arrays[f"{_slug(name)}__standalone_error_m"] = np.concatenate(
+            [e.standalone_error_m.ravel() for e in eps]
+        )
+    np.savez_compressed(files["npz"], **arrays)
+    if plots:
+        files["cdf"] = plot_error_cdf(report, out / "error_cdf.png")
+        for name, eps in report.episodes.items():
+            path = out / f"trajectories_{_slug(name)}.png"
+            if plot_trajectories(env, eps[0], path, title=f"{name}, seed {eps[0].seed}"):
+                files[f"trajectories:{name}"] = path
+
+
+def _csv_cell(v: Any) -> Any:
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else repr(round(v, 6))
+    return v
+
+
+def _markdown_document(report: Report) -> str:
+    seeds = report.seeds
+    span = f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    lines = [
+        "# Policy evaluation",
+        "",
+        f"Environment `{report.env_id}` with settings `{json.dumps(_jsonable(report.env_kwargs))}`;"
+        f" {len(seeds)} held-out episodes (reset seeds {span}).",
+        "Errors are true-minus-estimated 3-D position errors over all UAV-steps; mean, median"
+        " and p95 over steps with a fix, P(< 3 m) over all steps. Goal rate: episodes in which"
+        " the whole swarm reached the goal area; collisions: episodes ended by a crash.",
+        "",
+        report.to_markdown(),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def plot_error_cdf(report: Report, path: str | Path) -> Path:
+    """Empirical CDF of the cooperative (solid) and standalone (dashed) 3-D error per policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, (name, eps) in enumerate(report.episodes.items()):
+        c = colors[k % len(colors)]
+        for key, style, label in (
+            ("coop_error_m", "-", "cooperative"),
+            ("standalone_error_m", "--", "standalone"),
+        ):
+            err = np.concatenate([getattr(e, key).ravel() for e in eps])
+            n = err.size
+            fin = np.sort(err[np.isfinite(err)])
+            if fin.size == 0:
+                continue
+            y = np.arange(1, fin.size + 1) / n  # steps without a fix never reach the curve
+            ax.step(fin, y, where="post", color=c, ls=style, label=f"{name} ({label})")
+    ax.axvline(ERROR_THRESHOLD_M, color="0.5", lw=0.8, ls=":")
+    ax.set_xscale("log")
+    ax.set_xlabel("3-D position error [m]")
+    ax.set_ylabel("P(error ≤ x)")
+    ax.set_ylim(0.0, 1.0)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.set_title("Navigation error per policy (held-out episodes)")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _world(env: Any) -> tuple[np.ndarray | None, np.ndarray | None, tuple[float, ...] | None]:
+    """(building footprints (n_b, 4), goal (2,), extent) of the env's current world."""
+    base = getattr(env, "unwrapped", env)
+    world = getattr(base, "world", base)
+    city = getattr(world, "city", None)
+    footprints = extent = None
+    if city is not None:
+        footprints = np.asarray(city.buildings.footprints_m)
+        extent = tuple(city.extent_m)
+    goal = getattr(world, "goal_enu_m", None)
+    goal = np.asarray(goal, dtype=float)[:2] if goal is not None else None
+    return footprints, goal, extent
+
+
+def plot_trajectories(env: Any, record: EpisodeRecord, path: str | Path, title: str = "") -> bool:
+    """Top-down view of one episode: buildings, goal and the true track of every UAV.
+
+    The env is reset with the record's seed to show the episode's world. Returns False (and
+    writes nothing) when the positions are unknown.
+    """
+    if record.pos_enu_m is None:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    env.reset(seed=record.seed)
+    footprints, goal, extent = _world(env)
+    fig, ax = plt.subplots(figsize=(6, 6))
+    if footprints is not None:
+        for x0, y0, x1, y1 in footprints:
+            ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.75", lw=0))
+    pos = record.pos_enu_m
+    for i in range(pos.shape[1]):
+        (line,) = ax.plot(pos[:, i, 0], pos[:, i, 1], lw=1.2, label=f"uav_{i}")
+        ax.plot(pos[0, i, 0], pos[0, i, 1], "o", color=line.get_color(), ms=4)
+        end = "x" if record.collided else ("*" if record.goal_reached[i] else "s")
+        ax.plot(pos[-1, i, 0], pos[-1, i, 1], end, color=line.get_color(), ms=7)
+    if goal is not None:
+        ax.plot(goal[0], goal[1], marker="*", color="gold", mec="k", ms=16, ls="", label="goal")
+    if extent is not None:
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+    ax.set_aspect("equal")
+    ax.set_xlabel("East [m]")
+    ax.set_ylabel("North [m]")
+    outcome = "collision" if record.collided else f"{int(record.goal_reached.sum())} at goal"
+    ax.set_title(f"{title}\n{record.length} steps, {outcome}", fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# command line
+# --------------------------------------------------------------------------------------------
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav evaluate``."""
+    parser.add_argument(
+        "--policies",
+        nargs="+",
+        default=["random", "formation", "sky"],
+        help="policies: random, formation, sky, ppo:<path> (default: the three heuristics)",
+    )
+    parser.add_argument("--out", default=None, help="directory for report.* and plots")
+    parser.add_argument(
+        "--episodes", type=int, default=DEFAULT_EPISODES, help="held-out episodes per policy"
+    )
+    parser.add_argument(
+        "--seed-start",
+        type=int,
+        default=EVAL_SEED_START,
+        help=f"first held-out reset seed (>= {EVAL_SEED_START}; training uses seeds below)",
+    )
+    parser.add_argument(
+        "--seeds", type=int, nargs="+", default=None, help="explicit reset seeds (override)"
+    )
+    parser.add_argument(
+        "--env-id",
+        default=None,
+        help="environment (default: the one a ppo: policy was trained in, else urban_canyon_v0)",
+    )
+    parser.add_argument(
+        "--train-config",
+        default=None,
+        help="config.yaml of a training run: evaluate in its environment (default: the run "
+        "directory of the first ppo: policy)",
+    )
+    parser.add_argument("--n-uavs", type=int, default=None, help="UAVs per swarm (env n_uavs)")
+    parser.add_argument("--city", default=None, help="city layout (env setting 'city')")
+    parser.add_argument(
+        "--env-set",
+        dest="env_overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override an environment setting (repeatable)",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+
+
+def _read_train_config(path: Path) -> dict[str, Any]:
+    import yaml
+
+    return dict(yaml.safe_load(path.read_text()) or {})
+
+
+def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    """(env id, env kwargs): ``--train-config``, else the run of a ``ppo:`` policy, then flags."""
+    from training.train import apply_overrides
+
+    trained: dict[str, Any] = {}
+    if args.train_config:
+        p = Path(args.train_config)
+        if not p.is_file():
+            raise FileNotFoundError(f"training config not found: {p}")
+        trained = _read_train_config(p)
+    else:
+        trained = _train_config_of_policies(args.policies)
+    env_id = args.env_id or trained.get("env_id") or "urban_canyon_v0"
+    env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
+    if args.n_uavs is not None:
+        env["n_uavs"] = args.n_uavs
+    if args.city is not None:
+        env["city"] = args.city
+    return env_id, env
+
+
+def _train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
+    """The training configuration a ``ppo:<path>`` policy came from (empty if none).
+
+    ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
+    ``DIR/final_model.zip`` or ``DIR/checkpoints/*.zip`` is evaluated in the environment it
+    was trained in unless told otherwise. PPO policies from runs with different environment
+    settings raise ``ValueError``.
+    """
+    found: dict[str, Any] | None = None
+    for name in policies:
+        if not name.startswith("ppo:"):
+            continue
+        model = Path(name[4:])
+        for folder in (model.parent, model.parent.parent):
+            cfg = folder / "config.yaml"
+            if cfg.is_file():
+                data = _read_train_config(cfg)
+                key = (data.get("env_id"), data.get("env") or {})
+                if found is not None and key != (found.get("env_id"), found.get("env") or {}):
+                    raise ValueError(
+                        "the PPO policies were trained in different environments "
+                        f"({found.get('env')} vs {data.get('env')}); pass --train-config or "
+                        "--env-set explicitly"
+                    )
+                found = data
+                break
+    return found or {}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``coopnav evaluate``; returns the exit status."""
+    try:
+        seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
+        if min(seeds) < EVAL_SEED_START:
+            print(
+                f"coopnav evaluate: warning: seeds below {EVAL_SEED_START} may have been seen "
+                "in training",
+                file=sys.stderr,
+            )
+        env_id, env_kwargs = _env_from_args(args)
+        report = evaluate(
+            args.policies,
+            seeds,
+            env_kwargs,
+            args.out,
+            env_id=env_id,
+            plots=not args.no_plots,
+            verbose=True,
+        )
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"coopnav evaluate: error: {exc}", file=sys.stderr)
+        return 2
+    print(report.to_markdown())
+    if report.files:
+        print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))
+    return 0

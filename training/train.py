@@ -1,0 +1,742 @@
+"""``coopnav train``: PPO with parameter sharing across the UAVs of ``urban_canyon_v0``.
+
+One Stable-Baselines3 PPO policy drives every UAV: SuperSuit turns the PettingZoo swarm into
+a vector env with one slot per UAV and concatenates ``n_envs`` swarms
+(:mod:`training.vec_env`, which also makes ``PPO(seed=...)`` work and repeat exactly).
+
+Hyperparameters come from ``training/configs/ppo.yaml`` (section ``urban_canyon_v0``) and
+can be overridden from the command line. Everything a run produces goes to ``--out DIR``::
+
+    DIR/config.yaml              the resolved configuration, seed included
+                                 (a resumed session adds config_resumed_at_<N>.yaml)
+    DIR/run.json                 versions, wall time, agent-steps per second
+    DIR/final_model.zip          the trained policy (``agents.ppo`` / ``ppo:DIR/final_model.zip``)
+    DIR/checkpoints/ppo_<N>_steps.zip   periodic checkpoints (N agent-steps)
+    DIR/logs/                    TensorBoard events and progress*.csv (learning curve)
+    DIR/*monitor.csv             one line per finished UAV-episode (return, length, final infos)
+
+``--resume CHECKPOINT`` (or ``--resume latest``) continues an interrupted run: the model, its
+optimizer state and its step count are loaded, and training runs until ``timesteps``
+agent-steps in total. Checkpoints are written at the start of a rollout, right after a
+policy update, so resuming from one loses no collected experience; Ctrl-C (or SIGTERM) also
+writes one, at the step count of the last completed update.
+
+Seeds: training resets its swarm copies with ``seed + k`` (``k < n_envs``), then each copy
+continues its own generator; a resumed run reseeds with ``seed + num_timesteps`` (modulo the
+training seed range) so it does not replay its first episodes. Training seeds are kept below
+:data:`training.evaluate.EVAL_SEED_START`, where the held-out evaluation seeds begin.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import importlib
+import json
+import re
+import signal
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from training.evaluate import EVAL_SEED_START
+
+__all__ = [
+    "DEFAULT_CONFIG_PATH",
+    "TrainConfig",
+    "add_arguments",
+    "apply_overrides",
+    "find_latest_checkpoint",
+    "load_config",
+    "make_env_fn",
+    "run",
+    "train",
+]
+
+DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.yaml"
+"""The packaged hyperparameter file (one section per environment id)."""
+
+DEFAULT_ENV_ID: str = "urban_canyon_v0"
+
+_CHECKPOINT_RE = re.compile(r"_(\d+)_steps\.zip$")
+
+_MONITOR_INFO_KEYS: tuple[str, ...] = (
+    "in_goal",
+    "goal_reached",
+    "collided",
+    "nav_error_m",
+    "coop_error_m",
+    "goal_distance_m",
+)
+"""Final-step infos written to ``monitor*.csv`` for each UAV-episode (those the env has)."""
+
+
+# --------------------------------------------------------------------------------------------
+# configuration
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a training run.
+
+    Parameters
+    ----------
+    out : str
+        Output directory (created).
+    env_id : str, default "urban_canyon_v0"
+        A module ``coopnav_env.<env_id>`` with a ``parallel_env`` function, or
+        ``"package.module:callable"`` returning a PettingZoo ParallelEnv (used by the tests).
+    timesteps : int, default 1_000_000
+        Total agent-steps to train for (SB3 timesteps under parameter sharing), >= 1.
+    seed : int, default 0
+        Seed of PPO (torch, numpy) and of the environments, in
+        ``[0, EVAL_SEED_START - n_envs]``.
+    n_envs : int, default 2
+        Swarm copies stepped together, >= 1.
+    num_cpus : int, default 1
+        Worker processes for the swarm copies, >= 0 (0 and 1: all in this process).
+    checkpoint_freq : int, default 50_000
+        Agent-steps between checkpoints, >= 0 (0 disables periodic checkpoints).
+    torch_threads : int, default 1
+        Threads PyTorch may use, >= 1.
+    device : str, default "cpu"
+        PyTorch device.
+    env : dict
+        Keyword arguments of the environment (``UrbanCanyonConfig`` fields, ``n_uavs``,
+        ``max_steps``); unknown keys are rejected by the environment.
+    ppo : dict
+        Keyword arguments of ``stable_baselines3.PPO`` (``policy`` included, default
+        ``"MlpPolicy"``); unknown keys raise ``ValueError``.
+    resume : str or None, default None
+        Checkpoint to continue from, or ``"latest"`` for the newest one in ``out``.
+    progress_bar : bool, default True
+    verbose : int, default 0
+        SB3 verbosity (1 prints the training table).
+    """
+
+    out: str
+    env_id: str = DEFAULT_ENV_ID
+    timesteps: int = 1_000_000
+    seed: int = 0
+    n_envs: int = 2
+    num_cpus: int = 1
+    checkpoint_freq: int = 50_000
+    torch_threads: int = 1
+    device: str = "cpu"
+    env: dict[str, Any] = field(default_factory=dict)
+    ppo: dict[str, Any] = field(default_factory=dict)
+    resume: str | None = None
+    progress_bar: bool = True
+    verbose: int = 0
+
+    def __post_init__(self) -> None:
+        def _int(name: str, lo: int, hi: int | None = None) -> None:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ValueError(f"TrainConfig.{name} must be an integer, got {v!r}")
+            if v < lo or (hi is not None and v > hi):
+                rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+                raise ValueError(f"TrainConfig.{name} must be {rng}, got {v}")
+
+        _int("timesteps", 1)
+        _int("n_envs", 1)
+        _int("seed", 0, EVAL_SEED_START - self.n_envs)
+        _int("num_cpus", 0)
+        _int("checkpoint_freq", 0)
+        _int("torch_threads", 1)
+        _int("verbose", 0, 2)
+        if not str(self.out):
+            raise ValueError("TrainConfig.out must be a directory path")
+        for name in ("env", "ppo"):
+            if not isinstance(getattr(self, name), Mapping):
+                raise ValueError(
+                    f"TrainConfig.{name} must be a mapping, got {getattr(self, name)!r}"
+                )
+        object.__setattr__(self, "env", dict(self.env))
+        object.__setattr__(self, "ppo", dict(self.ppo))
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
+        """Build from a mapping; unknown keys raise ``ValueError`` listing the valid ones."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown training setting(s) {unknown}; valid settings: {sorted(names)}"
+            )
+        return cls(**dict(data))
+
+    def to_dict(self) -> dict[str, Any]:
+        """A plain (YAML-serialisable) copy."""
+        return copy.deepcopy(dataclasses.asdict(self))
+
+
+def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) -> dict[str, Any]:
+    """The section ``env_id`` of a YAML hyperparameter file, as a plain dict.
+
+    Parameters
+    ----------
+    path : path or None
+        YAML file with one top-level key per environment; None for
+        :data:`DEFAULT_CONFIG_PATH`.
+    env_id : str, default "urban_canyon_v0"
+        Section to read. A ``module:callable`` env id falls back to the default section.
+
+    Raises
+    ------
+    FileNotFoundError
+        The file does not exist.
+    ValueError
+        The file holds no such section.
+    """
+    import yaml
+
+    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    if not p.is_file():
+        raise FileNotFoundError(f"hyperparameter file not found: {p}")
+    data = yaml.safe_load(p.read_text()) or {}
+    key = env_id if env_id in data or ":" not in env_id else DEFAULT_ENV_ID
+    if key not in data:
+        raise ValueError(f"{p} has no section {env_id!r}; sections: {sorted(data)}")
+    section = copy.deepcopy(data[key]) or {}
+    section.setdefault("env_id", env_id)
+    return section
+
+
+def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str, Any]:
+    """Apply ``key=value`` overrides with dotted keys (``ppo.learning_rate=1e-4``).
+
+    Values are parsed as YAML (``3``, ``1e-4``, ``true``, ``[64, 64]``, ``null``). Nested
+    mappings are created as needed; the input is not modified.
+
+    Raises
+    ------
+    ValueError
+        An item without ``=`` or with an empty key.
+    """
+    import yaml
+
+    out = copy.deepcopy(dict(config))
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key or any(not part for part in key.split(".")):
+            raise ValueError(f"override {item!r} must look like key=value (dotted keys allowed)")
+        value = yaml.safe_load(raw) if raw.strip() else ""
+        # YAML 1.1 reads "1e-4" as a string; accept it as a float
+        if isinstance(value, str):
+            try:
+                value = float(value) if re.fullmatch(r"[-+]?[\d.]+[eE][-+]?\d+", value) else value
+            except ValueError:
+                pass
+        node = out
+        parts = key.split(".")
+        for part in parts[:-1]:
+            nxt = node.get(part)
+            if not isinstance(nxt, dict):
+                nxt = {}
+                node[part] = nxt
+            node = nxt
+        node[parts[-1]] = value
+    return out
+
+
+def make_env_fn(env_id: str, env_kwargs: Mapping[str, Any]) -> Callable[[], Any]:
+    """A picklable function returning a fresh ParallelEnv for ``env_id`` and its kwargs."""
+    import functools
+
+    if ":" in env_id:
+        mod_name, _, attr = env_id.partition(":")
+        factory = getattr(importlib.import_module(mod_name), attr)
+    else:
+        try:
+            mod = importlib.import_module(f"coopnav_env.{env_id}")
+        except ModuleNotFoundError as exc:
+            raise ValueError(
+                f"unknown environment {env_id!r} (no module coopnav_env.{env_id})"
+            ) from exc
+        factory = mod.parallel_env
+    return functools.partial(factory, **dict(env_kwargs))
+
+
+def find_latest_checkpoint(out: str | Path) -> Path:
+    """The checkpoint with the most steps in ``out/checkpoints``.
+
+    Raises
+    ------
+    FileNotFoundError
+        There is none.
+    """
+    folder = Path(out) / "checkpoints"
+    found = []
+    for p in folder.glob("*_steps.zip"):
+        m = _CHECKPOINT_RE.search(p.name)
+        if m:
+            found.append((int(m.group(1)), p))
+    if not found:
+        raise FileNotFoundError(f"no checkpoint to resume from in {folder}")
+    return max(found)[1]
+
+
+def _resolve_resume(cfg: TrainConfig) -> Path | None:
+    if cfg.resume is None:
+        return None
+    if cfg.resume == "latest":
+        return find_latest_checkpoint(cfg.out)
+    p = Path(cfg.resume)
+    if not p.is_file() and p.with_suffix(".zip").is_file():
+        p = p.with_suffix(".zip")
+    if not p.is_file():
+        raise FileNotFoundError(f"checkpoint to resume from not found: {p}")
+    return p
+
+
+# --------------------------------------------------------------------------------------------
+# callbacks (SB3 imported lazily: this module is imported by `coopnav --help`)
+# --------------------------------------------------------------------------------------------
+
+
+def _callbacks() -> tuple[Any, Any, Any]:
+    """(navigation metrics, rollout checkpoint, progress bar) callback classes bound to SB3."""
+    import numpy as np
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class NavMetricsCallback(BaseCallback):
+        """Log navigation figures of each rollout to TensorBoard (``nav/...``).
+
+        Reads ``infos`` of every agent-step: mean and median cooperative 3-D error,
+        P(error < 3 m) (a step without a cooperative fix counts as a failure), mean
+        satellites received; and, over the swarm episodes that ended in the rollout, the
+        goal rate (every UAV in the goal area: ``in_goal``) and the collision rate (some UAV
+        ``collided``). Vector slots ``k * n_agents .. (k + 1) * n_agents - 1`` are the UAVs
+        of swarm copy ``k`` (see :mod:`training.vec_env`); they finish together.
+        """
+
+        def __init__(self, n_agents: int):
+            super().__init__()
+            self.n_agents = int(n_agents)
+
+        def _on_rollout_start(self) -> None:
+            self._err: list[float] = []
+            self._sats: list[float] = []
+            self._ended = 0
+            self._goals = 0
+            self._crashes = 0
+
+        def _on_step(self) -> bool:
+            infos = self.locals.get("infos", ())
+            dones = np.asarray(self.locals.get("dones", np.zeros(len(infos), dtype=bool)))
+            for info in infos:
+                e = info.get("coop_error_m")
+                if e is not None:
+                    self._err.append(float(e))
+                n = info.get("n_sats")
+                if n is not None:
+                    self._sats.append(float(n))
+            n = self.n_agents
+            for k in range(len(infos) // n):
+                if not dones[k * n]:
+                    continue
+                swarm = infos[k * n : (k + 1) * n]
+                self._ended += 1
+                self._goals += all(
+                    bool(i.get("in_goal", i.get("goal_reached", False))) for i in swarm
+                )
+                self._crashes += any(bool(i.get("collided", False)) for i in swarm)
+            return True
+
+        def _on_rollout_end(self) -> None:
+            err = np.asarray(self._err, dtype=float)
+            fin = err[np.isfinite(err)]
+            if err.size:
+                self.logger.record("nav/p_coop_error_lt_3m", float(np.mean(err < 3.0)))
+            if fin.size:
+                self.logger.record("nav/coop_error_mean_m", float(fin.mean()))
+                self.logger.record("nav/coop_error_median_m", float(np.median(fin)))
+            if self._sats:
+                self.logger.record("nav/n_sats_mean", float(np.mean(self._sats)))
+            if self._ended:
+                self.logger.record("nav/goal_rate", self._goals / self._ended)
+                self.logger.record("nav/collision_rate", self._crashes / self._ended)
+                self.logger.record("nav/episodes", self._ended)
+
+    class RolloutCheckpointCallback(BaseCallback):
+        """Save ``ppo_<N>_steps.zip`` every ``freq`` agent-steps, right after an update.
+
+        Saving at the start of a rollout (not in the middle of one, as SB3's
+        ``CheckpointCallback`` does) means a checkpoint holds the policy trained on every
+        step it counts: resuming loses no collected experience.
+        """
+
+        def __init__(self, freq: int, folder: Path):
+            super().__init__()
+            self.freq = int(freq)
+            self.folder = folder
+            self.rollout_start_timesteps = 0
+            self.collecting = False
+            self._last = -1
+
+        def _init_callback(self) -> None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self._last = self.model.num_timesteps
+
+        def save(self, num_timesteps: int | None = None) -> Path:
+            """Save now (optionally under a smaller step count) and return the path."""
+            n = self.model.num_timesteps if num_timesteps is None else int(num_timesteps)
+            path = self.folder / f"ppo_{n}_steps.zip"
+            saved = self.model.num_timesteps
+            self.model.num_timesteps = n
+            try:
+                self.model.save(path)
+            finally:
+                self.model.num_timesteps = saved
+            return path
+
+        def _on_rollout_start(self) -> None:
+            self.collecting = True
+            self.rollout_start_timesteps = self.model.num_timesteps
+            n = self.model.num_timesteps
+            if self.freq > 0 and n // self.freq > max(self._last, 0) // self.freq and n > 0:
+                self.save()
+                self._last = n
+
+        def _on_rollout_end(self) -> None:
+            self.collecting = False
+
+        def _on_step(self) -> bool:
+            return True
+
+    class ProgressCallback(BaseCallback):
+        """A plain ``tqdm`` progress bar over agent-steps, with the latest episode return.
+
+        SB3's own bar needs ``rich``; this one needs only ``tqdm`` (and prints nothing when
+        that is missing).
+        """
+
+        def _on_training_start(self) -> None:
+            try:
+                from tqdm import tqdm
+            except ImportError:  # pragma: no cover - tqdm is a training dependency
+                self.bar = None
+                return
+            # PPO collects whole rollouts: the run ends at the next multiple of one rollout
+            rollout = max(int(getattr(self.model, "n_steps", 1)) * self.training_env.num_envs, 1)
+            todo = self.locals["total_timesteps"] - self.model.num_timesteps
+            self.bar = tqdm(
+                total=-(-todo // rollout) * rollout,
+                unit="agent-step",
+                unit_scale=True,
+                dynamic_ncols=True,
+                smoothing=0.1,
+                mininterval=0.5,
+            )
+
+        def _on_step(self) -> bool:
+            if self.bar is not None:
+                self.bar.update(self.training_env.num_envs)
+            return True
+
+        def _on_rollout_end(self) -> None:
+            buf = self.model.ep_info_buffer
+            if self.bar is not None and buf:
+                self.bar.set_postfix(ep_return=f"{np.mean([e['r'] for e in buf]):.2f}")
+
+        def _on_training_end(self) -> None:
+            if self.bar is not None:
+                self.bar.close()
+
+    return NavMetricsCallback, RolloutCheckpointCallback, ProgressCallback
+
+
+# --------------------------------------------------------------------------------------------
+# training
+# --------------------------------------------------------------------------------------------
+
+
+def _terminate_as_interrupt() -> Any:
+    """Make SIGTERM (a scheduler stopping the job) behave like Ctrl-C; return the old handler.
+
+    Returns None (and changes nothing) outside the main thread, where handlers can't be set.
+    """
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def _raise(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    return signal.signal(signal.SIGTERM, _raise)
+
+
+def _check_same_environment(cfg: TrainConfig, saved: Path) -> None:
+    """Refuse to resume in ``cfg.out`` with other environment settings than it was started.
+
+    Raises
+    ------
+    ValueError
+        ``saved`` (the run's ``config.yaml``) names another ``env_id`` or ``env``.
+    """
+    import yaml
+
+    if not saved.is_file():
+        return
+    old = yaml.safe_load(saved.read_text()) or {}
+    if old.get("env_id") != cfg.env_id or (old.get("env") or {}) != cfg.env:
+        raise ValueError(
+            f"cannot resume in {cfg.out}: it was trained on {old.get('env_id')} with "
+            f"{old.get('env') or {}}, not {cfg.env_id} with {cfg.env}; repeat the original "
+            "settings, or use a new --out to fine-tune in another environment"
+        )
+
+
+def _write_yaml(path: Path, data: Any) -> None:
+    import yaml
+
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def train(cfg: TrainConfig) -> Path:
+    """Train a parameter-sharing PPO policy and return the path of the final model.
+
+    Parameters
+    ----------
+    cfg : TrainConfig
+
+    Returns
+    -------
+    pathlib.Path
+        ``cfg.out / "final_model.zip"``.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``cfg.resume`` names a checkpoint that does not exist.
+    ValueError
+        Unknown environment or PPO setting.
+    KeyboardInterrupt
+        Re-raised after writing a checkpoint (``checkpoints/ppo_<N>_steps.zip``).
+    """
+    import inspect
+
+    import numpy as np
+    import stable_baselines3
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from training.vec_env import make_vec_env
+
+    out = Path(cfg.out)
+    resume_path = _resolve_resume(cfg)
+    ppo_kwargs = dict(cfg.ppo)
+    policy = ppo_kwargs.pop("policy", "MlpPolicy")
+    valid = set(inspect.signature(PPO.__init__).parameters) - {"self", "policy", "env", "seed"}
+    valid -= {"device", "tensorboard_log", "verbose", "_init_setup_model"}
+    unknown = sorted(set(ppo_kwargs) - valid)
+    if unknown:
+        raise ValueError(f"unknown PPO setting(s) {unknown}; valid settings: {sorted(valid)}")
+
+    env_fn = make_env_fn(cfg.env_id, cfg.env)
+    probe = env_fn()  # validates the env kwargs before anything is written
+    n_agents = len(probe.possible_agents)
+    _, probe_infos = probe.reset(seed=0)
+    info_keys = set(probe_infos.get(probe.possible_agents[0], {}))
+    probe.close()
+    monitor_keys = tuple(k for k in _MONITOR_INFO_KEYS if k in info_keys)
+
+    start_steps = 0
+    if resume_path is not None:
+        model = PPO.load(resume_path, env=None, device=cfg.device)
+        start_steps = int(model.num_timesteps)
+        del model
+        _check_same_environment(cfg, out / "config.yaml")
+
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(cfg.torch_threads)
+    resolved = cfg.to_dict()
+    resolved["resume"] = str(resume_path) if resume_path else None
+    resolved["agent_steps_per_env_step"] = cfg.n_envs * n_agents
+    # the original config.yaml stays: `coopnav evaluate` reads the environment from it
+    name = "config.yaml" if start_steps == 0 else f"config_resumed_at_{start_steps}.yaml"
+    _write_yaml(out / name, resolved)
+
+    venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus)
+    suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
+    monitor = VecMonitor(
+        venv,
+        # SB3 appends ".monitor.csv" to any other name
+        filename=str(
+            out / ("monitor.csv" if not suffix else f"resumed_at_{start_steps}.monitor.csv")
+        ),
+        info_keywords=monitor_keys,
+    )
+    if resume_path is not None:
+        model = PPO.load(resume_path, env=monitor, device=cfg.device)
+        env_seed = (cfg.seed + start_steps) % (EVAL_SEED_START - cfg.n_envs)
+        model.set_random_seed(env_seed)
+    else:
+        model = PPO(
+            policy, monitor, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose, **ppo_kwargs
+        )
+    logs = out / "logs"
+    logs.mkdir(exist_ok=True)
+    formats = [
+        TensorBoardOutputFormat(str(logs)),
+        CSVOutputFormat(str(logs / f"progress{suffix}.csv")),
+    ]
+    if cfg.verbose:
+        from stable_baselines3.common.logger import HumanOutputFormat
+
+        formats.append(HumanOutputFormat(sys.stdout))
+    model.set_logger(Logger(str(logs), formats))
+
+    nav_cls, ckpt_cls, progress_cls = _callbacks()
+    ckpt = ckpt_cls(cfg.checkpoint_freq, out / "checkpoints")
+    remaining = cfg.timesteps - start_steps
+    t0 = time.perf_counter()
+    previous_term = _terminate_as_interrupt()
+    try:
+        if remaining > 0:
+            model.learn(
+                total_timesteps=remaining,
+                callback=[nav_cls(n_agents), ckpt] + ([progress_cls()] if cfg.progress_bar else []),
+                reset_num_timesteps=resume_path is None,
+            )
+    except KeyboardInterrupt:
+        n = ckpt.rollout_start_timesteps if ckpt.collecting else model.num_timesteps
+        path = ckpt.save(n)
+        print(
+            f"\ninterrupted: checkpoint written to {path}; continue with --resume {path}",
+            file=sys.stderr,
+        )
+        monitor.close()
+        raise
+    finally:
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
+    wall_s = time.perf_counter() - t0
+    final = out / "final_model.zip"
+    model.save(final)
+    done_steps = int(model.num_timesteps) - start_steps
+    info = {
+        "final_model": str(final),
+        "seed": cfg.seed,
+        "num_timesteps": int(model.num_timesteps),
+        "session_agent_steps": done_steps,
+        "session_wall_s": round(wall_s, 3),
+        "agent_steps_per_s": round(done_steps / wall_s, 1) if wall_s > 0 else None,
+        "resumed_from": str(resume_path) if resume_path else None,
+        "versions": {
+            "python": sys.version.split()[0],
+            "numpy": np.__version__,
+            "torch": torch.__version__,
+            "stable_baselines3": stable_baselines3.__version__,
+        },
+    }
+    (out / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+    monitor.close()
+    return final
+
+
+# --------------------------------------------------------------------------------------------
+# command line
+# --------------------------------------------------------------------------------------------
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav train``."""
+    parser.add_argument("--out", default="runs/ppo", help="output directory (default runs/ppo)")
+    parser.add_argument(
+        "--config", default=None, help=f"hyperparameter YAML (default {DEFAULT_CONFIG_PATH.name})"
+    )
+    parser.add_argument(
+        "--env-id", default=DEFAULT_ENV_ID, help="environment (section of --config)"
+    )
+    parser.add_argument(
+        "--timesteps", type=int, default=None, help="total agent-steps (SB3 timesteps)"
+    )
+    parser.add_argument("--seed", type=int, default=None, help="training seed")
+    parser.add_argument("--n-envs", type=int, default=None, help="swarm copies stepped together")
+    parser.add_argument("--num-cpus", type=int, default=None, help="worker processes (default 1)")
+    parser.add_argument(
+        "--checkpoint-freq", type=int, default=None, help="agent-steps between checkpoints"
+    )
+    parser.add_argument("--n-uavs", type=int, default=None, help="UAVs per swarm (env n_uavs)")
+    parser.add_argument("--city", default=None, help="city layout (env setting 'city')")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a setting, e.g. ppo.learning_rate=1e-4 or n_envs=4 (repeatable)",
+    )
+    parser.add_argument(
+        "--env-set",
+        dest="env_overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override an environment setting, e.g. max_steps=300 (repeatable)",
+    )
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="CHECKPOINT",
+        help="continue from a checkpoint (.zip) or 'latest' (newest in OUT/checkpoints)",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument("--verbose", type=int, default=None, help="SB3 verbosity (0-2)")
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """Merge the YAML section, ``--set``/``--env-set`` and explicit flags (in that order)."""
+    base = load_config(args.config, args.env_id)
+    base["env_id"] = args.env_id
+    base["out"] = args.out
+    data = apply_overrides(base, args.overrides)
+    data = apply_overrides(data, [f"env.{item}" for item in args.env_overrides])
+    flags = {
+        "timesteps": args.timesteps,
+        "seed": args.seed,
+        "n_envs": args.n_envs,
+        "num_cpus": args.num_cpus,
+        "checkpoint_freq": args.checkpoint_freq,
+        "resume": args.resume,
+        "verbose": args.verbose,
+    }
+    data.update({k: v for k, v in flags.items() if v is not None})
+    env = dict(data.get("env") or {})
+    if args.n_uavs is not None:
+        env["n_uavs"] = args.n_uavs
+    if args.city is not None:
+        env["city"] = args.city
+    data["env"] = env
+    if args.no_progress:
+        data["progress_bar"] = False
+    return TrainConfig.from_dict(data)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``coopnav train``; returns the exit status."""
+    try:
+        cfg = config_from_args(args)
+        final = train(cfg)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"coopnav train: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    info = json.loads((final.parent / "run.json").read_text())
+    print(
+        f"final model: {final}  ({info['num_timesteps']} agent-steps, "
+        f"{info['agent_steps_per_s']} agent-steps/s)"
+    )
+    return 0

@@ -1,0 +1,196 @@
+"""Parameter-sharing vector environments for Stable-Baselines3, with seeding that works.
+
+SuperSuit turns a PettingZoo ParallelEnv into a vector env with one slot per agent
+(``pettingzoo_env_to_vec_env_v1``) and concatenates copies of it
+(``concat_vec_envs_v1(..., base_class="stable_baselines3")``), so one SB3 policy is shared by
+all UAVs. Three gaps of that path are closed here:
+
+* **Seeding.** SuperSuit's ``SB3VecEnvWrapper`` has no working ``seed()`` (it forwards to a
+  gymnasium vector env that has none), so ``PPO(seed=...)`` fails. :class:`SeededVecEnv`
+  implements ``seed(seed)``: the next ``reset()`` resets swarm copy ``k`` with reset seed
+  ``seed + k``, then every later episode continues each copy's own generator, so two runs
+  with the same seed see exactly the same episodes.
+* **Distinct seeds across processes.** With ``num_cpus > 1`` SuperSuit gives process ``p``
+  the seed ``seed + p`` and its ``j``-th copy ``seed + p + j``: copies collide. Each copy here
+  corrects the seed it receives (:class:`_SeedShiftMarkovVectorEnv`), so copy ``k`` gets
+  ``seed + k`` whatever the number of processes, exactly as in one process.
+* **Terminal infos.** SuperSuit resets a finished swarm inside ``step`` and merges the reset
+  infos *over* the final step's infos, so a callback would read the new episode's
+  ``goal_reached`` instead of the finished one's. Reset infos are dropped there instead (SB3
+  does not use them). Truncation (``max_steps``) is reported to SB3 as
+  ``info["TimeLimit.truncated"]`` so that PPO bootstraps the value of the last observation
+  instead of treating the time limit as a terminal state.
+
+SB3 counts agent-steps as timesteps: one step of ``n_envs`` swarms of ``n_uavs`` UAVs is
+``n_envs * n_uavs`` timesteps.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from pettingzoo import ParallelEnv
+from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+from supersuit.vector import MakeCPUAsyncConstructor, MarkovVectorEnv
+from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+
+__all__ = ["SeededVecEnv", "make_vec_env"]
+
+
+class _SeedShiftMarkovVectorEnv(MarkovVectorEnv):
+    """SuperSuit's agents-as-vector adapter with a seed correction and clean terminal infos.
+
+    Parameters
+    ----------
+    par_env : pettingzoo.ParallelEnv
+        One swarm; every agent must stay alive until the whole swarm is done.
+    seed_shift : int
+        Added to every reset seed this copy receives, so that copy ``k`` is reset with
+        ``seed + k`` even when SuperSuit hands it ``seed + p + j`` (process ``p``, slot ``j``).
+    """
+
+    def __init__(self, par_env: ParallelEnv, seed_shift: int = 0):
+        super().__init__(par_env, black_death=False)
+        self.seed_shift = int(seed_shift)
+        self._in_step = False
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            seed = int(seed) + self.seed_shift
+        obs, infos = super().reset(seed=seed, options=options)
+        if self._in_step:  # automatic reset inside step(): keep the final step's infos
+            infos = [{} for _ in infos]
+        return obs, infos
+
+    def step(self, actions):
+        self._in_step = True
+        try:
+            return super().step(actions)
+        finally:
+            self._in_step = False
+
+
+class _CopyFactory:
+    """Picklable constructor of swarm copy ``k`` (for SuperSuit's worker processes)."""
+
+    def __init__(self, env_fn: Callable[[], ParallelEnv], seed_shift: int):
+        self.env_fn = env_fn
+        self.seed_shift = seed_shift
+
+    def __call__(self) -> _SeedShiftMarkovVectorEnv:
+        return _SeedShiftMarkovVectorEnv(self.env_fn(), self.seed_shift)
+
+
+class SeededVecEnv(VecEnvWrapper):
+    """SB3 ``VecEnv`` over SuperSuit's concatenated swarms, with a working ``seed()``.
+
+    Parameters
+    ----------
+    venv : SB3VecEnvWrapper
+        What ``concat_vec_envs_v1(..., base_class="stable_baselines3")`` returns.
+    n_copies : int
+        Number of swarm copies inside (``num_envs`` is ``n_copies * n_agents``).
+
+    Notes
+    -----
+    ``seed(s)`` takes effect at the next ``reset()`` (as in SB3 since gymnasium 0.26): copy
+    ``k`` is reset with ``s + k``. A ``reset()`` without a pending seed continues every
+    copy's generator.
+    """
+
+    def __init__(self, venv: SB3VecEnvWrapper, n_copies: int):
+        super().__init__(venv)
+        self.n_copies = int(n_copies)
+        self.n_agents = self.num_envs // self.n_copies
+        self._pending_seed: int | None = None
+        self.reset_infos: list[dict[str, Any]] = []
+
+    @property
+    def _gym_venv(self) -> Any:
+        """The gymnasium-style vector env under SuperSuit's SB3 adapter."""
+        return self.venv.venv
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        """Attributes of the sub-envs; ``render_mode`` is the swarm's (SB3 asks for it)."""
+        if attr_name == "render_mode":
+            return [getattr(self._gym_venv, "render_mode", None)] * self.num_envs
+        return self.venv.get_attr(attr_name, indices)
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Seed the next reset: swarm copy ``k`` gets ``seed + k``; one entry per slot."""
+        self._pending_seed = None if seed is None else int(seed)
+        if seed is None:
+            return [None] * self.num_envs
+        return [int(seed) + k for k in range(self.n_copies) for _ in range(self.n_agents)]
+
+    def reset(self) -> VecEnvObs:
+        seed, self._pending_seed = self._pending_seed, None
+        obs, self.reset_infos = self._gym_venv.reset(seed=seed)
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._gym_venv.step_async(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, terms, truncs, infos = self._gym_venv.step_wait()
+        terms = np.asarray(terms, dtype=bool)
+        truncs = np.asarray(truncs, dtype=bool)
+        dones = terms | truncs
+        infos = list(infos)
+        for i in np.flatnonzero(truncs & ~terms):
+            infos[i] = {**infos[i], "TimeLimit.truncated": True}
+        return obs, np.asarray(rewards, dtype=np.float32), dones, infos
+
+    def close(self) -> None:
+        self._gym_venv.close()
+
+
+def make_vec_env(
+    env_fn: Callable[[], ParallelEnv], n_copies: int = 1, num_cpus: int = 1
+) -> SeededVecEnv:
+    """Build the parameter-sharing SB3 vector env of ``n_copies`` swarms.
+
+    Parameters
+    ----------
+    env_fn : callable
+        Returns a fresh PettingZoo ParallelEnv (one swarm). Must be picklable (e.g. a
+        ``functools.partial``) when ``num_cpus > 1``.
+    n_copies : int, default 1
+        Number of independent swarms stepped together, >= 1.
+    num_cpus : int, default 1
+        Worker processes; 0 or 1 steps everything in this process (best on 2-core machines,
+        where the policy update competes with the workers).
+
+    Returns
+    -------
+    SeededVecEnv
+        ``num_envs = n_copies * n_agents`` slots, agent-major inside each copy
+        (``uav_0 .. uav_{N-1}`` of copy 0, then copy 1, ...).
+    """
+    import supersuit as ss
+
+    if int(n_copies) < 1:
+        raise ValueError(f"n_copies must be >= 1, got {n_copies}")
+    if int(num_cpus) < 0:
+        raise ValueError(f"num_cpus must be >= 0, got {num_cpus}")
+    n_copies, num_cpus = int(n_copies), min(int(num_cpus), int(n_copies))
+    if num_cpus <= 1:
+        # one process: ConcatVecEnv resets copy k with seed + k already
+        one = _SeedShiftMarkovVectorEnv(env_fn(), 0)
+        venv = ss.concat_vec_envs_v1(one, n_copies, num_cpus=0, base_class="stable_baselines3")
+    else:
+        # SuperSuit's own split of copies over processes (see MakeCPUAsyncConstructor):
+        # process p holds copies [p * per_cpu, (p + 1) * per_cpu) and resets its j-th copy
+        # with seed + p + j; shift it to seed + k, k = p * per_cpu + j.
+        per_cpu = (n_copies + num_cpus - 1) // num_cpus
+        fns = [_CopyFactory(env_fn, k - (k // per_cpu + k % per_cpu)) for k in range(n_copies)]
+        probe = fns[0]()
+        gym_venv = MakeCPUAsyncConstructor(num_cpus)(
+            fns, probe.observation_space, probe.action_space
+        )
+        probe.close()
+        venv = SB3VecEnvWrapper(gym_venv)
+    return SeededVecEnv(venv, n_copies)
