@@ -4,11 +4,11 @@ Two figures per swarm size N (every UAV sees ``--sats`` satellites, centroid at 
 covariance, DDT):
 
 * **solve** -- the WLS of Eq. 15-17 over all m transferred measurements at a given
-  linearisation point: normal equations ``G^T C*^-1 G``, ``G^T C*^-1 a`` and their solution with
-  ``H*`` (plus the cross-covariances needed for every UAV's ``H_p``). Structured: the block /
-  low-rank elimination of :func:`coopnav_env.nav.cooperative._structured_normal`. Reference:
-  the same quantities with C* formed densely and inverted by ``numpy.linalg.inv``
-  (:func:`coopnav_env.nav.cooperative._dense_normal`).
+  linearisation point (``coopnav_env.nav.cooperative._wls_step``): weights, normal equations
+  ``G^T C*^-1 G``, ``G^T C*^-1 a``, their solution and ``H*`` (plus the cross-covariances
+  needed for every UAV's ``H_p``). Structured: the block / low-rank elimination of
+  ``_structured_normal``. Reference: the same quantities from the literal DDT measurements
+  with C* formed densely and inverted by ``numpy.linalg.inv`` (``_dense_normal``).
 * **call** -- one whole public call ``solve_cooperative(..., max_iter=1)`` (set-up, one
   Gauss-Newton step, every UAV's position and covariance), structured vs ``method="dense"``.
 
@@ -30,7 +30,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from coopnav_env.nav import cooperative as coop
 from coopnav_env.nav import solve_cooperative
-from coopnav_env.nav.wls import _safe_inverse
 from tests.nav.scenario import make_scenario
 
 
@@ -64,21 +63,17 @@ def main(argv: list[str] | None = None) -> int:
         obs = sc.observations(rng)
         rel = sc.relative(rng)
         x0 = sc.pos_ecef[0] + 1.0
-        st = coop._setup(obs, rel, 0, "ddt", None)
+        sobs, _ = coop._sort_by_system(obs)
+        st = coop._setup(sobs, rel, 0, "ddt", None)
         ok = np.ones(1, dtype=bool)
-        lin_ud = coop._linearize(obs, st, x0[None], np.zeros((1, 2)), literal_ddt=False)
-        lin_dd = coop._linearize(obs, st, x0[None], np.zeros((1, 2)), literal_ddt=True)
+        lin_ud = coop._linearize(sobs, st, x0[None], np.zeros((1, 2)), literal_ddt=False)
+        lin_dd = coop._linearize(sobs, st, x0[None], np.zeros((1, 2)), literal_ddt=True)
 
         def solve_structured(lin=lin_ud):
-            w, lam, sig_c, eps = coop._weights(obs, st, lin, "exact")
-            info, rhs, _ = coop._structured_normal(w, lin.A, lin.a, lin.nuis, lam, sig_c, eps)
-            inv, _ = _safe_inverse(info, ok)
-            return inv @ rhs[..., None]
+            return coop._wls_step(sobs, st, lin, "ddt", "exact", "structured", ok)[1]
 
         def solve_dense(lin=lin_dd):
-            info, rhs, _ = coop._dense_normal(obs, st, lin, "ddt", "exact")
-            inv, _ = _safe_inverse(info, ok)
-            return inv @ rhs[..., None]
+            return coop._wls_step(sobs, st, lin, "ddt", "exact", "dense", ok)[1]
 
         assert np.allclose(solve_structured(), solve_dense(), atol=1e-6)
         few = max(3, args.repeats // 10)

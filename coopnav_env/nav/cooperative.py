@@ -184,6 +184,36 @@ class _Setup:
     too_few: np.ndarray  # (B,) availability rule violated
     pr: np.ndarray  # (B or 1, N, S) pseudoranges, 0 where not received
     avail: np.ndarray  # (B, N) UAV has a relative measurement to the centroid
+    sys_slices: tuple[slice, ...]  # contiguous satellite range of each constellation
+
+
+def _system_slices(system: np.ndarray, n_sys: int) -> tuple[slice, ...]:
+    """Contiguous satellite range of each constellation (``system`` must be sorted)."""
+    edges = np.searchsorted(system, np.arange(n_sys + 1))
+    return tuple(slice(int(edges[i]), int(edges[i + 1])) for i in range(n_sys))
+
+
+def _sort_by_system(obs: GnssObservations) -> tuple[GnssObservations, np.ndarray | None]:
+    """The observations with satellites ordered by constellation (stable), and the order used.
+
+    The solver works on contiguous constellation groups; the result does not depend on the
+    order of the satellites, so callers never see the permutation.
+    """
+    if np.all(np.diff(obs.system) >= 0):
+        return obs, None
+    order = np.argsort(obs.system, kind="stable")
+    return (
+        GnssObservations(
+            pr_m=obs.pr_m[:, order],
+            sv_ecef_m=obs.sv_ecef_m[order],
+            system=obs.system[order],
+            sigma_user_m=obs.sigma_user_m[:, order],
+            sigma_common_m=obs.sigma_common_m[order],
+            el_deg=obs.el_deg[:, order],
+            n_systems=obs.n_systems,
+        ),
+        order,
+    )
 
 
 def _sqrtm_psd(cov: np.ndarray) -> np.ndarray:
@@ -299,6 +329,7 @@ def _setup(
         too_few=too_few,
         pr=np.where(obs.visible, obs.pr_m, 0.0)[None],
         avail=bavail,
+        sys_slices=_system_slices(obs.system, n_sys),
     )
 
 
@@ -382,23 +413,25 @@ def _structured_normal(
     w: np.ndarray,
     A: np.ndarray,
     a: np.ndarray,
-    nuis: np.ndarray,
+    nuis_slices: tuple[slice, ...],
+    nuis_active: np.ndarray | None,
     lam: np.ndarray,
     sig_c: np.ndarray,
-    eps_load: np.ndarray,
+    eps_load: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""Reduced normal equations of a GLS with structured covariance.
 
     The row covariance is ``C = blockdiag_n(diag(1/w_n) + lam_n lam_n^T) + E E^T`` where
     ``E[(n, k), k'] = sig_c[k] delta_kk'`` (errors common to all blocks for one satellite), and
-    each block ``n`` has flat-prior nuisance parameters with design ``nuis_n`` (one-hot rows:
-    each row belongs to at most one nuisance, e.g. its constellation's clock).
+    each active block ``n`` has one flat-prior nuisance parameter per satellite group (its clock
+    for that constellation): the satellites are sorted by constellation and ``nuis_slices``
+    gives each group's contiguous range.
 
     Each low-rank term is a latent variable with a unit prior; nuisances and latents are
     eliminated in closed form, never by forming ``C``:
 
-    1. per block, the nuisance clocks: ``N^T W N`` is diagonal for one-hot rows, so
-       ``P0 = W - W N (N^T W N)^-1 N^T W`` costs a division;
+    1. per block, the nuisance clocks: ``N^T W N`` is diagonal (one clock per group), so
+       ``P0 = W - W N (N^T W N)^-1 N^T W`` is a weighted mean removal per group;
     2. per block, the rank-3 relative-error latent (Woodbury with a closed-form 3x3 inverse):
        ``P = P0 - P0 lam (I + lam^T P0 lam)^-1 lam^T P0``;
     3. the common errors, with one ``S x S`` solve per batch element:
@@ -409,10 +442,13 @@ def _structured_normal(
     w : (B, N, S) inverse variances of the diagonal part; 0 marks an absent row.
     A : (B, N, S, P) design of the global parameters.
     a : (B, N, S) residuals.
-    nuis : (B, N, S, Q) one-hot design of the per-block nuisance parameters.
+    nuis_slices : satellite ranges of the nuisance groups (empty: no nuisances).
+    nuis_active : (B, N) blocks that carry the nuisances (None: none).
     lam : (B, N, S, 3) per-block low-rank loadings.
     sig_c : (B, S) common-error standard deviations.
-    eps_load : (B, N, S, 3) loadings of the per-block relative error for the cross-covariance.
+    eps_load : (B, N, S, 3) or None
+        Loadings of the per-block relative error for the cross-covariance; ``None`` means
+        ``lam`` (the exact model), for which ``P lam = P0 lam M^-1`` needs no extra columns.
 
     Returns
     -------
@@ -421,20 +457,26 @@ def _structured_normal(
     cross : (B, N, P, 3) ``A^T C~^-1 eps_load_n`` per block.
     """
     b, n, s = w.shape
-    q_dim, p_dim = nuis.shape[-1], A.shape[-1]
-    x = np.concatenate([lam, A, a[..., None], eps_load], axis=-1)  # (B, N, S, 3 + P + 1 + 3)
+    p_dim = A.shape[-1]
+    parts = [lam, A, a[..., None]] + ([] if eps_load is None else [eps_load])
+    x = np.concatenate(parts, axis=-1)  # (B, N, S, 3 + P + 1 [+ 3])
     p0x = w[..., None] * x
-    if q_dim:
-        wn = w[..., None] * nuis  # (B, N, S, Q)
-        d = wn.sum(axis=2)  # diagonal of N^T W N; 0 for a constellation the UAV lacks
-        dinv = np.divide(1.0, d, out=np.zeros_like(d), where=d > 0)
-        wnd = wn * dinv[:, :, None, :]
-        p0x -= wnd @ (np.swapaxes(wn, -1, -2) @ x)
+    groups = []  # (slice, w of the group, coefficient active / sum w) per nuisance group
+    if nuis_active is not None:
+        for sl in nuis_slices:
+            wq = w[:, :, sl]
+            d = wq.sum(axis=2)  # N^T W N for this clock; 0 for a constellation the UAV lacks
+            coef = np.divide(nuis_active, d, out=np.zeros_like(d), where=d > 0)
+            p0x[:, :, sl] -= (
+                wq[..., None] * (coef[..., None] * p0x[:, :, sl].sum(axis=2))[:, :, None, :]
+            )
+            groups.append((sl, wq, coef))
     p0lam, x_rest, p0_rest = p0x[..., :3], x[..., 3:], p0x[..., 3:]
     m3inv = _inv_sym3(np.eye(3) + np.swapaxes(lam, -1, -2) @ p0lam)  # (B, N, 3, 3)
     g3 = p0lam @ m3inv  # (B, N, S, 3)
     px = p0_rest - g3 @ (np.swapaxes(p0lam, -1, -2) @ x_rest)
-    pa, pr, pe = px[..., :p_dim], px[..., p_dim], px[..., p_dim + 1 :]
+    pa, pr = px[..., :p_dim], px[..., p_dim]
+    pe = g3 if eps_load is None else px[..., p_dim + 1 :]
     # A^T P [A, a] summed over blocks
     a_flat = A.reshape(b, n * s, p_dim)
     atpx = np.swapaxes(a_flat, 1, 2) @ px[..., : p_dim + 1].reshape(b, n * s, p_dim + 1)
@@ -442,10 +484,8 @@ def _structured_normal(
     left = g3.swapaxes(1, 2).reshape(b, s, n * 3)
     right = p0lam.swapaxes(1, 2).reshape(b, s, n * 3)
     sum_p = -(left @ right.swapaxes(1, 2))
-    if q_dim:
-        sum_p -= wnd.swapaxes(1, 2).reshape(b, s, n * q_dim) @ wn.swapaxes(1, 2).reshape(
-            b, s, n * q_dim
-        ).swapaxes(1, 2)
+    for sl, wq, coef in groups:  # - sum_n w_s w_t / d over pairs in the same group
+        sum_p[:, sl, sl] -= (wq * coef[..., None]).swapaxes(1, 2) @ wq
     diag = np.arange(s)
     sum_p[:, diag, diag] += w.sum(axis=1)
     mg = sig_c[:, :, None] * sum_p * sig_c[:, None, :]
@@ -463,15 +503,47 @@ def _structured_normal(
 
 def _weights(
     obs: GnssObservations, st: _Setup, lin: _Linear, covariance: CovarianceModel
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``w, lam, sig_c, eps_load`` of the structured covariance for the rows of ``lin``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """``w, lam, sig_c, eps_load`` of the structured covariance for the rows of ``lin``.
+
+    ``eps_load`` is None when it equals ``lam`` (the exact covariance model).
+    """
     # rows that are absent get zero weight; nothing else needs masking (see _structured_normal)
     w = np.where(lin.rows, 1.0 / obs.sigma_user_m[None] ** 2, 0.0)
+    sig_c = np.broadcast_to(obs.sigma_common_m, (w.shape[0], obs.n_sv))
     # Eq. 21-22: the relative error of UAV q loads its own rows with 1^k (paper and exact SDT)
     eps_load = lin.u @ st.froot
-    lam = lin.u @ st.froot_paper if covariance == "paper" else eps_load
-    sig_c = np.broadcast_to(obs.sigma_common_m, (w.shape[0], obs.n_sv))
-    return w, lam, sig_c, eps_load
+    if covariance != "paper":
+        return w, eps_load, sig_c, None
+    return w, lin.u @ st.froot_paper, sig_c, eps_load
+
+
+def _wls_step(
+    obs: GnssObservations,
+    st: _Setup,
+    lin: _Linear,
+    transfer: Transfer,
+    covariance: CovarianceModel,
+    method: str,
+    usable: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One WLS solve (Eq. 15-17) with the full covariance C* at the linearisation ``lin``.
+
+    Returns the inverse normal matrix ``(G^T C*^-1 G)^-1`` (B, P, P), the update (B, P), the
+    cross-covariance terms (B, N, P, 3) and the singular flags (B,).
+    """
+    if method == "dense":
+        info, rhs, cross = _dense_normal(obs, st, lin, transfer, covariance)
+    else:
+        w, lam, sig_c, eps_load = _weights(obs, st, lin, covariance)
+        active = ~lin.is_ref if lin.nuis.shape[-1] else None
+        info, rhs, cross = _structured_normal(
+            w, lin.A, lin.a, st.sys_slices, active, lam, sig_c, eps_load
+        )
+    idx = np.arange(3, info.shape[-1])
+    info[:, idx, idx] += ~st.has_clock
+    inv, singular = _safe_inverse(info, usable)
+    return inv, np.einsum("bpq,bq->bp", inv, rhs), cross, singular
 
 
 def _gauss_newton(
@@ -499,15 +571,7 @@ def _gauss_newton(
     n_iter = 0
     for n_iter in range(1, max_iter + 1):  # noqa: B007 - reported
         lin = _linearize(obs, st, pos, clk, literal)
-        if method == "dense":
-            info, rhs, cross = _dense_normal(obs, st, lin, transfer, covariance)
-        else:
-            w, lam, sig_c, eps_load = _weights(obs, st, lin, covariance)
-            info, rhs, cross = _structured_normal(w, lin.A, lin.a, lin.nuis, lam, sig_c, eps_load)
-        idx = np.arange(3, p_dim)
-        info[:, idx, idx] += ~st.has_clock
-        inv, singular = _safe_inverse(info, usable)
-        dx = np.einsum("bpq,bq->bp", inv, rhs)
+        inv, dx, cross, singular = _wls_step(obs, st, lin, transfer, covariance, method, usable)
         dx[~usable | singular] = 0.0
         pos = pos + dx[:, :3]
         clk = clk + dx[:, 3:]
@@ -672,6 +736,7 @@ def solve_cooperative(
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
     if not tol_m > 0:
         raise ValueError(f"tol_m must be > 0, got {tol_m}")
+    obs, _ = _sort_by_system(obs)
     st = _setup(obs, rel, centroid, transfer, sdt_min_centroid_sats, covariance)
     n_b = st.ref.shape[0]
     x0 = np.zeros((n_b, 3))
@@ -786,6 +851,9 @@ def solve_cooperative_samples(
         raise ValueError(f"rel_samples_m must have shape ({k}, {obs.n_rx}, 3)")
     if isinstance(centroid, str):
         raise ValueError("solve_cooperative_samples needs one shared centroid (int/VirtualPoint)")
+    obs, order = _sort_by_system(obs)
+    if order is not None:
+        pr_samples_m = pr_samples_m[:, :, order]
     st = _setup(
         obs,
         rel if isinstance(rel, RelativePositions) else None,
@@ -799,7 +867,7 @@ def solve_cooperative_samples(
     rep = {
         f: np.repeat(getattr(st, f), k, axis=0)
         for f in st.__dataclass_fields__
-        if getattr(st, f) is not None
+        if isinstance(getattr(st, f), np.ndarray)
     }
     rep["base"] = np.where(st.avail[0][None, :, None], rel_samples_m, 0.0)
     rep["pr"] = np.where(obs.visible[None], pr_samples_m, 0.0)

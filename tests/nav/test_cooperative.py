@@ -304,3 +304,24 @@ def test_non_convergence_is_reported():
     coop = solve_cooperative(obs, sc.relative(noise=False), max_iter=1)
     assert np.all(coop.status == NavStatus.NOT_CONVERGED)
     assert np.all(np.isfinite(coop.pos_ecef_m))  # the last iterate is returned
+
+
+@pytest.mark.parametrize("transfer", ["sdt", "ddt"])
+def test_result_does_not_depend_on_satellite_order(transfer):
+    sc = make_scenario(canyon_uav=0, seed=12)
+    rng = np.random.default_rng(12)
+    obs = sc.observations(rng)
+    rel = sc.relative(rng)
+    order = np.random.default_rng(0).permutation(obs.n_sv)
+    shuffled = GnssObservations(
+        pr_m=obs.pr_m[:, order],
+        sv_ecef_m=obs.sv_ecef_m[order],
+        system=obs.system[order],
+        sigma_user_m=sc.sigma_user[:, order],
+        sigma_common_m=obs.sigma_common_m[order],
+        el_deg=sc.el_deg[:, order],
+    )
+    a = solve_cooperative(obs, rel, transfer=transfer)
+    b = solve_cooperative(shuffled, rel, transfer=transfer)
+    assert np.abs(a.pos_ecef_m - b.pos_ecef_m).max() < 1e-6
+    assert np.allclose(a.cov_ecef_m2, b.cov_ecef_m2, rtol=1e-9, atol=1e-12)
