@@ -8,6 +8,8 @@ name                      policy
                           formation, ignoring navigation quality (:mod:`agents.heuristics`)
 ``sky``                   like ``formation``, but each UAV steers toward open sky while
                           keeping contact with its neighbours (:mod:`agents.heuristics`)
+``waypoint``              each UAV flies toward its next route waypoint from its own
+                          observation only (:mod:`agents.heuristics`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
 ========================  ==================================================================
 
@@ -26,7 +28,7 @@ from agents.base import Policy, clip_actions
 
 __all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy"]
 
-POLICY_NAMES: tuple[str, ...] = ("random", "formation", "sky", "ppo:<path>")
+POLICY_NAMES: tuple[str, ...] = ("random", "formation", "sky", "waypoint", "ppo:<path>")
 """Names :func:`make_policy` accepts."""
 
 
@@ -68,6 +70,10 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import SkySeekingPolicy
 
         return SkySeekingPolicy(env, **kwargs)
+    if name == "waypoint":
+        from agents.heuristics import WaypointPolicy
+
+        return WaypointPolicy(env, **kwargs)
     if name.startswith("ppo:"):
         path = name[len("ppo:") :]
         if not path:

@@ -17,7 +17,7 @@ is open enough for the swarm to know where it is.
 | Agents             | N = `n_uavs` (default 5; 50 works)                          |
 | Action Shape       | (3,)                                                        |
 | Action Values      | [-1, 1] (float32)                                           |
-| Observation Shape  | (14 + A + 4K,) = (38,) by default                           |
+| Observation Shape  | (20 + 2A + 4K,) = (52,) by default                          |
 | Observation Values | each entry in [-1, 1] or [0, 1] (float32), see the table    |
 | State Shape        | (13 N + 4,) = (69,) for 5 UAVs                              |
 
@@ -48,7 +48,9 @@ pseudoranges (paper Eq. 1-8) and the relative positions of the UAVs within 200 m
 navigates: standalone WLS and the cooperative virtual-centroid solution (DDT by default, exact
 covariance; one centroid per UAV up to 10 UAVs, one shared centroid at the UAV with the most
 satellites from 11 on). A UAV uses its cooperative fix, else its standalone fix, else dead
-reckoning.
+reckoning; a fix counts only when its predicted 3-D sigma is at most `max_fix_sigma_m` (30 m,
+an integrity gate). At reset the world also plans the shortest street route from the start to
+the goal, which the observation and the progress reward follow.
 
 ## Action Space
 
@@ -65,27 +67,47 @@ position). Every entry is clipped to its bounds, so observations always lie in
 `observation_space(agent)`. `A = obs_sky_azimuths` (8), `K = obs_neighbours` (4), `L` the
 larger side of the city [m].
 
-| Index            | Meaning                                          | Units / scale | Bounds  |
-|------------------|--------------------------------------------------|---------------|---------|
-| 0-2              | estimated position minus goal centre, E N U      | m / L         | [-1, 1] |
-| 3-5              | velocity E N U                                   | m/s / v_max   | [-1, 1] |
-| 6-8              | predicted sigma E N U of the estimate (H_p)      | m / sigma_max | [0, 1]  |
-| 9                | satellites received / above the cut-off          | count ratio   | [0, 1]  |
-| 10               | distinct satellites of it + UAVs in range        | count ratio   | [0, 1]  |
-| 11..10+A         | skyline elevation at azimuth 360 i / A           | deg / 90      | [0, 1]  |
-| 11+A+4k..13+A+4k | neighbour k (nearest first): relative E N U      | m / range_max | [-1, 1] |
-| 14+A+4k          | neighbour k present (1) or empty slot (0)        | flag          | {0, 1}  |
-| 11+A+4K          | the estimate is a cooperative fix                | flag          | {0, 1}  |
-| 12+A+4K          | the estimate is a fresh fix (not dead reckoning) | flag          | {0, 1}  |
-| 13+A+4K          | steps left / max_steps                           | ratio         | [0, 1]  |
+| Index             | Meaning                                          | Units / scale   | Bounds  |
+|-------------------|--------------------------------------------------|-----------------|---------|
+| 0-2               | estimated position minus goal centre, E N U      | m / L           | [-1, 1] |
+| 3-5               | velocity E N U                                   | m/s / v_max     | [-1, 1] |
+| 6-8               | predicted sigma E N U of the estimate (H_p)      | m / sigma_max   | [0, 1]  |
+| 9                 | satellites received / above the cut-off          | count ratio     | [0, 1]  |
+| 10                | distinct satellites of it + UAVs in range        | count ratio     | [0, 1]  |
+| 11..10+A          | skyline elevation at azimuth 360 i / A           | deg / 90        | [0, 1]  |
+| 11+A+4k..13+A+4k  | neighbour k (nearest first): relative E N U      | m / range_max   | [-1, 1] |
+| 14+A+4k           | neighbour k present (1) or empty slot (0)        | flag            | {0, 1}  |
+| 11+A+4K           | the estimate is a cooperative fix                | flag            | {0, 1}  |
+| 12+A+4K           | the estimate is a fresh fix (not dead reckoning) | flag            | {0, 1}  |
+| 13+A+4K           | steps left / max_steps                           | ratio           | [0, 1]  |
+| 14+A+4K..15+A+4K  | next route waypoint minus the estimate, E N      | m / route_scale | [-1, 1] |
+| 16+A+4K..17+A+4K  | the leg after that waypoint, E N (0: none)       | m / route_scale | [-1, 1] |
+| 18+A+4K           | remaining route length from the estimate         | m / 2L          | [0, 1]  |
+| 19+A+4K           | estimated altitude within the altitude band      | m / band        | [0, 1]  |
+| 20+A+4K..19+2A+4K | nearest-wall distance at azimuth 360 i / A       | m / wall_scale  | [0, 1]  |
 
 `L`: the larger side of the city extent [m]; `v_max`: `kinematics.max_speed_mps`;
-`sigma_max`: `obs_sigma_max_m`; `range_max`: `relative_sensing.max_range_m`. Azimuths
-are clockwise from North; the sigma is from the covariance of the estimate the UAV uses
-(`H_p` of Eq. 19-23 for a cooperative fix).
+`sigma_max`: `obs_sigma_max_m`; `range_max`: `relative_sensing.max_range_m`;
+`route_scale`: `obs_route_scale_m`; `wall_scale`: `obs_wall_scale_m`; `band`: the altitude
+band `altitude_max_m - altitude_min_m` above `altitude_min_m`. Azimuths are clockwise from
+North; the sigma is from the covariance of the estimate the UAV uses (`H_p` of Eq. 19-23 for a
+cooperative fix).
+
+The route: at reset the world plans the shortest route along the street centre lines from the
+start formation to the goal (at most two turns on the grid; `env.unwrapped.world.route_xy_m`).
+Each UAV tracks its own next waypoint, which advances when the UAV's *estimated* position is
+within `route_reach_m` (5 m) of it along East and North, or past it along the leg arriving at
+it; the goal is the last waypoint. The skyline and the wall distances are what an on-board
+camera and range sensor measure around the UAV (like the relative positions of the
+neighbours, from its true position); the wall distance is horizontal, at the UAV's altitude,
+to the nearest building taller than the UAV (1 when none is within `wall_scale`). Together
+with the waypoint vector at a 50 m scale they resolve the position in the street: 10 m off the
+centre line changes the waypoint vector by 0.2 and the wall distances by 0.2, where it changes
+the position-to-goal entries (scale `L` = 500 m) by 0.02.
 
 With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts, 11-18 sky,
-19-34 four neighbour slots, 35-37 flags and time.
+19-34 four neighbour slots, 35-37 flags and time, 38-39 next waypoint, 40-41 the leg after it,
+42 remaining route, 43 altitude, 44-51 wall distances.
 
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
@@ -97,18 +119,34 @@ With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts,
 
 Per agent, the sum of six terms, each also reported in `infos[agent]["reward_terms"]`:
 
-* `nav` = `-nav_reward_weight * min(e, nav_reward_cap_m) / nav_reward_scale_m` (defaults 1,
-  50 m, 10 m), where `e` is the true 3-D error of the estimate the UAV uses
+* `nav` = `-nav_reward_weight * min(e, nav_reward_cap_m) / nav_reward_scale_m` (defaults 0.1,
+  10 m, 10 m), where `e` is the true 3-D error of the estimate the UAV uses
   (`nav_reward="error"`, default) or its predicted 3-D sigma `sqrt(trace H_p)`
-  (`nav_reward="sigma"`);
+  (`nav_reward="sigma"`): -0.03 per step at a 3 m error, at worst -0.1;
 * `progress` = `progress_reward_weight * (d_prev - d_now) / (max_speed_mps * dt_s)` (weight 1),
-  `d` the true horizontal distance to the goal centre: at most 1 per step;
-* `collision` = `-collision_penalty` (10) for a UAV that hits a building;
-* `separation` = `-separation_penalty` (1) for a UAV closer than `min_separation_m` (3 m) to
-  another;
-* `contact` = `-contact_penalty` (0.5) for a UAV with no other UAV in relative-sensing range;
+  `d` the remaining length of the street route from the UAV's true position: the straight
+  distance to its next waypoint plus the route after that waypoint, both ends of the step
+  measured to the waypoint that was next at the start of the step (switching waypoints earns
+  nothing). At most 1 in magnitude per step; summed over an episode, about the route length
+  covered / 10 m (a 300 m route: about +30);
+* `collision` = `-collision_penalty` (40) for a UAV that hits a building;
+* `separation` = `-separation_penalty` (0.05) for a UAV closer than `min_separation_m` (3 m)
+  to another;
+* `contact` = `-contact_penalty` (0.02) for a UAV with no other UAV in relative-sensing range;
 * `goal` = `+goal_bonus` (10) for every UAV when all UAVs are in the goal area (not on a step
   where a UAV crashes).
+
+Crashing never pays: a crash costs `collision_penalty` = 40, more than the worst a whole
+episode can lose to the per-step penalties without one, `max_steps * (0.1 * 10 / 10 + 0.05 +
+0.02)` = 200 x 0.17 = 34 (`UrbanCanyonConfig.worst_episode_penalty`; a 200-step episode at a
+typical 3 m error loses about 200 x 0.03 = 6 to the navigation term). The progress term is
+no penalty to escape: it only pays for route actually covered, which a crash stops. The
+penalty is not larger than that on purpose: a crash must also not be so costly that hovering
+in place beats flying the route while the policy is still learning to steer (with a 100
+penalty PPO learned exactly that). Before coopnav 0.1.0 was released the defaults were 1,
+50 m, 10 m, collision 10, separation 1, contact 0.5: the navigation term alone cost about 0.3
+per UAV and step, 60 per 200-step episode, so ending the episode in a wall at once (-10) was
+the best a policy could do.
 
 ## Infos
 
@@ -118,8 +156,10 @@ Per agent, the sum of six terms, each also reported in `infos[agent]["reward_ter
 `n_sats_open_sky`, `coop_status` and `standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK,
 1 too few satellites, 2 singular, 3 not converged, 4 no relative position), `nav_source`
 (`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
-`goal_distance_m`, `in_goal`, `collided`, `separation_violation`, `out_of_contact`, `step`, and
-`reward_terms`.
+`goal_distance_m`, `next_waypoint` (index into `world.route_xy_m`), `coop_rejected` and
+`standalone_rejected` (the solver's fix was OK but the integrity gate `max_fix_sigma_m`
+rejected it: its error is reported as `inf`), `in_goal`, `collided`, `separation_violation`,
+`out_of_contact`, `step`, and `reward_terms`.
 
 `reset()` returns, per agent, `{"initial": {...}}`: the same figures for the first epoch,
 nested so that SuperSuit's automatic reset, which merges the reset infos into the terminal
@@ -212,13 +252,26 @@ up to 10 UAVs, `"shared"` from 11).
 
 `goal_distance_min_m`, `goal_radius_m` (200, 25): goal placement and size [m].
 
+`route_reach_m` (5): a UAV's next route waypoint is reached when its estimated position is
+within this distance of it along East and North (or past it along the route) [m].
+
+`max_fix_sigma_m` (30): integrity gate. A cooperative or standalone fix whose predicted 3-D
+sigma `sqrt(trace(cov))` exceeds this is rejected (`coop_rejected`, `standalone_rejected`) and
+the UAV falls back to the next source (standalone, then dead reckoning); None disables it. In
+street canyons some fixes come from barely enough satellites (4-5 measurements for 4-5
+unknowns) in a narrow strip of sky; they are valid least-squares solutions, but off by tens to
+hundreds of metres, and their covariance says so.
+
 `max_steps` (200): truncation.
 
 `obs_neighbours`, `obs_sky_azimuths`, `obs_sigma_max_m` (4, 8, 20): observation layout.
 
+`obs_route_scale_m`, `obs_wall_scale_m` (50, 50): scales of the route and wall-distance
+observations [m].
+
 `nav_reward` (`"error"`), `nav_reward_weight`, `nav_reward_scale_m`, `nav_reward_cap_m`
-(1, 10, 50), `progress_reward_weight` (1), `collision_penalty` (10), `separation_penalty` (1),
-`contact_penalty` (0.5), `goal_bonus` (10): rewards, above.
+(0.1, 10, 10), `progress_reward_weight` (1), `collision_penalty` (40), `separation_penalty`
+(0.05), `contact_penalty` (0.02), `goal_bonus` (10): rewards, above.
 
 `render_sky_uav` (-1): the UAV of the sky plot; -1 picks the one with the fewest satellites.
 
@@ -243,7 +296,11 @@ world state): a restored copy continues exactly like the original.
 
 ## Version History
 
-* v0: Initial release (coopnav 0.1.0).
+* v0: Initial release (coopnav 0.1.0). Before the release the observation gained the route
+  (next waypoint, the leg after it, remaining route), the altitude in the band and the wall
+  distances (38 -> 52 entries by default), the progress reward moved from the straight-line
+  distance to the goal to the remaining street route, the reward defaults changed so that a
+  crash never pays (above), and the integrity gate `max_fix_sigma_m` was added.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env

@@ -50,6 +50,7 @@ __all__ = [
     "TrainConfig",
     "add_arguments",
     "apply_overrides",
+    "behaviour_clone",
     "find_latest_checkpoint",
     "load_config",
     "make_env_fn",
@@ -63,6 +64,15 @@ DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.y
 DEFAULT_ENV_ID: str = "urban_canyon_v0"
 
 _CHECKPOINT_RE = re.compile(r"_(\d+)_steps\.zip$")
+
+_PRETRAIN_DEFAULTS: dict[str, Any] = {
+    "policy": "waypoint",
+    "policy_kwargs": {},
+    "episodes": 60,
+    "epochs": 30,
+    "learning_rate": 1e-3,
+}
+"""Settings of the optional behaviour-cloning warm start (``pretrain``)."""
 
 _MONITOR_INFO_KEYS: tuple[str, ...] = (
     "in_goal",
@@ -114,6 +124,20 @@ class TrainConfig:
         ``"MlpPolicy"``); unknown keys raise ``ValueError``.
     resume : str or None, default None
         Checkpoint to continue from, or ``"latest"`` for the newest one in ``out``.
+    normalize_reward : bool, default False
+        Scale the rewards PPO learns from by a running estimate of the standard deviation of
+        the discounted return (SB3 ``VecNormalize(norm_obs=False, norm_reward=True)``, with
+        PPO's ``gamma``). Observations are not normalised, so the saved policy needs nothing
+        else at inference; episode returns in the logs and ``monitor.csv`` stay unscaled. A
+        resumed run restarts the running estimate.
+    pretrain : dict or None, default None
+        Behaviour cloning before PPO (:func:`behaviour_clone`): ``policy`` (a
+        :func:`agents.make_policy` name, e.g. ``"waypoint"``) and its ``policy_kwargs``,
+        ``episodes`` (teacher episodes on training seeds), ``epochs`` and ``learning_rate``.
+        The policy's mean action is fitted to the teacher's actions (its log-std keeps
+        ``log_std_init``) and the value network to the teacher's discounted returns, so that
+        PPO starts from a policy that flies the route instead of discovering flight between
+        walls by trial and crash. Skipped on resume.
     progress_bar : bool, default True
     verbose : int, default 0
         SB3 verbosity (1 prints the training table).
@@ -131,6 +155,8 @@ class TrainConfig:
     env: dict[str, Any] = field(default_factory=dict)
     ppo: dict[str, Any] = field(default_factory=dict)
     resume: str | None = None
+    normalize_reward: bool = False
+    pretrain: dict[str, Any] | None = None
     progress_bar: bool = True
     verbose: int = 0
 
@@ -150,6 +176,10 @@ class TrainConfig:
         _int("checkpoint_freq", 0)
         _int("torch_threads", 1)
         _int("verbose", 0, 2)
+        if not isinstance(self.normalize_reward, bool):
+            raise ValueError(
+                f"TrainConfig.normalize_reward must be true or false, got {self.normalize_reward!r}"
+            )
         if not str(self.out):
             raise ValueError("TrainConfig.out must be a directory path")
         for name in ("env", "ppo"):
@@ -159,6 +189,15 @@ class TrainConfig:
                 )
         object.__setattr__(self, "env", dict(self.env))
         object.__setattr__(self, "ppo", dict(self.ppo))
+        if self.pretrain is not None:
+            if not isinstance(self.pretrain, Mapping):
+                raise ValueError(f"TrainConfig.pretrain must be a mapping, got {self.pretrain!r}")
+            unknown = sorted(set(self.pretrain) - set(_PRETRAIN_DEFAULTS))
+            if unknown:
+                raise ValueError(
+                    f"unknown pretrain setting(s) {unknown}; valid: {sorted(_PRETRAIN_DEFAULTS)}"
+                )
+            object.__setattr__(self, "pretrain", {**_PRETRAIN_DEFAULTS, **self.pretrain})
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
@@ -458,6 +497,100 @@ def _callbacks() -> tuple[Any, Any, Any]:
 # --------------------------------------------------------------------------------------------
 
 
+def behaviour_clone(
+    model: Any, env_fn: Callable[[], Any], spec: Mapping[str, Any], seed: int = 0
+) -> dict[str, Any]:
+    """Fit a fresh PPO model to a teacher policy (behaviour cloning) before PPO starts.
+
+    The teacher flies ``spec["episodes"]`` episodes of the training environment (reset seeds
+    ``EVAL_SEED_START // 2 + seed + i``, below the held-out evaluation seeds). The actor's
+    mean action is fitted to the teacher's actions (mean squared error; the log-std is left
+    at ``log_std_init``, so PPO keeps exploring), and the critic to the teacher's discounted
+    returns (``gamma`` of the model; rewards scaled like ``VecNormalize`` when the model's
+    environment normalises them), for ``spec["epochs"]`` passes with Adam.
+
+    Returns
+    -------
+    dict
+        Samples, teacher goal rate and final losses (written to ``pretrain.json``).
+    """
+    import numpy as np
+    import torch
+
+    from agents import make_policy
+
+    env = env_fn()
+    teacher = make_policy(str(spec["policy"]), env, **dict(spec.get("policy_kwargs") or {}))
+    gamma = float(model.gamma)
+    obs_all: list[np.ndarray] = []
+    act_all: list[np.ndarray] = []
+    ret_all: list[np.ndarray] = []
+    goals = 0
+    for i in range(int(spec["episodes"])):
+        ep_seed = EVAL_SEED_START // 2 + seed + i
+        obs, _ = env.reset(seed=ep_seed)
+        teacher.reset(seed=ep_seed)
+        ep_obs, ep_act, ep_rew = [], [], []
+        infos: dict[str, Any] = {}
+        while env.agents:
+            agents = list(env.agents)
+            act = teacher.act(obs)
+            ep_obs.append(np.stack([obs[a] for a in agents]))
+            ep_act.append(np.stack([np.clip(act[a], -1.0, 1.0) for a in agents]))
+            obs, rew, _te, _tr, infos = env.step(act)
+            ep_rew.append(np.array([rew[a] for a in agents]))
+        goals += bool(infos) and all(bool(v.get("in_goal", False)) for v in infos.values())
+        rets = np.zeros_like(np.stack(ep_rew))
+        acc = np.zeros(rets.shape[1])
+        for t in range(len(ep_rew) - 1, -1, -1):
+            acc = ep_rew[t] + gamma * acc
+            rets[t] = acc
+        obs_all += ep_obs
+        act_all += ep_act
+        ret_all.append(rets.reshape(-1))
+    env.close()
+    x = torch.as_tensor(np.concatenate(obs_all), dtype=torch.float32, device=model.device)
+    y = torch.as_tensor(np.concatenate(act_all), dtype=torch.float32, device=model.device)
+    r = np.concatenate(ret_all)
+    ret_scale = float(np.std(r)) if getattr(model.get_env(), "norm_reward", False) else 1.0
+    v = torch.as_tensor(r / max(ret_scale, 1e-8), dtype=torch.float32, device=model.device)
+    policy = model.policy
+    params = [p for name, p in policy.named_parameters() if name != "log_std"]
+    opt = torch.optim.Adam(params, lr=float(spec["learning_rate"]))
+    gen = torch.Generator().manual_seed(int(seed))
+    batch = 256
+    pi_loss = vf_loss = float("nan")
+    policy.set_training_mode(True)
+    for _ in range(int(spec["epochs"])):
+        perm = torch.randperm(x.shape[0], generator=gen)
+        for k in range(0, x.shape[0], batch):
+            idx = perm[k : k + batch]
+            features = policy.extract_features(x[idx])
+            if isinstance(features, tuple):  # separate actor/critic feature extractors
+                latent_pi = policy.mlp_extractor.forward_actor(features[0])
+                latent_vf = policy.mlp_extractor.forward_critic(features[1])
+            else:
+                latent_pi, latent_vf = policy.mlp_extractor(features)
+            mean = policy.action_net(latent_pi)
+            value = policy.value_net(latent_vf).squeeze(-1)
+            loss_pi = torch.mean((mean - y[idx]) ** 2)
+            loss_vf = torch.mean((value - v[idx]) ** 2)
+            opt.zero_grad()
+            (loss_pi + 0.5 * loss_vf).backward()
+            opt.step()
+            pi_loss, vf_loss = loss_pi.item(), loss_vf.item()
+    policy.set_training_mode(False)
+    return {
+        "teacher": str(spec["policy"]),
+        "episodes": int(spec["episodes"]),
+        "samples": int(x.shape[0]),
+        "teacher_goal_rate": goals / max(int(spec["episodes"]), 1),
+        "return_scale": ret_scale,
+        "final_action_mse": pi_loss,
+        "final_value_mse": vf_loss,
+    }
+
+
 def _terminate_as_interrupt() -> Any:
     """Make SIGTERM (a scheduler stopping the job) behave like Ctrl-C; return the old handler.
 
@@ -577,14 +710,24 @@ def train(cfg: TrainConfig) -> Path:
         ),
         info_keywords=monitor_keys,
     )
+    learn_env: Any = monitor
+    if cfg.normalize_reward:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        learn_env = VecNormalize(
+            monitor, norm_obs=False, norm_reward=True, gamma=float(ppo_kwargs.get("gamma", 0.99))
+        )
     if resume_path is not None:
-        model = PPO.load(resume_path, env=monitor, device=cfg.device)
+        model = PPO.load(resume_path, env=learn_env, device=cfg.device)
         env_seed = (cfg.seed + start_steps) % (EVAL_SEED_START - cfg.n_envs)
         model.set_random_seed(env_seed)
     else:
         model = PPO(
-            policy, monitor, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose, **ppo_kwargs
+            policy, learn_env, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose, **ppo_kwargs
         )
+        if cfg.pretrain:
+            stats = behaviour_clone(model, env_fn, cfg.pretrain, seed=cfg.seed)
+            (out / "pretrain.json").write_text(json.dumps(stats, indent=2) + "\n")
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
     formats = [

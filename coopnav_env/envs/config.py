@@ -38,24 +38,33 @@ class UrbanCanyonConfig(ScenarioConfig):
         Azimuths of the sky-openness observation, evenly spaced from North, in [1, 72].
     obs_sigma_max_m : float, default 20.0
         Predicted sigma per axis at which the SIG observation saturates at 1, in (0, 1e4] [m].
+    obs_route_scale_m : float, default 50.0
+        Scale of the route observations (vector to the next waypoint, next leg): a distance
+        of this many metres reads 1, in (0, 1e4] [m].
+    obs_wall_scale_m : float, default 50.0
+        Wall distance at which the range observation saturates at 1, in (0, 1e4] [m].
     nav_reward : {"error", "sigma"}, default "error"
         Navigation reward from the true 3-D error of the estimate a UAV uses, or from its
         predicted 3-D sigma ``sqrt(trace(H_p))``.
-    nav_reward_weight : float, default 1.0
+    nav_reward_weight : float, default 0.1
         Weight of the navigation term, in [0, 1000].
     nav_reward_scale_m : float, default 10.0
         Error (or sigma) that costs one ``nav_reward_weight``, in (0, 1e4] [m].
-    nav_reward_cap_m : float, default 50.0
+    nav_reward_cap_m : float, default 10.0
         The error (or sigma) is capped here before scaling, in (0, 1e5] [m].
     progress_reward_weight : float, default 1.0
-        Weight of the progress term (decrease of the true horizontal distance to the goal per
-        step, divided by ``max_speed_mps * dt_s``, so at most 1), in [0, 1000].
-    collision_penalty : float, default 10.0
-        Subtracted from a UAV that hits a building (the episode ends), in [0, 1e5].
-    separation_penalty : float, default 1.0
+        Weight of the progress term (decrease of the remaining street-route length per step,
+        divided by ``max_speed_mps * dt_s``, so at most 1 in magnitude), in [0, 1000].
+    collision_penalty : float, default 40.0
+        Subtracted from a UAV that hits a building (the episode ends), in [0, 1e5]. The
+        default is larger than the worst penalty a whole episode can collect without a crash,
+        ``max_steps * (nav_reward_weight * nav_reward_cap_m / nav_reward_scale_m +
+        separation_penalty + contact_penalty)`` = 200 x (0.1 + 0.05 + 0.02) = 34
+        (:attr:`worst_episode_penalty`), so that ending an episode by crashing never pays.
+    separation_penalty : float, default 0.05
         Subtracted per step from each UAV closer than ``min_separation_m`` to another, in
         [0, 1e5].
-    contact_penalty : float, default 0.5
+    contact_penalty : float, default 0.02
         Subtracted per step from each UAV with no other UAV in relative-sensing range, in
         [0, 1e5].
     goal_bonus : float, default 10.0
@@ -71,14 +80,16 @@ class UrbanCanyonConfig(ScenarioConfig):
     obs_neighbours: int = 4
     obs_sky_azimuths: int = 8
     obs_sigma_max_m: float = 20.0
+    obs_route_scale_m: float = 50.0
+    obs_wall_scale_m: float = 50.0
     nav_reward: Literal["error", "sigma"] = "error"
-    nav_reward_weight: float = 1.0
+    nav_reward_weight: float = 0.1
     nav_reward_scale_m: float = 10.0
-    nav_reward_cap_m: float = 50.0
+    nav_reward_cap_m: float = 10.0
     progress_reward_weight: float = 1.0
-    collision_penalty: float = 10.0
-    separation_penalty: float = 1.0
-    contact_penalty: float = 0.5
+    collision_penalty: float = 40.0
+    separation_penalty: float = 0.05
+    contact_penalty: float = 0.02
     goal_bonus: float = 10.0
     render_sky_uav: int = -1
     render_width_px: int = 1280
@@ -91,6 +102,8 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_int(o, "obs_neighbours", self.obs_neighbours, 0, 64)
         _check_int(o, "obs_sky_azimuths", self.obs_sky_azimuths, 1, 72)
         _check_real(o, "obs_sigma_max_m", self.obs_sigma_max_m, 0.0, 1e4, lo_open=True)
+        _check_real(o, "obs_route_scale_m", self.obs_route_scale_m, 0.0, 1e4, lo_open=True)
+        _check_real(o, "obs_wall_scale_m", self.obs_wall_scale_m, 0.0, 1e4, lo_open=True)
         _check_choice(o, "nav_reward", self.nav_reward, ("error", "sigma"))
         _check_real(o, "nav_reward_weight", self.nav_reward_weight, 0.0, 1000.0)
         _check_real(o, "nav_reward_scale_m", self.nav_reward_scale_m, 0.0, 1e4, lo_open=True)
@@ -106,8 +119,25 @@ class UrbanCanyonConfig(ScenarioConfig):
 
     @property
     def obs_dim(self) -> int:
-        """Length of one agent's observation vector: ``14 + obs_sky_azimuths + 4 K``."""
-        return 14 + self.obs_sky_azimuths + 4 * self.obs_neighbours
+        """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``."""
+        return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours
+
+    @property
+    def worst_episode_penalty(self) -> float:
+        """The most a whole episode without a crash can lose to the per-step penalties.
+
+        ``max_steps * (nav_reward_weight * nav_reward_cap_m / nav_reward_scale_m +
+        separation_penalty + contact_penalty)``: every step at the capped navigation error,
+        too close to another UAV and out of contact. (The progress term is left out: summed
+        over an episode it is the net decrease of the remaining route, which crashing does
+        not improve.) The defaults keep ``collision_penalty`` above it.
+        """
+        per_step = (
+            self.nav_reward_weight * self.nav_reward_cap_m / self.nav_reward_scale_m
+            + self.separation_penalty
+            + self.contact_penalty
+        )
+        return float(self.max_steps * per_step)
 
     @property
     def state_dim(self) -> int:

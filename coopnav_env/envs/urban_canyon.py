@@ -7,29 +7,10 @@ end, arguments, version history) is the docstring of :mod:`coopnav_env.urban_can
 
 Observation layout
 ------------------
-One float32 vector per agent, ``14 + A + 4 K`` long (``A = obs_sky_azimuths``, default 8;
-``K = obs_neighbours``, default 4; 38 by default). Every entry is clipped to its bounds, so the
-observation is always inside ``observation_space``. ``L`` is the larger side of the city
-extent [m]. Only what a UAV can know on board: never its true position.
-
-| Index            | Meaning                                          | Units / scale | Bounds  |
-|------------------|--------------------------------------------------|---------------|---------|
-| 0-2              | estimated position minus goal centre, E N U      | m / L         | [-1, 1] |
-| 3-5              | velocity E N U                                   | m/s / v_max   | [-1, 1] |
-| 6-8              | predicted sigma E N U of the estimate (H_p)      | m / sigma_max | [0, 1]  |
-| 9                | satellites received / above the cut-off          | count ratio   | [0, 1]  |
-| 10               | distinct satellites of it + UAVs in range        | count ratio   | [0, 1]  |
-| 11..10+A         | skyline elevation at azimuth 360 i / A           | deg / 90      | [0, 1]  |
-| 11+A+4k..13+A+4k | neighbour k (nearest first): relative E N U      | m / range_max | [-1, 1] |
-| 14+A+4k          | neighbour k present (1) or empty slot (0)        | flag          | {0, 1}  |
-| 11+A+4K          | the estimate is a cooperative fix                | flag          | {0, 1}  |
-| 12+A+4K          | the estimate is a fresh fix (not dead reckoning) | flag          | {0, 1}  |
-| 13+A+4K          | steps left / max_steps                           | ratio         | [0, 1]  |
-
-``L``: the larger side of the city extent [m]; ``v_max``: ``kinematics.max_speed_mps``;
-``sigma_max``: ``obs_sigma_max_m``; ``range_max``: ``relative_sensing.max_range_m``. Azimuths
-are clockwise from North; the sigma is from the covariance of the estimate the UAV uses
-(``H_p`` of Eq. 19-23 for a cooperative fix).
+One float32 vector per agent, ``20 + 2 A + 4 K`` long (``A = obs_sky_azimuths``, default 8;
+``K = obs_neighbours``, default 4; 52 by default), clipped to its bounds. The index table (with
+units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it is built by
+:meth:`UrbanCanyonParallelEnv._observations` below, in the same order.
 """
 
 from __future__ import annotations
@@ -43,6 +24,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from coopnav_env.envs.config import UrbanCanyonConfig, make_config
+from coopnav_env.sim.route import remaining_route_m, route_tail_lengths_m
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
 __all__ = ["REWARD_TERMS", "UrbanCanyonEnv", "aec_env", "parallel_env"]
@@ -181,8 +163,12 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             self._trail = self._trail[-60:]
 
         # reward terms, shape (N,) each
-        d_prev, d_now = prev.goal_distance_m, ep.goal_distance_m
-        in_goal = d_now <= cfg.goal_radius_m
+        # progress: decrease of the remaining street route, both ends measured to the
+        # waypoint that was next at the previous step (no reward for switching waypoints)
+        route = self.world.route_xy_m
+        d_prev = remaining_route_m(route, prev.pos_enu_m[:, :2], prev.next_waypoint)
+        d_now = remaining_route_m(route, ep.pos_enu_m[:, :2], prev.next_waypoint)
+        in_goal = ep.goal_distance_m <= cfg.goal_radius_m
         crash = bool(ep.collided.any())
         reached = bool(in_goal.all()) and not crash
         if cfg.nav_reward == "error":
@@ -268,6 +254,20 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         slots[:, :m, :3] = rel_k
         slots[:, :m, 3] = present
 
+        # route: next waypoint and the leg after it, from the estimated position
+        route = self.world.route_xy_m
+        wp = ep.next_waypoint
+        last = route.shape[0] - 1
+        est_xy = ep.nav_pos_enu_m[:, :2]
+        to_wp = route[wp] - est_xy
+        after = route[np.minimum(wp + 1, last)] - route[wp]  # 0 when the next one is the goal
+        remaining = np.linalg.norm(to_wp, axis=1) + route_tail_lengths_m(route)[wp]
+        kin = cfg.kinematics
+        alt = (ep.nav_pos_enu_m[:, 2] - kin.altitude_min_m) / (
+            kin.altitude_max_m - kin.altitude_min_m
+        )
+        walls = self.world.city.wall_distance_m(ep.pos_enu_m, self._az_deg)
+
         obs = np.concatenate(
             [
                 (ep.nav_pos_enu_m - ep.goal_enu_m) / big,
@@ -280,6 +280,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 (ep.nav_source == NavSource.COOPERATIVE)[:, None],
                 (ep.nav_source != NavSource.DEAD_RECKONING)[:, None],
                 np.full((n, 1), 1.0 - self._steps / cfg.max_steps),
+                to_wp / cfg.obs_route_scale_m,
+                after / cfg.obs_route_scale_m,
+                (remaining / (2.0 * big))[:, None],
+                alt[:, None],
+                np.minimum(walls / cfg.obs_wall_scale_m, 1.0),
             ],
             axis=1,
         )
@@ -310,6 +315,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "standalone_status": ep.standalone_status.tolist(),
             "nav_source": ep.nav_source.tolist(),
             "goal_distance_m": ep.goal_distance_m.tolist(),
+            "next_waypoint": ep.next_waypoint.tolist(),
+            "coop_rejected": ep.coop_rejected.tolist(),
+            "standalone_rejected": ep.standalone_rejected.tolist(),
             "in_goal": np.asarray(in_goal, dtype=bool).tolist(),
             "collided": ep.collided.tolist(),
             "separation_violation": ep.separation_violation.tolist(),
@@ -426,6 +434,8 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(5 + a),  # sigma, satellite counts, sky
             np.tile([-1.0, -1.0, -1.0, 0.0], k),  # neighbour slots
             np.zeros(3),  # flags, time left
+            -np.ones(4),  # next waypoint, leg after it
+            np.zeros(2 + a),  # remaining route, altitude, wall distances
         ]
     )
     hi = np.ones(cfg.obs_dim)

@@ -2,6 +2,7 @@
 
 ``city``   buildings, street grid, 3-D line of sight, skyline mask, the paper's analytic
            canyon mask (Eq. 25) and NLOS reception.
+``route``  shortest street routes, arc-length polylines, waypoint tracking.
 ``swarm``  UAV kinematics, building and inter-UAV collisions, relative (UWB-like) sensing.
 ``scenario`` the world of one episode, epoch by epoch: kinematics -> satellites -> visibility
            -> measurements -> standalone and cooperative navigation (:class:`UrbanWorld`).
@@ -24,6 +25,7 @@ from coopnav_env.sim.city import (
     is_inside_building,
     line_of_sight,
     mask_elevation_deg,
+    wall_distance_m,
 )
 from coopnav_env.sim.scenario import (
     AUTO_SHARED_MIN_UAVS,
@@ -72,4 +74,5 @@ __all__ = [
     "separation_violations",
     "step_kinematics",
     "swept_collisions",
+    "wall_distance_m",
 ]

@@ -13,7 +13,8 @@ North, clockwise towards East, in degrees: a unit direction is
 Buildings are axis-aligned boxes standing on the ground. Two visibility models are offered:
 
 * the 3-D model, :func:`line_of_sight` (ray against every box, slab method) with its
-  skyline companion :func:`mask_elevation_deg`;
+  skyline companion :func:`mask_elevation_deg` (and :func:`wall_distance_m`, the horizontal
+  range to the nearest wall, what a navigation agent's range sensor measures);
 * the paper's analytic urban-canyon mask (Eq. 25), :class:`CanyonMask`.
 
 :func:`canyon_city` builds the paper's straight canyon as real boxes so that both models can
@@ -45,6 +46,7 @@ __all__ = [
     "is_inside_building",
     "line_of_sight",
     "mask_elevation_deg",
+    "wall_distance_m",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -424,6 +426,52 @@ def line_of_sight(buildings: Buildings, pos_enu_m: ArrayLike, dir_enu: ArrayLike
     return visible
 
 
+class _HorizontalSweep:
+    """Slab intervals of horizontal rays (receivers x azimuths) against the building footprints.
+
+    Iterating yields ``(t_near, t_far, lo, hi)`` per chunk of buildings taller than the lowest
+    receiver: the footprint entry/exit distances, shape ``(n, n_az, n_chunk)``, and the chunk's
+    box corners broadcastable as ``(1, 1, n_chunk, 3)``. Chunking bounds the memory.
+    """
+
+    def __init__(self, buildings: Buildings, pos: FloatArray, az_deg: ArrayLike) -> None:
+        az = np.asarray(az_deg, dtype=np.float64)
+        if az.ndim != 1:
+            raise ValueError(f"az_deg must have shape (n_az,), got {az.shape}")
+        if not np.all(np.isfinite(az)):
+            raise ValueError("az_deg must be finite")
+        az_rad = np.radians(az)
+        dir_xy = np.stack([np.sin(az_rad), np.cos(az_rad)], axis=1)  # (n_az, 2)
+        # exact zeros for the cardinal directions so that the slab test treats them exactly
+        self._dir = np.where(np.abs(dir_xy) < 1e-15, 0.0, dir_xy)
+        self._pos = pos
+        self.shape = (pos.shape[0], az.shape[0])
+        if buildings.n == 0 or pos.shape[0] == 0 or az.shape[0] == 0:
+            self._tall = np.zeros(0, dtype=np.intp)
+        else:
+            self._tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
+        self._lo = buildings.min_m[self._tall]
+        self._hi = buildings.max_m[self._tall]
+
+    def __iter__(self):
+        pos, d, lo, hi = self._pos, self._dir, self._lo, self._hi
+        for cb in _chunk_slices(self._tall.size, 2 * self.shape[0] * self.shape[1]):
+            t_near, t_far = _slab_interval(
+                [pos[:, None, None, k] for k in range(2)],
+                [d[None, :, None, k] for k in range(2)],
+                [lo[None, None, cb, k] for k in range(2)],
+                [hi[None, None, cb, k] for k in range(2)],
+            )
+            yield t_near, t_far, lo[None, None, cb], hi[None, None, cb]
+
+
+def _horizontal_sweep(
+    buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike
+) -> tuple[FloatArray, _HorizontalSweep]:
+    pos = _as_points(pos_enu_m, "pos_enu_m")
+    return pos, _HorizontalSweep(buildings, pos, az_deg)
+
+
 def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
     """Elevation of the building skyline seen from each receiver along each azimuth.
 
@@ -448,36 +496,48 @@ def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: Array
         Skyline elevation [deg], in [0, 90]: 0 where no building taller than the receiver lies
         along the azimuth, 90 for a receiver inside a building.
     """
-    pos = _as_points(pos_enu_m, "pos_enu_m")
-    az = np.asarray(az_deg, dtype=np.float64)
-    if az.ndim != 1:
-        raise ValueError(f"az_deg must have shape (n_az,), got {az.shape}")
-    if not np.all(np.isfinite(az)):
-        raise ValueError("az_deg must be finite")
-    az_rad = np.radians(az)
-    dir_xy = np.stack([np.sin(az_rad), np.cos(az_rad)], axis=1)  # (n_az, 2)
-    # exact zeros for the cardinal directions so that the slab test treats them exactly
-    dir_xy = np.where(np.abs(dir_xy) < 1e-15, 0.0, dir_xy)
-    n, n_az = pos.shape[0], az.shape[0]
-    tan_max = np.zeros((n, n_az))  # tangent of the skyline elevation
-    if buildings.n == 0 or n == 0 or n_az == 0:
-        return tan_max
-    tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
-    lo_all = buildings.min_m[tall]
-    hi_all = buildings.max_m[tall]
-    for cb in _chunk_slices(tall.size, 2 * n * n_az):
-        t_near, t_far = _slab_interval(
-            [pos[:, None, None, k] for k in range(2)],
-            [dir_xy[None, :, None, k] for k in range(2)],
-            [lo_all[None, None, cb, k] for k in range(2)],
-            [hi_all[None, None, cb, k] for k in range(2)],
-        )  # (n, n_az, n_b_chunk)
-        rel_h = hi_all[None, None, cb, 2] - pos[:, None, None, 2]
+    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
+    tan_max = np.zeros(sweep.shape)  # tangent of the skyline elevation
+    for t_near, t_far, _lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
+        rel_h = hi[..., 2] - pos[:, None, None, 2]
         hit = (t_far > 0.0) & (t_near <= t_far) & (rel_h > 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             tan_el = rel_h / np.maximum(t_near, 0.0)  # +inf inside a footprint
         tan_max = np.maximum(tan_max, np.where(hit, tan_el, 0.0).max(axis=2))
     return np.degrees(np.arctan(tan_max))
+
+
+def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
+    """Horizontal distance to the nearest building wall along each azimuth (a range sensor).
+
+    The ray starts at the receiver and runs horizontally at its altitude toward azimuth
+    ``az``; it hits a building when it enters the building's footprint while the receiver is
+    below the roof (``z < roof``: a lower building is overflown, exactly as the collision test
+    of :mod:`coopnav_env.sim.swarm` sees it). The distance is measured to the footprint edge.
+
+    Parameters
+    ----------
+    buildings : Buildings
+    pos_enu_m : array_like, shape (n, 3)
+        Receiver positions in ENU [m].
+    az_deg : array_like, shape (n_az,)
+        Azimuths, clockwise from North [deg].
+
+    Returns
+    -------
+    ndarray, shape (n, n_az)
+        Distance [m], >= 0: ``inf`` where the ray meets no building taller than the receiver,
+        0 for a receiver inside a building.
+    """
+    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
+    dist = np.full(sweep.shape, np.inf)
+    for t_near, t_far, lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
+        z = pos[:, None, None, 2]
+        below_roof = (z < hi[..., 2]) & (z >= lo[..., 2])
+        hit = (t_far >= 0.0) & (t_near <= t_far) & below_roof
+        d = np.where(hit, np.maximum(t_near, 0.0), np.inf)
+        dist = np.minimum(dist, d.min(axis=2))
+    return dist
 
 
 # --------------------------------------------------------------------------------------------
@@ -793,6 +853,10 @@ class City:
     def mask_elevation_deg(self, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
         """:func:`mask_elevation_deg` against this city's buildings; ``(n, n_az)`` [deg]."""
         return mask_elevation_deg(self.buildings, pos_enu_m, az_deg)
+
+    def wall_distance_m(self, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
+        """:func:`wall_distance_m` against this city's buildings; ``(n, n_az)`` [m]."""
+        return wall_distance_m(self.buildings, pos_enu_m, az_deg)
 
     def random_street_points(
         self,

@@ -47,14 +47,32 @@ The flow of one epoch (:meth:`UrbanWorld.step`)
 
    Both solvers are warm-started from each UAV's previous estimate moved by its velocity
    times ``dt`` (a UAV knows its own velocity), so they converge in one or two Gauss-Newton
-   iterations; the first epoch of an episode starts from the known launch positions (the
-   converged fix does not depend on the start point, only the iteration count does).
+   iterations; the first epoch of an episode starts from the known launch positions. The start
+   point matters: a fix with no redundancy (as many pseudoranges as unknowns, e.g. 5 GPS + BDS
+   satellites for 3 coordinates and 2 clocks) has two exact solutions, and Gauss-Newton
+   started at the Earth's centre (the solvers' default) can converge, status OK, to the far
+   one, 50,000-70,000 km away (``tests/sim/test_scenario.py`` has a case). Started within a
+   few kilometres of the truth it finds the near one.
 
    The estimate a UAV *uses* (``nav_*``, what the environment observes and rewards) is its
    cooperative fix when that is valid, else its standalone fix (a UAV out of relative range of
    its centroid navigates standalone), else dead reckoning: the previous estimate moved by the
    velocity, with its covariance grown by ``(dead_reckoning_sigma_mps * dt)^2`` per axis.
    Degenerate geometry is a reported :class:`~coopnav_env.nav.NavStatus`, never an exception.
+
+   *Integrity gate.* A fix is valid when its solver reports OK **and** its predicted 3-D
+   sigma ``sqrt(trace(cov))`` is at most ``max_fix_sigma_m`` (default 30 m). Fixes from
+   barely enough satellites in a canyon (4-5 measurements for 4-5 unknowns, all from a narrow
+   strip of sky) are least-squares solutions with hardly any redundancy: their geometry makes
+   the error tens to hundreds of metres, and their covariance says so (predicted 3-D sigma
+   of the same order as the error). The gate rejects them (``*_rejected``; reported as no fix)
+   instead of letting one such fix move a UAV's estimate by hundreds of metres and
+   warm-start the next epoch from there.
+6. **Route.** At reset the world plans the shortest street route from the formation centre to
+   the goal (:func:`~coopnav_env.sim.route.street_route`, ``route_xy_m``). After the
+   navigation each UAV's next waypoint (``next_waypoint``) advances once its *estimated*
+   position has reached or passed it (:func:`~coopnav_env.sim.route.advance_waypoints`,
+   ``route_reach_m``).
 
 Random draws per step, in this order: NLOS (only when ``nlos_probability > 0``), pseudoranges,
 relative positions. Every draw comes from the generator passed to :meth:`UrbanWorld.reset` /
@@ -106,6 +124,7 @@ from coopnav_env.sim.city import (
     draw_nlos,
     generate_city,
 )
+from coopnav_env.sim.route import advance_waypoints, street_route
 from coopnav_env.sim.swarm import (
     KinematicsConfig,
     RelativeSensingConfig,
@@ -251,6 +270,16 @@ class ScenarioConfig:
     goal_radius_m : float, default 25.0
         A UAV is in the goal area when its true horizontal distance to the goal is at most
         this, in (0, 1000] [m].
+    route_reach_m : float, default 5.0
+        Waypoint tracking on the street route planned at reset: a UAV's next waypoint counts
+        as reached when its *estimated* position is within this distance of it along both
+        East and North, or past it along the leg that arrives at it
+        (:func:`~coopnav_env.sim.route.advance_waypoints`), in [0, 1000] [m].
+    max_fix_sigma_m : float or None, default 30.0
+        Integrity gate: a cooperative or standalone fix whose predicted 3-D sigma
+        ``sqrt(trace(cov))`` exceeds this is rejected (reported as no fix, ``*_rejected``)
+        and the UAV falls back to the next source (standalone, then dead reckoning), in
+        (0, 1e6] [m]; None disables the gate.
     """
 
     n_uavs: int = 5
@@ -285,6 +314,8 @@ class ScenarioConfig:
     start_altitude_m: float = 15.0
     goal_distance_min_m: float = 200.0
     goal_radius_m: float = 25.0
+    route_reach_m: float = 5.0
+    max_fix_sigma_m: float | None = 30.0
 
     def __post_init__(self) -> None:
         o = type(self).__name__
@@ -346,6 +377,9 @@ class ScenarioConfig:
         )
         _check_real(o, "goal_distance_min_m", self.goal_distance_min_m, 0.0, 1e5)
         _check_real(o, "goal_radius_m", self.goal_radius_m, 0.0, 1000.0, lo_open=True)
+        _check_real(o, "route_reach_m", self.route_reach_m, 0.0, 1000.0)
+        if self.max_fix_sigma_m is not None:
+            _check_real(o, "max_fix_sigma_m", self.max_fix_sigma_m, 0.0, 1e6, lo_open=True)
 
     @property
     def dt_s(self) -> float:
@@ -518,7 +552,10 @@ class Epoch:
     standalone_cov_enu_m2, coop_cov_enu_m2, nav_cov_enu_m2 : ndarray, shape (N, 3, 3)
         Their covariances in ENU [m^2]; the cooperative one is ``H_p`` (Eq. 19-23).
     standalone_status, coop_status : ndarray of int, shape (N,)
-        :class:`~coopnav_env.nav.NavStatus` of each fix.
+        :class:`~coopnav_env.nav.NavStatus` of each fix, as the solver reported it.
+    standalone_rejected, coop_rejected : ndarray of bool, shape (N,)
+        The solver reported OK but the integrity gate rejected the fix (predicted 3-D sigma
+        above ``max_fix_sigma_m``); its position and covariance are NaN like a missing fix.
     nav_source : ndarray of int, shape (N,)
         :class:`NavSource` of the estimate used.
     centroid_uav : int
@@ -531,6 +568,9 @@ class Epoch:
         No other UAV in relative-sensing range (always False for a single UAV).
     n_iter_standalone, n_iter_coop : int
         Gauss-Newton iterations run by the two solvers (1-2 when warm-started).
+    next_waypoint : ndarray of int, shape (N,)
+        Index into ``UrbanWorld.route_xy_m`` of each UAV's next waypoint, after this epoch's
+        update from the estimates used.
     """
 
     t_s: float
@@ -564,6 +604,9 @@ class Epoch:
     out_of_contact: BoolArray
     n_iter_standalone: int
     n_iter_coop: int
+    standalone_rejected: BoolArray
+    coop_rejected: BoolArray
+    next_waypoint: np.ndarray
 
     @property
     def n_uavs(self) -> int:
@@ -572,13 +615,13 @@ class Epoch:
 
     @property
     def coop_ok(self) -> BoolArray:
-        """Valid cooperative fix, shape (N,)."""
-        return self.coop_status == NavStatus.OK
+        """Valid cooperative fix (solver OK and accepted by the integrity gate), shape (N,)."""
+        return (self.coop_status == NavStatus.OK) & ~self.coop_rejected
 
     @property
     def standalone_ok(self) -> BoolArray:
-        """Valid standalone fix, shape (N,)."""
-        return self.standalone_status == NavStatus.OK
+        """Valid standalone fix (solver OK and accepted by the integrity gate), shape (N,)."""
+        return (self.standalone_status == NavStatus.OK) & ~self.standalone_rejected
 
     @property
     def coop_error_m(self) -> FloatArray:
@@ -732,6 +775,8 @@ class UrbanWorld:
             if goal.shape != (3,) or not np.all(np.isfinite(goal)):
                 raise ValueError("goal_enu_m must be finite with shape (3,)")
         self.goal_enu_m = goal
+        self.route_xy_m = street_route(city, pos[:, :2].mean(axis=0), goal[:2])
+        self.next_wp = np.full(n, min(1, self.route_xy_m.shape[0] - 1), dtype=np.int64)
         self.start_enu_m = pos.copy()
         self.pos_enu_m = pos
         self.vel_enu_mps = np.zeros((n, 3))
@@ -860,6 +905,11 @@ class UrbanWorld:
         sa_ok = sa.status == NavStatus.OK
         co_status = np.where(linked, co.status, NavStatus.NO_RELATIVE_POSITION)
         co_ok = co_status == NavStatus.OK
+        # integrity gate: a fix whose predicted 3-D sigma is too large is not used
+        sa_rej = sa_ok & ~_sigma_within(sa.cov_ecef_m2, cfg.max_fix_sigma_m)
+        co_rej = co_ok & ~_sigma_within(co.cov_ecef_m2, cfg.max_fix_sigma_m)
+        sa_ok &= ~sa_rej
+        co_ok &= ~co_rej
         sa_pos = np.where(sa_ok[:, None], self.ecef_to_enu(sa.pos_ecef_m), np.nan)
         sa_cov = np.where(sa_ok[:, None, None], self.cov_ecef_to_enu(sa.cov_ecef_m2), np.nan)
         co_pos = np.where(co_ok[:, None], self.ecef_to_enu(co.pos_ecef_m), np.nan)
@@ -880,6 +930,9 @@ class UrbanWorld:
         )
         self.nav_pos_enu_m, self.nav_cov_enu_m2 = nav_pos, nav_cov
         self._warm = True
+        self.next_wp = advance_waypoints(
+            self.route_xy_m, nav_pos[:, :2], self.next_wp, cfg.route_reach_m
+        )
 
         link_or_self = avail | np.eye(n, dtype=bool)
         n_swarm = (link_or_self.astype(np.int64) @ received.astype(np.int64) > 0).sum(axis=1)
@@ -915,7 +968,23 @@ class UrbanWorld:
             out_of_contact=~avail.any(axis=1) if n > 1 else np.zeros(n, dtype=bool),
             n_iter_standalone=int(sa.n_iter),
             n_iter_coop=int(co.n_iter),
+            standalone_rejected=sa_rej,
+            coop_rejected=co_rej,
+            next_waypoint=self.next_wp.copy(),
         )
+
+
+def _sigma_within(cov_ecef_m2: np.ndarray, max_sigma_m: float | None) -> BoolArray:
+    """``sqrt(trace(cov)) <= max_sigma_m`` per fix (True everywhere when the gate is off).
+
+    The trace is invariant under the ECEF-ENU rotation. NaN covariances (no fix) give False,
+    which does not matter: only fixes the solver reported OK are tested.
+    """
+    if max_sigma_m is None:
+        return np.ones(cov_ecef_m2.shape[0], dtype=bool)
+    tr = np.einsum("nii->n", cov_ecef_m2)
+    with np.errstate(invalid="ignore"):
+        return tr <= max_sigma_m**2
 
 
 def _swept_collisions_culled(

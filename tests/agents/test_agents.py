@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import itertools
 
 import numpy as np
 import pytest
@@ -66,8 +65,9 @@ def test_missing_checkpoint_names_the_path(tmp_path):
 
 
 def test_heuristics_need_the_urban_env():
-    with pytest.raises(ValueError, match="urban_canyon_v0"):
-        make_policy("formation", ToyParallelEnv())
+    for name in ("formation", "sky", "waypoint"):
+        with pytest.raises(ValueError, match="urban_canyon_v0"):
+            make_policy(name, ToyParallelEnv())
 
 
 def test_random_policy_is_seeded_and_valid():
@@ -83,55 +83,15 @@ def test_random_policy_is_seeded_and_valid():
 
 
 # --------------------------------------------------------------------------------------------
-# route planning
+# route planning (tested in tests/sim/test_route.py)
 # --------------------------------------------------------------------------------------------
 
 
-class _Grid:
-    street_centres_x_m = np.array([-100.0, 0.0, 100.0])
-    street_centres_y_m = np.array([-100.0, 0.0, 100.0])
+def test_heuristics_use_the_route_module():
+    from coopnav_env.sim import route
 
-
-def _on_streets(route: np.ndarray) -> bool:
-    xs, ys = _Grid.street_centres_x_m, _Grid.street_centres_y_m
-    for p, q in itertools.pairwise(route):
-        if np.isclose(p[0], q[0]):  # north-south leg
-            if not np.isclose(np.abs(xs - p[0]).min(), 0.0):
-                return False
-        elif np.isclose(p[1], q[1]):  # east-west leg
-            if not np.isclose(np.abs(ys - p[1]).min(), 0.0):
-                return False
-        else:
-            return False
-    return True
-
-
-@pytest.mark.parametrize(
-    ("start", "goal", "length"),
-    [
-        ((0.0, -80.0), (0.0, 60.0), 140.0),  # same street
-        ((1.0, -80.0), (60.0, 100.0), 180.0 + 60.0),  # NS then EW
-        ((-100.0, -70.0), (100.0, -40.0), 30.0 + 200.0 + 60.0),  # NS - EW - NS, best cross st.
-        ((-70.0, 99.0), (30.0, -100.0), 70.0 + 200.0 + 30.0),  # EW - NS - EW
-        ((50.0, 0.0), (-100.0, 50.0), 150.0 + 50.0),  # EW then NS
-    ],
-)
-def test_street_route_is_on_streets_and_shortest(start, goal, length):
-    route = street_route(_Grid, np.array(start), np.array(goal))
-    assert _on_streets(route)
-    assert route.shape[0] <= 4
-    line = Polyline(route)
-    assert line.length == pytest.approx(length)
-
-
-def test_polyline_projection_respects_window():
-    line = Polyline(np.array([[0.0, 0.0], [0.0, 100.0], [100.0, 100.0]]))
-    p = np.array([[5.0, 95.0]])  # near both legs around the corner
-    assert line.project(p, np.array([0.0]), np.array([90.0]))[0] == pytest.approx(90.0)
-    assert line.project(p, np.array([100.0]), np.array([200.0]))[0] == pytest.approx(105.0)
-    np.testing.assert_allclose(line.point(np.array([150.0])), [[50.0, 100.0]])
-    assert line.distance_to_corner(np.array([30.0]))[0] == pytest.approx(70.0)
-    assert np.isinf(line.distance_to_corner(np.array([130.0]))[0])
+    assert street_route is route.street_route
+    assert Polyline is route.Polyline
 
 
 # --------------------------------------------------------------------------------------------
@@ -140,7 +100,7 @@ def test_polyline_projection_respects_window():
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["random", "formation", "sky"])
+@pytest.mark.parametrize("name", ["random", "formation", "sky", "waypoint"])
 def test_policies_give_valid_actions_on_the_env(name):
     env = urban(max_steps=25)
     pol = make_policy(name, env)
@@ -151,7 +111,7 @@ def test_policies_give_valid_actions_on_the_env(name):
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["formation", "sky"])
+@pytest.mark.parametrize("name", ["formation", "sky", "waypoint"])
 def test_heuristics_reach_the_goal_along_the_canyon(name):
     """The paper's straight canyon: flying the street is enough to get there."""
     env = urban(city="canyon", n_uavs=4, max_steps=120)
@@ -190,3 +150,16 @@ def test_heuristics_are_deterministic():
         _, a1 = fly(env, pol, seed=1_000_002)
         _, a2 = fly(env, pol, seed=1_000_002)
         assert all(np.array_equal(x[k], y[k]) for x, y in zip(a1, a2) for k in x)
+
+
+@needs_env
+def test_waypoint_follower_turns_corners_of_the_grid():
+    """Obs-only route following: toward the next waypoint, which advances at each corner."""
+    env = urban(max_steps=200)
+    pol = make_policy("waypoint", env)
+    assert pol.name == "waypoint"
+    reached = 0
+    for seed in range(1_000_000, 1_000_004):
+        infos, _ = fly(env, pol, seed=seed)
+        reached += all(infos[a]["in_goal"] for a in env.possible_agents)
+    assert reached >= 3

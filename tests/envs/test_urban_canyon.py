@@ -78,7 +78,7 @@ def test_metadata_spaces_and_shim() -> None:
     for a in env.possible_agents:
         assert env.observation_space(a) is env.observation_space(a)
         assert env.action_space(a) is env.action_space(a)
-        assert env.observation_space(a).shape == (38,)
+        assert env.observation_space(a).shape == (52,)
         assert env.observation_space(a).dtype == np.float32
         assert env.action_space(a).shape == (3,)
     assert urban_canyon_v0.__all__ == ["env", "parallel_env", "raw_env"]
@@ -94,7 +94,7 @@ def test_documented_observation_table_matches_the_code() -> None:
     assert rows and rows == table(urban_canyon_module.__doc__)
     cfg = UrbanCanyonConfig()
     a, k = cfg.obs_sky_azimuths, cfg.obs_neighbours
-    assert cfg.obs_dim == 13 + a + 4 * k + 1 == 38
+    assert cfg.obs_dim == 20 + 2 * a + 4 * k == 52
     for name in config_field_names():
         assert f"`{name}`" in urban_canyon_v0.__doc__, name
 
@@ -141,8 +141,74 @@ def test_observation_contents() -> None:
     d = np.linalg.norm(slots[:, :3], axis=1)
     assert np.all(np.diff(d) >= 0)
     assert o[37] == 1.0
+    # route: next waypoint and the leg after it (scale 50 m), remaining route, altitude, walls
+    world = env.unwrapped.world
+    route, wp = world.route_xy_m, ep.next_waypoint[2]
+    est = ep.nav_pos_enu_m[2]
+    np.testing.assert_allclose(o[38:40], np.clip((route[wp] - est[:2]) / 50.0, -1, 1), atol=1e-6)
+    nxt = route[min(wp + 1, len(route) - 1)] - route[wp]
+    np.testing.assert_allclose(o[40:42], np.clip(nxt / 50.0, -1, 1), atol=1e-6)
+    remaining = (
+        np.linalg.norm(route[wp] - est[:2])
+        + np.linalg.norm(np.diff(route[wp:], axis=0), axis=1).sum()
+    )
+    assert o[42] == pytest.approx(min(remaining / (2 * L), 1.0), abs=1e-6)
+    assert o[43] == pytest.approx((est[2] - 5.0) / 25.0, abs=1e-6)
+    walls = world.city.wall_distance_m(ep.pos_enu_m[2:3], np.arange(8) * 45.0)[0]
+    np.testing.assert_allclose(o[44:52], np.minimum(walls / 50.0, 1.0), atol=1e-6)
+    assert np.all(o[44:52] < 1.0) or np.any(o[44:52] < 0.25)  # a street: walls nearby
     obs, *_ = env.step(_zeros(env))
     assert obs["uav_2"][37] == np.float32(0.9)
+
+
+def test_waypoints_advance_along_the_route_to_the_goal() -> None:
+    from agents import make_policy
+
+    env = urban_canyon_v0.parallel_env()
+    for seed in range(20):  # an episode whose route turns at least once
+        obs, infos0 = env.reset(seed=seed)
+        if env.unwrapped.world.route_xy_m.shape[0] >= 3:
+            break
+    world = env.unwrapped.world
+    route = world.route_xy_m
+    np.testing.assert_allclose(route[-1], world.goal_enu_m[:2])
+    assert [i["initial"]["next_waypoint"] for i in infos0.values()] == [1] * 5
+    policy = make_policy("formation", env)
+    policy.reset(seed)
+    seen = [np.ones(5, dtype=int)]
+    while env.agents:
+        obs, _r, _te, _tr, infos = env.step(policy.act(obs))
+        seen.append(np.array([infos[a]["next_waypoint"] for a in env.possible_agents]))
+    seen = np.array(seen)
+    assert np.all(np.diff(seen, axis=0) >= 0)  # never goes back
+    assert np.all(seen[-1] == len(route) - 1)  # the goal is the last waypoint
+    assert infos["uav_0"]["in_goal"]
+    # at the goal the waypoint vector points at the goal and no leg follows
+    o = obs["uav_0"]
+    assert np.all(o[40:42] == 0.0)
+
+
+def test_progress_reward_follows_the_street_route() -> None:
+    env = urban_canyon_v0.parallel_env(n_uavs=1, city="canyon", goal_distance_min_m=100.0)
+    env.reset(seed=0)
+    world = env.unwrapped.world
+    to_goal = world.goal_enu_m[:2] - world.pos_enu_m[0, :2]
+    direction = to_goal / np.linalg.norm(to_goal)
+    for _ in range(3):
+        *_, infos = env.step({"uav_0": np.r_[direction, 0.0]})
+    # flying along the single canyon toward the goal: progress = distance flown / 10 m
+    assert infos["uav_0"]["reward_terms"]["progress"] == pytest.approx(
+        np.linalg.norm(world.vel_enu_mps[0, :2]) / 10.0, rel=1e-6
+    )
+    for _ in range(5):  # turning back (4 m/s^2): the remaining route grows again
+        _, _, _, _, infos = env.step({"uav_0": np.r_[-direction, 0.0]})
+    assert infos["uav_0"]["reward_terms"]["progress"] < 0.0
+
+
+def test_default_rewards_make_crashing_never_pay() -> None:
+    cfg = UrbanCanyonConfig()
+    assert cfg.worst_episode_penalty == pytest.approx(200 * (0.1 * 10 / 10 + 0.05 + 0.02))
+    assert cfg.collision_penalty > cfg.worst_episode_penalty
 
 
 def test_state_is_inside_state_space() -> None:
@@ -219,12 +285,12 @@ def test_supersuit_sb3_vec_env_with_crashes() -> None:
     n = 2 * 5
     assert vec.num_envs == n
     obs = vec.reset()
-    assert obs.shape == (n, 38) and obs.dtype == np.float32
+    assert obs.shape == (n, 52) and obs.dtype == np.float32
     east = np.tile([1.0, 0.0, 0.0], (n, 1)).astype(np.float32)  # into the canyon's east wall
     crashes = 0
     for _ in range(25):
         obs, rewards, dones, infos = vec.step(east)
-        assert obs.shape == (n, 38) and rewards.shape == (n,) and dones.shape == (n,)
+        assert obs.shape == (n, 52) and rewards.shape == (n,) and dones.shape == (n,)
         assert np.all(np.isfinite(obs)) and np.all(np.isfinite(rewards))
         assert vec.observation_space.contains(obs[0])
         if dones.any():
@@ -271,7 +337,7 @@ def test_crash_terminates_everyone_with_a_penalty() -> None:
     crashed = [a for a in infos if infos[a]["collided"]]
     assert crashed
     for a in crashed:
-        assert infos[a]["reward_terms"]["collision"] == -10.0
+        assert infos[a]["reward_terms"]["collision"] == -40.0
 
 
 def test_reward_is_the_sum_of_its_terms_and_infos_are_python_numbers() -> None:
@@ -282,7 +348,7 @@ def test_reward_is_the_sum_of_its_terms_and_infos_are_python_numbers() -> None:
         info = infos[a]
         assert set(info["reward_terms"]) == set(REWARD_TERMS)
         assert rewards[a] == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
-        expected = -min(info["sig_3d_m"], 50.0) / 10.0
+        expected = -0.1 * min(info["sig_3d_m"], 10.0) / 10.0
         assert info["reward_terms"]["nav"] == pytest.approx(expected)
         for key in ("nav_error_m", "coop_error_m", "standalone_error_m", "sig_3d_m"):
             assert type(info[key]) is float and not math.isnan(info[key])

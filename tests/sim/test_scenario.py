@@ -346,3 +346,80 @@ def test_fifty_uavs_step() -> None:
     assert ep.centroid_uav >= 0
     assert np.all(np.isfinite(ep.nav_pos_enu_m))
     assert ep.coop_ok.mean() > 0.5
+
+
+# ---- integrity gate and the spurious root of zero-redundancy fixes --------------------------
+
+
+def _first_epoch_with_solver_inputs(cfg: ScenarioConfig, seed: int):
+    """The first epoch of ``seed`` and the standalone solver's observations (spied)."""
+    import coopnav_env.sim.scenario as scenario
+
+    calls = {}
+    original = scenario.solve_standalone
+
+    def spy(obs, x0, **kw):
+        calls["obs"] = obs
+        return original(obs, x0, **kw)
+
+    world = UrbanWorld(cfg)
+    scenario.solve_standalone = spy
+    try:
+        ep = world.reset(np.random.default_rng(seed))
+    finally:
+        scenario.solve_standalone = original
+    return world, ep, calls["obs"]
+
+
+def test_zero_redundancy_fix_from_the_earth_centre_finds_the_spurious_root() -> None:
+    """Seed 245, UAV 2: 5 satellites of GPS + BDS for 5 unknowns (two exact solutions).
+
+    Started at the Earth's centre (the solvers' default x0) Gauss-Newton converges, status OK,
+    to the second root 53,000 km away; the world starts from the launch positions and gets the
+    near root (a 100-300 m error with a ~500 m predicted sigma), which the gate rejects.
+    """
+    from coopnav_env.nav import solve_standalone
+
+    world, ep, obs = _first_epoch_with_solver_inputs(ScenarioConfig(max_fix_sigma_m=None), 245)
+    truth = world.enu_to_ecef(ep.pos_enu_m)
+    cold = solve_standalone(obs, np.zeros((5, 3)))
+    assert cold.status[2] == NavStatus.OK
+    assert np.linalg.norm(cold.pos_ecef_m[2] - truth[2]) > 5e7  # 53,000 km
+    assert np.sqrt(np.trace(cold.cov_ecef_m2[2])) > 1e3  # its sigma: 5 km
+    # the world's warm start finds the near root: large error, and a sigma that says so
+    assert obs.visible[2].sum() == 5 and ep.standalone_status[2] == NavStatus.OK
+    assert 50.0 < ep.standalone_error_m[2] < 1e3
+    sigma = np.sqrt(np.trace(ep.standalone_cov_enu_m2[2]))
+    assert 300.0 < sigma < 1e3
+    # with the default gate (30 m) the same fix is rejected and never used
+    _, gated, _ = _first_epoch_with_solver_inputs(ScenarioConfig(), 245)
+    assert gated.standalone_rejected[2] and not gated.standalone_ok[2]
+    assert math.isnan(gated.standalone_error_m[2])
+    assert gated.nav_error_m[2] < 50.0
+
+
+def test_integrity_gate_rejects_only_fixes_with_a_large_predicted_sigma() -> None:
+    cfg = ScenarioConfig(max_fix_sigma_m=30.0)
+    world = UrbanWorld(cfg)
+    rng = np.random.default_rng(3)
+    rejected = 0
+    for _ in range(3):
+        world.reset(rng)
+        for _ in range(20):
+            ep = world.step(rng.uniform(-0.3, 0.3, (5, 3)), rng)
+            for kind in ("coop", "standalone"):
+                ok = getattr(ep, f"{kind}_ok")
+                cov = getattr(ep, f"{kind}_cov_enu_m2")
+                rej = getattr(ep, f"{kind}_rejected")
+                assert not np.any(ok & rej)
+                sig = np.sqrt(np.einsum("nii->n", cov[ok]))
+                assert np.all(sig <= 30.0)
+                assert np.all(np.isnan(getattr(ep, f"{kind}_pos_enu_m")[rej]))
+                rejected += int(rej.sum())
+            # the estimate used is a valid fix or dead reckoning, never a rejected fix
+            src = ep.nav_source
+            assert np.all(ep.coop_ok[src == NavSource.COOPERATIVE])
+            assert np.all(ep.standalone_ok[src == NavSource.STANDALONE])
+    with pytest.raises(ValueError, match="max_fix_sigma_m"):
+        ScenarioConfig(max_fix_sigma_m=0.0)
+    assert ScenarioConfig(max_fix_sigma_m=None).max_fix_sigma_m is None

@@ -1,4 +1,5 @@
-"""3-D line of sight and skyline mask, against brute force and hand-made geometry; NLOS."""
+"""3-D line of sight, skyline mask and wall distances, against brute force and hand-made
+geometry; NLOS."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ from coopnav_env.sim import (
     generate_city,
     line_of_sight,
     mask_elevation_deg,
+    swept_collisions,
+    wall_distance_m,
 )
 
 
@@ -172,6 +175,58 @@ def test_mask_elevation_errors() -> None:
     with pytest.raises(ValueError, match=r"az_deg must have shape \(n_az,\)"):
         mask_elevation_deg(b, np.zeros((1, 3)), np.zeros((2, 2)))
     np.testing.assert_array_equal(mask_elevation_deg(b, np.zeros((2, 3)), [0.0, 1.0]), 0.0)
+
+
+def test_wall_distance_single_building_by_hand() -> None:
+    # the same box: x in [10, 20], y in [-5, 5], roof 30 m
+    b = Buildings.from_boxes([(10.0, -5.0, 20.0, 5.0, 30.0)])
+    pos = np.array(
+        [
+            [0.0, 0.0, 10.0],  # west of the box, below the roof
+            [15.0, -20.0, 10.0],  # south of the box
+            [0.0, 0.0, 40.0],  # above the roof: overflies it
+            [15.0, 0.0, 10.0],  # inside
+            [0.0, 4.0, 29.9],  # just below the roof, 4 m north of the box axis
+        ]
+    )
+    az = np.array([0.0, 45.0, 80.0, 90.0, 180.0, 270.0])
+    d = wall_distance_m(b, pos, az)
+    assert d.shape == (5, 6)
+    inf = np.inf
+    t80 = 10.0 / math.sin(math.radians(80.0))  # the wall at x = 10 seen under azimuth 80
+    # azimuth 45 from the origin: the ray meets x = 10 at y = 10, north of the box
+    np.testing.assert_allclose(d[0], [inf, inf, t80, 10.0, inf, inf])
+    np.testing.assert_allclose(d[1], [15.0, inf, inf, inf, inf, inf])
+    assert np.all(np.isinf(d[2]))
+    np.testing.assert_array_equal(d[3], 0.0)
+    # from y = 4 the azimuth-80 ray reaches x = 10 at y = 5.76, north of the box: a miss
+    np.testing.assert_allclose(d[4], [inf, inf, inf, 10.0, inf, inf])
+    # a UAV flying the measured distance (minus its radius) straight at the wall just misses it
+    r, start, u = 1.0, pos[:1], np.array([1.0, 0.0, 0.0])
+    assert not swept_collisions(b, start, start + u * (d[0, 3] - r - 0.01), r)[0]
+    assert swept_collisions(b, start, start + u * (d[0, 3] - r + 0.01), r)[0]
+
+
+def test_wall_distance_matches_the_city_and_brute_force() -> None:
+    city = generate_city(CityConfig(), np.random.default_rng(5))
+    pos = city.random_street_points(np.random.default_rng(6), 30, altitude_m=15.0)
+    az = np.arange(8) * 45.0
+    d = city.wall_distance_m(pos, az)
+    np.testing.assert_array_equal(d, wall_distance_m(city.buildings, pos, az))
+    assert np.all(d > 0.0)
+    # brute force: march along each ray in 5 cm steps until a point is inside a building
+    step = 0.05
+    for i in range(0, 30, 7):
+        for k, a in enumerate(az):
+            u = np.array([math.sin(math.radians(a)), math.cos(math.radians(a)), 0.0])
+            s = np.arange(0.0, 120.0, step)
+            inside = city.is_inside_building(pos[i] + s[:, None] * u)
+            first = s[np.argmax(inside)] if inside.any() else np.inf
+            if np.isfinite(first) or d[i, k] < 120.0:
+                assert abs(first - d[i, k]) <= step + 1e-9, (i, a, first, d[i, k])
+    with pytest.raises(ValueError, match=r"az_deg must have shape \(n_az,\)"):
+        wall_distance_m(city.buildings, pos, np.zeros((2, 2)))
+    assert np.all(np.isinf(wall_distance_m(Buildings.empty(), pos[:2], az)))
 
 
 def test_draw_nlos_statistics_and_determinism() -> None:

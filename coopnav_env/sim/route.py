@@ -1,0 +1,293 @@
+"""Routes along the street network: shortest street route, arc-length polylines, waypoints.
+
+Pure numpy, no randomness. Every street of a :class:`~coopnav_env.sim.city.City` spans the
+whole city (a Manhattan grid: north-south centre lines ``street_centres_x_m``, east-west ones
+``street_centres_y_m``), so the shortest route along street centre lines from one street point
+to another has at most two turns (:func:`street_route`). The environment plans this route at
+reset and tracks each UAV's next waypoint on it (:func:`advance_waypoints`,
+:func:`remaining_route_m`); the heuristic column followers of :mod:`agents.heuristics` fly
+along it with :class:`Polyline`.
+
+Frames and units: the city's local East-North-Up frame, metres; routes are horizontal
+``(k, 2)`` arrays of East/North waypoints.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = [
+    "Polyline",
+    "advance_waypoints",
+    "extend_route",
+    "remaining_route_m",
+    "route_tail_lengths_m",
+    "street_route",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# route planning on the street grid
+# --------------------------------------------------------------------------------------------
+
+
+def _street_of(xy: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> tuple[str, float]:
+    """The street a point is on: ``("ns", x_centre)`` or ``("ew", y_centre)``, the nearest."""
+    dx = np.abs(cx - xy[0]) if cx.size else np.array([np.inf])
+    dy = np.abs(cy - xy[1]) if cy.size else np.array([np.inf])
+    if dx.min() <= dy.min():
+        return "ns", float(cx[int(np.argmin(dx))])
+    return "ew", float(cy[int(np.argmin(dy))])
+
+
+def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarray:
+    """Shortest route along street centre lines from ``start_xy`` to ``goal_xy``.
+
+    Each end is snapped to its nearest street centre line (north-south or east-west). On the
+    same street the route is straight; on crossing streets it turns once at their
+    intersection; on two parallel streets it turns twice, through the cross street that
+    minimises the length (ties: the first in the city's order).
+
+    Parameters
+    ----------
+    city : coopnav_env.sim.city.City
+        Anything with ``street_centres_x_m`` (north-south centre lines, East [m]) and
+        ``street_centres_y_m`` (east-west centre lines, North [m]), each street spanning the
+        whole city; at least one street.
+    start_xy, goal_xy : array_like, shape (2,)
+        East/North of the start and the goal [m].
+
+    Returns
+    -------
+    ndarray, shape (k, 2)
+        Waypoints [m], ``1 <= k <= 4``: the snapped start, the corners, the snapped goal,
+        without repeated points (``k = 1`` when both ends snap to the same point).
+    """
+    cx = np.asarray(city.street_centres_x_m, dtype=float).reshape(-1)
+    cy = np.asarray(city.street_centres_y_m, dtype=float).reshape(-1)
+    if cx.size + cy.size == 0:
+        raise ValueError("street_route needs a city with at least one street")
+    start = np.asarray(start_xy, dtype=float).reshape(2)
+    goal = np.asarray(goal_xy, dtype=float).reshape(2)
+    s_kind, s_c = _street_of(start, cx, cy)
+    g_kind, g_c = _street_of(goal, cx, cy)
+    sx, sy = (s_c, float(start[1])) if s_kind == "ns" else (float(start[0]), s_c)
+    gx, gy = (g_c, float(goal[1])) if g_kind == "ns" else (float(goal[0]), g_c)
+    pts: list[tuple[float, float]] = [(sx, sy)]
+    if s_kind == g_kind == "ns":
+        if not math.isclose(sx, gx) and cy.size:
+            b = cy[int(np.argmin(np.abs(cy - sy) + np.abs(cy - gy)))]
+            pts += [(sx, b), (gx, b)]
+    elif s_kind == g_kind == "ew":
+        if not math.isclose(sy, gy) and cx.size:
+            b = cx[int(np.argmin(np.abs(cx - sx) + np.abs(cx - gx)))]
+            pts += [(b, sy), (b, gy)]
+    elif s_kind == "ns":
+        pts.append((sx, gy))
+    else:
+        pts.append((gx, sy))
+    pts.append((gx, gy))
+    out = [pts[0]]
+    for p in pts[1:]:
+        if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
+            out.append(p)
+    return np.array(out, dtype=float).reshape(-1, 2)
+
+
+def extend_route(points: ArrayLike, back_m: float, fwd_m: float, extent: tuple) -> np.ndarray:
+    """Prepend/append straight extensions along the first/last leg, kept inside ``extent``.
+
+    Parameters
+    ----------
+    points : array_like, shape (k, 2)
+        A route [m].
+    back_m, fwd_m : float
+        Length of the extension before the first and after the last waypoint [m].
+    extent : tuple of 4 float
+        ``(x_min, x_max, y_min, y_max)`` of the city [m]; the extensions stop 2 m inside it.
+
+    Returns
+    -------
+    ndarray, shape (k', 2)
+        The route with up to two extra end points (a single point extends northward).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if pts.shape[0] < 2:
+        d0 = d1 = np.array([0.0, 1.0])
+    else:
+        d0 = pts[1] - pts[0]
+        d0 /= np.linalg.norm(d0)
+        d1 = pts[-1] - pts[-2]
+        d1 /= np.linalg.norm(d1)
+    x0, x1, y0, y1 = extent
+    lo, hi = np.array([x0 + 2.0, y0 + 2.0]), np.array([x1 - 2.0, y1 - 2.0])
+    first = np.clip(pts[0] - d0 * back_m, lo, hi)
+    last = np.clip(pts[-1] + d1 * fwd_m, lo, hi)
+    out = [first] if np.linalg.norm(first - pts[0]) > 1e-6 else []
+    out += list(pts)
+    if np.linalg.norm(last - pts[-1]) > 1e-6:
+        out.append(last)
+    return np.array(out)
+
+
+# --------------------------------------------------------------------------------------------
+# waypoint tracking
+# --------------------------------------------------------------------------------------------
+
+
+def route_tail_lengths_m(route: ArrayLike) -> np.ndarray:
+    """Length of the route after each waypoint [m], shape ``(k,)`` (0 at the last one)."""
+    pts = np.asarray(route, dtype=float).reshape(-1, 2)
+    legs = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    return np.r_[np.cumsum(legs[::-1])[::-1], 0.0]
+
+
+def remaining_route_m(route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike) -> np.ndarray:
+    """Remaining route length of each point: straight to its next waypoint, then along the route.
+
+    ``|xy - route[next_wp]| + (length of the route after route[next_wp])``.
+
+    Parameters
+    ----------
+    route : array_like, shape (k, 2)
+        Waypoints [m].
+    xy : array_like, shape (n, 2)
+        Horizontal positions [m].
+    next_wp : array_like of int, shape (n,)
+        Index of each point's next waypoint, in ``[0, k - 1]``.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        [m].
+    """
+    pts = np.asarray(route, dtype=float).reshape(-1, 2)
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    idx = np.asarray(next_wp, dtype=np.int64)
+    d = np.linalg.norm(xy - pts[idx], axis=1)
+    return d + route_tail_lengths_m(pts)[idx]
+
+
+def advance_waypoints(
+    route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike, reach_m: float
+) -> np.ndarray:
+    """Advance each point's next waypoint once it is reached or passed.
+
+    Waypoint ``i`` (not the last) counts as reached by a point that is within ``reach_m`` of it
+    along both East and North (inside the square of side ``2 reach_m`` centred on it: with
+    ``reach_m`` half the street width, the intersection of a corner), or that is past it along
+    the leg that arrives at it (``(xy - w_i) . (w_i - w_{i-1}) >= 0``). The test repeats, so
+    a point may skip several waypoints in one call. The last waypoint (the goal) is never
+    passed.
+
+    Parameters
+    ----------
+    route : array_like, shape (k, 2)
+        Waypoints [m].
+    xy : array_like, shape (n, 2)
+        Horizontal positions [m] (the environment passes the *estimated* positions).
+    next_wp : array_like of int, shape (n,)
+        Current next waypoint of each point, in ``[0, k - 1]``.
+    reach_m : float
+        Half side of the reach square [m], >= 0.
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        The updated indices (a new array), never smaller than ``next_wp``.
+    """
+    pts = np.asarray(route, dtype=float).reshape(-1, 2)
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    idx = np.array(next_wp, dtype=np.int64, copy=True).reshape(-1)
+    k = pts.shape[0]
+    arrive = np.zeros_like(pts)  # direction of the leg arriving at each waypoint
+    if k > 1:
+        arrive[1:] = np.diff(pts, axis=0)
+    for _ in range(k):
+        not_last = idx < k - 1
+        w = pts[idx]
+        near = np.all(np.abs(xy - w) <= reach_m, axis=1)
+        past = np.einsum("ij,ij->i", xy - w, arrive[idx]) >= 0.0
+        past &= np.any(arrive[idx] != 0.0, axis=1)
+        step = not_last & (near | past)
+        if not step.any():
+            break
+        idx[step] += 1
+    return idx
+
+
+# --------------------------------------------------------------------------------------------
+# arc-length polyline
+# --------------------------------------------------------------------------------------------
+
+
+class Polyline:
+    """A 2-D polyline parametrised by arc length.
+
+    Parameters
+    ----------
+    points : array_like, shape (k, 2)
+        Vertices [m]; consecutive duplicates are not allowed (k >= 1; a single point becomes
+        a 1 mm segment).
+    """
+
+    def __init__(self, points: ArrayLike):
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if pts.shape[0] == 1:
+            pts = np.vstack([pts, pts + np.array([1e-3, 0.0])])
+        self.points = pts
+        seg = np.diff(pts, axis=0)
+        self.seg_len = np.linalg.norm(seg, axis=1)
+        self.seg_dir = seg / self.seg_len[:, None]
+        self.s = np.r_[0.0, np.cumsum(self.seg_len)]  # arc length at each vertex
+        self.length = float(self.s[-1])
+
+    def _seg(self, s: np.ndarray) -> np.ndarray:
+        return np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.seg_len.size - 1)
+
+    def point(self, s: ArrayLike) -> np.ndarray:
+        """Points at arc lengths ``s`` (clamped to the ends), shape ``s.shape + (2,)``."""
+        s = np.clip(np.asarray(s, dtype=float), 0.0, self.length)
+        k = self._seg(s)
+        return self.points[k] + self.seg_dir[k] * (s - self.s[k])[..., None]
+
+    def tangent(self, s: ArrayLike) -> np.ndarray:
+        """Unit tangents at arc lengths ``s``, shape ``s.shape + (2,)``."""
+        return self.seg_dir[self._seg(np.clip(np.asarray(s, dtype=float), 0.0, self.length))]
+
+    def distance_to_corner(self, s: ArrayLike) -> np.ndarray:
+        """Arc length from ``s`` to the next interior vertex (inf after the last one)."""
+        s = np.asarray(s, dtype=float)
+        corners = self.s[1:-1]
+        if corners.size == 0:
+            return np.full(s.shape, np.inf)
+        ahead = corners[None, :] - s.reshape(-1, 1)
+        ahead = np.where(ahead >= -1e-9, ahead, np.inf)
+        return ahead.min(axis=1).reshape(s.shape)
+
+    def project(self, xy: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> np.ndarray:
+        """Arc length of the nearest point of the polyline within ``[lo, hi]``, per point.
+
+        Parameters
+        ----------
+        xy : array_like, shape (n, 2)
+        lo, hi : array_like, shape (n,)
+            Window of admissible arc lengths (keeps the projection from jumping to another
+            leg of the route).
+        """
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        lo = np.asarray(lo, dtype=float)
+        hi = np.asarray(hi, dtype=float)
+        rel = xy[:, None, :] - self.points[None, :-1, :]  # (n, m, 2)
+        t = np.clip(np.einsum("nmk,mk->nm", rel, self.seg_dir), 0.0, self.seg_len[None, :])
+        s = self.s[None, :-1] + t
+        s = np.clip(s, lo[:, None], hi[:, None])
+        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.seg_len.size - 1)
+        pts = self.points[k] + self.seg_dir[k] * (s - self.s[k])[..., None]
+        d = np.linalg.norm(pts - xy[:, None, :], axis=2)
+        best = np.argmin(d, axis=1)
+        return s[np.arange(xy.shape[0]), best]
