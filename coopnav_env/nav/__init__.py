@@ -7,10 +7,17 @@ from coopnav_env.nav.cooperative import (
     solve_cooperative_samples,
     solve_master_slave,
 )
-from coopnav_env.nav.types import GnssObservations, NavStatus, RelativePositions, VirtualPoint
+from coopnav_env.nav.types import (
+    PLAUSIBLE_RADIUS_M,
+    GnssObservations,
+    NavStatus,
+    RelativePositions,
+    VirtualPoint,
+)
 from coopnav_env.nav.wls import StandaloneSolution, solve_standalone
 
 __all__ = [
+    "PLAUSIBLE_RADIUS_M",
     "CooperativeSolution",
     "GnssObservations",
     "MasterSlaveSolution",

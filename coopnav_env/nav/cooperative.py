@@ -77,7 +77,15 @@ from typing import Literal
 
 import numpy as np
 
-from coopnav_env.nav.types import GnssObservations, NavStatus, RelativePositions, VirtualPoint
+from coopnav_env.nav.types import (
+    PLAUSIBLE_RADIUS_M,
+    GnssObservations,
+    NavStatus,
+    RelativePositions,
+    VirtualPoint,
+    check_plausible_radius,
+    implausible_radius,
+)
 from coopnav_env.nav.wls import StandaloneSolution, _safe_inverse, solve_standalone
 
 __all__ = [
@@ -445,7 +453,7 @@ def _structured_normal(
     nuis_slices : satellite ranges of the nuisance groups (empty: no nuisances).
     nuis_active : (B, N) blocks that carry the nuisances (None: none).
     lam : (B, N, S, 3) per-block low-rank loadings.
-    sig_c : (B, S) common-error standard deviations.
+    sig_c : (B, S) or (1, S) common-error standard deviations.
     eps_load : (B, N, S, 3) or None
         Loadings of the per-block relative error for the cross-covariance; ``None`` means
         ``lam`` (the exact model), for which ``P lam = P0 lam M^-1`` needs no extra columns.
@@ -510,7 +518,7 @@ def _weights(
     """
     # rows that are absent get zero weight; nothing else needs masking (see _structured_normal)
     w = np.where(lin.rows, 1.0 / obs.sigma_user_m[None] ** 2, 0.0)
-    sig_c = np.broadcast_to(obs.sigma_common_m, (w.shape[0], obs.n_sv))
+    sig_c = obs.sigma_common_m[None, :]  # (1, S): broadcasts over the batch
     # Eq. 21-22: the relative error of UAV q loads its own rows with 1^k (paper and exact SDT)
     eps_load = lin.u @ st.froot
     if covariance != "paper":
@@ -690,6 +698,7 @@ def solve_cooperative(
     method: Literal["structured", "dense"] = "structured",
     max_iter: int = 10,
     tol_m: float = 1e-4,
+    plausible_radius_m: tuple[float, float] | None = PLAUSIBLE_RADIUS_M,
 ) -> CooperativeSolution:
     """Cooperative position fix of every UAV through a virtual centroid (Eq. 10-23).
 
@@ -719,12 +728,17 @@ def solve_cooperative(
         inverts ``C*`` (reference for tests and benchmarks).
     max_iter, tol_m
         Gauss-Newton iteration limit and position-update threshold [m].
+    plausible_radius_m : (float, float) or None
+        Geocentric distance range [m] of a valid centroid fix (default
+        :data:`~coopnav_env.nav.types.PLAUSIBLE_RADIUS_M`); outside it the status is
+        ``IMPLAUSIBLE_POSITION`` (see :class:`NavStatus`). ``None`` disables the check.
 
     Returns
     -------
     CooperativeSolution
         Degenerate cases (too few satellites, singular geometry, no relative link to the
-        centroid, non-convergence) are reported in ``status``; nothing is raised for them.
+        centroid, non-convergence, a spurious far root) are reported in ``status``; nothing is
+        raised for them.
     """
     if transfer not in ("sdt", "ddt"):
         raise ValueError(f"transfer must be 'sdt' or 'ddt', got {transfer!r}")
@@ -736,6 +750,7 @@ def solve_cooperative(
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
     if not tol_m > 0:
         raise ValueError(f"tol_m must be > 0, got {tol_m}")
+    check_plausible_radius(plausible_radius_m)
     obs, _ = _sort_by_system(obs)
     st = _setup(obs, rel, centroid, transfer, sdt_min_centroid_sats, covariance)
     n_b = st.ref.shape[0]
@@ -748,7 +763,7 @@ def solve_cooperative(
         obs, st, x0, transfer, covariance, method, max_iter, tol_m
     )
     c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = _finish(
-        obs, st, pos, clk, inv, cross, converged, singular, lin
+        obs, st, pos, clk, inv, cross, converged, singular, lin, plausible_radius_m
     )
     if isinstance(centroid, str):  # "self": UAV q's solution is centroid q's
         uav_pos, uav_cov, uav_status = c_pos, h_star, c_status.copy()
@@ -768,7 +783,7 @@ def solve_cooperative(
     )
 
 
-def _finish(obs, st, pos, clk, inv, cross, converged, singular, lin):
+def _finish(obs, st, pos, clk, inv, cross, converged, singular, lin, plausible_radius_m):
     """Statuses, centroid outputs and every UAV's position/covariance from each centroid."""
     rows = lin.rows
     n_b = pos.shape[0]
@@ -782,6 +797,9 @@ def _finish(obs, st, pos, clk, inv, cross, converged, singular, lin):
     too_few = st.too_few | (n_meas - n_nuis < 3 + st.has_clock.sum(axis=1))
     c_status = np.full(n_b, NavStatus.OK, dtype=np.int64)
     c_status[~converged] = NavStatus.NOT_CONVERGED
+    c_status[converged & implausible_radius(pos, plausible_radius_m)] = (
+        NavStatus.IMPLAUSIBLE_POSITION
+    )
     c_status[singular] = NavStatus.SINGULAR_GEOMETRY
     c_status[too_few] = NavStatus.TOO_FEW_SATELLITES
     failed = (c_status == NavStatus.TOO_FEW_SATELLITES) | (c_status == NavStatus.SINGULAR_GEOMETRY)
@@ -816,6 +834,7 @@ def solve_cooperative_samples(
     sdt_min_centroid_sats: int | None = None,
     max_iter: int = 10,
     tol_m: float = 1e-4,
+    plausible_radius_m: tuple[float, float] | None = PLAUSIBLE_RADIUS_M,
 ) -> CooperativeSolution:
     """Solve many noise realisations of one geometry at once (Monte Carlo), one shared centroid.
 
@@ -851,6 +870,7 @@ def solve_cooperative_samples(
         raise ValueError(f"rel_samples_m must have shape ({k}, {obs.n_rx}, 3)")
     if isinstance(centroid, str):
         raise ValueError("solve_cooperative_samples needs one shared centroid (int/VirtualPoint)")
+    check_plausible_radius(plausible_radius_m)
     obs, order = _sort_by_system(obs)
     if order is not None:
         pr_samples_m = pr_samples_m[:, :, order]
@@ -877,7 +897,7 @@ def solve_cooperative_samples(
         obs, st, x0, transfer, covariance, "structured", max_iter, tol_m
     )
     c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = _finish(
-        obs, st, pos, clk, inv, cross, converged, singular, lin
+        obs, st, pos, clk, inv, cross, converged, singular, lin, plausible_radius_m
     )
     return CooperativeSolution(
         pos_ecef_m=uav_pos,

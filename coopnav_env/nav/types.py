@@ -16,6 +16,7 @@ import numpy as np
 from coopnav_env.constants import SYSTEMS
 
 __all__ = [
+    "PLAUSIBLE_RADIUS_M",
     "GnssObservations",
     "NavStatus",
     "RelativePositions",
@@ -41,6 +42,13 @@ class NavStatus(IntEnum):
     NO_RELATIVE_POSITION
         The UAV has no relative position measurement to a shared centroid (or master), so it
         cannot be located from it.
+    IMPLAUSIBLE_POSITION
+        The iteration converged, but to a point whose distance from the Earth's centre lies
+        outside ``plausible_radius_m`` (default :data:`PLAUSIBLE_RADIUS_M`). The pseudorange
+        equations have a second, spurious root; with no redundancy (as many measurements as
+        unknowns) Gauss-Newton started at the Earth's centre, the paper's start, can converge
+        to it, tens of thousands of km away, with a consistent (zero) residual. The last
+        iterate and its covariance are returned for diagnosis, but the fix is not valid.
     """
 
     OK = 0
@@ -48,6 +56,39 @@ class NavStatus(IntEnum):
     SINGULAR_GEOMETRY = 2
     NOT_CONVERGED = 3
     NO_RELATIVE_POSITION = 4
+    IMPLAUSIBLE_POSITION = 5
+
+
+#: Default range of geocentric distance [m] of a plausible fix of a UAV: from 6,300 km (below
+#: the polar radius 6,356.8 km by a margin) to 6,500 km (about 120 km above the equator).
+PLAUSIBLE_RADIUS_M: tuple[float, float] = (6.3e6, 6.5e6)
+
+
+def check_plausible_radius(plausible_radius_m: tuple[float, float] | None) -> None:
+    """Validate a ``plausible_radius_m`` argument (``None`` disables the check)."""
+    if plausible_radius_m is None:
+        return
+    try:
+        lo, hi = (float(v) for v in plausible_radius_m)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"plausible_radius_m must be None or a pair (min, max) in m, got {plausible_radius_m!r}"
+        ) from None
+    if not (0.0 <= lo < hi and np.isfinite(hi)):
+        raise ValueError(
+            f"plausible_radius_m must satisfy 0 <= min < max < inf, got {plausible_radius_m!r}"
+        )
+
+
+def implausible_radius(
+    pos_ecef_m: np.ndarray, plausible_radius_m: tuple[float, float] | None
+) -> np.ndarray:
+    """Boolean mask of finite positions outside the plausible geocentric shell."""
+    if plausible_radius_m is None:
+        return np.zeros(pos_ecef_m.shape[:-1], dtype=bool)
+    r = np.linalg.norm(pos_ecef_m, axis=-1)
+    lo, hi = plausible_radius_m
+    return np.isfinite(r) & ((r < lo) | (r > hi))
 
 
 def _as_float_array(name: str, value, shape: tuple[int | None, ...]) -> np.ndarray:

@@ -11,7 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coopnav_env.nav.types import GnssObservations, NavStatus
+from coopnav_env.nav.types import (
+    PLAUSIBLE_RADIUS_M,
+    GnssObservations,
+    NavStatus,
+    check_plausible_radius,
+    implausible_radius,
+)
 
 __all__ = ["StandaloneSolution", "solve_standalone"]
 
@@ -48,7 +54,7 @@ class StandaloneSolution:
 
     @property
     def ok(self) -> np.ndarray:
-        """Boolean mask of receivers with a valid fix (OK or NOT_CONVERGED excluded)."""
+        """Boolean mask of receivers with a valid fix (status OK, no other status)."""
         return self.status == NavStatus.OK
 
 
@@ -69,12 +75,16 @@ def _safe_inverse(info: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.
         Inverses (identity where singular or not usable).
     singular : ndarray of bool, shape (B,)
     """
-    d = np.sqrt(np.clip(np.einsum("bii->bi", info), 1e-300, None))
+    d = np.sqrt(np.clip(np.diagonal(info, axis1=1, axis2=2), 1e-300, None))
     scaled = info / d[:, :, None] / d[:, None, :]
-    eig = np.linalg.eigvalsh(np.where(usable[:, None, None], scaled, np.eye(info.shape[-1])))
+    eye = np.eye(info.shape[-1])
+    # (the np.where calls are skipped when they would select everything: the hot path)
+    eig = np.linalg.eigvalsh(
+        scaled if usable.all() else np.where(usable[:, None, None], scaled, eye)
+    )
     singular = usable & ((eig[:, 0] <= 0) | (eig[:, -1] > COND_LIMIT * eig[:, 0]))
     good = usable & ~singular
-    safe = np.where(good[:, None, None], scaled, np.eye(info.shape[-1]))
+    safe = scaled if good.all() else np.where(good[:, None, None], scaled, eye)
     inv = np.linalg.inv(safe) / d[:, :, None] / d[:, None, :]
     return inv, singular
 
@@ -85,6 +95,7 @@ def solve_standalone(
     *,
     max_iter: int = 10,
     tol_m: float = 1e-4,
+    plausible_radius_m: tuple[float, float] | None = PLAUSIBLE_RADIUS_M,
 ) -> StandaloneSolution:
     """Standalone WLS position fix of every receiver (paper Eq. 14-17).
 
@@ -104,6 +115,10 @@ def solve_standalone(
         Maximum Gauss-Newton iterations (default 10; from zero about 6 are needed).
     tol_m : float
         Convergence threshold on the position update norm [m].
+    plausible_radius_m : (float, float) or None
+        Geocentric distance range [m] of a valid fix (default :data:`PLAUSIBLE_RADIUS_M`);
+        a converged fix outside it gets ``IMPLAUSIBLE_POSITION`` (the spurious root of the
+        pseudorange equations, see :class:`NavStatus`). ``None`` disables the check.
 
     Returns
     -------
@@ -112,6 +127,7 @@ def solve_standalone(
         ``TOO_FEW_SATELLITES``; a numerically singular normal matrix gives
         ``SINGULAR_GEOMETRY``; both have NaN positions. Nothing is raised for such cases.
     """
+    check_plausible_radius(plausible_radius_m)
     if max_iter < 1:
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
     if not tol_m > 0:
@@ -160,6 +176,7 @@ def solve_standalone(
             break
     status = np.full(n_rx, NavStatus.OK, dtype=np.int64)
     status[~converged] = NavStatus.NOT_CONVERGED
+    status[converged & implausible_radius(pos, plausible_radius_m)] = NavStatus.IMPLAUSIBLE_POSITION
     status[singular] = NavStatus.SINGULAR_GEOMETRY
     status[too_few] = NavStatus.TOO_FEW_SATELLITES
     failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)

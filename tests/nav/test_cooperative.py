@@ -281,6 +281,27 @@ def test_bad_solver_arguments_raise():
         RelativePositions(rel.rel_ecef_m, bad, rel.available)
     with pytest.raises(ValueError, match="max_iter must be >= 1"):
         solve_standalone(obs, max_iter=0)
+    for bad_radius in [(6.5e6, 6.3e6), (-1.0, 6.5e6), (6.3e6, np.inf), "far", (1.0,)]:
+        with pytest.raises(ValueError, match="plausible_radius_m must"):
+            solve_standalone(obs, plausible_radius_m=bad_radius)
+        with pytest.raises(ValueError, match="plausible_radius_m must"):
+            solve_cooperative(obs, rel, plausible_radius_m=bad_radius)
+
+
+def test_plausibility_shell_flags_fixes_outside_it_and_keeps_them_for_diagnosis():
+    """Real fixes lie in the default shell; a shell that excludes them reports every fix."""
+    sc = make_scenario()
+    obs = sc.observations(noise=False)
+    rel = sc.relative(noise=False)
+    assert np.all(solve_standalone(obs).status == NavStatus.OK)
+    assert np.all(solve_cooperative(obs, rel).status == NavStatus.OK)
+    shell = (7.0e6, 8.0e6)  # everything on the ground is "implausible" here
+    sa = solve_standalone(obs, plausible_radius_m=shell)
+    assert np.all(sa.status == NavStatus.IMPLAUSIBLE_POSITION) and not sa.ok.any()
+    np.testing.assert_allclose(sa.pos_ecef_m, sc.pos_ecef, atol=1e-6)
+    co = solve_cooperative(obs, rel, plausible_radius_m=shell)
+    assert np.all(co.status == NavStatus.IMPLAUSIBLE_POSITION)
+    assert np.all(co.centroid_status == NavStatus.IMPLAUSIBLE_POSITION)
 
 
 def test_singular_geometry_is_reported():

@@ -374,18 +374,34 @@ def _first_epoch_with_solver_inputs(cfg: ScenarioConfig, seed: int):
 def test_zero_redundancy_fix_from_the_earth_centre_finds_the_spurious_root() -> None:
     """Seed 245, UAV 2: 5 satellites of GPS + BDS for 5 unknowns (two exact solutions).
 
-    Started at the Earth's centre (the solvers' default x0) Gauss-Newton converges, status OK,
-    to the second root 53,000 km away; the world starts from the launch positions and gets the
-    near root (a 100-300 m error with a ~500 m predicted sigma), which the gate rejects.
+    Started at the Earth's centre (the solvers' default x0) Gauss-Newton converges to the
+    second root 48,500 km from the Earth's centre, with a zero residual; the solvers report it
+    as IMPLAUSIBLE_POSITION (it was OK before the plausibility check). The world starts from
+    the launch positions and gets the near root (a 100-300 m error with a ~500 m predicted
+    sigma), which the integrity gate rejects.
     """
-    from coopnav_env.nav import solve_standalone
+    from coopnav_env.nav import RelativePositions, solve_cooperative, solve_standalone
 
     world, ep, obs = _first_epoch_with_solver_inputs(ScenarioConfig(max_fix_sigma_m=None), 245)
     truth = world.enu_to_ecef(ep.pos_enu_m)
+    unchecked = solve_standalone(obs, np.zeros((5, 3)), plausible_radius_m=None)
+    assert unchecked.status[2] == NavStatus.OK
+    assert np.linalg.norm(unchecked.pos_ecef_m[2] - truth[2]) > 4e7
+    assert np.linalg.norm(unchecked.pos_ecef_m[2]) > 4e7
+    assert np.sqrt(np.trace(unchecked.cov_ecef_m2[2])) > 1e3  # its sigma: 5 km
     cold = solve_standalone(obs, np.zeros((5, 3)))
-    assert cold.status[2] == NavStatus.OK
-    assert np.linalg.norm(cold.pos_ecef_m[2] - truth[2]) > 5e7  # 53,000 km
-    assert np.sqrt(np.trace(cold.cov_ecef_m2[2])) > 1e3  # its sigma: 5 km
+    assert cold.status[2] == NavStatus.IMPLAUSIBLE_POSITION and not cold.ok[2]
+    np.testing.assert_array_equal(cold.pos_ecef_m[2], unchecked.pos_ecef_m[2])  # kept for diagnosis
+    # the cooperative solver, the UAV alone as its own centroid, finds the same far root
+    alone = RelativePositions(np.zeros((1, 1, 3)), np.zeros((1, 1, 3, 3)), np.ones((1, 1), bool))
+    for transfer in ("sdt", "ddt"):
+        co = solve_cooperative(obs.subset_receivers([2]), alone, transfer=transfer)
+        assert co.status[0] == NavStatus.IMPLAUSIBLE_POSITION
+        co_unchecked = solve_cooperative(
+            obs.subset_receivers([2]), alone, transfer=transfer, plausible_radius_m=None
+        )
+        assert co_unchecked.status[0] == NavStatus.OK
+        assert np.linalg.norm(co_unchecked.pos_ecef_m[0]) > 4e7
     # the world's warm start finds the near root: large error, and a sigma that says so
     assert obs.visible[2].sum() == 5 and ep.standalone_status[2] == NavStatus.OK
     assert 50.0 < ep.standalone_error_m[2] < 1e3
