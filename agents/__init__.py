@@ -13,6 +13,10 @@ name                      policy
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
 ========================  ==================================================================
 
+A heuristic takes constructor options after ``@`` as ``key=value`` pairs separated by commas,
+e.g. ``waypoint@altitude_m=28`` or ``formation@cruise_speed_mps=5,spacing_m=10``; values are
+read as Python literals (numbers, strings, ``True``/``False``).
+
 >>> from coopnav_env import urban_canyon_v0  # doctest: +SKIP
 >>> env = urban_canyon_v0.parallel_env()  # doctest: +SKIP
 >>> policy = make_policy("formation", env)  # doctest: +SKIP
@@ -58,6 +62,12 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
     """
     if not isinstance(name, str):
         raise ValueError(f"policy name must be a string, got {name!r}")
+    if "@" in name and ":" not in name.split("@", 1)[0]:
+        base, options = _parse_options(name)
+        try:
+            return make_policy(base, env, **{**options, **kwargs})
+        except TypeError as exc:  # an option the policy's constructor does not take
+            raise ValueError(f"bad option for policy {base!r} in {name!r}: {exc}") from None
     if name == "random":
         from agents.random_policy import RandomPolicy
 
@@ -82,3 +92,24 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
 
         return PPOPolicy(env, path, **kwargs)
     raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICY_NAMES)}")
+
+
+def _parse_options(name: str) -> tuple[str, dict[str, Any]]:
+    """Split ``"waypoint@altitude_m=28,cruise_speed_mps=5"`` into a name and keyword options."""
+    import ast
+
+    base, _, text = name.partition("@")
+    options: dict[str, Any] = {}
+    for item in text.split(","):
+        key, eq, value = item.partition("=")
+        key = key.strip()
+        if not eq or not key.isidentifier():
+            raise ValueError(
+                f"bad policy option {item!r} in {name!r}: expected key=value pairs separated "
+                "by commas, e.g. 'waypoint@altitude_m=28'"
+            )
+        try:
+            options[key] = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError):
+            options[key] = value.strip()
+    return base, options

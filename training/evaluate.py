@@ -648,7 +648,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--policies",
         nargs="+",
         default=["random", "formation", "sky"],
-        help="policies: random, formation, sky, ppo:<path> (default: the three heuristics)",
+        help="policies: random, formation, sky, waypoint, ppo:<path>; options of a heuristic "
+        "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
     )
     parser.add_argument("--out", default=None, help="directory for report.* and plots")
     parser.add_argument(

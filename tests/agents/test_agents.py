@@ -58,6 +58,21 @@ def test_unknown_name_lists_valid_ones():
         make_policy("ppo:", env)
 
 
+def test_policy_options_after_at_sign():
+    from coopnav_env import urban_canyon_v0
+
+    env = urban_canyon_v0.parallel_env()
+    pol = make_policy("waypoint@altitude_m=28,cruise_speed_mps=5.5", env)
+    assert pol.name == "waypoint"
+    assert pol.altitude_m == 28.0 and pol.cruise_speed_mps == 5.5
+    with pytest.raises(ValueError, match=r"bad option for policy 'waypoint'.*altitude"):
+        make_policy("waypoint@altitude=28", env)
+    with pytest.raises(ValueError, match="expected key=value pairs"):
+        make_policy("waypoint@28", env)
+    with pytest.raises(ValueError, match="unknown policy 'nope'"):
+        make_policy("nope@a=1", env)
+
+
 def test_missing_checkpoint_names_the_path(tmp_path):
     missing = tmp_path / "nowhere" / "final_model.zip"
     with pytest.raises(FileNotFoundError, match="nowhere"):
