@@ -6,7 +6,10 @@ scored on every UAV at every step:
 
 * cooperative and standalone 3-D position error (true minus estimated): mean, median, 95th
   percentile over the agent-steps that have a fix, and P(error < 3 m) over all agent-steps
-  (a step without a fix counts as a failure), the statistic of the paper's Figure 8;
+  (a step without a fix counts as a failure), the statistic of the paper's Figure 8; the
+  standard error of the cooperative mean treats episodes as independent clusters (steps of one
+  episode are correlated), so two policies' means differ clearly when they differ by several
+  of their combined SEs;
 * the goal rate (episodes in which the swarm reached the goal: every UAV in the goal area at
   once, which ends the episode), the UAV goal rate (UAVs that entered the goal area at some
   step), collisions (episodes ended by a crash), satellites received per UAV and by the UAV
@@ -129,6 +132,7 @@ class PolicyStats:
     episodes: int
     agent_steps: int
     coop_error_mean_m: float
+    coop_error_mean_se_m: float
     coop_error_median_m: float
     coop_error_p95_m: float
     p_coop_error_lt_3m: float
@@ -166,6 +170,7 @@ class PolicyStats:
             episodes=len(eps),
             agent_steps=int(coop.size),
             coop_error_mean_m=c["mean"],
+            coop_error_mean_se_m=_clustered_se([e.coop_error_m for e in eps]),
             coop_error_median_m=c["median"],
             coop_error_p95_m=c["p95"],
             p_coop_error_lt_3m=c["p_lt"],
@@ -187,6 +192,26 @@ class PolicyStats:
             length_mean=float(np.mean([e.length for e in eps])),
             wall_s=round(float(wall_s), 3),
         )
+
+
+def _clustered_se(per_episode: Sequence[np.ndarray]) -> float:
+    """Standard error of the pooled mean of the finite samples, episodes as clusters.
+
+    The errors of one episode are strongly correlated (same city, same sky, consecutive
+    epochs), the episodes independent, so the usual ``std / sqrt(n_samples)`` would be far too
+    small. For the ratio estimator ``mean = sum_e S_e / sum_e n_e`` (``S_e`` the sum and
+    ``n_e`` the count of episode ``e``'s finite errors) the cluster-robust standard error is
+    ``sqrt(E / (E - 1) * sum_e (S_e - n_e mean)^2) / sum_e n_e`` over ``E`` episodes.
+    """
+    sums = np.array([float(np.sum(x[np.isfinite(x)])) for x in per_episode])
+    counts = np.array([float(np.isfinite(x).sum()) for x in per_episode])
+    used = counts > 0
+    n_eps, total = int(used.sum()), counts.sum()
+    if n_eps < 2:
+        return math.nan
+    mean = sums.sum() / total
+    resid = sums[used] - counts[used] * mean
+    return float(np.sqrt(n_eps / (n_eps - 1) * np.sum(resid**2)) / total)
 
 
 def _nanmean(x: np.ndarray) -> float:
@@ -211,6 +236,7 @@ def _error_stats(err: np.ndarray) -> dict[str, float]:
 _TABLE: tuple[tuple[str, str, str], ...] = (
     ("policy", "policy", "{}"),
     ("coop mean [m]", "coop_error_mean_m", "{:.2f}"),
+    ("± SE [m]", "coop_error_mean_se_m", "{:.2f}"),
     ("coop median [m]", "coop_error_median_m", "{:.2f}"),
     ("coop p95 [m]", "coop_error_p95_m", "{:.2f}"),
     ("P(coop < 3 m)", "p_coop_error_lt_3m", "{:.3f}"),

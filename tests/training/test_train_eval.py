@@ -423,3 +423,24 @@ def test_evaluate_cli_uses_the_training_environment(tmp_path, capsys):
     data = json.loads((out / "report.json").read_text())
     assert data["env_id"] == TOY and data["env_kwargs"] == {"n_uavs": 2, "max_steps": 5}
     assert all(p["length_mean"] == 5.0 for p in data["policies"])
+
+
+def test_clustered_standard_error_of_the_pooled_mean():
+    """Episodes as clusters: equals the textbook formula, and ignores NaN (no-fix) samples."""
+    from training.evaluate import _clustered_se
+
+    rng = np.random.default_rng(0)
+    eps = [rng.normal(3.0 + rng.normal(), 0.5, size=rng.integers(20, 60)) for _ in range(12)]
+    eps[3][:5] = np.nan
+    finite = [e[np.isfinite(e)] for e in eps]
+    total = sum(f.size for f in finite)
+    mean = sum(f.sum() for f in finite) / total
+    want = np.sqrt(12 / 11 * sum((f.sum() - f.size * mean) ** 2 for f in finite)) / total
+    assert _clustered_se(eps) == pytest.approx(want, rel=1e-12)
+    # the episode-to-episode spread (sd 1 of the episode means) dominates: the naive
+    # per-sample SE would be several times smaller
+    naive = np.concatenate(finite).std(ddof=1) / np.sqrt(total)
+    assert _clustered_se(eps) > 2 * naive
+    # identical episodes: no spread between clusters
+    assert _clustered_se([np.ones(5), np.ones(5)]) == 0.0
+    assert np.isnan(_clustered_se([np.ones(5)]))
