@@ -23,6 +23,20 @@ all UAVs. Three gaps of that path are closed here:
 
 SB3 counts agent-steps as timesteps: one step of ``n_envs`` swarms of ``n_uavs`` UAVs is
 ``n_envs * n_uavs`` timesteps.
+
+Two kinds build the same vector environment (``make_vec_env(..., kind=...)``, the
+``vec_env`` setting of ``coopnav train``):
+
+* ``"supersuit"`` (any PettingZoo ParallelEnv): SuperSuit's per-agent adapters as above,
+  optionally over worker processes.
+* ``"batched"`` (``urban_canyon_v0`` only): :class:`BatchedVecEnv` over
+  :class:`coopnav_env.envs.BatchedUrbanCanyonEnv`, which steps the ``n_copies`` swarms with
+  one ``(K, N, 3)`` action array instead of per-agent dictionaries. Same slots (agent-major
+  inside each copy), same seeding (copy ``k`` reset with ``seed + k``, then each copy
+  continues its generator), same observations, rewards, dones and infos (including
+  ``terminal_observation`` and ``TimeLimit.truncated``) as the SuperSuit kind in one
+  process, bit for bit (``tests/training/test_batched_vec_env.py``). Actions are cast to
+  float32 first, as SuperSuit does (it copies them into arrays of the action space's dtype).
 """
 
 from __future__ import annotations
@@ -32,12 +46,15 @@ from typing import Any
 
 import numpy as np
 from pettingzoo import ParallelEnv
-from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 from supersuit.vector import MakeCPUAsyncConstructor, MarkovVectorEnv
 from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
-__all__ = ["SeededVecEnv", "make_vec_env"]
+__all__ = ["VEC_ENV_KINDS", "BatchedVecEnv", "SeededVecEnv", "make_vec_env"]
+
+VEC_ENV_KINDS: tuple[str, ...] = ("supersuit", "batched")
+"""Kinds of vector environment :func:`make_vec_env` builds (``coopnav train``'s ``vec_env``)."""
 
 
 class _SeedShiftMarkovVectorEnv(MarkovVectorEnv):
@@ -84,7 +101,23 @@ class _CopyFactory:
         return _SeedShiftMarkovVectorEnv(self.env_fn(), self.seed_shift)
 
 
-class SeededVecEnv(VecEnvWrapper):
+class _SwarmSeeding:
+    """``seed()`` of the swarm vector envs: copy ``k`` gets ``seed + k`` at the next reset."""
+
+    num_envs: int
+    n_copies: int
+    n_agents: int
+    _pending_seed: int | None
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Seed the next reset: swarm copy ``k`` gets ``seed + k``; one entry per slot."""
+        self._pending_seed = None if seed is None else int(seed)
+        if seed is None:
+            return [None] * self.num_envs
+        return [int(seed) + k for k in range(self.n_copies) for _ in range(self.n_agents)]
+
+
+class SeededVecEnv(_SwarmSeeding, VecEnvWrapper):
     """SB3 ``VecEnv`` over SuperSuit's concatenated swarms, with a working ``seed()``.
 
     Parameters
@@ -119,13 +152,6 @@ class SeededVecEnv(VecEnvWrapper):
             return [getattr(self._gym_venv, "render_mode", None)] * self.num_envs
         return self.venv.get_attr(attr_name, indices)
 
-    def seed(self, seed: int | None = None) -> Sequence[int | None]:
-        """Seed the next reset: swarm copy ``k`` gets ``seed + k``; one entry per slot."""
-        self._pending_seed = None if seed is None else int(seed)
-        if seed is None:
-            return [None] * self.num_envs
-        return [int(seed) + k for k in range(self.n_copies) for _ in range(self.n_agents)]
-
     def reset(self) -> VecEnvObs:
         seed, self._pending_seed = self._pending_seed, None
         obs, self.reset_infos = self._gym_venv.reset(seed=seed)
@@ -148,9 +174,106 @@ class SeededVecEnv(VecEnvWrapper):
         self._gym_venv.close()
 
 
+class BatchedVecEnv(_SwarmSeeding, VecEnv):
+    """SB3 ``VecEnv`` over :class:`coopnav_env.envs.BatchedUrbanCanyonEnv` (parameter sharing).
+
+    Slot ``k * N + i`` is UAV ``i`` of swarm copy ``k``, as in :class:`SeededVecEnv`; the
+    observations, rewards, dones, infos and seeding are those of the SuperSuit kind (see
+    the module docstring).
+
+    Parameters
+    ----------
+    batch : BatchedUrbanCanyonEnv
+    """
+
+    def __init__(self, batch: Any):
+        self.batch = batch
+        self.n_copies = batch.n_copies
+        self.n_agents = batch.n_agents
+        self._pending_seed: int | None = None
+        self._actions: np.ndarray | None = None
+        super().__init__(
+            batch.n_copies * batch.n_agents, batch.observation_space, batch.action_space
+        )
+
+    def reset(self) -> VecEnvObs:
+        seed, self._pending_seed = self._pending_seed, None
+        obs, infos = self.batch.reset(seed=seed)
+        agents = self.batch.possible_agents
+        self.reset_infos = [info.get(a, {}) for info in infos for a in agents]
+        return obs.reshape(self.num_envs, -1).copy()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        # as SuperSuit: actions are copied into arrays of the action space's dtype (float32)
+        self._actions = np.asarray(actions, dtype=self.action_space.dtype)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        if self._actions is None:
+            raise ValueError("step_wait() called without step_async()")
+        actions, self._actions = self._actions, None
+        obs, rewards, terminated, truncated, infos, final_obs = self.batch.step(
+            actions.reshape(self.n_copies, self.n_agents, -1)
+        )
+        n = self.n_agents
+        agents = self.batch.possible_agents
+        flat_infos: list[dict[str, Any]] = []
+        for k, info in enumerate(infos):
+            if terminated[k] or truncated[k]:
+                for i, a in enumerate(agents):
+                    slot = info[a]
+                    slot["terminal_observation"] = final_obs[k, i].copy()
+                    if truncated[k] and not terminated[k]:
+                        slot = {**slot, "TimeLimit.truncated": True}
+                    flat_infos.append(slot)
+            else:
+                flat_infos.extend(info[a] for a in agents)
+        dones = np.repeat(terminated | truncated, n)
+        return (
+            obs.reshape(self.num_envs, -1).copy(),
+            rewards.reshape(-1).astype(np.float32),
+            dones,
+            flat_infos,
+        )
+
+    def close(self) -> None:
+        self.batch.close()
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        """Attributes of the swarm copies, one entry per slot (``render_mode`` is None)."""
+        idx = self._indices(indices)
+        if attr_name == "render_mode":
+            return [None] * len(idx)
+        return [getattr(self.batch.envs[i // self.n_agents], attr_name) for i in idx]
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        for k in sorted({i // self.n_agents for i in self._indices(indices)}):
+            setattr(self.batch.envs[k], attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
+        return [
+            getattr(self.batch.envs[i // self.n_agents], method_name)(*method_args, **method_kwargs)
+            for i in self._indices(indices)
+        ]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False] * len(self._indices(indices))
+
+    def _indices(self, indices: Any) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        if isinstance(indices, int | np.integer):
+            return [int(indices)]
+        return [int(i) for i in indices]
+
+
 def make_vec_env(
-    env_fn: Callable[[], ParallelEnv], n_copies: int = 1, num_cpus: int = 1
-) -> SeededVecEnv:
+    env_fn: Callable[[], ParallelEnv],
+    n_copies: int = 1,
+    num_cpus: int = 1,
+    kind: str = "supersuit",
+) -> SeededVecEnv | BatchedVecEnv:
     """Build the parameter-sharing SB3 vector env of ``n_copies`` swarms.
 
     Parameters
@@ -162,20 +285,35 @@ def make_vec_env(
         Number of independent swarms stepped together, >= 1.
     num_cpus : int, default 1
         Worker processes; 0 or 1 steps everything in this process (best on 2-core machines,
-        where the policy update competes with the workers).
+        where the policy update competes with the workers). The batched kind always runs
+        in this process and requires 0 or 1.
+    kind : {"supersuit", "batched"}, default "supersuit"
+        See the module docstring; ``"batched"`` needs ``env_fn`` to return
+        ``urban_canyon_v0`` environments.
 
     Returns
     -------
-    SeededVecEnv
+    SeededVecEnv or BatchedVecEnv
         ``num_envs = n_copies * n_agents`` slots, agent-major inside each copy
         (``uav_0 .. uav_{N-1}`` of copy 0, then copy 1, ...).
     """
-    import supersuit as ss
-
     if int(n_copies) < 1:
         raise ValueError(f"n_copies must be >= 1, got {n_copies}")
     if int(num_cpus) < 0:
         raise ValueError(f"num_cpus must be >= 0, got {num_cpus}")
+    if kind not in VEC_ENV_KINDS:
+        raise ValueError(f"vec_env kind must be one of {VEC_ENV_KINDS}, got {kind!r}")
+    if kind == "batched":
+        from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+        if int(num_cpus) > 1:
+            raise ValueError(
+                f"the batched vec_env steps every copy in this process: num_cpus must be 0 or "
+                f"1, got {num_cpus}"
+            )
+        return BatchedVecEnv(BatchedUrbanCanyonEnv.from_envs([env_fn() for _ in range(n_copies)]))
+    import supersuit as ss
+
     n_copies, num_cpus = int(n_copies), min(int(num_cpus), int(n_copies))
     if num_cpus <= 1:
         # one process: ConcatVecEnv resets copy k with seed + k already

@@ -10,7 +10,7 @@ Observation layout
 One float32 vector per agent, ``20 + 2 A + 4 K`` long (``A = obs_sky_azimuths``, default 8;
 ``K = obs_neighbours``, default 4; 52 by default), clipped to its bounds. The index table (with
 units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it is built by
-:meth:`UrbanCanyonParallelEnv._observations` below, in the same order.
+:meth:`UrbanCanyonEnv._observation_array` below, in the same order.
 """
 
 from __future__ import annotations
@@ -116,6 +116,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         copies of a fresh environment (e.g. made by a vector wrapper) do not share a stream.
         ``options`` is accepted for API compatibility and ignored.
         """
+        obs = dict(zip(self.possible_agents, self._reset_arrays(seed)))
+        infos = self._reset_infos()
+        if self.render_mode == "human":
+            self.render()
+        return obs, infos
+
+    def _reset_arrays(self, seed: int | None) -> np.ndarray:
+        """Reset (as :meth:`reset`) and return the observations as one ``(N, obs_dim)`` array."""
         if seed is not None:
             self._rng = np.random.default_rng(seed)
         elif self._rng is None:
@@ -125,14 +133,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._epoch = self.world.reset(self._rng)
         self._city_scale_m = _city_scale_m(self.world)
         self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
+        return self._observation_array()
+
+    def _reset_infos(self) -> dict[str, dict[str, Any]]:
+        """The infos :meth:`reset` returns for the current (first) epoch."""
         terms = {t: np.zeros(self.config.n_uavs) for t in REWARD_TERMS}
-        obs = self._observations()
         first = self._infos(terms, self._epoch.goal_distance_m <= self.config.goal_radius_m)
         # nested: SuperSuit merges reset infos into the terminal step's infos at auto-reset
-        infos = {a: {"initial": info} for a, info in first.items()}
-        if self.render_mode == "human":
-            self.render()
-        return obs, infos
+        return {a: {"initial": info} for a, info in first.items()}
 
     def step(
         self, actions: dict[str, Any]
@@ -153,6 +161,29 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         if not self.agents:
             raise ValueError("step() called after the episode ended: call reset() first")
         cmd = self._action_array(actions)
+        obs_arr, reward, terminated, truncated, terms, in_goal = self._step_arrays(cmd)
+        obs = dict(zip(self.possible_agents, obs_arr))
+        infos = self._infos(terms, in_goal)
+        agents = self.agents
+        rewards = dict(zip(agents, reward.tolist()))
+        terms_d = dict.fromkeys(agents, terminated)
+        truncs_d = dict.fromkeys(agents, truncated)
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terms_d, truncs_d, infos
+
+    def _step_arrays(
+        self, cmd: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, bool, bool, dict[str, np.ndarray], np.ndarray]:
+        """Advance one epoch with a checked, clipped command ``(N, 3)`` (float64).
+
+        The array core of :meth:`step` (and of the batched vector environment): returns the
+        observations ``(N, obs_dim)`` float32, the rewards ``(N,)``, terminated, truncated,
+        the reward terms and the in-goal flags. It does not change :attr:`agents` and does not
+        render.
+        """
         cfg = self.config
         prev = self._epoch
         ep = self.world.step(cmd, self._rng)
@@ -192,17 +223,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
         terminated = crash or reached
         truncated = (self._steps >= cfg.max_steps) and not terminated
-        obs = self._observations()
-        infos = self._infos(terms, in_goal)
-        agents = self.agents
-        rewards = dict(zip(agents, reward.tolist()))
-        terms_d = dict.fromkeys(agents, terminated)
-        truncs_d = dict.fromkeys(agents, truncated)
-        if terminated or truncated:
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return obs, rewards, terms_d, truncs_d, infos
+        return self._observation_array(), reward, terminated, truncated, terms, in_goal
 
     def _action_array(self, actions: dict[str, Any]) -> np.ndarray:
         if not isinstance(actions, dict):
@@ -233,14 +254,16 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
     # ---- observations, infos, state ---------------------------------------------------------
 
-    def _observations(self) -> dict[str, np.ndarray]:
+    def _observation_array(self) -> np.ndarray:
+        """Every agent's observation, ``(N, obs_dim)`` float32 (rows in agent order)."""
         cfg = self.config
         ep = self._epoch
         n = cfg.n_uavs
         big = self._city_scale_m
         k = cfg.obs_neighbours
         n_open = max(ep.n_above_mask, 1)
-        sky = self.world.city.mask_elevation_deg(ep.pos_enu_m, self._az_deg) / 90.0
+        sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
+        sky = sky_deg / 90.0
 
         # neighbour slots: nearest (measured) first
         rel, avail = ep.rel_enu_m, ep.rel_available
@@ -266,7 +289,6 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         alt = (ep.nav_pos_enu_m[:, 2] - kin.altitude_min_m) / (
             kin.altitude_max_m - kin.altitude_min_m
         )
-        walls = self.world.city.wall_distance_m(ep.pos_enu_m, self._az_deg)
 
         obs = np.concatenate(
             [
@@ -289,8 +311,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             axis=1,
         )
         space = self.observation_spaces[self.possible_agents[0]]
-        obs = np.clip(obs, space.low, space.high).astype(np.float32)
-        return dict(zip(self.possible_agents, obs))
+        return np.clip(obs, space.low, space.high).astype(np.float32)
 
     def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
         ep = self._epoch

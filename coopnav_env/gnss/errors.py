@@ -47,7 +47,7 @@ from coopnav_env.gnss._validate import (
     as_point_list,
     readonly,
 )
-from coopnav_env.gnss.frames import azimuth_elevation, line_of_sight
+from coopnav_env.gnss.frames import _azimuth_elevation, _line_of_sight
 
 __all__ = [
     "ErrorModel",
@@ -106,7 +106,10 @@ def sigma_tropo_m(el_deg: ArrayLike) -> NDArray[np.float64]:
     ndarray, shape (...)
         Standard deviation [m]: 0.12 m at zenith, about 1.1 m at 5 deg.
     """
-    el = as_elevation_deg(el_deg, "el_deg")
+    return _sigma_tropo(as_elevation_deg(el_deg, "el_deg"))
+
+
+def _sigma_tropo(el: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.12 * 1.001 / np.sqrt(0.002001 + np.sin(np.pi * el / 180.0) ** 2)
 
 
@@ -123,7 +126,10 @@ def sigma_multipath_m(el_deg: ArrayLike) -> NDArray[np.float64]:
     ndarray, shape (...)
         Standard deviation [m].
     """
-    el = as_elevation_deg(el_deg, "el_deg")
+    return _sigma_multipath(as_elevation_deg(el_deg, "el_deg"))
+
+
+def _sigma_multipath(el: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.13 + 0.53 * np.exp(-el / 10.0)
 
 
@@ -140,7 +146,10 @@ def sigma_noise_m(el_deg: ArrayLike) -> NDArray[np.float64]:
     ndarray, shape (...)
         Standard deviation [m].
     """
-    el = as_elevation_deg(el_deg, "el_deg")
+    return _sigma_noise(as_elevation_deg(el_deg, "el_deg"))
+
+
+def _sigma_noise(el: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.15 + 0.43 * np.exp(-el / 6.9)
 
 
@@ -555,23 +564,66 @@ def simulate_pseudoranges(
                 f"extra_bias_m must have shape ({n_rx}, {n_sv}), got shape {extra.shape}"
             )
 
-    _, range_m = line_of_sight(rx, sv)
-    az_deg, el_deg = azimuth_elevation(rx, sv)
-    if el_ref_deg is None:
-        el_ref = el_deg.mean(axis=0)
-    else:
+    el_ref = None
+    if el_ref_deg is not None:
         el_ref = as_elevation_deg(el_ref_deg, "el_ref_deg")
         if el_ref.shape != (n_sv,):
             raise ValueError(f"el_ref_deg must have shape ({n_sv},), got shape {el_ref.shape}")
+    return _simulate_pseudoranges(gen, rx, sv, sys_idx, vis, model, clock, extra, el_ref)
 
-    sigma_common = model.sigma_common_m(el_ref)
-    sigma_user = model.sigma_user_m(el_deg, sys_idx)
+
+def _iono_factors(model: ErrorModel) -> NDArray[np.float64]:
+    """``model.iono_factor`` of every system index (cached per model: it is frozen)."""
+    cached = _IONO_FACTORS.get(model)
+    if cached is None:
+        cached = model.iono_factor(np.arange(len(SYSTEMS)))
+        cached.setflags(write=False)
+        if len(_IONO_FACTORS) < 64:
+            _IONO_FACTORS[model] = cached
+    return cached
+
+
+_IONO_FACTORS: dict[ErrorModel, NDArray[np.float64]] = {}
+
+
+def _simulate_pseudoranges(
+    gen: np.random.Generator,
+    rx: NDArray[np.float64],
+    sv: NDArray[np.float64],
+    sys_idx: NDArray[np.intp],
+    vis: NDArray[np.bool_],
+    model: ErrorModel,
+    clock: NDArray[np.float64],
+    extra: NDArray[np.float64] | None,
+    el_ref: NDArray[np.float64] | None = None,
+) -> PseudorangeEpoch:
+    """:func:`simulate_pseudoranges` of validated arrays (``extra`` None: no extra bias).
+
+    The same arithmetic in the same order as the public function, without re-checking its
+    inputs (the environment calls this once per step with arrays it built itself).
+    """
+    n_rx, n_sv = rx.shape[0], sv.shape[0]
+    unit, range_m = _line_of_sight(rx, sv)
+    az_deg, el_deg = _azimuth_elevation(rx, unit)
+    if el_ref is None:
+        el_ref = el_deg.mean(axis=0)
+
+    # model.sigma_common_m(el_ref) and model.sigma_user_m(el_deg, sys_idx), unchecked
+    if model.differential:
+        sigma_common = np.zeros(el_ref.shape)
+    else:
+        tropo = _sigma_tropo(el_ref) if model.tropo else np.zeros(el_ref.shape)
+        sigma_common = np.hypot(np.full(el_ref.shape, model.sigma_ure_m), tropo)
+    factor = _iono_factors(model)[sys_idx]
+    sigma_user = factor * np.hypot(_sigma_multipath(el_deg), _sigma_noise(el_deg))
 
     z_common = gen.standard_normal(n_sv)  # always first, always full size
     z_user = gen.standard_normal((n_rx, n_sv))
     common_error = sigma_common * z_common
     user_error = sigma_user * z_user
 
+    if extra is None:
+        extra = np.zeros((n_rx, n_sv))
     pr = range_m + clock[:, sys_idx] + common_error[None, :] + user_error + extra
     pr = np.where(vis, pr, np.nan)
     return PseudorangeEpoch(

@@ -105,7 +105,11 @@ def ecef_to_geodetic(
     alt_m : ndarray, shape (...)
         Height above the ellipsoid [m].
     """
-    pos = as_points(pos_ecef_m, "pos_ecef_m")
+    return _ecef_to_geodetic(as_points(pos_ecef_m, "pos_ecef_m"))
+
+
+def _ecef_to_geodetic(pos: NDArray[np.float64]):
+    """:func:`ecef_to_geodetic` of a validated float array of shape (..., 3)."""
     x, y, z = pos[..., 0], pos[..., 1], pos[..., 2]
     p_m = np.hypot(x, y)
     if np.any((p_m == 0.0) & (z == 0.0)):
@@ -142,8 +146,13 @@ def enu_rotation(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
         ``R`` with rows the E, N, U unit vectors expressed in ECEF, so that
         ``d_enu = R @ d_ecef``. Leading shape is the broadcast of the inputs.
     """
-    lat = np.radians(as_latitude_deg(lat_deg, "lat_deg"))
-    lon = np.radians(as_float_array(lon_deg, "lon_deg"))
+    return _enu_rotation(as_latitude_deg(lat_deg, "lat_deg"), as_float_array(lon_deg, "lon_deg"))
+
+
+def _enu_rotation(lat_deg: NDArray[np.float64], lon_deg: NDArray[np.float64]):
+    """:func:`enu_rotation` of validated float arrays."""
+    lat = np.radians(lat_deg)
+    lon = np.radians(lon_deg)
     lat, lon = np.broadcast_arrays(lat, lon)
     sl, cl = np.sin(lat), np.cos(lat)
     so, co = np.sin(lon), np.cos(lon)
@@ -272,6 +281,11 @@ def line_of_sight(
     """
     rx = as_point_list(rx_ecef_m, "rx_ecef_m")
     sv = as_point_list(sv_ecef_m, "sv_ecef_m")
+    return _line_of_sight(rx, sv)
+
+
+def _line_of_sight(rx: NDArray[np.float64], sv: NDArray[np.float64]):
+    """:func:`line_of_sight` of validated ``(n_rx, 3)`` and ``(n_sv, 3)`` float arrays."""
     diff = sv[None, :, :] - rx[:, None, :]
     range_m = np.linalg.norm(diff, axis=-1)
     if np.any(range_m == 0.0):
@@ -299,8 +313,14 @@ def azimuth_elevation(
         Elevation above the receiver's ellipsoidal horizon, in ``[-90, 90]`` [deg].
     """
     unit, _ = line_of_sight(rx_ecef_m, sv_ecef_m)
-    lat, lon, _ = ecef_to_geodetic(np.asarray(rx_ecef_m, dtype=np.float64))
-    rot = enu_rotation(lat, lon)  # (n_rx, 3, 3)
+    return _azimuth_elevation(np.asarray(rx_ecef_m, dtype=np.float64), unit)
+
+
+def _azimuth_elevation(rx: NDArray[np.float64], unit: NDArray[np.float64]):
+    """:func:`azimuth_elevation` from validated receivers and their line-of-sight unit vectors
+    (the first output of :func:`line_of_sight`, which the caller may already have)."""
+    lat, lon, _ = _ecef_to_geodetic(rx)
+    rot = _enu_rotation(lat, lon)  # (n_rx, 3, 3)
     enu = np.einsum("rij,rsj->rsi", rot, unit)
     az = np.degrees(np.arctan2(enu[..., 0], enu[..., 1])) % 360.0
     az = np.where(az >= 360.0, az - 360.0, az)  # -tiny % 360 rounds to 360.0

@@ -40,12 +40,15 @@ __all__ = [
     "CanyonMask",
     "City",
     "CityConfig",
+    "SkyDirections",
     "canyon_city",
     "draw_nlos",
     "generate_city",
     "is_inside_building",
     "line_of_sight",
     "mask_elevation_deg",
+    "sky_and_walls",
+    "sky_directions",
     "wall_distance_m",
 ]
 
@@ -360,21 +363,49 @@ def line_of_sight(buildings: Buildings, pos_enu_m: ArrayLike, dir_enu: ArrayLike
     memory stays bounded (about 10 MB) whatever the problem size.
     """
     pos = _as_points(pos_enu_m, "pos_enu_m")
-    u = _unit_directions(dir_enu)
-    n_rx, n_sv = pos.shape[0], u.shape[0]
-    up = u[:, 2] > 0.0
-    visible = np.broadcast_to(up, (n_rx, n_sv)).copy()
-    if buildings.n == 0 or n_rx == 0 or not np.any(up):
-        return visible
+    return _trace_line_of_sight(buildings, pos, sky_directions(dir_enu))
 
+
+@dataclass(frozen=True, eq=False)
+class SkyDirections:
+    """Satellite directions prepared for :func:`line_of_sight` (see :func:`sky_directions`).
+
+    They depend on the satellites only, not on the receivers or the city, so a caller that
+    traces the same sky from many positions or cities (the world at one GNSS epoch, copies
+    of an environment at the same time) prepares them once.
+    """
+
+    n_sv: int
+    up: BoolArray  # (n_sv,) elevation > 0
+    order: NDArray[np.intp]  # rising satellites by increasing cot(el)
+    cot_s: FloatArray  # (n_up,) sorted cot(el): horizontal distance per metre of climb
+    h_dir: FloatArray  # (n_up, 2) sorted horizontal unit directions (0 at the zenith)
+
+
+def sky_directions(dir_enu: ArrayLike) -> SkyDirections:
+    """Normalise and sort satellite directions, shape ``(n_sv, 3)``, for :func:`line_of_sight`."""
+    u = _unit_directions(dir_enu)
+    up = u[:, 2] > 0.0
     # satellites sorted by decreasing elevation (increasing cot(el))
     u_up = u[up]
     cos_el = np.hypot(u_up[:, 0], u_up[:, 1])
     cot_el = cos_el / u_up[:, 2]  # horizontal distance per metre of climb
     order = np.argsort(cot_el, kind="stable")
-    cot_s = cot_el[order]
     with np.errstate(divide="ignore", invalid="ignore"):
         h_dir = np.where(cos_el[:, None] > 0.0, u_up[:, :2] / cos_el[:, None], 0.0)[order]
+    for arr in (up, order, h_dir):
+        arr.setflags(write=False)
+    return SkyDirections(u.shape[0], up, order, _readonly(cot_el[order]), h_dir)
+
+
+def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirections) -> BoolArray:
+    """:func:`line_of_sight` from validated receivers and prepared directions."""
+    n_rx, n_sv = pos.shape[0], sky.n_sv
+    up = sky.up
+    visible = np.broadcast_to(up, (n_rx, n_sv)).copy()
+    if buildings.n == 0 or n_rx == 0 or not np.any(up):
+        return visible
+    order, cot_s, h_dir = sky.order, sky.cot_s, sky.h_dir
     n_up = cot_s.size
 
     blocked_s = np.zeros((n_rx, n_up), dtype=bool)  # columns in sorted order
@@ -456,13 +487,41 @@ class _HorizontalSweep:
     def __iter__(self):
         pos, d, lo, hi = self._pos, self._dir, self._lo, self._hi
         for cb in _chunk_slices(self._tall.size, 2 * self.shape[0] * self.shape[1]):
-            t_near, t_far = _slab_interval(
-                [pos[:, None, None, k] for k in range(2)],
-                [d[None, :, None, k] for k in range(2)],
-                [lo[None, None, cb, k] for k in range(2)],
-                [hi[None, None, cb, k] for k in range(2)],
-            )
+            t_near, t_far = _sweep_slab(pos, d, lo[cb], hi[cb])
             yield t_near, t_far, lo[None, None, cb], hi[None, None, cb]
+
+
+def _sweep_slab(
+    pos: FloatArray, d: FloatArray, lo: FloatArray, hi: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_slab_interval` of receivers (n, 3) x directions (n_az, 2) x boxes (m, 3).
+
+    The same values, computed the same way, except that the directions with a zero component
+    along an axis (the cardinal azimuths) get their infinite slab bounds written into their
+    columns only, instead of by full-size ``where`` passes over every azimuth.
+    """
+    t_near: FloatArray | None = None
+    t_far: FloatArray | None = None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(2):
+            p_k, lo_k, hi_k = pos[:, None, None, k], lo[None, None, :, k], hi[None, None, :, k]
+            inv = 1.0 / d[None, :, None, k]
+            t1 = (lo_k - p_k) * inv
+            t2 = (hi_k - p_k) * inv
+            t_lo = np.minimum(t1, t2)
+            t_hi = np.maximum(t1, t2, out=t1)  # (in place: fewer large temporaries)
+            zero = np.flatnonzero(d[:, k] == 0.0)
+            if zero.size:
+                in_slab = (p_k >= lo_k) & (p_k <= hi_k)  # (n, 1, m)
+                t_lo[:, zero, :] = np.where(in_slab, -np.inf, np.inf)
+                t_hi[:, zero, :] = np.where(in_slab, np.inf, -np.inf)
+            if t_near is None or t_far is None:
+                t_near, t_far = t_lo, t_hi
+            else:
+                np.maximum(t_near, t_lo, out=t_near)
+                np.minimum(t_far, t_hi, out=t_far)
+    assert t_near is not None and t_far is not None
+    return t_near, t_far
 
 
 def _horizontal_sweep(
@@ -499,12 +558,51 @@ def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: Array
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     tan_max = np.zeros(sweep.shape)  # tangent of the skyline elevation
     for t_near, t_far, _lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
-        rel_h = hi[..., 2] - pos[:, None, None, 2]
-        hit = (t_far > 0.0) & (t_near <= t_far) & (rel_h > 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tan_el = rel_h / np.maximum(t_near, 0.0)  # +inf inside a footprint
-        tan_max = np.maximum(tan_max, np.where(hit, tan_el, 0.0).max(axis=2))
+        entered = t_near <= t_far
+        tan_max = np.maximum(
+            tan_max, _skyline_tan(pos, entered, np.maximum(t_near, 0.0), t_far, hi)
+        )
     return np.degrees(np.arctan(tan_max))
+
+
+def _skyline_tan(pos: FloatArray, entered, t_in, t_far, hi) -> FloatArray:
+    """Largest ``tan(elevation)`` of a roof edge per (receiver, azimuth) over a building chunk.
+
+    ``entered = t_near <= t_far`` and ``t_in = max(t_near, 0)`` of the sweep, ``(n, n_az, m)``.
+    """
+    rel_h = hi[..., 2] - pos[:, None, None, 2]
+    hit = (t_far > 0.0) & entered & (rel_h > 0.0)
+    tan_el = np.zeros(hit.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(rel_h, t_in, out=tan_el, where=hit)  # +inf inside a footprint
+    return tan_el.max(axis=2)
+
+
+def _wall_min(pos: FloatArray, entered, t_in, t_far, lo, hi) -> FloatArray:
+    """Nearest footprint entry per (receiver, azimuth) over a building chunk (inf: none)."""
+    z = pos[:, None, None, 2]
+    below_roof = (z < hi[..., 2]) & (z >= lo[..., 2])
+    hit = (t_far >= 0.0) & entered & below_roof
+    return np.where(hit, t_in, np.inf).min(axis=2)
+
+
+def sky_and_walls(
+    buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`mask_elevation_deg` and :func:`wall_distance_m` from one horizontal sweep.
+
+    Both trace the same horizontal rays (receivers x azimuths) through the same footprints;
+    this computes the slab intervals once and returns exactly what the two functions return.
+    """
+    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
+    tan_max = np.zeros(sweep.shape)
+    dist = np.full(sweep.shape, np.inf)
+    for t_near, t_far, lo, hi in sweep:
+        entered = t_near <= t_far
+        t_in = np.maximum(t_near, 0.0)
+        tan_max = np.maximum(tan_max, _skyline_tan(pos, entered, t_in, t_far, hi))
+        dist = np.minimum(dist, _wall_min(pos, entered, t_in, t_far, lo, hi))
+    return np.degrees(np.arctan(tan_max)), dist
 
 
 def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
@@ -532,11 +630,8 @@ def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLik
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     dist = np.full(sweep.shape, np.inf)
     for t_near, t_far, lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
-        z = pos[:, None, None, 2]
-        below_roof = (z < hi[..., 2]) & (z >= lo[..., 2])
-        hit = (t_far >= 0.0) & (t_near <= t_far) & below_roof
-        d = np.where(hit, np.maximum(t_near, 0.0), np.inf)
-        dist = np.minimum(dist, d.min(axis=2))
+        t_in = np.maximum(t_near, 0.0)
+        dist = np.minimum(dist, _wall_min(pos, t_near <= t_far, t_in, t_far, lo, hi))
     return dist
 
 
@@ -857,6 +952,12 @@ class City:
     def wall_distance_m(self, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
         """:func:`wall_distance_m` against this city's buildings; ``(n, n_az)`` [m]."""
         return wall_distance_m(self.buildings, pos_enu_m, az_deg)
+
+    def sky_and_walls(
+        self, pos_enu_m: ArrayLike, az_deg: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """:func:`sky_and_walls`: skyline [deg] and wall distances [m], each ``(n, n_az)``."""
+        return sky_and_walls(self.buildings, pos_enu_m, az_deg)
 
     def random_street_points(
         self,

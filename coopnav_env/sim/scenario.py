@@ -95,6 +95,7 @@ from numpy.typing import ArrayLike
 from coopnav_env.constants import SHANGHAI_ALT_M, SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG, SYSTEMS
 from coopnav_env.gnss import (
     ErrorModel,
+    PseudorangeEpoch,
     azimuth_elevation,
     default_constellation,
     direction_enu,
@@ -102,9 +103,8 @@ from coopnav_env.gnss import (
     enu_rotation,
     geodetic_to_ecef,
     select_highest,
-    simulate_pseudoranges,
 )
-from coopnav_env.gnss.errors import DEFAULT_CLOCK_SIGMA_M
+from coopnav_env.gnss.errors import DEFAULT_CLOCK_SIGMA_M, _simulate_pseudoranges
 from coopnav_env.nav import (
     GnssObservations,
     NavStatus,
@@ -118,11 +118,14 @@ from coopnav_env.sim.city import (
     City,
     CityConfig,
     FloatArray,
+    SkyDirections,
     _check_int,
     _check_real,
+    _trace_line_of_sight,
     canyon_city,
     draw_nlos,
     generate_city,
+    sky_directions,
 )
 from coopnav_env.sim.route import advance_waypoints, street_route
 from coopnav_env.sim.swarm import (
@@ -679,10 +682,23 @@ class UrbanWorld:
         self.config = config
         self.fixed_city = city
         self.constellation = default_constellation(config.systems)
+        self._cached_constellation = self.constellation  # the one the sky cache keys stand for
         self.origin_ecef_m = geodetic_to_ecef(config.lat_deg, config.lon_deg, config.alt_m)
         self.rot_enu = enu_rotation(config.lat_deg, config.lon_deg)  # d_enu = R d_ecef
         self.city: City | None = None
         self.last: Epoch | None = None
+
+    def _sky(self, t_s: float) -> _SkyEpoch:
+        """The satellites above the cut-off at ``t_s`` (:func:`_sky_epoch`, cached).
+
+        The cache key names the default constellation of ``config.systems``; a world whose
+        ``constellation`` was replaced computes its sky without the cache.
+        """
+        cfg = self.config
+        if self.constellation is not self.__dict__.get("_cached_constellation"):
+            return _sky_epoch(self.constellation, self.origin_ecef_m, cfg.elevation_mask_deg, t_s)
+        key = (cfg.systems, cfg.lat_deg, cfg.lon_deg, cfg.alt_m, cfg.elevation_mask_deg, t_s)
+        return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m)
 
     # ---- frames -----------------------------------------------------------------------------
 
@@ -714,9 +730,7 @@ class UrbanWorld:
         """
         r = self.rot_enu
         if row is None:
-            return RelativePositions(
-                rel_ecef_m=rel_enu_m @ r, cov_ecef_m2=r.T @ cov_enu_m2 @ r, available=available
-            )
+            return _trusted_relative(rel_enu_m @ r, r.T @ cov_enu_m2 @ r, available)
         n = available.shape[0]
         rel = np.zeros((n, n, 3))
         cov = np.zeros((n, n, 3, 3))
@@ -724,7 +738,7 @@ class UrbanWorld:
         rel[row] = rel_enu_m[row] @ r
         cov[row] = r.T @ cov_enu_m2[row] @ r
         avail[row] = available[row]
-        return RelativePositions(rel_ecef_m=rel, cov_ecef_m2=cov, available=avail)
+        return _trusted_relative(rel, cov, avail)
 
     # ---- episode ----------------------------------------------------------------------------
 
@@ -833,13 +847,9 @@ class UrbanWorld:
         # satellites and visibility
         # Only the satellites above the cut-off (at the origin) enter the arrays: the others
         # can never be received, and dropping them makes everything downstream cheaper.
-        sv_all = self.constellation.positions_ecef(self.t_s)
-        az_all, el_all = azimuth_elevation(self.origin_ecef_m[None], sv_all)
-        sv_index = np.flatnonzero(el_all[0] > cfg.elevation_mask_deg)
-        sv_ecef = sv_all[sv_index]
-        system = np.asarray(self.constellation.system)[sv_index]
-        az, el = az_all[0, sv_index], el_all[0, sv_index]
-        los = self.city.line_of_sight(pos, direction_enu(az, el))
+        sky = self._sky(self.t_s)
+        sv_index, sv_ecef, system, az, el = sky.sv_index, sky.sv_ecef, sky.system, sky.az, sky.el
+        los = _trace_line_of_sight(self.city.buildings, pos, sky.directions)
         if cfg.nlos_probability > 0.0:
             received, bias = draw_nlos(
                 rng, ~los, cfg.nlos_probability, cfg.nlos_bias_mean_m, cfg.nlos_bias_floor_m
@@ -852,17 +862,18 @@ class UrbanWorld:
 
         # measurements
         rx_ecef = self.enu_to_ecef(pos)
-        pr = simulate_pseudoranges(
+        # simulate_pseudoranges without re-validating the world's own arrays
+        pr = _simulate_pseudoranges(
             rng,
             rx_ecef,
             sv_ecef,
-            system,
+            sky.system_idx,
             received,
             cfg.error_model,
-            clock_bias_m=self.clock_bias_m,
-            extra_bias_m=bias,
+            self.clock_bias_m,
+            bias,
         )
-        obs = GnssObservations.from_epoch(pr)
+        obs = _trusted_observations(pr)
         rel_enu, rel_cov_enu, avail = measure_relative_positions(rng, pos, cfg.relative_sensing)
 
         # warm start: the previous estimates moved by the velocity; at the first epoch of an
@@ -972,6 +983,112 @@ class UrbanWorld:
             coop_rejected=co_rej,
             next_waypoint=self.next_wp.copy(),
         )
+
+
+def _trusted_relative(rel: np.ndarray, cov: np.ndarray, available: np.ndarray) -> RelativePositions:
+    """:class:`RelativePositions` of the world's own measurements, without re-validating them.
+
+    The world's relative measurements are finite with symmetric PSD covariances by
+    construction (:func:`~coopnav_env.sim.swarm.measure_relative_positions`), so the checks of
+    ``RelativePositions.__post_init__`` (an eigenvalue decomposition per pair, a millisecond
+    for 50 UAVs) are skipped; the stored arrays are exactly what it would store.
+    """
+    out = object.__new__(RelativePositions)
+    avail = np.array(available, dtype=bool)
+    np.fill_diagonal(avail, True)
+    object.__setattr__(out, "rel_ecef_m", rel)
+    object.__setattr__(out, "cov_ecef_m2", cov)
+    object.__setattr__(out, "available", avail)
+    return out
+
+
+def _trusted_observations(pr: PseudorangeEpoch) -> GnssObservations:
+    """``GnssObservations.from_epoch(pr)`` without re-validating the simulator's output.
+
+    The simulator's arrays have the right shapes, finite values where received and NaN
+    elsewhere; the fields are set exactly as ``GnssObservations.__post_init__`` sets them
+    (user sigma and elevation replaced by NaN where not received).
+    """
+    out = object.__new__(GnssObservations)
+    visible = np.isfinite(pr.pr_m)
+    fields_ = {
+        "pr_m": pr.pr_m,
+        "sv_ecef_m": pr.sv_ecef_m,
+        "system": pr.system.astype(np.int64),
+        "sigma_user_m": np.where(visible, pr.sigma_user_m, np.nan),
+        "sigma_common_m": pr.sigma_common_m,
+        "el_deg": np.where(visible, pr.el_deg, np.nan),
+        "n_systems": len(SYSTEMS),
+        "visible": visible,
+    }
+    for name, value in fields_.items():
+        object.__setattr__(out, name, value)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _SkyEpoch:
+    """The satellites above the elevation cut-off at the world's origin at one GNSS time."""
+
+    sv_index: np.ndarray  # (S,) indices into the constellation
+    sv_ecef: FloatArray  # (S, 3) positions [m]
+    system: np.ndarray  # (S,) constellation of each
+    system_idx: np.ndarray  # (S,) the same as intp (what simulate_pseudoranges works with)
+    az: FloatArray  # (S,) azimuth at the origin [deg]
+    el: FloatArray  # (S,) elevation at the origin [deg]
+    directions: SkyDirections  # the same, prepared for line of sight
+
+
+def _sky_epoch(constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, t_s: float):
+    """Satellite positions and directions at the origin at ``t_s``, the ones above the mask."""
+    sv_all = constellation.positions_ecef(t_s)
+    az_all, el_all = azimuth_elevation(origin_ecef_m[None], sv_all)
+    sv_index = np.flatnonzero(el_all[0] > mask_deg)
+    az, el = az_all[0, sv_index], el_all[0, sv_index]
+    sky = _SkyEpoch(
+        sv_index=sv_index,
+        sv_ecef=sv_all[sv_index],
+        system=np.asarray(constellation.system)[sv_index],
+        system_idx=np.asarray(constellation.system)[sv_index].astype(np.intp),
+        az=az,
+        el=el,
+        directions=sky_directions(direction_enu(az, el)),
+    )
+    for arr in (sky.sv_index, sky.sv_ecef, sky.system, sky.system_idx, sky.az, sky.el):
+        arr.setflags(write=False)
+    return sky
+
+
+class _SkyCache:
+    """Process-wide cache of :func:`_sky_epoch`, keyed by the sky's settings and the time.
+
+    The satellites' geometry depends only on the constellation, the origin, the cut-off and
+    the GNSS time, not on the UAVs or the city; with the default ``t0_random_s = 0`` every
+    episode replays the same times, and copies of an environment (vector environments) share
+    them. The cached arrays are read-only. At most ``max_size`` entries are kept (the oldest
+    goes first); an entry is about 3 kB, so the default bounds the cache to about 6 MB (with a
+    random start time, ``t0_random_s > 0``, it rarely hits and only costs the inserts).
+    """
+
+    def __init__(self, max_size: int = 2048) -> None:
+        self.max_size = int(max_size)
+        self._data: dict[tuple, _SkyEpoch] = {}
+
+    def get(self, key: tuple, constellation: Any, origin_ecef_m: np.ndarray) -> _SkyEpoch:
+        hit = self._data.get(key)
+        if hit is None:
+            hit = _sky_epoch(constellation, origin_ecef_m, key[-2], key[-1])
+            if len(self._data) >= self.max_size:
+                self._data.pop(next(iter(self._data)), None)
+            self._data[key] = hit
+        return hit
+
+    def clear(self) -> None:
+        """Drop every entry."""
+        self._data.clear()
+
+
+_SKY_CACHE = _SkyCache()
 
 
 def _sigma_within(cov_ecef_m2: np.ndarray, max_sigma_m: float | None) -> BoolArray:

@@ -1,0 +1,215 @@
+"""K copies of ``urban_canyon_v0`` stepped together, with arrays in and out.
+
+:class:`BatchedUrbanCanyonEnv` holds ``K`` independent swarms (each its own world, city and
+random generator) and steps them with one ``(K, N, 3)`` action array, returning
+``(K, N, obs_dim)`` observations, ``(K, N)`` rewards and ``(K,)`` episode-end flags; a
+finished copy is reset at once (automatic reset), as vector environments do. It is the engine
+of the batched Stable-Baselines3 vector environment (:func:`training.vec_env.make_vec_env`
+with ``kind="batched"``, the ``vec_env: batched`` setting of ``coopnav train``).
+
+Equivalence with K separate environments
+----------------------------------------
+Copy ``k`` behaves exactly like a separate ``urban_canyon_v0.parallel_env`` with the same
+settings, bit for bit: ``reset(seed=s)`` resets copy ``k`` with ``s + k`` (a sequence gives
+one seed per copy; ``None`` continues each copy's generator, drawing it from OS entropy the
+first time), every later episode of a copy continues that copy's generator (what a separate
+environment does on ``reset()`` without a seed, and what SuperSuit's vector wrappers do), and
+each step runs the parallel environment's own array core (``UrbanCanyonEnv._step_arrays``:
+world step, rewards, observations). ``tests/envs/test_batched.py`` checks observations,
+rewards, terminations, truncations and infos against separate environments over episodes
+that end at different steps.
+
+What is batched and what is not
+-------------------------------
+The action checks and clipping, the reward, termination and observation buffers are single
+``(K, ...)`` numpy operations. The world step of each copy -- satellites, line of sight,
+pseudoranges, the standalone and cooperative navigation solvers, the skyline and wall
+sensors -- still runs copy by copy: the copies see different satellites (their episodes
+start at different times) and different cities, and stacking their solver problems would
+change the floating-point summation order of the solvers (padding to a common satellite
+count changes numpy's pairwise sums and LAPACK's blocking), so the episodes would no longer
+be those of separate environments. What the batching removes is the per-agent dictionary
+plumbing of PettingZoo and SuperSuit (observations, rewards, actions and flags per agent),
+not the physics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from coopnav_env.envs.config import UrbanCanyonConfig
+from coopnav_env.envs.urban_canyon import UrbanCanyonEnv
+
+__all__ = ["BatchedUrbanCanyonEnv"]
+
+
+class BatchedUrbanCanyonEnv:
+    """``n_copies`` independent ``urban_canyon_v0`` swarms stepped together.
+
+    Parameters
+    ----------
+    n_copies : int
+        Number of swarm copies ``K``, >= 1.
+    config : UrbanCanyonConfig, optional
+        Settings of every copy; ``**overrides`` are applied on top (as for
+        ``urban_canyon_v0.parallel_env``).
+
+    Attributes
+    ----------
+    envs : list of UrbanCanyonEnv
+        The copies (their worlds and generators); copy ``k`` is ``envs[k]``.
+    n_copies, n_agents, obs_dim : int
+    observation_space, action_space : gymnasium.spaces.Box
+        The spaces of one agent.
+
+    Notes
+    -----
+    Rendering is not supported (``render_mode`` must be None); render a copy through
+    ``envs[k]`` after giving it a render mode, or use the parallel environment.
+    """
+
+    def __init__(
+        self, n_copies: int, config: UrbanCanyonConfig | None = None, **overrides: Any
+    ) -> None:
+        if isinstance(n_copies, bool) or not isinstance(n_copies, int | np.integer):
+            raise ValueError(f"n_copies must be an integer >= 1, got {n_copies!r}")
+        if int(n_copies) < 1:
+            raise ValueError(f"n_copies must be an integer >= 1, got {n_copies}")
+        envs = [UrbanCanyonEnv(config=config, **overrides) for _ in range(int(n_copies))]
+        self._init(envs)
+
+    @classmethod
+    def from_envs(cls, envs: Sequence[UrbanCanyonEnv]) -> BatchedUrbanCanyonEnv:
+        """Batch existing (fresh) parallel environments; they must share one configuration."""
+        envs = list(envs)
+        if not envs:
+            raise ValueError("from_envs needs at least one environment")
+        for e in envs:
+            if not isinstance(e, UrbanCanyonEnv):
+                raise ValueError(
+                    f"from_envs batches urban_canyon_v0 environments (UrbanCanyonEnv), got "
+                    f"{type(e).__name__}"
+                )
+        if any(e.config != envs[0].config for e in envs):
+            raise ValueError("every batched environment must have the same configuration")
+        if any(e is f for i, e in enumerate(envs) for f in envs[i + 1 :]):
+            raise ValueError("the batched environments must be distinct objects")
+        out = cls.__new__(cls)
+        out._init(envs)
+        return out
+
+    def _init(self, envs: list[UrbanCanyonEnv]) -> None:
+        for e in envs:
+            if e.render_mode is not None:
+                raise ValueError("BatchedUrbanCanyonEnv does not render: use render_mode=None")
+        self.envs = envs
+        self.config = envs[0].config
+        self.n_copies = len(envs)
+        self.n_agents = self.config.n_uavs
+        self.obs_dim = self.config.obs_dim
+        agent = envs[0].possible_agents[0]
+        self.observation_space: spaces.Box = envs[0].observation_space(agent)
+        self.action_space: spaces.Box = envs[0].action_space(agent)
+        self.possible_agents = list(envs[0].possible_agents)
+        self._obs = np.zeros((self.n_copies, self.n_agents, self.obs_dim), dtype=np.float32)
+        self._needs_reset = True
+
+    # ---- episodes ---------------------------------------------------------------------------
+
+    def _seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
+        if seed is None:
+            return [None] * self.n_copies
+        if isinstance(seed, int | np.integer) and not isinstance(seed, bool):
+            return [int(seed) + k for k in range(self.n_copies)]
+        seeds = list(seed)
+        if len(seeds) != self.n_copies:
+            raise ValueError(f"seed must be an int or {self.n_copies} seeds, got {len(seeds)}")
+        return [None if s is None else int(s) for s in seeds]
+
+    def reset(
+        self, seed: int | Sequence[int | None] | None = None
+    ) -> tuple[np.ndarray, list[dict[str, dict[str, Any]]]]:
+        """Reset every copy; copy ``k`` gets ``seed + k`` (or ``seed[k]``; None continues).
+
+        Returns
+        -------
+        obs : ndarray, shape (K, N, obs_dim), float32
+            A buffer reused by later calls: copy it to keep it.
+        infos : list of K dicts
+            Each copy's reset infos (``{agent: {"initial": {...}}}``, as ``reset`` returns).
+        """
+        infos = []
+        for k, s in enumerate(self._seeds(seed)):
+            self._obs[k] = self.envs[k]._reset_arrays(s)
+            infos.append(self.envs[k]._reset_infos())
+        self._needs_reset = False
+        return self._obs, infos
+
+    def _actions(self, actions: Any) -> np.ndarray:
+        shape = (self.n_copies, self.n_agents, 3)
+        try:
+            cmd = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"actions must be a numeric array of shape {shape}") from exc
+        if cmd.shape != shape:
+            if cmd.size == np.prod(shape):
+                cmd = cmd.reshape(shape)
+            else:
+                raise ValueError(f"actions must have shape {shape}, got {cmd.shape}")
+        if not np.all(np.isfinite(cmd)):
+            bad = sorted({int(k) for k in np.nonzero(~np.isfinite(cmd))[0]})
+            raise ValueError(f"actions contain NaN or inf (copies {bad})")
+        return np.clip(cmd, -1.0, 1.0)
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[dict[str, dict]], np.ndarray]:
+        """Step every copy with ``actions`` of shape ``(K, N, 3)`` (or ``(K * N, 3)``).
+
+        Actions are clipped to ``[-1, 1]``; NaN or inf raises ``ValueError``.
+
+        Returns
+        -------
+        obs : ndarray, shape (K, N, obs_dim), float32
+            After the step; for a copy whose episode ended, the first observation of its next
+            episode (automatic reset; the buffer is reused by later calls).
+        rewards : ndarray, shape (K, N), float64
+        terminated, truncated : ndarray of bool, shape (K,)
+            Whether each copy's episode ended at this step (every agent of a copy ends
+            together).
+        infos : list of K dicts
+            Each copy's step infos ``{agent: {...}}``: for a finished copy, those of its final
+            step (the reset infos of the next episode are not merged in).
+        final_obs : ndarray, shape (K, N, obs_dim), float32
+            The observations of this step before any automatic reset (equal to ``obs`` for
+            copies that did not finish).
+        """
+        if self._needs_reset:
+            raise ValueError("step() called before reset(): call reset() first")
+        cmd = self._actions(actions)
+        k_n = (self.n_copies, self.n_agents)
+        rewards = np.empty(k_n)
+        terminated = np.zeros(self.n_copies, dtype=bool)
+        truncated = np.zeros(self.n_copies, dtype=bool)
+        infos = []
+        obs = self._obs
+        for k, env in enumerate(self.envs):
+            obs[k], rewards[k], terminated[k], truncated[k], terms, in_goal = env._step_arrays(
+                cmd[k]
+            )
+            infos.append(env._infos(terms, in_goal))
+        final_obs = obs.copy()
+        done = terminated | truncated
+        for k in np.flatnonzero(done).tolist():
+            # automatic reset: the next episode continues the copy's generator
+            obs[k] = self.envs[k]._reset_arrays(None)
+        return obs, rewards, terminated, truncated, infos, final_obs
+
+    def close(self) -> None:
+        """Close every copy."""
+        for e in self.envs:
+            e.close()

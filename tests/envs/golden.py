@@ -1,0 +1,66 @@
+"""Fingerprints of fixed-seed episodes of ``urban_canyon_v0`` (for the bit-identity tests).
+
+:func:`episode_digest` runs ``steps`` steps of random actions from ``reset(seed=seed)``
+(resetting without a seed when an episode ends, so resets and the generator's continuation
+are covered too) and hashes, in order, every observation, reward, termination, truncation,
+info dict (floats by ``repr``, which is exact), the global state and the reset infos.
+``python -m tests.envs.golden`` prints the digests of :data:`CASES`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Any
+
+import numpy as np
+
+#: (name, environment keyword arguments, steps, seed) of the golden episodes.
+CASES: tuple[tuple[str, dict[str, Any], int, int], ...] = (
+    ("n5_grid", {"n_uavs": 5}, 200, 7),
+    ("n20_grid", {"n_uavs": 20}, 200, 11),
+    (
+        "n6_nlos_fixed_city",
+        {"n_uavs": 6, "nlos_probability": 0.3, "max_sats": 9, "city_seed": 3, "t0_random_s": 5e4},
+        120,
+        5,
+    ),
+    ("n4_canyon_sdt", {"n_uavs": 4, "city": "canyon", "transfer": "sdt"}, 120, 3),
+)
+
+
+def _update(h: Any, obj: Any) -> None:
+    if isinstance(obj, np.ndarray):
+        h.update(str((obj.dtype.str, obj.shape)).encode())
+        h.update(np.ascontiguousarray(obj).tobytes())
+    else:
+        h.update(json.dumps(obj, sort_keys=True, default=repr).encode())
+
+
+def episode_digest(env_kwargs: dict[str, Any], steps: int, seed: int) -> str:
+    """sha256 of everything ``steps`` random-action steps of the environment return."""
+    from coopnav_env import urban_canyon_v0
+
+    env = urban_canyon_v0.parallel_env(**env_kwargs)
+    h = hashlib.sha256()
+    rng = np.random.default_rng(seed + 1000)
+    obs, infos = env.reset(seed=seed)
+    _update(h, [obs[a] for a in env.possible_agents])
+    _update(h, infos)
+    for _ in range(steps):
+        actions = {a: rng.uniform(-1.0, 1.0, 3).astype(np.float32) for a in env.agents}
+        obs, rew, term, trunc, infos = env.step(actions)
+        for part in (obs, rew, term, trunc):
+            _update(h, [part[a] for a in env.possible_agents])
+        _update(h, infos)
+        _update(h, env.state())
+        if not env.agents:
+            obs, infos = env.reset()
+            _update(h, [obs[a] for a in env.possible_agents])
+            _update(h, infos)
+    return h.hexdigest()
+
+
+if __name__ == "__main__":
+    for name, kwargs, steps, seed in CASES:
+        print(f'"{name}": "{episode_digest(kwargs, steps, seed)}",')

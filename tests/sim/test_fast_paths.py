@@ -1,0 +1,120 @@
+"""The world's fast paths return exactly what the checked public functions return.
+
+Shared skyline/wall sweep, cached satellite geometry, unchecked pseudorange simulation and
+solver inputs built without re-validation (see docs/performance.md); the end-to-end check is
+tests/envs/test_golden.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coopnav_env.gnss import ErrorModel, default_constellation, simulate_pseudoranges
+from coopnav_env.gnss.errors import _simulate_pseudoranges
+from coopnav_env.nav import GnssObservations, RelativePositions
+from coopnav_env.sim import city as C
+from coopnav_env.sim import scenario as S
+from coopnav_env.sim.city import CityConfig, canyon_city, generate_city
+from coopnav_env.sim.swarm import RelativeSensingConfig, measure_relative_positions
+
+
+def _dense_reference(buildings, pos, az_deg):
+    """The skyline and wall sweeps as they were written before they shared one pass."""
+    az = np.radians(np.asarray(az_deg, dtype=float))
+    d = np.stack([np.sin(az), np.cos(az)], axis=1)
+    d = np.where(np.abs(d) < 1e-15, 0.0, d)
+    tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
+    lo, hi = buildings.min_m[tall][None, None], buildings.max_m[tall][None, None]
+    t_near, t_far = C._slab_interval(
+        [pos[:, None, None, k] for k in range(2)],
+        [d[None, :, None, k] for k in range(2)],
+        [lo[..., k] for k in range(2)],
+        [hi[..., k] for k in range(2)],
+    )
+    rel_h = hi[..., 2] - pos[:, None, None, 2]
+    hit = (t_far > 0.0) & (t_near <= t_far) & (rel_h > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tan_el = rel_h / np.maximum(t_near, 0.0)
+    sky = np.degrees(np.arctan(np.maximum(0.0, np.where(hit, tan_el, 0.0).max(axis=2))))
+    z = pos[:, None, None, 2]
+    hit = (t_far >= 0.0) & (t_near <= t_far) & (z < hi[..., 2]) & (z >= lo[..., 2])
+    walls = np.where(hit, np.maximum(t_near, 0.0), np.inf).min(axis=2)
+    return sky, walls
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_shared_sweep_equals_separate_and_reference_sweeps(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    city = canyon_city() if seed == 0 else generate_city(CityConfig(), rng)
+    b = city.buildings
+    x0, x1, y0, y1 = city.extent_m
+    pos = np.c_[rng.uniform(x0, x1, 40), rng.uniform(y0, y1, 40), rng.uniform(0.0, 60.0, 40)]
+    m = min(4, b.n)  # receivers on corners, on walls and inside footprints
+    pos[:m, :2] = b.min_m[:m, :2]
+    pos[5 : 5 + m, 0], pos[5 : 5 + m, 1] = b.max_m[:m, 0], b.min_m[:m, 1] + 3.0
+    pos[10 : 10 + m, :2] = (b.min_m[:m, :2] + b.max_m[:m, :2]) / 2.0
+    for az in (np.arange(8) * 45.0, np.arange(72) * 5.0, rng.uniform(0.0, 360.0, 7)):
+        sky, walls = city.sky_and_walls(pos, az)
+        ref_sky, ref_walls = _dense_reference(b, pos, az)
+        np.testing.assert_array_equal(sky, ref_sky)
+        np.testing.assert_array_equal(walls, ref_walls)
+        np.testing.assert_array_equal(sky, city.mask_elevation_deg(pos, az))
+        np.testing.assert_array_equal(walls, city.wall_distance_m(pos, az))
+
+
+def test_sky_cache_returns_the_uncached_geometry_read_only() -> None:
+    con = default_constellation(("GPS", "BDS"))
+    origin = np.array([-2.85e6, 4.66e6, 3.27e6])
+    cache = S._SkyCache(max_size=2)
+    for t in (0.0, 1.0, 2.0, 1.0):
+        hit = cache.get((10.0, t), con, origin)  # the key ends with (mask, time)
+        fresh = S._sky_epoch(con, origin, 10.0, t)
+        for name in ("sv_index", "sv_ecef", "system", "system_idx", "az", "el"):
+            np.testing.assert_array_equal(getattr(hit, name), getattr(fresh, name))
+            assert not getattr(hit, name).flags.writeable
+        np.testing.assert_array_equal(hit.directions.cot_s, fresh.directions.cot_s)
+    assert len(cache._data) == 2  # bounded
+    cache.clear()
+    assert not cache._data
+
+
+def test_unchecked_pseudoranges_and_solver_inputs_equal_the_checked_ones() -> None:
+    con = default_constellation(("GPS", "BDS"))
+    sv = con.positions_ecef(1234.0)[:14]
+    system = np.asarray(con.system)[:14]
+    rng = np.random.default_rng(0)
+    rx = np.array([-2.85e6, 4.66e6, 3.27e6]) + rng.normal(0.0, 100.0, (4, 3))
+    vis = rng.random((4, 14)) < 0.7
+    clock = rng.normal(0.0, 1e4, (4, 2))
+    extra = np.where(vis, rng.exponential(5.0, (4, 14)), 0.0)
+    for model in (ErrorModel(), ErrorModel(differential=True), ErrorModel(iono_free=False)):
+        for bias in (None, extra):
+            a = simulate_pseudoranges(
+                np.random.default_rng(5), rx, sv, system, vis, model, clock, extra_bias_m=bias
+            )
+            b = _simulate_pseudoranges(
+                np.random.default_rng(5), rx, sv, system.astype(np.intp), vis, model, clock, bias
+            )
+            for name in a.__dataclass_fields__:
+                np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+            checked, fast = GnssObservations.from_epoch(a), S._trusted_observations(a)
+            for name in checked.__dataclass_fields__:
+                x, y = getattr(checked, name), getattr(fast, name)
+                assert np.asarray(x).dtype == np.asarray(y).dtype, name
+                np.testing.assert_array_equal(x, y, err_msg=name)
+    pos = rng.normal(0.0, 60.0, (6, 3))
+    rel, cov, avail = measure_relative_positions(rng, pos, RelativeSensingConfig(max_range_m=90))
+    checked = RelativePositions(rel, cov, avail)
+    fast = S._trusted_relative(rel, cov, avail)
+    for name in ("rel_ecef_m", "cov_ecef_m2", "available"):
+        np.testing.assert_array_equal(getattr(checked, name), getattr(fast, name))
+    assert not avail.diagonal().any()  # the caller's array is not modified
+
+
+def test_a_replaced_constellation_bypasses_the_sky_cache() -> None:
+    world = S.UrbanWorld(S.ScenarioConfig(n_uavs=3))
+    both = world.reset(np.random.default_rng(0))
+    world.constellation = default_constellation(("GPS",))
+    gps = world.reset(np.random.default_rng(0))
+    assert set(gps.system.tolist()) == {0} and gps.sv_index.size < both.sv_index.size
