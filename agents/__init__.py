@@ -11,6 +11,8 @@ name                      policy
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
+``rllib:<path>``          an RLlib checkpoint of ``coopnav train --backend rllib``
+                          (:mod:`agents.rllib_policy`; needs the ``ray`` extra)
 ========================  ==================================================================
 
 A heuristic takes constructor options after ``@`` as ``key=value`` pairs separated by commas,
@@ -32,7 +34,14 @@ from agents.base import Policy, clip_actions
 
 __all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy"]
 
-POLICY_NAMES: tuple[str, ...] = ("random", "formation", "sky", "waypoint", "ppo:<path>")
+POLICY_NAMES: tuple[str, ...] = (
+    "random",
+    "formation",
+    "sky",
+    "waypoint",
+    "ppo:<path>",
+    "rllib:<path>",
+)
 """Names :func:`make_policy` accepts."""
 
 
@@ -42,7 +51,8 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
     Parameters
     ----------
     name : str
-        One of :data:`POLICY_NAMES`; ``ppo:<path>`` loads the SB3 model at ``<path>``.
+        One of :data:`POLICY_NAMES`; ``ppo:<path>`` loads the SB3 model at ``<path>``,
+        ``rllib:<path>`` the shared policy of an RLlib checkpoint.
     env : pettingzoo.ParallelEnv
         The environment the policy acts in (spaces; map and goal for the heuristics).
     **kwargs
@@ -56,9 +66,11 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
     Raises
     ------
     ValueError
-        Unknown name (the message lists the valid ones), or an empty ``ppo:`` path.
+        Unknown name (the message lists the valid ones), or an empty ``ppo:``/``rllib:`` path.
     FileNotFoundError
-        ``ppo:<path>`` names a checkpoint that does not exist.
+        ``ppo:<path>`` or ``rllib:<path>`` names a checkpoint that does not exist.
+    ImportError
+        ``rllib:<path>`` without Ray RLlib installed.
     """
     if not isinstance(name, str):
         raise ValueError(f"policy name must be a string, got {name!r}")
@@ -91,6 +103,13 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.ppo import PPOPolicy
 
         return PPOPolicy(env, path, **kwargs)
+    if name.startswith("rllib:"):
+        path = name[len("rllib:") :]
+        if not path:
+            raise ValueError("policy 'rllib:<path>' needs the path of an RLlib checkpoint")
+        from agents.rllib_policy import RLlibPolicy
+
+        return RLlibPolicy(env, path, **kwargs)
     raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICY_NAMES)}")
 
 

@@ -16,7 +16,10 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("training.demo", "navigation demo: standalone vs cooperative error of a canyon UAV"),
     "reproduce": ("training.reproduce", "regenerate the paper's tables and figures (Section 4)"),
-    "train": ("training.train", "train a PPO policy (parameter sharing) on urban_canyon_v0"),
+    "train": (
+        "training.train",
+        "train a PPO policy (parameter sharing) on urban_canyon_v0 (SB3, or Ray RLlib)",
+    ),
     "evaluate": ("training.evaluate", "evaluate policies: navigation error, goal rate, plots"),
     "render": ("training.render", "render one episode of urban_canyon_v0 to PNG frames"),
 }

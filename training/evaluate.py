@@ -214,6 +214,24 @@ def _clustered_se(per_episode: Sequence[np.ndarray]) -> float:
     return float(np.sqrt(n_eps / (n_eps - 1) * np.sum(resid**2)) / total)
 
 
+def _finite_mean(x: np.ndarray) -> float:
+    fin = np.asarray(x)[np.isfinite(x)]
+    return float(fin.mean()) if fin.size else math.nan
+
+
+def _episode_summary(e: EpisodeRecord) -> dict[str, Any]:
+    """Per-episode figures written to ``report.json`` (for paired comparisons)."""
+    return {
+        "seed": e.seed,
+        "coop_error_mean_m": _finite_mean(e.coop_error_m),
+        "standalone_error_mean_m": _finite_mean(e.standalone_error_m),
+        "success": bool(e.success),
+        "collided": bool(e.collided),
+        "length": int(e.length),
+        "return": float(e.episode_return),
+    }
+
+
 def _nanmean(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     return float(x.mean()) if x.size else math.nan
@@ -263,7 +281,7 @@ class Report:
     env_kwargs : dict
     env_id : str
     episodes : dict of str to list of EpisodeRecord
-        Raw records per policy (not written to JSON; errors go to ``errors.npz``).
+        Raw records per policy (JSON gets a per-episode summary; errors go to ``errors.npz``).
     files : dict of str to Path
         What was written (empty when ``out`` was None).
     """
@@ -289,7 +307,34 @@ class Report:
             "seeds": list(self.seeds),
             "error_threshold_m": ERROR_THRESHOLD_M,
             "policies": [_jsonable(asdict(s)) for s in self.stats],
+            "episodes": {
+                name: [_jsonable(_episode_summary(e)) for e in eps]
+                for name, eps in self.episodes.items()
+            },
         }
+
+    def paired_difference(self, policy: str, reference: str) -> tuple[float, float, int]:
+        """Mean cooperative error of ``policy`` minus ``reference``, paired by episode seed.
+
+        Both policies flew the same held-out episodes (same city, sky and noise seeds), so the
+        per-episode difference of the mean cooperative 3-D error removes most of the
+        episode-to-episode spread that the per-policy standard errors carry.
+
+        Returns
+        -------
+        (mean difference [m], its standard error [m], episodes used)
+            Episodes in which either policy had no fix are skipped; SE is NaN below 2 pairs.
+        """
+        diffs = []
+        for a, b in zip(self.episodes[policy], self.episodes[reference]):
+            ea, eb = _finite_mean(a.coop_error_m), _finite_mean(b.coop_error_m)
+            if np.isfinite(ea) and np.isfinite(eb):
+                diffs.append(ea - eb)
+        d = np.asarray(diffs)
+        if d.size == 0:
+            return math.nan, math.nan, 0
+        se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else math.nan
+        return float(d.mean()), se, int(d.size)
 
     def to_markdown(self) -> str:
         """The summary table in GitHub Markdown."""
@@ -674,7 +719,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--policies",
         nargs="+",
         default=["random", "formation", "sky"],
-        help="policies: random, formation, sky, waypoint, ppo:<path>; options of a heuristic "
+        help="policies: random, formation, sky, waypoint, ppo:<path> (SB3 .zip), rllib:<path> "
+        "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
     )
     parser.add_argument("--out", default=None, help="directory for report.* and plots")
@@ -742,19 +788,20 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
 
 
 def _train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
-    """The training configuration a ``ppo:<path>`` policy came from (empty if none).
+    """The training configuration a ``ppo:<path>`` or ``rllib:<path>`` policy came from.
 
     ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
-    ``DIR/final_model.zip`` or ``DIR/checkpoints/*.zip`` is evaluated in the environment it
-    was trained in unless told otherwise. PPO policies from runs with different environment
-    settings raise ``ValueError``.
+    ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
+    in the environment it was trained in unless told otherwise (empty if none is found).
+    Trained policies from runs with different environment settings raise ``ValueError``.
     """
     found: dict[str, Any] | None = None
     for name in policies:
-        if not name.startswith("ppo:"):
+        kind, sep, path = name.partition(":")
+        if not sep or kind not in ("ppo", "rllib"):
             continue
-        model = Path(name[4:])
-        for folder in (model.parent, model.parent.parent):
+        model = Path(path)
+        for folder in (model, model.parent, model.parent.parent):
             cfg = folder / "config.yaml"
             if cfg.is_file():
                 data = _read_train_config(cfg)
@@ -790,7 +837,7 @@ def run(args: argparse.Namespace) -> int:
             plots=not args.no_plots,
             verbose=True,
         )
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, ImportError) as exc:
         print(f"coopnav evaluate: error: {exc}", file=sys.stderr)
         return 2
     print(report.to_markdown())

@@ -3,6 +3,8 @@
 One Stable-Baselines3 PPO policy drives every UAV: SuperSuit turns the PettingZoo swarm into
 a vector env with one slot per UAV and concatenates ``n_envs`` swarms
 (:mod:`training.vec_env`, which also makes ``PPO(seed=...)`` work and repeat exactly).
+``--backend rllib`` trains on Ray RLlib instead, with env runners on a Ray cluster
+(:mod:`training.rllib_train`, same configuration file and output layout).
 
 Hyperparameters come from ``training/configs/ppo.yaml`` (section ``urban_canyon_v0``) and
 can be overridden from the command line. Everything a run produces goes to ``--out DIR``::
@@ -63,7 +65,13 @@ DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.y
 
 DEFAULT_ENV_ID: str = "urban_canyon_v0"
 
+BACKENDS: tuple[str, ...] = ("sb3", "rllib")
+"""Training backends: Stable-Baselines3 (default) and Ray RLlib (``training.rllib_train``)."""
+
 _CHECKPOINT_RE = re.compile(r"_(\d+)_steps\.zip$")
+
+_VEC_ENVS: tuple[str, ...] = ("supersuit", "batched")
+"""Values of ``TrainConfig.vec_env`` (``training.vec_env.VEC_ENV_KINDS``, without importing SB3)."""
 
 _PRETRAIN_DEFAULTS: dict[str, Any] = {
     "policy": "waypoint",
@@ -110,6 +118,14 @@ class TrainConfig:
         Swarm copies stepped together, >= 1.
     num_cpus : int, default 1
         Worker processes for the swarm copies, >= 0 (0 and 1: all in this process).
+    vec_env : {"supersuit", "batched"}, default "supersuit"
+        How the swarm copies become one SB3 vector environment
+        (:func:`~training.vec_env.make_vec_env`): SuperSuit's per-agent adapters (any
+        environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
+        environment (one process; the same observations, rewards and seeding bit for bit).
+        ``benchmarks/bench_env.py`` measures both; SuperSuit stays the default because the
+        batched one is not faster (the world step of each copy dominates, see
+        ``docs/performance.md``).
     checkpoint_freq : int, default 50_000
         Agent-steps between checkpoints, >= 0 (0 disables periodic checkpoints).
     torch_threads : int, default 1
@@ -141,6 +157,12 @@ class TrainConfig:
     progress_bar : bool, default True
     verbose : int, default 0
         SB3 verbosity (1 prints the training table).
+    backend : {"sb3", "rllib"}, default "sb3"
+        Stable-Baselines3 in this process (:func:`train`), or Ray RLlib with env runners on
+        a Ray cluster (:func:`training.rllib_train.train_rllib`, needs the ``ray`` extra).
+    rllib : dict
+        Settings of the RLlib backend (:class:`training.rllib_train.RLlibSettings`: env
+        runners, Ray address, ``ppo`` and ``model``); the SB3 backend ignores them.
     """
 
     out: str
@@ -149,6 +171,7 @@ class TrainConfig:
     seed: int = 0
     n_envs: int = 2
     num_cpus: int = 1
+    vec_env: str = "supersuit"
     checkpoint_freq: int = 50_000
     torch_threads: int = 1
     device: str = "cpu"
@@ -159,6 +182,8 @@ class TrainConfig:
     pretrain: dict[str, Any] | None = None
     progress_bar: bool = True
     verbose: int = 0
+    backend: str = "sb3"
+    rllib: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         def _int(name: str, lo: int, hi: int | None = None) -> None:
@@ -173,6 +198,15 @@ class TrainConfig:
         _int("n_envs", 1)
         _int("seed", 0, EVAL_SEED_START - self.n_envs)
         _int("num_cpus", 0)
+        if self.vec_env not in _VEC_ENVS:
+            raise ValueError(
+                f"TrainConfig.vec_env must be one of {list(_VEC_ENVS)}, got {self.vec_env!r}"
+            )
+        if self.vec_env == "batched" and self.num_cpus > 1:
+            raise ValueError(
+                "TrainConfig.vec_env 'batched' steps every swarm copy in this process: "
+                f"num_cpus must be 0 or 1, got {self.num_cpus}"
+            )
         _int("checkpoint_freq", 0)
         _int("torch_threads", 1)
         _int("verbose", 0, 2)
@@ -182,13 +216,20 @@ class TrainConfig:
             )
         if not str(self.out):
             raise ValueError("TrainConfig.out must be a directory path")
-        for name in ("env", "ppo"):
+        if self.backend not in BACKENDS:
+            raise ValueError(
+                f"TrainConfig.backend must be one of {list(BACKENDS)}, got {self.backend!r}"
+            )
+        if self.rllib is None:
+            object.__setattr__(self, "rllib", {})
+        for name in ("env", "ppo", "rllib"):
             if not isinstance(getattr(self, name), Mapping):
                 raise ValueError(
                     f"TrainConfig.{name} must be a mapping, got {getattr(self, name)!r}"
                 )
         object.__setattr__(self, "env", dict(self.env))
         object.__setattr__(self, "ppo", dict(self.ppo))
+        object.__setattr__(self, "rllib", dict(self.rllib))
         if self.pretrain is not None:
             if not isinstance(self.pretrain, Mapping):
                 raise ValueError(f"TrainConfig.pretrain must be a mapping, got {self.pretrain!r}")
@@ -311,14 +352,28 @@ def find_latest_checkpoint(out: str | Path) -> Path:
     FileNotFoundError
         There is none.
     """
-    folder = Path(out) / "checkpoints"
+    return latest_numbered(Path(out) / "checkpoints", "*_steps.zip", _CHECKPOINT_RE, "")
+
+
+def latest_numbered(
+    folder: Path, glob: str, pattern: re.Pattern[str], kind: str, valid: Any = None
+) -> Path:
+    """The entry of ``folder`` matching ``glob`` whose ``pattern`` group 1 is largest.
+
+    ``valid`` (optional) filters candidates; ``kind`` names them in the error message.
+
+    Raises
+    ------
+    FileNotFoundError
+        There is none.
+    """
     found = []
-    for p in folder.glob("*_steps.zip"):
-        m = _CHECKPOINT_RE.search(p.name)
-        if m:
+    for p in folder.glob(glob):
+        m = pattern.search(p.name)
+        if m and (valid is None or valid(p)):
             found.append((int(m.group(1)), p))
     if not found:
-        raise FileNotFoundError(f"no checkpoint to resume from in {folder}")
+        raise FileNotFoundError(f"no {kind}checkpoint to resume from in {folder}")
     return max(found)[1]
 
 
@@ -700,7 +755,7 @@ def train(cfg: TrainConfig) -> Path:
     name = "config.yaml" if start_steps == 0 else f"config_resumed_at_{start_steps}.yaml"
     _write_yaml(out / name, resolved)
 
-    venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus)
+    venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=cfg.vec_env)
     suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
     monitor = VecMonitor(
         venv,
@@ -809,6 +864,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--n-envs", type=int, default=None, help="swarm copies stepped together")
     parser.add_argument("--num-cpus", type=int, default=None, help="worker processes (default 1)")
     parser.add_argument(
+        "--vec-env",
+        choices=_VEC_ENVS,
+        default=None,
+        help="vector environment: supersuit (default) or batched (urban_canyon_v0 only)",
+    )
+    parser.add_argument(
         "--checkpoint-freq", type=int, default=None, help="agent-steps between checkpoints"
     )
     parser.add_argument("--n-uavs", type=int, default=None, help="UAVs per swarm (env n_uavs)")
@@ -837,6 +898,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--verbose", type=int, default=None, help="SB3 verbosity (0-2)")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=None,
+        help="sb3 (default: Stable-Baselines3 in this process) or rllib (Ray RLlib, needs "
+        'pip install -e ".[ray]")',
+    )
+    parser.add_argument(
+        "--num-env-runners",
+        type=int,
+        default=None,
+        help="rllib: Ray actors stepping the environment (0: this process samples)",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="rllib: join the Ray cluster at HOST:PORT (see `ray start --head`) or 'auto' "
+        "(default: start a local Ray)",
+    )
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -851,11 +931,21 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         "seed": args.seed,
         "n_envs": args.n_envs,
         "num_cpus": args.num_cpus,
+        "vec_env": args.vec_env,
         "checkpoint_freq": args.checkpoint_freq,
         "resume": args.resume,
         "verbose": args.verbose,
     }
     data.update({k: v for k, v in flags.items() if v is not None})
+    if args.backend is not None:
+        data["backend"] = args.backend
+    rllib_flags = {"num_env_runners": args.num_env_runners, "address": args.address}
+    given = {k: v for k, v in rllib_flags.items() if v is not None}
+    if given and data.get("backend", "sb3") != "rllib":
+        flags_text = ", ".join("--" + k.replace("_", "-") for k in given)
+        raise ValueError(f"{flags_text} only apply to --backend rllib")
+    if given:
+        data["rllib"] = {**(data.get("rllib") or {}), **given}
     env = dict(data.get("env") or {})
     if args.n_uavs is not None:
         env["n_uavs"] = args.n_uavs
@@ -871,8 +961,13 @@ def run(args: argparse.Namespace) -> int:
     """Run ``coopnav train``; returns the exit status."""
     try:
         cfg = config_from_args(args)
-        final = train(cfg)
-    except (ValueError, FileNotFoundError) as exc:
+        if cfg.backend == "rllib":
+            from training.rllib_train import train_rllib
+
+            final = train_rllib(cfg)
+        else:
+            final = train(cfg)
+    except (ValueError, FileNotFoundError, ImportError, ConnectionError) as exc:
         print(f"coopnav train: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

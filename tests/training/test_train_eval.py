@@ -276,6 +276,25 @@ def test_evaluate_is_deterministic_and_writes_reports(tmp_path):
     data = json.loads((tmp_path / "e1" / "report.json").read_text())
     assert data["seeds"] == seeds and data["policies"][0]["policy"] == "random"
     assert "| random |" in (tmp_path / "e1" / "report.md").read_text()
+    assert [e["seed"] for e in data["episodes"]["random"]] == seeds
+    assert r1.paired_difference("random", "random") == (0.0, 0.0, 3)
+
+
+def test_paired_difference_by_episode():
+    from training.evaluate import EpisodeRecord, Report
+
+    def record(seed, errors):
+        e = np.asarray(errors, dtype=float)
+        z = np.zeros_like(e)
+        return EpisodeRecord(seed, e, e, z, z, e, None, z > 0, True, False, 0.0, e.shape[0])
+
+    a = [record(1, [[1.0, 3.0]]), record(2, [[5.0, np.nan]]), record(3, [[np.nan, np.nan]])]
+    b = [record(1, [[1.0, 1.0]]), record(2, [[2.0, 2.0]]), record(3, [[1.0, 1.0]])]
+    report = Report([], [1, 2, 3], {}, "x", episodes={"a": a, "b": b})
+    diff, se, n = report.paired_difference("a", "b")
+    assert n == 2  # episode 3: no fix for "a"
+    assert diff == pytest.approx((1.0 + 3.0) / 2)  # per-episode differences 1 and 3
+    assert se == pytest.approx(np.std([1.0, 3.0], ddof=1) / np.sqrt(2))
 
 
 def test_evaluate_bad_policies(tmp_path):
