@@ -548,8 +548,9 @@ def _wls_step(
         info, rhs, cross = _structured_normal(
             w, lin.A, lin.a, st.sys_slices, active, lam, sig_c, eps_load
         )
-    idx = np.arange(3, info.shape[-1])
-    info[:, idx, idx] += ~st.has_clock
+    if not st.has_clock.all():  # unit diagonal for the clocks of constellations not seen
+        idx = np.arange(3, info.shape[-1])
+        info[:, idx, idx] += ~st.has_clock
     inv, singular = _safe_inverse(info, usable)
     return inv, np.einsum("bpq,bq->bp", inv, rhs), cross, singular
 

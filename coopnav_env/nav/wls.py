@@ -77,14 +77,14 @@ def _safe_inverse(info: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.
     """
     d = np.sqrt(np.clip(np.diagonal(info, axis1=1, axis2=2), 1e-300, None))
     scaled = info / d[:, :, None] / d[:, None, :]
-    eye = np.eye(info.shape[-1])
     # (the np.where calls are skipped when they would select everything: the hot path)
-    eig = np.linalg.eigvalsh(
-        scaled if usable.all() else np.where(usable[:, None, None], scaled, eye)
-    )
+    if usable.all():
+        eig = np.linalg.eigvalsh(scaled)
+    else:
+        eig = np.linalg.eigvalsh(np.where(usable[:, None, None], scaled, np.eye(info.shape[-1])))
     singular = usable & ((eig[:, 0] <= 0) | (eig[:, -1] > COND_LIMIT * eig[:, 0]))
     good = usable & ~singular
-    safe = scaled if good.all() else np.where(good[:, None, None], scaled, eye)
+    safe = scaled if good.all() else np.where(good[:, None, None], scaled, np.eye(info.shape[-1]))
     inv = np.linalg.inv(safe) / d[:, :, None] / d[:, None, :]
     return inv, singular
 
