@@ -78,7 +78,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         base, options = _parse_options(name)
         try:
             return make_policy(base, env, **{**options, **kwargs})
-        except TypeError as exc:  # an option the policy's constructor does not take
+        except (TypeError, ValueError) as exc:  # an option the constructor rejects
             raise ValueError(f"bad option for policy {base!r} in {name!r}: {exc}") from None
     if name == "random":
         from agents.random_policy import RandomPolicy

@@ -154,7 +154,8 @@ the best a policy could do.
 3-D errors [m]; `inf` where that fix does not exist), `sig_e_m`, `sig_n_m`, `sig_u_m`,
 `sig_3d_m` (predicted sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`,
 `n_sats_open_sky`, `coop_status` and `standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK,
-1 too few satellites, 2 singular, 3 not converged, 4 no relative position), `nav_source`
+1 too few satellites, 2 singular, 3 not converged, 4 no relative position, 5 implausible
+position: the spurious far root), `nav_source`
 (`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
 `goal_distance_m`, `next_waypoint` (index into `world.route_xy_m`), `coop_rejected` and
 `standalone_rejected` (the solver's fix was OK but the integrity gate `max_fix_sigma_m`

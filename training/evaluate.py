@@ -323,10 +323,15 @@ class Report:
         Returns
         -------
         (mean difference [m], its standard error [m], episodes used)
-            Episodes in which either policy had no fix are skipped; SE is NaN below 2 pairs.
+            Episodes flown by only one of them or in which either had no fix are skipped; SE
+            is NaN below 2 pairs.
         """
+        ref = {e.seed: e for e in self.episodes[reference]}
         diffs = []
-        for a, b in zip(self.episodes[policy], self.episodes[reference]):
+        for a in self.episodes[policy]:
+            b = ref.get(a.seed)
+            if b is None:
+                continue
             ea, eb = _finite_mean(a.coop_error_m), _finite_mean(b.coop_error_m)
             if np.isfinite(ea) and np.isfinite(eb):
                 diffs.append(ea - eb)
@@ -739,13 +744,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--env-id",
         default=None,
-        help="environment (default: the one a ppo: policy was trained in, else urban_canyon_v0)",
+        help="environment (default: the one a ppo:/rllib: policy was trained in, else "
+        "urban_canyon_v0)",
     )
     parser.add_argument(
         "--train-config",
         default=None,
         help="config.yaml of a training run: evaluate in its environment (default: the run "
-        "directory of the first ppo: policy)",
+        "directory of the first ppo:/rllib: policy)",
     )
     parser.add_argument("--n-uavs", type=int, default=None, help="UAVs per swarm (env n_uavs)")
     parser.add_argument("--city", default=None, help="city layout (env setting 'city')")

@@ -39,15 +39,17 @@ socket path), the token of Ray's token authentication is passed in the environme
 redirected to a temporary directory. With ``address`` (``--address``) the run joins an existing
 cluster, whose files are where its ``ray start --temp-dir`` put them.
 
-Seeds: env runner ``i`` resets its envs with ``seed + i`` (RLlib's rule; runner 0 is this
-process), a resumed run with ``seed + N`` (``N`` agent-steps done, modulo the training seed
-range), all below :data:`training.evaluate.EVAL_SEED_START`.
+Seeds: copy ``j`` of env runner ``i`` first resets with ``seed + i E + j`` (``E`` =
+``num_envs_per_env_runner``; runner 0 is this process; see :func:`make_rllib_env`), a resumed
+run with ``seed + N`` (``N`` agent-steps done, modulo the training seed range), all below
+:data:`training.evaluate.EVAL_SEED_START`.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -239,7 +241,21 @@ def make_rllib_env(env_config: Mapping[str, Any]) -> Any:
     from training.train import make_env_fn
 
     env_id = str(env_config.get("env_id", "urban_canyon_v0"))
-    return ParallelPettingZooEnv(make_env_fn(env_id, dict(env_config.get("env_kwargs") or {}))())
+    env = ParallelPettingZooEnv(make_env_fn(env_id, dict(env_config.get("env_kwargs") or {}))())
+    # RLlib resets env runner i's vector env with seed + i, and gymnasium's vector env gives its
+    # copy j seed + i + j: with E > 1 copies per runner, copy j + 1 of runner i and copy j of
+    # runner i + 1 would replay the same episodes. Shifting runner i's seeds by i (E - 1) makes
+    # them seed + i E + j, distinct for every (runner, copy).
+    offset = int(getattr(env_config, "worker_index", 0) or 0) * (
+        int(env_config.get("num_envs_per_env_runner", 1)) - 1
+    )
+    if offset:
+        env.reset = functools.partial(_reset_with_seed_offset, env.reset, offset)
+    return env
+
+
+def _reset_with_seed_offset(reset: Any, offset: int, *, seed: int | None = None, options=None):
+    return reset(seed=None if seed is None else int(seed) + offset, options=options)
 
 
 def map_to_shared_policy(agent_id: Any, episode: Any = None, **kwargs: Any) -> str:
@@ -493,7 +509,11 @@ def build_ppo_config(cfg: TrainConfig, s: RLlibSettings, seed: int, env_name: st
         .framework("torch")
         .environment(
             env_name,
-            env_config={"env_id": cfg.env_id, "env_kwargs": dict(cfg.env)},
+            env_config={
+                "env_id": cfg.env_id,
+                "env_kwargs": dict(cfg.env),
+                "num_envs_per_env_runner": s.num_envs_per_env_runner,
+            },
             disable_env_checking=True,
         )
         .env_runners(
@@ -661,10 +681,11 @@ def train_rllib(cfg: TrainConfig) -> Path:
     )
 
     s = RLlibSettings.from_dict(cfg.rllib)
-    span = s.num_env_runners + s.num_envs_per_env_runner  # env seeds: seed .. seed + span - 1
+    # env seeds: seed + i E + j for runner i <= num_env_runners and copy j < E
+    span = (s.num_env_runners + 1) * s.num_envs_per_env_runner
     if cfg.seed + span > EVAL_SEED_START:
         raise ValueError(
-            f"seed {cfg.seed} + env runners + envs per runner must stay below "
+            f"seed {cfg.seed} + (env runners + 1) x envs per runner must stay below "
             f"{EVAL_SEED_START} (the held-out evaluation seeds), got {cfg.seed + span}"
         )
     ray = import_rllib()

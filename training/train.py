@@ -36,6 +36,7 @@ import copy
 import dataclasses
 import importlib
 import json
+import math
 import re
 import signal
 import sys
@@ -238,7 +239,29 @@ class TrainConfig:
                 raise ValueError(
                     f"unknown pretrain setting(s) {unknown}; valid: {sorted(_PRETRAIN_DEFAULTS)}"
                 )
-            object.__setattr__(self, "pretrain", {**_PRETRAIN_DEFAULTS, **self.pretrain})
+            pre = {**_PRETRAIN_DEFAULTS, **self.pretrain}
+            object.__setattr__(self, "pretrain", pre)
+            if not isinstance(pre["policy"], str) or not pre["policy"]:
+                raise ValueError(f"pretrain.policy must be a policy name, got {pre['policy']!r}")
+            if not isinstance(pre["policy_kwargs"], Mapping):
+                raise ValueError(
+                    f"pretrain.policy_kwargs must be a mapping, got {pre['policy_kwargs']!r}"
+                )
+            for key, lo in (("episodes", 1), ("epochs", 0)):
+                if not isinstance(pre[key], int) or isinstance(pre[key], bool) or pre[key] < lo:
+                    raise ValueError(f"pretrain.{key} must be an integer >= {lo}, got {pre[key]!r}")
+            lr = pre["learning_rate"]
+            if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not 0 < lr < math.inf:
+                raise ValueError(f"pretrain.learning_rate must be > 0, got {lr!r}")
+            # the teacher's episodes (seeds EVAL_SEED_START // 2 + seed + i) must stay below the
+            # held-out evaluation seeds
+            last = EVAL_SEED_START // 2 + self.seed + pre["episodes"]
+            if last > EVAL_SEED_START:
+                raise ValueError(
+                    f"pretrain: the teacher's episode seeds {EVAL_SEED_START // 2 + self.seed}.."
+                    f"{last - 1} would reach the held-out evaluation seeds (>= {EVAL_SEED_START}); "
+                    f"lower seed ({self.seed}) or pretrain.episodes ({pre['episodes']})"
+                )
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
@@ -894,7 +917,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--resume",
         default=None,
         metavar="CHECKPOINT",
-        help="continue from a checkpoint (.zip) or 'latest' (newest in OUT/checkpoints)",
+        help="continue from a checkpoint (SB3: a .zip; rllib: a checkpoint folder "
+        "rllib_<N>_steps) or 'latest' (the newest in OUT/checkpoints)",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--verbose", type=int, default=None, help="SB3 verbosity (0-2)")

