@@ -163,6 +163,10 @@ class GnssObservations:
             raise ValueError(f"sigma_common_m must be finite and >= 0, got {sc[~(sc >= 0)][:3]}")
         if np.any(~np.isfinite(el[visible])):
             raise ValueError("el_deg must be finite for every received satellite")
+        self._store(pr, sv, system, su, sc, el, visible)
+
+    def _store(self, pr, sv, system, su, sc, el, visible) -> None:
+        """Set the fields from valid arrays (the one place that decides what is stored)."""
         # Values at satellites that are not received are irrelevant: store NaN there so that
         # nothing downstream can use them by accident.
         su = np.where(visible, su, np.nan)
@@ -177,6 +181,27 @@ class GnssObservations:
         ):
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "visible", visible)
+
+    @classmethod
+    def _trusted_from_epoch(cls, epoch, n_systems: int = len(SYSTEMS)) -> GnssObservations:
+        """:meth:`from_epoch` without the validation, for the simulator's own output.
+
+        The simulator's arrays are valid by construction (shapes, finite where received, NaN
+        elsewhere); the hot path of :class:`coopnav_env.sim.UrbanWorld` skips the checks. The
+        stored fields are exactly those of :meth:`from_epoch` (same ``_store``).
+        """
+        out = object.__new__(cls)
+        object.__setattr__(out, "n_systems", n_systems)
+        out._store(
+            epoch.pr_m,
+            epoch.sv_ecef_m,
+            epoch.system,
+            epoch.sigma_user_m,
+            epoch.sigma_common_m,
+            epoch.el_deg,
+            np.isfinite(epoch.pr_m),
+        )
+        return out
 
     @property
     def n_rx(self) -> int:
@@ -262,9 +287,26 @@ class RelativePositions:
         if not np.all(np.isfinite(rel[avail])):
             raise ValueError("rel_ecef_m contains NaN or inf for an available pair")
         _check_cov("cov_ecef_m2", cov[avail])
+        self._store(rel, cov, avail)
+
+    def _store(self, rel: np.ndarray, cov: np.ndarray, avail: np.ndarray) -> None:
         object.__setattr__(self, "rel_ecef_m", rel)
         object.__setattr__(self, "cov_ecef_m2", cov)
         object.__setattr__(self, "available", avail)
+
+    @classmethod
+    def _trusted(cls, rel: np.ndarray, cov: np.ndarray, available: np.ndarray) -> RelativePositions:
+        """The constructor without its checks, for measurements valid by construction.
+
+        :func:`coopnav_env.sim.swarm.measure_relative_positions` gives finite values and
+        symmetric PSD covariances; skipping ``__post_init__``'s checks (an eigenvalue
+        decomposition per pair, a millisecond for 50 UAVs) stores exactly the same arrays.
+        """
+        out = object.__new__(cls)
+        avail = np.array(available, dtype=bool)  # a copy: the caller's array is not modified
+        np.fill_diagonal(avail, True)
+        out._store(rel, cov, avail)
+        return out
 
     @property
     def n_rx(self) -> int:

@@ -50,9 +50,10 @@ The flow of one epoch (:meth:`UrbanWorld.step`)
    iterations; the first epoch of an episode starts from the known launch positions. The start
    point matters: a fix with no redundancy (as many pseudoranges as unknowns, e.g. 5 GPS + BDS
    satellites for 3 coordinates and 2 clocks) has two exact solutions, and Gauss-Newton
-   started at the Earth's centre (the solvers' default) can converge, status OK, to the far
-   one, 50,000-70,000 km away (``tests/sim/test_scenario.py`` has a case). Started within a
-   few kilometres of the truth it finds the near one.
+   started at the Earth's centre (the solvers' default) can converge to the far one, tens of
+   thousands of km away, which the solvers report as ``IMPLAUSIBLE_POSITION``
+   (``tests/sim/test_scenario.py`` has a case). Started within a few kilometres of the truth
+   it finds the near one.
 
    The estimate a UAV *uses* (``nav_*``, what the environment observes and rewards) is its
    cooperative fix when that is valid, else its standalone fix (a UAV out of relative range of
@@ -95,7 +96,6 @@ from numpy.typing import ArrayLike
 from coopnav_env.constants import SHANGHAI_ALT_M, SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG, SYSTEMS
 from coopnav_env.gnss import (
     ErrorModel,
-    PseudorangeEpoch,
     azimuth_elevation,
     default_constellation,
     direction_enu,
@@ -730,7 +730,7 @@ class UrbanWorld:
         """
         r = self.rot_enu
         if row is None:
-            return _trusted_relative(rel_enu_m @ r, r.T @ cov_enu_m2 @ r, available)
+            return RelativePositions._trusted(rel_enu_m @ r, r.T @ cov_enu_m2 @ r, available)
         n = available.shape[0]
         rel = np.zeros((n, n, 3))
         cov = np.zeros((n, n, 3, 3))
@@ -738,7 +738,7 @@ class UrbanWorld:
         rel[row] = rel_enu_m[row] @ r
         cov[row] = r.T @ cov_enu_m2[row] @ r
         avail[row] = available[row]
-        return _trusted_relative(rel, cov, avail)
+        return RelativePositions._trusted(rel, cov, avail)
 
     # ---- episode ----------------------------------------------------------------------------
 
@@ -873,7 +873,7 @@ class UrbanWorld:
             self.clock_bias_m,
             bias,
         )
-        obs = _trusted_observations(pr)
+        obs = GnssObservations._trusted_from_epoch(pr)
         rel_enu, rel_cov_enu, avail = measure_relative_positions(rng, pos, cfg.relative_sensing)
 
         # warm start: the previous estimates moved by the velocity; at the first epoch of an
@@ -983,47 +983,6 @@ class UrbanWorld:
             coop_rejected=co_rej,
             next_waypoint=self.next_wp.copy(),
         )
-
-
-def _trusted_relative(rel: np.ndarray, cov: np.ndarray, available: np.ndarray) -> RelativePositions:
-    """:class:`RelativePositions` of the world's own measurements, without re-validating them.
-
-    The world's relative measurements are finite with symmetric PSD covariances by
-    construction (:func:`~coopnav_env.sim.swarm.measure_relative_positions`), so the checks of
-    ``RelativePositions.__post_init__`` (an eigenvalue decomposition per pair, a millisecond
-    for 50 UAVs) are skipped; the stored arrays are exactly what it would store.
-    """
-    out = object.__new__(RelativePositions)
-    avail = np.array(available, dtype=bool)
-    np.fill_diagonal(avail, True)
-    object.__setattr__(out, "rel_ecef_m", rel)
-    object.__setattr__(out, "cov_ecef_m2", cov)
-    object.__setattr__(out, "available", avail)
-    return out
-
-
-def _trusted_observations(pr: PseudorangeEpoch) -> GnssObservations:
-    """``GnssObservations.from_epoch(pr)`` without re-validating the simulator's output.
-
-    The simulator's arrays have the right shapes, finite values where received and NaN
-    elsewhere; the fields are set exactly as ``GnssObservations.__post_init__`` sets them
-    (user sigma and elevation replaced by NaN where not received).
-    """
-    out = object.__new__(GnssObservations)
-    visible = np.isfinite(pr.pr_m)
-    fields_ = {
-        "pr_m": pr.pr_m,
-        "sv_ecef_m": pr.sv_ecef_m,
-        "system": pr.system.astype(np.int64),
-        "sigma_user_m": np.where(visible, pr.sigma_user_m, np.nan),
-        "sigma_common_m": pr.sigma_common_m,
-        "el_deg": np.where(visible, pr.el_deg, np.nan),
-        "n_systems": len(SYSTEMS),
-        "visible": visible,
-    }
-    for name, value in fields_.items():
-        object.__setattr__(out, name, value)
-    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -98,7 +98,7 @@ def test_unchecked_pseudoranges_and_solver_inputs_equal_the_checked_ones() -> No
             )
             for name in a.__dataclass_fields__:
                 np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
-            checked, fast = GnssObservations.from_epoch(a), S._trusted_observations(a)
+            checked, fast = GnssObservations.from_epoch(a), GnssObservations._trusted_from_epoch(a)
             for name in checked.__dataclass_fields__:
                 x, y = getattr(checked, name), getattr(fast, name)
                 assert np.asarray(x).dtype == np.asarray(y).dtype, name
@@ -106,7 +106,7 @@ def test_unchecked_pseudoranges_and_solver_inputs_equal_the_checked_ones() -> No
     pos = rng.normal(0.0, 60.0, (6, 3))
     rel, cov, avail = measure_relative_positions(rng, pos, RelativeSensingConfig(max_range_m=90))
     checked = RelativePositions(rel, cov, avail)
-    fast = S._trusted_relative(rel, cov, avail)
+    fast = RelativePositions._trusted(rel, cov, avail)
     for name in ("rel_ecef_m", "cov_ecef_m2", "available"):
         np.testing.assert_array_equal(getattr(checked, name), getattr(fast, name))
     assert not avail.diagonal().any()  # the caller's array is not modified
