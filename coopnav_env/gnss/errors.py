@@ -200,7 +200,12 @@ def sigma_user_m(el_deg: ArrayLike, factor: ArrayLike) -> NDArray[np.float64]:
     fac = as_float_array(factor, "factor")
     if np.any(fac < 0.0):
         raise ValueError(f"factor must be >= 0, got {fac}")
-    return fac * np.hypot(sigma_multipath_m(el_deg), sigma_noise_m(el_deg))
+    return _sigma_user(as_elevation_deg(el_deg, "el_deg"), fac)
+
+
+def _sigma_user(el: NDArray[np.float64], factor: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`sigma_user_m` of validated elevations and factors."""
+    return factor * np.hypot(_sigma_multipath(el), _sigma_noise(el))
 
 
 # --------------------------------------------------------------------------------------------
@@ -317,11 +322,14 @@ class ErrorModel:
             ``sqrt(sigma_URE^2 + sigma_tropo^2)`` [m], without the troposphere if
             ``tropo`` is false, and 0 if ``differential``.
         """
-        el = as_elevation_deg(el_deg, "el_deg")
+        return self._sigma_common(as_elevation_deg(el_deg, "el_deg"))
+
+    def _sigma_common(self, el: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:meth:`sigma_common_m` of validated elevations."""
         if self.differential:
             return np.zeros(el.shape)
-        tropo = sigma_tropo_m(el) if self.tropo else np.zeros(el.shape)
-        return np.hypot(sigma_ure_m(el, self.sigma_ure_m), tropo)
+        tropo = _sigma_tropo(el) if self.tropo else np.zeros(el.shape)
+        return np.hypot(np.full(el.shape, self.sigma_ure_m), tropo)
 
     def sigma_user_m(self, el_deg: ArrayLike, system: ArrayLike) -> NDArray[np.float64]:
         """Standard deviation of the receiver-related error (Eq. 6-8).
@@ -345,7 +353,7 @@ class ErrorModel:
                 f"el_deg must have shape (..., {factor.shape[0]}) to match system, "
                 f"got shape {el.shape}"
             )
-        return sigma_user_m(el, factor)
+        return _sigma_user(el, factor)
 
 
 # --------------------------------------------------------------------------------------------
@@ -609,13 +617,8 @@ def _simulate_pseudoranges(
         el_ref = el_deg.mean(axis=0)
 
     # model.sigma_common_m(el_ref) and model.sigma_user_m(el_deg, sys_idx), unchecked
-    if model.differential:
-        sigma_common = np.zeros(el_ref.shape)
-    else:
-        tropo = _sigma_tropo(el_ref) if model.tropo else np.zeros(el_ref.shape)
-        sigma_common = np.hypot(np.full(el_ref.shape, model.sigma_ure_m), tropo)
-    factor = _iono_factors(model)[sys_idx]
-    sigma_user = factor * np.hypot(_sigma_multipath(el_deg), _sigma_noise(el_deg))
+    sigma_common = model._sigma_common(el_ref)
+    sigma_user = _sigma_user(el_deg, _iono_factors(model)[sys_idx])
 
     z_common = gen.standard_normal(n_sv)  # always first, always full size
     z_user = gen.standard_normal((n_rx, n_sv))
