@@ -24,7 +24,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from coopnav_env.envs.config import UrbanCanyonConfig, make_config
-from coopnav_env.sim.route import remaining_route_m, route_tail_lengths_m
+from coopnav_env.sim.route import remaining_route_m
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
 __all__ = ["REWARD_TERMS", "UrbanCanyonEnv", "aec_env", "parallel_env"]
@@ -197,8 +197,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         # progress: decrease of the remaining street route, both ends measured to the
         # waypoint that was next at the previous step (no reward for switching waypoints)
         route = self.world.route_xy_m
-        d_prev = remaining_route_m(route, prev.pos_enu_m[:, :2], prev.next_waypoint)
-        d_now = remaining_route_m(route, ep.pos_enu_m[:, :2], prev.next_waypoint)
+        tail = self.world.route_tail_m
+        d_prev = remaining_route_m(route, prev.pos_enu_m[:, :2], prev.next_waypoint, tail)
+        d_now = remaining_route_m(route, ep.pos_enu_m[:, :2], prev.next_waypoint, tail)
         in_goal = ep.goal_distance_m <= cfg.goal_radius_m
         crash = bool(ep.collided.any())
         reached = bool(in_goal.all()) and not crash
@@ -284,7 +285,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         est_xy = ep.nav_pos_enu_m[:, :2]
         to_wp = route[wp] - est_xy
         after = route[np.minimum(wp + 1, last)] - route[wp]  # 0 when the next one is the goal
-        remaining = np.linalg.norm(to_wp, axis=1) + route_tail_lengths_m(route)[wp]
+        remaining = remaining_route_m(route, est_xy, wp, self.world.route_tail_m)
         kin = cfg.kinematics
         alt = (ep.nav_pos_enu_m[:, 2] - kin.altitude_min_m) / (
             kin.altitude_max_m - kin.altitude_min_m

@@ -146,7 +146,9 @@ def route_tail_lengths_m(route: ArrayLike) -> np.ndarray:
     return np.r_[np.cumsum(legs[::-1])[::-1], 0.0]
 
 
-def remaining_route_m(route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike) -> np.ndarray:
+def remaining_route_m(
+    route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike, tail_m: np.ndarray | None = None
+) -> np.ndarray:
     """Remaining route length of each point: straight to its next waypoint, then along the route.
 
     ``|xy - route[next_wp]| + (length of the route after route[next_wp])``.
@@ -159,6 +161,8 @@ def remaining_route_m(route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike) -> np
         Horizontal positions [m].
     next_wp : array_like of int, shape (n,)
         Index of each point's next waypoint, in ``[0, k - 1]``.
+    tail_m : ndarray, shape (k,), optional
+        :func:`route_tail_lengths_m` of ``route``, when the caller already has it.
 
     Returns
     -------
@@ -169,7 +173,7 @@ def remaining_route_m(route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike) -> np
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     idx = np.asarray(next_wp, dtype=np.int64)
     d = np.linalg.norm(xy - pts[idx], axis=1)
-    return d + route_tail_lengths_m(pts)[idx]
+    return d + (route_tail_lengths_m(pts) if tail_m is None else tail_m)[idx]
 
 
 def advance_waypoints(

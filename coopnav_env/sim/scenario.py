@@ -127,7 +127,7 @@ from coopnav_env.sim.city import (
     generate_city,
     sky_directions,
 )
-from coopnav_env.sim.route import advance_waypoints, street_route
+from coopnav_env.sim.route import advance_waypoints, route_tail_lengths_m, street_route
 from coopnav_env.sim.swarm import (
     KinematicsConfig,
     RelativeSensingConfig,
@@ -790,6 +790,7 @@ class UrbanWorld:
                 raise ValueError("goal_enu_m must be finite with shape (3,)")
         self.goal_enu_m = goal
         self.route_xy_m = street_route(city, pos[:, :2].mean(axis=0), goal[:2])
+        self.route_tail_m = route_tail_lengths_m(self.route_xy_m)  # route left after each point
         self.next_wp = np.full(n, min(1, self.route_xy_m.shape[0] - 1), dtype=np.int64)
         self.start_enu_m = pos.copy()
         self.pos_enu_m = pos
