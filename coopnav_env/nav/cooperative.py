@@ -67,7 +67,10 @@ per UAV (diagonal user errors plus a rank-3 relative-error term) plus a rank-``n
 errors common to all UAVs. We write each low-rank term as a latent variable with a unit prior
 and eliminate, in order: the per-UAV latent (Woodbury with a 3x3 solve per UAV), the per-UAV
 nuisance clocks (an ``N_const x N_const`` solve per UAV), and the common errors (one
-``n_sv x n_sv`` Cholesky). All of it is batched over UAVs and centroids with numpy.
+``n_sv x n_sv`` Cholesky). For the exact model the Gauss-Newton loop runs in a compiled kernel
+(:mod:`coopnav_env.nav._kernels`, numba), one loop per centroid problem; the numpy formulation
+here (batched over UAVs and centroids) serves the paper's covariance and the literal DDT, and
+is the second implementation the tests compare the kernel with.
 """
 
 from __future__ import annotations
@@ -77,6 +80,7 @@ from typing import Literal
 
 import numpy as np
 
+from coopnav_env.nav import _kernels
 from coopnav_env.nav.types import (
     PLAUSIBLE_RADIUS_M,
     GnssObservations,
@@ -95,6 +99,10 @@ __all__ = [
     "solve_cooperative_samples",
     "solve_master_slave",
 ]
+
+_USE_KERNEL = True
+"""Run the exact structured model in the compiled kernel (False: the numpy formulation, which
+the tests use as a second implementation)."""
 
 Transfer = Literal["sdt", "ddt"]
 CovarianceModel = Literal["exact", "paper"]
@@ -565,13 +573,41 @@ def _gauss_newton(
     max_iter: int,
     tol_m: float,
 ):
+    """Gauss-Newton iterations of the centroid WLS of every problem of ``st``.
+
+    Returns ``pos, clk, inv, cross, converged, singular, rows, n_nuis, n_iter``: the rows used
+    (B, N, S) and the number of nuisance clocks they carry (B,) are what :func:`_finish` needs.
+    The exact structured model runs in the compiled kernel
+    (:func:`coopnav_env.nav._kernels.cooperative_gauss_newton`); the paper's covariance, the
+    literal DDT and the dense reference run the numpy formulation below.
+    """
     n_b = st.ref.shape[0]
     n_sys = obs.n_systems
     p_dim = 3 + n_sys
-    pos = x0.copy()
-    clk = np.zeros((n_b, n_sys))
     literal = transfer == "ddt" and (covariance == "paper" or method == "dense")
     usable = ~st.too_few
+    is_ref = np.arange(obs.n_rx)[None, :] == st.ref[:, None]  # (B, N)
+    if method == "structured" and covariance == "exact" and _USE_KERNEL:
+        pos, clk, inv, cross, converged, singular, iters = _kernels.cooperative_gauss_newton(
+            np.ascontiguousarray(st.pr, dtype=float),
+            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+            np.where(obs.visible, 1.0 / np.where(obs.visible, obs.sigma_user_m, 1.0) ** 2, 0.0),
+            np.ascontiguousarray(obs.sigma_common_m, dtype=float),
+            np.ascontiguousarray(obs.system, dtype=np.int64),
+            np.ascontiguousarray(st.used),
+            np.ascontiguousarray(st.base, dtype=float),
+            np.ascontiguousarray(st.froot, dtype=float),
+            is_ref,
+            np.ascontiguousarray(st.has_clock),
+            np.ascontiguousarray(usable),
+            np.ascontiguousarray(x0, dtype=float),
+            int(max_iter),
+            float(tol_m),
+        )
+        n_iter = int(iters.max()) if iters.size else 0
+        return pos, clk, inv, cross, converged, singular, st.used, _n_nuisance(obs, st), n_iter
+    pos = x0.copy()
+    clk = np.zeros((n_b, n_sys))
     converged = np.zeros(n_b, dtype=bool)
     singular = np.zeros(n_b, dtype=bool)
     inv = np.zeros((n_b, p_dim, p_dim))
@@ -587,7 +623,16 @@ def _gauss_newton(
         converged = np.linalg.norm(dx[:, :3], axis=1) < tol_m
         if np.all(converged | ~usable | singular):
             break
-    return pos, clk, inv, cross, converged, singular, lin, n_iter
+    n_nuis = _n_nuisance(obs, st) if lin.nuis.shape[-1] else np.zeros(n_b, dtype=int)
+    return pos, clk, inv, cross, converged, singular, lin.rows, n_nuis, n_iter
+
+
+def _n_nuisance(obs: GnssObservations, st: _Setup) -> np.ndarray:
+    """Nuisance clocks (UAV other than the reference, constellation with a row) per problem."""
+    onehot = np.eye(obs.n_systems)[obs.system]  # (S, n_sys)
+    per = np.einsum("bns,sq->bnq", st.used.astype(float), onehot) > 0
+    not_ref = np.arange(obs.n_rx)[None, :] != st.ref[:, None]
+    return (per & not_ref[:, :, None]).sum(axis=(1, 2))
 
 
 # --------------------------------------------------------------------------------------------
@@ -760,11 +805,11 @@ def solve_cooperative(
         x0 = x0 + np.asarray(x0_ecef_m, dtype=float)
         if x0.shape != (n_b, 3) or not np.all(np.isfinite(x0)):
             raise ValueError(f"x0_ecef_m must be finite with shape ({n_b}, 3) or (3,)")
-    pos, clk, inv, cross, converged, singular, lin, n_iter = _gauss_newton(
+    pos, clk, inv, cross, converged, singular, rows, n_nuis, n_iter = _gauss_newton(
         obs, st, x0, transfer, covariance, method, max_iter, tol_m
     )
     c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = _finish(
-        obs, st, pos, clk, inv, cross, converged, singular, lin, plausible_radius_m
+        obs, st, pos, clk, inv, cross, converged, singular, rows, n_nuis, plausible_radius_m
     )
     if isinstance(centroid, str):  # "self": UAV q's solution is centroid q's
         uav_pos, uav_cov, uav_status = c_pos, h_star, c_status.copy()
@@ -784,17 +829,12 @@ def solve_cooperative(
     )
 
 
-def _finish(obs, st, pos, clk, inv, cross, converged, singular, lin, plausible_radius_m):
+def _finish(obs, st, pos, clk, inv, cross, converged, singular, rows, n_nuis, plausible_radius_m):
     """Statuses, centroid outputs and every UAV's position/covariance from each centroid."""
-    rows = lin.rows
     n_b = pos.shape[0]
     n_meas = rows.sum(axis=(1, 2))
     n_uavs = rows.any(axis=2).sum(axis=1)
     # counting rule: measurements minus per-UAV nuisance clocks must cover the unknowns
-    if lin.nuis.shape[-1]:
-        n_nuis = (np.einsum("bnsq,bns->bnq", lin.nuis, rows.astype(float)) > 0).sum(axis=(1, 2))
-    else:
-        n_nuis = np.zeros(n_b, dtype=int)
     too_few = st.too_few | (n_meas - n_nuis < 3 + st.has_clock.sum(axis=1))
     c_status = np.full(n_b, NavStatus.OK, dtype=np.int64)
     c_status[~converged] = NavStatus.NOT_CONVERGED
@@ -894,11 +934,11 @@ def solve_cooperative_samples(
     rep["pr"] = np.where(obs.visible[None], pr_samples_m, 0.0)
     st = replace(st, **rep)
     x0 = np.zeros((k, 3)) if x0_ecef_m is None else np.broadcast_to(x0_ecef_m, (k, 3)).copy()
-    pos, clk, inv, cross, converged, singular, lin, n_iter = _gauss_newton(
+    pos, clk, inv, cross, converged, singular, rows, n_nuis, n_iter = _gauss_newton(
         obs, st, x0, transfer, covariance, "structured", max_iter, tol_m
     )
     c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = _finish(
-        obs, st, pos, clk, inv, cross, converged, singular, lin, plausible_radius_m
+        obs, st, pos, clk, inv, cross, converged, singular, rows, n_nuis, plausible_radius_m
     )
     return CooperativeSolution(
         pos_ecef_m=uav_pos,

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from coopnav_env.nav import _kernels
+from coopnav_env.nav._kernels import COND_LIMIT
 from coopnav_env.nav.types import (
     PLAUSIBLE_RADIUS_M,
     GnssObservations,
@@ -21,8 +23,10 @@ from coopnav_env.nav.types import (
 
 __all__ = ["StandaloneSolution", "solve_standalone"]
 
-#: A normal matrix whose diagonally scaled condition number exceeds this is reported singular.
-COND_LIMIT = 1e10
+#: A normal matrix whose diagonally scaled condition number exceeds ``COND_LIMIT`` (defined
+#: in :mod:`coopnav_env.nav._kernels`) is reported singular.
+_USE_KERNEL = True
+"""Run the Gauss-Newton loop in the compiled kernel (False: the numpy formulation)."""
 
 
 @dataclass(frozen=True)
@@ -132,7 +136,7 @@ def solve_standalone(
         raise ValueError(f"max_iter must be >= 1, got {max_iter}")
     if not tol_m > 0:
         raise ValueError(f"tol_m must be > 0, got {tol_m}")
-    n_rx, n_sv = obs.pr_m.shape
+    n_rx = obs.pr_m.shape[0]
     n_sys = obs.n_systems
     vis = obs.visible
     w = np.where(vis, 1.0 / (obs.sigma_user_m**2 + obs.sigma_common_m[None, :] ** 2), 0.0)
@@ -147,9 +151,51 @@ def solve_standalone(
         pos = pos + np.asarray(x0_ecef_m, dtype=float)
         if not np.all(np.isfinite(pos)):
             raise ValueError("x0_ecef_m contains NaN or inf")
+    usable = ~too_few
+    if _USE_KERNEL:
+        pos, clock, inv, converged, singular, iters = _kernels.standalone_gauss_newton(
+            pr,
+            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+            w,
+            np.ascontiguousarray(obs.system, dtype=np.int64),
+            seen,
+            usable,
+            np.ascontiguousarray(pos),
+            int(max_iter),
+            float(tol_m),
+        )
+        n_iter = int(iters.max()) if iters.size else 0
+    else:
+        pos, clock, inv, converged, singular, n_iter = _gauss_newton_numpy(
+            obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m
+        )
+    status = np.full(n_rx, NavStatus.OK, dtype=np.int64)
+    status[~converged] = NavStatus.NOT_CONVERGED
+    status[converged & implausible_radius(pos, plausible_radius_m)] = NavStatus.IMPLAUSIBLE_POSITION
+    status[singular] = NavStatus.SINGULAR_GEOMETRY
+    status[too_few] = NavStatus.TOO_FEW_SATELLITES
+    failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)
+    pos[failed] = np.nan
+    cov = inv[:, :3, :3].copy()
+    cov[failed] = np.nan
+    clock = np.where(seen & ~failed[:, None], clock, np.nan)
+    return StandaloneSolution(
+        pos_ecef_m=pos,
+        cov_ecef_m2=cov,
+        clock_m=clock,
+        status=status,
+        n_used=n_used,
+        n_iter=n_iter,
+    )
+
+
+def _gauss_newton_numpy(obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m):
+    """The numpy formulation of the standalone Gauss-Newton loop (second implementation of
+    :func:`coopnav_env.nav._kernels.standalone_gauss_newton`, used by the tests)."""
+    n_rx, n_sv = pr.shape
+    n_sys = seen.shape[1]
     clock = np.zeros((n_rx, n_sys))
     converged = np.zeros(n_rx, dtype=bool)
-    usable = ~too_few
     n_iter = 0
     singular = np.zeros(n_rx, dtype=bool)
     inv = np.zeros((n_rx, 3 + n_sys, 3 + n_sys))
@@ -174,21 +220,4 @@ def solve_standalone(
         converged = step < tol_m
         if np.all(converged | ~usable | singular):
             break
-    status = np.full(n_rx, NavStatus.OK, dtype=np.int64)
-    status[~converged] = NavStatus.NOT_CONVERGED
-    status[converged & implausible_radius(pos, plausible_radius_m)] = NavStatus.IMPLAUSIBLE_POSITION
-    status[singular] = NavStatus.SINGULAR_GEOMETRY
-    status[too_few] = NavStatus.TOO_FEW_SATELLITES
-    failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)
-    pos[failed] = np.nan
-    cov = inv[:, :3, :3].copy()
-    cov[failed] = np.nan
-    clock = np.where(seen & ~failed[:, None], clock, np.nan)
-    return StandaloneSolution(
-        pos_ecef_m=pos,
-        cov_ecef_m2=cov,
-        clock_m=clock,
-        status=status,
-        n_used=n_used,
-        n_iter=n_iter,
-    )
+    return pos, clock, inv, converged, singular, n_iter

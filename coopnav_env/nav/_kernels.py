@@ -1,0 +1,495 @@
+r"""Compiled (numba) Gauss-Newton loops of the standalone and the cooperative WLS solvers.
+
+The public solvers (:func:`~coopnav_env.nav.solve_standalone`,
+:func:`~coopnav_env.nav.solve_cooperative`) validate their inputs, prepare the problem with
+numpy and hand the iteration to these kernels: one compiled loop per receiver (standalone) or
+per centroid problem (cooperative), in which a numpy implementation would spend its time in the
+call overhead of a few hundred small array operations per iteration.
+
+The algebra is exactly that of the numpy formulation (see the docstring of
+``coopnav_env.nav.cooperative._structured_normal`` for the elimination order); only the order
+of the floating-point sums differs, so results agree with it to about 1e-12 relative (the tests
+compare both, and the dense literal solve). Two further differences, both below 1e-9 m:
+
+* each problem stops iterating as soon as its own update is below ``tol_m`` (the numpy loop
+  iterates all problems until the last one has converged);
+* the small dense solves are hand-written (Cholesky for symmetric positive definite matrices,
+  cyclic Jacobi for the eigenvalues of the conditioning check), so the kernels need no LAPACK.
+
+The kernels are compiled on first use and cached on disk beside this file (numba
+``cache=True``); the first call of a fresh installation takes a few seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# the same limit as coopnav_env.nav.wls.COND_LIMIT (imported there from here)
+COND_LIMIT = 1e10
+
+
+@njit(cache=True)
+def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
+    """Inverse of the symmetric positive definite ``a`` into ``out``; False if not SPD."""
+    n = a.shape[0]
+    low = np.zeros((n, n))
+    for j in range(n):
+        s = a[j, j]
+        for k in range(j):
+            s -= low[j, k] * low[j, k]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        low[j, j] = d
+        for i in range(j + 1, n):
+            s = a[i, j]
+            for k in range(j):
+                s -= low[i, k] * low[j, k]
+            low[i, j] = s / d
+    # inverse of the triangular factor, then inv(a) = inv(L)^T inv(L)
+    linv = np.zeros((n, n))
+    for j in range(n):
+        linv[j, j] = 1.0 / low[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= low[i, k] * linv[k, j]
+            linv[i, j] = s / low[i, i]
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.0
+            for k in range(j, n):
+                s += linv[k, i] * linv[k, j]
+            out[i, j] = s
+            out[j, i] = s
+    return True
+
+
+@njit(cache=True)
+def _eig_extremes_sym(a: np.ndarray) -> tuple[float, float]:
+    """Smallest and largest eigenvalue of a small symmetric matrix (cyclic Jacobi)."""
+    n = a.shape[0]
+    m = a.copy()
+    for _sweep in range(60):
+        off = 0.0
+        for i in range(n):
+            for j in range(i + 1, n):
+                off += m[i, j] * m[i, j]
+        diag = 0.0
+        for i in range(n):
+            diag += m[i, i] * m[i, i]
+        if off <= 1e-30 * diag or off == 0.0:
+            break
+        for p in range(n):
+            for q in range(p + 1, n):
+                apq = m[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (m[q, q] - m[p, p]) / (2.0 * apq)
+                t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(n):
+                    mkp = m[k, p]
+                    mkq = m[k, q]
+                    m[k, p] = c * mkp - s * mkq
+                    m[k, q] = s * mkp + c * mkq
+                for k in range(n):
+                    mpk = m[p, k]
+                    mqk = m[q, k]
+                    m[p, k] = c * mpk - s * mqk
+                    m[q, k] = s * mpk + c * mqk
+    lo = m[0, 0]
+    hi = m[0, 0]
+    for i in range(1, n):
+        lo = min(lo, m[i, i])
+        hi = max(hi, m[i, i])
+    return lo, hi
+
+
+@njit(cache=True)
+def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
+    """One matrix of ``coopnav_env.nav.wls._safe_inverse``: inverse into ``out``; singular?
+
+    The matrix is scaled to unit diagonal; it is singular when its smallest eigenvalue is not
+    positive or its condition number exceeds ``COND_LIMIT``. A singular or unusable matrix
+    gets the (scaled-back) identity.
+    """
+    p = info.shape[0]
+    d = np.empty(p)
+    for i in range(p):
+        d[i] = np.sqrt(max(info[i, i], 1e-300))
+    scaled = np.empty((p, p))
+    for i in range(p):
+        for j in range(p):
+            scaled[i, j] = info[i, j] / d[i] / d[j]
+    singular = False
+    good = usable
+    if usable:
+        lo, hi = _eig_extremes_sym(scaled)
+        singular = (lo <= 0.0) or (hi > COND_LIMIT * lo)
+        good = not singular
+    if good:
+        ok = _cholesky_inverse(scaled, out)
+        if not ok:  # numerically indefinite despite the eigenvalue test
+            singular = True
+            good = False
+    if not good:
+        for i in range(p):
+            for j in range(p):
+                out[i, j] = 0.0
+            out[i, i] = 1.0
+    for i in range(p):
+        for j in range(p):
+            out[i, j] = out[i, j] / d[i] / d[j]
+    return singular
+
+
+@njit(cache=True)
+def standalone_gauss_newton(
+    pr: np.ndarray,  # (R, S) pseudoranges, 0 where not received
+    sv: np.ndarray,  # (S, 3)
+    w: np.ndarray,  # (R, S) weights, 0 where not received
+    system: np.ndarray,  # (S,) constellation index
+    seen: np.ndarray,  # (R, n_sys) bool
+    usable: np.ndarray,  # (R,) bool
+    x0: np.ndarray,  # (R, 3)
+    max_iter: int,
+    tol_m: float,
+):
+    """Gauss-Newton of Eq. 14-17 per receiver.
+
+    Returns ``pos (R, 3), clock (R, n_sys), inv (R, P, P), converged (R,), singular (R,),
+    n_iter (R,)`` with ``inv`` the inverse normal matrix at the last linearisation.
+    """
+    n_rx, n_sv = pr.shape
+    n_sys = seen.shape[1]
+    p_dim = 3 + n_sys
+    pos = x0.copy()
+    clock = np.zeros((n_rx, n_sys))
+    inv = np.zeros((n_rx, p_dim, p_dim))
+    converged = np.zeros(n_rx, dtype=np.bool_)
+    singular = np.zeros(n_rx, dtype=np.bool_)
+    n_iter = np.zeros(n_rx, dtype=np.int64)
+    info = np.empty((p_dim, p_dim))
+    rhs = np.empty(p_dim)
+    g = np.empty(p_dim)
+    for r in range(n_rx):
+        for it in range(1, max_iter + 1):
+            n_iter[r] = it
+            info[:, :] = 0.0
+            rhs[:] = 0.0
+            for k in range(n_sv):
+                wk = w[r, k]
+                if wk == 0.0:
+                    continue
+                dx0 = sv[k, 0] - pos[r, 0]
+                dx1 = sv[k, 1] - pos[r, 1]
+                dx2 = sv[k, 2] - pos[r, 2]
+                rng = np.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
+                sk = system[k]
+                g[:] = 0.0
+                g[0] = -dx0 / rng
+                g[1] = -dx1 / rng
+                g[2] = -dx2 / rng
+                g[3 + sk] = 1.0
+                res = pr[r, k] - rng - clock[r, sk]
+                for i in range(p_dim):
+                    wg = wk * g[i]
+                    rhs[i] += wg * res
+                    for j in range(p_dim):
+                        info[i, j] += wg * g[j]
+            for s in range(n_sys):
+                if not seen[r, s]:
+                    info[3 + s, 3 + s] += 1.0
+            sing = _safe_inverse_one(info, usable[r], inv[r])
+            singular[r] = sing
+            if not usable[r] or sing:
+                converged[r] = True  # a zero update (the status says why)
+                break
+            step2 = 0.0
+            for i in range(p_dim):
+                d = 0.0
+                for j in range(p_dim):
+                    d += inv[r, i, j] * rhs[j]
+                if i < 3:
+                    pos[r, i] += d
+                    step2 += d * d
+                else:
+                    clock[r, i - 3] += d
+            converged[r] = np.sqrt(step2) < tol_m
+            if converged[r]:
+                break
+    return pos, clock, inv, converged, singular, n_iter
+
+
+@njit(cache=True)
+def _inv3(m: np.ndarray, out: np.ndarray) -> None:
+    """Closed-form inverse of a symmetric 3x3 matrix (as ``cooperative._inv_sym3``)."""
+    a, b, c = m[0, 0], m[0, 1], m[0, 2]
+    d, e, f = m[1, 1], m[1, 2], m[2, 2]
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    out[0, 0] = c00 / det
+    out[0, 1] = c01 / det
+    out[0, 2] = c02 / det
+    out[1, 0] = c01 / det
+    out[1, 1] = c11 / det
+    out[1, 2] = c12 / det
+    out[2, 0] = c02 / det
+    out[2, 1] = c12 / det
+    out[2, 2] = c22 / det
+
+
+@njit(cache=True)
+def cooperative_gauss_newton(
+    pr: np.ndarray,  # (B or 1, N, S) pseudoranges, 0 where not received
+    sv: np.ndarray,  # (S, 3)
+    w_user: np.ndarray,  # (N, S) 1 / sigma_user^2 (any value where not received)
+    sig_c: np.ndarray,  # (S,) common-error sigma
+    system: np.ndarray,  # (S,) constellation index, sorted
+    rows: np.ndarray,  # (B, N, S) bool measurement used
+    base: np.ndarray,  # (B, N, 3) baseline of each UAV from the centroid
+    froot: np.ndarray,  # (B, N, 3, 3) square root of its covariance
+    is_ref: np.ndarray,  # (B, N) bool clock reference (carries no nuisance clocks)
+    has_clock: np.ndarray,  # (B, n_sys) bool centroid clock estimable
+    usable: np.ndarray,  # (B,) bool
+    x0: np.ndarray,  # (B, 3)
+    max_iter: int,
+    tol_m: float,
+):
+    """Gauss-Newton of the centroid WLS with the exact structured covariance ``C*``.
+
+    The model of ``cooperative._linearize`` (undifferenced form, one nuisance clock per UAV
+    other than the reference and constellation) and the elimination of
+    ``cooperative._structured_normal`` with ``eps_load = lam = 1 F_q`` (the exact model).
+
+    Returns ``pos (B, 3), clk (B, n_sys), inv (B, P, P), cross (B, N, P, 3), converged (B,),
+    singular (B,), n_iter (B,)``.
+    """
+    n_b, n, n_sv = rows.shape
+    n_sys = has_clock.shape[1]
+    p_dim = 3 + n_sys
+    n_x = 3 + p_dim + 1  # columns [lam | A | a]
+    pos = x0.copy()
+    clk = np.zeros((n_b, n_sys))
+    inv = np.zeros((n_b, p_dim, p_dim))
+    cross = np.zeros((n_b, n, p_dim, 3))
+    converged = np.zeros(n_b, dtype=np.bool_)
+    singular = np.zeros(n_b, dtype=np.bool_)
+    n_iter = np.zeros(n_b, dtype=np.int64)
+
+    x = np.zeros((n_sv, n_x))  # one block's rows
+    p0x = np.zeros((n_sv, n_x))
+    px = np.zeros((n_sv, p_dim + 1))
+    g3 = np.zeros((n, n_sv, 3))  # P0 lam M3^-1 of every block (the cross terms need it)
+    a_all = np.zeros((n, n_sv, p_dim))
+    sum_p = np.zeros((n_sv, n_sv))
+    pa_sum = np.zeros((n_sv, p_dim))
+    pr_sum = np.zeros(n_sv)
+    atpx = np.zeros((p_dim, p_dim + 1))
+    m3 = np.zeros((3, 3))
+    m3inv = np.zeros((3, 3))
+    t3 = np.zeros((3, p_dim + 1))
+    grp_sum = np.zeros(n_x)
+    mg = np.zeros((n_sv, n_sv))
+    mg_inv = np.zeros((n_sv, n_sv))
+    ape = np.zeros((p_dim, n_sv))
+    gmat = np.zeros((p_dim, n_sv))
+    info = np.zeros((p_dim, p_dim))
+    rhs = np.zeros(p_dim)
+    idx = np.zeros(n_sv, dtype=np.int64)
+    # contiguous satellite range of each constellation (system is sorted)
+    start = np.zeros(n_sys + 1, dtype=np.int64)
+    for s in range(n_sys + 1):
+        c = 0
+        for k in range(n_sv):
+            if system[k] < s:
+                c += 1
+        start[s] = c
+
+    for b in range(n_b):
+        pb = b if pr.shape[0] > 1 else 0
+        for it in range(1, max_iter + 1):
+            n_iter[b] = it
+            sum_p[:, :] = 0.0
+            pa_sum[:, :] = 0.0
+            pr_sum[:] = 0.0
+            atpx[:, :] = 0.0
+            g3[:, :, :] = 0.0
+            a_all[:, :, :] = 0.0
+            for q in range(n):
+                # the block's rows, in satellite order
+                m = 0
+                for k in range(n_sv):
+                    if rows[b, q, k]:
+                        idx[m] = k
+                        m += 1
+                if m == 0:
+                    continue
+                pq0 = pos[b, 0] + base[b, q, 0]
+                pq1 = pos[b, 1] + base[b, q, 1]
+                pq2 = pos[b, 2] + base[b, q, 2]
+                for i in range(m):
+                    k = idx[i]
+                    d0 = sv[k, 0] - pq0
+                    d1 = sv[k, 1] - pq1
+                    d2 = sv[k, 2] - pq2
+                    rng = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                    u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
+                    for j in range(3):  # lam = u F_q
+                        x[i, j] = (
+                            u0 * froot[b, q, 0, j]
+                            + u1 * froot[b, q, 1, j]
+                            + (u2 * froot[b, q, 2, j])
+                        )
+                    x[i, 3] = -u0
+                    x[i, 4] = -u1
+                    x[i, 5] = -u2
+                    for s in range(n_sys):
+                        x[i, 6 + s] = 0.0
+                    sk = system[k]
+                    res = pr[pb, q, k] - rng
+                    if has_clock[b, sk]:
+                        x[i, 6 + sk] = 1.0
+                        res -= clk[b, sk]
+                    x[i, n_x - 1] = res
+                    wk = w_user[q, k]
+                    for j in range(n_x):
+                        p0x[i, j] = wk * x[i, j]
+                    for j in range(p_dim):
+                        a_all[q, k, j] = x[i, 3 + j]
+                # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
+                if not is_ref[b, q]:
+                    for s in range(n_sys):
+                        dsum = 0.0
+                        grp_sum[:] = 0.0
+                        for i in range(m):
+                            k = idx[i]
+                            if start[s] <= k < start[s + 1]:
+                                dsum += w_user[q, k]
+                                for j in range(n_x):
+                                    grp_sum[j] += p0x[i, j]
+                        if dsum > 0.0:
+                            coef = 1.0 / dsum
+                            for i in range(m):
+                                k = idx[i]
+                                if start[s] <= k < start[s + 1]:
+                                    f = w_user[q, k] * coef
+                                    for j in range(n_x):
+                                        p0x[i, j] -= f * grp_sum[j]
+                            # - sum over the group's pairs of w_s w_t / d
+                            for i in range(m):
+                                ki = idx[i]
+                                if not start[s] <= ki < start[s + 1]:
+                                    continue
+                                for i2 in range(m):
+                                    k2 = idx[i2]
+                                    if start[s] <= k2 < start[s + 1]:
+                                        sum_p[ki, k2] -= w_user[q, ki] * coef * w_user[q, k2]
+                # 2. the rank-3 relative-error latent (Woodbury)
+                for i1 in range(3):
+                    for i2 in range(3):
+                        acc = 1.0 if i1 == i2 else 0.0
+                        for i in range(m):
+                            acc += x[i, i1] * p0x[i, i2]
+                        m3[i1, i2] = acc
+                _inv3(m3, m3inv)
+                for i1 in range(3):
+                    for j in range(p_dim + 1):
+                        acc = 0.0
+                        for i in range(m):
+                            acc += p0x[i, i1] * x[i, 3 + j]
+                        t3[i1, j] = acc
+                for i in range(m):
+                    k = idx[i]
+                    for j in range(3):
+                        g3[q, k, j] = (
+                            p0x[i, 0] * m3inv[0, j]
+                            + p0x[i, 1] * m3inv[1, j]
+                            + p0x[i, 2] * m3inv[2, j]
+                        )
+                    for j in range(p_dim + 1):
+                        px[i, j] = p0x[i, 3 + j] - (
+                            g3[q, k, 0] * t3[0, j] + g3[q, k, 1] * t3[1, j] + g3[q, k, 2] * t3[2, j]
+                        )
+                # accumulate A^T P [A, a], sum_n P_n, sum_n P_n A and P_n a
+                for i in range(m):
+                    k = idx[i]
+                    for p in range(p_dim):
+                        ap = x[i, 3 + p]
+                        if ap != 0.0:
+                            for j in range(p_dim + 1):
+                                atpx[p, j] += ap * px[i, j]
+                    for p in range(p_dim):
+                        pa_sum[k, p] += px[i, p]
+                    pr_sum[k] += px[i, p_dim]
+                    sum_p[k, k] += w_user[q, k]
+                    for i2 in range(m):
+                        k2 = idx[i2]
+                        sum_p[k, k2] -= (
+                            g3[q, k, 0] * p0x[i2, 0]
+                            + g3[q, k, 1] * p0x[i2, 1]
+                            + g3[q, k, 2] * p0x[i2, 2]
+                        )
+            # 3. the errors common to all UAVs
+            for k in range(n_sv):
+                for k2 in range(n_sv):
+                    mg[k, k2] = sig_c[k] * sum_p[k, k2] * sig_c[k2]
+                mg[k, k] += 1.0
+            _cholesky_inverse(mg, mg_inv)
+            for p in range(p_dim):
+                for k in range(n_sv):
+                    ape[p, k] = pa_sum[k, p] * sig_c[k]
+            for p in range(p_dim):
+                for k in range(n_sv):
+                    acc = 0.0
+                    for k2 in range(n_sv):
+                        acc += ape[p, k2] * mg_inv[k2, k]
+                    gmat[p, k] = acc
+            for p in range(p_dim):
+                acc_r = atpx[p, p_dim]
+                for k in range(n_sv):
+                    acc_r -= gmat[p, k] * sig_c[k] * pr_sum[k]
+                rhs[p] = acc_r
+                for p2 in range(p_dim):
+                    acc = atpx[p, p2]
+                    for k in range(n_sv):
+                        acc -= gmat[p, k] * ape[p2, k]
+                    info[p, p2] = acc
+            for s in range(n_sys):  # unit diagonal for the clocks of constellations not seen
+                if not has_clock[b, s]:
+                    info[3 + s, 3 + s] += 1.0
+            # cross terms A^T P~ eps_q = A^T P_q eps_q - G (sig_c P_q eps_q), P_q eps_q = g3_q
+            for q in range(n):
+                for p in range(p_dim):
+                    for j in range(3):
+                        acc = 0.0
+                        for k in range(n_sv):
+                            gk = g3[q, k, j]
+                            if gk != 0.0:
+                                acc += (a_all[q, k, p] - gmat[p, k] * sig_c[k]) * gk
+                        cross[b, q, p, j] = acc
+            sing = _safe_inverse_one(info, usable[b], inv[b])
+            singular[b] = sing
+            if not usable[b] or sing:
+                converged[b] = True
+                break
+            step2 = 0.0
+            for i in range(p_dim):
+                d = 0.0
+                for j in range(p_dim):
+                    d += inv[b, i, j] * rhs[j]
+                if i < 3:
+                    pos[b, i] += d
+                    step2 += d * d
+                else:
+                    clk[b, i - 3] += d
+            converged[b] = np.sqrt(step2) < tol_m
+            if converged[b]:
+                break
+    return pos, clk, inv, cross, converged, singular, n_iter

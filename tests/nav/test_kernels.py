@@ -1,0 +1,156 @@
+"""The compiled Gauss-Newton kernels against the numpy formulation of the same solvers.
+
+The solvers run their iterations in ``coopnav_env.nav._kernels`` (numba); the numpy
+formulation (``_USE_KERNEL = False``) is a second, independent implementation of the same
+algebra. Both must give the same statuses, positions to 1e-6 m and covariances to 1e-9
+relative, in every mode the kernels serve, with noise, masked UAVs, UAVs out of range,
+degenerate problems and warm starts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coopnav_env.nav import (
+    GnssObservations,
+    NavStatus,
+    VirtualPoint,
+    cooperative,
+    solve_cooperative,
+    solve_cooperative_samples,
+    solve_standalone,
+    wls,
+)
+from tests.nav.scenario import make_scenario
+
+
+def _both(monkeypatch, fn):
+    """``fn()`` with the kernels and with the numpy formulation."""
+    fast = fn()
+    with monkeypatch.context() as m:
+        m.setattr(cooperative, "_USE_KERNEL", False)
+        m.setattr(wls, "_USE_KERNEL", False)
+        ref = fn()
+    return fast, ref
+
+
+def _assert_same(fast, ref, pos_tol=1e-6, cov_rel=1e-9):
+    assert np.array_equal(fast.status, ref.status)
+    assert np.array_equal(np.isnan(fast.pos_ecef_m), np.isnan(ref.pos_ecef_m))
+    ok = np.isfinite(ref.pos_ecef_m)
+    assert np.abs(fast.pos_ecef_m[ok] - ref.pos_ecef_m[ok]).max(initial=0.0) < pos_tol
+    cok = np.isfinite(ref.cov_ecef_m2)
+    scale = np.abs(ref.cov_ecef_m2[cok]).max(initial=1.0)
+    assert np.abs(fast.cov_ecef_m2[cok] - ref.cov_ecef_m2[cok]).max(initial=0.0) <= cov_rel * scale
+    assert np.array_equal(np.isnan(fast.cov_ecef_m2), np.isnan(ref.cov_ecef_m2))
+
+
+CASES = [
+    dict(seed=1),
+    dict(seed=2, canyon_uav=0),
+    dict(seed=3, canyon_uav=1, canyon_hd=3.0, spread_m=300.0),
+    dict(seed=4, differential=True, canyon_uav=2),
+    dict(seed=5, n_uav=1),
+    dict(seed=6, n_uav=9, n_sv=22, canyon_uav=4),
+    dict(seed=7, max_open=6, canyon_uav=0, canyon_hd=4.0),
+]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_standalone_kernel_equals_numpy(monkeypatch, case):
+    sc = make_scenario(**case)
+    obs = sc.observations(np.random.default_rng(case["seed"]))
+    for x0 in (None, sc.pos_ecef + 30.0):
+        fast, ref = _both(monkeypatch, lambda x0=x0: solve_standalone(obs, x0))
+        _assert_same(fast, ref)
+        ok = ref.status == NavStatus.OK
+        assert np.abs(fast.clock_m[ok] - ref.clock_m[ok]).max(initial=0.0) < 1e-6
+
+
+@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize("transfer", ["sdt", "ddt"])
+@pytest.mark.parametrize("centroid", ["self", 0, "virtual"])
+def test_cooperative_kernel_equals_numpy(monkeypatch, case, transfer, centroid):
+    sc = make_scenario(**case)
+    rng = np.random.default_rng(100 + case["seed"])
+    obs = sc.observations(rng)
+    n = sc.pos_ecef.shape[0]
+    cov_enu = np.broadcast_to(np.diag([0.3, 0.8, 0.5]) ** 2, (n, n, 3, 3)).copy()
+    rel = sc.relative(rng, cov_enu=cov_enu)
+    if n > 2:  # one UAV out of range of every other one
+        avail = rel.available.copy()
+        avail[n - 1, :] = False
+        avail[:, n - 1] = False
+        rel = type(rel)(rel.rel_ecef_m, rel.cov_ecef_m2, avail)
+    if centroid == "virtual":
+        p_v = sc.pos_ecef.mean(axis=0) + 3.0
+        cov = np.broadcast_to(0.16 * np.eye(3), (n, 3, 3)).copy()
+        cen = VirtualPoint(sc.pos_ecef - p_v, cov, np.ones(n, dtype=bool))
+    else:
+        cen = centroid
+    x0 = None if centroid == "virtual" else sc.pos_ecef[0] + 20.0
+    fast, ref = _both(
+        monkeypatch,
+        lambda: solve_cooperative(obs, rel, transfer=transfer, centroid=cen, x0_ecef_m=x0),
+    )
+    _assert_same(fast, ref)
+    assert np.array_equal(fast.centroid_status, ref.centroid_status)
+    assert np.array_equal(fast.n_meas_used, ref.n_meas_used)
+    assert np.array_equal(fast.n_uavs_used, ref.n_uavs_used)
+
+
+def test_cooperative_kernel_degenerate_problems(monkeypatch):
+    """Too few satellites, a UAV blind to everything, and a singular geometry."""
+    sc = make_scenario(seed=8, n_sv=8)
+    obs = sc.observations(np.random.default_rng(8))
+    rel = sc.relative(np.random.default_rng(9))
+    vis = np.ones_like(obs.visible)
+    vis[0] = False  # UAV 0 sees nothing
+    vis[1, 2:] = False  # UAV 1 sees two satellites
+    pr = np.where(vis, obs.pr_m, np.nan)
+    blind = GnssObservations(
+        pr_m=pr,
+        sv_ecef_m=obs.sv_ecef_m,
+        system=obs.system,
+        sigma_user_m=np.where(vis, obs.sigma_user_m, np.nan),
+        sigma_common_m=obs.sigma_common_m,
+        el_deg=obs.el_deg,
+        n_systems=obs.n_systems,
+    )
+    for transfer in ("sdt", "ddt"):
+        fast, ref = _both(monkeypatch, lambda t=transfer: solve_cooperative(blind, rel, transfer=t))
+        _assert_same(fast, ref)
+        assert fast.status[0] != NavStatus.OK or transfer == "ddt"
+    fast, ref = _both(monkeypatch, lambda: solve_standalone(blind))
+    _assert_same(fast, ref)
+    assert fast.status[0] == NavStatus.TOO_FEW_SATELLITES
+    # every satellite in one direction: singular
+    sv = obs.sv_ecef_m.copy()
+    sv[:] = sv[0] + np.arange(sv.shape[0])[:, None] * 1e-3
+    flat = GnssObservations(
+        pr_m=obs.pr_m,
+        sv_ecef_m=sv,
+        system=obs.system,
+        sigma_user_m=obs.sigma_user_m,
+        sigma_common_m=obs.sigma_common_m,
+        el_deg=obs.el_deg,
+        n_systems=obs.n_systems,
+    )
+    fast, ref = _both(monkeypatch, lambda: solve_standalone(flat))
+    assert np.array_equal(fast.status, ref.status)
+    assert np.all(fast.status == NavStatus.SINGULAR_GEOMETRY)
+
+
+def test_samples_kernel_equals_numpy(monkeypatch):
+    sc = make_scenario(seed=10, canyon_uav=0)
+    obs = sc.observations(np.random.default_rng(1))
+    rel = sc.relative(np.random.default_rng(2))
+    rng = np.random.default_rng(3)
+    k = 7
+    pr_s = obs.pr_m[None] + rng.normal(0.0, 2.0, (k, *obs.pr_m.shape))
+    rel_s = rel.rel_ecef_m[2][None] + rng.normal(0.0, 0.3, (k, sc.pos_ecef.shape[0], 3))
+    fast, ref = _both(
+        monkeypatch, lambda: solve_cooperative_samples(obs, pr_s, rel, rel_s, centroid=2)
+    )
+    _assert_same(fast, ref)
