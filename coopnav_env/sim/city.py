@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from coopnav_env.sim import _kernels
+
 __all__ = [
     "DEFAULT_CANYON_GAPS_DEG",
     "Buildings",
@@ -59,6 +61,10 @@ CHUNK_ELEMENTS: int = 1 << 20
 """Largest number of elements of one temporary array in the chunked kernels (about 8 MB of
 float64). Bounds the memory of :func:`line_of_sight`, :func:`mask_elevation_deg` and the
 collision kernels whatever the number of receivers, satellites and buildings."""
+
+_USE_KERNEL = True
+"""Trace line of sight and the horizontal sensors with the compiled loops of
+:mod:`coopnav_env.sim._kernels` (False: the numpy formulations, identical results)."""
 
 DEFAULT_CANYON_GAPS_DEG: tuple[tuple[float, float], ...] = ((50.0, 70.0), (220.0, 240.0))
 """Default gaps of the analytic canyon mask, absolute azimuth intervals ``(start, end)`` [deg].
@@ -408,9 +414,26 @@ def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirectio
     order, cot_s, h_dir = sky.order, sky.cot_s, sky.h_dir
     n_up = cot_s.size
 
-    blocked_s = np.zeros((n_rx, n_up), dtype=bool)  # columns in sorted order
     lo_all, hi_all = buildings.min_m, buildings.max_m
-    for cb in _chunk_slices(buildings.n, 4 * n_rx):
+    if _USE_KERNEL:
+        blocked_s = _kernels.blocked_sorted(
+            np.ascontiguousarray(pos, dtype=float), lo_all, hi_all, cot_s, h_dir
+        )
+    else:
+        blocked_s = _blocked_sorted_numpy(pos, lo_all, hi_all, cot_s, h_dir, n_up)
+    blocked_up = np.empty_like(blocked_s)
+    blocked_up[:, order] = blocked_s
+    visible[:, up] = ~blocked_up
+    # A receiver inside a building needs no special case: its footprint distance is 0, so
+    # every satellite is tested, and the ray starts inside the footprint below the roof.
+    return visible
+
+
+def _blocked_sorted_numpy(pos, lo_all, hi_all, cot_s, h_dir, n_up):
+    """The numpy formulation of :func:`coopnav_env.sim._kernels.blocked_sorted`."""
+    n_rx = pos.shape[0]
+    blocked_s = np.zeros((n_rx, n_up), dtype=bool)  # columns in sorted order
+    for cb in _chunk_slices(lo_all.shape[0], 4 * n_rx):
         # 1. cull (receiver, building) pairs, arrays of shape (n_rx, n_b_chunk)
         climb_m = hi_all[None, cb, 2] - pos[:, None, 2]
         dx = np.maximum(
@@ -448,13 +471,7 @@ def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirectio
                 & (np.maximum(t_near, 0.0) <= climb_t * cot_s[sat])
             )
             blocked_s[rx[hit], sat[hit]] = True
-
-    blocked_up = np.empty_like(blocked_s)
-    blocked_up[:, order] = blocked_s
-    visible[:, up] = ~blocked_up
-    # A receiver inside a building needs no special case: its footprint distance is 0, so
-    # every satellite is tested, and the ray starts inside the footprint below the roof.
-    return visible
+    return blocked_s
 
 
 class _HorizontalSweep:
@@ -555,6 +572,8 @@ def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: Array
         Skyline elevation [deg], in [0, 90]: 0 where no building taller than the receiver lies
         along the azimuth, 90 for a receiver inside a building.
     """
+    if _USE_KERNEL:
+        return sky_and_walls(buildings, pos_enu_m, az_deg)[0]
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     tan_max = np.zeros(sweep.shape)  # tangent of the skyline elevation
     for t_near, t_far, _lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
@@ -595,6 +614,11 @@ def sky_and_walls(
     this computes the slab intervals once and returns exactly what the two functions return.
     """
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
+    if _USE_KERNEL:
+        tan_max, dist = _kernels.sky_and_walls(
+            np.ascontiguousarray(pos), sweep._dir, sweep._lo, sweep._hi
+        )
+        return np.degrees(np.arctan(tan_max)), dist
     tan_max = np.zeros(sweep.shape)
     dist = np.full(sweep.shape, np.inf)
     for t_near, t_far, lo, hi in sweep:
@@ -627,6 +651,8 @@ def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLik
         Distance [m], >= 0: ``inf`` where the ray meets no building taller than the receiver,
         0 for a receiver inside a building.
     """
+    if _USE_KERNEL:
+        return sky_and_walls(buildings, pos_enu_m, az_deg)[1]
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     dist = np.full(sweep.shape, np.inf)
     for t_near, t_far, lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)

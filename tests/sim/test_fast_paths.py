@@ -118,3 +118,45 @@ def test_a_replaced_constellation_bypasses_the_sky_cache() -> None:
     world.constellation = default_constellation(("GPS",))
     gps = world.reset(np.random.default_rng(0))
     assert set(gps.system.tolist()) == {0} and gps.sv_index.size < both.sv_index.size
+
+
+def _tricky_positions(city, rng, n=60):
+    """Receivers anywhere, on footprint corners and walls, inside footprints, on the ground."""
+    b = city.buildings
+    x0, x1, y0, y1 = city.extent_m
+    pos = np.c_[rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(0.0, 60.0, n)]
+    m = min(4, b.n)
+    pos[:m, :2] = b.min_m[:m, :2]
+    pos[5 : 5 + m, 0], pos[5 : 5 + m, 1] = b.max_m[:m, 0], b.min_m[:m, 1] + 3.0
+    pos[10 : 10 + m, :2] = (b.min_m[:m, :2] + b.max_m[:m, :2]) / 2.0
+    pos[15:20, 2] = 0.0
+    return pos
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_compiled_line_of_sight_and_sweeps_equal_the_numpy_ones(monkeypatch, seed) -> None:
+    """The numba loops (coopnav_env.sim._kernels) give bit-identical results."""
+    rng = np.random.default_rng(100 + seed)
+    city = canyon_city() if seed == 0 else generate_city(CityConfig(), rng)
+    pos = _tricky_positions(city, rng)
+    az = rng.uniform(0.0, 360.0, 24)
+    el = rng.uniform(-5.0, 90.0, 24)
+    el[:3] = (90.0, 0.0, 10.0)  # zenith, horizon, the lowest ray
+    az[3:7] = (0.0, 90.0, 180.0, 270.0)  # cardinal directions: zero components
+    dirs = np.c_[
+        np.cos(np.radians(el)) * np.sin(np.radians(az)),
+        np.cos(np.radians(el)) * np.cos(np.radians(az)),
+        np.sin(np.radians(el)),
+    ]
+    dirs = np.where(np.abs(dirs) < 1e-15, 0.0, dirs)
+    sweep_az = np.r_[np.arange(8) * 45.0, rng.uniform(0.0, 360.0, 5)]
+    fast_los = city.line_of_sight(pos, dirs)
+    fast_sky, fast_walls = city.sky_and_walls(pos, sweep_az)
+    monkeypatch.setattr(C, "_USE_KERNEL", False)
+    ref_los = city.line_of_sight(pos, dirs)
+    ref_sky, ref_walls = city.sky_and_walls(pos, sweep_az)
+    assert ref_los.sum() > 0 and (~ref_los).sum() > 0  # both outcomes occur
+    np.testing.assert_array_equal(fast_los, ref_los)
+    np.testing.assert_array_equal(fast_sky, ref_sky)
+    np.testing.assert_array_equal(fast_walls, ref_walls)
+    assert np.array_equal(np.signbit(fast_sky), np.signbit(ref_sky))

@@ -1,0 +1,130 @@
+"""Compiled (numba) loops of the line-of-sight and horizontal-ray sensors of :mod:`.city`.
+
+They compute exactly what the numpy formulations in :mod:`coopnav_env.sim.city` compute, with
+the same floating-point operations in the same order per (receiver, building, direction)
+triple, so the results are identical bit for bit (the tests compare both). They exist because
+the numpy versions spend most of their time in the overhead of many small array operations.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, inline="always")
+def _fmax(a, b):
+    """``numpy.maximum`` of two floats (``max`` differs for signed zeros: max(-0., 0.) = -0.)."""
+    if a > b or a != a:
+        return a
+    return b
+
+
+@njit(cache=True, inline="always")
+def _fmin(a, b):
+    """``numpy.minimum`` of two floats."""
+    if a < b or a != a:
+        return a
+    return b
+
+
+@njit(cache=True, error_model="numpy")
+def _slab_2d(px, py, dx, dy, lox, loy, hix, hiy):
+    """``t_near, t_far`` of the horizontal line ``p + t d`` in a footprint (as ``_sweep_slab``)."""
+    if dx == 0.0:
+        if px >= lox and px <= hix:
+            t_near, t_far = -np.inf, np.inf
+        else:
+            t_near, t_far = np.inf, -np.inf
+    else:
+        inv = 1.0 / dx
+        t1 = (lox - px) * inv
+        t2 = (hix - px) * inv
+        t_near, t_far = _fmin(t1, t2), _fmax(t1, t2)
+    if dy == 0.0:
+        if py >= loy and py <= hiy:
+            lo_y, hi_y = -np.inf, np.inf
+        else:
+            lo_y, hi_y = np.inf, -np.inf
+    else:
+        inv = 1.0 / dy
+        t1 = (loy - py) * inv
+        t2 = (hiy - py) * inv
+        lo_y, hi_y = _fmin(t1, t2), _fmax(t1, t2)
+    return _fmax(t_near, lo_y), _fmin(t_far, hi_y)
+
+
+@njit(cache=True, error_model="numpy")
+def sky_and_walls(pos, dirs, lo, hi):
+    """Skyline ``tan(elevation)`` and nearest wall per (receiver, azimuth).
+
+    ``pos`` (n, 3), ``dirs`` (n_az, 2) horizontal unit directions with exact zeros on the
+    cardinal axes, ``lo``/``hi`` (m, 3) corners of the buildings taller than the lowest
+    receiver. Returns ``tan_max`` (n, n_az) (0: no roof above the receiver along the ray,
+    inf: inside a footprint) and ``dist`` (n, n_az) (inf: no wall).
+    """
+    n = pos.shape[0]
+    n_az = dirs.shape[0]
+    m = lo.shape[0]
+    tan_max = np.zeros((n, n_az))
+    dist = np.full((n, n_az), np.inf)
+    for i in range(n):
+        px, py, z = pos[i, 0], pos[i, 1], pos[i, 2]
+        for a in range(n_az):
+            dx, dy = dirs[a, 0], dirs[a, 1]
+            best_tan = 0.0
+            best_dist = np.inf
+            for b in range(m):
+                t_near, t_far = _slab_2d(px, py, dx, dy, lo[b, 0], lo[b, 1], hi[b, 0], hi[b, 1])
+                entered = t_near <= t_far
+                t_in = _fmax(t_near, 0.0)
+                rel_h = hi[b, 2] - z
+                if t_far > 0.0 and entered and rel_h > 0.0:
+                    tan_el = rel_h / t_in
+                    if tan_el > best_tan:
+                        best_tan = tan_el
+                if t_far >= 0.0 and entered and z < hi[b, 2] and z >= lo[b, 2]:
+                    if t_in < best_dist:
+                        best_dist = t_in
+            tan_max[i, a] = best_tan
+            dist[i, a] = best_dist
+    return tan_max, dist
+
+
+@njit(cache=True, error_model="numpy")
+def blocked_sorted(pos, lo, hi, cot_s, h_dir):
+    """Blocked (receiver, rising satellite) pairs, satellites in the sorted order of
+    :class:`~coopnav_env.sim.city.SkyDirections` (``cot_s`` increasing, ``h_dir`` (n_up, 2)).
+
+    The culling of ``city._trace_line_of_sight``: a building is tested only when its roof is
+    above the receiver and its footprint within reach of the lowest ray, and then only against
+    the satellites low enough to pass under the roof at the footprint's nearest point.
+    """
+    n_rx = pos.shape[0]
+    m = lo.shape[0]
+    n_up = cot_s.shape[0]
+    blocked = np.zeros((n_rx, n_up), dtype=np.bool_)
+    if n_up == 0:
+        return blocked
+    cot_max = cot_s[n_up - 1]
+    for i in range(n_rx):
+        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
+        for b in range(m):
+            climb = hi[b, 2] - pz
+            if not climb > 0.0:
+                continue
+            ddx = _fmax(_fmax(lo[b, 0] - px, 0.0), px - hi[b, 0])
+            ddy = _fmax(_fmax(lo[b, 1] - py, 0.0), py - hi[b, 1])
+            dist_xy = np.hypot(ddx, ddy)
+            if not dist_xy <= climb * cot_max:
+                continue
+            first = np.searchsorted(cot_s, dist_xy / climb)
+            for s in range(first, n_up):
+                if blocked[i, s]:
+                    continue
+                t_near, t_far = _slab_2d(
+                    px, py, h_dir[s, 0], h_dir[s, 1], lo[b, 0], lo[b, 1], hi[b, 0], hi[b, 1]
+                )
+                if t_far > 0.0 and t_near <= t_far and _fmax(t_near, 0.0) <= climb * cot_s[s]:
+                    blocked[i, s] = True
+    return blocked
