@@ -406,10 +406,11 @@ def section_scaling(args, out: dict) -> None:
         print(msg)
     print(
         "   why: MPE's step is O(N^2) Python (every pair of entities collides in a Python loop);"
-        "\n   urban's is numpy over arrays: per-step overhead dominates up to N ~ 10, then the"
-        "\n   O(N x satellites) measurement model, the O(N^2) relative sensing (tiny arrays) and"
-        "\n   the solver (one centroid per UAV, ~N^2, up to 10 UAVs; one shared centroid, ~N,"
-        "\n   from 11) grow slowly; the shared-centroid switch at N = 11 lowers the cost."
+        "\n   urban's is numpy over arrays plus compiled loops (solvers, line of sight, sensors):"
+        "\n   per-step overhead dominates up to N ~ 10, then the O(N x satellites) measurement"
+        "\n   model, the O(N^2) relative sensing (tiny arrays) and the solver (one centroid per"
+        "\n   UAV, ~N^2, up to 10 UAVs; one shared centroid, ~N, from 11) grow slowly; the"
+        "\n   shared-centroid switch at N = 11 lowers the cost."
     )
     out["scaling_n"] = rows
 
@@ -434,7 +435,7 @@ def section_scaling(args, out: dict) -> None:
         "\n   traces only the pairs within reach of the lowest satellite's ray (~(roof - z) /"
         "\n   tan(10 deg), under 1 km) and only the satellites low enough to pass under that"
         "\n   roof; the skyline and wall sensors sweep 8 horizontal rays per UAV over every"
-        "\n   building (O(N x 8 x buildings), a few numpy passes), which is what grows with the"
+        "\n   building (O(N x 8 x buildings), one compiled loop), which is what grows with the"
         "\n   city; the rest of the step (solvers, measurements) does not depend on it."
     )
     out["scaling_city"] = crow

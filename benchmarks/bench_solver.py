@@ -11,6 +11,10 @@ covariance, DDT):
   with C* formed densely and inverted by ``numpy.linalg.inv`` (``_dense_normal``).
 * **call** -- one whole public call ``solve_cooperative(..., max_iter=1)`` (set-up, one
   Gauss-Newton step, every UAV's position and covariance), structured vs ``method="dense"``.
+* **fix** -- one whole public call ``solve_cooperative(...)`` iterated to convergence (what the
+  environment runs every step) with the Gauss-Newton loop in the compiled kernel
+  (``coopnav_env.nav._kernels``, the default) vs the numpy formulation of the same algebra
+  (``cooperative._USE_KERNEL = False``).
 
 Both run in this process, interleaved, in ``--rounds`` alternating rounds; a round's figure is
 the median of its repeated timings, and the best round of each counts (as ``timeit``
@@ -60,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(0)
     head = (
         f"{'N':>4} {'m':>5} | {'solve struct':>12} {'solve dense':>12} {'ratio':>7} | "
-        f"{'call struct':>11} {'call dense':>11} {'ratio':>7}   (microseconds)"
+        f"{'call struct':>11} {'call dense':>11} {'ratio':>7} | "
+        f"{'fix kernel':>10} {'fix numpy':>10} {'ratio':>7}   (microseconds)"
     )
     print(head)
     worst = {}
@@ -84,7 +89,15 @@ def main(argv: list[str] | None = None) -> int:
         assert np.allclose(solve_structured(), solve_dense(), atol=1e-6)
         few = max(3, args.repeats // 10)
         kw = dict(centroid=0, x0_ecef_m=x0, max_iter=1)
-        rounds: list[tuple[float, float, float, float]] = []
+        rounds: list[tuple[float, ...]] = []
+
+        def fix(kernel: bool) -> None:
+            coop._USE_KERNEL = kernel
+            try:
+                solve_cooperative(obs, rel, centroid=0, x0_ecef_m=x0)
+            finally:
+                coop._USE_KERNEL = True
+
         for _ in range(max(1, args.rounds)):
             rounds.append(
                 (
@@ -92,14 +105,17 @@ def main(argv: list[str] | None = None) -> int:
                     _median_time(solve_dense, few),
                     _median_time(lambda: solve_cooperative(obs, rel, **kw), args.repeats),
                     _median_time(lambda: solve_cooperative(obs, rel, method="dense", **kw), few),
+                    _median_time(lambda: fix(True), args.repeats),
+                    _median_time(lambda: fix(False), few),
                 )
             )
-        t_s, t_d, c_s, c_d = (min(col) for col in zip(*rounds))
+        t_s, t_d, c_s, c_d, f_k, f_n = (min(col) for col in zip(*rounds))
         t_s_med = statistics.median(r[0] for r in rounds)
         m = int(lin_dd.rows.sum())
         print(
             f"{n:>4} {m:>5} | {t_s * 1e6:>12.0f} {t_d * 1e6:>12.0f} {t_d / t_s:>6.1f}x | "
-            f"{c_s * 1e6:>11.0f} {c_d * 1e6:>11.0f} {c_d / c_s:>6.1f}x   "
+            f"{c_s * 1e6:>11.0f} {c_d * 1e6:>11.0f} {c_d / c_s:>6.1f}x | "
+            f"{f_k * 1e6:>10.0f} {f_n * 1e6:>10.0f} {f_n / f_k:>6.1f}x   "
             f"(solve struct, median of rounds: {t_s_med * 1e6:.0f})"
         )
         worst[n] = (t_s, t_d / t_s, t_s_med)
