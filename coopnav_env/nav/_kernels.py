@@ -17,7 +17,8 @@ compare both, and the dense literal solve). Two further differences, both below 
   cyclic Jacobi for the eigenvalues of the conditioning check), so the kernels need no LAPACK.
 
 The kernels are compiled on first use and cached on disk beside this file (numba
-``cache=True``); the first call of a fresh installation takes a few seconds.
+``cache=True``); the first call of a fresh installation compiles them (about 15 s
+for all kernels of the package on a 2-core machine).
 """
 
 from __future__ import annotations
