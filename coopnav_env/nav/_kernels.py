@@ -442,7 +442,13 @@ def cooperative_gauss_newton(
                 for k2 in range(n_sv):
                     mg[k, k2] = sig_c[k] * sum_p[k, k2] * sig_c[k2]
                 mg[k, k] += 1.0
-            _cholesky_inverse(mg, mg_inv)
+            if not _cholesky_inverse(mg, mg_inv):  # I + E^T P E is SPD unless inputs are broken
+                for i in range(p_dim):
+                    for j in range(p_dim):
+                        inv[b, i, j] = 1.0 if i == j else 0.0
+                singular[b] = True
+                converged[b] = True
+                break
             for p in range(p_dim):
                 for k in range(n_sv):
                     ape[p, k] = pa_sum[k, p] * sig_c[k]
