@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-# the same limit as coopnav_env.nav.wls.COND_LIMIT (imported there from here)
+# exported as coopnav_env.nav.wls.COND_LIMIT (one value for both implementations)
 COND_LIMIT = 1e10
 
 

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from coopnav_env.nav import _kernels
-from coopnav_env.nav._kernels import COND_LIMIT
 from coopnav_env.nav.types import (
     PLAUSIBLE_RADIUS_M,
     GnssObservations,
@@ -23,8 +22,10 @@ from coopnav_env.nav.types import (
 
 __all__ = ["StandaloneSolution", "solve_standalone"]
 
-#: A normal matrix whose diagonally scaled condition number exceeds ``COND_LIMIT`` (defined
-#: in :mod:`coopnav_env.nav._kernels`) is reported singular.
+#: A normal matrix whose diagonally scaled condition number exceeds this is reported singular
+#: (the numpy formulation and the compiled kernels share the value).
+COND_LIMIT = _kernels.COND_LIMIT
+
 _USE_KERNEL = True
 """Run the Gauss-Newton loop in the compiled kernel (False: the numpy formulation)."""
 
