@@ -150,6 +150,39 @@ def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
 
 
 @njit(cache=True)
+def _gauss_newton_update(
+    info: np.ndarray,
+    rhs: np.ndarray,
+    usable: bool,
+    inv_out: np.ndarray,
+    pos: np.ndarray,
+    clock: np.ndarray,
+    tol_m: float,
+) -> tuple[bool, bool]:
+    """One update ``dx = info^-1 rhs`` of a Gauss-Newton problem, applied in place.
+
+    ``inv_out`` receives the inverse (:func:`_safe_inverse_one`), ``pos`` (3,) and ``clock``
+    (n_sys,) the update. Returns ``(singular, done)``: ``done`` when the problem is unusable
+    or singular (no update; the status says why) or the position update is below ``tol_m``.
+    """
+    p_dim = info.shape[0]
+    singular = _safe_inverse_one(info, usable, inv_out)
+    if not usable or singular:
+        return singular, True
+    step2 = 0.0
+    for i in range(p_dim):
+        d = 0.0
+        for j in range(p_dim):
+            d += inv_out[i, j] * rhs[j]
+        if i < 3:
+            pos[i] += d
+            step2 += d * d
+        else:
+            clock[i - 3] += d
+    return False, np.sqrt(step2) < tol_m
+
+
+@njit(cache=True)
 def standalone_gauss_newton(
     pr: np.ndarray,  # (R, S) pseudoranges, 0 where not received
     sv: np.ndarray,  # (S, 3)
@@ -206,22 +239,9 @@ def standalone_gauss_newton(
             for s in range(n_sys):
                 if not seen[r, s]:
                     info[3 + s, 3 + s] += 1.0
-            sing = _safe_inverse_one(info, usable[r], inv[r])
-            singular[r] = sing
-            if not usable[r] or sing:
-                converged[r] = True  # a zero update (the status says why)
-                break
-            step2 = 0.0
-            for i in range(p_dim):
-                d = 0.0
-                for j in range(p_dim):
-                    d += inv[r, i, j] * rhs[j]
-                if i < 3:
-                    pos[r, i] += d
-                    step2 += d * d
-                else:
-                    clock[r, i - 3] += d
-            converged[r] = np.sqrt(step2) < tol_m
+            singular[r], converged[r] = _gauss_newton_update(
+                info, rhs, usable[r], inv[r], pos[r], clock[r], tol_m
+            )
             if converged[r]:
                 break
     return pos, clock, inv, converged, singular, n_iter
@@ -481,22 +501,9 @@ def cooperative_gauss_newton(
                             if gk != 0.0:
                                 acc += (a_all[q, k, p] - gmat[p, k] * sig_c[k]) * gk
                         cross[b, q, p, j] = acc
-            sing = _safe_inverse_one(info, usable[b], inv[b])
-            singular[b] = sing
-            if not usable[b] or sing:
-                converged[b] = True
-                break
-            step2 = 0.0
-            for i in range(p_dim):
-                d = 0.0
-                for j in range(p_dim):
-                    d += inv[b, i, j] * rhs[j]
-                if i < 3:
-                    pos[b, i] += d
-                    step2 += d * d
-                else:
-                    clk[b, i - 3] += d
-            converged[b] = np.sqrt(step2) < tol_m
+            singular[b], converged[b] = _gauss_newton_update(
+                info, rhs, usable[b], inv[b], pos[b], clk[b], tol_m
+            )
             if converged[b]:
                 break
     return pos, clk, inv, cross, converged, singular, n_iter

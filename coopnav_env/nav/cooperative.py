@@ -586,8 +586,8 @@ def _gauss_newton(
     p_dim = 3 + n_sys
     literal = transfer == "ddt" and (covariance == "paper" or method == "dense")
     usable = ~st.too_few
-    is_ref = np.arange(obs.n_rx)[None, :] == st.ref[:, None]  # (B, N)
     if method == "structured" and covariance == "exact" and _USE_KERNEL:
+        is_ref = np.arange(obs.n_rx)[None, :] == st.ref[:, None]  # (B, N)
         pos, clk, inv, cross, converged, singular, iters = _kernels.cooperative_gauss_newton(
             np.ascontiguousarray(st.pr, dtype=float),
             np.ascontiguousarray(obs.sv_ecef_m, dtype=float),

@@ -28,30 +28,25 @@ def _fmin(a, b):
     return b
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _slab_1d(p, d, lo, hi):
+    """Parameter interval of ``p + t d`` inside ``[lo, hi]`` along one axis (exact for d = 0)."""
+    if d == 0.0:
+        if p >= lo and p <= hi:
+            return -np.inf, np.inf
+        return np.inf, -np.inf
+    inv = 1.0 / d
+    t1 = (lo - p) * inv
+    t2 = (hi - p) * inv
+    return _fmin(t1, t2), _fmax(t1, t2)
+
+
 @njit(cache=True, error_model="numpy")
 def _slab_2d(px, py, dx, dy, lox, loy, hix, hiy):
     """``t_near, t_far`` of the horizontal line ``p + t d`` in a footprint (as ``_sweep_slab``)."""
-    if dx == 0.0:
-        if px >= lox and px <= hix:
-            t_near, t_far = -np.inf, np.inf
-        else:
-            t_near, t_far = np.inf, -np.inf
-    else:
-        inv = 1.0 / dx
-        t1 = (lox - px) * inv
-        t2 = (hix - px) * inv
-        t_near, t_far = _fmin(t1, t2), _fmax(t1, t2)
-    if dy == 0.0:
-        if py >= loy and py <= hiy:
-            lo_y, hi_y = -np.inf, np.inf
-        else:
-            lo_y, hi_y = np.inf, -np.inf
-    else:
-        inv = 1.0 / dy
-        t1 = (loy - py) * inv
-        t2 = (hiy - py) * inv
-        lo_y, hi_y = _fmin(t1, t2), _fmax(t1, t2)
-    return _fmax(t_near, lo_y), _fmin(t_far, hi_y)
+    lo_x, hi_x = _slab_1d(px, dx, lox, hix)
+    lo_y, hi_y = _slab_1d(py, dy, loy, hiy)
+    return _fmax(lo_x, lo_y), _fmin(hi_x, hi_y)
 
 
 @njit(cache=True, error_model="numpy")

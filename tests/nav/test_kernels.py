@@ -9,11 +9,12 @@ degenerate problems and warm starts.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from coopnav_env.nav import (
-    GnssObservations,
     NavStatus,
     VirtualPoint,
     cooperative,
@@ -108,15 +109,10 @@ def test_cooperative_kernel_degenerate_problems(monkeypatch):
     vis = np.ones_like(obs.visible)
     vis[0] = False  # UAV 0 sees nothing
     vis[1, 2:] = False  # UAV 1 sees two satellites
-    pr = np.where(vis, obs.pr_m, np.nan)
-    blind = GnssObservations(
-        pr_m=pr,
-        sv_ecef_m=obs.sv_ecef_m,
-        system=obs.system,
+    blind = replace(
+        obs,
+        pr_m=np.where(vis, obs.pr_m, np.nan),
         sigma_user_m=np.where(vis, obs.sigma_user_m, np.nan),
-        sigma_common_m=obs.sigma_common_m,
-        el_deg=obs.el_deg,
-        n_systems=obs.n_systems,
     )
     for transfer in ("sdt", "ddt"):
         fast, ref = _both(monkeypatch, lambda t=transfer: solve_cooperative(blind, rel, transfer=t))
@@ -128,15 +124,7 @@ def test_cooperative_kernel_degenerate_problems(monkeypatch):
     # every satellite in one direction: singular
     sv = obs.sv_ecef_m.copy()
     sv[:] = sv[0] + np.arange(sv.shape[0])[:, None] * 1e-3
-    flat = GnssObservations(
-        pr_m=obs.pr_m,
-        sv_ecef_m=sv,
-        system=obs.system,
-        sigma_user_m=obs.sigma_user_m,
-        sigma_common_m=obs.sigma_common_m,
-        el_deg=obs.el_deg,
-        n_systems=obs.n_systems,
-    )
+    flat = replace(obs, sv_ecef_m=sv)
     fast, ref = _both(monkeypatch, lambda: solve_standalone(flat))
     assert np.array_equal(fast.status, ref.status)
     assert np.all(fast.status == NavStatus.SINGULAR_GEOMETRY)
