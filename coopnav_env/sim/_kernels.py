@@ -123,3 +123,42 @@ def blocked_sorted(pos, lo, hi, cot_s, h_dir):
                 if t_far > 0.0 and t_near <= t_far and _fmax(t_near, 0.0) <= climb * cot_s[s]:
                     blocked[i, s] = True
     return blocked
+
+
+@njit(cache=True, error_model="numpy")
+def relative_measurements(pos, z, sigma0, sigma_per, max_range):
+    """Pairwise relative measurements of :func:`~coopnav_env.sim.swarm.measure_relative_positions`.
+
+    ``pos`` (n, 3) true ENU positions, ``z`` (n (n - 1) / 2, 3) the standard normal draws of the
+    upper triangle in row-major order. Returns ``rel`` (n, n, 3), the per-axis variance ``var``
+    (n, n) and ``available`` (n, n), with the numpy formulation's arithmetic in its order.
+    """
+    n = pos.shape[0]
+    rel = np.zeros((n, n, 3))
+    var = np.zeros((n, n))
+    available = np.zeros((n, n), dtype=np.bool_)
+    k = 0
+    for b in range(n):
+        for q in range(b + 1, n):
+            d0 = pos[q, 0] - pos[b, 0]
+            d1 = pos[q, 1] - pos[b, 1]
+            d2 = pos[q, 2] - pos[b, 2]
+            r = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            s = sigma0 + sigma_per * r
+            e0 = z[k, 0] * s
+            e1 = z[k, 1] * s
+            e2 = z[k, 2] * s
+            k += 1
+            if r > 0.0 and r <= max_range:
+                available[b, q] = True
+                available[q, b] = True
+                v = s * s
+                var[b, q] = v
+                var[q, b] = v
+                rel[b, q, 0] = d0 + e0
+                rel[b, q, 1] = d1 + e1
+                rel[b, q, 2] = d2 + e2
+                rel[q, b, 0] = -d0 + -e0
+                rel[q, b, 1] = -d1 + -e1
+                rel[q, b, 2] = -d2 + -e2
+    return rel, var, available

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from coopnav_env.sim import _kernels
 from coopnav_env.sim.city import (
     BoolArray,
     Buildings,
@@ -21,6 +22,9 @@ from coopnav_env.sim.city import (
     _check_real,
     _chunk_slices,
 )
+
+_USE_KERNEL = True
+"""Relative sensing through :mod:`coopnav_env.sim._kernels` (False: the numpy formulation)."""
 
 __all__ = [
     "KinematicsConfig",
@@ -377,12 +381,38 @@ def measure_relative_positions(
     on the geometry.
     """
     pos = _as_points(pos_enu_m, "pos_enu_m")
+    rel, var, available = _measure_relative(rng, pos, cfg)
+    cov = var[:, :, None, None] * np.eye(3)
+    return rel, cov, available
+
+
+def _measure_relative(
+    rng: np.random.Generator, pos: FloatArray, cfg: RelativeSensingConfig
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """:func:`measure_relative_positions` of validated positions, with the per-axis variance
+    ``(n, n)`` instead of the covariance matrices (``cov = var * I``).
+
+    The same draws and arithmetic as the numpy formulation :func:`_measure_relative_numpy`
+    (the compiled kernel by default; the tests check they agree bit for bit).
+    """
+    n = pos.shape[0]
+    z = rng.standard_normal((n * (n - 1) // 2, 3))
+    if _USE_KERNEL:
+        return _kernels.relative_measurements(
+            pos, z, float(cfg.sigma0_m), float(cfg.sigma_per_m), float(cfg.max_range_m)
+        )
+    return _measure_relative_numpy(pos, z, cfg)
+
+
+def _measure_relative_numpy(
+    pos: FloatArray, z: FloatArray, cfg: RelativeSensingConfig
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """The numpy formulation of :func:`coopnav_env.sim._kernels.relative_measurements`."""
     n = pos.shape[0]
     diff = pos[None, :, :] - pos[:, None, :]  # diff[b, q] = pos[q] - pos[b]
     range_m = np.linalg.norm(diff, axis=2)
     sigma = cfg.sigma_m(range_m)
     iu, ju = np.triu_indices(n, 1)
-    z = rng.standard_normal((iu.size, 3))
     eps = np.zeros((n, n, 3))
     eps[iu, ju] = z * sigma[iu, ju, None]
     eps[ju, iu] = -eps[iu, ju]
@@ -390,5 +420,4 @@ def measure_relative_positions(
     np.fill_diagonal(available, False)
     rel = np.where(available[:, :, None], diff + eps, 0.0)
     var = np.where(available, sigma**2, 0.0)
-    cov = var[:, :, None, None] * np.eye(3)
-    return rel, cov, available
+    return rel, var, available
