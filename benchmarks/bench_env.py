@@ -227,7 +227,7 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("line of sight", "coopnav_env.sim.scenario", "_trace_line_of_sight"),
     ("skyline + walls", "coopnav_env.sim.city", "City.sky_and_walls"),
     ("collisions", "coopnav_env.sim.scenario", "_swept_collisions_culled"),
-    ("relative sensing", "coopnav_env.sim.scenario", "measure_relative_positions"),
+    ("relative sensing", "coopnav_env.sim.scenario", "_measure_relative"),
     ("relative sensing", "coopnav_env.sim.scenario", "UrbanWorld._relative_ecef"),
 )
 NAV = ("cooperative solver", "standalone solver")

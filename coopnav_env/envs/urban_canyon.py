@@ -345,12 +345,15 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "separation_violation": ep.separation_violation.tolist(),
             "out_of_contact": ep.out_of_contact.tolist(),
         }
-        term_cols = {t: np.asarray(v, dtype=float).tolist() for t, v in terms.items()}
+        keys = list(cols)
+        term_keys = list(terms)
+        term_rows = zip(*(np.asarray(v, dtype=float).tolist() for v in terms.values()))
+        step = self._steps
         infos = {}
-        for i, a in enumerate(self.possible_agents):
-            info = {key: col[i] for key, col in cols.items()}
-            info["reward_terms"] = {t: col[i] for t, col in term_cols.items()}
-            info["step"] = self._steps
+        for a, row, term_row in zip(self.possible_agents, zip(*cols.values()), term_rows):
+            info = dict(zip(keys, row))
+            info["reward_terms"] = dict(zip(term_keys, term_row))
+            info["step"] = step
             infos[a] = info
         return infos
 

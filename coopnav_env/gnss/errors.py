@@ -37,6 +37,7 @@ from coopnav_env.constants import (
     FREQ_GPS_L2_HZ,
     SYSTEMS,
 )
+from coopnav_env.gnss import _kernels
 from coopnav_env.gnss._validate import (
     as_bool_matrix,
     as_count,
@@ -47,7 +48,12 @@ from coopnav_env.gnss._validate import (
     as_point_list,
     readonly,
 )
-from coopnav_env.gnss.frames import _azimuth_elevation, _line_of_sight
+from coopnav_env.gnss.frames import (
+    _azimuth_elevation,
+    _ecef_to_geodetic,
+    _enu_rotation,
+    _line_of_sight,
+)
 
 __all__ = [
     "ErrorModel",
@@ -594,6 +600,33 @@ def _iono_factors(model: ErrorModel) -> NDArray[np.float64]:
 _IONO_FACTORS: dict[ErrorModel, NDArray[np.float64]] = {}
 
 
+_USE_KERNEL = True
+"""Receiver-satellite geometry through :mod:`coopnav_env.gnss._kernels` (False: numpy)."""
+
+
+def _range_azimuth_elevation(
+    rx: NDArray[np.float64], sv: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Range, azimuth and elevation of every (receiver, satellite) pair (validated arrays).
+
+    :func:`~coopnav_env.gnss.frames.line_of_sight` and
+    :func:`~coopnav_env.gnss.frames.azimuth_elevation` in one compiled pass (the numpy
+    formulation with ``_USE_KERNEL = False``; they agree to a few units in the last place).
+    """
+    if not _USE_KERNEL:
+        unit, range_m = _line_of_sight(rx, sv)
+        az_deg, el_deg = _azimuth_elevation(rx, unit)
+        return range_m, az_deg, el_deg
+    lat, lon, _ = _ecef_to_geodetic(rx)
+    rot = _enu_rotation(lat, lon)
+    range_m, az_deg, el_deg = _kernels.range_azimuth_elevation(
+        np.ascontiguousarray(rx), np.ascontiguousarray(sv), np.ascontiguousarray(rot)
+    )
+    if np.any(range_m == 0.0):
+        raise ValueError("line_of_sight: a receiver coincides with a satellite (zero range)")
+    return range_m, az_deg, el_deg
+
+
 def _simulate_pseudoranges(
     gen: np.random.Generator,
     rx: NDArray[np.float64],
@@ -611,8 +644,7 @@ def _simulate_pseudoranges(
     inputs (the environment calls this once per step with arrays it built itself).
     """
     n_rx, n_sv = rx.shape[0], sv.shape[0]
-    unit, range_m = _line_of_sight(rx, sv)
-    az_deg, el_deg = _azimuth_elevation(rx, unit)
+    range_m, az_deg, el_deg = _range_azimuth_elevation(rx, sv)
     if el_ref is None:
         el_ref = el_deg.mean(axis=0)
 

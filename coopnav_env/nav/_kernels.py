@@ -507,3 +507,52 @@ def cooperative_gauss_newton(
             if converged[b]:
                 break
     return pos, clk, inv, cross, converged, singular, n_iter
+
+
+@njit(cache=True)
+def fix_status(pos, converged, singular, too_few, check_radius, r_lo, r_hi):
+    """Status of each fix and whether it failed (no position), as the solvers define them.
+
+    In increasing precedence: OK (0), NOT_CONVERGED (3), IMPLAUSIBLE_POSITION (5, a converged
+    fix whose geocentric distance is outside ``[r_lo, r_hi]``, when ``check_radius``),
+    SINGULAR_GEOMETRY (2), TOO_FEW_SATELLITES (1). Failed: singular or too few satellites.
+    The distance is ``sqrt(x*x + y*y + z*z)``, as ``numpy.linalg.norm`` sums three terms.
+    """
+    n = pos.shape[0]
+    status = np.zeros(n, dtype=np.int64)
+    failed = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        if too_few[i]:
+            status[i] = 1
+            failed[i] = True
+        elif singular[i]:
+            status[i] = 2
+            failed[i] = True
+        elif not converged[i]:
+            status[i] = 3
+        elif check_radius:
+            r = np.sqrt(pos[i, 0] * pos[i, 0] + pos[i, 1] * pos[i, 1] + pos[i, 2] * pos[i, 2])
+            if np.isfinite(r) and (r < r_lo or r > r_hi):
+                status[i] = 5
+    return status, failed
+
+
+@njit(cache=True)
+def n_nuisance(used, system, ref, n_sys):
+    """Nuisance clocks per centroid problem: (UAV other than the reference, constellation)
+    pairs with at least one used row. ``used`` (B, N, S), ``system`` (S,), ``ref`` (B,)."""
+    n_b, n, s = used.shape
+    out = np.zeros(n_b, dtype=np.int64)
+    seen = np.zeros(n_sys, dtype=np.bool_)
+    for b in range(n_b):
+        for q in range(n):
+            if q == ref[b]:
+                continue
+            seen[:] = False
+            for k in range(s):
+                if used[b, q, k]:
+                    seen[system[k]] = True
+            for j in range(n_sys):
+                if seen[j]:
+                    out[b] += 1
+    return out

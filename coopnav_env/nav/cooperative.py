@@ -88,9 +88,8 @@ from coopnav_env.nav.types import (
     RelativePositions,
     VirtualPoint,
     check_plausible_radius,
-    implausible_radius,
 )
-from coopnav_env.nav.wls import StandaloneSolution, _safe_inverse, solve_standalone
+from coopnav_env.nav.wls import StandaloneSolution, _safe_inverse, fix_status, solve_standalone
 
 __all__ = [
     "CooperativeSolution",
@@ -232,7 +231,20 @@ def _sort_by_system(obs: GnssObservations) -> tuple[GnssObservations, np.ndarray
     )
 
 
+_DIAGONAL = np.array([0, 4, 8])
+_OFF_DIAGONAL = np.array([1, 2, 3, 5, 6, 7])
+
+
 def _sqrtm_psd(cov: np.ndarray) -> np.ndarray:
+    """Symmetric square roots of positive semi-definite ``(..., 3, 3)`` matrices.
+
+    When every matrix is diagonal (the simulator's relative sensing: ``sigma_d^2 I``) the
+    root is the square root of the diagonal, which is what the eigendecomposition returns for
+    a diagonal matrix too (the tests check both agree), without its cost.
+    """
+    flat = cov.reshape((*cov.shape[:-2], 9))
+    if not flat[..., _OFF_DIAGONAL].any():
+        return np.sqrt(np.clip(flat[..., _DIAGONAL], 0.0, None))[..., None] * np.eye(3)
     lam, vec = np.linalg.eigh(cov)
     return np.einsum("...ij,...j,...kj->...ik", vec, np.sqrt(np.clip(lam, 0.0, None)), vec)
 
@@ -629,6 +641,13 @@ def _gauss_newton(
 
 def _n_nuisance(obs: GnssObservations, st: _Setup) -> np.ndarray:
     """Nuisance clocks (UAV other than the reference, constellation with a row) per problem."""
+    if _USE_KERNEL:
+        return _kernels.n_nuisance(
+            np.ascontiguousarray(st.used, dtype=bool),
+            np.ascontiguousarray(obs.system, dtype=np.int64),
+            np.ascontiguousarray(st.ref, dtype=np.int64),
+            int(obs.n_systems),
+        )
     onehot = np.eye(obs.n_systems)[obs.system]  # (S, n_sys)
     per = np.einsum("bns,sq->bnq", st.used.astype(float), onehot) > 0
     not_ref = np.arange(obs.n_rx)[None, :] != st.ref[:, None]
@@ -808,10 +827,22 @@ def solve_cooperative(
     pos, clk, inv, cross, converged, singular, rows, n_nuis, n_iter = _gauss_newton(
         obs, st, x0, transfer, covariance, method, max_iter, tol_m
     )
+    self_centroids = isinstance(centroid, str)
     c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = _finish(
-        obs, st, pos, clk, inv, cross, converged, singular, rows, n_nuis, plausible_radius_m
+        obs,
+        st,
+        pos,
+        clk,
+        inv,
+        cross,
+        converged,
+        singular,
+        rows,
+        n_nuis,
+        plausible_radius_m,
+        with_uavs=not self_centroids,
     )
-    if isinstance(centroid, str):  # "self": UAV q's solution is centroid q's
+    if self_centroids:  # "self": UAV q's solution is centroid q's
         uav_pos, uav_cov, uav_status = c_pos, h_star, c_status.copy()
     else:
         uav_pos, uav_cov, uav_status = uav_pos[0], uav_cov[0], uav_status[0]
@@ -829,29 +860,40 @@ def solve_cooperative(
     )
 
 
-def _finish(obs, st, pos, clk, inv, cross, converged, singular, rows, n_nuis, plausible_radius_m):
-    """Statuses, centroid outputs and every UAV's position/covariance from each centroid."""
-    n_b = pos.shape[0]
+def _finish(
+    obs,
+    st,
+    pos,
+    clk,
+    inv,
+    cross,
+    converged,
+    singular,
+    rows,
+    n_nuis,
+    plausible_radius_m,
+    with_uavs=True,
+):
+    """Statuses, centroid outputs and every UAV's position/covariance from each centroid.
+
+    ``with_uavs=False`` (centroid ``"self"``, where UAV q's solution is centroid q's) skips
+    the UAV outputs and returns ``None`` for them.
+    """
     n_meas = rows.sum(axis=(1, 2))
     n_uavs = rows.any(axis=2).sum(axis=1)
     # counting rule: measurements minus per-UAV nuisance clocks must cover the unknowns
     too_few = st.too_few | (n_meas - n_nuis < 3 + st.has_clock.sum(axis=1))
-    c_status = np.full(n_b, NavStatus.OK, dtype=np.int64)
-    c_status[~converged] = NavStatus.NOT_CONVERGED
-    c_status[converged & implausible_radius(pos, plausible_radius_m)] = (
-        NavStatus.IMPLAUSIBLE_POSITION
-    )
-    c_status[singular] = NavStatus.SINGULAR_GEOMETRY
-    c_status[too_few] = NavStatus.TOO_FEW_SATELLITES
-    failed = (c_status == NavStatus.TOO_FEW_SATELLITES) | (c_status == NavStatus.SINGULAR_GEOMETRY)
+    c_status, failed = fix_status(pos, converged, singular, too_few, plausible_radius_m)
     h_star = inv[:, :3, :3].copy()
     c_pos = pos.copy()
     c_pos[failed] = np.nan
     h_star[failed] = np.nan
     c_clk = np.where(st.has_clock & ~failed[:, None], clk, np.nan)
+    if not with_uavs:
+        return c_pos, h_star, c_clk, c_status, n_uavs, n_meas, None, None, None
     # Every UAV from each centroid: p_q = p* + x_q, H_q = H* + C_d,q + Y + Y^T, where
     # Y = cov(p*~, eps_q) = [H A^T C~^-1 (1 F_q)]_pos F_q^T (Eq. 19-22, Appendix B)
-    y = np.einsum("bpq,bnql,bnkl->bnpk", inv[:, :3], cross, st.froot)
+    y = np.matmul(inv[:, None, :3], cross) @ np.swapaxes(st.froot, -1, -2)
     uav_pos = c_pos[:, None, :] + st.base
     uav_cov = h_star[:, None] + st.bcov + y + np.swapaxes(y, -1, -2)
     uav_status = np.repeat(c_status[:, None], obs.n_rx, axis=1)

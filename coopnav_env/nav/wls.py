@@ -170,12 +170,7 @@ def solve_standalone(
         pos, clock, inv, converged, singular, n_iter = _gauss_newton_numpy(
             obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m
         )
-    status = np.full(n_rx, NavStatus.OK, dtype=np.int64)
-    status[~converged] = NavStatus.NOT_CONVERGED
-    status[converged & implausible_radius(pos, plausible_radius_m)] = NavStatus.IMPLAUSIBLE_POSITION
-    status[singular] = NavStatus.SINGULAR_GEOMETRY
-    status[too_few] = NavStatus.TOO_FEW_SATELLITES
-    failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)
+    status, failed = fix_status(pos, converged, singular, too_few, plausible_radius_m)
     pos[failed] = np.nan
     cov = inv[:, :3, :3].copy()
     cov[failed] = np.nan
@@ -188,6 +183,46 @@ def solve_standalone(
         n_used=n_used,
         n_iter=n_iter,
     )
+
+
+def fix_status(
+    pos: np.ndarray,
+    converged: np.ndarray,
+    singular: np.ndarray,
+    too_few: np.ndarray,
+    plausible_radius_m: tuple[float, float] | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:class:`NavStatus` of each fix (n,) and whether it failed (no position).
+
+    In increasing precedence: ``OK``, ``NOT_CONVERGED``, ``IMPLAUSIBLE_POSITION`` (a
+    converged fix outside ``plausible_radius_m``), ``SINGULAR_GEOMETRY``,
+    ``TOO_FEW_SATELLITES``; the last two have failed. Shared by both solvers (a compiled
+    helper; the numpy formulation is :func:`_fix_status_numpy`).
+    """
+    check = plausible_radius_m is not None
+    lo, hi = plausible_radius_m if check else (0.0, 0.0)
+    if not _USE_KERNEL:
+        return _fix_status_numpy(pos, converged, singular, too_few, plausible_radius_m)
+    return _kernels.fix_status(
+        np.ascontiguousarray(pos, dtype=float),
+        np.ascontiguousarray(converged, dtype=bool),
+        np.ascontiguousarray(singular, dtype=bool),
+        np.ascontiguousarray(too_few, dtype=bool),
+        check,
+        float(lo),
+        float(hi),
+    )
+
+
+def _fix_status_numpy(pos, converged, singular, too_few, plausible_radius_m):
+    """The numpy formulation of :func:`fix_status`."""
+    status = np.full(pos.shape[0], NavStatus.OK, dtype=np.int64)
+    status[~converged] = NavStatus.NOT_CONVERGED
+    status[converged & implausible_radius(pos, plausible_radius_m)] = NavStatus.IMPLAUSIBLE_POSITION
+    status[singular] = NavStatus.SINGULAR_GEOMETRY
+    status[too_few] = NavStatus.TOO_FEW_SATELLITES
+    failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)
+    return status, failed
 
 
 def _gauss_newton_numpy(obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m):

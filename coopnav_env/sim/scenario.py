@@ -30,8 +30,9 @@ The flow of one epoch (:meth:`UrbanWorld.step`)
    Eq. 1-8; the common clock/ephemeris/troposphere error is drawn once per satellite and
    shared by the swarm, and redrawn each epoch; the NLOS bias goes in ``extra_bias_m``);
    receiver clock biases are drawn once per episode. Relative positions by
-   :func:`~coopnav_env.sim.swarm.measure_relative_positions` (Eq. 9), rotated to ECEF by
-   :meth:`~coopnav_env.nav.RelativePositions.from_enu`.
+   :func:`~coopnav_env.sim.swarm.measure_relative_positions` (Eq. 9), rotated to ECEF as
+   :meth:`~coopnav_env.nav.RelativePositions.from_enu` does (the isotropic covariance
+   ``sigma_d^2 I`` is the same in both frames).
 5. **Navigation.** :func:`~coopnav_env.nav.solve_standalone` for every UAV and
    :func:`~coopnav_env.nav.solve_cooperative` (paper Eq. 10-23) with the configured transfer
    (DDT/SDT), covariance model (exact/paper) and centroid:
@@ -131,7 +132,7 @@ from coopnav_env.sim.route import advance_waypoints, route_tail_lengths_m, stree
 from coopnav_env.sim.swarm import (
     KinematicsConfig,
     RelativeSensingConfig,
-    measure_relative_positions,
+    _measure_relative,
     separation_violations,
     step_kinematics,
     swept_collisions,
@@ -717,26 +718,27 @@ class UrbanWorld:
     def _relative_ecef(
         self,
         rel_enu_m: np.ndarray,
-        cov_enu_m2: np.ndarray,
+        var_m2: np.ndarray,
         available: np.ndarray,
         row: int | None = None,
     ) -> RelativePositions:
-        """:meth:`RelativePositions.from_enu` at the origin, with the rotation as matmuls.
+        """:meth:`RelativePositions.from_enu` at the origin for the isotropic relative sensing.
 
-        Same result as ``from_enu`` (the tests check it), without its three-operand einsum,
-        which costs a few milliseconds for 50 UAVs. With ``row = a`` only the measurements
-        relative to UAV ``a`` are kept (all a shared centroid at ``a`` needs); the other pairs
-        are marked unavailable.
+        ``var_m2`` (N, N) is the per-axis variance of each pair (``cov_enu = var I``); its
+        ECEF covariance is ``R^T (var I) R = var I``, so only the vectors are rotated (as
+        matmuls). With ``row = a`` only the measurements relative to UAV ``a`` are kept (all a
+        shared centroid at ``a`` needs); the other pairs are marked unavailable.
         """
         r = self.rot_enu
         if row is None:
-            return RelativePositions._trusted(rel_enu_m @ r, r.T @ cov_enu_m2 @ r, available)
+            cov = var_m2[:, :, None, None] * np.eye(3)
+            return RelativePositions._trusted(rel_enu_m @ r, cov, available)
         n = available.shape[0]
         rel = np.zeros((n, n, 3))
         cov = np.zeros((n, n, 3, 3))
         avail = np.zeros((n, n), dtype=bool)
         rel[row] = rel_enu_m[row] @ r
-        cov[row] = r.T @ cov_enu_m2[row] @ r
+        cov[row] = var_m2[row][:, None, None] * np.eye(3)
         avail[row] = available[row]
         return RelativePositions._trusted(rel, cov, avail)
 
@@ -875,7 +877,7 @@ class UrbanWorld:
             bias,
         )
         obs = GnssObservations._trusted_from_epoch(pr)
-        rel_enu, rel_cov_enu, avail = measure_relative_positions(rng, pos, cfg.relative_sensing)
+        rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
 
         # warm start: the previous estimates moved by the velocity; at the first epoch of an
         # episode, the known launch positions
@@ -886,7 +888,7 @@ class UrbanWorld:
         n_sats = received.sum(axis=1)
         if cfg.centroid_mode == "shared" or n == 1:
             a = int(np.argmax(n_sats))
-            rel = self._relative_ecef(rel_enu, rel_cov_enu, avail, row=a)
+            rel = self._relative_ecef(rel_enu, rel_var, avail, row=a)
             co = solve_cooperative(
                 obs,
                 rel,
@@ -900,7 +902,7 @@ class UrbanWorld:
             linked[a] = True
             centroid_uav = a
         else:
-            rel = self._relative_ecef(rel_enu, rel_cov_enu, avail)
+            rel = self._relative_ecef(rel_enu, rel_var, avail)
             co = solve_cooperative(
                 obs,
                 rel,

@@ -150,12 +150,14 @@ def test_relative_positions_rotate_like_from_enu() -> None:
     rng = np.random.default_rng(0)
     pos = np.c_[rng.uniform(-100, 100, (6, 2)), rng.uniform(5, 30, 6)]
     rel, cov, avail = measure_relative_positions(rng, pos, RelativeSensingConfig(sigma0_m=0.3))
-    ours = world._relative_ecef(rel, cov, avail)
+    var = cov[:, :, 0, 0]
+    assert np.array_equal(cov, var[:, :, None, None] * np.eye(3))  # isotropic
+    ours = world._relative_ecef(rel, var, avail)
     ref = RelativePositions.from_enu(rel, cov, avail, cfg.lat_deg, cfg.lon_deg)
     np.testing.assert_allclose(ours.rel_ecef_m, ref.rel_ecef_m, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ours.cov_ecef_m2, ref.cov_ecef_m2, rtol=0, atol=1e-14)
     np.testing.assert_array_equal(ours.available, ref.available)
-    row = world._relative_ecef(rel, cov, avail, row=2)
+    row = world._relative_ecef(rel, var, avail, row=2)
     np.testing.assert_allclose(row.rel_ecef_m[2], ref.rel_ecef_m[2], rtol=0, atol=1e-12)
     np.testing.assert_allclose(row.cov_ecef_m2[2], ref.cov_ecef_m2[2], rtol=0, atol=1e-14)
     assert row.available.sum() == avail[2].sum() + 6  # row 2 plus the diagonal
