@@ -23,11 +23,15 @@ from gymnasium.utils import EzPickle
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from coopnav_env.envs import _kernels
 from coopnav_env.envs.config import UrbanCanyonConfig, make_config
 from coopnav_env.sim.route import remaining_route_m
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
 __all__ = ["REWARD_TERMS", "UrbanCanyonEnv", "aec_env", "parallel_env"]
+
+_USE_KERNEL = True
+"""Observations through :mod:`coopnav_env.envs._kernels` (False: the numpy formulation)."""
 
 REWARD_TERMS: tuple[str, ...] = ("nav", "progress", "collision", "separation", "contact", "goal")
 """Names of the reward terms in ``infos[agent]["reward_terms"]`` (their sum is the reward)."""
@@ -92,6 +96,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         s_lo, s_hi = _state_bounds(cfg)
         self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
+        self._obs_low = lo.astype(np.float64)  # the clip bounds as numpy's clip sees them
+        self._obs_high = hi.astype(np.float64)
 
     # ---- spaces -----------------------------------------------------------------------------
 
@@ -256,7 +262,57 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
     # ---- observations, infos, state ---------------------------------------------------------
 
     def _observation_array(self) -> np.ndarray:
-        """Every agent's observation, ``(N, obs_dim)`` float32 (rows in agent order)."""
+        """Every agent's observation, ``(N, obs_dim)`` float32 (rows in agent order).
+
+        Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows`; the numpy
+        formulation :meth:`_observation_array_numpy` (``_USE_KERNEL = False``) is the readable
+        definition, and the two agree bit for bit.
+        """
+        if not _USE_KERNEL:
+            return self._observation_array_numpy()
+        cfg = self.config
+        ep = self._epoch
+        kin = cfg.kinematics
+        sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
+        params = np.array(
+            [
+                self._city_scale_m,
+                kin.max_speed_mps,
+                cfg.obs_sigma_max_m,
+                cfg.relative_sensing.max_range_m,
+                cfg.max_steps,
+                cfg.obs_route_scale_m,
+                kin.altitude_min_m,
+                kin.altitude_max_m,
+                cfg.obs_wall_scale_m,
+            ],
+            dtype=np.float64,
+        )
+        return _kernels.observation_rows(
+            ep.nav_pos_enu_m,
+            ep.goal_enu_m,
+            ep.vel_enu_mps,
+            ep.nav_sigma_enu_m,
+            ep.n_sats,
+            ep.n_sats_swarm,
+            max(ep.n_above_mask, 1),
+            sky_deg,
+            ep.rel_enu_m,
+            ep.rel_available,
+            self.world.route_xy_m,
+            self.world.route_tail_m,
+            ep.next_waypoint,
+            ep.nav_source,
+            walls,
+            self._steps,
+            params,
+            cfg.obs_neighbours,
+            self._obs_low,
+            self._obs_high,
+        )
+
+    def _observation_array_numpy(self) -> np.ndarray:
+        """The numpy formulation of :meth:`_observation_array` (the definition)."""
         cfg = self.config
         ep = self._epoch
         n = cfg.n_uavs

@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
+from coopnav_env.envs import urban_canyon
 from coopnav_env.gnss import errors
 from coopnav_env.nav import cooperative, wls
 from coopnav_env.sim import city, swarm
@@ -67,7 +68,7 @@ def _episode(n_uavs: int, seed: int, steps: int, **kwargs) -> tuple[np.ndarray, 
 )
 def test_compiled_solvers_change_episodes_only_in_the_last_bits(monkeypatch, n_uavs, seed, kwargs):
     fast_obs, fast_rew = _episode(n_uavs, seed, 150, **kwargs)
-    for module in (cooperative, wls, errors, city, swarm):  # every numpy formulation
+    for module in (cooperative, wls, errors, city, swarm, urban_canyon):  # numpy formulations
         monkeypatch.setattr(module, "_USE_KERNEL", False)
     ref_obs, ref_rew = _episode(n_uavs, seed, 150, **kwargs)
     assert fast_obs.shape == ref_obs.shape
