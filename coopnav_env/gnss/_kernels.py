@@ -2,7 +2,8 @@
 
 :func:`range_azimuth_elevation` computes, per (receiver, satellite) pair, what
 ``frames._line_of_sight`` followed by ``frames._azimuth_elevation`` compute for a whole array:
-the range, and the azimuth and elevation in the receiver's ENU frame. The numpy formulation is
+the range, and the azimuth and elevation in the receiver's ENU frame (whose latitude and
+longitude it also computes, as ``frames._ecef_to_geodetic`` does). The numpy formulation is
 the reference (``errors._USE_KERNEL = False``); the two agree to a few units in the last place
 (the transcendental functions are libm's here and numpy's there), which the tests bound.
 """
@@ -14,11 +15,14 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy")
-def range_azimuth_elevation(rx, sv, rot):
+def range_azimuth_elevation(rx, sv, a_m, b_m, f, e2, ep2, n_bowring):
     """Range [m], azimuth [deg, 0..360) and elevation [deg] of every (receiver, satellite).
 
-    ``rx`` (n, 3) and ``sv`` (s, 3) ECEF [m]; ``rot`` (n, 3, 3) the ECEF-to-ENU rotation at
-    each receiver (rows E, N, U). A zero range gives NaN angles (the caller reports it).
+    ``rx`` (n, 3) and ``sv`` (s, 3) ECEF [m]. The ENU frame of each receiver comes from its
+    geodetic latitude and longitude (Bowring's iteration with ``n_bowring`` steps on the
+    ellipsoid ``a_m, b_m, f, e2, ep2``, as ``frames._ecef_to_geodetic``). Returns
+    ``range_m, az_deg, el_deg`` (n, s) and two flags: a receiver at the Earth's centre (no
+    latitude) and a zero range (receiver on a satellite); the caller raises for them.
     """
     n = rx.shape[0]
     s = sv.shape[0]
@@ -26,23 +30,40 @@ def range_azimuth_elevation(rx, sv, rot):
     az = np.empty((n, s))
     el = np.empty((n, s))
     to_deg = 180.0 / np.pi
+    at_centre = False
+    zero_range = False
     for i in range(n):
+        x, y, z = rx[i, 0], rx[i, 1], rx[i, 2]
+        p = np.hypot(x, y)
+        if p == 0.0 and z == 0.0:
+            at_centre = True
+        lon = np.arctan2(y, x)
+        beta = np.arctan2(z, (1.0 - f) * p)
+        lat = beta
+        for _ in range(n_bowring):
+            lat = np.arctan2(z + ep2 * b_m * np.sin(beta) ** 3, p - e2 * a_m * np.cos(beta) ** 3)
+            beta = np.arctan2((1.0 - f) * np.sin(lat), np.cos(lat))
+        sl, cl = np.sin(lat), np.cos(lat)
+        so, co = np.sin(lon), np.cos(lon)
         for k in range(s):
-            d0 = sv[k, 0] - rx[i, 0]
-            d1 = sv[k, 1] - rx[i, 1]
-            d2 = sv[k, 2] - rx[i, 2]
+            d0 = sv[k, 0] - x
+            d1 = sv[k, 1] - y
+            d2 = sv[k, 2] - z
             r = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             range_m[i, k] = r
+            if r == 0.0:
+                zero_range = True
             u0 = d0 / r
             u1 = d1 / r
             u2 = d2 / r
-            e = rot[i, 0, 0] * u0 + rot[i, 0, 1] * u1 + rot[i, 0, 2] * u2
-            nn = rot[i, 1, 0] * u0 + rot[i, 1, 1] * u1 + rot[i, 1, 2] * u2
-            up = rot[i, 2, 0] * u0 + rot[i, 2, 1] * u1 + rot[i, 2, 2] * u2
+            # rows of the ECEF-to-ENU rotation (frames.enu_rotation)
+            e = -so * u0 + co * u1 + 0.0 * u2
+            nn = -sl * co * u0 + -sl * so * u1 + cl * u2
+            up = cl * co * u0 + cl * so * u1 + sl * u2
             a = np.arctan2(e, nn) * to_deg
             a = a % 360.0
             if a >= 360.0:
                 a -= 360.0
             az[i, k] = a
             el[i, k] = np.arcsin(min(max(up, -1.0), 1.0)) * to_deg
-    return range_m, az, el
+    return range_m, az, el, at_centre, zero_range

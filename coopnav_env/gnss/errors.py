@@ -36,6 +36,10 @@ from coopnav_env.constants import (
     FREQ_GPS_L1_HZ,
     FREQ_GPS_L2_HZ,
     SYSTEMS,
+    WGS84_A_M,
+    WGS84_B_M,
+    WGS84_E2,
+    WGS84_F,
 )
 from coopnav_env.gnss import _kernels
 from coopnav_env.gnss._validate import (
@@ -49,9 +53,9 @@ from coopnav_env.gnss._validate import (
     readonly,
 )
 from coopnav_env.gnss.frames import (
+    _EP2,
+    _N_BOWRING_ITER,
     _azimuth_elevation,
-    _ecef_to_geodetic,
-    _enu_rotation,
     _line_of_sight,
 )
 
@@ -617,12 +621,19 @@ def _range_azimuth_elevation(
         unit, range_m = _line_of_sight(rx, sv)
         az_deg, el_deg = _azimuth_elevation(rx, unit)
         return range_m, az_deg, el_deg
-    lat, lon, _ = _ecef_to_geodetic(rx)
-    rot = _enu_rotation(lat, lon)
-    range_m, az_deg, el_deg = _kernels.range_azimuth_elevation(
-        np.ascontiguousarray(rx), np.ascontiguousarray(sv), np.ascontiguousarray(rot)
+    range_m, az_deg, el_deg, at_centre, zero_range = _kernels.range_azimuth_elevation(
+        np.ascontiguousarray(rx, dtype=np.float64),
+        np.ascontiguousarray(sv, dtype=np.float64),
+        WGS84_A_M,
+        WGS84_B_M,
+        WGS84_F,
+        WGS84_E2,
+        _EP2,
+        _N_BOWRING_ITER,
     )
-    if np.any(range_m == 0.0):
+    if at_centre:
+        raise ValueError("pos_ecef_m contains the Earth's centre [0, 0, 0], which has no latitude")
+    if zero_range:
         raise ValueError("line_of_sight: a receiver coincides with a satellite (zero range)")
     return range_m, az_deg, el_deg
 

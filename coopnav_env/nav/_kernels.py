@@ -556,3 +556,80 @@ def n_nuisance(used, system, ref, n_sys):
                 if seen[j]:
                     out[b] += 1
     return out
+
+
+@njit(cache=True)
+def setup_masks(vis, bavail, cen, system, el, n_sys, ddt, need_override):
+    """The masks of ``cooperative._setup`` for ``B`` centroid problems (numpy formulation there).
+
+    ``vis`` (N, S), ``bavail`` (B, N), ``cen`` (B,) centroid UAV or -1 for a virtual point,
+    ``system`` (S,), ``el`` (N, S) [deg], ``ddt`` the transfer, ``need_override`` the SDT
+    availability rule (-1: ``3 + clocks``). Returns ``ref (B,), used (B, N, S),
+    has_clock (B, n_sys), pivot (B, N, n_sys), too_few (B,)``.
+    """
+    n_b, n = bavail.shape
+    s = vis.shape[1]
+    ref = cen.copy()
+    used = np.zeros((n_b, n, s), dtype=np.bool_)
+    has_clock = np.zeros((n_b, n_sys), dtype=np.bool_)
+    pivot = np.full((n_b, n, n_sys), -1, dtype=np.int64)
+    too_few = np.zeros(n_b, dtype=np.bool_)
+    ref_vis = np.zeros(s, dtype=np.bool_)
+    best_el = np.empty(n_sys)
+    nan_seen = np.zeros(n_sys, dtype=np.bool_)
+    for b in range(n_b):
+        if cen[b] < 0:
+            # clock reference of a virtual point: the available UAV seeing most satellites
+            best, best_n = 0, -1
+            for q in range(n):
+                cnt = 0
+                if bavail[b, q]:
+                    for k in range(s):
+                        if vis[q, k]:
+                            cnt += 1
+                if cnt > best_n:
+                    best, best_n = q, cnt
+            ref[b] = best if best_n > 0 else -1
+        r = ref[b]
+        n_ref = 0
+        for k in range(s):
+            ref_vis[k] = r >= 0 and vis[r, k] and bavail[b, r]
+            if ref_vis[k]:
+                n_ref += 1
+                has_clock[b, system[k]] = True
+        for q in range(n):
+            if not bavail[b, q]:
+                continue
+            # DDT pivots: highest elevation at the reference among the satellites of the
+            # constellation seen by both (first index on ties, as numpy.argmax)
+            for j in range(n_sys):
+                best_el[j] = -np.inf
+                nan_seen[j] = False
+            for k in range(s):
+                if vis[q, k] and ref_vis[k]:
+                    j = system[k]
+                    e = el[r, k]
+                    if e != e:
+                        nan_seen[j] = True
+                    elif pivot[b, q, j] < 0 or e > best_el[j]:
+                        best_el[j] = e
+                        pivot[b, q, j] = k
+            for j in range(n_sys):
+                if nan_seen[j] or best_el[j] == -np.inf:
+                    pivot[b, q, j] = -1
+            for k in range(s):
+                if vis[q, k]:
+                    used[b, q, k] = (not ddt) or pivot[b, q, system[k]] >= 0
+        if ddt:
+            too_few[b] = n_ref < 1
+        elif cen[b] >= 0:
+            need = need_override
+            if need < 0:
+                need = 3
+                for j in range(n_sys):
+                    if has_clock[b, j]:
+                        need += 1
+            too_few[b] = n_ref < need
+        else:
+            too_few[b] = r < 0
+    return ref, used, has_clock, pivot, too_few

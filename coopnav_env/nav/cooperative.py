@@ -294,8 +294,58 @@ def _setup(
     n_b = cen.shape[0]
     vis = obs.visible
     n_sys = obs.n_systems
-    onehot = np.eye(n_sys, dtype=bool)[obs.system]  # (S, n_sys)
+    if _USE_KERNEL:
+        ref, used, has_clock, pivot, too_few = _kernels.setup_masks(
+            np.ascontiguousarray(vis, dtype=bool),
+            np.ascontiguousarray(bavail, dtype=bool),
+            np.ascontiguousarray(cen, dtype=np.int64),
+            np.ascontiguousarray(obs.system, dtype=np.int64),
+            np.ascontiguousarray(obs.el_deg, dtype=np.float64),
+            int(n_sys),
+            transfer == "ddt",
+            -1 if sdt_min_centroid_sats is None else int(sdt_min_centroid_sats),
+        )
+    else:
+        ref, used, has_clock, pivot, too_few = _setup_masks_numpy(
+            obs, bavail, cen, transfer, sdt_min_centroid_sats
+        )
+    bidx = np.arange(n_b)
+    froot = _sqrtm_psd(bcov)
 
+    froot_paper = None
+    if covariance == "paper":
+        # Eq. 18 adds sigma_d^2 to every row, the centroid UAV's own rows included: give those
+        # rows the mean relative covariance of the other available UAVs.
+        own = np.zeros((n_b, n), dtype=bool)
+        own[bidx[cen >= 0], cen[cen >= 0]] = True
+        others = bavail & ~own
+        cnt = np.maximum(others.sum(axis=1), 1)
+        mean_cov = np.einsum("bn,bnij->bij", others.astype(float), bcov) / cnt[:, None, None]
+        bcov_paper = np.where(own[..., None, None], mean_cov[:, None], bcov)
+        froot_paper = _sqrtm_psd(bcov_paper)
+    return _Setup(
+        centroid_uav=cen,
+        ref=ref,
+        base=base,
+        bcov=bcov,
+        froot=froot,
+        froot_paper=froot_paper,
+        used=used,
+        has_clock=has_clock,
+        pivot=pivot,
+        too_few=too_few,
+        pr=np.where(obs.visible, obs.pr_m, 0.0)[None],
+        avail=bavail,
+        sys_slices=_system_slices(obs.system, n_sys),
+    )
+
+
+def _setup_masks_numpy(obs, bavail, cen, transfer, sdt_min_centroid_sats):
+    """The numpy formulation of :func:`coopnav_env.nav._kernels.setup_masks`."""
+    n_b = cen.shape[0]
+    vis = obs.visible
+    n_sys = obs.n_systems
+    onehot = np.eye(n_sys, dtype=bool)[obs.system]  # (S, n_sys)
     used0 = vis[None, :, :] & bavail[:, :, None]  # (B, N, S)
     n_vis = (used0).sum(axis=2)  # (B, N)
     ref = cen.copy()
@@ -332,33 +382,7 @@ def _setup(
         n_ref = ref_vis.sum(axis=1)
         too_few = np.where(cen >= 0, n_ref < need, ref < 0)
 
-    froot = _sqrtm_psd(bcov)
-    froot_paper = None
-    if covariance == "paper":
-        # Eq. 18 adds sigma_d^2 to every row, the centroid UAV's own rows included: give those
-        # rows the mean relative covariance of the other available UAVs.
-        own = np.zeros((n_b, n), dtype=bool)
-        own[bidx[cen >= 0], cen[cen >= 0]] = True
-        others = bavail & ~own
-        cnt = np.maximum(others.sum(axis=1), 1)
-        mean_cov = np.einsum("bn,bnij->bij", others.astype(float), bcov) / cnt[:, None, None]
-        bcov_paper = np.where(own[..., None, None], mean_cov[:, None], bcov)
-        froot_paper = _sqrtm_psd(bcov_paper)
-    return _Setup(
-        centroid_uav=cen,
-        ref=ref,
-        base=base,
-        bcov=bcov,
-        froot=froot,
-        froot_paper=froot_paper,
-        used=used,
-        has_clock=has_clock,
-        pivot=pivot,
-        too_few=too_few,
-        pr=np.where(obs.visible, obs.pr_m, 0.0)[None],
-        avail=bavail,
-        sys_slices=_system_slices(obs.system, n_sys),
-    )
+    return ref, used, has_clock, pivot, too_few
 
 
 @dataclass

@@ -162,3 +162,134 @@ def relative_measurements(pos, z, sigma0, sigma_per, max_range):
                 rel[q, b, 1] = -d1 + -e1
                 rel[q, b, 2] = -d2 + -e2
     return rel, var, available
+
+
+@njit(cache=True)
+def advance_waypoints(pts, xy, next_wp, reach_m):
+    """:func:`coopnav_env.sim.route.advance_waypoints` of validated arrays, one point at a time.
+
+    ``pts`` (k, 2) waypoints, ``xy`` (n, 2), ``next_wp`` (n,) int64. A point advances while its
+    next waypoint is not the last and is reached (inside the reach square) or passed (at or
+    beyond it along the arriving leg, when that leg has a length).
+    """
+    k = pts.shape[0]
+    idx = next_wp.copy()
+    for i in range(xy.shape[0]):
+        while idx[i] < k - 1:
+            j = idx[i]
+            dx = xy[i, 0] - pts[j, 0]
+            dy = xy[i, 1] - pts[j, 1]
+            near = abs(dx) <= reach_m and abs(dy) <= reach_m
+            ax = 0.0
+            ay = 0.0
+            if j > 0:
+                ax = pts[j, 0] - pts[j - 1, 0]
+                ay = pts[j, 1] - pts[j - 1, 1]
+            past = dx * ax + dy * ay >= 0.0 and (ax != 0.0 or ay != 0.0)
+            if not (near or past):
+                break
+            idx[i] = j + 1
+    return idx
+
+
+@njit(cache=True, inline="always")
+def _to_enu(p, origin, rot, out):
+    """``(p - origin) @ rot.T`` of one ECEF point into ``out`` (3,)."""
+    d0 = p[0] - origin[0]
+    d1 = p[1] - origin[1]
+    d2 = p[2] - origin[2]
+    for i in range(3):
+        out[i] = d0 * rot[i, 0] + d1 * rot[i, 1] + d2 * rot[i, 2]
+
+
+@njit(cache=True, inline="always")
+def _cov_to_enu(c, rot, tmp, out):
+    """``rot @ c @ rot.T`` of one 3x3 covariance into ``out``."""
+    for i in range(3):
+        for k in range(3):
+            tmp[i, k] = rot[i, 0] * c[0, k] + rot[i, 1] * c[1, k] + rot[i, 2] * c[2, k]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = tmp[i, 0] * rot[j, 0] + tmp[i, 1] * rot[j, 1] + tmp[i, 2] * rot[j, 2]
+
+
+@njit(cache=True)
+def select_navigation(
+    sa_status,  # (N,) standalone statuses
+    sa_pos,  # (N, 3) ECEF
+    sa_cov,  # (N, 3, 3) ECEF
+    co_status_raw,  # (N,) cooperative statuses
+    co_pos,
+    co_cov,
+    linked,  # (N,) bool: the UAV has a relative link for the cooperative fix
+    check_sigma,  # bool: integrity gate on
+    max_sigma2,  # gate: trace(cov) <= max_sigma2
+    origin,  # (3,) ECEF of the ENU origin
+    rot,  # (3, 3) ECEF -> ENU
+    pred_enu,  # (N, 3) dead-reckoning prediction
+    prev_cov,  # (N, 3, 3) previous estimate's covariance (ENU)
+    dr_var,  # dead-reckoning variance added per axis
+):
+    """The estimate each UAV uses: cooperative, else standalone, else dead reckoning.
+
+    ``UrbanWorld._epoch``'s selection (its numpy formulation is ``_select_navigation_numpy``
+    in :mod:`coopnav_env.sim.scenario`): fixes with status OK whose ``trace(cov)`` passes the
+    gate, expressed in ENU (NaN where not used). Status 4 (NO_RELATIVE_POSITION) replaces the
+    cooperative status of an unlinked UAV. Returns ``sa_pos, sa_cov, co_pos, co_cov`` (ENU),
+    ``co_status, source, nav_pos, nav_cov, sa_rejected, co_rejected``.
+    """
+    n = sa_status.shape[0]
+    sa_pos_e = np.full((n, 3), np.nan)
+    sa_cov_e = np.full((n, 3, 3), np.nan)
+    co_pos_e = np.full((n, 3), np.nan)
+    co_cov_e = np.full((n, 3, 3), np.nan)
+    co_status = np.empty(n, dtype=np.int64)
+    source = np.empty(n, dtype=np.int64)
+    nav_pos = np.empty((n, 3))
+    nav_cov = np.empty((n, 3, 3))
+    sa_rej = np.zeros(n, dtype=np.bool_)
+    co_rej = np.zeros(n, dtype=np.bool_)
+    tmp = np.empty((3, 3))
+    for i in range(n):
+        co_status[i] = co_status_raw[i] if linked[i] else 4
+        sa_ok = sa_status[i] == 0
+        co_ok = co_status[i] == 0
+        if check_sigma:
+            if sa_ok and not (sa_cov[i, 0, 0] + sa_cov[i, 1, 1] + sa_cov[i, 2, 2] <= max_sigma2):
+                sa_rej[i] = True
+                sa_ok = False
+            if co_ok and not (co_cov[i, 0, 0] + co_cov[i, 1, 1] + co_cov[i, 2, 2] <= max_sigma2):
+                co_rej[i] = True
+                co_ok = False
+        if sa_ok:
+            _to_enu(sa_pos[i], origin, rot, sa_pos_e[i])
+            _cov_to_enu(sa_cov[i], rot, tmp, sa_cov_e[i])
+        if co_ok:
+            _to_enu(co_pos[i], origin, rot, co_pos_e[i])
+            _cov_to_enu(co_cov[i], rot, tmp, co_cov_e[i])
+        if co_ok:
+            source[i] = 0
+            nav_pos[i] = co_pos_e[i]
+            nav_cov[i] = co_cov_e[i]
+        elif sa_ok:
+            source[i] = 1
+            nav_pos[i] = sa_pos_e[i]
+            nav_cov[i] = sa_cov_e[i]
+        else:
+            source[i] = 2
+            nav_pos[i] = pred_enu[i]
+            for a in range(3):
+                for b in range(3):
+                    nav_cov[i, a, b] = prev_cov[i, a, b] + (dr_var if a == b else 0.0)
+    return (
+        sa_pos_e,
+        sa_cov_e,
+        co_pos_e,
+        co_cov_e,
+        co_status,
+        source,
+        nav_pos,
+        nav_cov,
+        sa_rej,
+        co_rej,
+    )

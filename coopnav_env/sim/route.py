@@ -20,6 +20,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from coopnav_env.sim import _kernels
+
+_USE_KERNEL = True
+"""Waypoint advance through :mod:`coopnav_env.sim._kernels` (False: the numpy formulation)."""
+
 __all__ = [
     "Polyline",
     "advance_waypoints",
@@ -207,6 +212,10 @@ def advance_waypoints(
     pts = np.asarray(route, dtype=float).reshape(-1, 2)
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     idx = np.array(next_wp, dtype=np.int64, copy=True).reshape(-1)
+    if _USE_KERNEL:
+        return _kernels.advance_waypoints(
+            np.ascontiguousarray(pts), np.ascontiguousarray(xy), idx, float(reach_m)
+        )
     k = pts.shape[0]
     arrive = np.zeros_like(pts)  # direction of the leg arriving at each waypoint
     if k > 1:

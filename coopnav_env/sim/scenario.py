@@ -113,6 +113,7 @@ from coopnav_env.nav import (
     solve_cooperative,
     solve_standalone,
 )
+from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim.city import (
     BoolArray,
     Buildings,
@@ -137,6 +138,10 @@ from coopnav_env.sim.swarm import (
     step_kinematics,
     swept_collisions,
 )
+
+_USE_KERNEL = True
+"""The estimate selection of each epoch through :func:`coopnav_env.sim._kernels.select_navigation`
+(False: the numpy formulation ``_select_navigation_numpy``)."""
 
 __all__ = [
     "AUTO_SHARED_MIN_UAVS",
@@ -916,31 +921,10 @@ class UrbanWorld:
             linked = avail.any(axis=1) | (n == 1)
             centroid_uav = -1
 
-        sa_ok = sa.status == NavStatus.OK
-        co_status = np.where(linked, co.status, NavStatus.NO_RELATIVE_POSITION)
-        co_ok = co_status == NavStatus.OK
-        # integrity gate: a fix whose predicted 3-D sigma is too large is not used
-        sa_rej = sa_ok & ~_sigma_within(sa.cov_ecef_m2, cfg.max_fix_sigma_m)
-        co_rej = co_ok & ~_sigma_within(co.cov_ecef_m2, cfg.max_fix_sigma_m)
-        sa_ok &= ~sa_rej
-        co_ok &= ~co_rej
-        sa_pos = np.where(sa_ok[:, None], self.ecef_to_enu(sa.pos_ecef_m), np.nan)
-        sa_cov = np.where(sa_ok[:, None, None], self.cov_ecef_to_enu(sa.cov_ecef_m2), np.nan)
-        co_pos = np.where(co_ok[:, None], self.ecef_to_enu(co.pos_ecef_m), np.nan)
-        co_cov = np.where(co_ok[:, None, None], self.cov_ecef_to_enu(co.cov_ecef_m2), np.nan)
-
-        source = np.where(
-            co_ok,
-            NavSource.COOPERATIVE,
-            np.where(sa_ok, NavSource.STANDALONE, NavSource.DEAD_RECKONING),
-        ).astype(np.int64)
-        dr_pos = pred_enu
-        dr_cov = self.nav_cov_enu_m2 + np.eye(3) * (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (
-            1.0 if self._warm else 0.0
-        )
-        nav_pos = np.where(co_ok[:, None], co_pos, np.where(sa_ok[:, None], sa_pos, dr_pos))
-        nav_cov = np.where(
-            co_ok[:, None, None], co_cov, np.where(sa_ok[:, None, None], sa_cov, dr_cov)
+        dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (1.0 if self._warm else 0.0)
+        select = _select_navigation if _USE_KERNEL else _select_navigation_numpy
+        sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej = (
+            select(self, sa, co, linked, pred_enu, dr_var)
         )
         self.nav_pos_enu_m, self.nav_cov_enu_m2 = nav_pos, nav_cov
         self._warm = True
@@ -986,6 +970,59 @@ class UrbanWorld:
             coop_rejected=co_rej,
             next_waypoint=self.next_wp.copy(),
         )
+
+
+def _select_navigation(world, sa, co, linked, pred_enu, dr_var):
+    """The estimate each UAV uses (compiled :func:`coopnav_env.sim._kernels.select_navigation`).
+
+    Returns the standalone and cooperative fixes in ENU (NaN where not used), the cooperative
+    status (``NO_RELATIVE_POSITION`` for an unlinked UAV), the source, the estimate and its
+    covariance, and the fixes the integrity gate rejected.
+    """
+    cfg = world.config
+    gate = cfg.max_fix_sigma_m
+    return _sim_kernels.select_navigation(
+        np.ascontiguousarray(sa.status, dtype=np.int64),
+        np.ascontiguousarray(sa.pos_ecef_m, dtype=np.float64),
+        np.ascontiguousarray(sa.cov_ecef_m2, dtype=np.float64),
+        np.ascontiguousarray(co.status, dtype=np.int64),
+        np.ascontiguousarray(co.pos_ecef_m, dtype=np.float64),
+        np.ascontiguousarray(co.cov_ecef_m2, dtype=np.float64),
+        np.ascontiguousarray(linked, dtype=bool),
+        gate is not None,
+        float(gate) ** 2 if gate is not None else 0.0,
+        world.origin_ecef_m,
+        world.rot_enu,
+        np.ascontiguousarray(pred_enu, dtype=np.float64),
+        np.ascontiguousarray(world.nav_cov_enu_m2, dtype=np.float64),
+        float(dr_var),
+    )
+
+
+def _select_navigation_numpy(world, sa, co, linked, pred_enu, dr_var):
+    """The numpy formulation of :func:`_select_navigation` (the definition)."""
+    cfg = world.config
+    sa_ok = sa.status == NavStatus.OK
+    co_status = np.where(linked, co.status, NavStatus.NO_RELATIVE_POSITION).astype(np.int64)
+    co_ok = co_status == NavStatus.OK
+    # integrity gate: a fix whose predicted 3-D sigma is too large is not used
+    sa_rej = sa_ok & ~_sigma_within(sa.cov_ecef_m2, cfg.max_fix_sigma_m)
+    co_rej = co_ok & ~_sigma_within(co.cov_ecef_m2, cfg.max_fix_sigma_m)
+    sa_ok &= ~sa_rej
+    co_ok &= ~co_rej
+    sa_pos = np.where(sa_ok[:, None], world.ecef_to_enu(sa.pos_ecef_m), np.nan)
+    sa_cov = np.where(sa_ok[:, None, None], world.cov_ecef_to_enu(sa.cov_ecef_m2), np.nan)
+    co_pos = np.where(co_ok[:, None], world.ecef_to_enu(co.pos_ecef_m), np.nan)
+    co_cov = np.where(co_ok[:, None, None], world.cov_ecef_to_enu(co.cov_ecef_m2), np.nan)
+    source = np.where(
+        co_ok,
+        NavSource.COOPERATIVE,
+        np.where(sa_ok, NavSource.STANDALONE, NavSource.DEAD_RECKONING),
+    ).astype(np.int64)
+    dr_cov = world.nav_cov_enu_m2 + np.eye(3) * dr_var
+    nav_pos = np.where(co_ok[:, None], co_pos, np.where(sa_ok[:, None], sa_pos, pred_enu))
+    nav_cov = np.where(co_ok[:, None, None], co_cov, np.where(sa_ok[:, None, None], sa_cov, dr_cov))
+    return sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej
 
 
 @dataclass(frozen=True, eq=False)

@@ -14,13 +14,15 @@ for values near zero). The test
 below pins that: an episode run with the numpy formulation of the solvers stays within those
 bounds of the same episode with the kernels.
 
-Regenerated again (session of 2026-11-30) when the receiver-satellite geometry moved into a
-compiled kernel (libm's arctan2/arcsin instead of numpy's: elevations differ by ~1e-13 deg),
-the relative covariances in ECEF became exactly ``sigma_d^2 I`` (they were ``R^T sigma_d^2
-I R``, off by ~1e-16 relative) and the UAV covariance cross terms became matmuls: against the
-previous digests' episodes, navigation errors moved by at most 3.4e-8 m, rewards by 3e-10 and
+Regenerated again (third session of 2026-11-30) when the receiver-satellite geometry moved
+into a compiled kernel (libm's arctan2/arcsin/sin/cos instead of numpy's: elevations differ by
+~1e-13 deg), the relative covariances in ECEF became exactly ``sigma_d^2 I`` (they were
+``R^T sigma_d^2 I R``, off by ~1e-16 relative), the UAV covariance cross terms became matmuls
+and the ECEF-to-ENU rotation of the selected fixes a compiled loop: against the previous
+digests' episodes, navigation errors moved by at most 3.4e-8 m, rewards by 3e-10 and
 observations by one float32 ulp in a handful of entries. The compiled relative sensing,
-statuses and nuisance-clock count are bit-identical to their numpy formulations.
+statuses, solver set-up masks, nuisance-clock count, waypoint advance and observation builder
+are bit-identical to their numpy formulations.
 """
 
 from __future__ import annotations
@@ -32,14 +34,14 @@ from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import urban_canyon
 from coopnav_env.gnss import errors
 from coopnav_env.nav import cooperative, wls
-from coopnav_env.sim import city, swarm
+from coopnav_env.sim import city, route, scenario, swarm
 from tests.envs.golden import CASES, episode_digest
 
 GOLDEN: dict[str, str] = {
-    "n5_grid": "b76e5a895c5343054dd0453b21c5ef6a4b52e0aeb8b01aa6acf8ab0608132f1c",
-    "n20_grid": "667334ac7df6eb7b3e2cc99ec8c7050b6a38f5f7440ecb8b082972800b591ec1",
-    "n6_nlos_fixed_city": "cc673fc3b6f87a3591badd7f4533605bdaa5b4303479317b7b9590d2a82bde49",
-    "n4_canyon_sdt": "8d1166c47dbd4871bfcd23e04ca480ec04bae7f0659819a1c8d87af9daab7741",
+    "n5_grid": "d8f0692738c0173a6bf03e99fc9940188f7ec940262cc0f75be36d2e7f4cf5a1",
+    "n20_grid": "36e58efa5e8c061aa13faca99204f1277f9ebea5911993d3fbbd3a44fd3584bd",
+    "n6_nlos_fixed_city": "318bedf1d2f6fec63c7971ce33745abd3acaa5471df4b3e2759896db437ad3e1",
+    "n4_canyon_sdt": "d553f3ef7eab774abc40ffcafbae684070679b07b0be7acf42dbef740d580156",
 }
 
 
@@ -68,7 +70,7 @@ def _episode(n_uavs: int, seed: int, steps: int, **kwargs) -> tuple[np.ndarray, 
 )
 def test_compiled_solvers_change_episodes_only_in_the_last_bits(monkeypatch, n_uavs, seed, kwargs):
     fast_obs, fast_rew = _episode(n_uavs, seed, 150, **kwargs)
-    for module in (cooperative, wls, errors, city, swarm, urban_canyon):  # numpy formulations
+    for module in (cooperative, wls, errors, city, swarm, route, scenario, urban_canyon):
         monkeypatch.setattr(module, "_USE_KERNEL", False)
     ref_obs, ref_rew = _episode(n_uavs, seed, 150, **kwargs)
     assert fast_obs.shape == ref_obs.shape

@@ -46,3 +46,9 @@ def test_zero_range_is_still_an_error() -> None:
     sv = np.array([[7e6, 0.0, 0.0], [0.0, 2.6e7, 0.0]])
     with pytest.raises(ValueError, match="zero range"):
         errors._range_azimuth_elevation(np.array([[7e6, 0.0, 0.0]]), sv)
+
+
+def test_earth_centre_is_still_an_error() -> None:
+    sv = np.array([[2.6e7, 0.0, 0.0]])
+    with pytest.raises(ValueError, match="Earth's centre"):
+        errors._range_azimuth_elevation(np.zeros((1, 3)), sv)

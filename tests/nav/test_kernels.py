@@ -142,3 +142,56 @@ def test_samples_kernel_equals_numpy(monkeypatch):
         monkeypatch, lambda: solve_cooperative_samples(obs, pr_s, rel, rel_s, centroid=2)
     )
     _assert_same(fast, ref)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_setup_masks_kernel_equals_numpy(seed):
+    """References, used rows, clocks, DDT pivots and availability of every problem type,
+    with randomly masked satellites and unlinked UAVs: identical arrays (dtype included)."""
+    rng = np.random.default_rng(seed)
+    sc = make_scenario(
+        seed=seed, n_uav=int(rng.integers(1, 8)), n_sv=int(rng.integers(4, 20)), canyon_uav=0
+    )
+    obs = sc.observations(rng)
+    vis = obs.visible & (rng.random(obs.visible.shape) > 0.35)
+    obs = replace(
+        obs,
+        pr_m=np.where(vis, obs.pr_m, np.nan),
+        sigma_user_m=np.where(vis, obs.sigma_user_m, np.nan),
+    )
+    rel = sc.relative(rng)
+    n = obs.n_rx
+    avail = rel.available & (rng.random((n, n)) > 0.2)
+    avail = avail & avail.T
+    np.fill_diagonal(avail, True)
+    rel = type(rel)(rel.rel_ecef_m, rel.cov_ecef_m2, avail)
+    sobs, _ = cooperative._sort_by_system(obs)
+    virtual = VirtualPoint(rel.rel_ecef_m[0], rel.cov_ecef_m2[0], rng.random(n) > 0.3)
+    for centroid in ("self", n - 1, virtual):
+        for transfer in ("ddt", "sdt"):
+            for need in (None, 2, 7):
+                bavail = (
+                    virtual.available[None]
+                    if centroid is virtual
+                    else rel.available[np.arange(n) if centroid == "self" else [centroid]]
+                )
+                cen = (
+                    np.array([-1])
+                    if centroid is virtual
+                    else (np.arange(n) if centroid == "self" else np.array([centroid]))
+                )
+                fast = cooperative._kernels.setup_masks(
+                    sobs.visible,
+                    bavail,
+                    cen,
+                    sobs.system.astype(np.int64),
+                    sobs.el_deg,
+                    sobs.n_systems,
+                    transfer == "ddt",
+                    -1 if need is None else need,
+                )
+                ref = cooperative._setup_masks_numpy(sobs, bavail, cen, transfer, need)
+                for name, a, b in zip(
+                    ("ref", "used", "has_clock", "pivot", "too_few"), fast, ref, strict=True
+                ):
+                    assert a.shape == b.shape and np.array_equal(a, b), name

@@ -182,3 +182,65 @@ def test_relative_sensing_kernel_equals_numpy_bit_for_bit(n: int) -> None:
         rel, cov, avail = measure_relative_positions(np.random.default_rng(seed), pos, cfg)
         assert rel.tobytes() == fast[0].tobytes() and np.array_equal(avail, fast[2])
         np.testing.assert_array_equal(cov, fast[1][:, :, None, None] * np.eye(3))
+
+
+def test_waypoint_advance_kernel_equals_numpy(monkeypatch) -> None:
+    """Random routes (with a repeated waypoint: a zero-length leg), points on and off them."""
+    from coopnav_env.sim import route
+
+    for seed in range(600):
+        rng = np.random.default_rng(seed)
+        k = int(rng.integers(1, 8))
+        pts = np.round(rng.uniform(-100.0, 100.0, (k, 2)) / 10.0) * 10.0
+        if k > 2 and seed % 3 == 0:
+            pts[2] = pts[1]
+        n = int(rng.integers(1, 10))
+        if seed % 2:
+            xy = np.round(rng.uniform(-120.0, 120.0, (n, 2)))
+        else:  # on, near and exactly at the edge of the reach square of waypoints
+            xy = pts[rng.integers(0, k, n)] + rng.choice([0.0, 0.5, -3.0, 5.0], (n, 2))
+        wp = rng.integers(0, k, n)
+        reach = float(rng.choice([0.0, 5.0, 10.0]))
+        fast = route.advance_waypoints(pts, xy, wp, reach)
+        monkeypatch.setattr(route, "_USE_KERNEL", False)
+        ref = route.advance_waypoints(pts, xy, wp, reach)
+        monkeypatch.setattr(route, "_USE_KERNEL", True)
+        np.testing.assert_array_equal(fast, ref)
+        assert fast.dtype == ref.dtype == np.int64
+
+
+@pytest.mark.parametrize("gate", [None, 3.0])
+def test_navigation_selection_kernel_matches_numpy(gate) -> None:
+    """Cooperative, else standalone, else dead reckoning, with failed, unlinked and gated fixes."""
+    from types import SimpleNamespace
+
+    world = S.UrbanWorld(S.ScenarioConfig(n_uavs=8, max_fix_sigma_m=gate))
+    world.reset(np.random.default_rng(0))
+    rng = np.random.default_rng(1)
+    n = 8
+    rejected = 0
+    for trial in range(30):
+
+        def fix(rng=rng):
+            pos = world.enu_to_ecef(rng.normal(0.0, 50.0, (n, 3)))
+            a = rng.normal(0.0, 1.5, (n, 3, 3))
+            cov = a @ np.swapaxes(a, 1, 2)
+            status = rng.choice([0, 0, 0, 1, 2, 3, 5], n)
+            failed = (status == 1) | (status == 2)
+            pos[failed] = np.nan
+            cov[failed] = np.nan
+            return SimpleNamespace(status=status, pos_ecef_m=pos, cov_ecef_m2=cov)
+
+        sa, co = fix(), fix()
+        linked = rng.random(n) > 0.2
+        pred = rng.normal(0.0, 50.0, (n, 3))
+        world.nav_cov_enu_m2 = np.broadcast_to(np.eye(3) * rng.uniform(1, 4), (n, 3, 3)).copy()
+        dr_var = float(trial % 2) * 0.25
+        fast = S._select_navigation(world, sa, co, linked, pred, dr_var)
+        ref = S._select_navigation_numpy(world, sa, co, linked, pred, dr_var)
+        for k, (a, b) in enumerate(zip(fast, ref, strict=True)):
+            assert a.shape == b.shape and a.dtype == b.dtype, k
+            assert np.array_equal(np.isnan(a), np.isnan(b)) if a.dtype.kind == "f" else True
+            np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-9, err_msg=str(k))
+        rejected += int(fast[8].sum() + fast[9].sum())
+    assert (rejected > 0) == (gate is not None)  # the gate was exercised
