@@ -445,6 +445,16 @@ class PseudorangeEpoch:
         for name in ("pr_m", *expected, "clock_bias_m"):
             object.__setattr__(self, name, readonly(np.asarray(getattr(self, name))))
 
+    @classmethod
+    def _trusted(cls, **fields: NDArray) -> PseudorangeEpoch:
+        """An epoch of arrays the simulator just made (shapes right by construction): no
+        checks and no copies; the arrays are made read-only in place."""
+        out = object.__new__(cls)
+        for name, value in fields.items():
+            value.setflags(write=False)
+            object.__setattr__(out, name, value)
+        return out
+
     @property
     def n_rx(self) -> int:
         """Number of receivers."""
@@ -672,11 +682,11 @@ def _simulate_pseudoranges(
         extra = np.zeros((n_rx, n_sv))
     pr = range_m + clock[:, sys_idx] + common_error[None, :] + user_error + extra
     pr = np.where(vis, pr, np.nan)
-    return PseudorangeEpoch(
+    return PseudorangeEpoch._trusted(
         pr_m=pr,
-        visible=vis,
-        sv_ecef_m=sv,
-        system=sys_idx,
+        visible=readonly(vis),  # the caller's arrays are copied, the fresh ones are not
+        sv_ecef_m=readonly(sv),
+        system=readonly(sys_idx),
         el_deg=el_deg,
         az_deg=az_deg,
         sigma_user_m=sigma_user,
@@ -684,5 +694,5 @@ def _simulate_pseudoranges(
         range_m=range_m,
         common_error_m=common_error,
         user_error_m=user_error,
-        clock_bias_m=clock,
+        clock_bias_m=readonly(clock),
     )

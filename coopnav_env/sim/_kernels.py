@@ -293,3 +293,92 @@ def select_navigation(
         sa_rej,
         co_rej,
     )
+
+
+@njit(cache=True, inline="always")
+def _clip01(x):
+    """``numpy.clip(x, 0, 1)`` of a finite float (a signed zero becomes +0)."""
+    x = x if x > 0.0 else 0.0
+    return x if x < 1.0 else 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def _segment_box_dist2(p0, d, lo, hi):
+    """``swarm._segment_box_min_dist2`` of one segment and one box, same operations."""
+    tb = np.empty(8)
+    tb[0] = 0.0
+    tb[1] = 1.0
+    for k in range(3):
+        t_lo = (lo[k] - p0[k]) / d[k]
+        t_hi = (hi[k] - p0[k]) / d[k]
+        tb[2 + k] = _clip01(t_lo) if np.isfinite(t_lo) else 0.0
+        tb[5 + k] = _clip01(t_hi) if np.isfinite(t_hi) else 0.0
+    # insertion sort (8 finite values; equal values are equal, so the order of ties is moot)
+    for i in range(1, 8):
+        v = tb[i]
+        j = i - 1
+        while j >= 0 and tb[j] > v:
+            tb[j + 1] = tb[j]
+            j -= 1
+        tb[j + 1] = v
+    best = np.inf
+    for c in range(15):
+        if c < 8:
+            t = tb[c]
+        else:
+            a = tb[c - 8]
+            b = tb[c - 7]
+            tm = 0.5 * (a + b)
+            num = 0.0
+            den = 0.0
+            for k in range(3):
+                pm = p0[k] + tm * d[k]
+                if pm < lo[k]:
+                    off = p0[k] - lo[k]
+                    dd = d[k]
+                elif pm > hi[k]:
+                    off = p0[k] - hi[k]
+                    dd = d[k]
+                else:
+                    off = 0.0
+                    dd = 0.0
+                num += dd * off
+                den += dd * dd
+            num = -num
+            t = num / den if den > 0.0 else tm
+            t = t if t > a else a  # numpy.clip(t, a, b)
+            t = t if t < b else b
+        e2 = 0.0
+        for k in range(3):
+            pc = p0[k] + t * d[k]
+            ex = _fmax(_fmax(lo[k] - pc, 0.0), pc - hi[k])
+            e2 += ex * ex
+        if e2 < best:
+            best = e2
+    return best
+
+
+@njit(cache=True, error_model="numpy")
+def swept_collisions_culled(lo, hi, start, end, radius):
+    """``scenario._swept_collisions_culled``: the exact segment-box test on the (UAV, building)
+    pairs whose bounding boxes overlap (touching counts), any hit per UAV."""
+    n = start.shape[0]
+    m = lo.shape[0]
+    hit = np.zeros(n, dtype=np.bool_)
+    r2 = radius * radius
+    d = np.empty(3)
+    for i in range(n):
+        for k in range(3):
+            d[k] = end[i, k] - start[i, k]
+        for b in range(m):
+            overlap = True
+            for k in range(3):
+                s_lo = _fmin(start[i, k], end[i, k]) - radius
+                s_hi = _fmax(start[i, k], end[i, k]) + radius
+                if not (s_lo <= hi[b, k] and s_hi >= lo[b, k]):
+                    overlap = False
+                    break
+            if overlap and _segment_box_dist2(start[i], d, lo[b], hi[b]) <= r2:
+                hit[i] = True
+                break
+    return hit

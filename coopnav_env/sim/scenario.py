@@ -1111,8 +1111,18 @@ def _swept_collisions_culled(
     The bounding box of each swept sphere is tested against every building box first (a cheap
     ``(N, n_b)`` test); the exact segment-box distance then only runs on the UAVs and buildings
     of overlapping pairs. The result equals :func:`swept_collisions` (the exact test is run on
-    a superset of the pairs that can collide).
+    a superset of the pairs that can collide). The compiled
+    :func:`coopnav_env.sim._kernels.swept_collisions_culled` runs the exact test on the
+    overlapping pairs only, with the same operations (``_USE_KERNEL = False``: this numpy code).
     """
+    if _USE_KERNEL:
+        return _sim_kernels.swept_collisions_culled(
+            buildings.min_m,
+            buildings.max_m,
+            np.ascontiguousarray(start_enu_m, dtype=np.float64),
+            np.ascontiguousarray(end_enu_m, dtype=np.float64),
+            float(radius_m),
+        )
     n = start_enu_m.shape[0]
     lo = np.minimum(start_enu_m, end_enu_m) - radius_m
     hi = np.maximum(start_enu_m, end_enu_m) + radius_m

@@ -195,3 +195,27 @@ def test_setup_masks_kernel_equals_numpy(seed):
                     ("ref", "used", "has_clock", "pivot", "too_few"), fast, ref, strict=True
                 ):
                     assert a.shape == b.shape and np.array_equal(a, b), name
+
+
+@pytest.mark.parametrize("cond", [1.0, 1e3, 1e8, 3e9, 3e10, 1e12, 1e17])
+def test_safe_inverse_condition_test(cond):
+    """The Cholesky-first shortcut decides singularity as the eigenvalue test does."""
+    from coopnav_env.nav import _kernels
+
+    rng = np.random.default_rng(int(np.log10(cond)) + 1)
+    for _ in range(20):
+        q, _ = np.linalg.qr(rng.normal(size=(5, 5)))
+        lam = np.geomspace(1.0, 1.0 / cond, 5) * rng.uniform(0.5, 2.0)
+        a = (q * lam) @ q.T
+        a = (a + a.T) / 2.0
+        d = np.sqrt(np.diag(a))
+        scaled = a / np.outer(d, d)
+        ev = np.linalg.eigvalsh(scaled)
+        expect = bool(ev[0] <= 0.0 or ev[-1] > wls.COND_LIMIT * ev[0])
+        out = np.empty((5, 5))
+        singular = _kernels._safe_inverse_one(a, True, out)
+        assert singular == expect
+        if not singular:
+            np.testing.assert_allclose(out @ a, np.eye(5), atol=1e-9 * cond)
+        else:
+            np.testing.assert_allclose(out * np.outer(d, d), np.eye(5), rtol=1e-14, atol=1e-14)

@@ -244,3 +244,32 @@ def test_navigation_selection_kernel_matches_numpy(gate) -> None:
             np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-9, err_msg=str(k))
         rejected += int(fast[8].sum() + fast[9].sum())
     assert (rejected > 0) == (gate is not None)  # the gate was exercised
+
+
+def test_swept_collision_kernel_equals_numpy(monkeypatch) -> None:
+    """UAVs anywhere, on footprint corners and at roof height, moving or not, radius 0 too."""
+    hits = total = 0
+    for seed in range(150):
+        rng = np.random.default_rng(seed)
+        city = generate_city(CityConfig(), rng) if seed % 3 else canyon_city()
+        b = city.buildings
+        n = int(rng.integers(1, 30))
+        x0, x1, y0, y1 = city.extent_m
+        p0 = np.c_[rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(0.0, 60.0, n)]
+        step = rng.normal(0.0, 8.0, (n, 3)) * rng.choice([0.0, 1.0], (n, 1))
+        m = min(3, n, b.n)
+        if seed % 5 == 0:
+            p0[:m, :2] = b.min_m[:m, :2]
+        if seed % 7 == 0:
+            p0[:m, 2] = b.max_m[:m, 2]
+            step[:m, 2] = 0.0
+        p1 = p0 + step
+        radius = float(rng.choice([0.0, 1.0, 2.5]))
+        fast = S._swept_collisions_culled(b, p0, p1, radius)
+        monkeypatch.setattr(S, "_USE_KERNEL", False)
+        ref = S._swept_collisions_culled(b, p0, p1, radius)
+        monkeypatch.setattr(S, "_USE_KERNEL", True)
+        np.testing.assert_array_equal(fast, ref)
+        hits += int(ref.sum())
+        total += n
+    assert 0 < hits < total  # both outcomes exercised
