@@ -382,3 +382,20 @@ def swept_collisions_culled(lo, hi, start, end, radius):
                 hit[i] = True
                 break
     return hit
+
+
+@njit(cache=True)
+def separation_violations(pos, sep):
+    """``swarm.separation_violations``: UAVs with another UAV strictly closer than ``sep``
+    (pairwise ``sqrt(dx*dx + dy*dy + dz*dz)``, as ``numpy.linalg.norm`` sums three terms)."""
+    n = pos.shape[0]
+    out = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        for j in range(i + 1, n):
+            d0 = pos[j, 0] - pos[i, 0]
+            d1 = pos[j, 1] - pos[i, 1]
+            d2 = pos[j, 2] - pos[i, 2]
+            if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) < sep:
+                out[i] = True
+                out[j] = True
+    return out

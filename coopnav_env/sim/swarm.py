@@ -301,6 +301,9 @@ def separation_violations(pos_enu_m: ArrayLike, min_separation_m: float) -> Bool
         True for each UAV with another UAV strictly closer than ``min_separation_m``.
     """
     sep = _check_real("separation_violations", "min_separation_m", min_separation_m, 0.0)
+    if _USE_KERNEL:
+        pos = _as_points(pos_enu_m, "pos_enu_m")
+        return _kernels.separation_violations(np.ascontiguousarray(pos), float(sep))
     rng_m = pairwise_ranges_m(pos_enu_m)
     np.fill_diagonal(rng_m, np.inf)
     return np.any(rng_m < sep, axis=1)

@@ -273,3 +273,21 @@ def test_swept_collision_kernel_equals_numpy(monkeypatch) -> None:
         hits += int(ref.sum())
         total += n
     assert 0 < hits < total  # both outcomes exercised
+
+
+def test_separation_kernel_equals_numpy(monkeypatch) -> None:
+    from coopnav_env.sim import swarm
+
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(1, 40))
+        pos = rng.uniform(-30.0, 30.0, (n, 3))
+        if n > 3:
+            pos[1] = pos[0] + [3.0, 0.0, 0.0]  # exactly at the limit: not a violation
+            pos[3] = pos[2]  # coincident
+        sep = float(rng.choice([0.0, 3.0, 8.0]))
+        fast = swarm.separation_violations(pos, sep)
+        monkeypatch.setattr(swarm, "_USE_KERNEL", False)
+        ref = swarm.separation_violations(pos, sep)
+        monkeypatch.setattr(swarm, "_USE_KERNEL", True)
+        np.testing.assert_array_equal(fast, ref)
