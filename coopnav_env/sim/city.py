@@ -483,18 +483,10 @@ class _HorizontalSweep:
     """
 
     def __init__(self, buildings: Buildings, pos: FloatArray, az_deg: ArrayLike) -> None:
-        az = np.asarray(az_deg, dtype=np.float64)
-        if az.ndim != 1:
-            raise ValueError(f"az_deg must have shape (n_az,), got {az.shape}")
-        if not np.all(np.isfinite(az)):
-            raise ValueError("az_deg must be finite")
-        az_rad = np.radians(az)
-        dir_xy = np.stack([np.sin(az_rad), np.cos(az_rad)], axis=1)  # (n_az, 2)
-        # exact zeros for the cardinal directions so that the slab test treats them exactly
-        self._dir = np.where(np.abs(dir_xy) < 1e-15, 0.0, dir_xy)
+        self._dir = _ray_directions(az_deg)
         self._pos = pos
-        self.shape = (pos.shape[0], az.shape[0])
-        if buildings.n == 0 or pos.shape[0] == 0 or az.shape[0] == 0:
+        self.shape = (pos.shape[0], self._dir.shape[0])
+        if buildings.n == 0 or pos.shape[0] == 0 or self._dir.shape[0] == 0:
             self._tall = np.zeros(0, dtype=np.intp)
         else:
             self._tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
@@ -539,6 +531,33 @@ def _sweep_slab(
                 np.minimum(t_far, t_hi, out=t_far)
     assert t_near is not None and t_far is not None
     return t_near, t_far
+
+
+def _ray_directions(az_deg: ArrayLike) -> FloatArray:
+    """Horizontal unit vectors ``(sin az, cos az)`` (n_az, 2) of azimuths [deg], read-only.
+
+    Components below 1e-15 are exact zeros, so that the slab test treats the cardinal
+    directions exactly. Cached by value (an environment asks for the same azimuths each step).
+    """
+    az = np.asarray(az_deg, dtype=np.float64)
+    key = az.tobytes() if az.ndim == 1 else None
+    hit = _RAY_DIRECTIONS.get(key) if key is not None else None
+    if hit is not None:
+        return hit
+    if az.ndim != 1:
+        raise ValueError(f"az_deg must have shape (n_az,), got {az.shape}")
+    if not np.all(np.isfinite(az)):
+        raise ValueError("az_deg must be finite")
+    az_rad = np.radians(az)
+    dir_xy = np.stack([np.sin(az_rad), np.cos(az_rad)], axis=1)  # (n_az, 2)
+    out = np.where(np.abs(dir_xy) < 1e-15, 0.0, dir_xy)
+    out.setflags(write=False)
+    if len(_RAY_DIRECTIONS) < 64:
+        _RAY_DIRECTIONS[key] = out
+    return out
+
+
+_RAY_DIRECTIONS: dict[bytes, FloatArray] = {}
 
 
 def _horizontal_sweep(
@@ -613,12 +632,15 @@ def sky_and_walls(
     Both trace the same horizontal rays (receivers x azimuths) through the same footprints;
     this computes the slab intervals once and returns exactly what the two functions return.
     """
-    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     if _USE_KERNEL:
+        # every building goes to the kernel: one whose roof is not above a receiver changes
+        # nothing for it (the sweep's "taller than the lowest receiver" cull is implied)
+        pos = _as_points(pos_enu_m, "pos_enu_m")
         tan_max, dist = _kernels.sky_and_walls(
-            np.ascontiguousarray(pos), sweep._dir, sweep._lo, sweep._hi
+            np.ascontiguousarray(pos), _ray_directions(az_deg), buildings.min_m, buildings.max_m
         )
         return np.degrees(np.arctan(tan_max)), dist
+    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     tan_max = np.zeros(sweep.shape)
     dist = np.full(sweep.shape, np.inf)
     for t_near, t_far, lo, hi in sweep:
