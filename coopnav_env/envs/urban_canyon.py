@@ -372,34 +372,58 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
     def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
         ep = self._epoch
-        inf = float("inf")
-
-        def fin(x: np.ndarray) -> list[float]:
-            return np.where(np.isfinite(x), x, inf).tolist()
-
+        # three errors in one pass: estimate used, cooperative, standalone (inf: no fix)
+        err = np.linalg.norm(
+            np.stack([ep.nav_pos_enu_m, ep.coop_pos_enu_m, ep.standalone_pos_enu_m]) - ep.pos_enu_m,
+            axis=2,
+        )
+        err[1:] = np.where(np.isfinite(err[1:]), err[1:], np.inf)
         sig = ep.nav_sigma_enu_m
+        floats = np.concatenate(
+            [err, sig.T, np.sqrt((sig**2).sum(axis=1))[None], ep.goal_distance_m[None]]
+        ).tolist()
+        ints = np.stack(
+            [
+                ep.n_sats,
+                ep.n_sats_swarm,
+                ep.coop_status,
+                ep.standalone_status,
+                ep.nav_source,
+                ep.next_waypoint,
+            ]
+        ).tolist()
+        bools = np.stack(
+            [
+                ep.coop_rejected,
+                ep.standalone_rejected,
+                np.asarray(in_goal, dtype=bool),
+                ep.collided,
+                ep.separation_violation,
+                ep.out_of_contact,
+            ]
+        ).tolist()
         cols = {
-            "nav_error_m": ep.nav_error_m.tolist(),
-            "coop_error_m": fin(ep.coop_error_m),
-            "standalone_error_m": fin(ep.standalone_error_m),
-            "sig_e_m": sig[:, 0].tolist(),
-            "sig_n_m": sig[:, 1].tolist(),
-            "sig_u_m": sig[:, 2].tolist(),
-            "sig_3d_m": np.sqrt((sig**2).sum(axis=1)).tolist(),
-            "n_sats": ep.n_sats.tolist(),
-            "n_sats_swarm": ep.n_sats_swarm.tolist(),
+            "nav_error_m": floats[0],
+            "coop_error_m": floats[1],
+            "standalone_error_m": floats[2],
+            "sig_e_m": floats[3],
+            "sig_n_m": floats[4],
+            "sig_u_m": floats[5],
+            "sig_3d_m": floats[6],
+            "n_sats": ints[0],
+            "n_sats_swarm": ints[1],
             "n_sats_open_sky": [ep.n_above_mask] * ep.n_uavs,
-            "coop_status": ep.coop_status.tolist(),
-            "standalone_status": ep.standalone_status.tolist(),
-            "nav_source": ep.nav_source.tolist(),
-            "goal_distance_m": ep.goal_distance_m.tolist(),
-            "next_waypoint": ep.next_waypoint.tolist(),
-            "coop_rejected": ep.coop_rejected.tolist(),
-            "standalone_rejected": ep.standalone_rejected.tolist(),
-            "in_goal": np.asarray(in_goal, dtype=bool).tolist(),
-            "collided": ep.collided.tolist(),
-            "separation_violation": ep.separation_violation.tolist(),
-            "out_of_contact": ep.out_of_contact.tolist(),
+            "coop_status": ints[2],
+            "standalone_status": ints[3],
+            "nav_source": ints[4],
+            "goal_distance_m": floats[7],
+            "next_waypoint": ints[5],
+            "coop_rejected": bools[0],
+            "standalone_rejected": bools[1],
+            "in_goal": bools[2],
+            "collided": bools[3],
+            "separation_violation": bools[4],
+            "out_of_contact": bools[5],
         }
         keys = list(cols)
         term_keys = list(terms)
