@@ -645,3 +645,54 @@ def setup_masks(vis, bavail, cen, system, el, n_sys, ddt, need_override):
         else:
             too_few[b] = r < 0
     return ref, used, has_clock, pivot, too_few
+
+
+@njit(cache=True)
+def standalone_solve(
+    vis, pr_m, sv, sigma_user, sigma_common, system, n_sys, x0, max_iter, tol_m, check, lo, hi
+):
+    """``wls.solve_standalone`` after its argument checks, in one compiled call.
+
+    Weights ``1 / (sigma_user^2 + sigma_common^2)`` of the received pseudoranges, the
+    constellations each receiver sees and the counting rule, :func:`standalone_gauss_newton`,
+    :func:`fix_status`, then NaN positions/covariances of failed fixes and NaN clocks of
+    constellations not seen. Returns ``pos, cov, clock, status, n_used, n_iter``.
+    """
+    n, s = vis.shape
+    w = np.zeros((n, s))
+    pr = np.zeros((n, s))
+    seen = np.zeros((n, n_sys), dtype=np.bool_)
+    n_used = np.zeros(n, dtype=np.int64)
+    too_few = np.zeros(n, dtype=np.bool_)
+    for r in range(n):
+        for k in range(s):
+            if vis[r, k]:
+                su = sigma_user[r, k]
+                sc = sigma_common[k]
+                w[r, k] = 1.0 / (su * su + sc * sc)
+                pr[r, k] = pr_m[r, k]
+                seen[r, system[k]] = True
+                n_used[r] += 1
+        n_seen = 0
+        for j in range(n_sys):
+            if seen[r, j]:
+                n_seen += 1
+        too_few[r] = n_used[r] < 3 + n_seen
+    pos, clock, inv, converged, singular, iters = standalone_gauss_newton(
+        pr, sv, w, system, seen, ~too_few, x0, max_iter, tol_m
+    )
+    status, failed = fix_status(pos, converged, singular, too_few, check, lo, hi)
+    cov = np.empty((n, 3, 3))
+    for r in range(n):
+        for a in range(3):
+            for b in range(3):
+                cov[r, a, b] = np.nan if failed[r] else inv[r, a, b]
+            if failed[r]:
+                pos[r, a] = np.nan
+        for j in range(n_sys):
+            if failed[r] or not seen[r, j]:
+                clock[r, j] = np.nan
+    n_iter = 0
+    for r in range(n):
+        n_iter = max(n_iter, iters[r])
+    return pos, cov, clock, status, n_used, n_iter

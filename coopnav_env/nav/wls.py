@@ -140,6 +140,37 @@ def solve_standalone(
     n_rx = obs.pr_m.shape[0]
     n_sys = obs.n_systems
     vis = obs.visible
+    if _USE_KERNEL:
+        pos = np.zeros((n_rx, 3))
+        if x0_ecef_m is not None:
+            pos = pos + np.asarray(x0_ecef_m, dtype=float)
+            if not np.all(np.isfinite(pos)):
+                raise ValueError("x0_ecef_m contains NaN or inf")
+        check = plausible_radius_m is not None
+        lo, hi = plausible_radius_m if check else (0.0, 0.0)
+        pos, cov, clock, status, n_used, n_iter = _kernels.standalone_solve(
+            np.ascontiguousarray(vis, dtype=bool),
+            np.ascontiguousarray(obs.pr_m, dtype=float),
+            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+            np.ascontiguousarray(obs.sigma_user_m, dtype=float),
+            np.ascontiguousarray(obs.sigma_common_m, dtype=float),
+            np.ascontiguousarray(obs.system, dtype=np.int64),
+            int(n_sys),
+            np.ascontiguousarray(pos),
+            int(max_iter),
+            float(tol_m),
+            check,
+            float(lo),
+            float(hi),
+        )
+        return StandaloneSolution(
+            pos_ecef_m=pos,
+            cov_ecef_m2=cov,
+            clock_m=clock,
+            status=status,
+            n_used=n_used,
+            n_iter=int(n_iter),
+        )
     w = np.where(vis, 1.0 / (obs.sigma_user_m**2 + obs.sigma_common_m[None, :] ** 2), 0.0)
     pr = np.where(vis, obs.pr_m, 0.0)
     onehot = np.eye(n_sys)[obs.system]  # (n_sv, n_sys)
@@ -152,24 +183,10 @@ def solve_standalone(
         pos = pos + np.asarray(x0_ecef_m, dtype=float)
         if not np.all(np.isfinite(pos)):
             raise ValueError("x0_ecef_m contains NaN or inf")
-    usable = ~too_few
-    if _USE_KERNEL:
-        pos, clock, inv, converged, singular, iters = _kernels.standalone_gauss_newton(
-            pr,
-            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
-            w,
-            np.ascontiguousarray(obs.system, dtype=np.int64),
-            seen,
-            usable,
-            np.ascontiguousarray(pos),
-            int(max_iter),
-            float(tol_m),
-        )
-        n_iter = int(iters.max()) if iters.size else 0
-    else:
-        pos, clock, inv, converged, singular, n_iter = _gauss_newton_numpy(
-            obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m
-        )
+    # the numpy formulation (the kernel path above does all of this in one compiled call)
+    pos, clock, inv, converged, singular, n_iter = _gauss_newton_numpy(
+        obs, pr, w, onehot, seen, ~too_few, pos, max_iter, tol_m
+    )
     status, failed = fix_status(pos, converged, singular, too_few, plausible_radius_m)
     pos[failed] = np.nan
     cov = inv[:, :3, :3].copy()
