@@ -696,3 +696,85 @@ def standalone_solve(
     for r in range(n):
         n_iter = max(n_iter, iters[r])
     return pos, cov, clock, status, n_used, n_iter
+
+
+@njit(cache=True)
+def cooperative_finish(
+    pos, clk, inv, cross, converged, singular, rows, n_nuis, too_few_setup, has_clock,
+    base, bcov, froot, avail, check, lo, hi, with_uavs,
+):
+    """``cooperative._finish``: statuses, centroid outputs and (``with_uavs``) every UAV's
+    position, covariance and status from each centroid (Eq. 19-22, Appendix B):
+    ``p_q = p* + x_q``, ``H_q = H* + C_d,q + Y + Y^T``, ``Y = [H A^T C~^-1 (1 F_q)]_pos F_q^T``
+    (``inv[:3] @ cross @ froot^T`` summed in loops here).
+
+    Returns ``c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status``
+    (the UAV arrays empty with ``with_uavs`` False).
+    """
+    n_b, n, s = rows.shape
+    n_sys = has_clock.shape[1]
+    p_dim = inv.shape[1]
+    n_meas = np.zeros(n_b, dtype=np.int64)
+    n_uavs = np.zeros(n_b, dtype=np.int64)
+    too_few = too_few_setup.copy()
+    for b in range(n_b):
+        for q in range(n):
+            cnt = 0
+            for k in range(s):
+                if rows[b, q, k]:
+                    cnt += 1
+            n_meas[b] += cnt
+            if cnt > 0:
+                n_uavs[b] += 1
+        n_clk = 0
+        for j in range(n_sys):
+            if has_clock[b, j]:
+                n_clk += 1
+        # counting rule: measurements minus per-UAV nuisance clocks must cover the unknowns
+        if n_meas[b] - n_nuis[b] < 3 + n_clk:
+            too_few[b] = True
+    c_status, failed = fix_status(pos, converged, singular, too_few, check, lo, hi)
+    c_pos = pos.copy()
+    h_star = np.empty((n_b, 3, 3))
+    c_clk = np.empty((n_b, n_sys))
+    for b in range(n_b):
+        for a in range(3):
+            if failed[b]:
+                c_pos[b, a] = np.nan
+            for c in range(3):
+                h_star[b, a, c] = np.nan if failed[b] else inv[b, a, c]
+        for j in range(n_sys):
+            c_clk[b, j] = clk[b, j] if has_clock[b, j] and not failed[b] else np.nan
+    m = n if with_uavs else 0
+    uav_pos = np.empty((n_b, m, 3))
+    uav_cov = np.empty((n_b, m, 3, 3))
+    uav_status = np.empty((n_b, m), dtype=np.int64)
+    t = np.empty((3, 3))
+    for b in range(n_b):
+        for q in range(m):
+            if not avail[b, q]:
+                for a in range(3):
+                    uav_pos[b, q, a] = np.nan
+                    for c in range(3):
+                        uav_cov[b, q, a, c] = np.nan
+                uav_status[b, q] = 4 if c_status[b] == 0 else c_status[b]
+                continue
+            uav_status[b, q] = c_status[b]
+            for a in range(3):
+                uav_pos[b, q, a] = c_pos[b, a] + base[b, q, a]
+            # t = inv[:3] @ cross[b, q] (3 x 3), y = t @ froot[b, q]^T
+            for a in range(3):
+                for c in range(3):
+                    acc = 0.0
+                    for pp in range(p_dim):
+                        acc += inv[b, a, pp] * cross[b, q, pp, c]
+                    t[a, c] = acc
+            for a in range(3):
+                for c in range(3):
+                    y_ac = 0.0
+                    y_ca = 0.0
+                    for l in range(3):
+                        y_ac += t[a, l] * froot[b, q, c, l]
+                        y_ca += t[c, l] * froot[b, q, a, l]
+                    uav_cov[b, q, a, c] = h_star[b, a, c] + bcov[b, q, a, c] + y_ac + y_ca
+    return c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status

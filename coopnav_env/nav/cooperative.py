@@ -901,8 +901,36 @@ def _finish(
     """Statuses, centroid outputs and every UAV's position/covariance from each centroid.
 
     ``with_uavs=False`` (centroid ``"self"``, where UAV q's solution is centroid q's) skips
-    the UAV outputs and returns ``None`` for them.
+    the UAV outputs and returns ``None`` for them. Compiled as
+    :func:`coopnav_env.nav._kernels.cooperative_finish` (``_USE_KERNEL``; this numpy code
+    otherwise).
     """
+    if _USE_KERNEL:
+        check = plausible_radius_m is not None
+        lo, hi = plausible_radius_m if check else (0.0, 0.0)
+        out = _kernels.cooperative_finish(
+            np.ascontiguousarray(pos, dtype=float),
+            np.ascontiguousarray(clk, dtype=float),
+            np.ascontiguousarray(inv, dtype=float),
+            np.ascontiguousarray(cross, dtype=float),
+            np.ascontiguousarray(converged, dtype=bool),
+            np.ascontiguousarray(singular, dtype=bool),
+            np.ascontiguousarray(rows, dtype=bool),
+            np.ascontiguousarray(n_nuis, dtype=np.int64),
+            np.ascontiguousarray(st.too_few, dtype=bool),
+            np.ascontiguousarray(st.has_clock, dtype=bool),
+            np.ascontiguousarray(st.base, dtype=float),
+            np.ascontiguousarray(st.bcov, dtype=float),
+            np.ascontiguousarray(st.froot, dtype=float),
+            np.ascontiguousarray(st.avail, dtype=bool),
+            check,
+            float(lo),
+            float(hi),
+            bool(with_uavs),
+        )
+        if not with_uavs:
+            return (*out[:6], None, None, None)
+        return out
     n_meas = rows.sum(axis=(1, 2))
     n_uavs = rows.any(axis=2).sum(axis=1)
     # counting rule: measurements minus per-UAV nuisance clocks must cover the unknowns
