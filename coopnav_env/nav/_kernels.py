@@ -282,13 +282,14 @@ def _inv3(m: np.ndarray, out: np.ndarray) -> None:
 def cooperative_gauss_newton(
     pr: np.ndarray,  # (B or 1, N, S) pseudoranges, 0 where not received
     sv: np.ndarray,  # (S, 3)
-    w_user: np.ndarray,  # (N, S) 1 / sigma_user^2 (any value where not received)
+    vis: np.ndarray,  # (N, S) bool received
+    sigma_user: np.ndarray,  # (N, S) receiver-error sigma (any value where not received)
     sig_c: np.ndarray,  # (S,) common-error sigma
     system: np.ndarray,  # (S,) constellation index, sorted
     rows: np.ndarray,  # (B, N, S) bool measurement used
     base: np.ndarray,  # (B, N, 3) baseline of each UAV from the centroid
     froot: np.ndarray,  # (B, N, 3, 3) square root of its covariance
-    is_ref: np.ndarray,  # (B, N) bool clock reference (carries no nuisance clocks)
+    ref: np.ndarray,  # (B,) clock reference UAV (carries no nuisance clocks), -1: none
     has_clock: np.ndarray,  # (B, n_sys) bool centroid clock estimable
     usable: np.ndarray,  # (B,) bool
     x0: np.ndarray,  # (B, 3)
@@ -308,6 +309,11 @@ def cooperative_gauss_newton(
     n_sys = has_clock.shape[1]
     p_dim = 3 + n_sys
     n_x = 3 + p_dim + 1  # columns [lam | A | a]
+    w_user = np.zeros((n, n_sv))  # 1 / sigma_user^2 of the received pseudoranges
+    for q in range(n):
+        for k in range(n_sv):
+            if vis[q, k]:
+                w_user[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
     pos = x0.copy()
     clk = np.zeros((n_b, n_sys))
     inv = np.zeros((n_b, p_dim, p_dim))
@@ -397,7 +403,7 @@ def cooperative_gauss_newton(
                     for j in range(p_dim):
                         a_all[q, k, j] = x[i, 3 + j]
                 # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
-                if not is_ref[b, q]:
+                if q != ref[b]:
                     for s in range(n_sys):
                         dsum = 0.0
                         grp_sum[:] = 0.0
@@ -700,8 +706,24 @@ def standalone_solve(
 
 @njit(cache=True)
 def cooperative_finish(
-    pos, clk, inv, cross, converged, singular, rows, n_nuis, too_few_setup, has_clock,
-    base, bcov, froot, avail, check, lo, hi, with_uavs,
+    pos,
+    clk,
+    inv,
+    cross,
+    converged,
+    singular,
+    rows,
+    n_nuis,
+    too_few_setup,
+    has_clock,
+    base,
+    bcov,
+    froot,
+    avail,
+    check,
+    lo,
+    hi,
+    with_uavs,
 ):
     """``cooperative._finish``: statuses, centroid outputs and (``with_uavs``) every UAV's
     position, covariance and status from each centroid (Eq. 19-22, Appendix B):
@@ -778,3 +800,28 @@ def cooperative_finish(
                         y_ca += t[c, l] * froot[b, q, a, l]
                     uav_cov[b, q, a, c] = h_star[b, a, c] + bcov[b, q, a, c] + y_ac + y_ca
     return c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status
+
+
+@njit(cache=True)
+def sqrtm_diagonal(cov):
+    """Square roots of diagonal ``(M, 3, 3)`` covariances: ``(root, True)``, or
+    ``(undefined, False)`` as soon as one matrix has a non-zero (or NaN) off-diagonal entry.
+
+    ``root = sqrt(clip(diag, 0)) * I`` elementwise, as ``cooperative._sqrtm_psd``'s numpy
+    shortcut computes it (a negative zero clips to +0, NaN stays NaN).
+    """
+    m = cov.shape[0]
+    out = np.empty((m, 3, 3))
+    for i in range(m):
+        for a in range(3):
+            for b in range(3):
+                if a != b and cov[i, a, b] != 0.0:
+                    return out, False
+        for a in range(3):
+            d = cov[i, a, a]
+            if not (d > 0.0 or d != d):
+                d = 0.0
+            r = np.sqrt(d)
+            for b in range(3):
+                out[i, a, b] = r * (1.0 if a == b else 0.0)
+    return out, True

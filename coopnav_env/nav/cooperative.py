@@ -203,9 +203,22 @@ class _Setup:
 
 
 def _system_slices(system: np.ndarray, n_sys: int) -> tuple[slice, ...]:
-    """Contiguous satellite range of each constellation (``system`` must be sorted)."""
-    edges = np.searchsorted(system, np.arange(n_sys + 1))
-    return tuple(slice(int(edges[i]), int(edges[i + 1])) for i in range(n_sys))
+    """Contiguous satellite range of each constellation (``system`` must be sorted).
+
+    Cached by value: an environment asks for the same few satellite sets every step.
+    """
+    key = (np.asarray(system).tobytes(), np.asarray(system).dtype.str, int(n_sys))
+    hit = _SLICES.get(key)
+    if hit is None:
+        edges = np.searchsorted(system, np.arange(n_sys + 1))
+        hit = tuple(slice(int(edges[i]), int(edges[i + 1])) for i in range(n_sys))
+        if len(_SLICES) >= 4096:
+            _SLICES.clear()
+        _SLICES[key] = hit
+    return hit
+
+
+_SLICES: dict[tuple, tuple[slice, ...]] = {}
 
 
 def _sort_by_system(obs: GnssObservations) -> tuple[GnssObservations, np.ndarray | None]:
@@ -214,7 +227,8 @@ def _sort_by_system(obs: GnssObservations) -> tuple[GnssObservations, np.ndarray
     The solver works on contiguous constellation groups; the result does not depend on the
     order of the satellites, so callers never see the permutation.
     """
-    if np.all(np.diff(obs.system) >= 0):
+    system = obs.system
+    if system.size < 2 or bool((system[1:] >= system[:-1]).all()):
         return obs, None
     order = np.argsort(obs.system, kind="stable")
     return (
@@ -240,11 +254,18 @@ def _sqrtm_psd(cov: np.ndarray) -> np.ndarray:
 
     When every matrix is diagonal (the simulator's relative sensing: ``sigma_d^2 I``) the
     root is the square root of the diagonal, which is what the eigendecomposition returns for
-    a diagonal matrix too (the tests check both agree), without its cost.
+    a diagonal matrix too (to the last bit for ordinary values; the tests check it), without
+    its cost.
     """
-    flat = cov.reshape((*cov.shape[:-2], 9))
-    if not flat[..., _OFF_DIAGONAL].any():
-        return np.sqrt(np.clip(flat[..., _DIAGONAL], 0.0, None))[..., None] * np.eye(3)
+    if _USE_KERNEL and cov.ndim >= 2:
+        flat3 = np.ascontiguousarray(cov, dtype=np.float64).reshape(-1, 3, 3)
+        root, diagonal = _kernels.sqrtm_diagonal(flat3)
+        if diagonal:
+            return root.reshape(cov.shape)
+    else:
+        flat = cov.reshape((*cov.shape[:-2], 9))
+        if not flat[..., _OFF_DIAGONAL].any():
+            return np.sqrt(np.clip(flat[..., _DIAGONAL], 0.0, None))[..., None] * np.eye(3)
     lam, vec = np.linalg.eigh(cov)
     return np.einsum("...ij,...j,...kj->...ik", vec, np.sqrt(np.clip(lam, 0.0, None)), vec)
 
@@ -623,17 +644,17 @@ def _gauss_newton(
     literal = transfer == "ddt" and (covariance == "paper" or method == "dense")
     usable = ~st.too_few
     if method == "structured" and covariance == "exact" and _USE_KERNEL:
-        is_ref = np.arange(obs.n_rx)[None, :] == st.ref[:, None]  # (B, N)
         pos, clk, inv, cross, converged, singular, iters = _kernels.cooperative_gauss_newton(
             np.ascontiguousarray(st.pr, dtype=float),
             np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
-            np.where(obs.visible, 1.0 / np.where(obs.visible, obs.sigma_user_m, 1.0) ** 2, 0.0),
+            np.ascontiguousarray(obs.visible, dtype=bool),
+            np.ascontiguousarray(obs.sigma_user_m, dtype=float),
             np.ascontiguousarray(obs.sigma_common_m, dtype=float),
             np.ascontiguousarray(obs.system, dtype=np.int64),
             np.ascontiguousarray(st.used),
             np.ascontiguousarray(st.base, dtype=float),
             np.ascontiguousarray(st.froot, dtype=float),
-            is_ref,
+            np.ascontiguousarray(st.ref, dtype=np.int64),
             np.ascontiguousarray(st.has_clock),
             np.ascontiguousarray(usable),
             np.ascontiguousarray(x0, dtype=float),

@@ -17,8 +17,8 @@ bounds of the same episode with the kernels.
 Regenerated again (third session of 2026-11-30) when the receiver-satellite geometry moved
 into a compiled kernel (libm's arctan2/arcsin/sin/cos instead of numpy's: elevations differ by
 ~1e-13 deg), the relative covariances in ECEF became exactly ``sigma_d^2 I`` (they were
-``R^T sigma_d^2 I R``, off by ~1e-16 relative), the UAV covariance cross terms became
-compiled loops and the ECEF-to-ENU rotation of the selected fixes a compiled loop: against the previous
+``R^T sigma_d^2 I R``, off by ~1e-16 relative), and the UAV covariance cross terms and the
+ECEF-to-ENU rotation of the selected fixes became compiled loops: against the previous
 digests' episodes, navigation errors moved by at most 3.4e-8 m, rewards by 3e-10 and
 observations by one float32 ulp in a handful of entries. The compiled relative sensing,
 statuses, solver set-up masks, nuisance-clock count, waypoint advance and observation builder

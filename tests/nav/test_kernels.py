@@ -219,3 +219,26 @@ def test_safe_inverse_condition_test(cond):
             np.testing.assert_allclose(out @ a, np.eye(5), atol=1e-9 * cond)
         else:
             np.testing.assert_allclose(out * np.outer(d, d), np.eye(5), rtol=1e-14, atol=1e-14)
+
+
+def test_square_root_of_diagonal_covariances(monkeypatch):
+    """The diagonal shortcut (compiled and numpy) equals the eigendecomposition's root."""
+    rng = np.random.default_rng(0)
+    var = rng.uniform(0.0, 4.0, (3, 17, 3)) ** 2
+    var[0, 0] = [0.0, -0.0, 1e-300]  # zero, negative zero, tiny
+    cov = var[..., None] * np.eye(3)
+    lam, vec = np.linalg.eigh(cov)
+    eig_root = np.einsum("...ij,...j,...kj->...ik", vec, np.sqrt(np.clip(lam, 0.0, None)), vec)
+    fast = cooperative._sqrtm_psd(cov)
+    monkeypatch.setattr(cooperative, "_USE_KERNEL", False)
+    ref = cooperative._sqrtm_psd(cov)
+    assert fast.shape == ref.shape == cov.shape
+    assert fast.tobytes() == ref.tobytes()
+    np.testing.assert_allclose(fast, eig_root, rtol=1e-15, atol=0.0)
+    np.testing.assert_array_equal(fast[1:], eig_root[1:])  # ordinary values: bit for bit
+    # a full matrix takes the eigendecomposition in both paths
+    a = rng.normal(size=(4, 3, 3))
+    full = a @ np.swapaxes(a, 1, 2)
+    monkeypatch.setattr(cooperative, "_USE_KERNEL", True)
+    root = cooperative._sqrtm_psd(full)
+    np.testing.assert_allclose(root @ root, full, atol=1e-12)
