@@ -67,3 +67,67 @@ def range_azimuth_elevation(rx, sv, a_m, b_m, f, e2, ep2, n_bowring):
             az[i, k] = a
             el[i, k] = np.arcsin(min(max(up, -1.0), 1.0)) * to_deg
     return range_m, az, el, at_centre, zero_range
+
+
+@njit(cache=True, error_model="numpy")
+def pseudorange_model(
+    range_m,
+    el,
+    sys_idx,
+    vis,
+    clock,
+    factors,
+    z_common,
+    z_user,
+    extra,
+    el_ref,
+    ure,
+    tropo,
+    differential,
+):
+    """The error model and pseudoranges of ``errors._simulate_pseudoranges`` (Eq. 1-8).
+
+    ``el_ref`` (S,) is the elevation of the common error (NaN entries: the mean over the
+    receivers, as the numpy formulation's default). Sigmas: common
+    ``hypot(sigma_URE, sigma_tropo(el_ref))`` (0 with differential correction), receiver
+    ``factor_sys * hypot(sigma_MP(el), sigma_noise(el))``; ``pr = range + clock +
+    sigma_common z_common + sigma_user z_user + extra`` where received, NaN elsewhere.
+    Returns ``sigma_common, sigma_user, common_error, user_error, pr``.
+    """
+    n, s = el.shape
+    sigma_common = np.empty(s)
+    common_error = np.empty(s)
+    for k in range(s):
+        e = el_ref[k]
+        if e != e:
+            acc = el[0, k]
+            for i in range(1, n):
+                acc += el[i, k]
+            e = acc / n
+        if differential:
+            sc = 0.0
+        else:
+            t = 0.0
+            if tropo:
+                sn = np.sin(np.pi * e / 180.0)
+                t = 0.12 * 1.001 / np.sqrt(0.002001 + sn * sn)
+            sc = np.hypot(ure, t)
+        sigma_common[k] = sc
+        common_error[k] = sc * z_common[k]
+    sigma_user = np.empty((n, s))
+    user_error = np.empty((n, s))
+    pr = np.empty((n, s))
+    for i in range(n):
+        for k in range(s):
+            x = el[i, k]
+            mp = 0.13 + 0.53 * np.exp(-x / 10.0)
+            noise = 0.15 + 0.43 * np.exp(-x / 6.9)
+            su = factors[sys_idx[k]] * np.hypot(mp, noise)
+            sigma_user[i, k] = su
+            ue = su * z_user[i, k]
+            user_error[i, k] = ue
+            if vis[i, k]:
+                pr[i, k] = range_m[i, k] + clock[i, sys_idx[k]] + common_error[k] + ue + extra[i, k]
+            else:
+                pr[i, k] = np.nan
+    return sigma_common, sigma_user, common_error, user_error, pr

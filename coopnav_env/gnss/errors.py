@@ -666,6 +666,48 @@ def _simulate_pseudoranges(
     """
     n_rx, n_sv = rx.shape[0], sv.shape[0]
     range_m, az_deg, el_deg = _range_azimuth_elevation(rx, sv)
+    if _USE_KERNEL:
+        z_common = gen.standard_normal(n_sv)  # always first, always full size
+        z_user = gen.standard_normal((n_rx, n_sv))
+        sigma_common, sigma_user, common_error, user_error, pr = _kernels.pseudorange_model(
+            range_m,
+            el_deg,
+            np.ascontiguousarray(sys_idx, dtype=np.int64),
+            np.ascontiguousarray(vis, dtype=bool),
+            np.ascontiguousarray(clock, dtype=np.float64),
+            _iono_factors(model),
+            z_common,
+            z_user,
+            np.zeros((n_rx, n_sv)) if extra is None else np.ascontiguousarray(extra, dtype=float),
+            np.full(n_sv, np.nan) if el_ref is None else np.ascontiguousarray(el_ref, dtype=float),
+            float(model.sigma_ure_m),
+            bool(model.tropo),
+            bool(model.differential),
+        )
+    else:
+        sigma_common, sigma_user, common_error, user_error, pr = _pseudorange_model_numpy(
+            gen, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
+        )
+    return PseudorangeEpoch._trusted(
+        pr_m=pr,
+        visible=readonly(vis),  # the caller's arrays are copied, the fresh ones are not
+        sv_ecef_m=readonly(sv),
+        system=readonly(sys_idx),
+        el_deg=el_deg,
+        az_deg=az_deg,
+        sigma_user_m=sigma_user,
+        sigma_common_m=sigma_common,
+        range_m=range_m,
+        common_error_m=common_error,
+        user_error_m=user_error,
+        clock_bias_m=readonly(clock),
+    )
+
+
+def _pseudorange_model_numpy(gen, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref):
+    """The numpy formulation of :func:`coopnav_env.gnss._kernels.pseudorange_model` (with
+    the draws): returns ``sigma_common, sigma_user, common_error, user_error, pr``."""
+    n_rx, n_sv = el_deg.shape
     if el_ref is None:
         el_ref = el_deg.mean(axis=0)
 
@@ -682,17 +724,4 @@ def _simulate_pseudoranges(
         extra = np.zeros((n_rx, n_sv))
     pr = range_m + clock[:, sys_idx] + common_error[None, :] + user_error + extra
     pr = np.where(vis, pr, np.nan)
-    return PseudorangeEpoch._trusted(
-        pr_m=pr,
-        visible=readonly(vis),  # the caller's arrays are copied, the fresh ones are not
-        sv_ecef_m=readonly(sv),
-        system=readonly(sys_idx),
-        el_deg=el_deg,
-        az_deg=az_deg,
-        sigma_user_m=sigma_user,
-        sigma_common_m=sigma_common,
-        range_m=range_m,
-        common_error_m=common_error,
-        user_error_m=user_error,
-        clock_bias_m=readonly(clock),
-    )
+    return sigma_common, sigma_user, common_error, user_error, pr

@@ -52,3 +52,38 @@ def test_earth_centre_is_still_an_error() -> None:
     sv = np.array([[2.6e7, 0.0, 0.0]])
     with pytest.raises(ValueError, match="Earth's centre"):
         errors._range_azimuth_elevation(np.zeros((1, 3)), sv)
+
+
+@pytest.mark.parametrize("differential", [False, True])
+@pytest.mark.parametrize("tropo", [True, False])
+@pytest.mark.parametrize("with_extra", [False, True])
+def test_pseudorange_model_kernel_matches_numpy(monkeypatch, differential, tropo, with_extra):
+    """Same draws, same sigmas and pseudoranges to a few ulps (libm exp/sin vs numpy's)."""
+    from coopnav_env.gnss import ErrorModel
+
+    model = ErrorModel(differential=differential, tropo=tropo)
+    sv = default_constellation(("GPS", "BDS")).positions_ecef(500.0)
+    rng = np.random.default_rng(3)
+    rx = geodetic_to_ecef(31.2 + rng.normal(0, 0.001, 7), 121.5 + rng.normal(0, 0.001, 7), 20.0)
+    _, _, el = errors._range_azimuth_elevation(rx, sv)
+    keep = el.min(axis=0) > -5.0
+    sv = sv[keep]
+    system = default_constellation(("GPS", "BDS")).system[keep].astype(np.intp)
+    vis = rng.random((7, sv.shape[0])) > 0.3
+    clock = rng.normal(0.0, 3e4, (7, 2))
+    extra = rng.uniform(0.0, 20.0, vis.shape) if with_extra else None
+    for el_ref in (None, np.full(sv.shape[0], 35.0)):
+        fast = errors._simulate_pseudoranges(
+            np.random.default_rng(9), rx, sv, system, vis, model, clock, extra, el_ref
+        )
+        monkeypatch.setattr(errors, "_USE_KERNEL", False)
+        ref = errors._simulate_pseudoranges(
+            np.random.default_rng(9), rx, sv, system, vis, model, clock, extra, el_ref
+        )
+        monkeypatch.setattr(errors, "_USE_KERNEL", True)
+        np.testing.assert_array_equal(np.isnan(fast.pr_m), ~vis)
+        for name in ("sigma_common_m", "sigma_user_m", "common_error_m", "user_error_m"):
+            np.testing.assert_allclose(
+                getattr(fast, name), getattr(ref, name), rtol=1e-13, atol=0.0, err_msg=name
+            )
+        np.testing.assert_allclose(fast.pr_m[vis], ref.pr_m[vis], rtol=1e-15, atol=1e-8)
