@@ -399,3 +399,73 @@ def separation_violations(pos, sep):
                 out[i] = True
                 out[j] = True
     return out
+
+
+@njit(cache=True, inline="always")
+def _clip(x, lo, hi):
+    """``numpy.clip`` of a finite float to finite bounds."""
+    x = x if x > lo else lo
+    return x if x < hi else hi
+
+
+@njit(cache=True, error_model="numpy")
+def world_motion(
+    pos0,
+    vel0,
+    cmd,
+    v_max,
+    dv_max,
+    dt,
+    alt_min,
+    alt_max,
+    fence_lo,
+    fence_hi,
+    b_lo,
+    b_hi,
+    radius,
+    min_sep,
+):
+    """One motion step of ``UrbanWorld.step``: ``swarm.step_kinematics``, the virtual fence
+    at the city extent, swept collisions (a colliding UAV stays where it was, at rest) and
+    the separation test, with the numpy formulation's operations in its order.
+
+    Returns ``pos1, vel1, hit, sep``.
+    """
+    n = pos0.shape[0]
+    pos1 = np.empty((n, 3))
+    vel1 = np.empty((n, 3))
+    for i in range(n):
+        vx = _clip(cmd[i, 0], -1.0, 1.0) * v_max
+        vy = _clip(cmd[i, 1], -1.0, 1.0) * v_max
+        vz = _clip(cmd[i, 2], -1.0, 1.0) * v_max
+        h_scale = _fmin(1.0, v_max / _fmax(np.hypot(vx, vy), 1e-300))
+        vx *= h_scale
+        vy *= h_scale
+        d0 = vx - vel0[i, 0]
+        d1 = vy - vel0[i, 1]
+        d2 = vz - vel0[i, 2]
+        f = _fmin(1.0, dv_max / _fmax(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), 1e-300))
+        vel1[i, 0] = vel0[i, 0] + d0 * f
+        vel1[i, 1] = vel0[i, 1] + d1 * f
+        vel1[i, 2] = vel0[i, 2] + d2 * f
+        for k in range(3):
+            pos1[i, k] = pos0[i, k] + vel1[i, k] * dt
+        z = pos1[i, 2]
+        if z < alt_min:
+            vel1[i, 2] = _fmax(vel1[i, 2], 0.0)
+        elif z > alt_max:
+            vel1[i, 2] = _fmin(vel1[i, 2], 0.0)
+        pos1[i, 2] = _clip(z, alt_min, alt_max)
+        for k in range(2):  # virtual fence
+            p = pos1[i, k]
+            if p < fence_lo[k] or p > fence_hi[k]:
+                vel1[i, k] = 0.0
+            pos1[i, k] = _clip(p, fence_lo[k], fence_hi[k])
+    hit = swept_collisions_culled(b_lo, b_hi, pos0, pos1, radius)
+    for i in range(n):
+        if hit[i]:
+            for k in range(3):
+                pos1[i, k] = pos0[i, k]
+                vel1[i, k] = 0.0
+    sep = separation_violations(pos1, min_sep)
+    return pos1, vel1, hit, sep

@@ -826,19 +826,39 @@ class UrbanWorld:
         kin = cfg.kinematics
         cmd = np.asarray(cmd, dtype=float)
         pos0, vel0 = self.pos_enu_m, self.vel_enu_mps
-        pos1, vel1 = step_kinematics(pos0, vel0, cmd, kin)
         # virtual fence at the city extent
         x0, x1, y0, y1 = self.city.extent_m
         r = kin.uav_radius_m
         lo = np.array([x0 + r, y0 + r])
         hi = np.array([x1 - r, y1 - r])
-        out = (pos1[:, :2] < lo) | (pos1[:, :2] > hi)
-        pos1[:, :2] = np.clip(pos1[:, :2], lo, hi)
-        vel1[:, :2] = np.where(out, 0.0, vel1[:, :2])
-        hit = _swept_collisions_culled(self.city.buildings, pos0, pos1, r)
-        pos1[hit] = pos0[hit]
-        vel1[hit] = 0.0
-        sep = separation_violations(pos1, kin.min_separation_m)
+        if _USE_KERNEL:
+            if cmd.shape != pos0.shape:
+                raise ValueError(f"cmd must have shape {pos0.shape}, got {cmd.shape}")
+            pos1, vel1, hit, sep = _sim_kernels.world_motion(
+                pos0,
+                vel0,
+                np.ascontiguousarray(cmd),
+                float(kin.max_speed_mps),
+                float(kin.max_accel_mps2 * kin.dt_s),
+                float(kin.dt_s),
+                float(kin.altitude_min_m),
+                float(kin.altitude_max_m),
+                lo,
+                hi,
+                self.city.buildings.min_m,
+                self.city.buildings.max_m,
+                float(r),
+                float(kin.min_separation_m),
+            )
+        else:
+            pos1, vel1 = step_kinematics(pos0, vel0, cmd, kin)
+            out = (pos1[:, :2] < lo) | (pos1[:, :2] > hi)
+            pos1[:, :2] = np.clip(pos1[:, :2], lo, hi)
+            vel1[:, :2] = np.where(out, 0.0, vel1[:, :2])
+            hit = _swept_collisions_culled(self.city.buildings, pos0, pos1, r)
+            pos1[hit] = pos0[hit]
+            vel1[hit] = 0.0
+            sep = separation_violations(pos1, kin.min_separation_m)
         self.pos_enu_m, self.vel_enu_mps = pos1, vel1
         self.t_s = self.t_s + cfg.dt_s
         self.last = self._epoch(rng, hit, sep)
