@@ -133,3 +133,64 @@ def observation_rows(
         for j in range(dim):
             out[i, j] = _clip32(row[j], low[j], high[j])
     return out
+
+
+@njit(cache=True)
+def reward_terms(
+    route,  # (k, 2)
+    tail,  # (k,)
+    wp_prev,  # (n,) next waypoint at the previous step
+    xy_prev,  # (n, 2) true positions before the step
+    pos,  # (n, 3) true positions after it
+    goal,  # (3,)
+    nav_pos,  # (n, 3) estimate used
+    nav_cov,  # (n, 3, 3) its covariance
+    collided,
+    separation,
+    out_of_contact,
+    sigma_reward,  # bool: nav term from the predicted sigma (else from the true error)
+    params,  # (10,) float: see UrbanCanyonEnv._reward_params
+):
+    """The reward terms of ``UrbanCanyonEnv._step_arrays`` (its numpy formulation), in the
+    order of ``REWARD_TERMS``, shape (6, n); and the in-goal flags (n,)."""
+    n = pos.shape[0]
+    w_nav, cap, scale, w_prog, step_len = params[0], params[1], params[2], params[3], params[4]
+    pen_col, pen_sep, pen_con, goal_r = params[5], params[6], params[7], params[8]
+    goal_bonus = params[9]
+    terms = np.empty((6, n))
+    in_goal = np.empty(n, dtype=np.bool_)
+    crash = False
+    all_in = True
+    for i in range(n):
+        dx = pos[i, 0] - goal[0]
+        dy = pos[i, 1] - goal[1]
+        in_goal[i] = np.hypot(dx, dy) <= goal_r
+        all_in = all_in and in_goal[i]
+        crash = crash or collided[i]
+    reached = all_in and not crash
+    for i in range(n):
+        w = wp_prev[i]
+        ax = xy_prev[i, 0] - route[w, 0]
+        ay = xy_prev[i, 1] - route[w, 1]
+        d_prev = np.sqrt(ax * ax + ay * ay) + tail[w]
+        bx = pos[i, 0] - route[w, 0]
+        by = pos[i, 1] - route[w, 1]
+        d_now = np.sqrt(bx * bx + by * by) + tail[w]
+        if sigma_reward:
+            tr = nav_cov[i, 0, 0] + nav_cov[i, 1, 1] + nav_cov[i, 2, 2]
+            if not (tr > 0.0 or tr != tr):
+                tr = 0.0
+            nav_m = np.sqrt(tr)
+        else:
+            e0 = nav_pos[i, 0] - pos[i, 0]
+            e1 = nav_pos[i, 1] - pos[i, 1]
+            e2 = nav_pos[i, 2] - pos[i, 2]
+            nav_m = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        capped = nav_m if (nav_m < cap or nav_m != nav_m) else cap  # numpy.minimum
+        terms[0, i] = -w_nav * capped / scale
+        terms[1, i] = w_prog * (d_prev - d_now) / step_len
+        terms[2, i] = -pen_col * (1.0 if collided[i] else 0.0)
+        terms[3, i] = -pen_sep * (1.0 if separation[i] else 0.0)
+        terms[4, i] = -pen_con * (1.0 if out_of_contact[i] else 0.0)
+        terms[5, i] = goal_bonus if reached else 0.0
+    return terms, in_goal, crash, reached

@@ -97,6 +97,21 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
         self._obs_low = lo.astype(np.float64)  # the clip bounds as numpy's clip sees them
+        self._reward_params = np.array(
+            [
+                cfg.nav_reward_weight,
+                cfg.nav_reward_cap_m,
+                cfg.nav_reward_scale_m,
+                cfg.progress_reward_weight,
+                cfg.kinematics.max_speed_mps * cfg.dt_s,
+                cfg.collision_penalty,
+                cfg.separation_penalty,
+                cfg.contact_penalty,
+                cfg.goal_radius_m,
+                cfg.goal_bonus,
+            ],
+            dtype=np.float64,
+        )
         self._obs_high = hi.astype(np.float64)
 
     # ---- spaces -----------------------------------------------------------------------------
@@ -199,6 +214,29 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             self._trail.append(ep.pos_enu_m)
             self._trail = self._trail[-60:]
 
+        if _USE_KERNEL:
+            stacked, in_goal, crash, reached = _kernels.reward_terms(
+                self.world.route_xy_m,
+                self.world.route_tail_m,
+                prev.next_waypoint,
+                prev.pos_enu_m[:, :2],
+                ep.pos_enu_m,
+                ep.goal_enu_m,
+                ep.nav_pos_enu_m,
+                ep.nav_cov_enu_m2,
+                ep.collided,
+                ep.separation_violation,
+                ep.out_of_contact,
+                cfg.nav_reward == "sigma",
+                self._reward_params,
+            )
+            terms = dict(zip(REWARD_TERMS, stacked))
+            reward = stacked.sum(axis=0)
+            terminated = bool(crash or reached)
+            truncated = (self._steps >= cfg.max_steps) and not terminated
+            return self._observation_array(), reward, terminated, truncated, terms, in_goal
+
+        # the numpy formulation (the definition of the compiled reward_terms)
         # reward terms, shape (N,) each
         # progress: decrease of the remaining street route, both ends measured to the
         # waypoint that was next at the previous step (no reward for switching waypoints)
@@ -245,7 +283,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 f"unknown: {unknown}"
             )
         try:
-            cmd = np.array([np.asarray(actions[a], dtype=np.float64) for a in self.agents])
+            cmd = np.array([actions[a] for a in self.agents], dtype=np.float64)
         except (TypeError, ValueError) as exc:
             shapes = {a: np.shape(actions[a]) for a in self.agents}
             raise ValueError(

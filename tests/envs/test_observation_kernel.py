@@ -42,3 +42,37 @@ def test_observation_kernel_with_isolated_uavs() -> None:
     fast, ref = env._observation_array(), env._observation_array_numpy()
     assert not env._epoch.rel_available.any()
     assert fast.tobytes() == ref.tobytes()
+
+
+@pytest.mark.parametrize("nav_reward", ["error", "sigma"])
+def test_reward_kernel_matches_numpy(monkeypatch, nav_reward) -> None:
+    """Rewards, terms, in-goal flags and episode ends: identical with both formulations."""
+    from coopnav_env.envs import urban_canyon
+
+    def run(flag: bool):
+        monkeypatch.setattr(urban_canyon, "_USE_KERNEL", flag)
+        env = urban_canyon_v0.parallel_env(n_uavs=6, nav_reward=nav_reward, goal_radius_m=80.0)
+        env.reset(seed=5)
+        rng = np.random.default_rng(2)
+        out = []
+        for _ in range(60):
+            cmd = rng.uniform(-1.0, 1.0, (6, 3))
+            out.append(env._step_arrays(cmd))
+            if out[-1][2] or out[-1][3]:
+                env._reset_arrays(None)
+        return out
+
+    fast, ref = run(True), run(False)
+    ends = 0
+    for a, b in zip(fast, ref, strict=True):
+        assert a[1].tobytes() == b[1].tobytes()  # rewards
+        assert (a[2], a[3]) == (b[2], b[3]) and type(a[2]) is bool
+        ends += a[2] or a[3]
+        assert list(a[4]) == list(b[4])
+        for name in a[4]:
+            assert (
+                np.asarray(a[4][name], dtype=float).tobytes()
+                == np.asarray(b[4][name], dtype=float).tobytes()
+            ), name
+        np.testing.assert_array_equal(a[5], b[5])
+    assert ends > 0
