@@ -11,8 +11,9 @@ machines):
    installed. The two are measured in alternating rounds; the best round of each counts.
 2. **Where a step goes**: milliseconds per step inside the cooperative and standalone
    navigation solvers (the "nav solve"), pseudorange simulation, line of sight, the skyline
-   and wall sensors, collisions and relative sensing (timer hooks on those functions),
-   and the rest (environment adapter, observations, rewards, infos, resets).
+   and wall sensors, motion (kinematics, collisions) and relative sensing (timer hooks on
+   those functions), and the rest (environment adapter, observations, rewards, infos,
+   resets).
 3. **Memory per environment**: bytes allocated by building one environment, resetting it
    and stepping it 20 times (``tracemalloc``, what stays allocated), and its pickle size.
 4. **Scaling**: step cost against the swarm size N (2 ... 100, beside MPE) and against the
@@ -226,7 +227,8 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("pseudoranges", "coopnav_env.sim.scenario", "_simulate_pseudoranges"),
     ("line of sight", "coopnav_env.sim.scenario", "_trace_line_of_sight"),
     ("skyline + walls", "coopnav_env.sim.city", "City.sky_and_walls"),
-    ("collisions", "coopnav_env.sim.scenario", "_swept_collisions_culled"),
+    ("motion + collisions", "coopnav_env.sim._kernels", "world_motion"),
+    ("motion + collisions", "coopnav_env.sim.scenario", "_swept_collisions_culled"),
     ("relative sensing", "coopnav_env.sim.scenario", "_measure_relative"),
     ("relative sensing", "coopnav_env.sim.scenario", "UrbanWorld._relative_ecef"),
 )
