@@ -14,11 +14,20 @@ compare both, and the dense literal solve). Two further differences, both below 
 * each problem stops iterating as soon as its own update is below ``tol_m`` (the numpy loop
   iterates all problems until the last one has converged);
 * the small dense solves are hand-written (Cholesky for symmetric positive definite matrices,
-  cyclic Jacobi for the eigenvalues of the conditioning check), so the kernels need no LAPACK.
+  cyclic Jacobi for the eigenvalues of the conditioning check when the bound
+  ``||A||_F ||A^-1||_F`` does not already settle it), so the kernels need no LAPACK.
+
+Around the two loops, the rest of a solve is compiled too: :func:`standalone_solve` (the
+whole standalone solver after its argument checks), :func:`setup_masks` (clock references,
+used rows, DDT pivots and availability of the centroid problems), :func:`cooperative_finish`
+(statuses, centroid outputs and every UAV's position and covariance, Eq. 19-22),
+:func:`fix_status`, :func:`n_nuisance` and :func:`sqrtm_diagonal`. Each has its numpy
+formulation in :mod:`.wls` / :mod:`.cooperative` (``_USE_KERNEL = False``), compared in
+``tests/nav/test_kernels.py``.
 
 The kernels are compiled on first use and cached on disk beside this file (numba
-``cache=True``); the first call of a fresh installation compiles them (about 15 s
-for all kernels of the package on a 2-core machine).
+``cache=True``); the first call of a fresh installation compiles them (see the README for
+the time this takes for all kernels of the package on a 2-core machine).
 """
 
 from __future__ import annotations

@@ -1,9 +1,14 @@
-"""Compiled (numba) loops of the line-of-sight and horizontal-ray sensors of :mod:`.city`.
+"""Compiled (numba) loops of the world: line of sight, the horizontal-ray sensors of
+:mod:`.city`, relative sensing, motion (kinematics, collisions, separation), waypoint advance
+and the estimate selection of :class:`~coopnav_env.sim.scenario.UrbanWorld`.
 
-They compute exactly what the numpy formulations in :mod:`coopnav_env.sim.city` compute, with
-the same floating-point operations in the same order per (receiver, building, direction)
-triple, so the results are identical bit for bit (the tests compare both). They exist because
-the numpy versions spend most of their time in the overhead of many small array operations.
+Each has a numpy formulation that stays the readable definition (selected with the module
+flag ``_USE_KERNEL = False`` of :mod:`.city`, :mod:`.swarm`, :mod:`.route` or
+:mod:`.scenario`) and a test that compares the two. Most compute the same floating-point
+operations in the same order (including numpy's handling of signed zeros in ``maximum`` and
+``clip``), so the results are identical bit for bit; the estimate selection rotates to ENU in
+loops instead of matmuls (1e-13 apart). They exist because the numpy versions spend most of
+their time in the overhead of many small array operations.
 """
 
 from __future__ import annotations
@@ -267,18 +272,23 @@ def select_navigation(
         if co_ok:
             _to_enu(co_pos[i], origin, rot, co_pos_e[i])
             _cov_to_enu(co_cov[i], rot, tmp, co_cov_e[i])
+        # element loops, not array assignments: those compile numba's slow shape-error path
         if co_ok:
             source[i] = 0
-            nav_pos[i] = co_pos_e[i]
-            nav_cov[i] = co_cov_e[i]
+            for a in range(3):
+                nav_pos[i, a] = co_pos_e[i, a]
+                for b in range(3):
+                    nav_cov[i, a, b] = co_cov_e[i, a, b]
         elif sa_ok:
             source[i] = 1
-            nav_pos[i] = sa_pos_e[i]
-            nav_cov[i] = sa_cov_e[i]
+            for a in range(3):
+                nav_pos[i, a] = sa_pos_e[i, a]
+                for b in range(3):
+                    nav_cov[i, a, b] = sa_cov_e[i, a, b]
         else:
             source[i] = 2
-            nav_pos[i] = pred_enu[i]
             for a in range(3):
+                nav_pos[i, a] = pred_enu[i, a]
                 for b in range(3):
                     nav_cov[i, a, b] = prev_cov[i, a, b] + (dr_var if a == b else 0.0)
     return (
