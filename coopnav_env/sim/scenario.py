@@ -140,8 +140,10 @@ from coopnav_env.sim.swarm import (
 )
 
 _USE_KERNEL = True
-"""The estimate selection of each epoch through :func:`coopnav_env.sim._kernels.select_navigation`
-(False: the numpy formulation ``_select_navigation_numpy``)."""
+"""Compiled motion step (:func:`coopnav_env.sim._kernels.world_motion`), swept collisions and
+estimate selection (:func:`coopnav_env.sim._kernels.select_navigation`); False: their numpy
+formulations (``step_kinematics`` and the fence, ``_swept_collisions_culled``,
+``_select_navigation_numpy``)."""
 
 __all__ = [
     "AUTO_SHARED_MIN_UAVS",
