@@ -836,6 +836,8 @@ class UrbanWorld:
         if _USE_KERNEL:
             if cmd.shape != pos0.shape:
                 raise ValueError(f"cmd must have shape {pos0.shape}, got {cmd.shape}")
+            if not np.all(np.isfinite(cmd)):
+                raise ValueError("cmd must be finite")
             pos1, vel1, hit, sep = _sim_kernels.world_motion(
                 pos0,
                 vel0,

@@ -442,3 +442,21 @@ def test_integrity_gate_rejects_only_fixes_with_a_large_predicted_sigma() -> Non
     with pytest.raises(ValueError, match="max_fix_sigma_m"):
         ScenarioConfig(max_fix_sigma_m=0.0)
     assert ScenarioConfig(max_fix_sigma_m=None).max_fix_sigma_m is None
+
+
+@pytest.mark.parametrize("use_kernel", [True, False])
+def test_world_step_rejects_bad_commands(monkeypatch, use_kernel) -> None:
+    """Both motion paths refuse a NaN or wrongly shaped command with a clear error."""
+    from coopnav_env.sim import scenario
+
+    monkeypatch.setattr(scenario, "_USE_KERNEL", use_kernel)
+    world = UrbanWorld(ScenarioConfig(n_uavs=3))
+    world.reset(np.random.default_rng(0))
+    rng = np.random.default_rng(1)
+    bad = np.zeros((3, 3))
+    bad[1, 2] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        world.step(bad, rng)
+    with pytest.raises(ValueError, match="shape"):
+        world.step(np.zeros((2, 3)), rng)
+    world.step(np.zeros((3, 3)), rng)  # still usable
