@@ -153,6 +153,22 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._steps = 0
         self._epoch = self.world.reset(self._rng)
         self._city_scale_m = _city_scale_m(self.world)
+        # the observation kernel's scales (the city scale changes with the city)
+        cfg = self.config
+        self._obs_params = np.array(
+            [
+                self._city_scale_m,
+                cfg.kinematics.max_speed_mps,
+                cfg.obs_sigma_max_m,
+                cfg.relative_sensing.max_range_m,
+                cfg.max_steps,
+                cfg.obs_route_scale_m,
+                cfg.kinematics.altitude_min_m,
+                cfg.kinematics.altitude_max_m,
+                cfg.obs_wall_scale_m,
+            ],
+            dtype=np.float64,
+        )
         self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
         return self._observation_array()
 
@@ -310,22 +326,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             return self._observation_array_numpy()
         cfg = self.config
         ep = self._epoch
-        kin = cfg.kinematics
         sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
-        params = np.array(
-            [
-                self._city_scale_m,
-                kin.max_speed_mps,
-                cfg.obs_sigma_max_m,
-                cfg.relative_sensing.max_range_m,
-                cfg.max_steps,
-                cfg.obs_route_scale_m,
-                kin.altitude_min_m,
-                kin.altitude_max_m,
-                cfg.obs_wall_scale_m,
-            ],
-            dtype=np.float64,
-        )
         return _kernels.observation_rows(
             ep.nav_pos_enu_m,
             ep.goal_enu_m,
@@ -343,7 +344,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             ep.nav_source,
             walls,
             self._steps,
-            params,
+            self._obs_params,
             cfg.obs_neighbours,
             self._obs_low,
             self._obs_high,

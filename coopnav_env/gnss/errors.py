@@ -666,9 +666,11 @@ def _simulate_pseudoranges(
     """
     n_rx, n_sv = rx.shape[0], sv.shape[0]
     range_m, az_deg, el_deg = _range_azimuth_elevation(rx, sv)
+    z_common = gen.standard_normal(n_sv)  # always first, always full size
+    z_user = gen.standard_normal((n_rx, n_sv))
+    if extra is None:
+        extra = np.zeros((n_rx, n_sv))
     if _USE_KERNEL:
-        z_common = gen.standard_normal(n_sv)  # always first, always full size
-        z_user = gen.standard_normal((n_rx, n_sv))
         sigma_common, sigma_user, common_error, user_error, pr = _kernels.pseudorange_model(
             range_m,
             el_deg,
@@ -678,7 +680,7 @@ def _simulate_pseudoranges(
             _iono_factors(model),
             z_common,
             z_user,
-            np.zeros((n_rx, n_sv)) if extra is None else np.ascontiguousarray(extra, dtype=float),
+            np.ascontiguousarray(extra, dtype=float),
             np.full(n_sv, np.nan) if el_ref is None else np.ascontiguousarray(el_ref, dtype=float),
             float(model.sigma_ure_m),
             bool(model.tropo),
@@ -686,7 +688,7 @@ def _simulate_pseudoranges(
         )
     else:
         sigma_common, sigma_user, common_error, user_error, pr = _pseudorange_model_numpy(
-            gen, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
+            z_common, z_user, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
         )
     return PseudorangeEpoch._trusted(
         pr_m=pr,
@@ -704,10 +706,11 @@ def _simulate_pseudoranges(
     )
 
 
-def _pseudorange_model_numpy(gen, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref):
-    """The numpy formulation of :func:`coopnav_env.gnss._kernels.pseudorange_model` (with
-    the draws): returns ``sigma_common, sigma_user, common_error, user_error, pr``."""
-    n_rx, n_sv = el_deg.shape
+def _pseudorange_model_numpy(
+    z_common, z_user, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
+):
+    """The numpy formulation of :func:`coopnav_env.gnss._kernels.pseudorange_model`:
+    returns ``sigma_common, sigma_user, common_error, user_error, pr``."""
     if el_ref is None:
         el_ref = el_deg.mean(axis=0)
 
@@ -715,13 +718,8 @@ def _pseudorange_model_numpy(gen, range_m, el_deg, sys_idx, vis, model, clock, e
     sigma_common = model._sigma_common(el_ref)
     sigma_user = _sigma_user(el_deg, _iono_factors(model)[sys_idx])
 
-    z_common = gen.standard_normal(n_sv)  # always first, always full size
-    z_user = gen.standard_normal((n_rx, n_sv))
     common_error = sigma_common * z_common
     user_error = sigma_user * z_user
-
-    if extra is None:
-        extra = np.zeros((n_rx, n_sv))
     pr = range_m + clock[:, sys_idx] + common_error[None, :] + user_error + extra
     pr = np.where(vis, pr, np.nan)
     return sigma_common, sigma_user, common_error, user_error, pr

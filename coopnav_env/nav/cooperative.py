@@ -89,7 +89,13 @@ from coopnav_env.nav.types import (
     VirtualPoint,
     check_plausible_radius,
 )
-from coopnav_env.nav.wls import StandaloneSolution, _safe_inverse, fix_status, solve_standalone
+from coopnav_env.nav.wls import (
+    StandaloneSolution,
+    _radius_args,
+    _safe_inverse,
+    fix_status,
+    solve_standalone,
+)
 
 __all__ = [
     "CooperativeSolution",
@@ -927,8 +933,6 @@ def _finish(
     otherwise).
     """
     if _USE_KERNEL:
-        check = plausible_radius_m is not None
-        lo, hi = plausible_radius_m if check else (0.0, 0.0)
         out = _kernels.cooperative_finish(
             np.ascontiguousarray(pos, dtype=float),
             np.ascontiguousarray(clk, dtype=float),
@@ -944,9 +948,7 @@ def _finish(
             np.ascontiguousarray(st.bcov, dtype=float),
             np.ascontiguousarray(st.froot, dtype=float),
             np.ascontiguousarray(st.avail, dtype=bool),
-            check,
-            float(lo),
-            float(hi),
+            *_radius_args(plausible_radius_m),
             bool(with_uavs),
         )
         if not with_uavs:

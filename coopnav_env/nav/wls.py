@@ -140,14 +140,12 @@ def solve_standalone(
     n_rx = obs.pr_m.shape[0]
     n_sys = obs.n_systems
     vis = obs.visible
+    pos = np.zeros((n_rx, 3))
+    if x0_ecef_m is not None:
+        pos = pos + np.asarray(x0_ecef_m, dtype=float)
+        if not np.all(np.isfinite(pos)):
+            raise ValueError("x0_ecef_m contains NaN or inf")
     if _USE_KERNEL:
-        pos = np.zeros((n_rx, 3))
-        if x0_ecef_m is not None:
-            pos = pos + np.asarray(x0_ecef_m, dtype=float)
-            if not np.all(np.isfinite(pos)):
-                raise ValueError("x0_ecef_m contains NaN or inf")
-        check = plausible_radius_m is not None
-        lo, hi = plausible_radius_m if check else (0.0, 0.0)
         pos, cov, clock, status, n_used, n_iter = _kernels.standalone_solve(
             np.ascontiguousarray(vis, dtype=bool),
             np.ascontiguousarray(obs.pr_m, dtype=float),
@@ -159,31 +157,32 @@ def solve_standalone(
             np.ascontiguousarray(pos),
             int(max_iter),
             float(tol_m),
-            check,
-            float(lo),
-            float(hi),
+            *_radius_args(plausible_radius_m),
         )
-        return StandaloneSolution(
-            pos_ecef_m=pos,
-            cov_ecef_m2=cov,
-            clock_m=clock,
-            status=status,
-            n_used=n_used,
-            n_iter=int(n_iter),
+    else:
+        pos, cov, clock, status, n_used, n_iter = _standalone_numpy(
+            obs, pos, max_iter, tol_m, plausible_radius_m
         )
+    return StandaloneSolution(
+        pos_ecef_m=pos,
+        cov_ecef_m2=cov,
+        clock_m=clock,
+        status=status,
+        n_used=n_used,
+        n_iter=int(n_iter),
+    )
+
+
+def _standalone_numpy(obs, pos, max_iter, tol_m, plausible_radius_m):
+    """The numpy formulation of :func:`coopnav_env.nav._kernels.standalone_solve`."""
+    vis = obs.visible
+    n_sys = obs.n_systems
     w = np.where(vis, 1.0 / (obs.sigma_user_m**2 + obs.sigma_common_m[None, :] ** 2), 0.0)
     pr = np.where(vis, obs.pr_m, 0.0)
     onehot = np.eye(n_sys)[obs.system]  # (n_sv, n_sys)
     seen = np.einsum("rs,sk->rk", vis.astype(float), onehot) > 0  # (n_rx, n_sys)
     n_used = vis.sum(axis=1)
     too_few = n_used < 3 + seen.sum(axis=1)
-
-    pos = np.zeros((n_rx, 3))
-    if x0_ecef_m is not None:
-        pos = pos + np.asarray(x0_ecef_m, dtype=float)
-        if not np.all(np.isfinite(pos)):
-            raise ValueError("x0_ecef_m contains NaN or inf")
-    # the numpy formulation (the kernel path above does all of this in one compiled call)
     pos, clock, inv, converged, singular, n_iter = _gauss_newton_numpy(
         obs, pr, w, onehot, seen, ~too_few, pos, max_iter, tol_m
     )
@@ -192,14 +191,7 @@ def solve_standalone(
     cov = inv[:, :3, :3].copy()
     cov[failed] = np.nan
     clock = np.where(seen & ~failed[:, None], clock, np.nan)
-    return StandaloneSolution(
-        pos_ecef_m=pos,
-        cov_ecef_m2=cov,
-        clock_m=clock,
-        status=status,
-        n_used=n_used,
-        n_iter=n_iter,
-    )
+    return pos, cov, clock, status, n_used, n_iter
 
 
 def fix_status(
@@ -216,8 +208,6 @@ def fix_status(
     ``TOO_FEW_SATELLITES``; the last two have failed. Shared by both solvers (a compiled
     helper; the numpy formulation is :func:`_fix_status_numpy`).
     """
-    check = plausible_radius_m is not None
-    lo, hi = plausible_radius_m if check else (0.0, 0.0)
     if not _USE_KERNEL:
         return _fix_status_numpy(pos, converged, singular, too_few, plausible_radius_m)
     return _kernels.fix_status(
@@ -225,10 +215,16 @@ def fix_status(
         np.ascontiguousarray(converged, dtype=bool),
         np.ascontiguousarray(singular, dtype=bool),
         np.ascontiguousarray(too_few, dtype=bool),
-        check,
-        float(lo),
-        float(hi),
+        *_radius_args(plausible_radius_m),
     )
+
+
+def _radius_args(plausible_radius_m: tuple[float, float] | None) -> tuple[bool, float, float]:
+    """``plausible_radius_m`` as the kernels take it: ``(check, min, max)``."""
+    if plausible_radius_m is None:
+        return False, 0.0, 0.0
+    lo, hi = plausible_radius_m
+    return True, float(lo), float(hi)
 
 
 def _fix_status_numpy(pos, converged, singular, too_few, plausible_radius_m):

@@ -218,6 +218,22 @@ def _cov_to_enu(c, rot, tmp, out):
             out[i, j] = tmp[i, 0] * rot[j, 0] + tmp[i, 1] * rot[j, 1] + tmp[i, 2] * rot[j, 2]
 
 
+@njit(cache=True, inline="always")
+def _take_fix(pos, cov, i, add, add_var, nav_pos, nav_cov):
+    """Row ``i`` of ``pos``/``cov`` into the estimate; with ``add``, ``cov + add_var I`` (as
+    the numpy formulation's dead-reckoning covariance, zeros added off the diagonal too).
+
+    Element loops, not array assignments: those compile numba's slow shape-error path.
+    """
+    for a in range(3):
+        nav_pos[i, a] = pos[i, a]
+        for b in range(3):
+            v = cov[i, a, b]
+            if add:
+                v = v + (add_var if a == b else 0.0)
+            nav_cov[i, a, b] = v
+
+
 @njit(cache=True)
 def select_navigation(
     sa_status,  # (N,) standalone statuses
@@ -272,25 +288,15 @@ def select_navigation(
         if co_ok:
             _to_enu(co_pos[i], origin, rot, co_pos_e[i])
             _cov_to_enu(co_cov[i], rot, tmp, co_cov_e[i])
-        # element loops, not array assignments: those compile numba's slow shape-error path
         if co_ok:
             source[i] = 0
-            for a in range(3):
-                nav_pos[i, a] = co_pos_e[i, a]
-                for b in range(3):
-                    nav_cov[i, a, b] = co_cov_e[i, a, b]
+            _take_fix(co_pos_e, co_cov_e, i, False, 0.0, nav_pos, nav_cov)
         elif sa_ok:
             source[i] = 1
-            for a in range(3):
-                nav_pos[i, a] = sa_pos_e[i, a]
-                for b in range(3):
-                    nav_cov[i, a, b] = sa_cov_e[i, a, b]
+            _take_fix(sa_pos_e, sa_cov_e, i, False, 0.0, nav_pos, nav_cov)
         else:
             source[i] = 2
-            for a in range(3):
-                nav_pos[i, a] = pred_enu[i, a]
-                for b in range(3):
-                    nav_cov[i, a, b] = prev_cov[i, a, b] + (dr_var if a == b else 0.0)
+            _take_fix(pred_enu, prev_cov, i, True, dr_var, nav_pos, nav_cov)
     return (
         sa_pos_e,
         sa_cov_e,
