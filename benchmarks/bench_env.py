@@ -222,7 +222,8 @@ def section_compare(args, out: dict) -> None:
 
 STAGES: tuple[tuple[str, str, str], ...] = (
     # (label, module, attribute); a method is "Class.method"
-    ("cooperative solver", "coopnav_env.sim.scenario", "solve_cooperative"),
+    # the world's cooperative solve (the one-call compiled path, or solve_cooperative)
+    ("cooperative solver", "coopnav_env.sim.scenario", "UrbanWorld._solve_cooperative"),
     ("standalone solver", "coopnav_env.sim.scenario", "solve_standalone"),
     ("pseudoranges", "coopnav_env.sim.scenario", "_simulate_pseudoranges"),
     ("line of sight", "coopnav_env.sim.scenario", "_trace_line_of_sight"),
@@ -265,6 +266,51 @@ def stage_timers() -> Iterator[dict[str, float]]:
     finally:
         for owner, name, fn in reversed(undo):
             setattr(owner, name, fn)
+
+
+KERNEL_MODULES = (
+    "coopnav_env.sim._kernels",
+    "coopnav_env.gnss._kernels",
+    "coopnav_env.nav._kernels",
+    "coopnav_env.envs._kernels",
+)
+
+
+@contextlib.contextmanager
+def kernel_timers() -> Iterator[dict[str, float]]:
+    """Wrap every compiled kernel the package calls from Python with a timer.
+
+    Yields seconds per kernel name, each call counted from Python (the dispatch of its
+    arguments and results included; a kernel called from another kernel is part of its
+    caller). What the kernels take together is the compiled part of a step: what would be
+    left if every line of Python around them cost nothing.
+    """
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    acc: dict[str, float] = {}
+    undo = []
+    for mod_name in KERNEL_MODULES:
+        mod = importlib.import_module(mod_name)
+        for name, fn in list(vars(mod).items()):
+            if not isinstance(fn, CPUDispatcher):
+                continue
+
+            def timed(*a, _fn=fn, _label=name, **k):
+                t0 = time.perf_counter()
+                try:
+                    return _fn(*a, **k)
+                finally:
+                    acc[_label] = acc.get(_label, 0.0) + time.perf_counter() - t0
+
+            setattr(mod, name, timed)
+            undo.append((mod, name, fn))
+    try:
+        yield acc
+    finally:
+        for mod, name, fn in reversed(undo):
+            setattr(mod, name, fn)
 
 
 def stage_profile(n: int, seconds: float, **env_kw: Any) -> dict[str, Any]:
@@ -482,9 +528,37 @@ def section_batched(args, out: dict) -> None:
     for kind, rate in row.items():
         print(f"   {kind:>9}: {rate:8.0f} env-steps/s  ({rate * n:8.0f} agent-steps/s)")
     print(f"   batched / supersuit: {row['batched'] / row['supersuit']:.2f}x")
+    # the compiled part of a batched step: a ceiling for any batching of this Python code
+    step = fns["batched"]
+    with kernel_timers() as acc:
+        t0 = time.perf_counter()
+        m = 0
+        while time.perf_counter() - t0 < seconds or m < 3:
+            step(1)
+            m += 1
+        wall = time.perf_counter() - t0
+    per_swarm = {name: v / (m * k) for name, v in acc.items()}
+    compiled = sum(per_swarm.values())
+    gn = per_swarm.get("cooperative_gauss_newton", 0.0)
+    cores = 2
+    ceiling = cores / compiled if compiled > 0 else float("inf")
+    print(
+        f"   compiled kernels: {compiled * 1e6:.0f} us per swarm step "
+        f"({100 * compiled * m * k / wall:.0f}% of the batched step; the cooperative "
+        f"Gauss-Newton loop alone {gn * 1e6:.0f} us)"
+        f"\n   ceiling with every line of Python free and {cores} cores in perfect parallel: "
+        f"{ceiling:,.0f} env-steps/s (= {cores} / compiled time per swarm step)"
+    )
     for venv in venvs:
         venv.close()
-    out["batched"] = {"n": n, "copies": k, "env_steps_per_s": row}
+    out["batched"] = {
+        "n": n,
+        "copies": k,
+        "env_steps_per_s": row,
+        "compiled_s_per_swarm_step": compiled,
+        "compiled_by_kernel_s_per_swarm_step": per_swarm,
+        "ceiling_env_steps_per_s_2_cores": ceiling,
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -492,7 +566,30 @@ def section_batched(args, out: dict) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> float:
+@contextlib.contextmanager
+def ppo_update_timer() -> Iterator[dict[str, float]]:
+    """Time SB3's ``PPO.train`` (the gradient updates after each rollout); yields seconds."""
+    from stable_baselines3 import PPO
+
+    acc = {"update_s": 0.0}
+    original = PPO.train
+
+    def timed(self, *a, **k):
+        t0 = time.perf_counter()
+        try:
+            return original(self, *a, **k)
+        finally:
+            acc["update_s"] += time.perf_counter() - t0
+
+    PPO.train = timed
+    try:
+        yield acc
+    finally:
+        PPO.train = original
+
+
+def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> tuple[float, float]:
+    """(agent-steps/s of ``train()``, share of its learning time in PPO's gradient updates)."""
     from training.train import TrainConfig, load_config, train
 
     base = load_config()
@@ -514,9 +611,10 @@ def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> float:
                 },
             }
         )
-        train(cfg)
+        with ppo_update_timer() as acc:
+            train(cfg)
         info = json.loads((Path(tmp) / "run.json").read_text())
-    return float(info["agent_steps_per_s"])
+    return float(info["agent_steps_per_s"]), acc["update_s"] / float(info["session_wall_s"])
 
 
 def section_train(args, out: dict) -> None:
@@ -531,20 +629,37 @@ def section_train(args, out: dict) -> None:
         print("   needs the train extra: skipped")
         return
     rates: dict[str, list[float]] = {"supersuit": [], "batched": []}
+    shares: dict[str, list[float]] = {"supersuit": [], "batched": []}
     for _ in range(args.rounds):
         for kind in rates:
-            rates[kind].append(train_rate(kind, args.train_copies, steps, args.train_n_steps))
+            rate, share = train_rate(kind, args.train_copies, steps, args.train_n_steps)
+            rates[kind].append(rate)
+            shares[kind].append(share)
     best = {kind: max(v) for kind, v in rates.items()}
     for kind, v in best.items():
         each = ", ".join(f"{x:.0f}" for x in rates[kind])
-        print(f"   {kind:>9}: {v:8.0f} agent-steps/s  (rounds: {each})")
+        share = shares[kind][rates[kind].index(v)]
+        print(
+            f"   {kind:>9}: {v:8.0f} agent-steps/s  (rounds: {each}; "
+            f"{100 * share:.0f}% of the time in PPO's gradient updates)"
+        )
     print(f"   batched / supersuit: {best['batched'] / best['supersuit']:.2f}x")
+    # PPO's updates cost the same whatever steps the environment: a ceiling for any vector env
+    ss_share = shares["supersuit"][rates["supersuit"].index(best["supersuit"])]
+    ceiling = 1.0 / ss_share if ss_share > 0 else float("inf")
+    print(
+        f"   ceiling: a vector env that cost nothing (and a free policy forward pass) would "
+        f"leave the updates,\n   so no vector env can train more than 1 / {ss_share:.2f} = "
+        f"{ceiling:.2f}x faster than the SuperSuit path with these hyperparameters"
+    )
     out["train"] = {
         "n_envs": args.train_copies,
         "n_steps": args.train_n_steps,
         "agent_steps": steps,
         "agent_steps_per_s": best,
         "rounds": rates,
+        "update_share_rounds": shares,
+        "ceiling_vs_supersuit": ceiling,
     }
 
 

@@ -834,3 +834,114 @@ def sqrtm_diagonal(cov):
             for b in range(3):
                 out[i, a, b] = r * (1.0 if a == b else 0.0)
     return out, True
+
+
+@njit(cache=True)
+def cooperative_isotropic(
+    pr,  # (N, S) pseudoranges, NaN where not received
+    vis,  # (N, S) bool received
+    sv,  # (S, 3)
+    system,  # (S,) constellation index, sorted
+    sigma_user,  # (N, S)
+    sig_c,  # (S,)
+    el,  # (N, S) [deg]
+    n_sys,
+    rel,  # (B, N, 3) measured position of each UAV relative to centroid UAV cen[b], ECEF
+    var,  # (B, N) per-axis variance of each (covariance var * I)
+    avail,  # (B, N) bool (the centroid UAV's own entry is taken as True)
+    cen,  # (B,) centroid UAV of each problem
+    ddt,
+    need_override,
+    x0,  # (B, 3)
+    max_iter,
+    tol_m,
+    check,
+    lo,
+    hi,
+    with_uavs,
+):
+    """A whole ``solve_cooperative`` (exact covariance, UAV centroids) in one compiled call.
+
+    For relative positions with isotropic covariances ``var * I`` (the simulator's relative
+    sensing), the same kernels with the same arguments as the Python path of
+    ``cooperative.solve_cooperative`` (``_setup``, ``_gauss_newton``, ``_finish``): the
+    baselines and covariances masked to the available UAVs, :func:`setup_masks`,
+    :func:`sqrtm_diagonal`, :func:`cooperative_gauss_newton`, :func:`n_nuisance`,
+    :func:`cooperative_finish`; so the results are those of that path, bit for bit
+    (``tests/nav/test_kernels.py``), without its Python calls between the kernels.
+
+    Returns ``c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status,
+    n_iter`` as :func:`cooperative_finish` plus the largest iteration count.
+    """
+    n_b, n = avail.shape
+    s = vis.shape[1]
+    # a UAV always "sees" itself (RelativePositions marks the diagonal available)
+    bavail = avail.copy()
+    for b in range(n_b):
+        bavail[b, cen[b]] = True
+    base = np.zeros((n_b, n, 3))
+    bcov = np.zeros((n_b, n, 3, 3))
+    for b in range(n_b):
+        for q in range(n):
+            if bavail[b, q]:
+                v = var[b, q]
+                for a in range(3):
+                    base[b, q, a] = rel[b, q, a]
+                    for c in range(3):
+                        bcov[b, q, a, c] = v * (1.0 if a == c else 0.0)
+    ref, used, has_clock, _pivot, too_few = setup_masks(
+        vis, bavail, cen, system, el, n_sys, ddt, need_override
+    )
+    froot = sqrtm_diagonal(bcov.reshape((n_b * n, 3, 3)))[0].reshape((n_b, n, 3, 3))
+    pr0 = np.zeros((1, n, s))
+    for q in range(n):
+        for k in range(s):
+            if vis[q, k]:
+                pr0[0, q, k] = pr[q, k]
+    usable = np.empty(n_b, dtype=np.bool_)
+    for b in range(n_b):
+        usable[b] = not too_few[b]
+    pos, clk, inv, cross, converged, singular, iters = cooperative_gauss_newton(
+        pr0,
+        sv,
+        vis,
+        sigma_user,
+        sig_c,
+        system,
+        used,
+        base,
+        froot,
+        ref,
+        has_clock,
+        usable,
+        x0,
+        max_iter,
+        tol_m,
+    )
+    n_iter = 0
+    for b in range(n_b):
+        n_iter = max(n_iter, iters[b])
+    n_nuis = n_nuisance(used, system, ref, n_sys)
+    c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = (
+        cooperative_finish(
+            pos,
+            clk,
+            inv,
+            cross,
+            converged,
+            singular,
+            used,
+            n_nuis,
+            too_few,
+            has_clock,
+            base,
+            bcov,
+            froot,
+            bavail,
+            check,
+            lo,
+            hi,
+            with_uavs,
+        )
+    )
+    return c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status, n_iter

@@ -911,6 +911,81 @@ def solve_cooperative(
     )
 
 
+def _solve_isotropic(
+    obs: GnssObservations,
+    rel_ecef_m: np.ndarray,
+    var_m2: np.ndarray,
+    available: np.ndarray,
+    centroid: str | int,
+    transfer: Transfer,
+    x0_ecef_m: np.ndarray,
+    max_iter: int,
+    tol_m: float = 1e-4,
+    plausible_radius_m: tuple[float, float] | None = PLAUSIBLE_RADIUS_M,
+) -> CooperativeSolution | None:
+    """:func:`solve_cooperative` (exact covariance, structured) in one compiled call.
+
+    For the simulator's hot path: trusted arrays, relative positions with isotropic
+    covariances ``var_m2 * I``. ``centroid="self"``: ``rel_ecef_m`` (N, N, 3), ``var_m2`` and
+    ``available`` (N, N), ``x0_ecef_m`` (N, 3), as :class:`RelativePositions` holds them. An
+    ``int`` ``a``: only UAV ``a``'s row, ``rel_ecef_m`` (N, 3), ``var_m2`` and ``available``
+    (N,), ``x0_ecef_m`` (3,). Returns exactly what ``solve_cooperative`` returns for
+    ``RelativePositions(rel_ecef_m, var_m2[..., None, None] * I, available)`` (the same kernels
+    on the same arguments: :func:`coopnav_env.nav._kernels.cooperative_isotropic`), or None
+    when this path does not apply (kernels switched off, satellites not grouped by
+    constellation): the caller then runs ``solve_cooperative``.
+    """
+    system = obs.system
+    if not _USE_KERNEL or (system.size > 1 and not bool((system[1:] >= system[:-1]).all())):
+        return None
+    n = obs.n_rx
+    self_centroids = isinstance(centroid, str)
+    if self_centroids:
+        cen = np.arange(n, dtype=np.int64)
+        rel_b, var_b, avail_b, x0 = rel_ecef_m, var_m2, available, x0_ecef_m
+    else:
+        cen = np.array([int(centroid)], dtype=np.int64)
+        rel_b, var_b, avail_b, x0 = rel_ecef_m[None], var_m2[None], available[None], x0_ecef_m[None]
+    out = _kernels.cooperative_isotropic(
+        obs.pr_m,
+        obs.visible,
+        obs.sv_ecef_m,
+        system,
+        obs.sigma_user_m,
+        obs.sigma_common_m,
+        obs.el_deg,
+        int(obs.n_systems),
+        np.ascontiguousarray(rel_b, dtype=np.float64),
+        np.ascontiguousarray(var_b, dtype=np.float64),
+        np.ascontiguousarray(avail_b, dtype=bool),
+        cen,
+        transfer == "ddt",
+        -1,
+        np.ascontiguousarray(x0, dtype=np.float64),
+        int(max_iter),
+        float(tol_m),
+        *_radius_args(plausible_radius_m),
+        not self_centroids,
+    )
+    c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status, n_iter = out
+    if self_centroids:  # UAV q's solution is centroid q's
+        uav_pos, uav_cov, uav_status = c_pos, h_star, c_status.copy()
+    else:
+        uav_pos, uav_cov, uav_status = uav_pos[0], uav_cov[0], uav_status[0]
+    return CooperativeSolution(
+        pos_ecef_m=uav_pos,
+        cov_ecef_m2=uav_cov,
+        status=uav_status,
+        centroid_pos_ecef_m=c_pos,
+        centroid_cov_ecef_m2=h_star,
+        centroid_clock_m=c_clk,
+        centroid_status=c_status,
+        n_uavs_used=n_uavs,
+        n_meas_used=n_meas,
+        n_iter=int(n_iter),
+    )
+
+
 def _finish(
     obs,
     st,

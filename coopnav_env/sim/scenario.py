@@ -107,12 +107,14 @@ from coopnav_env.gnss import (
 )
 from coopnav_env.gnss.errors import DEFAULT_CLOCK_SIGMA_M, _simulate_pseudoranges
 from coopnav_env.nav import (
+    CooperativeSolution,
     GnssObservations,
     NavStatus,
     RelativePositions,
     solve_cooperative,
     solve_standalone,
 )
+from coopnav_env.nav.cooperative import _solve_isotropic
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim.city import (
     BoolArray,
@@ -749,6 +751,44 @@ class UrbanWorld:
         avail[row] = available[row]
         return RelativePositions._trusted(rel, cov, avail)
 
+    def _solve_cooperative(
+        self,
+        obs: GnssObservations,
+        rel_enu_m: np.ndarray,
+        var_m2: np.ndarray,
+        available: np.ndarray,
+        centroid: str | int,
+        x0_ecef_m: np.ndarray,
+    ) -> CooperativeSolution:
+        """The cooperative fixes of an epoch (``centroid``: ``"self"`` or the shared UAV).
+
+        :func:`solve_cooperative` on :meth:`_relative_ecef`'s relative positions; with the
+        exact covariance, through its one-call compiled form
+        (``coopnav_env.nav.cooperative._solve_isotropic``: same kernels, same arguments, same
+        result) on the same rotated vectors.
+        """
+        cfg = self.config
+        row = None if isinstance(centroid, str) else centroid
+        if cfg.covariance == "exact":
+            if row is None:
+                rel_ecef, var, avail = rel_enu_m @ self.rot_enu, var_m2, available
+            else:
+                rel_ecef, var, avail = rel_enu_m[row] @ self.rot_enu, var_m2[row], available[row]
+            co = _solve_isotropic(
+                obs, rel_ecef, var, avail, centroid, cfg.transfer, x0_ecef_m, cfg.nav_max_iter
+            )
+            if co is not None:
+                return co
+        return solve_cooperative(
+            obs,
+            self._relative_ecef(rel_enu_m, var_m2, available, row=row),
+            transfer=cfg.transfer,
+            centroid=centroid,
+            covariance=cfg.covariance,
+            x0_ecef_m=x0_ecef_m,
+            max_iter=cfg.nav_max_iter,
+        )
+
     # ---- episode ----------------------------------------------------------------------------
 
     def reset(
@@ -917,30 +957,12 @@ class UrbanWorld:
         n_sats = received.sum(axis=1)
         if cfg.centroid_mode == "shared" or n == 1:
             a = int(np.argmax(n_sats))
-            rel = self._relative_ecef(rel_enu, rel_var, avail, row=a)
-            co = solve_cooperative(
-                obs,
-                rel,
-                transfer=cfg.transfer,
-                centroid=a,
-                covariance=cfg.covariance,
-                x0_ecef_m=x0[a],
-                max_iter=cfg.nav_max_iter,
-            )
+            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, a, x0[a])
             linked = avail[a].copy()
             linked[a] = True
             centroid_uav = a
         else:
-            rel = self._relative_ecef(rel_enu, rel_var, avail)
-            co = solve_cooperative(
-                obs,
-                rel,
-                transfer=cfg.transfer,
-                centroid="self",
-                covariance=cfg.covariance,
-                x0_ecef_m=x0,
-                max_iter=cfg.nav_max_iter,
-            )
+            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, "self", x0)
             # a UAV out of range of every other one navigates standalone
             linked = avail.any(axis=1) | (n == 1)
             centroid_uav = -1

@@ -242,3 +242,84 @@ def test_square_root_of_diagonal_covariances(monkeypatch):
     monkeypatch.setattr(cooperative, "_USE_KERNEL", True)
     root = cooperative._sqrtm_psd(full)
     np.testing.assert_allclose(root @ root, full, atol=1e-12)
+
+
+def _fields_equal(a, b) -> None:
+    """Two CooperativeSolutions equal bit for bit (NaN where NaN)."""
+    for name in (
+        "pos_ecef_m",
+        "cov_ecef_m2",
+        "status",
+        "centroid_pos_ecef_m",
+        "centroid_cov_ecef_m2",
+        "centroid_clock_m",
+        "centroid_status",
+        "n_uavs_used",
+        "n_meas_used",
+    ):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.shape == y.shape, name
+        assert np.array_equal(x, y, equal_nan=True), name
+    assert a.n_iter == b.n_iter
+
+
+@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize("transfer", ["sdt", "ddt"])
+@pytest.mark.parametrize("which", ["self", "first", "last"])
+def test_one_call_isotropic_solve_equals_solve_cooperative(monkeypatch, case, transfer, which):
+    """The simulator's one-call path (`_solve_isotropic`) is `solve_cooperative`, bit for bit
+    (centroid "self", or one shared centroid at the first or the last UAV)."""
+    sc = make_scenario(**case)
+    rng = np.random.default_rng(200 + case["seed"])
+    obs, _ = cooperative._sort_by_system(sc.observations(rng))
+    n = sc.pos_ecef.shape[0]
+    centroid = {"self": "self", "first": 0, "last": n - 1}[which]
+    rel_ecef = sc.relative(rng).rel_ecef_m
+    var = rng.uniform(0.05, 2.0, (n, n))
+    var = (var + var.T) / 2
+    np.fill_diagonal(var, 0.0)
+    avail = np.ones((n, n), dtype=bool)
+    np.fill_diagonal(avail, False)
+    if n > 2:  # one UAV out of range of every other one, one broken link
+        avail[n - 1, :] = avail[:, n - 1] = False
+        avail[0, 1] = avail[1, 0] = False
+    x0 = sc.pos_ecef + 25.0
+    rel_cov = var[:, :, None, None] * np.eye(3)
+    ref = solve_cooperative(
+        obs,
+        cooperative.RelativePositions._trusted(rel_ecef, rel_cov, avail),
+        transfer=transfer,
+        centroid=centroid,
+        x0_ecef_m=x0 if centroid == "self" else x0[centroid],
+        max_iter=8,
+    )
+    if centroid == "self":
+        fast = cooperative._solve_isotropic(obs, rel_ecef, var, avail, "self", transfer, x0, 8)
+    else:
+        a = centroid
+        fast = cooperative._solve_isotropic(
+            obs, rel_ecef[a], var[a], avail[a], a, transfer, x0[a], 8
+        )
+    _fields_equal(fast, ref)
+    # the path declines (the caller then runs solve_cooperative) without the kernels ...
+    monkeypatch.setattr(cooperative, "_USE_KERNEL", False)
+    assert cooperative._solve_isotropic(obs, rel_ecef, var, avail, "self", transfer, x0, 8) is None
+
+
+def test_one_call_isotropic_solve_declines_unsorted_satellites():
+    """... and for satellites not grouped by constellation."""
+    sc = make_scenario(seed=3)
+    obs = sc.observations(np.random.default_rng(3))
+    assert np.any(np.diff(obs.system) < 0)
+    n = sc.pos_ecef.shape[0]
+    out = cooperative._solve_isotropic(
+        obs,
+        sc.relative(np.random.default_rng(4)).rel_ecef_m,
+        np.full((n, n), 0.25),
+        np.ones((n, n), dtype=bool),
+        "self",
+        "ddt",
+        sc.pos_ecef,
+        8,
+    )
+    assert out is None
