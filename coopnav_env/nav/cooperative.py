@@ -879,7 +879,7 @@ def solve_cooperative(
         obs, st, x0, transfer, covariance, method, max_iter, tol_m
     )
     self_centroids = isinstance(centroid, str)
-    c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = _finish(
+    finished = _finish(
         obs,
         st,
         pos,
@@ -893,7 +893,14 @@ def solve_cooperative(
         plausible_radius_m,
         with_uavs=not self_centroids,
     )
-    if self_centroids:  # "self": UAV q's solution is centroid q's
+    return _solution(finished, self_centroids, n_iter)
+
+
+def _solution(finished: tuple, self_centroids: bool, n_iter: int) -> CooperativeSolution:
+    """The :class:`CooperativeSolution` of :func:`_finish`'s outputs (``"self"`` centroids:
+    UAV q's solution is centroid q's; otherwise the one centroid's UAV outputs)."""
+    c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = finished
+    if self_centroids:
         uav_pos, uav_cov, uav_status = c_pos, h_star, c_status.copy()
     else:
         uav_pos, uav_cov, uav_status = uav_pos[0], uav_cov[0], uav_status[0]
@@ -907,7 +914,7 @@ def solve_cooperative(
         centroid_status=c_status,
         n_uavs_used=n_uavs,
         n_meas_used=n_meas,
-        n_iter=n_iter,
+        n_iter=int(n_iter),
     )
 
 
@@ -967,23 +974,7 @@ def _solve_isotropic(
         *_radius_args(plausible_radius_m),
         not self_centroids,
     )
-    c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status, n_iter = out
-    if self_centroids:  # UAV q's solution is centroid q's
-        uav_pos, uav_cov, uav_status = c_pos, h_star, c_status.copy()
-    else:
-        uav_pos, uav_cov, uav_status = uav_pos[0], uav_cov[0], uav_status[0]
-    return CooperativeSolution(
-        pos_ecef_m=uav_pos,
-        cov_ecef_m2=uav_cov,
-        status=uav_status,
-        centroid_pos_ecef_m=c_pos,
-        centroid_cov_ecef_m2=h_star,
-        centroid_clock_m=c_clk,
-        centroid_status=c_status,
-        n_uavs_used=n_uavs,
-        n_meas_used=n_meas,
-        n_iter=int(n_iter),
-    )
+    return _solution(out[:9], self_centroids, out[9])
 
 
 def _finish(
