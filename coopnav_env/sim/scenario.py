@@ -86,6 +86,7 @@ Frames: the city's local ENU frame at the geodetic origin ``(lat_deg, lon_deg, a
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
@@ -451,8 +452,29 @@ def formation_offsets(
     Returns
     -------
     ndarray, shape (n, 3)
-        ``(along, across, altitude)`` [m]; ``altitude`` absolute.
+        ``(along, across, altitude)`` [m]; ``altitude`` absolute (a new array each call; the
+        lattice of each set of arguments is computed once per process).
     """
+    return _formation_offsets(
+        int(n),
+        float(spacing_m),
+        float(half_width_m),
+        float(z_centre_m),
+        float(z_min_m),
+        float(z_max_m),
+    ).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _formation_offsets(
+    n: int,
+    spacing_m: float,
+    half_width_m: float,
+    z_centre_m: float,
+    z_min_m: float,
+    z_max_m: float,
+) -> FloatArray:
+    """:func:`formation_offsets`, cached (a reset of every episode needs the same lattice)."""
     n_across = math.floor(half_width_m / spacing_m)
     k_lo = math.ceil((z_min_m - z_centre_m) / spacing_m - 1e-9)
     k_hi = math.floor((z_max_m - z_centre_m) / spacing_m + 1e-9)
@@ -470,6 +492,7 @@ def formation_offsets(
     order = np.argsort(key, kind="stable")[:n]
     out = lattice[order]
     out[:, 2] += z_centre_m
+    out.setflags(write=False)
     return out
 
 

@@ -97,6 +97,17 @@ def test_formation_offsets_are_separated_and_inside_the_street(n) -> None:
     assert d.min() >= 5.0 - 1e-9
 
 
+def test_formation_offsets_are_a_fresh_array_each_call() -> None:
+    """The lattice is cached per arguments; what a caller gets is its own, writable copy."""
+    a = formation_offsets(5, 5.0, 8.0, 15.0, 6.0, 29.0)
+    expected = a.copy()
+    a[:] = -1.0  # must not reach the cache
+    b = formation_offsets(5, 5.0, 8.0, 15.0, 6.0, 29.0)
+    assert b.flags.writeable and b is not a
+    assert np.array_equal(b, expected)
+    assert not np.array_equal(formation_offsets(5, 5.0, 8.0, 20.0, 6.0, 29.0), expected)
+
+
 @pytest.mark.parametrize(("city", "n"), [("grid", 5), ("grid", 50), ("canyon", 5)])
 def test_reset_places_a_valid_formation_and_goal(city, n) -> None:
     cfg = ScenarioConfig(n_uavs=n, city=city)
