@@ -9,11 +9,12 @@ machines):
    ``continuous_actions=True``, N agents and N landmarks, ``max_cycles=25``) at the same N,
    and their ratio; VMAS ``navigation`` (one environment, CPU) beside them when ``vmas`` is
    installed. The two are measured in alternating rounds; the best round of each counts.
-2. **Where a step goes**: milliseconds per step inside the cooperative and standalone
-   navigation solvers (the "nav solve"), pseudorange simulation, line of sight, the skyline
-   and wall sensors, motion (kinematics, collisions) and relative sensing (timer hooks on
-   those functions), and the rest (environment adapter, observations, rewards, infos,
-   resets).
+2. **Where a step goes**: milliseconds per step inside the navigation of an epoch (the
+   "nav solve": pseudoranges, both solvers, the estimate selection and the waypoints, one
+   compiled call on the default path; the modular path's solvers and pseudoranges separately
+   when it runs), the receiver-satellite geometry, line of sight, the skyline and wall
+   sensors, motion (kinematics, collisions) and relative sensing (timer hooks on those
+   functions), and the rest (environment adapter, observations, rewards, infos, resets).
 3. **Memory per environment**: bytes allocated by building one environment, resetting it
    and stepping it 20 times (``tracemalloc``, what stays allocated), and its pickle size.
 4. **Scaling**: step cost against the swarm size N (2 ... 100, beside MPE) and against the
@@ -222,7 +223,11 @@ def section_compare(args, out: dict) -> None:
 
 STAGES: tuple[tuple[str, str, str], ...] = (
     # (label, module, attribute); a method is "Class.method"
-    # the world's cooperative solve (the one-call compiled path, or solve_cooperative)
+    # the default path: pseudoranges, both solvers, the estimate selection and the waypoints
+    # of an epoch in one compiled call (UrbanWorld._navigate_fused)
+    ("pseudoranges + solvers", "coopnav_env.sim._kernels", "epoch_navigation"),
+    ("receiver geometry", "coopnav_env.sim.scenario", "_range_azimuth_elevation"),
+    # the modular path (covariance="paper", or a kernel switched off): function by function
     ("cooperative solver", "coopnav_env.sim.scenario", "UrbanWorld._solve_cooperative"),
     ("standalone solver", "coopnav_env.sim.scenario", "solve_standalone"),
     ("pseudoranges", "coopnav_env.sim.scenario", "_simulate_pseudoranges"),
@@ -233,7 +238,7 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("relative sensing", "coopnav_env.sim.scenario", "_measure_relative"),
     ("relative sensing", "coopnav_env.sim.scenario", "UrbanWorld._relative_ecef"),
 )
-NAV = ("cooperative solver", "standalone solver")
+NAV = ("pseudoranges + solvers", "cooperative solver", "standalone solver")
 
 
 @contextlib.contextmanager
@@ -338,7 +343,15 @@ def stage_profile(n: int, seconds: float, **env_kw: Any) -> dict[str, Any]:
 def section_stages(args, out: dict) -> None:
     print("\n== 2. where a step of urban_canyon_v0 goes (ms per step, share) ==")
     rows = [stage_profile(n, args.seconds) for n in args.sizes]
-    labels = [*dict.fromkeys(label for label, _, _ in STAGES), "other"]
+    # the stages the runs went through (the default path skips the modular path's functions)
+    labels = [
+        *(
+            label
+            for label in dict.fromkeys(label for label, _, _ in STAGES)
+            if any(label in r["stages_ms"] for r in rows)
+        ),
+        "other",
+    ]
     print(f"{'':>20}" + "".join(f" | N={r['n']:<13}" for r in rows))
     for label in labels:
         cells = []

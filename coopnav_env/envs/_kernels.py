@@ -194,3 +194,38 @@ def reward_terms(
         terms[4, i] = -pen_con * (1.0 if out_of_contact[i] else 0.0)
         terms[5, i] = goal_bonus if reached else 0.0
     return terms, in_goal, crash, reached
+
+
+@njit(cache=True)
+def info_floats(
+    pos,  # (n, 3) true positions
+    nav_pos,  # (n, 3) estimate used
+    coop_pos,  # (n, 3) cooperative fix (NaN: none)
+    sa_pos,  # (n, 3) standalone fix (NaN: none)
+    nav_cov,  # (n, 3, 3) covariance of the estimate used
+    goal,  # (3,)
+):
+    """The per-agent real numbers of ``UrbanCanyonEnv._infos`` (its numpy formulation
+    ``_info_floats_numpy``), with the same float64 operations, ``(8, n)``: errors of the
+    estimate used, the cooperative and the standalone fix (inf: no fix), sigma E/N/U and 3-D,
+    goal distance."""
+    n = pos.shape[0]
+    floats = np.empty((8, n))
+    for i in range(n):
+        for r in range(3):
+            src = nav_pos if r == 0 else (coop_pos if r == 1 else sa_pos)
+            d0 = src[i, 0] - pos[i, 0]
+            d1 = src[i, 1] - pos[i, 1]
+            d2 = src[i, 2] - pos[i, 2]
+            e = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)  # numpy.linalg.norm of three terms
+            floats[r, i] = e if (r == 0 or np.isfinite(e)) else np.inf
+        acc = 0.0
+        for a in range(3):
+            v = nav_cov[i, a, a]
+            v = v if (v > 0.0 or v != v) else 0.0  # numpy.maximum(v, 0.0)
+            s = np.sqrt(v)
+            floats[3 + a, i] = s
+            acc = acc + s * s if a else s * s
+        floats[6, i] = np.sqrt(acc)
+        floats[7, i] = np.hypot(pos[i, 0] - goal[0], pos[i, 1] - goal[1])
+    return floats

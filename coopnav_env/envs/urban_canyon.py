@@ -409,7 +409,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         space = self.observation_spaces[self.possible_agents[0]]
         return np.clip(obs, space.low, space.high).astype(np.float32)
 
-    def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
+    def _info_floats_numpy(self) -> np.ndarray:
+        """The per-agent real numbers of the infos, ``(8, N)``: errors of the estimate used, the
+        cooperative and the standalone fix (inf: no fix), sigma E/N/U and 3-D, goal distance
+        (the numpy formulation of :func:`coopnav_env.envs._kernels.info_floats`)."""
         ep = self._epoch
         # three errors in one pass: estimate used, cooperative, standalone (inf: no fix)
         err = np.linalg.norm(
@@ -418,9 +421,23 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         )
         err[1:] = np.where(np.isfinite(err[1:]), err[1:], np.inf)
         sig = ep.nav_sigma_enu_m
-        floats = np.concatenate(
+        return np.concatenate(
             [err, sig.T, np.sqrt((sig**2).sum(axis=1))[None], ep.goal_distance_m[None]]
-        ).tolist()
+        )
+
+    def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
+        ep = self._epoch
+        if _USE_KERNEL:
+            floats = _kernels.info_floats(
+                ep.pos_enu_m,
+                ep.nav_pos_enu_m,
+                ep.coop_pos_enu_m,
+                ep.standalone_pos_enu_m,
+                ep.nav_cov_enu_m2,
+                ep.goal_enu_m,
+            ).tolist()
+        else:
+            floats = self._info_floats_numpy().tolist()
         ints = np.stack(
             [
                 ep.n_sats,

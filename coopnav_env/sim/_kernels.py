@@ -16,6 +16,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from coopnav_env.gnss import _kernels as _gnss_kernels
+from coopnav_env.nav import _kernels as _nav_kernels
+
 
 @njit(cache=True, inline="always")
 def _fmax(a, b):
@@ -485,3 +488,158 @@ def world_motion(
                 vel1[i, k] = 0.0
     sep = separation_violations(pos1, min_sep)
     return pos1, vel1, hit, sep
+
+
+# --------------------------------------------------------------------------------------------
+# one epoch's measurements and navigation in one call
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def epoch_navigation(
+    range_m,  # (N, S) receiver-satellite ranges [m]
+    el_deg,  # (N, S) elevations [deg]
+    sv,  # (S, 3) ECEF
+    system,  # (S,) int64 constellation index, sorted
+    received,  # (N, S) bool
+    clock,  # (N, n_sys_all) receiver clock biases [m]
+    iono,  # (n_sys_all,) iono factor per constellation
+    z_common,  # (S,) standard normal draws
+    z_user,  # (N, S)
+    extra,  # (N, S) extra (NLOS) bias [m]
+    el_ref,  # (S,) NaN: the mean elevation over the receivers
+    sigma_ure,
+    tropo,
+    differential,
+    n_sys,
+    x0,  # (N, 3) ECEF start of the standalone solves (the predicted positions)
+    rel_b,  # (B, N, 3) ECEF relative positions from each centroid UAV
+    var_b,  # (B, N) their per-axis variances
+    avail_b,  # (B, N) bool
+    cen,  # (B,) centroid UAVs
+    x0_co,  # (B, 3)
+    ddt,
+    max_iter,
+    tol_m,
+    check,
+    r_lo,
+    r_hi,
+    linked,  # (N,) bool
+    gate_on,
+    gate2,
+    origin,
+    rot,
+    pred_enu,
+    prev_cov,
+    dr_var,
+    route,  # (k, 2) waypoints
+    next_wp,  # (N,) int64
+    reach_m,
+    avail,  # (N, N) bool relative links
+):
+    """``UrbanWorld._epoch`` from the receiver geometry and the random draws to the estimates.
+
+    The kernels of the modular path on the same arguments, in its order:
+    :func:`coopnav_env.gnss._kernels.pseudorange_model`, the stored observation fields of
+    ``GnssObservations._trusted_from_epoch`` (received = finite pseudorange, NaN sigmas and
+    elevations elsewhere), :func:`coopnav_env.nav._kernels.standalone_solve`,
+    :func:`coopnav_env.nav._kernels.cooperative_isotropic`, :func:`select_navigation`,
+    :func:`advance_waypoints`, and the swarm's satellite count; so the results are the
+    modular path's bit for bit (the golden episodes of ``tests/envs/test_golden.py`` run
+    through both). Returns ``sa_status, sa_n_iter, co_n_iter, select_navigation's ten
+    arrays, next_wp, n_swarm``.
+    """
+    n, s = received.shape
+    _sc, _su, _ce, _ue, pr = _gnss_kernels.pseudorange_model(
+        range_m,
+        el_deg,
+        system,
+        received,
+        clock,
+        iono,
+        z_common,
+        z_user,
+        extra,
+        el_ref,
+        sigma_ure,
+        tropo,
+        differential,
+    )
+    vis = np.empty((n, s), dtype=np.bool_)
+    su = np.empty((n, s))
+    el = np.empty((n, s))
+    for q in range(n):
+        for k in range(s):
+            v = np.isfinite(pr[q, k])
+            vis[q, k] = v
+            su[q, k] = _su[q, k] if v else np.nan
+            el[q, k] = el_deg[q, k] if v else np.nan
+    sa_pos, sa_cov, _clk, sa_status, _n_used, sa_n_iter = _nav_kernels.standalone_solve(
+        vis, pr, sv, su, _sc, system, n_sys, x0.copy(), max_iter, tol_m, check, r_lo, r_hi
+    )
+    out = _nav_kernels.cooperative_isotropic(
+        pr,
+        vis,
+        sv,
+        system,
+        su,
+        _sc,
+        el,
+        n_sys,
+        rel_b,
+        var_b,
+        avail_b,
+        cen,
+        ddt,
+        -1,
+        x0_co,
+        max_iter,
+        tol_m,
+        check,
+        r_lo,
+        r_hi,
+        cen.shape[0] == 1,
+    )
+    c_pos, h_star, c_status, uav_pos, uav_cov, uav_status, co_n_iter = (
+        out[0],
+        out[1],
+        out[3],
+        out[6],
+        out[7],
+        out[8],
+        out[9],
+    )
+    if cen.shape[0] == 1:  # one shared centroid: its UAV outputs
+        co_pos, co_cov, co_status = uav_pos[0], uav_cov[0], uav_status[0]
+    else:  # "self": UAV q's solution is centroid q's
+        co_pos, co_cov, co_status = c_pos, h_star, c_status.copy()
+    sel = select_navigation(
+        sa_status,
+        sa_pos,
+        sa_cov,
+        co_status,
+        co_pos,
+        co_cov,
+        linked,
+        gate_on,
+        gate2,
+        origin,
+        rot,
+        pred_enu,
+        prev_cov,
+        dr_var,
+    )
+    nav_pos = sel[6]
+    xy = np.empty((n, 2))
+    for q in range(n):
+        xy[q, 0] = nav_pos[q, 0]
+        xy[q, 1] = nav_pos[q, 1]
+    wp = advance_waypoints(route, xy, next_wp.copy(), reach_m)
+    n_swarm = np.zeros(n, dtype=np.int64)
+    for q in range(n):
+        for k in range(s):
+            for p in range(n):
+                if (p == q or avail[q, p]) and received[p, k]:
+                    n_swarm[q] += 1
+                    break
+    return sa_status, sa_n_iter, co_n_iter, sel, wp, n_swarm

@@ -106,7 +106,13 @@ from coopnav_env.gnss import (
     geodetic_to_ecef,
     select_highest,
 )
-from coopnav_env.gnss.errors import DEFAULT_CLOCK_SIGMA_M, _simulate_pseudoranges
+from coopnav_env.gnss import errors as _errors
+from coopnav_env.gnss.errors import (
+    DEFAULT_CLOCK_SIGMA_M,
+    _iono_factors,
+    _range_azimuth_elevation,
+    _simulate_pseudoranges,
+)
 from coopnav_env.nav import (
     CooperativeSolution,
     GnssObservations,
@@ -115,8 +121,13 @@ from coopnav_env.nav import (
     solve_cooperative,
     solve_standalone,
 )
+from coopnav_env.nav import cooperative as _cooperative
+from coopnav_env.nav import wls as _wls
 from coopnav_env.nav.cooperative import _solve_isotropic
+from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
+from coopnav_env.nav.wls import _radius_args
 from coopnav_env.sim import _kernels as _sim_kernels
+from coopnav_env.sim import route as _route
 from coopnav_env.sim.city import (
     BoolArray,
     Buildings,
@@ -147,6 +158,20 @@ _USE_KERNEL = True
 estimate selection (:func:`coopnav_env.sim._kernels.select_navigation`); False: their numpy
 formulations (``step_kinematics`` and the fence, ``_swept_collisions_culled``,
 ``_select_navigation_numpy``)."""
+
+
+def _fused_path_on() -> bool:
+    """Whether ``UrbanWorld`` may run an epoch's navigation in one compiled call
+    (:meth:`UrbanWorld._navigate_fused`): only while every kernel it stands for is on (each
+    module's ``_USE_KERNEL``), so that switching one off runs its numpy formulation."""
+    return (
+        _USE_KERNEL
+        and _errors._USE_KERNEL
+        and _wls._USE_KERNEL
+        and _cooperative._USE_KERNEL
+        and _route._USE_KERNEL
+    )
+
 
 __all__ = [
     "AUTO_SHARED_MIN_UAVS",
@@ -943,7 +968,7 @@ class UrbanWorld:
         # Only the satellites above the cut-off (at the origin) enter the arrays: the others
         # can never be received, and dropping them makes everything downstream cheaper.
         sky = self._sky(self.t_s)
-        sv_index, sv_ecef, system, az, el = sky.sv_index, sky.sv_ecef, sky.system, sky.az, sky.el
+        sv_index, system, az, el = sky.sv_index, sky.system, sky.az, sky.el
         los = _trace_line_of_sight(self.city.buildings, pos, sky.directions)
         if cfg.nlos_probability > 0.0:
             received, bias = draw_nlos(
@@ -955,54 +980,28 @@ class UrbanWorld:
             received = select_highest(np.broadcast_to(el, received.shape), received, cfg.max_sats)
         nlos = received & ~los
 
-        # measurements
-        rx_ecef = self.enu_to_ecef(pos)
-        # simulate_pseudoranges without re-validating the world's own arrays
-        pr = _simulate_pseudoranges(
-            rng,
-            rx_ecef,
-            sv_ecef,
-            sky.system_idx,
-            received,
-            cfg.error_model,
-            self.clock_bias_m,
-            bias,
-        )
-        obs = GnssObservations._trusted_from_epoch(pr)
-        rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
-
+        # measurements and navigation
         # warm start: the previous estimates moved by the velocity; at the first epoch of an
         # episode, the known launch positions
         pred_enu = self.nav_pos_enu_m + self.vel_enu_mps * dt if self._warm else self.nav_pos_enu_m
-        x0 = self.enu_to_ecef(pred_enu)
-
-        sa = solve_standalone(obs, x0, max_iter=cfg.nav_max_iter)
-        n_sats = received.sum(axis=1)
-        if cfg.centroid_mode == "shared" or n == 1:
-            a = int(np.argmax(n_sats))
-            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, a, x0[a])
-            linked = avail[a].copy()
-            linked[a] = True
-            centroid_uav = a
-        else:
-            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, "self", x0)
-            # a UAV out of range of every other one navigates standalone
-            linked = avail.any(axis=1) | (n == 1)
-            centroid_uav = -1
-
         dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (1.0 if self._warm else 0.0)
-        select = _select_navigation if _USE_KERNEL else _select_navigation_numpy
-        sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej = (
-            select(self, sa, co, linked, pred_enu, dr_var)
-        )
+        fused = _fused_path_on() and cfg.covariance == "exact" and sky.grouped
+        navigate = self._navigate_fused if fused else self._navigate
+        (
+            rel_enu,
+            avail,
+            n_sats,
+            centroid_uav,
+            sa_status,
+            sa_n_iter,
+            co_n_iter,
+            (sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej),
+            next_wp,
+            n_swarm,
+        ) = navigate(rng, pos, sky, received, bias, pred_enu, dr_var)
         self.nav_pos_enu_m, self.nav_cov_enu_m2 = nav_pos, nav_cov
         self._warm = True
-        self.next_wp = advance_waypoints(
-            self.route_xy_m, nav_pos[:, :2], self.next_wp, cfg.route_reach_m
-        )
-
-        link_or_self = avail | np.eye(n, dtype=bool)
-        n_swarm = (link_or_self.astype(np.int64) @ received.astype(np.int64) > 0).sum(axis=1)
+        self.next_wp = next_wp
         return Epoch(
             t_s=float(self.t_s),
             pos_enu_m=pos.copy(),
@@ -1022,7 +1021,7 @@ class UrbanWorld:
             rel_available=avail,
             standalone_pos_enu_m=sa_pos,
             standalone_cov_enu_m2=sa_cov,
-            standalone_status=np.asarray(sa.status, dtype=np.int64),
+            standalone_status=sa_status,
             coop_pos_enu_m=co_pos,
             coop_cov_enu_m2=co_cov,
             coop_status=np.asarray(co_status, dtype=np.int64),
@@ -1033,11 +1032,152 @@ class UrbanWorld:
             collided=np.asarray(collided, dtype=bool),
             separation_violation=np.asarray(sep, dtype=bool),
             out_of_contact=~avail.any(axis=1) if n > 1 else np.zeros(n, dtype=bool),
-            n_iter_standalone=int(sa.n_iter),
-            n_iter_coop=int(co.n_iter),
+            n_iter_standalone=int(sa_n_iter),
+            n_iter_coop=int(co_n_iter),
             standalone_rejected=sa_rej,
             coop_rejected=co_rej,
             next_waypoint=self.next_wp.copy(),
+        )
+
+    def _navigate(self, rng, pos, sky, received, bias, pred_enu, dr_var):
+        """Pseudoranges, relative sensing, both solvers, the estimate selection and the
+        waypoints of one epoch, function by function (the definition of
+        :meth:`_navigate_fused`). Returns ``rel_enu, avail, n_sats, centroid_uav, sa_status,
+        sa_n_iter, co_n_iter, the selection's ten arrays, next_wp, n_swarm``."""
+        cfg = self.config
+        n = cfg.n_uavs
+        rx_ecef = self.enu_to_ecef(pos)
+        # simulate_pseudoranges without re-validating the world's own arrays
+        pr = _simulate_pseudoranges(
+            rng,
+            rx_ecef,
+            sky.sv_ecef,
+            sky.system_idx,
+            received,
+            cfg.error_model,
+            self.clock_bias_m,
+            bias,
+        )
+        obs = GnssObservations._trusted_from_epoch(pr)
+        rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
+        x0 = self.enu_to_ecef(pred_enu)
+
+        sa = solve_standalone(obs, x0, max_iter=cfg.nav_max_iter)
+        n_sats = received.sum(axis=1)
+        if cfg.centroid_mode == "shared" or n == 1:
+            a = int(np.argmax(n_sats))
+            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, a, x0[a])
+            linked = avail[a].copy()
+            linked[a] = True
+            centroid_uav = a
+        else:
+            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, "self", x0)
+            # a UAV out of range of every other one navigates standalone
+            linked = avail.any(axis=1) | (n == 1)
+            centroid_uav = -1
+
+        select = _select_navigation if _USE_KERNEL else _select_navigation_numpy
+        sel = select(self, sa, co, linked, pred_enu, dr_var)
+        next_wp = advance_waypoints(self.route_xy_m, sel[6][:, :2], self.next_wp, cfg.route_reach_m)
+        link_or_self = avail | np.eye(n, dtype=bool)
+        n_swarm = (link_or_self.astype(np.int64) @ received.astype(np.int64) > 0).sum(axis=1)
+        sa_status = np.asarray(sa.status, dtype=np.int64)
+        return (
+            rel_enu,
+            avail,
+            n_sats,
+            centroid_uav,
+            sa_status,
+            sa.n_iter,
+            co.n_iter,
+            sel,
+            next_wp,
+            n_swarm,
+        )
+
+    def _navigate_fused(self, rng, pos, sky, received, bias, pred_enu, dr_var):
+        """:meth:`_navigate` in three compiled calls: the receiver geometry (whose errors
+        raise here, as in the modular path), relative sensing, then everything else in
+        :func:`coopnav_env.sim._kernels.epoch_navigation` (the same kernels on the same
+        arguments, so the same results bit for bit). The random draws are those of the
+        modular path, in its order; the rotations to ECEF stay numpy matmuls (their rounding
+        is numpy's)."""
+        cfg = self.config
+        n = cfg.n_uavs
+        model = cfg.error_model
+        rx_ecef = self.enu_to_ecef(pos)
+        sv = sky.sv_ecef
+        n_sv = sv.shape[0]
+        range_m, _az, el_deg = _range_azimuth_elevation(rx_ecef, sv)
+        z_common = rng.standard_normal(n_sv)  # the draws of _simulate_pseudoranges
+        z_user = rng.standard_normal((n, n_sv))
+        rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
+        x0 = self.enu_to_ecef(pred_enu)
+        n_sats = received.sum(axis=1)
+        if cfg.centroid_mode == "shared" or n == 1:
+            a = int(np.argmax(n_sats))
+            rel_b = (rel_enu[a] @ self.rot_enu)[None]
+            var_b, avail_b, x0_co = rel_var[a][None], avail[a][None], x0[a][None]
+            cen = np.array([a], dtype=np.int64)
+            linked = avail[a].copy()
+            linked[a] = True
+            centroid_uav = a
+        else:
+            rel_b, var_b, avail_b, x0_co = rel_enu @ self.rot_enu, rel_var, avail, x0
+            cen = np.arange(n, dtype=np.int64)
+            linked = avail.any(axis=1) | (n == 1)
+            centroid_uav = -1
+        gate = cfg.max_fix_sigma_m
+        sa_status, sa_n_iter, co_n_iter, sel, next_wp, n_swarm = _sim_kernels.epoch_navigation(
+            range_m,
+            el_deg,
+            sv,
+            sky.system_idx,
+            received,
+            self.clock_bias_m,
+            _iono_factors(model),
+            z_common,
+            z_user,
+            np.zeros((n, n_sv)) if bias is None else np.ascontiguousarray(bias, dtype=float),
+            np.full(n_sv, np.nan),
+            float(model.sigma_ure_m),
+            bool(model.tropo),
+            bool(model.differential),
+            len(SYSTEMS),
+            x0,
+            np.ascontiguousarray(rel_b),
+            np.ascontiguousarray(var_b),
+            np.ascontiguousarray(avail_b),
+            cen,
+            np.ascontiguousarray(x0_co),
+            cfg.transfer == "ddt",
+            int(cfg.nav_max_iter),
+            1e-4,
+            *_radius_args(PLAUSIBLE_RADIUS_M),
+            linked,
+            gate is not None,
+            float(gate) ** 2 if gate is not None else 0.0,
+            self.origin_ecef_m,
+            self.rot_enu,
+            np.ascontiguousarray(pred_enu, dtype=np.float64),
+            np.ascontiguousarray(self.nav_cov_enu_m2, dtype=np.float64),
+            float(dr_var),
+            np.ascontiguousarray(self.route_xy_m, dtype=np.float64),
+            self.next_wp,
+            float(cfg.route_reach_m),
+            avail,
+        )
+        return (
+            rel_enu,
+            avail,
+            n_sats,
+            centroid_uav,
+            sa_status,
+            sa_n_iter,
+            co_n_iter,
+            sel,
+            next_wp,
+            n_swarm,
         )
 
 
@@ -1105,6 +1245,7 @@ class _SkyEpoch:
     az: FloatArray  # (S,) azimuth at the origin [deg]
     el: FloatArray  # (S,) elevation at the origin [deg]
     directions: SkyDirections  # the same, prepared for line of sight
+    grouped: bool  # satellites ordered by constellation (what the solvers' kernels work on)
 
 
 def _sky_epoch(constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, t_s: float):
@@ -1121,6 +1262,7 @@ def _sky_epoch(constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, t
         az=az,
         el=el,
         directions=sky_directions(direction_enu(az, el)),
+        grouped=bool(np.all(np.diff(np.asarray(constellation.system)[sv_index]) >= 0)),
     )
     for arr in (sky.sv_index, sky.sv_ecef, sky.system, sky.system_idx, sky.az, sky.el):
         arr.setflags(write=False)

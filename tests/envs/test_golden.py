@@ -23,6 +23,10 @@ digests' episodes, navigation errors moved by at most 3.4e-8 m, rewards by 3e-10
 observations by one float32 ulp in a handful of entries. The compiled relative sensing,
 statuses, solver set-up masks, nuisance-clock count, waypoint advance and observation builder
 are bit-identical to their numpy formulations.
+
+Unchanged (fourth session of 2026-11-30) by the world's cooperative solve in one compiled call
+and then the whole navigation of an epoch in one (``UrbanWorld._navigate_fused``): the same
+kernels on the same arguments; the test below runs the episodes both ways.
 """
 
 from __future__ import annotations
@@ -48,6 +52,28 @@ GOLDEN: dict[str, str] = {
 @pytest.mark.parametrize(("name", "kwargs", "steps", "seed"), CASES, ids=[c[0] for c in CASES])
 def test_episode_is_bit_identical_to_the_recorded_one(name, kwargs, steps, seed) -> None:
     assert episode_digest(kwargs, steps, seed) == GOLDEN[name]
+
+
+@pytest.mark.parametrize(("name", "kwargs", "steps", "seed"), CASES, ids=[c[0] for c in CASES])
+def test_fused_epoch_equals_the_modular_kernels(monkeypatch, name, kwargs, steps, seed) -> None:
+    """The one-call navigation of an epoch (``UrbanWorld._navigate_fused``) against the same
+    kernels called one by one from Python (``_navigate``): the same episodes, bit for bit
+    (self and shared centroids, DDT and SDT, NLOS biases and the channel limit)."""
+    calls = {"fused": 0}
+    fused = scenario.UrbanWorld._navigate_fused
+
+    def counted(self, *a):
+        calls["fused"] += 1
+        return fused(self, *a)
+
+    monkeypatch.setattr(scenario.UrbanWorld, "_navigate_fused", counted)
+    short = min(steps, 60)
+    fast = episode_digest(kwargs, short, seed)
+    assert calls["fused"] > short  # every epoch, resets included, went through it
+    monkeypatch.setattr(scenario, "_fused_path_on", lambda: False)
+    calls["fused"] = 0
+    assert episode_digest(kwargs, short, seed) == fast
+    assert calls["fused"] == 0
 
 
 def _episode(n_uavs: int, seed: int, steps: int, **kwargs) -> tuple[np.ndarray, np.ndarray]:

@@ -365,11 +365,12 @@ def test_fifty_uavs_step() -> None:
 
 
 def _first_epoch_with_solver_inputs(cfg: ScenarioConfig, seed: int):
-    """The first epoch of ``seed`` and the standalone solver's observations (spied)."""
+    """The first epoch of ``seed`` and the standalone solver's observations (spied on the
+    modular path, whose epochs are those of the one-call path bit for bit)."""
     import coopnav_env.sim.scenario as scenario
 
     calls = {}
-    original = scenario.solve_standalone
+    original, fused_on = scenario.solve_standalone, scenario._fused_path_on
 
     def spy(obs, x0, **kw):
         calls["obs"] = obs
@@ -377,10 +378,11 @@ def _first_epoch_with_solver_inputs(cfg: ScenarioConfig, seed: int):
 
     world = UrbanWorld(cfg)
     scenario.solve_standalone = spy
+    scenario._fused_path_on = lambda: False
     try:
         ep = world.reset(np.random.default_rng(seed))
     finally:
-        scenario.solve_standalone = original
+        scenario.solve_standalone, scenario._fused_path_on = original, fused_on
     return world, ep, calls["obs"]
 
 
