@@ -490,6 +490,33 @@ def world_motion(
     return pos1, vel1, hit, sep
 
 
+@njit(cache=True, error_model="numpy")
+def line_of_sight(pos, lo, hi, up, order, cot_s, h_dir):
+    """``city._trace_line_of_sight``: visible (receiver, satellite) pairs ``(n_rx, n_sv)``.
+
+    A satellite below the horizon (``up`` False) is never visible; a rising one is unless
+    :func:`blocked_sorted` finds a building in the way (its columns are those of ``up``'s
+    True entries permuted by ``order``, as :class:`~coopnav_env.sim.city.SkyDirections`
+    sorts them).
+    """
+    n_rx = pos.shape[0]
+    n_sv = up.shape[0]
+    visible = np.empty((n_rx, n_sv), dtype=np.bool_)
+    for i in range(n_rx):
+        for k in range(n_sv):
+            visible[i, k] = up[k]
+    n_up = cot_s.shape[0]
+    if lo.shape[0] == 0 or n_rx == 0 or n_up == 0:
+        return visible
+    blocked = blocked_sorted(pos, lo, hi, cot_s, h_dir)
+    up_idx = np.nonzero(up)[0]
+    for j in range(n_up):
+        col = up_idx[order[j]]
+        for i in range(n_rx):
+            visible[i, col] = not blocked[i, j]
+    return visible
+
+
 # --------------------------------------------------------------------------------------------
 # one epoch's measurements and navigation in one call
 # --------------------------------------------------------------------------------------------

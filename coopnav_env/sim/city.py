@@ -405,7 +405,18 @@ def sky_directions(dir_enu: ArrayLike) -> SkyDirections:
 
 
 def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirections) -> BoolArray:
-    """:func:`line_of_sight` from validated receivers and prepared directions."""
+    """:func:`line_of_sight` from validated receivers and prepared directions (in one
+    compiled call, :func:`coopnav_env.sim._kernels.line_of_sight`, with ``_USE_KERNEL``)."""
+    if _USE_KERNEL:
+        return _kernels.line_of_sight(
+            np.ascontiguousarray(pos, dtype=float),
+            buildings.min_m,
+            buildings.max_m,
+            sky.up,
+            sky.order,
+            sky.cot_s,
+            sky.h_dir,
+        )
     n_rx, n_sv = pos.shape[0], sky.n_sv
     up = sky.up
     visible = np.broadcast_to(up, (n_rx, n_sv)).copy()
@@ -415,12 +426,7 @@ def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirectio
     n_up = cot_s.size
 
     lo_all, hi_all = buildings.min_m, buildings.max_m
-    if _USE_KERNEL:
-        blocked_s = _kernels.blocked_sorted(
-            np.ascontiguousarray(pos, dtype=float), lo_all, hi_all, cot_s, h_dir
-        )
-    else:
-        blocked_s = _blocked_sorted_numpy(pos, lo_all, hi_all, cot_s, h_dir, n_up)
+    blocked_s = _blocked_sorted_numpy(pos, lo_all, hi_all, cot_s, h_dir, n_up)
     blocked_up = np.empty_like(blocked_s)
     blocked_up[:, order] = blocked_s
     visible[:, up] = ~blocked_up
