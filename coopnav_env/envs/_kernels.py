@@ -28,7 +28,7 @@ def observation_rows(
     nav_pos,  # (n, 3) estimated ENU position
     goal,  # (3,)
     vel,  # (n, 3)
-    sigma,  # (n, 3) predicted sigma per ENU axis
+    nav_cov,  # (n, 3, 3) covariance of the estimate (sigma per axis: sqrt of the diagonal)
     n_sats,  # (n,) int
     n_swarm,  # (n,) int
     n_open,  # int, satellites above the cut-off (>= 1)
@@ -67,8 +67,10 @@ def observation_rows(
         for j in range(3):
             row[c] = vel[i, j] / max_speed
             c += 1
-        for j in range(3):
-            row[c] = sigma[i, j] / sigma_max
+        for j in range(3):  # Epoch.nav_sigma_enu_m: sqrt(clip(diagonal, 0, None))
+            v = nav_cov[i, j, j]
+            v = v if (v > 0.0 or v != v) else 0.0
+            row[c] = np.sqrt(v) / sigma_max
             c += 1
         row[c] = n_sats[i] / n_open
         row[c + 1] = n_swarm[i] / n_open

@@ -25,6 +25,9 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from coopnav_env.envs import _kernels
 from coopnav_env.envs.config import UrbanCanyonConfig, make_config
+from coopnav_env.sim import _kernels as _sim_kernels
+from coopnav_env.sim import city as _city
+from coopnav_env.sim.city import _ray_directions
 from coopnav_env.sim.route import remaining_route_m
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
@@ -96,6 +99,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         s_lo, s_hi = _state_bounds(cfg)
         self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
+        self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
         self._obs_low = lo.astype(np.float64)  # the clip bounds as numpy's clip sees them
         self._reward_params = np.array(
             [
@@ -326,12 +330,17 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             return self._observation_array_numpy()
         cfg = self.config
         ep = self._epoch
-        sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
+        if _city._USE_KERNEL:  # City.sky_and_walls of the world's own (valid) positions
+            b = self.world.city.buildings
+            tan_max, walls = _sim_kernels.sky_and_walls(ep.pos_enu_m, self._rays, b.min_m, b.max_m)
+            sky_deg = np.degrees(np.arctan(tan_max))
+        else:
+            sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
         return _kernels.observation_rows(
             ep.nav_pos_enu_m,
             ep.goal_enu_m,
             ep.vel_enu_mps,
-            ep.nav_sigma_enu_m,
+            ep.nav_cov_enu_m2,
             ep.n_sats,
             ep.n_sats_swarm,
             max(ep.n_above_mask, 1),
@@ -438,26 +447,29 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             ).tolist()
         else:
             floats = self._info_floats_numpy().tolist()
-        ints = np.stack(
-            [
+        # rows of Python ints and bools (tolist per array: no stacked copy)
+        ints = [
+            a.tolist()
+            for a in (
                 ep.n_sats,
                 ep.n_sats_swarm,
                 ep.coop_status,
                 ep.standalone_status,
                 ep.nav_source,
                 ep.next_waypoint,
-            ]
-        ).tolist()
-        bools = np.stack(
-            [
+            )
+        ]
+        bools = [
+            np.asarray(a, dtype=bool).tolist()
+            for a in (
                 ep.coop_rejected,
                 ep.standalone_rejected,
-                np.asarray(in_goal, dtype=bool),
+                in_goal,
                 ep.collided,
                 ep.separation_violation,
                 ep.out_of_contact,
-            ]
-        ).tolist()
+            )
+        ]
         cols = {
             "nav_error_m": floats[0],
             "coop_error_m": floats[1],
