@@ -71,8 +71,9 @@ BACKENDS: tuple[str, ...] = ("sb3", "rllib")
 
 _CHECKPOINT_RE = re.compile(r"_(\d+)_steps\.zip$")
 
-_VEC_ENVS: tuple[str, ...] = ("supersuit", "batched")
-"""Values of ``TrainConfig.vec_env`` (``training.vec_env.VEC_ENV_KINDS``, without importing SB3)."""
+_VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
+"""Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of ``training.vec_env.VEC_ENV_KINDS``
+(listed here without importing SB3)."""
 
 _PRETRAIN_DEFAULTS: dict[str, Any] = {
     "policy": "waypoint",
@@ -119,14 +120,15 @@ class TrainConfig:
         Swarm copies stepped together, >= 1.
     num_cpus : int, default 1
         Worker processes for the swarm copies, >= 0 (0 and 1: all in this process).
-    vec_env : {"supersuit", "batched"}, default "supersuit"
+    vec_env : {"auto", "supersuit", "batched"}, default "auto"
         How the swarm copies become one SB3 vector environment
         (:func:`~training.vec_env.make_vec_env`): SuperSuit's per-agent adapters (any
         environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
-        environment (one process; the same observations, rewards and seeding bit for bit).
-        ``benchmarks/bench_env.py`` measures both; SuperSuit stays the default because the
-        batched one is not faster (the world step of each copy dominates, see
-        ``docs/performance.md``).
+        environment (one process; the same observations, rewards and seeding bit for bit, so
+        the same training). ``"auto"`` takes the batched one where it applies
+        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1), SuperSuit otherwise
+        (:meth:`vec_env_kind`); ``benchmarks/bench_env.py`` measures both (the batched one
+        steps 64 copies about 1.5x as fast; see ``docs/performance.md``).
     checkpoint_freq : int, default 50_000
         Agent-steps between checkpoints, >= 0 (0 disables periodic checkpoints).
     torch_threads : int, default 1
@@ -172,7 +174,7 @@ class TrainConfig:
     seed: int = 0
     n_envs: int = 2
     num_cpus: int = 1
-    vec_env: str = "supersuit"
+    vec_env: str = "auto"
     checkpoint_freq: int = 50_000
     torch_threads: int = 1
     device: str = "cpu"
@@ -273,6 +275,14 @@ class TrainConfig:
                 f"unknown training setting(s) {unknown}; valid settings: {sorted(names)}"
             )
         return cls(**dict(data))
+
+    def vec_env_kind(self) -> str:
+        """The vector environment :func:`train` builds: ``vec_env``, with ``"auto"`` resolved to
+        ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or 1) and to
+        ``"supersuit"`` otherwise (another environment, or worker processes)."""
+        if self.vec_env != "auto":
+            return self.vec_env
+        return "batched" if self.env_id == DEFAULT_ENV_ID and self.num_cpus <= 1 else "supersuit"
 
     def to_dict(self) -> dict[str, Any]:
         """A plain (YAML-serialisable) copy."""
@@ -774,11 +784,13 @@ def train(cfg: TrainConfig) -> Path:
     resolved = cfg.to_dict()
     resolved["resume"] = str(resume_path) if resume_path else None
     resolved["agent_steps_per_env_step"] = cfg.n_envs * n_agents
+    vec_kind = cfg.vec_env_kind()
+    resolved["vec_env_kind"] = vec_kind  # what "auto" became
     # the original config.yaml stays: `coopnav evaluate` reads the environment from it
     name = "config.yaml" if start_steps == 0 else f"config_resumed_at_{start_steps}.yaml"
     _write_yaml(out / name, resolved)
 
-    venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=cfg.vec_env)
+    venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=vec_kind)
     suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
     monitor = VecMonitor(
         venv,
@@ -853,6 +865,7 @@ def train(cfg: TrainConfig) -> Path:
         "session_agent_steps": done_steps,
         "session_wall_s": round(wall_s, 3),
         "agent_steps_per_s": round(done_steps / wall_s, 1) if wall_s > 0 else None,
+        "vec_env": vec_kind,
         "resumed_from": str(resume_path) if resume_path else None,
         "versions": {
             "python": sys.version.split()[0],
@@ -890,7 +903,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--vec-env",
         choices=_VEC_ENVS,
         default=None,
-        help="vector environment: supersuit (default) or batched (urban_canyon_v0 only)",
+        help="vector environment: auto (default: batched for urban_canyon_v0 in one process, "
+        "else supersuit), supersuit, or batched (urban_canyon_v0 only)",
     )
     parser.add_argument(
         "--checkpoint-freq", type=int, default=None, help="agent-steps between checkpoints"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import json
 import math
 
 import numpy as np
@@ -56,10 +57,25 @@ def test_batched_equals_supersuit_step_for_step() -> None:
 
 
 def test_training_is_identical_with_either_vec_env(tmp_path) -> None:
-    a = params(train(urban_cfg(tmp_path / "a", seed=5, timesteps=300)))
+    a = params(train(urban_cfg(tmp_path / "a", seed=5, timesteps=300, vec_env="supersuit")))
     b = params(train(urban_cfg(tmp_path / "b", seed=5, timesteps=300, vec_env="batched")))
     for k in a:
         np.testing.assert_array_equal(a[k], b[k])
+    assert json.loads((tmp_path / "a" / "run.json").read_text())["vec_env"] == "supersuit"
+    assert json.loads((tmp_path / "b" / "run.json").read_text())["vec_env"] == "batched"
+
+
+def test_auto_vec_env_is_batched_where_it_applies(tmp_path) -> None:
+    """ "auto" (the default): the batched vector env for urban_canyon_v0 in one process,
+    SuperSuit for worker processes or another environment; train() records which."""
+    assert urban_cfg(tmp_path).vec_env == "auto"
+    assert urban_cfg(tmp_path).vec_env_kind() == "batched"
+    assert urban_cfg(tmp_path, num_cpus=0).vec_env_kind() == "batched"
+    assert urban_cfg(tmp_path, num_cpus=2).vec_env_kind() == "supersuit"
+    assert urban_cfg(tmp_path, vec_env="supersuit").vec_env_kind() == "supersuit"
+    assert toy_cfg(tmp_path / "toy").vec_env_kind() == "supersuit"
+    train(toy_cfg(tmp_path / "toy", timesteps=64))  # auto -> supersuit: the toy env trains
+    assert json.loads((tmp_path / "toy" / "run.json").read_text())["vec_env"] == "supersuit"
 
 
 def test_bad_vec_env_settings(tmp_path) -> None:
@@ -73,7 +89,7 @@ def test_bad_vec_env_settings(tmp_path) -> None:
         make_vec_env(functools.partial(ToyParallelEnv, n_uavs=2), 2, kind="fast")
     with pytest.raises(ValueError, match="urban_canyon_v0"):
         train(toy_cfg(tmp_path / "toy", vec_env="batched"))
-    assert TrainConfig.from_dict({**load_config(), "out": str(tmp_path)}).vec_env == "supersuit"
+    assert TrainConfig.from_dict({**load_config(), "out": str(tmp_path)}).vec_env == "auto"
 
 
 def test_cli_vec_env_flag(tmp_path) -> None:
@@ -84,4 +100,4 @@ def test_cli_vec_env_flag(tmp_path) -> None:
     args = parser.parse_args(["--out", str(tmp_path), "--vec-env", "batched"])
     assert config_from_args(args).vec_env == "batched"
     args = parser.parse_args(["--out", str(tmp_path)])
-    assert config_from_args(args).vec_env == "supersuit"
+    assert config_from_args(args).vec_env == "auto"
