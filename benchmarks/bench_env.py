@@ -21,9 +21,13 @@ machines):
    size of the grid city (blocks per side), with the growth explained.
 5. **Batched**: env-steps/s (swarm steps) of K copies at N = 5 stepped as one SB3 vector
    environment, SuperSuit's adapters vs the batched vector environment
-   (``training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched environments.
+   (``training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched environments; and
+   the time inside the compiled kernels per swarm step (:func:`kernel_timers`), whose inverse
+   times two cores is a ceiling for any batching of this simulation.
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
-   packaged hyperparameters, no behaviour cloning) with each vector environment.
+   packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
+   of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the
+   speed-up any vector environment can bring.
 
 Usage::
 
@@ -225,20 +229,22 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     # (label, module, attribute); a method is "Class.method"
     # the default path: pseudoranges, both solvers, the estimate selection and the waypoints
     # of an epoch in one compiled call (UrbanWorld._navigate_fused)
-    ("pseudoranges + solvers", "coopnav_env.sim._kernels", "epoch_navigation"),
+    ("pseudorange+solvers", "coopnav_env.sim._kernels", "epoch_navigation"),
     ("receiver geometry", "coopnav_env.sim.scenario", "_range_azimuth_elevation"),
     # the modular path (covariance="paper", or a kernel switched off): function by function
     ("cooperative solver", "coopnav_env.sim.scenario", "UrbanWorld._solve_cooperative"),
     ("standalone solver", "coopnav_env.sim.scenario", "solve_standalone"),
     ("pseudoranges", "coopnav_env.sim.scenario", "_simulate_pseudoranges"),
     ("line of sight", "coopnav_env.sim.scenario", "_trace_line_of_sight"),
+    # the environment's sensors call the kernel on the world's own arrays (else the City method)
+    ("skyline + walls", "coopnav_env.sim._kernels", "sky_and_walls"),
     ("skyline + walls", "coopnav_env.sim.city", "City.sky_and_walls"),
     ("motion + collisions", "coopnav_env.sim._kernels", "world_motion"),
     ("motion + collisions", "coopnav_env.sim.scenario", "_swept_collisions_culled"),
     ("relative sensing", "coopnav_env.sim.scenario", "_measure_relative"),
     ("relative sensing", "coopnav_env.sim.scenario", "UrbanWorld._relative_ecef"),
 )
-NAV = ("pseudoranges + solvers", "cooperative solver", "standalone solver")
+NAV = ("pseudorange+solvers", "cooperative solver", "standalone solver")
 
 
 @contextlib.contextmanager
