@@ -315,3 +315,76 @@ def test_world_motion_kernel_equals_numpy(monkeypatch) -> None:
         hits += int(a.collided.sum())
         seps += int(a.separation_violation.sum())
     assert hits > 0 and seps > 0  # both were exercised
+
+
+def _world_epochs(kw: dict, steps: int = 40) -> list:
+    """A reset and ``steps`` steps of moderately random commands (collisions included)."""
+    cfg = S.ScenarioConfig(**kw)
+    world = S.UrbanWorld(cfg)
+    rng = np.random.default_rng(7)
+    cmd_rng = np.random.default_rng(8)
+    epochs = [world.reset(rng)]
+    for _ in range(steps):
+        epochs.append(world.step(cmd_rng.uniform(-0.7, 0.7, (cfg.n_uavs, 3)), rng))
+    return epochs
+
+
+def _assert_epochs_identical(a: list, b: list) -> None:
+    from dataclasses import fields
+
+    assert len(a) == len(b)
+    for ea, eb in zip(a, b):
+        for f in fields(ea):
+            x, y = getattr(ea, f.name), getattr(eb, f.name)
+            if isinstance(x, np.ndarray):
+                assert x.dtype == y.dtype and x.shape == y.shape, f.name
+                assert np.array_equal(x, y, equal_nan=True), f.name
+                assert x.tobytes() == y.tobytes(), f.name  # signed zeros too
+            else:
+                assert x == y, f.name
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"n_uavs": 1},
+        {"n_uavs": 5, "centroid": "shared"},
+        {"n_uavs": 12, "centroid": "self"},
+        {"n_uavs": 5, "systems": ("GPS",)},
+        {"n_uavs": 4, "error_model": ErrorModel(differential=True, tropo=False)},
+        {"n_uavs": 6, "max_fix_sigma_m": None, "transfer": "sdt"},
+        {"n_uavs": 5, "max_fix_sigma_m": 2.0},  # the integrity gate rejects fixes
+        {"n_uavs": 5, "nlos_probability": 0.4, "max_sats": 8},
+        {"n_uavs": 3, "relative_sensing": RelativeSensingConfig(max_range_m=6.0)},  # few links
+    ],
+)
+def test_fused_epoch_navigation_equals_the_modular_path(monkeypatch, kw) -> None:
+    """Every field of every epoch, bit for bit: ``UrbanWorld._navigate_fused`` (one compiled
+    call) against ``_navigate`` (the same kernels called one by one)."""
+    calls = {"fused": 0}
+    fused = S.UrbanWorld._navigate_fused
+
+    def counted(self, *a):
+        calls["fused"] += 1
+        return fused(self, *a)
+
+    monkeypatch.setattr(S.UrbanWorld, "_navigate_fused", counted)
+    fast = _world_epochs(kw)
+    assert calls["fused"] == len(fast)
+    monkeypatch.setattr(S, "_fused_path_on", lambda: False)
+    calls["fused"] = 0
+    ref = _world_epochs(kw)
+    assert calls["fused"] == 0
+    _assert_epochs_identical(fast, ref)
+
+
+def test_paper_covariance_takes_the_modular_path(monkeypatch) -> None:
+    """The one-call path serves the exact covariance only; Eq. 18 as printed runs the numpy
+    formulation of the cooperative solver."""
+
+    def refuse(self, *a):
+        raise AssertionError("the fused path must not run for covariance='paper'")
+
+    monkeypatch.setattr(S.UrbanWorld, "_navigate_fused", refuse)
+    epochs = _world_epochs({"n_uavs": 4, "covariance": "paper"}, steps=5)
+    assert np.isfinite(epochs[-1].nav_pos_enu_m).all()
