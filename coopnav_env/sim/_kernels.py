@@ -1,6 +1,9 @@
 """Compiled (numba) loops of the world: line of sight, the horizontal-ray sensors of
 :mod:`.city`, relative sensing, motion (kinematics, collisions, separation), waypoint advance
-and the estimate selection of :class:`~coopnav_env.sim.scenario.UrbanWorld`.
+and the estimate selection of :class:`~coopnav_env.sim.scenario.UrbanWorld`; and
+:func:`epoch_navigation`, which composes these with the measurement and solver kernels of
+:mod:`coopnav_env.gnss` and :mod:`coopnav_env.nav` into one call per epoch (the same kernels
+on the same arguments as the function-by-function path, so the same results bit for bit).
 
 Each has a numpy formulation that stays the readable definition (selected with the module
 flag ``_USE_KERNEL = False`` of :mod:`.city`, :mod:`.swarm`, :mod:`.route` or

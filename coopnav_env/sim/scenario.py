@@ -1152,7 +1152,7 @@ class UrbanWorld:
             np.ascontiguousarray(x0_co),
             cfg.transfer == "ddt",
             int(cfg.nav_max_iter),
-            1e-4,
+            1e-4,  # tol_m and plausible radii: the solvers' defaults, as _navigate uses them
             *_radius_args(PLAUSIBLE_RADIUS_M),
             linked,
             gate is not None,
