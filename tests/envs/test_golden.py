@@ -40,6 +40,7 @@ from coopnav_env.gnss import errors
 from coopnav_env.nav import cooperative, wls
 from coopnav_env.sim import city, route, scenario, swarm
 from tests.envs.golden import CASES, episode_digest
+from tests.sim.test_fast_paths import count_fused_calls
 
 GOLDEN: dict[str, str] = {
     "n5_grid": "d8f0692738c0173a6bf03e99fc9940188f7ec940262cc0f75be36d2e7f4cf5a1",
@@ -59,14 +60,7 @@ def test_fused_epoch_equals_the_modular_kernels(monkeypatch, name, kwargs, steps
     """The one-call navigation of an epoch (``UrbanWorld._navigate_fused``) against the same
     kernels called one by one from Python (``_navigate``): the same episodes, bit for bit
     (self and shared centroids, DDT and SDT, NLOS biases and the channel limit)."""
-    calls = {"fused": 0}
-    fused = scenario.UrbanWorld._navigate_fused
-
-    def counted(self, *a):
-        calls["fused"] += 1
-        return fused(self, *a)
-
-    monkeypatch.setattr(scenario.UrbanWorld, "_navigate_fused", counted)
+    calls = count_fused_calls(monkeypatch)
     short = min(steps, 60)
     fast = episode_digest(kwargs, short, seed)
     assert calls["fused"] > short  # every epoch, resets included, went through it

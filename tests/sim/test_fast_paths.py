@@ -317,6 +317,19 @@ def test_world_motion_kernel_equals_numpy(monkeypatch) -> None:
     assert hits > 0 and seps > 0  # both were exercised
 
 
+def count_fused_calls(monkeypatch) -> dict[str, int]:
+    """Count the calls of ``UrbanWorld._navigate_fused`` (in ``calls["fused"]``)."""
+    calls = {"fused": 0}
+    fused = S.UrbanWorld._navigate_fused
+
+    def counted(self, *a):
+        calls["fused"] += 1
+        return fused(self, *a)
+
+    monkeypatch.setattr(S.UrbanWorld, "_navigate_fused", counted)
+    return calls
+
+
 def _world_epochs(kw: dict, steps: int = 40) -> list:
     """A reset and ``steps`` steps of moderately random commands (collisions included)."""
     cfg = S.ScenarioConfig(**kw)
@@ -361,14 +374,7 @@ def _assert_epochs_identical(a: list, b: list) -> None:
 def test_fused_epoch_navigation_equals_the_modular_path(monkeypatch, kw) -> None:
     """Every field of every epoch, bit for bit: ``UrbanWorld._navigate_fused`` (one compiled
     call) against ``_navigate`` (the same kernels called one by one)."""
-    calls = {"fused": 0}
-    fused = S.UrbanWorld._navigate_fused
-
-    def counted(self, *a):
-        calls["fused"] += 1
-        return fused(self, *a)
-
-    monkeypatch.setattr(S.UrbanWorld, "_navigate_fused", counted)
+    calls = count_fused_calls(monkeypatch)
     fast = _world_epochs(kw)
     assert calls["fused"] == len(fast)
     monkeypatch.setattr(S, "_fused_path_on", lambda: False)
