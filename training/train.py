@@ -126,7 +126,7 @@ class TrainConfig:
         environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
         environment (one process; the same observations, rewards and seeding bit for bit, so
         the same training). ``"auto"`` takes the batched one where it applies
-        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1), SuperSuit otherwise
+        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1 and no render mode), SuperSuit otherwise
         (:meth:`vec_env_kind`); ``benchmarks/bench_env.py`` measures both (the batched one
         steps 64 copies about 1.5x as fast; see ``docs/performance.md``).
     checkpoint_freq : int, default 50_000
@@ -278,11 +278,17 @@ class TrainConfig:
 
     def vec_env_kind(self) -> str:
         """The vector environment :func:`train` builds: ``vec_env``, with ``"auto"`` resolved to
-        ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or 1) and to
-        ``"supersuit"`` otherwise (another environment, or worker processes)."""
+        ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or 1) without a
+        render mode, and to ``"supersuit"`` otherwise (another environment, worker processes,
+        or rendering, which the batched one does not do)."""
         if self.vec_env != "auto":
             return self.vec_env
-        return "batched" if self.env_id == DEFAULT_ENV_ID and self.num_cpus <= 1 else "supersuit"
+        batched = (
+            self.env_id == DEFAULT_ENV_ID
+            and self.num_cpus <= 1
+            and self.env.get("render_mode") is None
+        )
+        return "batched" if batched else "supersuit"
 
     def to_dict(self) -> dict[str, Any]:
         """A plain (YAML-serialisable) copy."""
