@@ -19,6 +19,16 @@ from coopnav_env.sim.city import CityConfig, canyon_city, generate_city
 from coopnav_env.sim.swarm import RelativeSensingConfig, measure_relative_positions
 
 
+def _kernel_and_numpy(monkeypatch, module, fn, *args):
+    """``fn(*args)`` with ``module``'s compiled kernels, then with its numpy formulation
+    (``module._USE_KERNEL`` False, restored afterwards)."""
+    fast = fn(*args)
+    with monkeypatch.context() as m:
+        m.setattr(module, "_USE_KERNEL", False)
+        ref = fn(*args)
+    return fast, ref
+
+
 def _dense_reference(buildings, pos, az_deg):
     """The skyline and wall sweeps as they were written before they shared one pass."""
     az = np.radians(np.asarray(az_deg, dtype=float))
@@ -201,10 +211,9 @@ def test_waypoint_advance_kernel_equals_numpy(monkeypatch) -> None:
             xy = pts[rng.integers(0, k, n)] + rng.choice([0.0, 0.5, -3.0, 5.0], (n, 2))
         wp = rng.integers(0, k, n)
         reach = float(rng.choice([0.0, 5.0, 10.0]))
-        fast = route.advance_waypoints(pts, xy, wp, reach)
-        monkeypatch.setattr(route, "_USE_KERNEL", False)
-        ref = route.advance_waypoints(pts, xy, wp, reach)
-        monkeypatch.setattr(route, "_USE_KERNEL", True)
+        fast, ref = _kernel_and_numpy(
+            monkeypatch, route, route.advance_waypoints, pts, xy, wp, reach
+        )
         np.testing.assert_array_equal(fast, ref)
         assert fast.dtype == ref.dtype == np.int64
 
@@ -265,10 +274,7 @@ def test_swept_collision_kernel_equals_numpy(monkeypatch) -> None:
             step[:m, 2] = 0.0
         p1 = p0 + step
         radius = float(rng.choice([0.0, 1.0, 2.5]))
-        fast = S._swept_collisions_culled(b, p0, p1, radius)
-        monkeypatch.setattr(S, "_USE_KERNEL", False)
-        ref = S._swept_collisions_culled(b, p0, p1, radius)
-        monkeypatch.setattr(S, "_USE_KERNEL", True)
+        fast, ref = _kernel_and_numpy(monkeypatch, S, S._swept_collisions_culled, b, p0, p1, radius)
         np.testing.assert_array_equal(fast, ref)
         hits += int(ref.sum())
         total += n
@@ -286,10 +292,7 @@ def test_separation_kernel_equals_numpy(monkeypatch) -> None:
             pos[1] = pos[0] + [3.0, 0.0, 0.0]  # exactly at the limit: not a violation
             pos[3] = pos[2]  # coincident
         sep = float(rng.choice([0.0, 3.0, 8.0]))
-        fast = swarm.separation_violations(pos, sep)
-        monkeypatch.setattr(swarm, "_USE_KERNEL", False)
-        ref = swarm.separation_violations(pos, sep)
-        monkeypatch.setattr(swarm, "_USE_KERNEL", True)
+        fast, ref = _kernel_and_numpy(monkeypatch, swarm, swarm.separation_violations, pos, sep)
         np.testing.assert_array_equal(fast, ref)
 
 
