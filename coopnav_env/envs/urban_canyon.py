@@ -434,19 +434,25 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             [err, sig.T, np.sqrt((sig**2).sum(axis=1))[None], ep.goal_distance_m[None]]
         )
 
+    def _info_floats(self) -> np.ndarray:
+        """The per-agent real numbers of the infos, ``(8, N)``, by the compiled
+        :func:`coopnav_env.envs._kernels.info_floats` (``_USE_KERNEL``; bit for bit the numpy
+        formulation :meth:`_info_floats_numpy` otherwise)."""
+        if not _USE_KERNEL:
+            return self._info_floats_numpy()
+        ep = self._epoch
+        return _kernels.info_floats(
+            ep.pos_enu_m,
+            ep.nav_pos_enu_m,
+            ep.coop_pos_enu_m,
+            ep.standalone_pos_enu_m,
+            ep.nav_cov_enu_m2,
+            ep.goal_enu_m,
+        )
+
     def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
         ep = self._epoch
-        if _USE_KERNEL:
-            floats = _kernels.info_floats(
-                ep.pos_enu_m,
-                ep.nav_pos_enu_m,
-                ep.coop_pos_enu_m,
-                ep.standalone_pos_enu_m,
-                ep.nav_cov_enu_m2,
-                ep.goal_enu_m,
-            ).tolist()
-        else:
-            floats = self._info_floats_numpy().tolist()
+        floats = self._info_floats().tolist()
         # rows of Python ints and bools (tolist per array: no stacked copy)
         ints = [
             a.tolist()

@@ -42,24 +42,13 @@ def test_observation_kernel_matches_numpy(kwargs) -> None:
 def test_info_kernel_matches_numpy(kwargs) -> None:
     """The infos' real numbers (errors, sigmas, goal distance), bit for bit, fixes missing
     (inf errors) included."""
-    from coopnav_env.envs import _kernels
-
     env = urban_canyon_v0.parallel_env(**kwargs)
     env.reset(seed=4)
     rng = np.random.default_rng(3)
     missing = 0
     for _ in range(60):
-        ep = env._epoch
-        fast = _kernels.info_floats(
-            ep.pos_enu_m,
-            ep.nav_pos_enu_m,
-            ep.coop_pos_enu_m,
-            ep.standalone_pos_enu_m,
-            ep.nav_cov_enu_m2,
-            ep.goal_enu_m,
-        )
-        ref = env._info_floats_numpy()
-        assert fast.shape == ref.shape == (8, ep.n_uavs)
+        fast, ref = env._info_floats(), env._info_floats_numpy()
+        assert fast.shape == ref.shape == (8, env._epoch.n_uavs)
         assert fast.tobytes() == ref.tobytes()
         missing += int(np.isinf(ref[1:3]).sum())
         env.step({a: rng.uniform(-1.5, 1.5, 3) for a in env.agents})
