@@ -248,20 +248,14 @@ NAV = ("pseudorange+solvers", "cooperative solver", "standalone solver")
 
 
 @contextlib.contextmanager
-def stage_timers() -> Iterator[dict[str, float]]:
-    """Wrap the functions of :data:`STAGES` with timers; yields seconds per label."""
-    import importlib
-
+def timed_attributes(targets: list[tuple[str, Any, str]]) -> Iterator[dict[str, float]]:
+    """Replace each ``owner.name`` of ``targets`` (``(label, owner, name)``) by a wrapper
+    that adds its wall time to ``acc[label]``; yields ``acc``, then restores the originals.
+    A class's attribute is taken from its ``__dict__`` (the plain function, not bound)."""
     acc: dict[str, float] = {}
     undo = []
-    for label, mod_name, attr in STAGES:
-        owner: Any = importlib.import_module(mod_name)
-        *path, name = attr.split(".")
-        for part in path:
-            owner = getattr(owner, part)
-        fn = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name, None)
-        if fn is None:
-            continue
+    for label, owner, name in targets:
+        fn = owner.__dict__[name] if isinstance(owner, type) else getattr(owner, name)
 
         def timed(*a, _fn=fn, _label=label, **k):
             t0 = time.perf_counter()
@@ -270,13 +264,28 @@ def stage_timers() -> Iterator[dict[str, float]]:
             finally:
                 acc[_label] = acc.get(_label, 0.0) + time.perf_counter() - t0
 
-        setattr(owner, name, functools.wraps(fn)(timed))
+        setattr(owner, name, timed)
         undo.append((owner, name, fn))
     try:
         yield acc
     finally:
         for owner, name, fn in reversed(undo):
             setattr(owner, name, fn)
+
+
+def stage_timers() -> contextlib.AbstractContextManager[dict[str, float]]:
+    """Timers on the functions of :data:`STAGES` (:func:`timed_attributes`): seconds per label."""
+    import importlib
+
+    targets = []
+    for label, mod_name, attr in STAGES:
+        owner: Any = importlib.import_module(mod_name)
+        *path, name = attr.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        if name in (owner.__dict__ if isinstance(owner, type) else dir(owner)):
+            targets.append((label, owner, name))
+    return timed_attributes(targets)
 
 
 KERNEL_MODULES = (
@@ -287,9 +296,8 @@ KERNEL_MODULES = (
 )
 
 
-@contextlib.contextmanager
-def kernel_timers() -> Iterator[dict[str, float]]:
-    """Wrap every compiled kernel the package calls from Python with a timer.
+def kernel_timers() -> contextlib.AbstractContextManager[dict[str, float]]:
+    """Timers on every compiled kernel the package calls from Python (:func:`timed_attributes`).
 
     Yields seconds per kernel name, each call counted from Python (the dispatch of its
     arguments and results included; a kernel called from another kernel is part of its
@@ -300,28 +308,13 @@ def kernel_timers() -> Iterator[dict[str, float]]:
 
     from numba.core.registry import CPUDispatcher
 
-    acc: dict[str, float] = {}
-    undo = []
+    targets = []
     for mod_name in KERNEL_MODULES:
         mod = importlib.import_module(mod_name)
-        for name, fn in list(vars(mod).items()):
-            if not isinstance(fn, CPUDispatcher):
-                continue
-
-            def timed(*a, _fn=fn, _label=name, **k):
-                t0 = time.perf_counter()
-                try:
-                    return _fn(*a, **k)
-                finally:
-                    acc[_label] = acc.get(_label, 0.0) + time.perf_counter() - t0
-
-            setattr(mod, name, timed)
-            undo.append((mod, name, fn))
-    try:
-        yield acc
-    finally:
-        for mod, name, fn in reversed(undo):
-            setattr(mod, name, fn)
+        targets += [
+            (name, mod, name) for name, fn in vars(mod).items() if isinstance(fn, CPUDispatcher)
+        ]
+    return timed_attributes(targets)
 
 
 def stage_profile(n: int, seconds: float, **env_kw: Any) -> dict[str, Any]:
@@ -585,26 +578,12 @@ def section_batched(args, out: dict) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-@contextlib.contextmanager
-def ppo_update_timer() -> Iterator[dict[str, float]]:
-    """Time SB3's ``PPO.train`` (the gradient updates after each rollout); yields seconds."""
+def ppo_update_timer() -> contextlib.AbstractContextManager[dict[str, float]]:
+    """Time SB3's ``PPO.train`` (the gradient updates after each rollout): seconds in
+    ``acc["update_s"]``."""
     from stable_baselines3 import PPO
 
-    acc = {"update_s": 0.0}
-    original = PPO.train
-
-    def timed(self, *a, **k):
-        t0 = time.perf_counter()
-        try:
-            return original(self, *a, **k)
-        finally:
-            acc["update_s"] += time.perf_counter() - t0
-
-    PPO.train = timed
-    try:
-        yield acc
-    finally:
-        PPO.train = original
+    return timed_attributes([("update_s", PPO, "train")])
 
 
 def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> tuple[float, float]:
@@ -633,7 +612,8 @@ def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> tuple[fl
         with ppo_update_timer() as acc:
             train(cfg)
         info = json.loads((Path(tmp) / "run.json").read_text())
-    return float(info["agent_steps_per_s"]), acc["update_s"] / float(info["session_wall_s"])
+    update_share = acc.get("update_s", 0.0) / float(info["session_wall_s"])
+    return float(info["agent_steps_per_s"]), update_share
 
 
 def section_train(args, out: dict) -> None:
