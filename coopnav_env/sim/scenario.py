@@ -799,6 +799,28 @@ class UrbanWorld:
         avail[row] = available[row]
         return RelativePositions._trusted(rel, cov, avail)
 
+    def _centroids(self, n_sats: np.ndarray, avail: BoolArray) -> tuple[str | int, BoolArray, int]:
+        """The epoch's centroid (``"self"``, or the shared UAV receiving the most satellites),
+        which UAVs have the relative link a cooperative fix needs, and ``Epoch.centroid_uav``."""
+        n = self.config.n_uavs
+        if self.config.centroid_mode == "shared" or n == 1:
+            a = int(np.argmax(n_sats))
+            linked = avail[a].copy()
+            linked[a] = True
+            return a, linked, a
+        # a UAV out of range of every other one navigates standalone
+        return "self", avail.any(axis=1) | (n == 1), -1
+
+    def _relative_rows(
+        self, rel_enu_m: np.ndarray, var_m2: np.ndarray, available: BoolArray, centroid: str | int
+    ) -> tuple[np.ndarray, np.ndarray, BoolArray]:
+        """The relative positions (rotated to ECEF by numpy matmuls), per-axis variances and
+        links the cooperative solve of ``centroid`` uses: all pairs ``(N, N)`` for ``"self"``,
+        UAV ``a``'s row ``(N,)`` for a shared centroid ``a``."""
+        if isinstance(centroid, str):
+            return rel_enu_m @ self.rot_enu, var_m2, available
+        return rel_enu_m[centroid] @ self.rot_enu, var_m2[centroid], available[centroid]
+
     def _solve_cooperative(
         self,
         obs: GnssObservations,
@@ -816,17 +838,14 @@ class UrbanWorld:
         result) on the same rotated vectors.
         """
         cfg = self.config
-        row = None if isinstance(centroid, str) else centroid
         if cfg.covariance == "exact":
-            if row is None:
-                rel_ecef, var, avail = rel_enu_m @ self.rot_enu, var_m2, available
-            else:
-                rel_ecef, var, avail = rel_enu_m[row] @ self.rot_enu, var_m2[row], available[row]
+            rel_ecef, var, avail = self._relative_rows(rel_enu_m, var_m2, available, centroid)
             co = _solve_isotropic(
                 obs, rel_ecef, var, avail, centroid, cfg.transfer, x0_ecef_m, cfg.nav_max_iter
             )
             if co is not None:
                 return co
+        row = None if isinstance(centroid, str) else centroid
         return solve_cooperative(
             obs,
             self._relative_ecef(rel_enu_m, var_m2, available, row=row),
@@ -1064,17 +1083,9 @@ class UrbanWorld:
 
         sa = solve_standalone(obs, x0, max_iter=cfg.nav_max_iter)
         n_sats = received.sum(axis=1)
-        if cfg.centroid_mode == "shared" or n == 1:
-            a = int(np.argmax(n_sats))
-            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, a, x0[a])
-            linked = avail[a].copy()
-            linked[a] = True
-            centroid_uav = a
-        else:
-            co = self._solve_cooperative(obs, rel_enu, rel_var, avail, "self", x0)
-            # a UAV out of range of every other one navigates standalone
-            linked = avail.any(axis=1) | (n == 1)
-            centroid_uav = -1
+        centroid, linked, centroid_uav = self._centroids(n_sats, avail)
+        x0_co = x0 if isinstance(centroid, str) else x0[centroid]
+        co = self._solve_cooperative(obs, rel_enu, rel_var, avail, centroid, x0_co)
 
         select = _select_navigation if _USE_KERNEL else _select_navigation_numpy
         sel = select(self, sa, co, linked, pred_enu, dr_var)
@@ -1114,19 +1125,13 @@ class UrbanWorld:
         rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
         x0 = self.enu_to_ecef(pred_enu)
         n_sats = received.sum(axis=1)
-        if cfg.centroid_mode == "shared" or n == 1:
-            a = int(np.argmax(n_sats))
-            rel_b = (rel_enu[a] @ self.rot_enu)[None]
-            var_b, avail_b, x0_co = rel_var[a][None], avail[a][None], x0[a][None]
-            cen = np.array([a], dtype=np.int64)
-            linked = avail[a].copy()
-            linked[a] = True
-            centroid_uav = a
-        else:
-            rel_b, var_b, avail_b, x0_co = rel_enu @ self.rot_enu, rel_var, avail, x0
-            cen = np.arange(n, dtype=np.int64)
-            linked = avail.any(axis=1) | (n == 1)
-            centroid_uav = -1
+        centroid, linked, centroid_uav = self._centroids(n_sats, avail)
+        rel_b, var_b, avail_b = self._relative_rows(rel_enu, rel_var, avail, centroid)
+        if isinstance(centroid, str):
+            cen, x0_co = np.arange(n, dtype=np.int64), x0
+        else:  # one centroid problem: the kernel takes (B = 1, ...) arrays
+            rel_b, var_b, avail_b = rel_b[None], var_b[None], avail_b[None]
+            cen, x0_co = np.array([centroid], dtype=np.int64), x0[centroid][None]
         gate = cfg.max_fix_sigma_m
         sa_status, sa_n_iter, co_n_iter, sel, next_wp, n_swarm = _sim_kernels.epoch_navigation(
             range_m,
