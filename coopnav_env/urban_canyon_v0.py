@@ -117,12 +117,15 @@ With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts,
 
 ## Rewards
 
-Per agent, the sum of six terms, each also reported in `infos[agent]["reward_terms"]`:
+Per agent, the sum of six terms, each also reported in `infos[agent]["reward_<term>"]`:
 
 * `nav` = `-nav_reward_weight * min(e, nav_reward_cap_m) / nav_reward_scale_m` (defaults 0.1,
   10 m, 10 m), where `e` is the true 3-D error of the estimate the UAV uses
   (`nav_reward="error"`, default) or its predicted 3-D sigma `sqrt(trace H_p)`
-  (`nav_reward="sigma"`): -0.03 per step at a 3 m error, at worst -0.1;
+  (`nav_reward="sigma"`): -0.03 per step at a 3 m error, at worst -0.1; with team credit
+  `nav_team_weight = w` (default 0) each UAV gets `(1 - w) nav_i + w mean_j(nav_j)`, so that a
+  UAV that keeps its neighbours' fixes good (holding an open square, spreading the swarm over
+  more sky) is paid for it;
 * `progress` = `progress_reward_weight * (d_prev - d_now) / (max_speed_mps * dt_s)` (weight 1),
   `d` the remaining length of the street route from the UAV's true position: the straight
   distance to its next waypoint plus the route after that waypoint, both ends of the step
@@ -150,21 +153,30 @@ the best a policy could do.
 
 ## Infos
 
-`infos[agent]` holds python numbers: `nav_error_m`, `coop_error_m`, `standalone_error_m` (true
-3-D errors [m]; `inf` where that fix does not exist), `sig_e_m`, `sig_n_m`, `sig_u_m`,
-`sig_3d_m` (predicted sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`,
-`n_sats_open_sky`, `coop_status` and `standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK,
-1 too few satellites, 2 singular, 3 not converged, 4 no relative position, 5 implausible
-position: the spurious far root), `nav_source`
-(`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
+`infos[agent]` is flat and holds python numbers only, with the same keys (in the same order,
+`coopnav_env.envs.urban_canyon.INFO_KEYS`) at `reset()` and at every step, so that libraries
+that build their specs from the reset (TorchRL's `PettingZooWrapper`, BenchMARL) and loggers
+that average every key work as they are: `nav_error_m`, `coop_error_m`, `standalone_error_m`
+(true 3-D errors [m]), `coop_fix`, `standalone_fix` (whether that fix exists: where it does
+not, its error is reported as -1, `NO_FIX_ERROR_M`, never `inf` or NaN; mask by the flag
+before averaging, or read it with `coopnav_env.envs.urban_canyon.fix_error_m(info, key)`,
+which returns `inf` for a missing fix), `sig_e_m`, `sig_n_m`, `sig_u_m`, `sig_3d_m` (predicted
+sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`, `n_sats_open_sky`, `coop_status` and
+`standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK, 1 too few satellites, 2 singular, 3
+not converged, 4 no relative position, 5 implausible position: the spurious far root),
+`nav_source` (`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
 `goal_distance_m`, `next_waypoint` (index into `world.route_xy_m`), `coop_rejected` and
 `standalone_rejected` (the solver's fix was OK but the integrity gate `max_fix_sigma_m`
-rejected it: its error is reported as `inf`), `in_goal`, `collided`, `separation_violation`,
-`out_of_contact`, `step`, and `reward_terms`.
+rejected it: the fix counts as missing), `in_goal`, `collided`, `separation_violation`,
+`out_of_contact`, the reward terms `reward_nav`, `reward_progress`, `reward_collision`,
+`reward_separation`, `reward_contact`, `reward_goal` (0 at reset; their sum is the reward),
+and `step` (0 at reset).
 
-`reset()` returns, per agent, `{"initial": {...}}`: the same figures for the first epoch,
-nested so that SuperSuit's automatic reset, which merges the reset infos into the terminal
-step's infos (`{**step_info, **reset_info}`), does not overwrite the terminal step's figures.
+The reset infos describe the first epoch of the new episode. SuperSuit's own automatic reset
+(`pettingzoo_env_to_vec_env_v1`) merges them over the terminal step's infos
+(`{**step_info, **reset_info}`), so with that recipe the terminal step's figures are lost;
+coopnav's vector environments (`training.vec_env.make_vec_env`, the batched
+`BatchedUrbanCanyonEnv`) keep the terminal step's infos and drop the reset's.
 
 ## Starting State
 
@@ -271,7 +283,8 @@ hundreds of metres, and their covariance says so.
 observations [m].
 
 `nav_reward` (`"error"`), `nav_reward_weight`, `nav_reward_scale_m`, `nav_reward_cap_m`
-(0.1, 10, 10), `progress_reward_weight` (1), `collision_penalty` (40), `separation_penalty`
+(0.1, 10, 10), `nav_team_weight` (0: own error; 1: the swarm mean),
+`progress_reward_weight` (1), `collision_penalty` (40), `separation_penalty`
 (0.05), `contact_penalty` (0.02), `goal_bonus` (10): rewards, above.
 
 `render_sky_uav` (-1): the UAV of the sky plot; -1 picks the one with the fewest satellites.

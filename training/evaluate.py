@@ -39,6 +39,8 @@ from typing import Any
 
 import numpy as np
 
+from coopnav_env.envs.urban_canyon import fix_error_m
+
 __all__ = [
     "DEFAULT_EPISODES",
     "EVAL_SEED_START",
@@ -410,9 +412,10 @@ def _in_goal(info: Mapping[str, Any]) -> bool:
 
 
 def _info_float(info: Mapping[str, Any], key: str) -> float:
+    """``info[key]`` as a float (NaN if absent); a missing fix's error is ``inf``."""
     v = info.get(key)
     try:
-        return float(v) if v is not None else math.nan
+        return fix_error_m(info, key) if v is not None else math.nan
     except (TypeError, ValueError):
         return math.nan
 

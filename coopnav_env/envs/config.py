@@ -52,6 +52,12 @@ class UrbanCanyonConfig(ScenarioConfig):
         Error (or sigma) that costs one ``nav_reward_weight``, in (0, 1e4] [m].
     nav_reward_cap_m : float, default 10.0
         The error (or sigma) is capped here before scaling, in (0, 1e5] [m].
+    nav_team_weight : float, default 0.0
+        Team credit of the navigation term, in [0, 1]: each UAV's ``nav`` term becomes
+        ``(1 - w) nav_i + w mean_j(nav_j)``; 0 keeps each UAV's own error, 1 gives every UAV
+        the swarm's mean. With a shared (team) term a UAV that holds an open square so that
+        its neighbours' fixes improve is paid for it; per-agent PPO cannot otherwise assign
+        that credit. The default keeps the own error (episodes of earlier versions unchanged).
     progress_reward_weight : float, default 1.0
         Weight of the progress term (decrease of the remaining street-route length per step,
         divided by ``max_speed_mps * dt_s``, so at most 1 in magnitude), in [0, 1000].
@@ -86,6 +92,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     nav_reward_weight: float = 0.1
     nav_reward_scale_m: float = 10.0
     nav_reward_cap_m: float = 10.0
+    nav_team_weight: float = 0.0
     progress_reward_weight: float = 1.0
     collision_penalty: float = 40.0
     separation_penalty: float = 0.05
@@ -108,6 +115,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_real(o, "nav_reward_weight", self.nav_reward_weight, 0.0, 1000.0)
         _check_real(o, "nav_reward_scale_m", self.nav_reward_scale_m, 0.0, 1e4, lo_open=True)
         _check_real(o, "nav_reward_cap_m", self.nav_reward_cap_m, 0.0, 1e5, lo_open=True)
+        _check_real(o, "nav_team_weight", self.nav_team_weight, 0.0, 1.0)
         _check_real(o, "progress_reward_weight", self.progress_reward_weight, 0.0, 1000.0)
         _check_real(o, "collision_penalty", self.collision_penalty, 0.0, 1e5)
         _check_real(o, "separation_penalty", self.separation_penalty, 0.0, 1e5)
