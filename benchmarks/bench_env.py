@@ -588,7 +588,8 @@ def ppo_update_timer() -> contextlib.AbstractContextManager[dict[str, float]]:
 
 def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> tuple[float, float]:
     """(agent-steps/s of ``train()``, share of its learning time in PPO's gradient updates)."""
-    from training.train import TrainConfig, load_config, train
+    from training.config import TrainConfig, load_config
+    from training.sb3_backend import train
 
     base = load_config()
     with tempfile.TemporaryDirectory() as tmp:

@@ -33,7 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from training.train import load_config
+from training.config import load_config
 
 
 def _one_run(runners: int, iterations: int, overrides: list[str], out: Path) -> dict:

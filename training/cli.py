@@ -15,7 +15,7 @@ import sys
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("training.demo", "navigation demo: standalone vs cooperative error of a canyon UAV"),
-    "reproduce": ("training.reproduce", "regenerate the paper's tables and figures (Section 4)"),
+    "reproduce": ("reproduction.cli", "regenerate the paper's tables and figures (Section 4)"),
     "train": (
         "training.train",
         "train a PPO policy (parameter sharing) on urban_canyon_v0 (SB3, or Ray RLlib)",

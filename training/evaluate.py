@@ -1,8 +1,8 @@
 """``coopnav evaluate``: navigation error, goal rate and collisions per policy.
 
 Each policy flies the same held-out episodes (reset seeds ``EVAL_SEED_START + i``, never used
-in training: ``coopnav train`` keeps its reset seeds below :data:`EVAL_SEED_START`) and is
-scored on every UAV at every step:
+in training: ``coopnav train`` keeps its reset seeds below
+:data:`training.envs.EVAL_SEED_START`) and is scored on every UAV at every step:
 
 * cooperative and standalone 3-D position error (true minus estimated): mean, median, 95th
   percentile over the agent-steps that have a fix, and P(error < 3 m) over all agent-steps
@@ -40,45 +40,26 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
+from training.config import apply_overrides
+from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
 
 __all__ = [
     "DEFAULT_EPISODES",
-    "EVAL_SEED_START",
     "EpisodeRecord",
     "PolicyStats",
     "Report",
     "add_arguments",
+    "clustered_se",
     "evaluate",
-    "heldout_seeds",
     "run",
+    "train_config_of_policies",
 ]
-
-EVAL_SEED_START: int = 1_000_000
-"""First held-out evaluation seed. Training reset seeds are ``< EVAL_SEED_START``."""
 
 DEFAULT_EPISODES: int = 20
 """Episodes per policy when no seeds are given."""
 
 ERROR_THRESHOLD_M: float = 3.0
 """Threshold of the availability statistic P(3-D error < 3 m) (the paper's Figure 8)."""
-
-
-def heldout_seeds(n: int, start: int = EVAL_SEED_START) -> list[int]:
-    """``n`` held-out evaluation seeds ``start, start + 1, ...``.
-
-    Raises
-    ------
-    ValueError
-        ``n < 1`` or ``start < EVAL_SEED_START`` (such seeds may have been seen in training).
-    """
-    if int(n) < 1:
-        raise ValueError(f"the number of evaluation episodes must be >= 1, got {n}")
-    if int(start) < EVAL_SEED_START:
-        raise ValueError(
-            f"evaluation seeds must be >= {EVAL_SEED_START} (training uses the seeds below), "
-            f"got {start}"
-        )
-    return [int(start) + i for i in range(int(n))]
 
 
 # --------------------------------------------------------------------------------------------
@@ -172,7 +153,7 @@ class PolicyStats:
             episodes=len(eps),
             agent_steps=int(coop.size),
             coop_error_mean_m=c["mean"],
-            coop_error_mean_se_m=_clustered_se([e.coop_error_m for e in eps]),
+            coop_error_mean_se_m=clustered_se([e.coop_error_m for e in eps]),
             coop_error_median_m=c["median"],
             coop_error_p95_m=c["p95"],
             p_coop_error_lt_3m=c["p_lt"],
@@ -196,7 +177,7 @@ class PolicyStats:
         )
 
 
-def _clustered_se(per_episode: Sequence[np.ndarray]) -> float:
+def clustered_se(per_episode: Sequence[np.ndarray]) -> float:
     """Standard error of the pooled mean of the finite samples, episodes as clusters.
 
     The errors of one episode are strongly correlated (same city, same sky, consecutive
@@ -386,8 +367,6 @@ def _slug(name: str) -> str:
 
 
 def _make_env(env_id: str, env_kwargs: Mapping[str, Any]) -> Any:
-    from training.train import make_env_fn
-
     return make_env_fn(env_id, env_kwargs)()
 
 
@@ -511,7 +490,7 @@ def evaluate(
     out : path or None
         Directory for the report files and plots; None writes nothing.
     env_id : str, default "urban_canyon_v0"
-        As in :class:`training.train.TrainConfig`.
+        As in :class:`training.config.TrainConfig`.
     plots : bool, default True
         Write the CDF and trajectory plots (needs matplotlib).
     verbose : bool, default False
@@ -777,8 +756,6 @@ def _read_train_config(path: Path) -> dict[str, Any]:
 
 def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     """(env id, env kwargs): ``--train-config``, else the run of a ``ppo:`` policy, then flags."""
-    from training.train import apply_overrides
-
     trained: dict[str, Any] = {}
     if args.train_config:
         p = Path(args.train_config)
@@ -786,7 +763,7 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
             raise FileNotFoundError(f"training config not found: {p}")
         trained = _read_train_config(p)
     else:
-        trained = _train_config_of_policies(args.policies)
+        trained = train_config_of_policies(args.policies)
     env_id = args.env_id or trained.get("env_id") or "urban_canyon_v0"
     env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
     if args.n_uavs is not None:
@@ -796,7 +773,7 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
     return env_id, env
 
 
-def _train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
+def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
     """The training configuration a ``ppo:<path>`` or ``rllib:<path>`` policy came from.
 
     ``coopnav train`` writes ``config.yaml`` into its output directory; a model at

@@ -15,7 +15,9 @@ pytest.importorskip("supersuit")
 from coopnav_env import urban_canyon_v0
 from tests.training.test_train_eval import params, toy_cfg, urban_cfg
 from tests.training.toy_env import ToyParallelEnv
-from training.train import TrainConfig, add_arguments, config_from_args, load_config, train
+from training.config import TrainConfig, load_config
+from training.sb3_backend import train
+from training.train import add_arguments, config_from_args
 from training.vec_env import BatchedVecEnv, SeededVecEnv, make_vec_env
 
 

@@ -19,14 +19,14 @@ from coopnav_env.nav import (
     solve_master_slave,
     solve_standalone,
 )
-from training.cli import main as cli_main
-from training.paper_scenario import (
+from reproduction import ReproduceConfig, reproduce, simulate_epoch
+from reproduction.scenario import (
     PaperScenario,
     canyon_mask_elevation_deg,
     formation_enu,
     in_azimuth_intervals,
 )
-from training.reproduce import ReproduceConfig, reproduce, simulate_epoch
+from training.cli import main as cli_main
 
 FIGURES = (
     "fig6_skyplot.png",

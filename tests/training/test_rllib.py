@@ -23,14 +23,15 @@ from pathlib import Path
 import pytest
 import yaml
 
-from training.rllib_train import (
+from training.config import TrainConfig, load_config
+from training.rllib_backend import (
     INSTALL_HINT,
     RLlibSettings,
     check_address,
     find_latest_rllib_checkpoint,
     import_rllib,
 )
-from training.train import TrainConfig, add_arguments, config_from_args, load_config
+from training.train import add_arguments, config_from_args
 
 ROOT = Path(__file__).resolve().parents[2]
 HAS_RAY = importlib.util.find_spec("ray") is not None
@@ -154,7 +155,7 @@ def test_rllib_policy_and_resume_errors(tmp_path, capsys):
     from agents import make_policy
     from coopnav_env import urban_canyon_v0
     from training.cli import main
-    from training.rllib_train import _resolve_resume
+    from training.rllib_backend import resolve_resume
 
     env = urban_canyon_v0.parallel_env(n_uavs=2)
     with pytest.raises(ValueError, match="needs the path of an RLlib checkpoint"):
@@ -171,11 +172,11 @@ def test_rllib_policy_and_resume_errors(tmp_path, capsys):
     zip_ckpt = tmp_path / "ppo_100_steps.zip"
     zip_ckpt.write_bytes(b"")
     with pytest.raises(ValueError, match=r"not an RLlib checkpoint.*--backend sb3"):
-        _resolve_resume(TrainConfig(out=str(tmp_path), backend="rllib", resume=str(zip_ckpt)))
+        resolve_resume(TrainConfig(out=str(tmp_path), backend="rllib", resume=str(zip_ckpt)))
 
 
 def test_evaluate_reads_the_environment_of_an_rllib_run(tmp_path):
-    from training.evaluate import _train_config_of_policies
+    from training.evaluate import train_config_of_policies
 
     run = tmp_path / "run"
     (run / "final_model").mkdir(parents=True)
@@ -184,12 +185,12 @@ def test_evaluate_reads_the_environment_of_an_rllib_run(tmp_path):
         yaml.safe_dump({"env_id": "urban_canyon_v0", "env": {"n_uavs": 3}, "backend": "rllib"})
     )
     for path in (run / "final_model", run / "checkpoints" / "rllib_10_steps", run):
-        assert _train_config_of_policies([f"rllib:{path}"])["env"] == {"n_uavs": 3}
+        assert train_config_of_policies([f"rllib:{path}"])["env"] == {"n_uavs": 3}
 
 
 @pytest.mark.skipif(not HAS_RAY, reason="ray[rllib] not installed")
 def test_env_creator_wraps_the_swarm_for_rllib():
-    from training.rllib_train import make_rllib_env, map_to_shared_policy
+    from training.rllib_backend import make_rllib_env, map_to_shared_policy
 
     env = make_rllib_env({"env_id": "urban_canyon_v0", "env_kwargs": {"n_uavs": 3}})
     obs, _ = env.reset(seed=4)
@@ -203,7 +204,7 @@ def test_env_creator_wraps_the_swarm_for_rllib():
 @pytest.mark.skipif(not HAS_RAY, reason="ray[rllib] not installed")
 def test_env_copies_of_different_runners_get_distinct_seeds():
     """RLlib + gymnasium seed copy j of runner i with seed + i + j; we shift to seed + i E + j."""
-    from training.rllib_train import make_rllib_env
+    from training.rllib_backend import make_rllib_env
 
     class Context(dict):  # RLlib's EnvContext: a dict with the runner's index
         def __init__(self, worker_index: int, copies: int):

@@ -19,19 +19,11 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
 from tests.training.toy_env import ToyParallelEnv
-from training.evaluate import (
-    EVAL_SEED_START,
-    evaluate,
-    heldout_seeds,
-)
-from training.train import (
-    TrainConfig,
-    apply_overrides,
-    config_from_args,
-    find_latest_checkpoint,
-    load_config,
-    train,
-)
+from training.config import TrainConfig, apply_overrides, load_config
+from training.envs import EVAL_SEED_START, heldout_seeds
+from training.evaluate import evaluate
+from training.sb3_backend import find_latest_checkpoint, train
+from training.train import config_from_args
 from training.vec_env import make_vec_env
 
 TOY = "tests.training.toy_env:ToyParallelEnv"
@@ -456,7 +448,7 @@ def test_evaluate_cli_uses_the_training_environment(tmp_path, capsys):
 
 def test_clustered_standard_error_of_the_pooled_mean():
     """Episodes as clusters: equals the textbook formula, and ignores NaN (no-fix) samples."""
-    from training.evaluate import _clustered_se
+    from training.evaluate import clustered_se
 
     rng = np.random.default_rng(0)
     eps = [rng.normal(3.0 + rng.normal(), 0.5, size=rng.integers(20, 60)) for _ in range(12)]
@@ -465,11 +457,11 @@ def test_clustered_standard_error_of_the_pooled_mean():
     total = sum(f.size for f in finite)
     mean = sum(f.sum() for f in finite) / total
     want = np.sqrt(12 / 11 * sum((f.sum() - f.size * mean) ** 2 for f in finite)) / total
-    assert _clustered_se(eps) == pytest.approx(want, rel=1e-12)
+    assert clustered_se(eps) == pytest.approx(want, rel=1e-12)
     # the episode-to-episode spread (sd 1 of the episode means) dominates: the naive
     # per-sample SE would be several times smaller
     naive = np.concatenate(finite).std(ddof=1) / np.sqrt(total)
-    assert _clustered_se(eps) > 2 * naive
+    assert clustered_se(eps) > 2 * naive
     # identical episodes: no spread between clusters
-    assert _clustered_se([np.ones(5), np.ones(5)]) == 0.0
-    assert np.isnan(_clustered_se([np.ones(5)]))
+    assert clustered_se([np.ones(5), np.ones(5)]) == 0.0
+    assert np.isnan(clustered_se([np.ones(5)]))

@@ -1,6 +1,6 @@
 """``coopnav train --backend rllib``: PPO with one shared policy on Ray RLlib.
 
-The same swarm task as :mod:`training.train` (the SB3 backend), distributed with Ray: every
+The same swarm task as :mod:`training.sb3_backend` (the SB3 backend), distributed with Ray: every
 UAV of ``urban_canyon_v0`` is mapped to one policy (``"shared"``: parameter sharing), the
 PettingZoo env is wrapped by RLlib's
 :class:`~ray.rllib.env.wrappers.pettingzoo_env.ParallelPettingZooEnv`, ``num_env_runners``
@@ -42,7 +42,7 @@ cluster, whose files are where its ``ray start --temp-dir`` put them.
 Seeds: copy ``j`` of env runner ``i`` first resets with ``seed + i E + j`` (``E`` =
 ``num_envs_per_env_runner``; runner 0 is this process; see :func:`make_rllib_env`), a resumed
 run with ``seed + N`` (``N`` agent-steps done, modulo the training seed range), all below
-:data:`training.evaluate.EVAL_SEED_START`.
+:data:`training.envs.EVAL_SEED_START`.
 """
 
 from __future__ import annotations
@@ -63,12 +63,18 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from training.evaluate import EVAL_SEED_START
-
-if TYPE_CHECKING:  # pragma: no cover
-    from training.train import TrainConfig
+from training.config import TrainConfig
+from training.envs import EVAL_SEED_START, make_env_fn
+from training.runs import (
+    atomic_path,
+    check_same_environment,
+    latest_numbered,
+    sigterm_as_interrupt,
+    write_json,
+    write_yaml,
+)
 
 __all__ = [
     "INSTALL_HINT",
@@ -79,7 +85,8 @@ __all__ = [
     "import_rllib",
     "is_rllib_checkpoint",
     "make_rllib_env",
-    "train_rllib",
+    "resolve_resume",
+    "train",
 ]
 
 INSTALL_HINT: str = 'pip install -e ".[ray]"'
@@ -101,7 +108,7 @@ SB3_ONLY_KEYS: tuple[str, ...] = (
     "verbose",
     "vec_env",
 )
-"""Settings of :class:`training.train.TrainConfig` that only the SB3 backend reads."""
+"""Settings of :class:`training.config.TrainConfig` that only the SB3 backend reads."""
 
 _CHECKPOINT_RE = re.compile(r"^rllib_(\d+)_steps$")
 _MAX_TEMP_DIR_LEN = 40  # Ray adds ~65 characters of session/socket path; AF_UNIX allows 107
@@ -237,8 +244,6 @@ def import_rllib() -> Any:
 def make_rllib_env(env_config: Mapping[str, Any]) -> Any:
     """An RLlib ``MultiAgentEnv`` for ``{"env_id": ..., "env_kwargs": {...}}`` (env creator)."""
     from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
-
-    from training.train import make_env_fn
 
     env_id = str(env_config.get("env_id", "urban_canyon_v0"))
     env = ParallelPettingZooEnv(make_env_fn(env_id, dict(env_config.get("env_kwargs") or {}))())
@@ -551,14 +556,21 @@ def find_latest_rllib_checkpoint(out: str | Path) -> Path:
     FileNotFoundError
         There is none.
     """
-    from training.train import latest_numbered
-
     return latest_numbered(
         Path(out) / "checkpoints", "rllib_*_steps", _CHECKPOINT_RE, "RLlib ", is_rllib_checkpoint
     )
 
 
-def _resolve_resume(cfg: TrainConfig) -> Path | None:
+def resolve_resume(cfg: TrainConfig) -> Path | None:
+    """The checkpoint folder ``cfg.resume`` names (``"latest"``: the newest in ``cfg.out``).
+
+    Raises
+    ------
+    FileNotFoundError
+        No such checkpoint.
+    ValueError
+        The path is not an RLlib checkpoint folder.
+    """
     if cfg.resume is None:
         return None
     if cfg.resume == "latest":
@@ -585,11 +597,11 @@ def _read_state(path: Path) -> dict[str, int]:
 
 
 def _save(algo: Any, path: Path, state: Mapping[str, int]) -> Path:
-    if path.exists():
-        shutil.rmtree(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    algo.save_to_path(str(path.absolute()))
-    (path / STATE_FILE).write_text(json.dumps(dict(state), indent=2) + "\n")
+    """Save ``algo`` and its counters to the checkpoint folder ``path``, atomically: into a
+    temporary folder beside it, renamed into place when complete."""
+    with atomic_path(path) as tmp:
+        algo.save_to_path(str(tmp.absolute()))
+        write_json(tmp / STATE_FILE, dict(state))
     return path
 
 
@@ -644,18 +656,12 @@ def _iteration_row(result: Mapping[str, Any]) -> dict[str, float]:
     }
 
 
-def _write_yaml(path: Path, data: Any) -> None:
-    import yaml
-
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-
-
-def train_rllib(cfg: TrainConfig) -> Path:
+def train(cfg: TrainConfig) -> Path:
     """Train one PPO policy shared by every UAV on Ray RLlib; return the final checkpoint.
 
     Parameters
     ----------
-    cfg : training.train.TrainConfig
+    cfg : training.config.TrainConfig
         ``backend`` is not read; ``cfg.rllib`` holds the :class:`RLlibSettings`.
 
     Returns
@@ -676,12 +682,6 @@ def train_rllib(cfg: TrainConfig) -> Path:
     KeyboardInterrupt
         Re-raised after writing a checkpoint (``checkpoints/rllib_<N>_steps``).
     """
-    from training.train import (
-        _check_same_environment,
-        _terminate_as_interrupt,
-        make_env_fn,
-    )
-
     s = RLlibSettings.from_dict(cfg.rllib)
     # env seeds: seed + i E + j for runner i <= num_env_runners and copy j < E
     span = (s.num_env_runners + 1) * s.num_envs_per_env_runner
@@ -695,13 +695,13 @@ def train_rllib(cfg: TrainConfig) -> Path:
     import torch
 
     out = Path(cfg.out)
-    resume_path = _resolve_resume(cfg)
+    resume_path = resolve_resume(cfg)
     probe = make_env_fn(cfg.env_id, cfg.env)()  # validates the env kwargs before any output
     n_agents = len(probe.possible_agents)
     probe.close()
     start = _read_state(resume_path) if resume_path else dict.fromkeys(_STATE_KEYS, 0)
     if resume_path is not None:
-        _check_same_environment(cfg, out / "config.yaml")
+        check_same_environment(cfg, out / "config.yaml")
     seed = cfg.seed
     if start["agent_steps"]:
         seed = (cfg.seed + start["agent_steps"]) % (EVAL_SEED_START - span)
@@ -717,14 +717,14 @@ def train_rllib(cfg: TrainConfig) -> Path:
     resolved["resume"] = str(resume_path) if resume_path else None
     resolved["agent_steps_per_env_step"] = n_agents
     n0 = start["agent_steps"]
-    _write_yaml(out / ("config.yaml" if n0 == 0 else f"config_resumed_at_{n0}.yaml"), resolved)
+    write_yaml(out / ("config.yaml" if n0 == 0 else f"config_resumed_at_{n0}.yaml"), resolved)
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
     suffix = "" if n0 == 0 else f"_resumed_at_{n0}"
     counters = dict(start)
     setup_t0 = time.perf_counter()
-    previous_term = _terminate_as_interrupt()
+    previous_term = sigterm_as_interrupt()
     try:
         with (
             ray_session(s, out) as session,
@@ -732,7 +732,7 @@ def train_rllib(cfg: TrainConfig) -> Path:
         ):
             from ray.tune.registry import register_env
 
-            _terminate_as_interrupt()  # again: ray.init installs a SIGTERM handler that aborts
+            sigterm_as_interrupt()  # again: ray.init installs a SIGTERM handler that aborts
             register_env(env_name, make_rllib_env)
             with _trainable_logdir_in(Path(trial_tmp)), _quiet_rllib():
                 algo = config.build_algo()
@@ -782,7 +782,7 @@ def train_rllib(cfg: TrainConfig) -> Path:
             "gymnasium": gymnasium.__version__,
         },
     }
-    (out / "run.json").write_text(json.dumps(info, indent=2) + "\n")
+    write_json(out / "run.json", info)
     return final
 
 

@@ -1,0 +1,160 @@
+"""``coopnav reproduce``: run the reproduction and write its files (:func:`reproduce`).
+
+Everything goes to ``--out DIR``: ``config.json`` (``--config`` reruns it exactly),
+``results.json``, ``report.md`` and the ``fig*.png`` figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+# --------------------------------------------------------------------------------------------
+# Entry points
+# --------------------------------------------------------------------------------------------
+from reproduction.config import ReproduceConfig
+from reproduction.figures import write_figures
+from reproduction.report import report_markdown
+from reproduction.scenario import (
+    PaperScenario,
+)
+from reproduction.simulation import json_float, run_studies
+from reproduction.tables import summarize
+
+__all__ = [
+    "add_arguments",
+    "build_config",
+    "reproduce",
+    "run",
+]
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return json_float(float(o))
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") -> Path:
+    """Run the reproduction and write results, report, figures and config to ``out_dir``.
+
+    Parameters
+    ----------
+    config : ReproduceConfig
+    out_dir : str or Path
+        Output directory (created if needed; files in it are overwritten).
+
+    Returns
+    -------
+    Path
+        ``out_dir``.
+    """
+    if not isinstance(config, ReproduceConfig):
+        raise ValueError(f"config must be a ReproduceConfig, got {type(config).__name__}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    cfg_dict = config.to_dict()
+    (out / "config.json").write_text(json.dumps(cfg_dict, indent=2) + "\n")
+    raw = run_studies(config)
+    t_sim = time.perf_counter() - t0
+    summary = summarize(config, raw)
+    figs = write_figures(config, raw, summary, out) if config.figures else []
+    runtime = time.perf_counter() - t0
+    results = {
+        "config": cfg_dict,
+        **summary,
+        "timing": {"simulation_s": round(t_sim, 2), "total_s": round(runtime, 2)},
+    }
+    (out / "results.json").write_text(
+        json.dumps(results, indent=1, default=_json_default, allow_nan=False) + "\n"
+    )
+    (out / "report.md").write_text(report_markdown(config, summary, figs, runtime))
+    return out
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def build_config(args: argparse.Namespace) -> ReproduceConfig:
+    """The configuration from the command line (``--config``, ``--quick``, ``--set``...)."""
+    data: dict[str, Any] = {}
+    if args.config:
+        data = json.loads(Path(args.config).read_text())
+    elif args.quick:
+        data = ReproduceConfig.quick().to_dict()
+    scen = dict(data.pop("scenario", {}))
+    fields = {f.name for f in dataclasses.fields(ReproduceConfig)} - {"scenario"}
+    sfields = set(PaperScenario.__dataclass_fields__)
+    for item in args.set or []:
+        if "=" not in item:
+            raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        key = key.strip().removeprefix("scenario.")
+        if key in fields:
+            data[key] = _parse_value(value)
+        elif key in sfields:
+            scen[key] = _parse_value(value)
+        else:
+            raise ValueError(f"unknown --set key {key!r}; allowed: {sorted(fields | sfields)}")
+    if args.seed is not None:
+        data["seed"] = args.seed
+    if args.no_figures:
+        data["figures"] = False
+    if args.no_sensitivity:
+        data["sensitivity"] = False
+    if args.no_progress:
+        data["progress"] = False
+    data["scenario"] = scen
+    return ReproduceConfig.from_dict(data)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav reproduce``."""
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument(
+        "--quick", action="store_true", help="small smoke-test configuration (well under a minute)"
+    )
+    parser.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    parser.add_argument(
+        "--config", default=None, help="JSON configuration, e.g. a previous run's config.json"
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a configuration field (ReproduceConfig or PaperScenario;"
+        " VALUE parsed as JSON), e.g. --set covariance=paper "
+        "--set h_over_d=2 --set 'gaps_deg=[]'; repeatable",
+    )
+    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity study")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``coopnav reproduce``: returns the process exit status."""
+    try:
+        cfg = build_config(args)
+    except (ValueError, OSError, json.JSONDecodeError) as exc:
+        print(f"coopnav reproduce: {exc}", file=sys.stderr)
+        return 2
+    out = reproduce(cfg, args.out)
+    extra = " and the figures" if cfg.figures else ""
+    print(f"wrote report.md, results.json, config.json{extra} to {out}")
+    return 0

@@ -1,0 +1,371 @@
+"""The run configuration shared by every training backend, and the backend registry.
+
+:class:`TrainConfig` holds everything that defines a training run; :func:`load_config` reads
+a section of the packaged YAML (``training/configs/ppo.yaml``) and :func:`apply_overrides`
+applies ``--set key=value`` items. Every setting is validated when the configuration is built,
+before any work starts, with a message that names the setting and its allowed values.
+
+Backends
+--------
+:data:`BACKENDS` maps a backend name (``--backend``, the ``backend`` setting) to the module
+that implements it; adding a backend is one line there. A backend module defines
+
+``train(cfg: TrainConfig) -> pathlib.Path``
+    Train and return the final model (written into ``cfg.out``), following the run-folder
+    rules of :mod:`training.runs` (lock, fresh / ``--overwrite`` / ``--resume``, atomic
+    writes, a checkpoint on SIGINT/SIGTERM).
+``check(cfg: TrainConfig) -> None`` (optional)
+    Validate the backend's own settings without starting any work (``ValueError`` naming
+    the setting); :func:`check_backend_settings` calls it.
+
+A backend with settings of its own keeps them in a mapping named after it (``rllib:``).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import importlib
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
+
+__all__ = [
+    "BACKENDS",
+    "DEFAULT_CONFIG_PATH",
+    "PRETRAIN_DEFAULTS",
+    "VEC_ENVS",
+    "TrainConfig",
+    "apply_overrides",
+    "backend_module",
+    "check_backend_settings",
+    "load_config",
+]
+
+DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.yaml"
+"""The packaged hyperparameter file (one section per environment id)."""
+
+BACKENDS: dict[str, str] = {
+    "sb3": "training.sb3_backend",
+    "rllib": "training.rllib_backend",
+}
+"""Training backends: name -> module (see the module docstring for what a module defines).
+``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib."""
+
+VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
+"""Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of ``training.vec_env.VEC_ENV_KINDS``
+(listed here without importing SB3)."""
+
+PRETRAIN_DEFAULTS: dict[str, Any] = {
+    "policy": "waypoint",
+    "policy_kwargs": {},
+    "episodes": 60,
+    "epochs": 30,
+    "learning_rate": 1e-3,
+}
+"""Settings of the optional behaviour-cloning warm start (``pretrain``)."""
+
+
+def backend_module(name: str) -> ModuleType:
+    """Import and return the module of backend ``name`` (a key of :data:`BACKENDS`).
+
+    Raises
+    ------
+    ValueError
+        Unknown backend.
+    """
+    if name not in BACKENDS:
+        raise ValueError(f"unknown training backend {name!r}; choose one of {list(BACKENDS)}")
+    return importlib.import_module(BACKENDS[name])
+
+
+def check_backend_settings(cfg: TrainConfig) -> None:
+    """Run the ``check(cfg)`` of ``cfg.backend``'s module, if it has one.
+
+    Raises
+    ------
+    ValueError
+        A setting of the backend is invalid.
+    ImportError
+        The backend's optional dependencies are missing.
+    """
+    check = getattr(backend_module(cfg.backend), "check", None)
+    if check is not None:
+        check(cfg)
+
+
+# --------------------------------------------------------------------------------------------
+# configuration
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a training run.
+
+    Parameters
+    ----------
+    out : str
+        Output directory (created).
+    env_id : str, default "urban_canyon_v0"
+        A module ``coopnav_env.<env_id>`` with a ``parallel_env`` function, or
+        ``"package.module:callable"`` returning a PettingZoo ParallelEnv (used by the tests).
+    timesteps : int, default 1_000_000
+        Total agent-steps to train for (SB3 timesteps under parameter sharing), >= 1.
+    seed : int, default 0
+        Seed of PPO (torch, numpy) and of the environments, in
+        ``[0, EVAL_SEED_START - n_envs]``.
+    n_envs : int, default 2
+        Swarm copies stepped together, >= 1.
+    num_cpus : int, default 1
+        Worker processes for the swarm copies, >= 0 (0 and 1: all in this process).
+    vec_env : {"auto", "supersuit", "batched"}, default "auto"
+        How the swarm copies become one SB3 vector environment
+        (:func:`~training.vec_env.make_vec_env`): SuperSuit's per-agent adapters (any
+        environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
+        environment (one process; the same observations, rewards and seeding bit for bit, so
+        the same training). ``"auto"`` takes the batched one where it applies
+        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1 and no render mode), SuperSuit otherwise
+        (:meth:`vec_env_kind`); ``benchmarks/bench_env.py`` measures both (the batched one
+        steps 64 copies about 1.5x as fast; see ``docs/performance.md``).
+    checkpoint_freq : int, default 50_000
+        Agent-steps between checkpoints, >= 0 (0 disables periodic checkpoints).
+    torch_threads : int, default 1
+        Threads PyTorch may use, >= 1.
+    device : str, default "cpu"
+        PyTorch device.
+    env : dict
+        Keyword arguments of the environment (``UrbanCanyonConfig`` fields, ``n_uavs``,
+        ``max_steps``); unknown keys are rejected by the environment.
+    ppo : dict
+        Keyword arguments of ``stable_baselines3.PPO`` (``policy`` included, default
+        ``"MlpPolicy"``); unknown keys raise ``ValueError``.
+    resume : str or None, default None
+        Checkpoint to continue from, or ``"latest"`` for the newest one in ``out``.
+    normalize_reward : bool, default False
+        Scale the rewards PPO learns from by a running estimate of the standard deviation of
+        the discounted return (SB3 ``VecNormalize(norm_obs=False, norm_reward=True)``, with
+        PPO's ``gamma``). Observations are not normalised, so the saved policy needs nothing
+        else at inference; episode returns in the logs and ``monitor.csv`` stay unscaled. A
+        resumed run restarts the running estimate.
+    pretrain : dict or None, default None
+        Behaviour cloning before PPO (:func:`training.sb3_backend.behaviour_clone`): ``policy`` (a
+        :func:`agents.make_policy` name, e.g. ``"waypoint"``) and its ``policy_kwargs``,
+        ``episodes`` (teacher episodes on training seeds), ``epochs`` and ``learning_rate``.
+        The policy's mean action is fitted to the teacher's actions (its log-std keeps
+        ``log_std_init``) and the value network to the teacher's discounted returns, so that
+        PPO starts from a policy that flies the route instead of discovering flight between
+        walls by trial and crash. Skipped on resume.
+    progress_bar : bool, default True
+    verbose : int, default 0
+        SB3 verbosity (1 prints the training table).
+    backend : {"sb3", "rllib"}, default "sb3"
+        Stable-Baselines3 in this process (:func:`training.sb3_backend.train`), or Ray RLlib
+        with env runners on a Ray cluster (:func:`training.rllib_backend.train`, needs the
+        ``ray`` extra); the keys of :data:`BACKENDS`.
+    rllib : dict
+        Settings of the RLlib backend (:class:`training.rllib_backend.RLlibSettings`: env
+        runners, Ray address, ``ppo`` and ``model``); the SB3 backend ignores them.
+    """
+
+    out: str
+    env_id: str = DEFAULT_ENV_ID
+    timesteps: int = 1_000_000
+    seed: int = 0
+    n_envs: int = 2
+    num_cpus: int = 1
+    vec_env: str = "auto"
+    checkpoint_freq: int = 50_000
+    torch_threads: int = 1
+    device: str = "cpu"
+    env: dict[str, Any] = field(default_factory=dict)
+    ppo: dict[str, Any] = field(default_factory=dict)
+    resume: str | None = None
+    normalize_reward: bool = False
+    pretrain: dict[str, Any] | None = None
+    progress_bar: bool = True
+    verbose: int = 0
+    backend: str = "sb3"
+    rllib: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        def _int(name: str, lo: int, hi: int | None = None) -> None:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ValueError(f"TrainConfig.{name} must be an integer, got {v!r}")
+            if v < lo or (hi is not None and v > hi):
+                rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+                raise ValueError(f"TrainConfig.{name} must be {rng}, got {v}")
+
+        _int("timesteps", 1)
+        _int("n_envs", 1)
+        _int("seed", 0, EVAL_SEED_START - self.n_envs)
+        _int("num_cpus", 0)
+        if self.vec_env not in VEC_ENVS:
+            raise ValueError(
+                f"TrainConfig.vec_env must be one of {list(VEC_ENVS)}, got {self.vec_env!r}"
+            )
+        if self.vec_env == "batched" and self.num_cpus > 1:
+            raise ValueError(
+                "TrainConfig.vec_env 'batched' steps every swarm copy in this process: "
+                f"num_cpus must be 0 or 1, got {self.num_cpus}"
+            )
+        _int("checkpoint_freq", 0)
+        _int("torch_threads", 1)
+        _int("verbose", 0, 2)
+        if not isinstance(self.normalize_reward, bool):
+            raise ValueError(
+                f"TrainConfig.normalize_reward must be true or false, got {self.normalize_reward!r}"
+            )
+        if not str(self.out):
+            raise ValueError("TrainConfig.out must be a directory path")
+        if self.backend not in BACKENDS:
+            raise ValueError(
+                f"TrainConfig.backend must be one of {list(BACKENDS)}, got {self.backend!r}"
+            )
+        if self.rllib is None:
+            object.__setattr__(self, "rllib", {})
+        for name in ("env", "ppo", "rllib"):
+            if not isinstance(getattr(self, name), Mapping):
+                raise ValueError(
+                    f"TrainConfig.{name} must be a mapping, got {getattr(self, name)!r}"
+                )
+        object.__setattr__(self, "env", dict(self.env))
+        object.__setattr__(self, "ppo", dict(self.ppo))
+        object.__setattr__(self, "rllib", dict(self.rllib))
+        if self.pretrain is not None:
+            if not isinstance(self.pretrain, Mapping):
+                raise ValueError(f"TrainConfig.pretrain must be a mapping, got {self.pretrain!r}")
+            unknown = sorted(set(self.pretrain) - set(PRETRAIN_DEFAULTS))
+            if unknown:
+                raise ValueError(
+                    f"unknown pretrain setting(s) {unknown}; valid: {sorted(PRETRAIN_DEFAULTS)}"
+                )
+            pre = {**PRETRAIN_DEFAULTS, **self.pretrain}
+            object.__setattr__(self, "pretrain", pre)
+            if not isinstance(pre["policy"], str) or not pre["policy"]:
+                raise ValueError(f"pretrain.policy must be a policy name, got {pre['policy']!r}")
+            if not isinstance(pre["policy_kwargs"], Mapping):
+                raise ValueError(
+                    f"pretrain.policy_kwargs must be a mapping, got {pre['policy_kwargs']!r}"
+                )
+            for key, lo in (("episodes", 1), ("epochs", 0)):
+                if not isinstance(pre[key], int) or isinstance(pre[key], bool) or pre[key] < lo:
+                    raise ValueError(f"pretrain.{key} must be an integer >= {lo}, got {pre[key]!r}")
+            lr = pre["learning_rate"]
+            if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not 0 < lr < math.inf:
+                raise ValueError(f"pretrain.learning_rate must be > 0, got {lr!r}")
+            # the teacher's episodes (seeds EVAL_SEED_START // 2 + seed + i) must stay below the
+            # held-out evaluation seeds
+            last = EVAL_SEED_START // 2 + self.seed + pre["episodes"]
+            if last > EVAL_SEED_START:
+                raise ValueError(
+                    f"pretrain: the teacher's episode seeds {EVAL_SEED_START // 2 + self.seed}.."
+                    f"{last - 1} would reach the held-out evaluation seeds (>= {EVAL_SEED_START}); "
+                    f"lower seed ({self.seed}) or pretrain.episodes ({pre['episodes']})"
+                )
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TrainConfig:
+        """Build from a mapping; unknown keys raise ``ValueError`` listing the valid ones."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            raise ValueError(
+                f"unknown training setting(s) {unknown}; valid settings: {sorted(names)}"
+            )
+        return cls(**dict(data))
+
+    def vec_env_kind(self) -> str:
+        """The vector environment the SB3 backend builds: ``vec_env``, with ``"auto"`` resolved to
+        ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or 1) without a
+        render mode, and to ``"supersuit"`` otherwise (another environment, worker processes,
+        or rendering, which the batched one does not do)."""
+        if self.vec_env != "auto":
+            return self.vec_env
+        batched = (
+            self.env_id == DEFAULT_ENV_ID
+            and self.num_cpus <= 1
+            and self.env.get("render_mode") is None
+        )
+        return "batched" if batched else "supersuit"
+
+    def to_dict(self) -> dict[str, Any]:
+        """A plain (YAML-serialisable) copy."""
+        return copy.deepcopy(dataclasses.asdict(self))
+
+
+def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) -> dict[str, Any]:
+    """The section ``env_id`` of a YAML hyperparameter file, as a plain dict.
+
+    Parameters
+    ----------
+    path : path or None
+        YAML file with one top-level key per environment; None for
+        :data:`DEFAULT_CONFIG_PATH`.
+    env_id : str, default "urban_canyon_v0"
+        Section to read. A ``module:callable`` env id falls back to the default section.
+
+    Raises
+    ------
+    FileNotFoundError
+        The file does not exist.
+    ValueError
+        The file holds no such section.
+    """
+    import yaml
+
+    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+    if not p.is_file():
+        raise FileNotFoundError(f"hyperparameter file not found: {p}")
+    data = yaml.safe_load(p.read_text()) or {}
+    key = env_id if env_id in data or ":" not in env_id else DEFAULT_ENV_ID
+    if key not in data:
+        raise ValueError(f"{p} has no section {env_id!r}; sections: {sorted(data)}")
+    section = copy.deepcopy(data[key]) or {}
+    section.setdefault("env_id", env_id)
+    return section
+
+
+def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str, Any]:
+    """Apply ``key=value`` overrides with dotted keys (``ppo.learning_rate=1e-4``).
+
+    Values are parsed as YAML (``3``, ``1e-4``, ``true``, ``[64, 64]``, ``null``). Nested
+    mappings are created as needed; the input is not modified.
+
+    Raises
+    ------
+    ValueError
+        An item without ``=`` or with an empty key.
+    """
+    import yaml
+
+    out = copy.deepcopy(dict(config))
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key or any(not part for part in key.split(".")):
+            raise ValueError(f"override {item!r} must look like key=value (dotted keys allowed)")
+        value = yaml.safe_load(raw) if raw.strip() else ""
+        # YAML 1.1 reads "1e-4" as a string; accept it as a float
+        if isinstance(value, str):
+            try:
+                value = float(value) if re.fullmatch(r"[-+]?[\d.]+[eE][-+]?\d+", value) else value
+            except ValueError:
+                pass
+        node = out
+        parts = key.split(".")
+        for part in parts[:-1]:
+            nxt = node.get(part)
+            if not isinstance(nxt, dict):
+                nxt = {}
+                node[part] = nxt
+            node = nxt
+        node[parts[-1]] = value
+    return out
