@@ -8,11 +8,18 @@ name                      policy
                           formation, ignoring navigation quality (:mod:`agents.heuristics`)
 ``sky``                   like ``formation``, but each UAV steers toward open sky while
                           keeping contact with its neighbours (:mod:`agents.heuristics`)
+``spread``                ``sky`` as a stretched column (20 m spacing) that closes up at the
+                          goal: the tuned heuristic (:mod:`agents.heuristics`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
+``planner``               privileged MPC that looks ahead in copies of the environment with
+                          the true errors: the headroom reference (:mod:`agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
 ``rllib:<path>``          an RLlib checkpoint of ``coopnav train --backend rllib``
                           (:mod:`agents.rllib_policy`; needs the ``ray`` extra)
+``mappo:<path>``          a TorchRL MAPPO or IPPO checkpoint of ``coopnav train --backend
+``ippo:<path>``           torchrl`` (:mod:`agents.marl_policy`; needs the ``marl`` extra);
+                          ``<path>`` a ``.pt`` file or a run folder
 ========================  ==================================================================
 
 A heuristic takes constructor options after ``@`` as ``key=value`` pairs separated by commas,
@@ -38,9 +45,13 @@ POLICY_NAMES: tuple[str, ...] = (
     "random",
     "formation",
     "sky",
+    "spread",
     "waypoint",
+    "planner",
     "ppo:<path>",
     "rllib:<path>",
+    "mappo:<path>",
+    "ippo:<path>",
 )
 """Names :func:`make_policy` accepts."""
 
@@ -92,6 +103,15 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import SkySeekingPolicy
 
         return SkySeekingPolicy(env, **kwargs)
+    if name == "spread":
+        from agents.heuristics import SpreadColumnPolicy
+
+        return SpreadColumnPolicy(env, **kwargs)
+    if name == "planner":
+        from agents.planner import PrivilegedPlanner
+
+        base = kwargs.pop("base", "spread")
+        return PrivilegedPlanner(env, make_policy(base, env), **kwargs)
     if name == "waypoint":
         from agents.heuristics import WaypointPolicy
 
@@ -110,6 +130,14 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.rllib_policy import RLlibPolicy
 
         return RLlibPolicy(env, path, **kwargs)
+    for prefix in ("mappo:", "ippo:", "torchrl:"):
+        if name.startswith(prefix):
+            path = name[len(prefix) :]
+            if not path:
+                raise ValueError(f"policy '{prefix}<path>' needs the path of a TorchRL checkpoint")
+            from agents.marl_policy import MARLPolicy
+
+            return MARLPolicy(env, path, make_base=make_policy, **kwargs)
     raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICY_NAMES)}")
 
 

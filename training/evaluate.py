@@ -706,7 +706,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--policies",
         nargs="+",
         default=["random", "formation", "sky"],
-        help="policies: random, formation, sky, waypoint, ppo:<path> (SB3 .zip), rllib:<path> "
+        help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
+        "ppo:<path> (SB3 .zip), mappo:<path> / ippo:<path> (TorchRL run or .pt), rllib:<path> "
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
     )
@@ -774,7 +775,8 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
 
 
 def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
-    """The training configuration a ``ppo:<path>`` or ``rllib:<path>`` policy came from.
+    """The training configuration a trained policy (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/
+    ``torchrl:``) came from.
 
     ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
     ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
@@ -784,7 +786,7 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
     found: dict[str, Any] | None = None
     for name in policies:
         kind, sep, path = name.partition(":")
-        if not sep or kind not in ("ppo", "rllib"):
+        if not sep or kind not in ("ppo", "rllib", "mappo", "ippo", "torchrl"):
             continue
         model = Path(path)
         for folder in (model, model.parent, model.parent.parent):
