@@ -19,7 +19,7 @@ import numpy as np
 
 from agents import register_policy
 from coopnav_env.envs import obs_layout
-from training.evaluate import evaluate, heldout_seeds
+from training.evaluate import evaluate
 
 
 class WallShyWaypointPolicy:
@@ -69,9 +69,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     register_policy("wall_shy", WallShyWaypointPolicy)
+    # held-out reset seeds, as `coopnav evaluate` uses them (training stays below 1,000,000)
+    seeds = [1_000_000 + i for i in range(args.episodes)]
     report = evaluate(
         ["formation", "wall_shy", "wall_shy@altitude_m=15"],
-        heldout_seeds(args.episodes),
+        seeds,
         {"max_steps": args.max_steps},
         out=args.out,
         plots=args.out is not None,
