@@ -11,9 +11,9 @@ They never read the true positions.
   centre line. It is the baseline a navigation-aware policy has to beat.
 * :class:`SkySeekingPolicy` flies the same route but steers toward open sky: it climbs to
   near the ceiling of the altitude band (more of the sky clears the roofs) and shifts each UAV
-  across the street away from the side whose skyline is higher (observation indices
-  ``11 .. 10+A``), while the column keeps every UAV in contact with its neighbours and waits
-  for a UAV that loses contact.
+  across the street away from the side whose skyline is higher (the ``skyline`` field of
+  :func:`coopnav_env.envs.obs_layout`), while the column keeps every UAV in contact with its
+  neighbours and waits for a UAV that loses contact.
 
 Route: the street grid is a Manhattan graph (every street spans the city), so the shortest
 route from one street point to another has at most two turns
@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from coopnav_env.envs.observation_layout import obs_layout
 from coopnav_env.sim.route import Polyline, extend_route, street_route
 
 __all__ = [
@@ -94,11 +95,10 @@ class _ColumnFollower:
                 f"{spacing_m}, {goal_spacing_m}, {close_distance_m}"
             )
         self._index = {a: i for i, a in enumerate(self.base.possible_agents)}
-        a, k = cfg.obs_sky_azimuths, cfg.obs_neighbours
-        self._sky = slice(11, 11 + a)
-        self._neigh0 = 11 + a
-        self._n_neigh = k
-        self._az_deg = np.arange(a) * (360.0 / a)
+        self.layout = obs_layout(cfg)
+        self._position = self.layout["position_to_goal"]
+        self._sky = self.layout["skyline"].slice
+        self._present = self.layout.neighbour_present_indices()
         self._path: Polyline | None = None
 
     # -- to be specialised ----------------------------------------------------------------
@@ -124,12 +124,10 @@ class _ColumnFollower:
         world = base.world
         city = world.city
         goal = np.asarray(world.goal_enu_m, dtype=float)
-        x0, x1, y0, y1 = city.extent_m
-        scale = float(max(x1 - x0, y1 - y0))
         vmax = float(self.cfg.kinematics.max_speed_mps)
         idx = np.array([self._index[a] for a in agents])
         obs = np.stack([np.asarray(observations[a], dtype=np.float64) for a in agents])
-        est = goal + obs[:, 0:3] * scale  # estimated positions, never the truth
+        est = goal + self._position.decode(obs)  # estimated positions, never the truth
         if self._path is None or self._n != len(self._index):
             self._plan(est, idx, city, goal)
         path = self._path
@@ -293,7 +291,8 @@ class SkySeekingPolicy(_ColumnFollower):
 
     Notes
     -----
-    Skyline elevation per azimuth comes from the observation (``obs[11 : 11 + A] * 90`` deg).
+    Skyline elevation per azimuth comes from the observation (the ``skyline`` field of
+    :func:`coopnav_env.envs.obs_layout`, a fraction of 90 deg).
     For each UAV the skylines to the left and right of its direction of travel are
     interpolated; the shift is ``-max_offset_m * tanh(4 (left - right))`` (away from the
     higher side). A UAV with no neighbour in relative range holds the column (the head stops)
@@ -347,9 +346,9 @@ class SkySeekingPolicy(_ColumnFollower):
         return new
 
     def _contact_factor(self, obs: np.ndarray) -> float:
-        if self._n_neigh == 0 or obs.shape[0] < 2:
+        if self._present.size == 0 or obs.shape[0] < 2:
             return 1.0
-        flags = obs[:, self._neigh0 + 3 : self._neigh0 + 4 * self._n_neigh : 4]
+        flags = obs[:, self._present]
         return 0.0 if np.any(flags.max(axis=1) < 0.5) else 1.0
 
 
@@ -391,12 +390,13 @@ class WaypointPolicy:
     """Each UAV flies toward its next route waypoint, from its own observation only.
 
     The simplest route follower: the horizontal command points at the next waypoint of the
-    environment's street route (observation entries ``14+A+4K .. 15+A+4K``, the waypoint minus
-    the UAV's *estimated* position) at ``cruise_speed_mps``, slowing down within a few metres
-    of it, and a proportional term holds ``altitude_m`` (from the estimated altitude, entry
-    ``19+A+4K``). No map, no neighbours, no walls: ten lines that reach the goal about as often
-    as :class:`FormationPolicy` (19 of 20 held-out episodes). ``coopnav train`` can start PPO
-    from a behaviour-cloned copy of it (``pretrain`` in ``training/configs/ppo.yaml``).
+    environment's street route (the ``next_waypoint`` field of
+    :func:`coopnav_env.envs.obs_layout`, the waypoint minus the UAV's *estimated* position) at
+    ``cruise_speed_mps``, slowing down within a few metres of it, and a proportional term holds
+    ``altitude_m`` (from the estimated altitude, the ``altitude`` field). No map, no
+    neighbours, no walls: ten lines that reach the goal about as often as
+    :class:`FormationPolicy` (19 of 20 held-out episodes). ``coopnav train`` can start PPO from
+    a behaviour-cloned copy of it (``pretrain`` in ``training/configs/ppo.yaml``).
 
     Parameters
     ----------
@@ -423,7 +423,9 @@ class WaypointPolicy:
         self.cruise_speed_mps = float(min(cruise_speed_mps, cfg.kinematics.max_speed_mps))
         self.altitude_m = float(cfg.start_altitude_m if altitude_m is None else altitude_m)
         self.gain_per_s = float(gain_per_s)
-        self._wp = 14 + cfg.obs_sky_azimuths + 4 * cfg.obs_neighbours  # first route entry
+        self.layout = obs_layout(cfg)
+        self._waypoint = self.layout["next_waypoint"]
+        self._altitude = self.layout["altitude"]
 
     def reset(self, seed: int | None = None) -> None:
         """Nothing to reset: the policy has no state."""
@@ -433,14 +435,14 @@ class WaypointPolicy:
         agents = list(observations)
         if not agents:
             return {}
-        cfg, kin = self.cfg, self.cfg.kinematics
+        kin = self.cfg.kinematics
         obs = np.stack([np.asarray(observations[a], dtype=np.float64) for a in agents])
-        to_wp = obs[:, self._wp : self._wp + 2] * cfg.obs_route_scale_m
+        to_wp = self._waypoint.decode(obs)
         dist = np.linalg.norm(to_wp, axis=1)
         speed = np.minimum(self.cruise_speed_mps, self.gain_per_s * dist + 1.0)
         v = np.zeros((len(agents), 3))
         v[:, :2] = to_wp / np.maximum(dist, 1e-6)[:, None] * speed[:, None]
-        alt = kin.altitude_min_m + obs[:, self._wp + 5] * (kin.altitude_max_m - kin.altitude_min_m)
+        alt = self._altitude.decode(obs)[:, 0]
         v[:, 2] = self.gain_per_s * (self.altitude_m - alt)
         cmd = np.clip(v / kin.max_speed_mps, -1.0, 1.0).astype(np.float32)
         return {a: cmd[i] for i, a in enumerate(agents)}

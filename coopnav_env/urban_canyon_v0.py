@@ -1,5 +1,4 @@
-"""
-# Urban Canyon
+"""Urban Canyon: a UAV swarm crosses a city on cooperative GNSS navigation (PettingZoo env).
 
 A swarm of UAVs crosses a city from a start area to a goal area. Tall buildings block the
 GNSS satellites, so a UAV in a street canyon sees few of them and its standalone position fix
@@ -13,13 +12,13 @@ is open enough for the swarm to know where it is.
 | Actions            | Continuous                                                  |
 | Parallel API       | Yes (`parallel_env`; `env` is the AEC version)              |
 | Manual Control     | No                                                          |
-| Agents             | `agents = ['uav_0', 'uav_1', ..., 'uav_{N-1}']`             |
-| Agents             | N = `n_uavs` (default 5; 50 works)                          |
+| Agents             | `uav_0` ... `uav_{N-1}`, N = `n_uavs` (default 5; 50 works) |
 | Action Shape       | (3,)                                                        |
 | Action Values      | [-1, 1] (float32)                                           |
 | Observation Shape  | (20 + 2A + 4K,) = (52,) by default                          |
 | Observation Values | each entry in [-1, 1] or [0, 1] (float32), see the table    |
 | State Shape        | (13 N + 4,) = (69,) for 5 UAVs                              |
+| Gymnasium          | `gymnasium.make("coopnav/UrbanCanyonSwarm-v0")`, one agent  |
 
 ```python
 from coopnav_env import urban_canyon_v0
@@ -109,6 +108,14 @@ With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts,
 19-34 four neighbour slots, 35-37 flags and time, 38-39 next waypoint, 40-41 the leg after it,
 42 remaining route, 43 altitude, 44-51 wall distances.
 
+The same table for code: `coopnav_env.envs.obs_layout(config)` maps a name to its slice,
+units, scale (and offset), bounds and description, for any configuration, e.g.
+`obs_layout(env.config)["next_waypoint"].slice` (`slice(38, 40)` by default) or
+`obs_layout()["altitude"].decode(obs)` (metres). Names: `position_to_goal`, `velocity`,
+`sigma`, `satellites`, `swarm_satellites`, `skyline`, `neighbour_k` and
+`neighbour_k_present` (k = 0..K-1), `cooperative_fix`, `fresh_fix`, `time_left`,
+`next_waypoint`, `next_leg`, `remaining_route`, `altitude`, `wall_distance`.
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -193,7 +200,7 @@ by the velocity.
   no black-death wrapper is needed.
 * Termination (all agents): every UAV is within `goal_radius_m` (25 m) of the goal centre
   horizontally; every UAV gets `goal_bonus`.
-* Truncation (all agents): `max_steps` (200) steps.
+* Truncation (all agents): `max_steps` (200) steps (also accepted as `max_cycles`).
 
 UAVs cannot leave the city extent (a virtual fence clamps them) nor the altitude band.
 
@@ -275,7 +282,9 @@ street canyons some fixes come from barely enough satellites (4-5 measurements f
 unknowns) in a narrow strip of sky; they are valid least-squares solutions, but off by tens to
 hundreds of metres, and their covariance says so.
 
-`max_steps` (200): truncation.
+`max_steps` (200): truncation. `max_cycles`, the name PettingZoo's own environments and
+BenchMARL use, is accepted as an alias (giving both with different values raises
+`ValueError`); `config.max_cycles` reads it.
 
 `obs_neighbours`, `obs_sky_azimuths`, `obs_sigma_max_m` (4, 8, 20): observation layout.
 
@@ -290,6 +299,17 @@ observations [m].
 `render_sky_uav` (-1): the UAV of the sky plot; -1 picks the one with the fewest satellites.
 
 `render_width_px`, `render_height_px` (1280, 640): frame size [pixel].
+
+## Gymnasium (one agent commands the swarm)
+
+`import coopnav_env` registers `"coopnav/UrbanCanyonSwarm-v0"`
+(`coopnav_env.envs.UrbanCanyonSwarmEnv`): `gymnasium.make("coopnav/UrbanCanyonSwarm-v0",
+reward="mean", **fields)` takes the same keywords and steps the same episodes. The observation
+is every UAV's observation stacked (`Box((N * obs_dim,), float32)`, `uav_0` first), the action
+every UAV's command (`Box(-1, 1, (3 N,), float32)`), the reward the swarm's mean (`reward=
+"mean"`) or summed (`"sum"`) reward; the episode terminates or is truncated when the swarm's
+does, and `info` holds the per-agent infos and rewards. It passes Gymnasium's and
+Stable-Baselines3's environment checkers; `examples/` trains SB3 PPO on it.
 
 ## Rendering
 

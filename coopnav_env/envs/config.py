@@ -31,7 +31,10 @@ class UrbanCanyonConfig(ScenarioConfig):
     Parameters
     ----------
     max_steps : int, default 200
-        Episode length; reaching it truncates every agent, in [1, 100000].
+        Episode length; reaching it truncates every agent, in [1, 100000]. ``max_cycles``, the
+        name PettingZoo's own environments, its ``max_cycles_test`` and BenchMARL use, is
+        accepted as an alias by :func:`make_config` (and so by ``parallel_env(...)``), and
+        :attr:`max_cycles` reads it.
     obs_neighbours : int, default 4
         Neighbour slots ``K`` in each observation (nearest first, padded), in [0, 64].
     obs_sky_azimuths : int, default 8
@@ -131,6 +134,11 @@ class UrbanCanyonConfig(ScenarioConfig):
         return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours
 
     @property
+    def max_cycles(self) -> int:
+        """``max_steps`` under its conventional PettingZoo name (read-only alias)."""
+        return self.max_steps
+
+    @property
     def worst_episode_penalty(self) -> float:
         """The most a whole episode without a crash can lose to the per-step penalties.
 
@@ -166,21 +174,37 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
     config : UrbanCanyonConfig, optional
         Starting point; default ``UrbanCanyonConfig()``.
     **overrides
-        Field values.
+        Field values. ``max_cycles`` is an alias of ``max_steps`` (PettingZoo's name).
 
     Raises
     ------
     ValueError
-        For an unknown name (the message lists the valid ones) or a bad value.
+        For an unknown name (the message lists the valid ones), a bad value, or
+        ``max_cycles`` and ``max_steps`` both given with different values.
     """
     if config is not None and not isinstance(config, UrbanCanyonConfig):
         raise ValueError(f"config must be an UrbanCanyonConfig or None, got {config!r}")
+    if "max_cycles" in overrides:
+        overrides = dict(overrides)
+        cycles = overrides.pop("max_cycles")
+        if "max_steps" in overrides and overrides["max_steps"] != cycles:
+            raise ValueError(
+                f"max_cycles is an alias of max_steps: give one of them, or the same value "
+                f"(got max_cycles={cycles!r}, max_steps={overrides['max_steps']!r})"
+            )
+        overrides["max_steps"] = cycles
+        try:
+            return make_config(config, **overrides)
+        except ValueError as exc:
+            if "max_steps must" not in str(exc):
+                raise
+            raise ValueError(f"{exc} (given as max_cycles, the alias of max_steps)") from None
     valid = config_field_names()
     unknown = sorted(set(overrides) - set(valid))
     if unknown:
         raise ValueError(
             f"unknown urban_canyon_v0 argument(s) {unknown}; valid arguments are "
-            f"render_mode, config, {', '.join(valid)}"
+            f"render_mode, config, {', '.join(valid)} (and max_cycles, an alias of max_steps)"
         )
     base = config if config is not None else UrbanCanyonConfig()
     return replace(base, **overrides) if overrides else base
