@@ -309,7 +309,7 @@ def test_supersuit_sb3_vec_env_with_crashes() -> None:
             assert dones[:5].all() == dones[:5].any() and dones[5:].all() == dones[5:].any()
             done_infos = [infos[i] for i in np.flatnonzero(dones)]
             assert all("terminal_observation" in i for i in done_infos)
-            crashes += bool(np.any(rewards[dones] < -30.0))  # the -40 crash penalty
+            crashes += bool(np.any(rewards[dones.astype(bool)] < -30.0))  # the -40 crash penalty
             # SuperSuit's own auto-reset merges the next episode's reset infos over the
             # terminal step's ({**step, **reset}: the keys are the same): the documented
             # reason to use training.vec_env.make_vec_env, which keeps the terminal infos
