@@ -2,15 +2,17 @@
 
 :class:`PrivilegedPlanner` may use everything the simulator knows: the city, the satellites,
 the true positions and errors, and the future itself, since it looks ahead in deep copies of
-the environment (whose random generator is copied too, so a look-ahead sees the noise the real
-episode will draw as long as it draws as many numbers). It chooses the swarm's velocity
-commands by sampling-based model-predictive control: at every step it
+the environment. Each look-ahead draws its own measurement noise (the copy's generator is
+reseeded, the same for every candidate of a step), so the planner knows the geometry of the
+future exactly but not its noise: it cannot pick a path for a lucky noise draw. It chooses the
+swarm's velocity commands by sampling-based model-predictive control: at every step it
 
 1. proposes ``n_samples`` candidate plans: the command of a base heuristic (default
    :class:`~agents.heuristics.SpreadColumnPolicy`, copied with the environment so that it
    keeps planning the route) plus a per-UAV velocity offset held for the horizon (one
    candidate is always the base alone, offset zero);
-2. flies each candidate ``horizon`` steps in a deep copy of the environment and scores it by
+2. flies each candidate ``horizon`` steps in a deep copy of the environment (with fresh noise) and
+   scores it by
    the swarm's mean *true* cooperative 3-D error (the estimate's error where there is no
    cooperative fix) over the horizon, plus ``crash_cost_m`` if any UAV hits a building, minus
    ``progress_weight_m`` times the swarm's mean progress reward (the decrease of the
@@ -57,6 +59,9 @@ class PrivilegedPlanner:
         Cost of a crash in the look-ahead, in metres of error.
     progress_weight_m : float
         Metres of error one unit of the progress reward is worth.
+    noise_samples : int
+        Independent measurement-noise draws each candidate is flown with (the cost is their
+        mean; the same draws for every candidate of a step).
     seed : int
         Seed of the planner's own sampling generator (reset per episode with the episode seed).
     """
@@ -74,6 +79,7 @@ class PrivilegedPlanner:
         offset_std: float = 0.3,
         crash_cost_m: float = 1000.0,
         progress_weight_m: float = 1.0,
+        noise_samples: int = 1,
         seed: int = 0,
     ) -> None:
         for name, v, lo in (
@@ -81,6 +87,7 @@ class PrivilegedPlanner:
             ("n_samples", n_samples, 1),
             ("n_elite", n_elite, 1),
             ("iterations", iterations, 1),
+            ("noise_samples", noise_samples, 1),
         ):
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ValueError(f"planner {name} must be an integer >= {lo}, got {v!r}")
@@ -97,6 +104,7 @@ class PrivilegedPlanner:
         self.offset_std = float(offset_std)
         self.crash_cost_m = float(crash_cost_m)
         self.progress_weight_m = float(progress_weight_m)
+        self.noise_samples = noise_samples
         self.seed = int(seed)
         self._rng = np.random.default_rng(seed)
         base_env = getattr(env, "unwrapped", env)
@@ -107,9 +115,18 @@ class PrivilegedPlanner:
         self.base.reset(seed)
         self._rng = np.random.default_rng(self.seed if seed is None else [self.seed, seed])
 
-    def _rollout(self, offsets: np.ndarray, first_obs: Mapping[str, np.ndarray]) -> float:
-        """Cost of flying base + ``offsets`` (N, 3) for the horizon in a copy of the world."""
+    def _rollout(
+        self, offsets: np.ndarray, first_obs: Mapping[str, np.ndarray], noise_seed: int
+    ) -> float:
+        """Cost of flying base + ``offsets`` (N, 3) for the horizon in a copy of the world.
+
+        The copy's generator is reseeded with ``noise_seed`` (the same for every candidate of
+        a step: common random numbers), so the look-ahead draws measurement noise that is
+        independent of the real episode's: the planner chooses by the geometry, not by
+        foreseeing the noise.
+        """
         env, base = copy.deepcopy((self.env, self.base))
+        getattr(env, "unwrapped", env)._rng = np.random.default_rng(noise_seed)
         obs = dict(first_obs)
         cost = 0.0
         for _ in range(self.horizon):
@@ -145,11 +162,17 @@ class PrivilegedPlanner:
         mean = np.zeros((n, 3))
         std = np.full((n, 3), self.offset_std)
         best_cost, best = np.inf, np.zeros((n, 3))
+        noise_seeds = self._rng.integers(0, 2**63 - 1, self.noise_samples)
         for it in range(self.iterations):
             cands = mean + std * self._rng.standard_normal((self.n_samples, n, 3))
             if it == 0:
                 cands[0] = 0.0  # the base heuristic itself is always a candidate
-            costs = np.array([self._rollout(c, observations) for c in cands])
+            costs = np.array(
+                [
+                    np.mean([self._rollout(c, observations, int(z)) for z in noise_seeds])
+                    for c in cands
+                ]
+            )
             order = np.argsort(costs, kind="stable")
             if costs[order[0]] < best_cost:
                 best_cost, best = float(costs[order[0]]), cands[order[0]].copy()

@@ -335,6 +335,16 @@ world state): a restored copy continues exactly like the original.
   distances (38 -> 52 entries by default), the progress reward moved from the straight-line
   distance to the goal to the remaining street route, the reward defaults changed so that a
   crash never pays (above), and the integrity gate `max_fix_sigma_m` was added.
+* v0, unreleased changes that keep the version: the infos became flat and numeric with the
+  same keys at reset and at every step (`reward_<term>` instead of the nested `reward_terms`,
+  no `"initial"` nesting at reset, a missing fix reported as -1 with `coop_fix` /
+  `standalone_fix` instead of `inf`), so that TorchRL's `PettingZooWrapper` and BenchMARL
+  accept the environment; and the option `nav_team_weight` (team credit, default 0). With the
+  defaults every observation, reward, termination, truncation and state is bit for bit what
+  it was (`tests/envs/test_golden.py` converts the new infos back to the old layout and
+  checks the recorded digests), so learning results do not change and the version is not
+  bumped (PettingZoo bumps it for changes that can change learning results); code that read
+  `infos[agent]["initial"]` or `infos[agent]["reward_terms"]` must read the flat keys.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env
