@@ -45,6 +45,8 @@ __all__ = [
     "apply_overrides",
     "backend_module",
     "check_backend_settings",
+    "check_bool",
+    "check_number",
     "load_config",
 ]
 
@@ -100,6 +102,52 @@ def check_backend_settings(cfg: TrainConfig) -> None:
         check(cfg)
 
 
+def check_number(
+    name: str,
+    value: Any,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    integer: bool = False,
+    none: bool = False,
+) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``value`` is a finite number in the range.
+
+    ``integer`` asks for an int; ``none`` also admits None. Booleans are not numbers here.
+    """
+    if none and value is None:
+        return
+    kind = "an integer" if integer else "a number"
+    if integer:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    else:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        ok = ok and math.isfinite(value)
+    if ok:
+        ok = (lo is None or (value > lo if lo_open else value >= lo)) and (
+            hi is None or (value < hi if hi_open else value <= hi)
+        )
+    if not ok:
+        if lo is not None and hi is not None:
+            rng = f" in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        elif lo is not None:
+            rng = f" {'>' if lo_open else '>='} {lo:g}"
+        elif hi is not None:
+            rng = f" {'<' if hi_open else '<='} {hi:g}"
+        else:
+            rng = ""
+        extra = " (or null)" if none else ""
+        raise ValueError(f"{name} must be {kind}{rng}{extra}, got {value!r}")
+
+
+def check_bool(name: str, value: Any) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``value`` is true or false."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{name} must be true or false, got {value!r}")
+
+
 # --------------------------------------------------------------------------------------------
 # configuration
 # --------------------------------------------------------------------------------------------
@@ -131,7 +179,7 @@ class TrainConfig:
         environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
         environment (one process; the same observations, rewards and seeding bit for bit, so
         the same training). ``"auto"`` takes the batched one where it applies
-        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1 and no render mode), SuperSuit otherwise
+        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1), SuperSuit otherwise
         (:meth:`vec_env_kind`); ``benchmarks/bench_env.py`` measures both (the batched one
         steps 64 copies about 1.5x as fast; see ``docs/performance.md``).
     checkpoint_freq : int, default 50_000
@@ -147,7 +195,12 @@ class TrainConfig:
         Keyword arguments of ``stable_baselines3.PPO`` (``policy`` included, default
         ``"MlpPolicy"``); unknown keys raise ``ValueError``.
     resume : str or None, default None
-        Checkpoint to continue from, or ``"latest"`` for the newest one in ``out``.
+        Checkpoint to continue from, or ``"latest"`` for the newest one in ``out`` that loads
+        (a finished run: its final model, when ``timesteps`` asks for more; see
+        :mod:`training.runs`).
+    overwrite : bool, default False
+        Start a fresh run in an ``out`` that holds an earlier run, removing that run's
+        outputs first (without it, or ``resume``, such a start is refused).
     normalize_reward : bool, default False
         Scale the rewards PPO learns from by a running estimate of the standard deviation of
         the discounted return (SB3 ``VecNormalize(norm_obs=False, norm_reward=True)``, with
@@ -187,6 +240,7 @@ class TrainConfig:
     env: dict[str, Any] = field(default_factory=dict)
     ppo: dict[str, Any] = field(default_factory=dict)
     resume: str | None = None
+    overwrite: bool = False
     normalize_reward: bool = False
     pretrain: dict[str, Any] | None = None
     progress_bar: bool = True
@@ -223,8 +277,22 @@ class TrainConfig:
             raise ValueError(
                 f"TrainConfig.normalize_reward must be true or false, got {self.normalize_reward!r}"
             )
-        if not str(self.out):
-            raise ValueError("TrainConfig.out must be a directory path")
+        if not isinstance(self.out, (str, Path)) or not str(self.out):
+            raise ValueError(f"TrainConfig.out must be a directory path, got {self.out!r}")
+        if self.resume is not None and (not isinstance(self.resume, str) or not self.resume):
+            raise ValueError(
+                f"TrainConfig.resume must be a checkpoint path or 'latest', got {self.resume!r}"
+            )
+        check_bool("TrainConfig.overwrite", self.overwrite)
+        if self.overwrite and self.resume is not None:
+            raise ValueError(
+                "--overwrite (start afresh, removing the earlier run) and --resume (continue "
+                "it) contradict each other; give one of them"
+            )
+        if not isinstance(self.device, str) or not self.device:
+            raise ValueError(
+                f"TrainConfig.device must be a PyTorch device name, got {self.device!r}"
+            )
         if self.backend not in BACKENDS:
             raise ValueError(
                 f"TrainConfig.backend must be one of {list(BACKENDS)}, got {self.backend!r}"
@@ -237,6 +305,12 @@ class TrainConfig:
                     f"TrainConfig.{name} must be a mapping, got {getattr(self, name)!r}"
                 )
         object.__setattr__(self, "env", dict(self.env))
+        if self.env.get("render_mode") is not None:
+            raise ValueError(
+                f"env.render_mode={self.env['render_mode']!r}: training does not render (it "
+                "would slow training to a few agent-steps per second and stall interrupts); "
+                "remove render_mode and render an episode of the trained policy instead"
+            )
         object.__setattr__(self, "ppo", dict(self.ppo))
         object.__setattr__(self, "rllib", dict(self.rllib))
         if self.pretrain is not None:
@@ -283,17 +357,12 @@ class TrainConfig:
         return cls(**dict(data))
 
     def vec_env_kind(self) -> str:
-        """The vector environment the SB3 backend builds: ``vec_env``, with ``"auto"`` resolved to
-        ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or 1) without a
-        render mode, and to ``"supersuit"`` otherwise (another environment, worker processes,
-        or rendering, which the batched one does not do)."""
+        """The vector environment the SB3 backend builds: ``vec_env``, with ``"auto"``
+        resolved to ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or
+        1), and to ``"supersuit"`` otherwise (another environment, worker processes)."""
         if self.vec_env != "auto":
             return self.vec_env
-        batched = (
-            self.env_id == DEFAULT_ENV_ID
-            and self.num_cpus <= 1
-            and self.env.get("render_mode") is None
-        )
+        batched = self.env_id == DEFAULT_ENV_ID and self.num_cpus <= 1
         return "batched" if batched else "supersuit"
 
     def to_dict(self) -> dict[str, Any]:
