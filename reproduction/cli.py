@@ -23,7 +23,7 @@ from reproduction.scenario import (
 )
 from reproduction.simulation import json_float, run_studies
 from reproduction.tables import summarize
-from training.files import atomic_write_text, write_json
+from training.files import atomic_write_text, ensure_folder, write_json
 
 __all__ = [
     "add_arguments",
@@ -59,8 +59,7 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
     """
     if not isinstance(config, ReproduceConfig):
         raise ValueError(f"config must be a ReproduceConfig, got {type(config).__name__}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_folder(out_dir)
     t0 = time.perf_counter()
     cfg_dict = config.to_dict()
     write_json(out / "config.json", cfg_dict)

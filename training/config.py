@@ -48,6 +48,7 @@ __all__ = [
     "check_bool",
     "check_number",
     "load_config",
+    "parse_yaml",
 ]
 
 DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.yaml"
@@ -72,6 +73,20 @@ PRETRAIN_DEFAULTS: dict[str, Any] = {
     "learning_rate": 1e-3,
 }
 """Settings of the optional behaviour-cloning warm start (``pretrain``)."""
+
+
+def parse_yaml(text: str, what: str) -> Any:
+    """``yaml.safe_load(text)``, with a one-line ``ValueError`` naming ``what`` when the text
+    is not valid YAML (where and why)."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ValueError(f"{what} is not valid YAML{where}: {problem}") from None
 
 
 def backend_module(name: str) -> ModuleType:
@@ -388,16 +403,19 @@ def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) ->
     ValueError
         The file holds no such section.
     """
-    import yaml
-
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     if not p.is_file():
         raise FileNotFoundError(f"hyperparameter file not found: {p}")
-    data = yaml.safe_load(p.read_text()) or {}
+    data = parse_yaml(p.read_text(), f"hyperparameter file {p}") or {}
+    if not isinstance(data, Mapping):
+        raise ValueError(f"hyperparameter file {p} must be a mapping of sections, got {data!r}")
     key = env_id if env_id in data or ":" not in env_id else DEFAULT_ENV_ID
     if key not in data:
         raise ValueError(f"{p} has no section {env_id!r}; sections: {sorted(data)}")
     section = copy.deepcopy(data[key]) or {}
+    if not isinstance(section, Mapping):
+        raise ValueError(f"section {key!r} of {p} must be a mapping of settings, got {section!r}")
+    section = dict(section)
     section.setdefault("env_id", env_id)
     return section
 
@@ -413,15 +431,13 @@ def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str
     ValueError
         An item without ``=`` or with an empty key.
     """
-    import yaml
-
     out = copy.deepcopy(dict(config))
     for item in items:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key or any(not part for part in key.split(".")):
             raise ValueError(f"override {item!r} must look like key=value (dotted keys allowed)")
-        value = yaml.safe_load(raw) if raw.strip() else ""
+        value = parse_yaml(raw, f"the value of {item!r}") if raw.strip() else ""
         # YAML 1.1 reads "1e-4" as a string; accept it as a float
         if isinstance(value, str):
             try:

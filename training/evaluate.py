@@ -41,9 +41,9 @@ from typing import Any
 
 import numpy as np
 
-from training.config import apply_overrides
+from training.config import apply_overrides, parse_yaml
 from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
-from training.files import atomic_path, atomic_write_text, write_json
+from training.files import atomic_path, atomic_write_text, ensure_folder, write_json
 
 __all__ = [
     "DEFAULT_EPISODES",
@@ -519,8 +519,17 @@ def evaluate(
     if len(set(policies)) != len(policies):
         raise ValueError(f"policy names must be unique, got {policies}")
     env_kwargs = dict(env_kwargs or {})
+    if out is not None:
+        ensure_folder(out)  # before any episode runs
     envs = {name: _make_env(env_id, env_kwargs) for name in policies}
-    made = {name: make_policy(name, envs[name]) for name in policies}
+    made = {}
+    for name in policies:
+        try:
+            made[name] = make_policy(name, envs[name])
+        except (ValueError, FileNotFoundError, ImportError):
+            raise
+        except Exception as exc:  # a damaged checkpoint: the loader's own error
+            raise ValueError(f"policy {name!r} does not load: {type(exc).__name__}: {exc}") from exc
 
     stats: list[PolicyStats] = []
     records: dict[str, list[EpisodeRecord]] = {}
@@ -754,9 +763,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read_train_config(path: Path) -> dict[str, Any]:
-    import yaml
-
-    return dict(yaml.safe_load(path.read_text()) or {})
+    data = parse_yaml(path.read_text(), f"training config {path}") or {}
+    if not isinstance(data, Mapping):
+        raise ValueError(f"training config {path} must be a mapping of settings")
+    return dict(data)
 
 
 def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:

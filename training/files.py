@@ -26,9 +26,30 @@ __all__ = [
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_text",
+    "ensure_folder",
     "write_json",
     "write_yaml",
 ]
+
+
+def ensure_folder(path: str | Path) -> Path:
+    """Create the output folder ``path`` if needed and check that files can be written in it.
+
+    Raises
+    ------
+    ValueError
+        ``path`` is a file, cannot be created, or is not writable (the message names it).
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"--out {path} is a file, not a folder; choose a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"cannot create the output folder {path}: {exc.strerror}") from exc
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise ValueError(f"the output folder {path} is not writable; choose another --out")
+    return path
 
 
 @contextmanager

@@ -42,6 +42,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from training.config import parse_yaml
+from training.files import ensure_folder
+
 if TYPE_CHECKING:  # pragma: no cover
     from training.config import TrainConfig
 
@@ -135,22 +138,17 @@ def recorded_config(out: str | Path) -> dict[str, Any] | None:
     RunFolderError
         The file exists but is not a YAML mapping.
     """
-    import yaml
-
     path = Path(out) / "config.yaml"
     if not path.is_file():
         return None
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise RunFolderError(f"cannot read the run's settings {path}: {exc}") from exc
+    data = parse_yaml(path.read_text(), f"the run's settings {path}")
     if not isinstance(data, dict):
         raise RunFolderError(f"{path} does not hold the settings of a run (not a mapping)")
     # a run trained further (--resume --timesteps M) records M in config_resumed_at_*.yaml
     for extra in Path(out).glob("config_resumed_at_*.yaml"):
         try:
-            more = yaml.safe_load(extra.read_text())
-        except (OSError, yaml.YAMLError):
+            more = parse_yaml(extra.read_text(), str(extra))
+        except (OSError, ValueError):
             continue
         steps = more.get("timesteps") if isinstance(more, dict) else None
         if isinstance(steps, int) and steps > data.get("timesteps", 0):
@@ -276,18 +274,6 @@ class RunState:
         )
 
 
-def _usable_folder(out: Path) -> None:
-    """Create ``out`` if needed; raise :class:`RunFolderError` if it can't hold a run."""
-    if out.exists() and not out.is_dir():
-        raise RunFolderError(f"--out {out} is a file, not a folder; choose a folder for the run")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RunFolderError(f"cannot create the output folder {out}: {exc.strerror}") from exc
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise RunFolderError(f"the output folder {out} is not writable; choose another --out")
-
-
 @contextmanager
 def _folder_lock(out: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``out`` (see the module docstring)."""
@@ -382,7 +368,7 @@ def open_run(cfg: TrainConfig) -> Iterator[RunState]:
     """
     out = Path(cfg.out)
     with interrupts_raise():
-        _usable_folder(out)
+        ensure_folder(out)
         with _folder_lock(out):
             outputs = run_outputs(out)
             if cfg.resume is None and outputs:

@@ -475,14 +475,9 @@ def check(cfg: TrainConfig) -> None:
             f"unknown ppo.policy_kwargs setting(s) {unknown}; valid settings: {sorted(allowed)}"
         )
     for key, value in kwargs.items():
-        rule = POLICY_KWARGS_RULES.get(key)
+        rule = POLICY_KWARGS_RULES.get(key, _a_class if key.endswith("_class") else None)
         if rule is not None:
             rule(f"ppo.policy_kwargs.{key}", value)
-        elif key.endswith("_class") and not isinstance(value, type):
-            raise ValueError(
-                f"ppo.policy_kwargs.{key} must be a Python class (it can't be set from YAML), "
-                f"got {value!r}"
-            )
     device = cfg.device
     if device != "auto":
         try:
@@ -538,8 +533,18 @@ PPO_RULES: dict[str, Callable[[str, Any], None]] = {
 }
 """What each PPO setting accepts (a function raising ``ValueError`` that names it)."""
 
+
+def _a_class(name: str, value: Any) -> None:
+    if not isinstance(value, type):
+        raise ValueError(
+            f"{name} must be a Python class (e.g. torch.nn.ReLU; it can't be set from YAML), "
+            f"got {value!r}"
+        )
+
+
 POLICY_KWARGS_RULES: dict[str, Callable[[str, Any], None]] = {
     "net_arch": _net_arch,
+    "activation_fn": _a_class,
     "log_std_init": _rule(),
     "ortho_init": check_bool,
     "full_std": check_bool,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+from collections.abc import Mapping
 from pathlib import Path
 
 from training.config import (
@@ -154,7 +155,10 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         raise ValueError(f"{flags_text} only apply to --backend rllib")
     if given:
         data["rllib"] = {**(data.get("rllib") or {}), **given}
-    env = dict(data.get("env") or {})
+    env = data.get("env") or {}
+    if not isinstance(env, Mapping):
+        raise ValueError(f"TrainConfig.env must be a mapping, got {env!r}")
+    env = dict(env)
     if args.n_uavs is not None:
         env["n_uavs"] = args.n_uavs
     if args.city is not None:
