@@ -13,18 +13,11 @@ import zipfile
 import pytest
 import yaml
 
+from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 from training.cli import main
 
-TOY = "tests.training.toy_env:ToyParallelEnv"
-TOY_SECTION = {
-    "timesteps": 200,
-    "n_envs": 1,
-    "checkpoint_freq": 0,
-    "env": {"n_uavs": 2, "max_steps": 8},
-    "ppo": {"n_steps": 16, "batch_size": 16, "n_epochs": 1},
-    "pretrain": None,
-    "progress_bar": False,
-}
+TOY = TOY_ENV_ID
+TOY_SECTION = TOY_TRAINING
 
 #: (id, argv with {tmp} placeholders, exit status, message fragment)
 CASES: list[tuple[str, list[str], int, str]] = [

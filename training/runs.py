@@ -43,17 +43,25 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from training.config import parse_yaml
-from training.files import ensure_folder
+from training.files import (
+    atomic_path,
+    atomic_write_text,
+    ensure_folder,
+    write_json,
+    write_yaml,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from training.config import TrainConfig
 
-__all__ = [
+__all__ = [  # atomic_path ... write_yaml: training.files, also importable from here
     "LOCK_NAME",
     "RUN_OUTPUTS",
     "Interrupted",
     "RunFolderError",
     "RunState",
+    "atomic_path",
+    "atomic_write_text",
     "check_same_environment",
     "checkpoint_candidates",
     "finished_run",
@@ -63,6 +71,9 @@ __all__ = [
     "open_run",
     "recorded_config",
     "run_outputs",
+    "sigterm_as_interrupt",
+    "write_json",
+    "write_yaml",
 ]
 
 LOCK_NAME: str = ".coopnav.lock"
@@ -346,12 +357,24 @@ def install_interrupt_handlers() -> None:
     have installed its own). Main thread only; elsewhere a no-op."""
     if threading.current_thread() is not threading.main_thread():
         return
+    signal.signal(signal.SIGINT, _raise_interrupted)
+    signal.signal(signal.SIGTERM, _raise_interrupted)
 
-    def _raise(signum: int, frame: Any) -> None:
-        raise Interrupted(signum)
 
-    signal.signal(signal.SIGINT, _raise)
-    signal.signal(signal.SIGTERM, _raise)
+def _raise_interrupted(signum: int, frame: Any) -> None:
+    raise Interrupted(signum)
+
+
+def sigterm_as_interrupt() -> Any:
+    """Make SIGTERM raise :class:`Interrupted` (as Ctrl-C does); return the old handler.
+
+    For a backend that manages its handlers itself; :func:`open_run` installs both SIGINT and
+    SIGTERM handlers for the whole run. Returns None (and changes nothing) outside the main
+    thread, where handlers can't be set.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_interrupted)
 
 
 @contextmanager

@@ -25,23 +25,15 @@ import yaml
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
+from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 from training.cli import main
 from training.config import TrainConfig, load_config
 from training.runs import LOCK_NAME
 from training.sb3_backend import find_latest_checkpoint, train
 
 ROOT = Path(__file__).resolve().parents[2]
-TOY = "tests.training.toy_env:ToyParallelEnv"
-TOY_SECTION = {
-    "timesteps": 600,
-    "seed": 0,
-    "n_envs": 2,
-    "checkpoint_freq": 0,
-    "env": {"n_uavs": 3, "max_steps": 12},
-    "ppo": {"n_steps": 32, "batch_size": 64, "n_epochs": 2},
-    "pretrain": None,
-    "progress_bar": False,
-}
+TOY = TOY_ENV_ID
+TOY_SECTION = TOY_TRAINING
 
 
 def toy_cfg(out: Path, **kw) -> TrainConfig:
