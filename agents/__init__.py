@@ -8,11 +8,18 @@ name                      policy
                           formation, ignoring navigation quality (:mod:`agents.heuristics`)
 ``sky``                   like ``formation``, but each UAV steers toward open sky while
                           keeping contact with its neighbours (:mod:`agents.heuristics`)
+``spread``                ``sky`` as a stretched column (20 m spacing) that closes up at the
+                          goal: the tuned heuristic (:mod:`agents.heuristics`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
+``planner``               privileged MPC that looks ahead in copies of the environment with
+                          the true errors: the headroom reference (:mod:`agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
 ``rllib:<path>``          an RLlib checkpoint of ``coopnav train --backend rllib``
                           (:mod:`agents.rllib_policy`; needs the ``ray`` extra)
+``mappo:<path>``          a TorchRL MAPPO or IPPO checkpoint of ``coopnav train --backend
+``ippo:<path>``           torchrl`` (:mod:`agents.marl_policy`; needs the ``marl`` extra);
+                          ``<path>`` a ``.pt`` file or a run folder
 ========================  ==================================================================
 
 A heuristic takes constructor options after ``@`` as ``key=value`` pairs separated by commas,
@@ -24,25 +31,36 @@ read as Python literals (numbers, strings, ``True``/``False``).
 >>> policy = make_policy("formation", env)  # doctest: +SKIP
 >>> obs, infos = env.reset(seed=1); policy.reset(seed=1)  # doctest: +SKIP
 >>> obs, rewards, terms, truncs, infos = env.step(policy.act(obs))  # doctest: +SKIP
+
+Your own policy (any class with the :class:`~agents.base.Policy` protocol) gets a name with
+:func:`register_policy`; :func:`make_policy`, and with it ``training.evaluate.evaluate``, then
+make it like a built-in one (``examples/evaluate_own_policy.py``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from agents.base import Policy, clip_actions
 
-__all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy"]
+__all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy", "register_policy"]
 
 POLICY_NAMES: tuple[str, ...] = (
     "random",
     "formation",
     "sky",
+    "spread",
     "waypoint",
+    "planner",
     "ppo:<path>",
     "rllib:<path>",
+    "mappo:<path>",
+    "ippo:<path>",
 )
-"""Names :func:`make_policy` accepts."""
+"""Names :func:`make_policy` accepts (plus those given to :func:`register_policy`)."""
+
+_REGISTERED: dict[str, Callable[..., Policy]] = {}
 
 
 def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
@@ -80,6 +98,14 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
             return make_policy(base, env, **{**options, **kwargs})
         except (TypeError, ValueError) as exc:  # an option the constructor rejects
             raise ValueError(f"bad option for policy {base!r} in {name!r}: {exc}") from None
+    if name in _REGISTERED:
+        policy = _REGISTERED[name](env, **kwargs)
+        if not isinstance(policy, Policy):
+            raise ValueError(
+                f"the factory registered as {name!r} returned {type(policy).__name__}, which "
+                "lacks the Policy protocol (name, reset(seed), act(observations))"
+            )
+        return policy
     if name == "random":
         from agents.random_policy import RandomPolicy
 
@@ -92,6 +118,15 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import SkySeekingPolicy
 
         return SkySeekingPolicy(env, **kwargs)
+    if name == "spread":
+        from agents.heuristics import SpreadColumnPolicy
+
+        return SpreadColumnPolicy(env, **kwargs)
+    if name == "planner":
+        from agents.planner import PrivilegedPlanner
+
+        base = kwargs.pop("base", "spread")
+        return PrivilegedPlanner(env, make_policy(base, env), **kwargs)
     if name == "waypoint":
         from agents.heuristics import WaypointPolicy
 
@@ -110,7 +145,56 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.rllib_policy import RLlibPolicy
 
         return RLlibPolicy(env, path, **kwargs)
-    raise ValueError(f"unknown policy {name!r}; valid policies: {', '.join(POLICY_NAMES)}")
+    for prefix in ("mappo:", "ippo:", "torchrl:"):
+        if name.startswith(prefix):
+            path = name[len(prefix) :]
+            if not path:
+                raise ValueError(f"policy '{prefix}<path>' needs the path of a TorchRL checkpoint")
+            from agents.marl_policy import MARLPolicy
+
+            return MARLPolicy(env, path, make_base=make_policy, **kwargs)
+    valid = ", ".join([*POLICY_NAMES, *_REGISTERED])
+    raise ValueError(f"unknown policy {name!r}; valid policies: {valid}")
+
+
+def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: bool = False) -> None:
+    """Give your own policy a name that :func:`make_policy` (and so evaluation) accepts.
+
+    After ``register_policy("mine", MyPolicy)``, ``make_policy("mine", env, **kwargs)`` returns
+    ``MyPolicy(env, **kwargs)``, ``"mine@key=value"`` passes options as for the heuristics, and
+    ``training.evaluate.evaluate(["formation", "mine"], seeds)`` flies it on the same held-out
+    episodes as the built-in policies. The registry lives in this process only.
+
+    Parameters
+    ----------
+    name : str
+        A Python identifier, not a built-in name (``random``, ``formation``, ``sky``,
+        ``waypoint``, ``ppo``, ``rllib``).
+    factory : callable
+        ``factory(env, **kwargs)`` returns an object with the
+        :class:`~agents.base.Policy` protocol (``env``: the PettingZoo parallel environment
+        of the evaluation).
+    overwrite : bool, default False
+        Replace an earlier registration of ``name`` instead of raising.
+
+    Raises
+    ------
+    ValueError
+        A bad or built-in name, a factory that is not callable, or ``name`` registered
+        already (without ``overwrite``).
+    """
+    builtin = {n.split(":")[0] for n in POLICY_NAMES}
+    if not isinstance(name, str) or not name.isidentifier() or name in builtin:
+        raise ValueError(
+            f"policy name must be a Python identifier other than {sorted(builtin)}, got {name!r}"
+        )
+    if not callable(factory):
+        raise ValueError(f"factory of policy {name!r} must be callable, got {factory!r}")
+    if name in _REGISTERED and not overwrite and _REGISTERED[name] is not factory:
+        raise ValueError(
+            f"policy {name!r} is registered already; pass overwrite=True to replace it"
+        )
+    _REGISTERED[name] = factory
 
 
 def _parse_options(name: str) -> tuple[str, dict[str, Any]]:

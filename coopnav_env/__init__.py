@@ -5,7 +5,28 @@ Sub-packages
 ``coopnav_env.gnss``   frames, constellations, error models and pseudorange simulation.
 ``coopnav_env.nav``    standalone WLS, virtual-centroid cooperative solver (SDT/DDT), master-slave.
 ``coopnav_env.sim``    the urban world: buildings, line of sight, canyon mask, swarm kinematics.
-``coopnav_env.envs``   the PettingZoo parallel environment.
+``coopnav_env.envs``   the PettingZoo parallel environment, its Gymnasium single-agent view and
+                       the named observation layout.
+
+Importing the package registers the Gymnasium id :data:`GYM_ENV_ID`
+(``"coopnav/UrbanCanyonSwarm-v0"``, :class:`coopnav_env.envs.gym_wrapper.UrbanCanyonSwarmEnv`:
+one agent commands the whole swarm), so ``gymnasium.make(GYM_ENV_ID, **fields)`` works after
+``import coopnav_env``. The registration names the entry point as a string: nothing but
+Gymnasium's registry is imported until the environment is made.
 """
 
 __version__ = "0.1.0"
+
+GYM_ENV_ID = "coopnav/UrbanCanyonSwarm-v0"
+"""Gymnasium id of the single-agent swarm environment (registered on import)."""
+
+
+def _register_gymnasium_envs() -> None:
+    """Register :data:`GYM_ENV_ID` with Gymnasium once (a re-import does not warn)."""
+    from gymnasium.envs.registration import register, registry
+
+    if GYM_ENV_ID not in registry:
+        register(id=GYM_ENV_ID, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv")
+
+
+_register_gymnasium_envs()

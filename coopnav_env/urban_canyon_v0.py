@@ -1,5 +1,4 @@
-"""
-# Urban Canyon
+"""Urban Canyon: a UAV swarm crosses a city on cooperative GNSS navigation (PettingZoo env).
 
 A swarm of UAVs crosses a city from a start area to a goal area. Tall buildings block the
 GNSS satellites, so a UAV in a street canyon sees few of them and its standalone position fix
@@ -13,13 +12,13 @@ is open enough for the swarm to know where it is.
 | Actions            | Continuous                                                  |
 | Parallel API       | Yes (`parallel_env`; `env` is the AEC version)              |
 | Manual Control     | No                                                          |
-| Agents             | `agents = ['uav_0', 'uav_1', ..., 'uav_{N-1}']`             |
-| Agents             | N = `n_uavs` (default 5; 50 works)                          |
+| Agents             | `uav_0` ... `uav_{N-1}`, N = `n_uavs` (default 5; 50 works) |
 | Action Shape       | (3,)                                                        |
 | Action Values      | [-1, 1] (float32)                                           |
 | Observation Shape  | (20 + 2A + 4K,) = (52,) by default                          |
 | Observation Values | each entry in [-1, 1] or [0, 1] (float32), see the table    |
 | State Shape        | (13 N + 4,) = (69,) for 5 UAVs                              |
+| Gymnasium          | `gymnasium.make("coopnav/UrbanCanyonSwarm-v0")`, one agent  |
 
 ```python
 from coopnav_env import urban_canyon_v0
@@ -109,6 +108,14 @@ With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts,
 19-34 four neighbour slots, 35-37 flags and time, 38-39 next waypoint, 40-41 the leg after it,
 42 remaining route, 43 altitude, 44-51 wall distances.
 
+The same table for code: `coopnav_env.envs.obs_layout(config)` maps a name to its slice,
+units, scale (and offset), bounds and description, for any configuration, e.g.
+`obs_layout(env.config)["next_waypoint"].slice` (`slice(38, 40)` by default) or
+`obs_layout()["altitude"].decode(obs)` (metres). Names: `position_to_goal`, `velocity`,
+`sigma`, `satellites`, `swarm_satellites`, `skyline`, `neighbour_k` and
+`neighbour_k_present` (k = 0..K-1), `cooperative_fix`, `fresh_fix`, `time_left`,
+`next_waypoint`, `next_leg`, `remaining_route`, `altitude`, `wall_distance`.
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -117,12 +124,15 @@ With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts,
 
 ## Rewards
 
-Per agent, the sum of six terms, each also reported in `infos[agent]["reward_terms"]`:
+Per agent, the sum of six terms, each also reported in `infos[agent]["reward_<term>"]`:
 
 * `nav` = `-nav_reward_weight * min(e, nav_reward_cap_m) / nav_reward_scale_m` (defaults 0.1,
   10 m, 10 m), where `e` is the true 3-D error of the estimate the UAV uses
   (`nav_reward="error"`, default) or its predicted 3-D sigma `sqrt(trace H_p)`
-  (`nav_reward="sigma"`): -0.03 per step at a 3 m error, at worst -0.1;
+  (`nav_reward="sigma"`): -0.03 per step at a 3 m error, at worst -0.1; with team credit
+  `nav_team_weight = w` (default 0) each UAV gets `(1 - w) nav_i + w mean_j(nav_j)`, so that a
+  UAV that keeps its neighbours' fixes good (holding an open square, spreading the swarm over
+  more sky) is paid for it;
 * `progress` = `progress_reward_weight * (d_prev - d_now) / (max_speed_mps * dt_s)` (weight 1),
   `d` the remaining length of the street route from the UAV's true position: the straight
   distance to its next waypoint plus the route after that waypoint, both ends of the step
@@ -150,21 +160,30 @@ the best a policy could do.
 
 ## Infos
 
-`infos[agent]` holds python numbers: `nav_error_m`, `coop_error_m`, `standalone_error_m` (true
-3-D errors [m]; `inf` where that fix does not exist), `sig_e_m`, `sig_n_m`, `sig_u_m`,
-`sig_3d_m` (predicted sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`,
-`n_sats_open_sky`, `coop_status` and `standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK,
-1 too few satellites, 2 singular, 3 not converged, 4 no relative position, 5 implausible
-position: the spurious far root), `nav_source`
-(`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
+`infos[agent]` is flat and holds python numbers only, with the same keys (in the same order,
+`coopnav_env.envs.urban_canyon.INFO_KEYS`) at `reset()` and at every step, so that libraries
+that build their specs from the reset (TorchRL's `PettingZooWrapper`, BenchMARL) and loggers
+that average every key work as they are: `nav_error_m`, `coop_error_m`, `standalone_error_m`
+(true 3-D errors [m]), `coop_fix`, `standalone_fix` (whether that fix exists: where it does
+not, its error is reported as -1, `NO_FIX_ERROR_M`, never `inf` or NaN; mask by the flag
+before averaging, or read it with `coopnav_env.envs.urban_canyon.fix_error_m(info, key)`,
+which returns `inf` for a missing fix), `sig_e_m`, `sig_n_m`, `sig_u_m`, `sig_3d_m` (predicted
+sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`, `n_sats_open_sky`, `coop_status` and
+`standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK, 1 too few satellites, 2 singular, 3
+not converged, 4 no relative position, 5 implausible position: the spurious far root),
+`nav_source` (`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
 `goal_distance_m`, `next_waypoint` (index into `world.route_xy_m`), `coop_rejected` and
 `standalone_rejected` (the solver's fix was OK but the integrity gate `max_fix_sigma_m`
-rejected it: its error is reported as `inf`), `in_goal`, `collided`, `separation_violation`,
-`out_of_contact`, `step`, and `reward_terms`.
+rejected it: the fix counts as missing), `in_goal`, `collided`, `separation_violation`,
+`out_of_contact`, the reward terms `reward_nav`, `reward_progress`, `reward_collision`,
+`reward_separation`, `reward_contact`, `reward_goal` (0 at reset; their sum is the reward),
+and `step` (0 at reset).
 
-`reset()` returns, per agent, `{"initial": {...}}`: the same figures for the first epoch,
-nested so that SuperSuit's automatic reset, which merges the reset infos into the terminal
-step's infos (`{**step_info, **reset_info}`), does not overwrite the terminal step's figures.
+The reset infos describe the first epoch of the new episode. SuperSuit's own automatic reset
+(`pettingzoo_env_to_vec_env_v1`) merges them over the terminal step's infos
+(`{**step_info, **reset_info}`), so with that recipe the terminal step's figures are lost;
+coopnav's vector environments (`training.vec_env.make_vec_env`, the batched
+`BatchedUrbanCanyonEnv`) keep the terminal step's infos and drop the reset's.
 
 ## Starting State
 
@@ -181,7 +200,7 @@ by the velocity.
   no black-death wrapper is needed.
 * Termination (all agents): every UAV is within `goal_radius_m` (25 m) of the goal centre
   horizontally; every UAV gets `goal_bonus`.
-* Truncation (all agents): `max_steps` (200) steps.
+* Truncation (all agents): `max_steps` (200) steps (also accepted as `max_cycles`).
 
 UAVs cannot leave the city extent (a virtual fence clamps them) nor the altitude band.
 
@@ -263,7 +282,9 @@ street canyons some fixes come from barely enough satellites (4-5 measurements f
 unknowns) in a narrow strip of sky; they are valid least-squares solutions, but off by tens to
 hundreds of metres, and their covariance says so.
 
-`max_steps` (200): truncation.
+`max_steps` (200): truncation. `max_cycles`, the name PettingZoo's own environments and
+BenchMARL use, is accepted as an alias (giving both with different values raises
+`ValueError`); `config.max_cycles` reads it.
 
 `obs_neighbours`, `obs_sky_azimuths`, `obs_sigma_max_m` (4, 8, 20): observation layout.
 
@@ -271,12 +292,24 @@ hundreds of metres, and their covariance says so.
 observations [m].
 
 `nav_reward` (`"error"`), `nav_reward_weight`, `nav_reward_scale_m`, `nav_reward_cap_m`
-(0.1, 10, 10), `progress_reward_weight` (1), `collision_penalty` (40), `separation_penalty`
+(0.1, 10, 10), `nav_team_weight` (0: own error; 1: the swarm mean),
+`progress_reward_weight` (1), `collision_penalty` (40), `separation_penalty`
 (0.05), `contact_penalty` (0.02), `goal_bonus` (10): rewards, above.
 
 `render_sky_uav` (-1): the UAV of the sky plot; -1 picks the one with the fewest satellites.
 
 `render_width_px`, `render_height_px` (1280, 640): frame size [pixel].
+
+## Gymnasium (one agent commands the swarm)
+
+`import coopnav_env` registers `"coopnav/UrbanCanyonSwarm-v0"`
+(`coopnav_env.envs.UrbanCanyonSwarmEnv`): `gymnasium.make("coopnav/UrbanCanyonSwarm-v0",
+reward="mean", **fields)` takes the same keywords and steps the same episodes. The observation
+is every UAV's observation stacked (`Box((N * obs_dim,), float32)`, `uav_0` first), the action
+every UAV's command (`Box(-1, 1, (3 N,), float32)`), the reward the swarm's mean (`reward=
+"mean"`) or summed (`"sum"`) reward; the episode terminates or is truncated when the swarm's
+does, and `info` holds the per-agent infos and rewards. It passes Gymnasium's and
+Stable-Baselines3's environment checkers; `examples/` trains SB3 PPO on it.
 
 ## Rendering
 
@@ -302,6 +335,16 @@ world state): a restored copy continues exactly like the original.
   distances (38 -> 52 entries by default), the progress reward moved from the straight-line
   distance to the goal to the remaining street route, the reward defaults changed so that a
   crash never pays (above), and the integrity gate `max_fix_sigma_m` was added.
+* v0, unreleased changes that keep the version: the infos became flat and numeric with the
+  same keys at reset and at every step (`reward_<term>` instead of the nested `reward_terms`,
+  no `"initial"` nesting at reset, a missing fix reported as -1 with `coop_fix` /
+  `standalone_fix` instead of `inf`), so that TorchRL's `PettingZooWrapper` and BenchMARL
+  accept the environment; and the option `nav_team_weight` (team credit, default 0). With the
+  defaults every observation, reward, termination, truncation and state is bit for bit what
+  it was (`tests/envs/test_golden.py` converts the new infos back to the old layout and
+  checks the recorded digests), so learning results do not change and the version is not
+  bumped (PettingZoo bumps it for changes that can change learning results); code that read
+  `infos[agent]["initial"]` or `infos[agent]["reward_terms"]` must read the flat keys.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env

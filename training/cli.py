@@ -27,9 +27,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "reproduce": ("reproduction.cli", "regenerate the paper's tables and figures (Section 4)"),
     "train": (
         "training.train",
-        "train a PPO policy (parameter sharing) on urban_canyon_v0 (SB3, or Ray RLlib)",
+        "train a shared policy on urban_canyon_v0 (SB3 PPO, Ray RLlib, or TorchRL MAPPO/IPPO)",
     ),
     "evaluate": ("training.evaluate", "evaluate policies: navigation error, goal rate, plots"),
+    "study": (
+        "training.marl_study",
+        "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",
+    ),
     "render": ("training.render", "render one episode of urban_canyon_v0 to PNG frames"),
 }
 

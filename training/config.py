@@ -57,9 +57,11 @@ DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.y
 BACKENDS: dict[str, str] = {
     "sb3": "training.sb3_backend",
     "rllib": "training.rllib_backend",
+    "torchrl": "training.marl",
 }
 """Training backends: name -> module (see the module docstring for what a module defines).
-``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib."""
+``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib; ``torchrl``:
+MAPPO or IPPO on TorchRL (:mod:`training.marl`)."""
 
 VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
 """Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of ``training.vec_env.VEC_ENV_KINDS``
@@ -240,6 +242,9 @@ class TrainConfig:
     rllib : dict
         Settings of the RLlib backend (:class:`training.rllib_backend.RLlibSettings`: env
         runners, Ray address, ``ppo`` and ``model``); the SB3 backend ignores them.
+    torchrl : dict
+        Settings of the TorchRL MAPPO/IPPO backend (:class:`agents.marl_nets.MARLSettings`
+        fields, plus ``env``: environment settings that override ``env`` for this backend).
     """
 
     out: str
@@ -262,6 +267,7 @@ class TrainConfig:
     verbose: int = 0
     backend: str = "sb3"
     rllib: dict[str, Any] = field(default_factory=dict)
+    torchrl: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         def _int(name: str, lo: int, hi: int | None = None) -> None:
@@ -314,7 +320,9 @@ class TrainConfig:
             )
         if self.rllib is None:
             object.__setattr__(self, "rllib", {})
-        for name in ("env", "ppo", "rllib"):
+        if self.torchrl is None:
+            object.__setattr__(self, "torchrl", {})
+        for name in ("env", "ppo", "rllib", "torchrl"):
             if not isinstance(getattr(self, name), Mapping):
                 raise ValueError(
                     f"TrainConfig.{name} must be a mapping, got {getattr(self, name)!r}"
@@ -328,6 +336,7 @@ class TrainConfig:
             )
         object.__setattr__(self, "ppo", dict(self.ppo))
         object.__setattr__(self, "rllib", dict(self.rllib))
+        object.__setattr__(self, "torchrl", dict(self.torchrl))
         if self.pretrain is not None:
             if not isinstance(self.pretrain, Mapping):
                 raise ValueError(f"TrainConfig.pretrain must be a mapping, got {self.pretrain!r}")

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from coopnav_env.envs.urban_canyon import fix_error_m
 from training.config import apply_overrides, parse_yaml
 from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
 from training.files import atomic_path, atomic_write_text, ensure_folder, write_json
@@ -393,9 +394,10 @@ def _in_goal(info: Mapping[str, Any]) -> bool:
 
 
 def _info_float(info: Mapping[str, Any], key: str) -> float:
+    """``info[key]`` as a float (NaN if absent); a missing fix's error is ``inf``."""
     v = info.get(key)
     try:
-        return float(v) if v is not None else math.nan
+        return fix_error_m(info, key) if v is not None else math.nan
     except (TypeError, ValueError):
         return math.nan
 
@@ -720,7 +722,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--policies",
         nargs="+",
         default=["random", "formation", "sky"],
-        help="policies: random, formation, sky, waypoint, ppo:<path> (SB3 .zip), rllib:<path> "
+        help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
+        "ppo:<path> (SB3 .zip), mappo:<path> / ippo:<path> (TorchRL run or .pt), rllib:<path> "
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
     )
@@ -789,7 +792,8 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
 
 
 def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
-    """The training configuration a ``ppo:<path>`` or ``rllib:<path>`` policy came from.
+    """The training configuration a trained policy (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/
+    ``torchrl:``) came from.
 
     ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
     ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
@@ -799,7 +803,7 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
     found: dict[str, Any] | None = None
     for name in policies:
         kind, sep, path = name.partition(":")
-        if not sep or kind not in ("ppo", "rllib"):
+        if not sep or kind not in ("ppo", "rllib", "mappo", "ippo", "torchrl"):
             continue
         model = Path(path)
         for folder in (model, model.parent, model.parent.parent):

@@ -272,13 +272,15 @@ def map_to_shared_policy(agent_id: Any, episode: Any = None, **kwargs: Any) -> s
 
 def _on_episode_end(*, episode: Any, metrics_logger: Any = None, **kwargs: Any) -> None:
     """Log the goal and collision rate and the mean cooperative error of each episode."""
+    from coopnav_env.envs.urban_canyon import fix_error_m
+
     if metrics_logger is None:
         return
     try:
         final = episode.get_infos(-1)
         chunks = [*(kwargs.get("prev_episode_chunks") or []), episode]
         errors = [
-            float(info["coop_error_m"])
+            fix_error_m(info, "coop_error_m")
             for chunk in chunks
             for agent_ep in chunk.agent_episodes.values()
             for info in agent_ep.get_infos()

@@ -84,8 +84,7 @@ RUN_OUTPUTS: tuple[str, ...] = (
     "config_resumed_at_*.yaml",
     "run.json",
     "pretrain.json",
-    "final_model.zip",
-    "final_model",
+    "final_model*",
     "checkpoints",
     "logs",
     "*monitor.csv",
@@ -131,11 +130,12 @@ def finished_run(out: str | Path) -> dict[str, Any] | None:
         info = json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-    final = info.get("final_model") if isinstance(info, dict) else None
-    if not final or not isinstance(info.get("num_timesteps"), int):
+    if not isinstance(info, dict) or not isinstance(info.get("num_timesteps"), int):
         return None
-    final_path = Path(out) / Path(final).name
-    return info if final_path.exists() else None
+    final = info.get("final_model")
+    if final:
+        return info if (Path(out) / Path(final).name).exists() else None
+    return info if any(Path(out).glob("final_model*")) else None
 
 
 def recorded_config(out: str | Path) -> dict[str, Any] | None:

@@ -143,6 +143,8 @@ def _callbacks() -> tuple[Any, Any, Any]:
     import numpy as np
     from stable_baselines3.common.callbacks import BaseCallback
 
+    from coopnav_env.envs.urban_canyon import fix_error_m
+
     class NavMetricsCallback(BaseCallback):
         """Log navigation figures of each rollout to TensorBoard (``nav/...``).
 
@@ -169,9 +171,8 @@ def _callbacks() -> tuple[Any, Any, Any]:
             infos = self.locals.get("infos", ())
             dones = np.asarray(self.locals.get("dones", np.zeros(len(infos), dtype=bool)))
             for info in infos:
-                e = info.get("coop_error_m")
-                if e is not None:
-                    self._err.append(float(e))
+                if info.get("coop_error_m") is not None:
+                    self._err.append(fix_error_m(info, "coop_error_m"))
                 n = info.get("n_sats")
                 if n is not None:
                     self._sats.append(float(n))

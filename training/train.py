@@ -102,6 +102,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         'in this process; rllib: Ray RLlib, needs pip install -e ".[ray]")',
     )
     parser.add_argument(
+        "--algorithm",
+        choices=["mappo", "ippo"],
+        default=None,
+        help="torchrl: MAPPO (critic on the global state) or IPPO (critic on the UAV's own "
+        "observation) (default: the config's torchrl.algorithm, mappo)",
+    )
+    parser.add_argument(
         "--num-env-runners",
         type=int,
         default=None,
@@ -155,6 +162,10 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         raise ValueError(f"{flags_text} only apply to --backend rllib")
     if given:
         data["rllib"] = {**(data.get("rllib") or {}), **given}
+    if args.algorithm is not None:
+        if data.get("backend", "sb3") != "torchrl":
+            raise ValueError("--algorithm only applies to --backend torchrl")
+        data["torchrl"] = {**(data.get("torchrl") or {}), "algorithm": args.algorithm}
     env = data.get("env") or {}
     if not isinstance(env, Mapping):
         raise ValueError(f"TrainConfig.env must be a mapping, got {env!r}")

@@ -142,7 +142,7 @@ class BatchedUrbanCanyonEnv:
         obs : ndarray, shape (K, N, obs_dim), float32
             A buffer reused by later calls: copy it to keep it.
         infos : list of K dicts
-            Each copy's reset infos (``{agent: {"initial": {...}}}``, as ``reset`` returns).
+            Each copy's reset infos (``{agent: {...}}``, as ``reset`` returns).
         """
         infos = []
         for k, s in enumerate(self._seeds(seed)):

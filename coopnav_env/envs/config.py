@@ -31,7 +31,10 @@ class UrbanCanyonConfig(ScenarioConfig):
     Parameters
     ----------
     max_steps : int, default 200
-        Episode length; reaching it truncates every agent, in [1, 100000].
+        Episode length; reaching it truncates every agent, in [1, 100000]. ``max_cycles``, the
+        name PettingZoo's own environments, its ``max_cycles_test`` and BenchMARL use, is
+        accepted as an alias by :func:`make_config` (and so by ``parallel_env(...)``), and
+        :attr:`max_cycles` reads it.
     obs_neighbours : int, default 4
         Neighbour slots ``K`` in each observation (nearest first, padded), in [0, 64].
     obs_sky_azimuths : int, default 8
@@ -52,6 +55,12 @@ class UrbanCanyonConfig(ScenarioConfig):
         Error (or sigma) that costs one ``nav_reward_weight``, in (0, 1e4] [m].
     nav_reward_cap_m : float, default 10.0
         The error (or sigma) is capped here before scaling, in (0, 1e5] [m].
+    nav_team_weight : float, default 0.0
+        Team credit of the navigation term, in [0, 1]: each UAV's ``nav`` term becomes
+        ``(1 - w) nav_i + w mean_j(nav_j)``; 0 keeps each UAV's own error, 1 gives every UAV
+        the swarm's mean. With a shared (team) term a UAV that holds an open square so that
+        its neighbours' fixes improve is paid for it; per-agent PPO cannot otherwise assign
+        that credit. The default keeps the own error (episodes of earlier versions unchanged).
     progress_reward_weight : float, default 1.0
         Weight of the progress term (decrease of the remaining street-route length per step,
         divided by ``max_speed_mps * dt_s``, so at most 1 in magnitude), in [0, 1000].
@@ -86,6 +95,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     nav_reward_weight: float = 0.1
     nav_reward_scale_m: float = 10.0
     nav_reward_cap_m: float = 10.0
+    nav_team_weight: float = 0.0
     progress_reward_weight: float = 1.0
     collision_penalty: float = 40.0
     separation_penalty: float = 0.05
@@ -108,6 +118,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_real(o, "nav_reward_weight", self.nav_reward_weight, 0.0, 1000.0)
         _check_real(o, "nav_reward_scale_m", self.nav_reward_scale_m, 0.0, 1e4, lo_open=True)
         _check_real(o, "nav_reward_cap_m", self.nav_reward_cap_m, 0.0, 1e5, lo_open=True)
+        _check_real(o, "nav_team_weight", self.nav_team_weight, 0.0, 1.0)
         _check_real(o, "progress_reward_weight", self.progress_reward_weight, 0.0, 1000.0)
         _check_real(o, "collision_penalty", self.collision_penalty, 0.0, 1e5)
         _check_real(o, "separation_penalty", self.separation_penalty, 0.0, 1e5)
@@ -121,6 +132,11 @@ class UrbanCanyonConfig(ScenarioConfig):
     def obs_dim(self) -> int:
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``."""
         return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours
+
+    @property
+    def max_cycles(self) -> int:
+        """``max_steps`` under its conventional PettingZoo name (read-only alias)."""
+        return self.max_steps
 
     @property
     def worst_episode_penalty(self) -> float:
@@ -158,21 +174,37 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
     config : UrbanCanyonConfig, optional
         Starting point; default ``UrbanCanyonConfig()``.
     **overrides
-        Field values.
+        Field values. ``max_cycles`` is an alias of ``max_steps`` (PettingZoo's name).
 
     Raises
     ------
     ValueError
-        For an unknown name (the message lists the valid ones) or a bad value.
+        For an unknown name (the message lists the valid ones), a bad value, or
+        ``max_cycles`` and ``max_steps`` both given with different values.
     """
     if config is not None and not isinstance(config, UrbanCanyonConfig):
         raise ValueError(f"config must be an UrbanCanyonConfig or None, got {config!r}")
+    if "max_cycles" in overrides:
+        overrides = dict(overrides)
+        cycles = overrides.pop("max_cycles")
+        if "max_steps" in overrides and overrides["max_steps"] != cycles:
+            raise ValueError(
+                f"max_cycles is an alias of max_steps: give one of them, or the same value "
+                f"(got max_cycles={cycles!r}, max_steps={overrides['max_steps']!r})"
+            )
+        overrides["max_steps"] = cycles
+        try:
+            return make_config(config, **overrides)
+        except ValueError as exc:
+            if "max_steps must" not in str(exc):
+                raise
+            raise ValueError(f"{exc} (given as max_cycles, the alias of max_steps)") from None
     valid = config_field_names()
     unknown = sorted(set(overrides) - set(valid))
     if unknown:
         raise ValueError(
             f"unknown urban_canyon_v0 argument(s) {unknown}; valid arguments are "
-            f"render_mode, config, {', '.join(valid)}"
+            f"render_mode, config, {', '.join(valid)} (and max_cycles, an alias of max_steps)"
         )
     base = config if config is not None else UrbanCanyonConfig()
     return replace(base, **overrides) if overrides else base

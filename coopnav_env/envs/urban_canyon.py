@@ -15,6 +15,7 @@ units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it 
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -31,13 +32,55 @@ from coopnav_env.sim.city import _ray_directions
 from coopnav_env.sim.route import remaining_route_m
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
-__all__ = ["REWARD_TERMS", "UrbanCanyonEnv", "aec_env", "parallel_env"]
+__all__ = [
+    "INFO_KEYS",
+    "NO_FIX_ERROR_M",
+    "REWARD_TERMS",
+    "UrbanCanyonEnv",
+    "aec_env",
+    "fix_error_m",
+    "parallel_env",
+]
 
 _USE_KERNEL = True
 """Observations through :mod:`coopnav_env.envs._kernels` (False: the numpy formulation)."""
 
 REWARD_TERMS: tuple[str, ...] = ("nav", "progress", "collision", "separation", "contact", "goal")
-"""Names of the reward terms in ``infos[agent]["reward_terms"]`` (their sum is the reward)."""
+"""Names of the reward terms; ``infos[agent]["reward_<term>"]`` holds each (their sum is the
+reward)."""
+
+NO_FIX_ERROR_M = -1.0
+"""``coop_error_m`` / ``standalone_error_m`` in the infos when that fix does not exist (the
+flags ``coop_fix`` / ``standalone_fix`` say so); finite, so that averaging loggers stay finite."""
+
+INFO_KEYS: tuple[str, ...] = (
+    "nav_error_m",
+    "coop_error_m",
+    "standalone_error_m",
+    "coop_fix",
+    "standalone_fix",
+    "sig_e_m",
+    "sig_n_m",
+    "sig_u_m",
+    "sig_3d_m",
+    "n_sats",
+    "n_sats_swarm",
+    "n_sats_open_sky",
+    "coop_status",
+    "standalone_status",
+    "nav_source",
+    "goal_distance_m",
+    "next_waypoint",
+    "coop_rejected",
+    "standalone_rejected",
+    "in_goal",
+    "collided",
+    "separation_violation",
+    "out_of_contact",
+    *(f"reward_{t}" for t in REWARD_TERMS),
+    "step",
+)
+"""The keys of ``infos[agent]``, in order: the same at reset and at every step, all numbers."""
 
 
 class UrbanCanyonEnv(ParallelEnv, EzPickle):
@@ -135,10 +178,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
     ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
         """Start an episode; ``seed`` reseeds the environment's only generator.
 
-        The infos hold the first epoch's figures under ``"initial"`` (see the documentation
-        page). Without a seed the episode continues the generator's stream (a new city, start and
-        goal); the very first reset without a seed draws the generator from OS entropy, so that
-        copies of a fresh environment (e.g. made by a vector wrapper) do not share a stream.
+        The infos hold the first epoch's figures, with the same flat keys as a step's (see
+        the documentation page). Without a seed the episode continues the generator's stream
+        (a new city, start and goal); the very first reset without a seed draws the generator
+        from OS entropy, so that copies of a fresh environment (e.g. made by a vector wrapper)
+        do not share a stream.
         ``options`` is accepted for API compatibility and ignored.
         """
         obs = dict(zip(self.possible_agents, self._reset_arrays(seed)))
@@ -184,11 +228,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         return self._observation_array()
 
     def _reset_infos(self) -> dict[str, dict[str, Any]]:
-        """The infos :meth:`reset` returns for the current (first) epoch."""
+        """The infos :meth:`reset` returns for the current (first) epoch.
+
+        The same flat keys as every step's infos (reward terms zero, ``step`` 0), so that
+        libraries that build their info specs from the reset (TorchRL's ``PettingZooWrapper``,
+        BenchMARL) see every key they will get later.
+        """
         terms = {t: np.zeros(self.config.n_uavs) for t in REWARD_TERMS}
-        first = self._infos(terms, self._epoch.goal_distance_m <= self.config.goal_radius_m)
-        # nested: SuperSuit merges reset infos into the terminal step's infos at auto-reset
-        return {a: {"initial": info} for a, info in first.items()}
+        return self._infos(terms, self._epoch.goal_distance_m <= self.config.goal_radius_m)
 
     def step(
         self, actions: dict[str, Any]
@@ -257,6 +304,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 cfg.nav_reward == "sigma",
                 self._reward_params,
             )
+            if cfg.nav_team_weight > 0.0:
+                stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
             terms = dict(zip(REWARD_TERMS, stacked))
             reward = stacked.sum(axis=0)
             terminated = bool(crash or reached)
@@ -279,10 +328,13 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         else:
             nav_m = np.sqrt(np.clip(np.trace(ep.nav_cov_enu_m2, axis1=1, axis2=2), 0.0, None))
         n = cfg.n_uavs
-        terms = {
-            "nav": -cfg.nav_reward_weight
+        nav = (
+            -cfg.nav_reward_weight
             * np.minimum(nav_m, cfg.nav_reward_cap_m)
-            / cfg.nav_reward_scale_m,
+            / cfg.nav_reward_scale_m
+        )
+        terms = {
+            "nav": _team_mix(nav, cfg.nav_team_weight) if cfg.nav_team_weight > 0.0 else nav,
             "progress": cfg.progress_reward_weight
             * (d_prev - d_now)
             / (cfg.kinematics.max_speed_mps * cfg.dt_s),
@@ -463,8 +515,19 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         )
 
     def _infos(self, terms: dict[str, np.ndarray], in_goal: np.ndarray) -> dict[str, dict]:
+        """Flat, numeric infos per agent (keys :data:`INFO_KEYS`, the same at every step).
+
+        A missing fix is reported by its flag (``coop_fix``, ``standalone_fix``) with the
+        error set to :data:`NO_FIX_ERROR_M` (-1), never ``inf`` or NaN: loggers average info
+        values, and one ``inf`` would make every mean ``inf``. Mask by the flag before
+        averaging.
+        """
         ep = self._epoch
-        floats = self._info_floats().tolist()
+        floats = self._info_floats()
+        fixes = np.isfinite(floats[1:3])
+        floats[1:3] = np.where(fixes, floats[1:3], NO_FIX_ERROR_M)
+        rows = floats.tolist()
+        fix_rows = fixes.tolist()
         # rows of Python ints and bools (tolist per array: no stacked copy)
         ints = [
             a.tolist()
@@ -488,21 +551,24 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 ep.out_of_contact,
             )
         ]
+        n = ep.n_uavs
         cols = {
-            "nav_error_m": floats[0],
-            "coop_error_m": floats[1],
-            "standalone_error_m": floats[2],
-            "sig_e_m": floats[3],
-            "sig_n_m": floats[4],
-            "sig_u_m": floats[5],
-            "sig_3d_m": floats[6],
+            "nav_error_m": rows[0],
+            "coop_error_m": rows[1],
+            "standalone_error_m": rows[2],
+            "coop_fix": fix_rows[0],
+            "standalone_fix": fix_rows[1],
+            "sig_e_m": rows[3],
+            "sig_n_m": rows[4],
+            "sig_u_m": rows[5],
+            "sig_3d_m": rows[6],
             "n_sats": ints[0],
             "n_sats_swarm": ints[1],
-            "n_sats_open_sky": [ep.n_above_mask] * ep.n_uavs,
+            "n_sats_open_sky": [int(ep.n_above_mask)] * n,
             "coop_status": ints[2],
             "standalone_status": ints[3],
             "nav_source": ints[4],
-            "goal_distance_m": floats[7],
+            "goal_distance_m": rows[7],
             "next_waypoint": ints[5],
             "coop_rejected": bools[0],
             "standalone_rejected": bools[1],
@@ -511,17 +577,13 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "separation_violation": bools[4],
             "out_of_contact": bools[5],
         }
+        for t in REWARD_TERMS:
+            cols[f"reward_{t}"] = np.asarray(terms[t], dtype=float).tolist()
+        cols["step"] = [self._steps] * n
         keys = list(cols)
-        term_keys = list(terms)
-        term_rows = zip(*(np.asarray(v, dtype=float).tolist() for v in terms.values()))
-        step = self._steps
-        infos = {}
-        for a, row, term_row in zip(self.possible_agents, zip(*cols.values()), term_rows):
-            info = dict(zip(keys, row))
-            info["reward_terms"] = dict(zip(term_keys, term_row))
-            info["step"] = step
-            infos[a] = info
-        return infos
+        return {
+            a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
+        }
 
     def state(self) -> np.ndarray:
         """Global state for centralised critics (truth included), inside ``state_space``.
@@ -639,3 +701,25 @@ def _state_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:
     lo = np.concatenate([-np.ones(6 * n + 3 + 3 * n), np.zeros(3 * n + n + 1)])
     hi = np.ones(cfg.state_dim)
     return lo.astype(np.float32), hi.astype(np.float32)
+
+
+def fix_error_m(info: dict[str, Any], key: str) -> float:
+    """The error ``info[key]`` of one agent's infos, ``inf`` where the fix does not exist.
+
+    ``key`` is ``"coop_error_m"`` or ``"standalone_error_m"`` (whose flags ``coop_fix`` and
+    ``standalone_fix`` say whether the fix exists; other keys, and infos without the flag,
+    are returned as they are). Use it to average errors over fixes only.
+    """
+    value = float(info[key])
+    flag = _FIX_FLAGS.get(key)
+    if flag is not None and flag in info and not info[flag]:
+        return math.inf
+    return value
+
+
+_FIX_FLAGS = {"coop_error_m": "coop_fix", "standalone_error_m": "standalone_fix"}
+
+
+def _team_mix(nav: np.ndarray, weight: float) -> np.ndarray:
+    """Team credit: ``(1 - weight) * nav_i + weight * mean(nav)`` (``nav_team_weight``)."""
+    return (1.0 - weight) * nav + weight * nav.mean()

@@ -37,6 +37,39 @@ def _update(h: Any, obj: Any) -> None:
         h.update(json.dumps(obj, sort_keys=True, default=repr).encode())
 
 
+def _recorded_layout(infos: dict[str, dict[str, Any]], reset: bool) -> dict[str, Any]:
+    """Infos in the layout the digests were recorded with (before the infos became flat).
+
+    The flat infos (same keys at reset and step, ``reward_<term>``, a missing fix as -1 with
+    the ``coop_fix`` / ``standalone_fix`` flags) carry the same numbers: converted back, the
+    recorded digests still pin every value bit for bit.
+    """
+    from coopnav_env.envs.urban_canyon import REWARD_TERMS
+
+    out = {}
+    for agent, info in infos.items():
+        old = {}
+        for key, value in info.items():
+            if key in ("coop_fix", "standalone_fix") or key.startswith("reward_") or key == "step":
+                continue
+            if key in ("coop_error_m", "standalone_error_m"):
+                value = value if info[key.replace("error_m", "fix")] else float("inf")
+            old[key] = value
+        if reset:
+            out[agent] = {
+                "initial": {
+                    **old,
+                    "reward_terms": {t: 0.0 for t in REWARD_TERMS},
+                    "step": info["step"],
+                }
+            }
+        else:
+            old["reward_terms"] = {t: info[f"reward_{t}"] for t in REWARD_TERMS}
+            old["step"] = info["step"]
+            out[agent] = old
+    return out
+
+
 def episode_digest(env_kwargs: dict[str, Any], steps: int, seed: int) -> str:
     """sha256 of everything ``steps`` random-action steps of the environment return."""
     from coopnav_env import urban_canyon_v0
@@ -46,18 +79,18 @@ def episode_digest(env_kwargs: dict[str, Any], steps: int, seed: int) -> str:
     rng = np.random.default_rng(seed + 1000)
     obs, infos = env.reset(seed=seed)
     _update(h, [obs[a] for a in env.possible_agents])
-    _update(h, infos)
+    _update(h, _recorded_layout(infos, reset=True))
     for _ in range(steps):
         actions = {a: rng.uniform(-1.0, 1.0, 3).astype(np.float32) for a in env.agents}
         obs, rew, term, trunc, infos = env.step(actions)
         for part in (obs, rew, term, trunc):
             _update(h, [part[a] for a in env.possible_agents])
-        _update(h, infos)
+        _update(h, _recorded_layout(infos, reset=False))
         _update(h, env.state())
         if not env.agents:
             obs, infos = env.reset()
             _update(h, [obs[a] for a in env.possible_agents])
-            _update(h, infos)
+            _update(h, _recorded_layout(infos, reset=True))
     return h.hexdigest()
 
 

@@ -14,6 +14,7 @@ from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 
 from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import REWARD_TERMS, UrbanCanyonConfig, UrbanCanyonEnv, config_field_names
+from coopnav_env.envs.urban_canyon import INFO_KEYS, NO_FIX_ERROR_M, fix_error_m
 from coopnav_env.nav import NavStatus
 
 
@@ -182,7 +183,7 @@ def test_waypoints_advance_along_the_route_to_the_goal() -> None:
     world = env.unwrapped.world
     route = world.route_xy_m
     np.testing.assert_allclose(route[-1], world.goal_enu_m[:2])
-    assert [i["initial"]["next_waypoint"] for i in infos0.values()] == [1] * 5
+    assert [i["next_waypoint"] for i in infos0.values()] == [1] * 5
     policy = make_policy("formation", env)
     policy.reset(seed)
     seen = [np.ones(5, dtype=int)]
@@ -207,12 +208,12 @@ def test_progress_reward_follows_the_street_route() -> None:
     for _ in range(3):
         *_, infos = env.step({"uav_0": np.r_[direction, 0.0]})
     # flying along the single canyon toward the goal: progress = distance flown / 10 m
-    assert infos["uav_0"]["reward_terms"]["progress"] == pytest.approx(
+    assert infos["uav_0"]["reward_progress"] == pytest.approx(
         np.linalg.norm(world.vel_enu_mps[0, :2]) / 10.0, rel=1e-6
     )
     for _ in range(5):  # turning back (4 m/s^2): the remaining route grows again
         _, _, _, _, infos = env.step({"uav_0": np.r_[-direction, 0.0]})
-    assert infos["uav_0"]["reward_terms"]["progress"] < 0.0
+    assert infos["uav_0"]["reward_progress"] < 0.0
 
 
 def test_default_rewards_make_crashing_never_pay() -> None:
@@ -308,7 +309,11 @@ def test_supersuit_sb3_vec_env_with_crashes() -> None:
             assert dones[:5].all() == dones[:5].any() and dones[5:].all() == dones[5:].any()
             done_infos = [infos[i] for i in np.flatnonzero(dones)]
             assert all("terminal_observation" in i for i in done_infos)
-            crashes += any(i["collided"] for i in done_infos)
+            crashes += bool(np.any(rewards[dones.astype(bool)] < -30.0))  # the -40 crash penalty
+            # SuperSuit's own auto-reset merges the next episode's reset infos over the
+            # terminal step's ({**step, **reset}: the keys are the same): the documented
+            # reason to use training.vec_env.make_vec_env, which keeps the terminal infos
+            assert all(i["step"] == 0 for i in done_infos)
     assert crashes >= 2  # crashed, reset automatically, and crashed again
     vec.close()
 
@@ -333,7 +338,7 @@ def test_goal_terminates_with_bonus() -> None:
     _, _, terms, truncs, infos = env.step(_zeros(env))
     assert all(terms.values()) and not any(truncs.values())
     for a in env.possible_agents:
-        assert infos[a]["reward_terms"]["goal"] == 10.0 and infos[a]["in_goal"]
+        assert infos[a]["reward_goal"] == 10.0 and infos[a]["in_goal"]
 
 
 def test_crash_terminates_everyone_with_a_penalty() -> None:
@@ -347,7 +352,7 @@ def test_crash_terminates_everyone_with_a_penalty() -> None:
     crashed = [a for a in infos if infos[a]["collided"]]
     assert crashed
     for a in crashed:
-        assert infos[a]["reward_terms"]["collision"] == -40.0
+        assert infos[a]["reward_collision"] == -40.0
 
 
 def test_reward_is_the_sum_of_its_terms_and_infos_are_python_numbers() -> None:
@@ -356,17 +361,60 @@ def test_reward_is_the_sum_of_its_terms_and_infos_are_python_numbers() -> None:
     _, rewards, _, _, infos = env.step({a: [0.3, 0.3, 0.0] for a in env.agents})
     for a in env.possible_agents:
         info = infos[a]
-        assert set(info["reward_terms"]) == set(REWARD_TERMS)
-        assert rewards[a] == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
+        assert tuple(info) == INFO_KEYS
+        terms = [info[f"reward_{t}"] for t in REWARD_TERMS]
+        assert rewards[a] == pytest.approx(sum(terms), abs=1e-12)
         expected = -0.1 * min(info["sig_3d_m"], 10.0) / 10.0
-        assert info["reward_terms"]["nav"] == pytest.approx(expected)
+        assert info["reward_nav"] == pytest.approx(expected)
         for key in ("nav_error_m", "coop_error_m", "standalone_error_m", "sig_3d_m"):
-            assert type(info[key]) is float and not math.isnan(info[key])
+            assert type(info[key]) is float and math.isfinite(info[key])
         for key in ("n_sats", "n_sats_swarm", "coop_status", "standalone_status", "nav_source"):
             assert type(info[key]) is int
         assert type(rewards[a]) is float
         if info["coop_status"] != NavStatus.OK:
-            assert info["coop_error_m"] == math.inf
+            assert not info["coop_fix"] and info["coop_error_m"] == NO_FIX_ERROR_M
+            assert fix_error_m(info, "coop_error_m") == math.inf
+
+
+def test_infos_are_flat_with_the_same_keys_at_reset_and_every_step() -> None:
+    # TorchRL's PettingZooWrapper (and BenchMARL) build their specs from the reset infos
+    env = urban_canyon_v0.parallel_env(city="canyon", max_steps=30)
+    _, infos = env.reset(seed=5)
+    for info in infos.values():
+        assert tuple(info) == INFO_KEYS
+        assert all(isinstance(v, (bool, int, float)) for v in info.values())
+        assert all(math.isfinite(v) for v in info.values())
+        assert info["step"] == 0 and all(info[f"reward_{t}"] == 0.0 for t in REWARD_TERMS)
+    seen_no_fix = False
+    while env.agents:
+        *_, infos = env.step({a: [0.0, 0.0, -1.0] for a in env.agents})  # down into the canyon
+        for info in infos.values():
+            assert tuple(info) == INFO_KEYS
+            assert all(math.isfinite(v) for v in info.values())
+            if not info["standalone_fix"]:
+                seen_no_fix = True
+                assert info["standalone_error_m"] == NO_FIX_ERROR_M
+    assert seen_no_fix  # the flag path was exercised
+
+
+def test_team_credit_mixes_the_navigation_term_with_the_swarm_mean() -> None:
+    out = {}
+    for w in (0.0, 0.5, 1.0):
+        env = urban_canyon_v0.parallel_env(nav_team_weight=w)
+        env.reset(seed=3)
+        _, rewards, _, _, infos = env.step({a: [0.2, 0.1, 0.0] for a in env.agents})
+        out[w] = (
+            np.array([infos[a]["reward_nav"] for a in env.possible_agents]),
+            np.array([rewards[a] for a in env.possible_agents]),
+        )
+    own, team = out[0.0][0], out[1.0][0]
+    np.testing.assert_allclose(team, np.full(5, own.mean()), rtol=1e-12)
+    np.testing.assert_allclose(out[0.5][0], 0.5 * own + 0.5 * own.mean(), rtol=1e-12)
+    # only the navigation term changes
+    np.testing.assert_allclose(out[1.0][1] - out[0.0][1], team - own, atol=1e-12)
+    assert np.ptp(own) > 0.0  # the UAVs' own terms differ, so the test can fail
+    with pytest.raises(ValueError, match="nav_team_weight"):
+        urban_canyon_v0.parallel_env(nav_team_weight=1.5)
 
 
 # ---- errors --------------------------------------------------------------------------------------

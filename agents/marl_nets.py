@@ -1,0 +1,294 @@
+"""The networks and checkpoints of the TorchRL MAPPO/IPPO backend (shared by training and
+evaluation): :class:`MARLSettings`, :func:`build_modules`, :func:`load_marl_checkpoint`.
+
+The training loop is :mod:`training.marl`; the evaluation policy :mod:`agents.marl_policy`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "ALGORITHMS",
+    "CHECKPOINT_FORMAT",
+    "MARLSettings",
+    "base_command_before",
+    "build_modules",
+    "load_marl_checkpoint",
+    "swarm_command",
+]
+
+CHECKPOINT_FORMAT = "coopnav-marl-1"
+"""The ``format`` entry of a checkpoint of :meth:`training.marl.MARLTrainer.save`."""
+
+ALGORITHMS: tuple[str, ...] = ("mappo", "ippo")
+"""Algorithms of the TorchRL backend."""
+
+
+@dataclass
+class MARLSettings:
+    """Settings of the TorchRL MAPPO/IPPO backend (the ``torchrl:`` section of the YAML).
+
+    Parameters
+    ----------
+    algorithm : {"mappo", "ippo"}
+        MAPPO: the critic sees ``env.state()`` and the UAV's observation; IPPO: the
+        observation only.
+    n_copies : int
+        Swarm copies stepped together (``BatchedUrbanCanyonEnv``), >= 1.
+    rollout_steps : int
+        Swarm steps per copy and iteration; one iteration is ``n_copies * rollout_steps *
+        n_uavs`` agent-steps.
+    epochs, minibatch_size : int
+        Passes over each rollout and agent-samples per gradient step.
+    learning_rate, gamma, gae_lambda, clip_epsilon, entropy_coef, critic_coef, max_grad_norm
+        PPO's settings.
+    hidden : list of int
+        Hidden layer sizes of actor and critic (equal widths; depth = len).
+    init_log_std : float
+        Initial log standard deviation of the action (in the network's output units).
+    normalize_reward : bool
+        Divide rewards by a running estimate of the discounted return's standard deviation.
+    residual_base : str or None
+        A :func:`agents.make_policy` name whose command the learned action is added to.
+    residual_base_kwargs : dict
+        Options of the base policy.
+    residual_scale : float
+        ``residual_mode: velocity``: the network's output (in ``[-1, 1]`` after clipping)
+        times this is added to the base command.
+    residual_mode : {"velocity", "offset"}
+        ``velocity``: the learned action is a velocity residual added to the base command (the
+        base command is part of the actor's input). ``offset``: the learned action moves each
+        UAV's slot of the base column (along the route, to the left, up) by the action times
+        ``offset_scale_m`` (the base must be a column follower: ``formation``, ``sky``,
+        ``spread``), so the policy shapes the formation while the base flies the route.
+    offset_scale_m : list of 3 floats
+        Largest slot shift along the route, to the left and up [m] (``offset`` mode).
+    """
+
+    algorithm: str = "mappo"
+    n_copies: int = 16
+    rollout_steps: int = 64
+    epochs: int = 5
+    minibatch_size: int = 2560
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coef: float = 0.0
+    critic_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    hidden: list[int] = field(default_factory=lambda: [128, 128])
+    init_log_std: float = -1.0
+    normalize_reward: bool = True
+    residual_base: str | None = None
+    residual_base_kwargs: dict[str, Any] = field(default_factory=dict)
+    residual_scale: float = 0.5
+    residual_mode: str = "velocity"
+    offset_scale_m: list[float] = field(default_factory=lambda: [15.0, 8.0, 8.0])
+
+    def __post_init__(self) -> None:
+        def bad(name: str, allowed: str) -> ValueError:
+            return ValueError(f"torchrl.{name} must be {allowed}, got {getattr(self, name)!r}")
+
+        if self.algorithm not in ALGORITHMS:
+            raise bad("algorithm", f"one of {list(ALGORITHMS)}")
+        for name in ("n_copies", "rollout_steps", "epochs", "minibatch_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise bad(name, "an integer >= 1")
+        for name, lo, hi in (
+            ("learning_rate", 0.0, 1.0),
+            ("clip_epsilon", 0.0, 1.0),
+            ("max_grad_norm", 0.0, 1e6),
+            ("residual_scale", 0.0, 1.0),
+        ):
+            v = getattr(self, name)
+            if not isinstance(v, int | float) or not (lo < float(v) <= hi):
+                raise bad(name, f"a number in ({lo}, {hi}]")
+        for name in ("gamma", "gae_lambda"):
+            v = getattr(self, name)
+            if not isinstance(v, int | float) or not (0.0 < float(v) <= 1.0):
+                raise bad(name, "a number in (0, 1]")
+        for name in ("entropy_coef", "critic_coef"):
+            v = getattr(self, name)
+            if not isinstance(v, int | float) or not (0.0 <= float(v) <= 100.0):
+                raise bad(name, "a number in [0, 100]")
+        if not isinstance(self.init_log_std, int | float) or not (
+            -10.0 <= float(self.init_log_std) <= 2.0
+        ):
+            raise bad("init_log_std", "a number in [-10, 2]")
+        if (
+            not isinstance(self.hidden, list | tuple)
+            or not self.hidden
+            or any(isinstance(h, bool) or not isinstance(h, int) or h < 1 for h in self.hidden)
+            or len(set(self.hidden)) != 1
+        ):
+            raise bad("hidden", "a non-empty list of equal positive integers, e.g. [128, 128]")
+        self.hidden = [int(h) for h in self.hidden]
+        if self.residual_base is not None and not isinstance(self.residual_base, str):
+            raise bad("residual_base", "null or a policy name such as 'sky'")
+        if not isinstance(self.residual_base_kwargs, Mapping):
+            raise bad("residual_base_kwargs", "a mapping of policy options")
+        self.residual_base_kwargs = dict(self.residual_base_kwargs)
+        if self.residual_mode not in ("velocity", "offset"):
+            raise bad("residual_mode", "'velocity' or 'offset'")
+        if self.residual_mode == "offset" and self.residual_base is None:
+            raise bad("residual_mode", "'velocity' when residual_base is null")
+        if (
+            not isinstance(self.offset_scale_m, list | tuple)
+            or len(self.offset_scale_m) != 3
+            or any(
+                not isinstance(v, int | float) or not 0.0 <= v <= 100.0 for v in self.offset_scale_m
+            )
+        ):
+            raise bad("offset_scale_m", "three numbers in [0, 100] (along, left, up) [m]")
+        self.offset_scale_m = [float(v) for v in self.offset_scale_m]
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | None) -> MARLSettings:
+        """Settings from a mapping; unknown keys raise ``ValueError`` listing the valid ones."""
+        d = dict(d or {})
+        valid = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(set(d) - set(valid))
+        if unknown:
+            raise ValueError(
+                f"unknown torchrl setting(s) {unknown}; valid settings are {', '.join(valid)}"
+            )
+        return cls(**d)
+
+    @property
+    def actor_extra_inputs(self) -> int:
+        """Entries the actor reads beside the observation: the base command (velocity mode)."""
+        return 3 if (self.residual_base is not None and self.residual_mode == "velocity") else 0
+
+    @property
+    def centralised_critic(self) -> bool:
+        """Whether the critic sees the global state (MAPPO)."""
+        return self.algorithm == "mappo"
+
+
+def build_modules(
+    settings: MARLSettings, n_agents: int, actor_dim: int, critic_dim: int
+) -> tuple[Any, Any]:
+    """The actor (ProbabilisticActor) and critic (TensorDictModule) of TorchRL.
+
+    Keys: actor reads ``("agents", "observation")`` and writes ``("agents", "action")`` and
+    ``("agents", "action_log_prob")``; the critic reads ``("agents", "critic_input")`` and
+    writes ``("agents", "state_value")``.
+    """
+    import torch
+    from tensordict.nn import AddStateIndependentNormalScale, TensorDictModule
+    from torch import nn
+    from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor
+
+    # Parameter sharing with decentralised inputs is one MLP applied to every agent's row
+    # (the last dimension), which is what MultiAgentMLP(share_params=True,
+    # centralized=False) computes; TorchRL's MLP is used because, with torchrl 0.14,
+    # MultiAgentMLP's vmapped parameters receive no gradient through ClipPPOLoss's
+    # functional parameters (zero gradient on every weight, checked here).
+    depth, width = len(settings.hidden), settings.hidden[0]
+    loc_net = MLP(
+        in_features=actor_dim,
+        out_features=3,
+        depth=depth,
+        num_cells=width,
+        activation_class=nn.Tanh,
+    )
+    if settings.residual_base is not None:
+        # start at the base policy: zero mean output
+        with torch.no_grad():
+            for p in loc_net.parameters():
+                last = p
+            last.zero_()  # the bias of the output layer
+            for name, p in loc_net.named_parameters():
+                if name.endswith("weight") and p.shape[0] == 3:
+                    p.mul_(0.01)
+    scale = AddStateIndependentNormalScale(
+        3, scale_mapping="exp", init_value=float(settings.init_log_std)
+    )
+    actor_module = TensorDictModule(
+        nn.Sequential(loc_net, scale),
+        in_keys=[("agents", "observation")],
+        out_keys=[("agents", "loc"), ("agents", "scale")],
+    )
+    actor = ProbabilisticActor(
+        module=actor_module,
+        in_keys=[("agents", "loc"), ("agents", "scale")],
+        out_keys=[("agents", "action")],
+        distribution_class=IndependentNormal,
+        return_log_prob=True,
+        log_prob_key=("agents", "action_log_prob"),
+    )
+    critic_net = MLP(
+        in_features=critic_dim,
+        out_features=1,
+        depth=depth,
+        num_cells=width,
+        activation_class=nn.Tanh,
+    )
+    critic = TensorDictModule(
+        critic_net,
+        in_keys=[("agents", "critic_input")],
+        out_keys=[("agents", "state_value")],
+    )
+    return actor, critic
+
+
+def base_command_before(
+    settings: MARLSettings, base: Any, observations: Mapping[str, Any], agents: list[str]
+) -> np.ndarray | None:
+    """The base command ``(N, 3)`` the actor reads (velocity mode), else None.
+
+    Call once per step, before the actor; :func:`swarm_command` then uses it.
+    """
+    if settings.residual_base is None or settings.residual_mode != "velocity":
+        return None
+    acts = base.act(observations)
+    return np.stack([acts[a] for a in agents]).astype(np.float32)
+
+
+def swarm_command(
+    settings: MARLSettings,
+    raw: np.ndarray,
+    base: Any,
+    base_cmd: np.ndarray | None,
+    observations: Mapping[str, Any],
+    agents: list[str],
+) -> np.ndarray:
+    """The velocity command ``(N, 3)`` in ``[-1, 1]`` of the network's output ``raw (N, 3)``.
+
+    No base: ``clip(raw)``. Velocity mode: ``clip(base_cmd + residual_scale * clip(raw))``.
+    Offset mode: the base column with every slot moved by ``clip(raw) * offset_scale_m``.
+    """
+    a = np.clip(raw, -1.0, 1.0)
+    if settings.residual_base is None:
+        return a
+    if settings.residual_mode == "velocity":
+        assert base_cmd is not None
+        return np.clip(base_cmd + settings.residual_scale * a, -1.0, 1.0)
+    base.set_slot_shifts(a * np.asarray(settings.offset_scale_m))
+    acts = base.act(observations)
+    return np.stack([acts[x] for x in agents]).astype(np.float32)
+
+
+def load_marl_checkpoint(path: str | Path) -> dict[str, Any]:
+    """Read a checkpoint written by :meth:`MARLTrainer.save` (``ValueError`` if it is not one)."""
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no TorchRL checkpoint at {path}")
+    try:
+        d = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # a truncated or foreign file
+        raise ValueError(f"{path} is not a readable coopnav TorchRL checkpoint: {exc}") from exc
+    if not isinstance(d, dict) or d.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path} is not a coopnav TorchRL checkpoint (format coopnav-marl-1)")
+    return d

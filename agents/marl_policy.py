@@ -1,0 +1,126 @@
+"""A policy trained by ``coopnav train --backend torchrl`` (MAPPO or IPPO), for evaluation.
+
+The checkpoint (``final_model.pt`` or ``checkpoints/marl_<N>_steps.pt``, or the run folder)
+holds the actor's weights, the backend's settings and the environment settings it was trained
+in. :class:`MARLPolicy` acts deterministically (the Gaussian's mean), as PPO evaluations do;
+a residual policy (``residual_base``) rebuilds its base heuristic on the evaluation
+environment and adds the learned command to it, exactly as in training. The critic is not
+needed to act and is not loaded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.marl_nets import (
+    MARLSettings,
+    base_command_before,
+    build_modules,
+    load_marl_checkpoint,
+    swarm_command,
+)
+
+__all__ = ["MARLPolicy", "resolve_marl_checkpoint"]
+
+
+def resolve_marl_checkpoint(path: str | Path) -> Path:
+    """The checkpoint file of ``path``: the file itself, or ``final_model.pt`` of a run folder.
+
+    ``"pretrained:<name>"`` is not resolved here (see :func:`agents.make_policy`).
+    """
+    p = Path(path)
+    if p.is_dir():
+        p = p / "final_model.pt"
+    if not p.is_file():
+        raise FileNotFoundError(
+            f"no TorchRL checkpoint at {path} (expected a .pt file of `coopnav train --backend "
+            "torchrl` or its run folder)"
+        )
+    return p
+
+
+class MARLPolicy:
+    """Deterministic shared actor of a TorchRL MAPPO/IPPO checkpoint.
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+        The environment to act in (its observation size must match the checkpoint's).
+    path : str or Path
+        Checkpoint file or run folder.
+    make_base : callable, optional
+        ``make_base(name, env, **options)`` builds the base heuristic of a residual policy
+        (:func:`agents.make_policy`, which passes itself).
+    """
+
+    name = "mappo"
+
+    def __init__(self, env: Any, path: str | Path, make_base: Any = None) -> None:
+        import torch
+
+        ckpt = load_marl_checkpoint(resolve_marl_checkpoint(path))
+        self.settings = MARLSettings.from_dict(ckpt["settings"])
+        self.name = self.settings.algorithm
+        self.env = env
+        base_env = getattr(env, "unwrapped", env)
+        self.agents = list(base_env.possible_agents)
+        n = len(self.agents)
+        if n != int(ckpt["n_agents"]):
+            raise ValueError(
+                f"the checkpoint was trained with {ckpt['n_agents']} UAVs, the environment has {n}"
+            )
+        obs_dim = int(base_env.observation_space(self.agents[0]).shape[0])
+        extra = self.settings.actor_extra_inputs
+        if obs_dim + extra != int(ckpt["actor_dim"]):
+            raise ValueError(
+                f"observation size {obs_dim} does not match the checkpoint's actor input "
+                f"{ckpt['actor_dim']} (trained in another environment configuration)"
+            )
+        self.env_kwargs: dict[str, Any] = dict(ckpt["env_kwargs"])
+        actor, _critic = build_modules(
+            self.settings, n, int(ckpt["actor_dim"]), int(ckpt["critic_dim"])
+        )
+        actor.load_state_dict(ckpt["actor"])
+        actor.eval()
+        self._actor = actor
+        self._torch = torch
+        self._base = None
+        if self.settings.residual_base is not None:
+            if make_base is None:
+                raise ValueError(
+                    "this checkpoint is a residual policy: pass make_base (agents.make_policy)"
+                )
+            self._base = make_base(
+                self.settings.residual_base, env, **self.settings.residual_base_kwargs
+            )
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the base heuristic (the network itself has no state)."""
+        if self._base is not None:
+            self._base.reset(seed)
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The mean action of every UAV, combined with the base policy as in training."""
+        from tensordict import TensorDict
+
+        live = list(observations)
+        if not live:
+            return {}
+        if live != self.agents:
+            raise ValueError(
+                "a TorchRL swarm policy acts for the whole swarm at once; got observations of "
+                f"{live}, expected {self.agents}"
+            )
+        obs = np.stack([np.asarray(observations[a], dtype=np.float32) for a in self.agents])
+        base_cmd = base_command_before(self.settings, self._base, observations, self.agents)
+        inp = obs if base_cmd is None else np.concatenate([obs, base_cmd], axis=1)
+        td = TensorDict({("agents", "observation"): self._torch.from_numpy(inp[None])}, [1])
+        with self._torch.no_grad():
+            td = self._actor.module[0](td)  # the loc/scale module: the mean is "loc"
+        mean = td["agents", "loc"][0].numpy()
+        cmd = swarm_command(self.settings, mean, self._base, base_cmd, observations, self.agents)
+        return {a: cmd[i].astype(np.float32) for i, a in enumerate(self.agents)}

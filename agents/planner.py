@@ -1,0 +1,185 @@
+"""A privileged planner: the headroom reference of the learning study, not a baseline.
+
+:class:`PrivilegedPlanner` may use everything the simulator knows: the city, the satellites,
+the true positions and errors, and the future itself, since it looks ahead in deep copies of
+the environment. Each look-ahead draws its own measurement noise (the copy's generator is
+reseeded, the same for every candidate of a step), so the planner knows the geometry of the
+future exactly but not its noise: it cannot pick a path for a lucky noise draw. It chooses the
+swarm's velocity commands by sampling-based model-predictive control: at every step it
+
+1. proposes ``n_samples`` candidate plans: the command of a base heuristic (default
+   :class:`~agents.heuristics.SpreadColumnPolicy`, copied with the environment so that it
+   keeps planning the route) plus a per-UAV velocity offset held for the horizon (one
+   candidate is always the base alone, offset zero);
+2. flies each candidate ``horizon`` steps in a deep copy of the environment (with fresh noise) and
+   scores it by
+   the swarm's mean *true* cooperative 3-D error (the estimate's error where there is no
+   cooperative fix) over the horizon, plus ``crash_cost_m`` if any UAV hits a building, minus
+   ``progress_weight_m`` times the swarm's mean progress reward (the decrease of the
+   remaining route, so that the plan still reaches the goal);
+3. refits the offsets' Gaussian to the best ``n_elite`` candidates (cross-entropy method) for
+   ``iterations`` rounds and applies the first command of the best plan found.
+
+It is slow (``n_samples * iterations * horizon`` environment steps per step, about 0.2-0.5 s
+per step with the defaults), uses information no on-board policy has, and is reported as a
+reference only: how much lower the error could be on the same episodes, so that the share of
+the gap between ``formation`` and the best possible that a learned policy closes can be
+stated. Its result is an estimate of the headroom from above (a better planner could do
+better still), not a bound.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PrivilegedPlanner"]
+
+
+class PrivilegedPlanner:
+    """Cross-entropy MPC over offsets to a base heuristic, scored with the truth.
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+        The environment itself (the planner copies it; it must be the object being stepped).
+    base : Policy
+        The base heuristic, acting in ``env`` (:func:`agents.make_policy` builds ``spread``
+        unless told otherwise with ``planner@base='sky'``).
+    horizon : int
+        Look-ahead steps, >= 1.
+    n_samples, n_elite, iterations : int
+        Candidates per CEM round, elite size, rounds.
+    offset_std : float
+        Initial standard deviation of the per-UAV velocity offsets (fraction of max speed).
+    crash_cost_m : float
+        Cost of a crash in the look-ahead, in metres of error.
+    progress_weight_m : float
+        Metres of error one unit of the progress reward is worth.
+    noise_samples : int
+        Independent measurement-noise draws each candidate is flown with (the cost is their
+        mean; the same draws for every candidate of a step).
+    seed : int
+        Seed of the planner's own sampling generator (reset per episode with the episode seed).
+    """
+
+    name = "planner"
+
+    def __init__(
+        self,
+        env: Any,
+        base: Any,
+        horizon: int = 6,
+        n_samples: int = 12,
+        n_elite: int = 3,
+        iterations: int = 2,
+        offset_std: float = 0.3,
+        crash_cost_m: float = 1000.0,
+        progress_weight_m: float = 1.0,
+        noise_samples: int = 1,
+        seed: int = 0,
+    ) -> None:
+        for name, v, lo in (
+            ("horizon", horizon, 1),
+            ("n_samples", n_samples, 1),
+            ("n_elite", n_elite, 1),
+            ("iterations", iterations, 1),
+            ("noise_samples", noise_samples, 1),
+        ):
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise ValueError(f"planner {name} must be an integer >= {lo}, got {v!r}")
+        if n_elite > n_samples:
+            raise ValueError(f"planner n_elite ({n_elite}) must be <= n_samples ({n_samples})")
+        if not (offset_std >= 0.0 and crash_cost_m >= 0.0 and progress_weight_m >= 0.0):
+            raise ValueError("planner offset_std, crash_cost_m, progress_weight_m must be >= 0")
+        self.env = env
+        self.base = base
+        self.horizon = horizon
+        self.n_samples = n_samples
+        self.n_elite = n_elite
+        self.iterations = iterations
+        self.offset_std = float(offset_std)
+        self.crash_cost_m = float(crash_cost_m)
+        self.progress_weight_m = float(progress_weight_m)
+        self.noise_samples = noise_samples
+        self.seed = int(seed)
+        self._rng = np.random.default_rng(seed)
+        base_env = getattr(env, "unwrapped", env)
+        self._agents = list(base_env.possible_agents)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reset the base heuristic and the sampling generator."""
+        self.base.reset(seed)
+        self._rng = np.random.default_rng(self.seed if seed is None else [self.seed, seed])
+
+    def _rollout(
+        self, offsets: np.ndarray, first_obs: Mapping[str, np.ndarray], noise_seed: int
+    ) -> float:
+        """Cost of flying base + ``offsets`` (N, 3) for the horizon in a copy of the world.
+
+        The copy's generator is reseeded with ``noise_seed`` (the same for every candidate of
+        a step: common random numbers), so the look-ahead draws measurement noise that is
+        independent of the real episode's: the planner chooses by the geometry, not by
+        foreseeing the noise.
+        """
+        env, base = copy.deepcopy((self.env, self.base))
+        getattr(env, "unwrapped", env)._rng = np.random.default_rng(noise_seed)
+        obs = dict(first_obs)
+        cost = 0.0
+        for _ in range(self.horizon):
+            if not env.agents:
+                break
+            cmd = base.act({a: obs[a] for a in env.agents})
+            acts = {
+                a: np.clip(cmd[a] + offsets[i], -1.0, 1.0).astype(np.float32)
+                for i, a in enumerate(self._agents)
+                if a in cmd
+            }
+            obs, _r, _te, _tr, infos = env.step(acts)
+            errs = [
+                i["coop_error_m"] if i["coop_fix"] else i["nav_error_m"] for i in infos.values()
+            ]
+            cost += float(np.mean(errs))
+            cost -= self.progress_weight_m * float(
+                np.mean([i["reward_progress"] for i in infos.values()])
+            )
+            if any(i["collided"] for i in infos.values()):
+                cost += self.crash_cost_m
+                break
+            if all(i["in_goal"] for i in infos.values()):
+                break
+        return cost
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The first command of the best plan found (see the module docstring)."""
+        live = list(observations)
+        if not live:
+            return {}
+        n = len(self._agents)
+        mean = np.zeros((n, 3))
+        std = np.full((n, 3), self.offset_std)
+        best_cost, best = np.inf, np.zeros((n, 3))
+        noise_seeds = self._rng.integers(0, 2**63 - 1, self.noise_samples)
+        for it in range(self.iterations):
+            cands = mean + std * self._rng.standard_normal((self.n_samples, n, 3))
+            if it == 0:
+                cands[0] = 0.0  # the base heuristic itself is always a candidate
+            costs = np.array(
+                [
+                    np.mean([self._rollout(c, observations, int(z)) for z in noise_seeds])
+                    for c in cands
+                ]
+            )
+            order = np.argsort(costs, kind="stable")
+            if costs[order[0]] < best_cost:
+                best_cost, best = float(costs[order[0]]), cands[order[0]].copy()
+            elite = cands[order[: self.n_elite]]
+            mean, std = elite.mean(axis=0), elite.std(axis=0) + 1e-3
+        cmd = self.base.act(observations)  # advances the real base heuristic by one step
+        return {
+            a: np.clip(cmd[a] + best[self._agents.index(a)], -1.0, 1.0).astype(np.float32)
+            for a in live
+        }

@@ -1,0 +1,646 @@
+"""MAPPO and IPPO on TorchRL: a centralised critic on ``state()``, parameter sharing, team credit.
+
+``coopnav train --backend torchrl --algorithm mappo`` (or ``ippo``) trains one policy shared by
+every UAV with TorchRL's multi-agent building blocks:
+
+* the actor is a :class:`torchrl.modules.MultiAgentMLP` (``share_params=True``, decentralised:
+  each UAV acts on its own observation) followed by a state-independent Gaussian scale
+  (:class:`tensordict.nn.AddStateIndependentNormalScale`) inside a
+  :class:`torchrl.modules.ProbabilisticActor`;
+* the critic is a second :class:`~torchrl.modules.MultiAgentMLP`. **MAPPO** feeds it the
+  environment's global state ``env.state()`` (true positions, estimation errors, sigmas,
+  satellites: what a centralised critic may see during training and the actor never sees)
+  together with the UAV's own observation (the "agent-specific global state" of Yu et al.,
+  *The Surprising Effectiveness of PPO in Cooperative Multi-Agent Games*, 2022); **IPPO**
+  feeds it the UAV's own observation only;
+* the loss is TorchRL's :class:`torchrl.objectives.ClipPPOLoss` and the advantages its
+  :class:`torchrl.objectives.value.GAE`.
+
+Why not BenchMARL
+-----------------
+BenchMARL 1.5 pins ``torchrl<0.12`` and needs ``torchvision``; with the CPU build of torch
+2.13 that this project installs, pip resolves it to torch 2.14.1 with the CUDA libraries
+(several GB) and torchvision, which does not import beside the CPU wheel. TorchRL 0.14 itself
+installs beside torch 2.13 and adds no other torch, so this backend uses TorchRL directly
+(the ``marl`` extra). The environment passes TorchRL's ``check_env_specs`` through its
+``PettingZooWrapper`` with and without ``state`` (tested), so BenchMARL tasks can wrap it too.
+
+Collection
+----------
+Rollouts come from :class:`coopnav_env.envs.BatchedUrbanCanyonEnv` (``n_copies`` swarms
+stepped with one array; copy ``k`` reset with ``seed + k``), not from TorchRL's
+``PettingZooWrapper``: the wrapper's per-step tensordict plumbing costs about three times the
+environment's own step here. The collected arrays are put in a ``TensorDict`` with TorchRL's
+multi-agent layout (``("agents", "observation")`` etc., batch ``[K, T]``, agents ``N``) for the
+loss and the advantage estimator.
+
+Episode ends
+------------
+A truncated episode (``max_steps``) is treated as terminal by the advantage estimator (no
+bootstrap from the last state): the batched environment resets a finished copy inside its
+step, so the state after the last step is gone. Episodes end at the goal or in a crash well
+before the default 200 steps in almost every training episode, so the bias is small.
+
+Residual policies
+-----------------
+With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the command of a
+hand-written base policy (:func:`agents.make_policy`), clipped to ``[-1, 1]``: residual policy
+learning (Silver et al. 2018; Johannink et al. 2019). The network's output is scaled by
+``residual_scale`` and its last layer starts at zero, so training starts from the base
+policy's behaviour and RL only has to find what to change. The base command is part of the
+actor's input. With ``residual_base: null`` the policy flies on its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import signal
+import sys
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from agents.marl_nets import (
+    CHECKPOINT_FORMAT,
+    MARLSettings,
+    base_command_before,
+    build_modules,
+    load_marl_checkpoint,
+    swarm_command,
+)
+from training.files import atomic_path, atomic_write_text, write_json, write_yaml
+from training.runs import (
+    checkpoint_candidates,
+    first_loadable,
+    open_run,
+    sigterm_as_interrupt,
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from training.config import TrainConfig
+
+__all__ = [
+    "MARLSettings",
+    "MARLTrainer",
+    "check",
+    "find_latest_checkpoint",
+    "settings_of",
+    "train",
+    "train_marl",
+]
+
+
+def _actor_inputs(obs: np.ndarray, base: np.ndarray | None) -> np.ndarray:
+    """The actor's input per UAV: its observation, and the base command if residual."""
+    return obs if base is None else np.concatenate([obs, base.astype(np.float32)], axis=-1)
+
+
+def _critic_inputs(obs: np.ndarray, state: np.ndarray | None) -> np.ndarray:
+    """The critic's input per UAV: (MAPPO) the global state beside its observation."""
+    if state is None:
+        return obs
+    n = obs.shape[-2]
+    tiled = np.broadcast_to(state[..., None, :], (*state.shape[:-1], n, state.shape[-1]))
+    return np.concatenate([tiled, obs], axis=-1)
+
+
+class _RunningStd:
+    """Running standard deviation of the discounted return (reward scaling, as SB3's)."""
+
+    def __init__(self, shape: tuple[int, ...], gamma: float) -> None:
+        self.gamma = gamma
+        self.ret = np.zeros(shape)
+        self.mean = 0.0
+        self.var = 1.0
+        self.count = 1e-4
+
+    def scale(self, reward: np.ndarray, done: np.ndarray) -> np.ndarray:
+        self.ret = self.ret * self.gamma + reward
+        x = self.ret.ravel()
+        b_mean, b_var, b_count = float(x.mean()), float(x.var()), x.size
+        delta = b_mean - self.mean
+        tot = self.count + b_count
+        self.mean += delta * b_count / tot
+        m2 = self.var * self.count + b_var * b_count + delta**2 * self.count * b_count / tot
+        self.var = m2 / tot
+        self.count = tot
+        self.ret[done] = 0.0
+        return reward / math.sqrt(self.var + 1e-8)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"mean": self.mean, "var": self.var, "count": self.count}
+
+    def load_state_dict(self, d: Mapping[str, Any]) -> None:
+        self.mean, self.var, self.count = float(d["mean"]), float(d["var"]), float(d["count"])
+
+
+class MARLTrainer:
+    """One MAPPO/IPPO training run on the batched environment (see the module docstring).
+
+    Parameters
+    ----------
+    settings : MARLSettings
+    env_kwargs : dict
+        ``urban_canyon_v0`` settings of every swarm copy.
+    seed : int
+        Copy ``k`` is reset with ``seed + k`` at the start; torch is seeded with ``seed``.
+    """
+
+    def __init__(self, settings: MARLSettings, env_kwargs: Mapping[str, Any], seed: int) -> None:
+        import torch
+        from torchrl.objectives import ClipPPOLoss, ValueEstimators
+
+        from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+        self.settings = settings
+        self.env_kwargs = dict(env_kwargs)
+        self.seed = int(seed)
+        torch.manual_seed(self.seed)
+        self.venv = BatchedUrbanCanyonEnv(settings.n_copies, **self.env_kwargs)
+        self.n_agents = self.venv.n_agents
+        obs_dim = self.venv.obs_dim
+        self.actor_dim = obs_dim + settings.actor_extra_inputs
+        state_dim = self.venv.config.state_dim if settings.centralised_critic else 0
+        self.critic_dim = obs_dim + state_dim
+        self.actor, self.critic = build_modules(
+            settings, self.n_agents, self.actor_dim, self.critic_dim
+        )
+        self.loss = ClipPPOLoss(
+            actor_network=self.actor,
+            critic_network=self.critic,
+            clip_epsilon=settings.clip_epsilon,
+            entropy_bonus=settings.entropy_coef > 0.0,
+            entropy_coeff=settings.entropy_coef,
+            critic_coeff=settings.critic_coef,
+            loss_critic_type="l2",
+            normalize_advantage=True,
+        )
+        self.loss.set_keys(
+            reward=("agents", "reward"),
+            action=("agents", "action"),
+            sample_log_prob=("agents", "action_log_prob"),
+            value=("agents", "state_value"),
+            done=("agents", "done"),
+            terminated=("agents", "terminated"),
+            advantage=("agents", "advantage"),
+            value_target=("agents", "value_target"),
+        )
+        self.loss.make_value_estimator(
+            ValueEstimators.GAE, gamma=settings.gamma, lmbda=settings.gae_lambda
+        )
+        self.optim = torch.optim.Adam(self.loss.parameters(), lr=settings.learning_rate)
+        self.reward_std = _RunningStd((settings.n_copies, self.n_agents), settings.gamma)
+        self.agent_steps = 0
+        self.iterations = 0
+        self._bases = self._make_bases()
+        obs, _ = self.venv.reset(seed=self.seed)
+        self._obs = obs.copy()
+        for b in self._bases:
+            if b is not None:
+                b.reset()
+        self._ep_return = np.zeros(settings.n_copies)
+        self._ep_err_sum = np.zeros(settings.n_copies)
+        self._ep_err_n = np.zeros(settings.n_copies)
+        self.episode_log: list[dict[str, float]] = []
+
+    # ---- collection -----------------------------------------------------------------------
+
+    def _make_bases(self) -> list[Any]:
+        s = self.settings
+        if s.residual_base is None:
+            return [None] * s.n_copies
+        from agents import make_policy
+
+        return [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
+
+    def _states(self) -> np.ndarray | None:
+        if not self.settings.centralised_critic:
+            return None
+        return np.stack([e.state() for e in self.venv.envs])
+
+    def collect(self) -> Any:
+        """One rollout of ``rollout_steps`` swarm steps of every copy, as a TensorDict."""
+        import torch
+        from tensordict import TensorDict
+        from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+        s = self.settings
+        k_, t_, n_ = s.n_copies, s.rollout_steps, self.n_agents
+        actor_in, critic_in, next_critic_in, acts, logps = [], [], [], [], []
+        rewards, dones, terms = [], [], []
+        agents = self.venv.possible_agents
+        state = self._states()
+        for _ in range(t_):
+            obs_d = [dict(zip(agents, self._obs[k])) for k in range(k_)]
+            base = self._before(obs_d)
+            a_in = _actor_inputs(self._obs, base)
+            c_in = _critic_inputs(self._obs, state)
+            # sample (TorchRL's modules return the distribution's mode unless told otherwise)
+            with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
+                td = TensorDict(
+                    {("agents", "observation"): torch.from_numpy(a_in)}, batch_size=[k_]
+                )
+                td = self.actor(td)
+            raw = td["agents", "action"].numpy()
+            cmd = np.stack(
+                [
+                    swarm_command(
+                        s,
+                        raw[k],
+                        self._bases[k],
+                        None if base is None else base[k],
+                        obs_d[k],
+                        agents,
+                    )
+                    for k in range(k_)
+                ]
+            )
+            obs, rew, terminated, truncated, infos, final_obs = self.venv.step(cmd)
+            done = terminated | truncated
+            # the critic's input after the step; a finished copy has been reset already, so
+            # its episode end is treated as terminal (no bootstrap, see _end_flags)
+            n_c_in = _critic_inputs(final_obs, self._states())
+            self._log_episodes(rew, done, infos)
+            scaled = (
+                self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
+                if (s.normalize_reward)
+                else rew
+            )
+            actor_in.append(a_in)
+            critic_in.append(c_in)
+            next_critic_in.append(n_c_in)
+            acts.append(raw)
+            logps.append(td["agents", "action_log_prob"].numpy())
+            rewards.append(scaled)
+            dones.append(done)
+            terms.append(done)
+            self._obs = obs.copy()
+            for kk in np.flatnonzero(done).tolist():
+                if self._bases[kk] is not None:
+                    self._bases[kk].reset()
+            state = self._states()
+        self.agent_steps += k_ * t_ * n_
+
+        def stack(xs: list[np.ndarray], dtype: Any = torch.float32) -> Any:
+            return torch.as_tensor(np.stack(xs, axis=1), dtype=dtype)  # [K, T, ...]
+
+        done_t = stack(dones, torch.bool)[..., None, None].expand(k_, t_, n_, 1)
+        term_t = stack(terms, torch.bool)[..., None, None].expand(k_, t_, n_, 1)
+        data = TensorDict(
+            {
+                ("agents", "observation"): stack(actor_in),
+                ("agents", "critic_input"): stack(critic_in),
+                ("agents", "action"): stack(acts),
+                ("agents", "action_log_prob"): stack(logps),
+                ("next", "agents", "critic_input"): stack(next_critic_in),
+                ("next", "agents", "reward"): stack(rewards)[..., None],
+                ("next", "agents", "done"): done_t.clone(),
+                ("next", "agents", "terminated"): term_t.clone(),
+            },
+            batch_size=[k_, t_],
+        )
+        return data
+
+    def _before(self, obs_d: list[dict[str, np.ndarray]]) -> np.ndarray | None:
+        """Every copy's base command the actor reads (velocity mode), else None."""
+        if self.settings.actor_extra_inputs == 0:
+            return None
+        agents = self.venv.possible_agents
+        return np.stack(
+            [base_command_before(self.settings, b, o, agents) for b, o in zip(self._bases, obs_d)]
+        )
+
+    def _log_episodes(self, rew: np.ndarray, done: np.ndarray, infos: list[dict]) -> None:
+        self._ep_return += rew.mean(axis=1)
+        for k, info in enumerate(infos):
+            errs = [v["coop_error_m"] for v in info.values() if v["coop_fix"]]
+            self._ep_err_sum[k] += sum(errs)
+            self._ep_err_n[k] += len(errs)
+        for k in np.flatnonzero(done).tolist():
+            info = infos[k]
+            self.episode_log.append(
+                {
+                    "return": float(self._ep_return[k]),
+                    "goal": float(all(v["in_goal"] for v in info.values())),
+                    "collision": float(any(v["collided"] for v in info.values())),
+                    "coop_error_m": float(self._ep_err_sum[k] / max(self._ep_err_n[k], 1.0)),
+                    "length": float(next(iter(info.values()))["step"]),
+                }
+            )
+            self._ep_return[k] = 0.0
+            self._ep_err_sum[k] = 0.0
+            self._ep_err_n[k] = 0.0
+
+    # ---- update ---------------------------------------------------------------------------
+
+    def update(self, data: Any) -> dict[str, float]:
+        """PPO epochs over one rollout; returns the mean losses."""
+        import torch
+
+        s = self.settings
+        with torch.no_grad():
+            self.loss.value_estimator(
+                data,
+                params=self.loss.critic_network_params,
+                target_params=self.loss.target_critic_network_params,
+            )
+        flat = data.reshape(-1)
+        n = flat.shape[0]
+        mb = max(1, s.minibatch_size // self.n_agents)
+        sums: dict[str, float] = {}
+        count = 0
+        for _ in range(s.epochs):
+            perm = torch.randperm(n)
+            for i in range(0, n, mb):
+                sub = flat[perm[i : i + mb]]
+                out = self.loss(sub)
+                total = out["loss_objective"] + out["loss_critic"]
+                if "loss_entropy" in out.keys():
+                    total = total + out["loss_entropy"]
+                self.optim.zero_grad()
+                total.backward()
+                torch.nn.utils.clip_grad_norm_(self.loss.parameters(), s.max_grad_norm)
+                self.optim.step()
+                for key in ("loss_objective", "loss_critic"):
+                    sums[key] = sums.get(key, 0.0) + float(out[key])
+                count += 1
+        self.iterations += 1
+        return {k: v / max(count, 1) for k, v in sums.items()}
+
+    # ---- checkpoints ----------------------------------------------------------------------
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything a resumed run or an evaluation needs."""
+        return {
+            "format": CHECKPOINT_FORMAT,
+            "settings": dataclasses.asdict(self.settings),
+            "env_kwargs": self.env_kwargs,
+            "n_agents": self.n_agents,
+            "actor_dim": self.actor_dim,
+            "critic_dim": self.critic_dim,
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "optimizer": self.optim.state_dict(),
+            "reward_std": self.reward_std.state_dict(),
+            "agent_steps": self.agent_steps,
+            "iterations": self.iterations,
+            "seed": self.seed,
+        }
+
+    def load_state_dict(self, d: Mapping[str, Any]) -> None:
+        """Continue from :meth:`state_dict` (weights, optimiser, reward scale, counters)."""
+        self.actor.load_state_dict(d["actor"])
+        self.critic.load_state_dict(d["critic"])
+        self.optim.load_state_dict(d["optimizer"])
+        self.reward_std.load_state_dict(d["reward_std"])
+        self.agent_steps = int(d["agent_steps"])
+        self.iterations = int(d["iterations"])
+
+    def save(self, path: str | Path) -> Path:
+        """Write :meth:`state_dict` to ``path`` atomically (temporary file, then rename)."""
+        import torch
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            torch.save(self.state_dict(), tmp)
+        return path
+
+    def train(
+        self,
+        total_agent_steps: int,
+        on_iteration: Callable[[dict[str, float]], None] | None = None,
+    ) -> None:
+        """Iterate collect/update until ``total_agent_steps`` agent-steps are reached."""
+        while self.agent_steps < total_agent_steps:
+            t0 = time.perf_counter()
+            data = self.collect()
+            t1 = time.perf_counter()
+            losses = self.update(data)
+            t2 = time.perf_counter()
+            recent = self.episode_log[-64:]
+            row = {
+                "iteration": float(self.iterations),
+                "agent_steps": float(self.agent_steps),
+                "collect_s": t1 - t0,
+                "update_s": t2 - t1,
+                **losses,
+            }
+            if recent:
+                for key in ("return", "goal", "collision", "coop_error_m", "length"):
+                    row[f"ep_{key}"] = float(np.mean([e[key] for e in recent]))
+            if on_iteration is not None:
+                on_iteration(row)
+
+
+CHECKPOINT_RE = re.compile(r"^marl_(\d+)_steps\.pt$")
+
+
+def settings_of(cfg: TrainConfig) -> tuple[MARLSettings, dict[str, Any]]:
+    """The backend's settings and the environment settings of a run configuration.
+
+    ``cfg.torchrl`` holds :class:`MARLSettings` fields plus an optional ``env`` mapping whose
+    entries override ``cfg.env`` for this backend (the learning study's rewards).
+    """
+    d = dict(cfg.torchrl)
+    env_over = d.pop("env", None) or {}
+    if not isinstance(env_over, Mapping):
+        raise ValueError(f"torchrl.env must be a mapping of environment settings, got {env_over!r}")
+    return MARLSettings.from_dict(d), {**cfg.env, **env_over}
+
+
+def check(cfg: TrainConfig) -> None:
+    """Validate the backend's settings before any work (``ValueError`` naming the setting)."""
+    settings, env_kwargs = settings_of(cfg)
+    try:
+        import tensordict  # noqa: F401
+        import torchrl  # noqa: F401
+    except ImportError as exc:
+        raise ImportError(
+            "the torchrl backend needs TorchRL: pip install torch==2.13.0 && "
+            'pip install -e ".[marl]"'
+        ) from exc
+    from coopnav_env.envs import make_config
+
+    make_config(**env_kwargs)  # environment settings
+    if settings.residual_base is not None:
+        from agents import POLICY_NAMES
+
+        if settings.residual_base.split("@")[0] not in POLICY_NAMES:
+            raise ValueError(
+                f"torchrl.residual_base must be a heuristic policy name, got "
+                f"{settings.residual_base!r}"
+            )
+
+
+def find_latest_checkpoint(out: str | Path) -> Path:
+    """The newest ``checkpoints/marl_<N>_steps.pt`` of a run folder that loads.
+
+    Checkpoints that do not load (a truncated file) are skipped with a warning naming them.
+    """
+    import warnings
+
+    folder = Path(out) / "checkpoints"
+    found = sorted(
+        (int(m.group(1)), p)
+        for p in folder.glob("marl_*_steps.pt")
+        if (m := CHECKPOINT_RE.match(p.name))
+    )
+    for _, p in reversed(found):
+        try:
+            load_marl_checkpoint(p)
+        except ValueError as exc:
+            warnings.warn(f"skipping a checkpoint that does not load: {exc}", stacklevel=2)
+            continue
+        return p
+    raise FileNotFoundError(f"no TorchRL checkpoint to resume from in {folder}")
+
+
+def train(cfg: TrainConfig) -> Path:
+    """``coopnav train --backend torchrl``: train and return the final model's path.
+
+    Writes ``config.yaml`` (resolved settings; ``env`` is what the policy was trained in, read
+    by ``coopnav evaluate``), ``logs/progress.csv`` (one row per iteration: agent-steps,
+    losses, return, goal and collision rate and mean cooperative error of the latest training
+    episodes), ``checkpoints/marl_<N>_steps.pt`` every ``checkpoint_freq`` agent-steps and on
+    Ctrl-C / SIGTERM, ``final_model.pt`` and ``run.json`` (agent-steps per second).
+    """
+    import torch
+
+    settings, env_kwargs = settings_of(cfg)
+    out = Path(cfg.out)
+    with open_run(cfg) as run:  # lock, fresh/overwrite/resume rules, interrupts (issue 15)
+        if cfg.resume == "latest" and run.nothing_to_do(cfg.timesteps):
+            run.say_finished()
+            return out / "final_model.pt"
+        resume = None
+        if cfg.resume == "latest":  # the newest that loads; a finished run: its final model
+            final = (
+                (run.finished["num_timesteps"], out / "final_model.pt") if run.finished else None
+            )
+            folder = out / "checkpoints"
+            candidates = checkpoint_candidates(folder, "marl_*_steps.pt", CHECKPOINT_RE, final)
+            resume = first_loadable(candidates, load_marl_checkpoint, folder, "TorchRL ")[1]
+        elif cfg.resume is not None:
+            resume = load_marl_checkpoint(Path(cfg.resume))
+        if resume is not None and resume["env_kwargs"] != env_kwargs:
+            raise ValueError(
+                f"cannot resume in {out}: the checkpoint was trained with {resume['env_kwargs']}, "
+                f"not {env_kwargs}"
+            )
+        torch.set_num_threads(cfg.torch_threads)
+        resolved = cfg.to_dict()
+        resolved["env"] = env_kwargs
+        resolved["backend"] = "torchrl"
+        if resume is None:
+            write_yaml(out / "config.yaml", resolved)
+        return train_marl(
+            out,
+            settings,
+            env_kwargs,
+            cfg.seed,
+            cfg.timesteps,
+            checkpoint_freq=cfg.checkpoint_freq,
+            resume=resume,
+            progress=cfg.progress_bar,
+        )
+
+
+def train_marl(
+    out: str | Path,
+    settings: MARLSettings,
+    env_kwargs: Mapping[str, Any],
+    seed: int,
+    timesteps: int,
+    checkpoint_freq: int = 0,
+    resume: Mapping[str, Any] | None = None,
+    progress: bool = True,
+) -> Path:
+    """Train and write ``out``: ``logs/progress.csv``, ``checkpoints/``, ``final_model.pt``.
+
+    ``timesteps`` and ``checkpoint_freq`` count agent-steps. Returns the final model's path.
+    """
+    import csv
+    import io
+    import warnings
+
+    out = Path(out)
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    trainer = MARLTrainer(settings, env_kwargs, seed)
+    if resume is not None:
+        trainer.load_state_dict(resume)
+    rows: list[dict[str, float]] = []
+    next_ckpt = [
+        (trainer.agent_steps // checkpoint_freq + 1) * checkpoint_freq if checkpoint_freq else 0
+    ]
+    t_start = time.perf_counter()
+    steps_start = trainer.agent_steps
+    bar = None
+    if progress:
+        try:
+            from tqdm import tqdm
+
+            bar = tqdm(total=timesteps, initial=trainer.agent_steps, unit="agent-step")
+        except ImportError:  # pragma: no cover
+            bar = None
+
+    def on_iteration(row: dict[str, float]) -> None:
+        row["wall_s"] = time.perf_counter() - t_start
+        rows.append(row)
+        keys: list[str] = []
+        for r in rows:
+            keys += [k for k in r if k not in keys]
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()})
+        atomic_write_text(out / "logs" / "progress.csv", buf.getvalue())
+        if bar is not None:
+            bar.update(int(row["agent_steps"]) - bar.n)
+            bar.set_postfix(
+                ret=f"{row.get('ep_return', float('nan')):.1f}",
+                goal=f"{row.get('ep_goal', float('nan')):.2f}",
+                err=f"{row.get('ep_coop_error_m', float('nan')):.2f}",
+            )
+        if checkpoint_freq and trainer.agent_steps >= next_ckpt[0]:
+            trainer.save(out / "checkpoints" / f"marl_{trainer.agent_steps}_steps.pt")
+            next_ckpt[0] = (trainer.agent_steps // checkpoint_freq + 1) * checkpoint_freq
+
+    old_term = sigterm_as_interrupt()
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*advantage normalization.*")
+            warnings.filterwarnings("ignore", message=".*requires_grad.*")
+            trainer.train(timesteps, on_iteration)
+    except KeyboardInterrupt:
+        saved = trainer.save(out / "checkpoints" / f"marl_{trainer.agent_steps}_steps.pt")
+        print(f"interrupted: saved {saved}; continue with --resume latest", file=sys.stderr)
+        raise
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+    if bar is not None:
+        bar.close()
+    final = trainer.save(out / "final_model.pt")
+    elapsed = time.perf_counter() - t_start
+    run = {
+        "backend": "torchrl",
+        "algorithm": settings.algorithm,
+        "seed": seed,
+        "agent_steps": trainer.agent_steps,
+        "num_timesteps": trainer.agent_steps,
+        "iterations": trainer.iterations,
+        "train_s": elapsed,
+        "agent_steps_per_s": round((trainer.agent_steps - steps_start) / max(elapsed, 1e-9), 1),
+        "settings": dataclasses.asdict(settings),
+        "env": dict(env_kwargs),
+        "finished": True,
+    }
+    write_json(out / "run.json", run)
+    return final

@@ -1,0 +1,686 @@
+"""The learning study: learned swarms against every heuristic and a privileged planner.
+
+``coopnav study`` regenerates ``docs/marl/`` (report, JSON, figures) from training runs:
+
+1. every policy flies the same held-out episodes (reset seeds from 1,000,000; training uses
+   seeds below) in the study's environment; a learned method contributes one row per
+   training seed, a heuristic one row; the privileged planner flies a subset (it costs
+   about 0.3 s per step);
+2. per method: the mean and the interquartile mean of the episode's mean cooperative 3-D
+   error and the goal rate, each with a 95 % stratified-bootstrap interval
+   (:mod:`training.stats`, over training seeds within episodes and over episodes); paired
+   differences against every heuristic by episode seed;
+3. behaviour descriptors per method (what was learned): spacing to the nearest neighbour,
+   altitude, the swarm's extent across its direction of travel, the share of UAV-steps
+   near an intersection or an open square, the swarm's distinct satellites, the time to the
+   goal;
+4. figures: learning curves with 95 % bands over seeds, the error per method with its
+   interval, and trajectories seen from above and from the side (altitude along the route).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from training.stats import (
+    Interval,
+    interquartile_mean,
+    paired_difference,
+    stratified_bootstrap_ci,
+)
+
+__all__ = [
+    "EpisodeResult",
+    "behaviour_descriptors",
+    "fly_episodes",
+    "main",
+    "summarise",
+]
+
+EVAL_SEED_START = 1_000_000
+NEAR_M = 10.0
+
+
+@dataclass
+class EpisodeResult:
+    """One episode of one policy: the figures the study compares."""
+
+    seed: int
+    coop_error_mean_m: float  # over UAV-steps with a cooperative fix (NaN if none)
+    p_fix: float  # share of UAV-steps with a cooperative fix
+    success: bool
+    collided: bool
+    length: int
+    descriptors: dict[str, float] = field(default_factory=dict)
+    pos_enu_m: np.ndarray | None = None  # (T+1, N, 3) true positions
+
+
+def _near_features(city: Any, xy: np.ndarray) -> np.ndarray:
+    """Whether each point (..., 2) is within NEAR_M of an intersection or an open square.
+
+    An intersection is the square where two streets cross (street width on each side); an
+    open square is an empty block. "Within" means inside the area grown by NEAR_M.
+    """
+    w = float(city.street_width_m) / 2.0 + NEAR_M
+    cx = np.asarray(city.street_centres_x_m)
+    cy = np.asarray(city.street_centres_y_m)
+    near = np.zeros(xy.shape[:-1], dtype=bool)
+    if cx.size and cy.size:
+        dx = np.min(np.abs(xy[..., 0, None] - cx), axis=-1)
+        dy = np.min(np.abs(xy[..., 1, None] - cy), axis=-1)
+        near |= (dx <= w) & (dy <= w)
+    sq = np.asarray(city.open_squares).reshape(-1, 2)
+    if sq.size and city.config is not None:
+        half = float(city.config.block_size_m) / 2.0 + NEAR_M
+        d = np.abs(xy[..., None, :] - sq)  # (..., k, 2)
+        near |= np.any(np.all(d <= half, axis=-1), axis=-1)
+    return near
+
+
+def behaviour_descriptors(env: Any, pos: np.ndarray, n_sats_swarm: np.ndarray) -> dict[str, float]:
+    """What a policy does, from an episode's true positions ``(T+1, N, 3)``.
+
+    ``spacing_m``: mean distance of a UAV to its nearest neighbour; ``altitude_m``: mean
+    altitude; ``cross_extent_m``: mean extent of the swarm across its direction of travel
+    (the smaller of its East and North extents: a column in one street has a small one, a
+    swarm that covers two streets or a square a large one); ``near_open_share``: share of
+    UAV-steps within 10 m of an intersection or an open square; ``swarm_sats``: mean distinct
+    satellites received by the swarm.
+    """
+    base = getattr(env, "unwrapped", env)
+    city = base.world.city
+    p = np.asarray(pos, dtype=float)
+    out: dict[str, float] = {}
+    if p.shape[1] > 1:
+        d = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
+        d[:, np.arange(p.shape[1]), np.arange(p.shape[1])] = np.inf
+        out["spacing_m"] = float(d.min(axis=2).mean())
+        ext = p[:, :, :2].max(axis=1) - p[:, :, :2].min(axis=1)
+        out["cross_extent_m"] = float(ext.min(axis=1).mean())
+    else:
+        out["spacing_m"] = math.nan
+        out["cross_extent_m"] = 0.0
+    out["altitude_m"] = float(p[:, :, 2].mean())
+    out["near_open_share"] = float(_near_features(city, p[:, :, :2]).mean())
+    out["swarm_sats"] = float(np.mean(n_sats_swarm)) if np.size(n_sats_swarm) else math.nan
+    return out
+
+
+def fly_episodes(
+    policy_name: str, env_kwargs: Mapping[str, Any], seeds: Sequence[int], keep_positions: bool
+) -> list[EpisodeResult]:
+    """Fly ``policy_name`` through ``reset(seed)`` for every seed; one env for all episodes."""
+    from agents import make_policy
+    from coopnav_env import urban_canyon_v0
+    from training.evaluate import run_episode
+
+    env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
+    policy = make_policy(policy_name, env)
+    out = []
+    for seed in seeds:
+        rec = run_episode(env, policy, int(seed))
+        err = rec.coop_error_m
+        fix = np.isfinite(err)
+        desc = (
+            behaviour_descriptors(env, rec.pos_enu_m, rec.n_sats_swarm)
+            if rec.pos_enu_m is not None
+            else {}
+        )
+        desc["time_to_goal_s"] = (
+            float(rec.length * env.unwrapped.config.dt_s) if rec.success else math.nan
+        )
+        out.append(
+            EpisodeResult(
+                seed=int(seed),
+                coop_error_mean_m=float(err[fix].mean()) if fix.any() else math.nan,
+                p_fix=float(fix.mean()) if fix.size else 0.0,
+                success=bool(rec.success),
+                collided=bool(rec.collided),
+                length=int(rec.length),
+                descriptors=desc,
+                pos_enu_m=rec.pos_enu_m if keep_positions else None,
+            )
+        )
+    env.close()
+    return out
+
+
+# ---- statistics ---------------------------------------------------------------------------
+
+
+def _matrix(runs: Sequence[Sequence[EpisodeResult]], key: str) -> np.ndarray:
+    """(runs, episodes) matrix of ``key``; an episode without any fix scores its crash cap."""
+    rows = []
+    for run in runs:
+        if key == "error":
+            rows.append([r.coop_error_mean_m for r in run])
+        elif key == "success":
+            rows.append([float(r.success) for r in run])
+        else:
+            rows.append([r.descriptors.get(key, math.nan) for r in run])
+    return np.array(rows, dtype=float)
+
+
+def summarise(
+    results: Mapping[str, Sequence[Sequence[EpisodeResult]]],
+    heuristics: Sequence[str],
+    reps: int = 2000,
+) -> dict[str, Any]:
+    """Per-method statistics and paired differences (see the module docstring)."""
+    methods: dict[str, Any] = {}
+    for name, runs in results.items():
+        err = _matrix(runs, "error")
+        succ = _matrix(runs, "success")
+        ok = np.all(np.isfinite(err), axis=0)  # episodes where every run had fixes
+        e = err[:, ok]
+        m: dict[str, Any] = {
+            "runs": len(runs),
+            "episodes": int(err.shape[1]),
+            "error_mean": stratified_bootstrap_ci(e, np.mean, reps).as_dict(),
+            "error_iqm": stratified_bootstrap_ci(e, interquartile_mean, reps).as_dict(),
+            "goal_rate": stratified_bootstrap_ci(succ, np.mean, reps).as_dict(),
+            "collision_rate": float(np.mean([[r.collided for r in run] for run in runs])),
+            "per_run_error_mean": [float(np.nanmean(row)) for row in err],
+            "per_run_goal_rate": [float(np.mean(row)) for row in succ],
+        }
+        desc: dict[str, float] = {}
+        keys = sorted({k for run in runs for r in run for k in r.descriptors})
+        for k in keys:
+            x = _matrix(runs, k)
+            desc[k] = float(np.nanmean(x)) if np.any(np.isfinite(x)) else math.nan
+        m["descriptors"] = desc
+        methods[name] = m
+    paired: dict[str, dict[str, Any]] = {}
+    for name, runs in results.items():
+        paired[name] = {}
+        for h in heuristics:
+            if h == name or h not in results:
+                continue
+            a, b = _matrix(runs, "error"), _matrix(results[h], "error")
+            if a.shape[1] != b.shape[1]:
+                continue
+            ok = np.all(np.isfinite(a), axis=0) & np.all(np.isfinite(b), axis=0)
+            iv, share = paired_difference(a[:, ok], b[:, ok], reps)
+            sa, sb = _matrix(runs, "success"), _matrix(results[h], "success")
+            giv, _ = paired_difference(sa, sb, reps)
+            paired[name][h] = {
+                "error_diff_m": iv.as_dict(),
+                "excludes_zero": iv.excludes_zero(),
+                "share_episodes_lower": share,
+                "goal_rate_diff": giv.as_dict(),
+            }
+    return {"methods": methods, "paired": paired}
+
+
+# ---- figures ------------------------------------------------------------------------------
+
+
+def _curves(run_dirs: Sequence[Path], key: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """(grid, values per run) of ``key`` in each run's logs/progress.csv, on a common grid."""
+    import csv
+
+    series = []
+    for d in run_dirs:
+        f = d / "logs" / "progress.csv"
+        if not f.is_file():
+            continue
+        with f.open() as fh:
+            rows = [r for r in csv.DictReader(fh) if r.get(key) not in (None, "")]
+        if not rows:
+            continue
+        x = np.array([float(r["agent_steps"]) for r in rows])
+        y = np.array([float(r[key]) for r in rows])
+        series.append((x, y))
+    if not series:
+        return None
+    hi = min(s[0][-1] for s in series)
+    lo = max(s[0][0] for s in series)
+    grid = np.linspace(lo, hi, 60)
+    vals = np.array([np.interp(grid, x, y) for x, y in series])
+    return grid, vals
+
+
+def plot_learning_curves(
+    groups: Mapping[str, Sequence[Path]], path: Path, ref: Mapping[str, float]
+) -> Path | None:
+    """Training-episode error and goal rate against agent-steps, mean and 95 % band over
+    seeds (t interval of the seed mean), one line per method; heuristics as dashed lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    drawn = False
+    for name, dirs in groups.items():
+        for ax, key, label in (
+            (axes[0], "ep_coop_error_m", "training episodes: mean coop error [m]"),
+            (axes[1], "ep_goal", "training episodes: goal rate"),
+        ):
+            c = _curves(dirs, key)
+            if c is None:
+                continue
+            grid, vals = c
+            mean = vals.mean(axis=0)
+            line = ax.plot(grid / 1e6, mean, label=f"{name} ({vals.shape[0]} seeds)")[0]
+            if vals.shape[0] > 1:
+                half = _t975(vals.shape[0] - 1) * vals.std(axis=0, ddof=1) / np.sqrt(len(vals))
+                ax.fill_between(
+                    grid / 1e6, mean - half, mean + half, color=line.get_color(), alpha=0.2
+                )
+            ax.set_xlabel("agent-steps [millions]")
+            ax.set_ylabel(label)
+            drawn = True
+    for h, v in ref.items():
+        axes[0].axhline(v, ls="--", lw=1, color="grey")
+        axes[0].annotate(
+            f"{h} (held-out)", (0.0, v), textcoords="offset points", xytext=(2, 2), fontsize=7
+        )
+    if not drawn:
+        plt.close(fig)
+        return None
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Learning curves: mean and 95 % band over training seeds")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _t975(dof: int) -> float:
+    """97.5 % quantile of Student's t (table for small dof, normal beyond)."""
+    table = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306}
+    return table.get(dof, 1.96 if dof > 30 else 2.2)
+
+
+def _save(fig: Any, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
+    """Mean and IQM of the cooperative error per method, with 95 % intervals."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(summary["methods"])
+    fig, ax = plt.subplots(figsize=(8, 0.45 * len(names) + 1.2))
+    y = np.arange(len(names))
+    for off, key, lab in ((-0.15, "error_mean", "mean"), (0.15, "error_iqm", "IQM")):
+        v = np.array([summary["methods"][n][key]["value"] for n in names])
+        lo = np.array([summary["methods"][n][key]["low"] for n in names])
+        hi = np.array([summary["methods"][n][key]["high"] for n in names])
+        ax.errorbar(v, y + off, xerr=[v - lo, hi - v], fmt="o", capsize=3, label=lab)
+    ax.set_yticks(y, names, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel("cooperative 3-D error per episode [m] (95 % stratified-bootstrap CI)")
+    ax.legend(loc="lower right", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_trajectories(
+    env_kwargs: Mapping[str, Any], seed: int, flights: Mapping[str, np.ndarray], path: Path
+) -> Path:
+    """One episode of several policies: from above (map) and from the side (altitude along
+    the route), so that formations that differ in height are told apart."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    from coopnav_env import urban_canyon_v0
+    from coopnav_env.sim.route import Polyline
+
+    env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
+    env.reset(seed=seed)
+    world = env.unwrapped.world
+    b = world.city.buildings
+    route = Polyline(np.asarray(world.route_xy_m))
+    names = list(flights)
+    fig, axes = plt.subplots(
+        2, len(names), figsize=(3.6 * len(names), 7.2), gridspec_kw={"height_ratios": [3, 1.4]}
+    )
+    axes = np.asarray(axes).reshape(2, len(names))
+    for j, name in enumerate(names):
+        pos = flights[name]
+        ax = axes[0, j]
+        for lo, hi in zip(b.min_m, b.max_m):
+            ax.add_patch(Rectangle(lo[:2], *(hi[:2] - lo[:2]), color="0.75", zorder=0, lw=0))
+        xy = np.asarray(world.route_xy_m)
+        ax.plot(xy[:, 0], xy[:, 1], "k:", lw=0.8, label="street route")
+        for i in range(pos.shape[1]):
+            ax.plot(pos[:, i, 0], pos[:, i, 1], lw=1.0)
+        ax.plot(*pos[0, :, :2].T, "g^", ms=4, label="start")
+        ax.plot(*world.goal_enu_m[:2], "r*", ms=10, label="goal")
+        lo_xy = np.minimum(pos[:, :, :2].min(axis=(0, 1)), world.goal_enu_m[:2]) - 40
+        hi_xy = np.maximum(pos[:, :, :2].max(axis=(0, 1)), world.goal_enu_m[:2]) + 40
+        ax.set_xlim(lo_xy[0], hi_xy[0])
+        ax.set_ylim(lo_xy[1], hi_xy[1])
+        ax.set_aspect("equal")
+        ax.set_title(_short(name), fontsize=9)
+        ax.set_xlabel("East [m]", fontsize=8)
+        if j == 0:
+            ax.set_ylabel("North [m]", fontsize=8)
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3)
+        side = axes[1, j]
+        t = np.arange(pos.shape[0])
+        s = route.project(
+            pos[:, :, :2].reshape(-1, 2),
+            np.zeros(pos.shape[0] * pos.shape[1]),
+            np.full(pos.shape[0] * pos.shape[1], route.length),
+        ).reshape(pos.shape[0], pos.shape[1])
+        for i in range(pos.shape[1]):
+            side.plot(s[:, i], pos[:, i, 2], lw=1.0)
+        side.set_ylim(0, 32)
+        side.set_xlabel("distance along the route [m]", fontsize=8)
+        if j == 0:
+            side.set_ylabel("altitude [m]", fontsize=8)
+        side.set_title(f"side view ({len(t) - 1} steps)", fontsize=8)
+    fig.suptitle(f"Episode seed {seed}: from above and from the side (one line per UAV)")
+    fig.tight_layout()
+    env.close()
+    return _save(fig, path)
+
+
+def _short(name: str) -> str:
+    """Policy label for plots: heuristic options abbreviated."""
+    base, _, opts = name.partition("@")
+    return base if not opts else f"{base} (tuned)"
+
+
+def _fmt_iv(d: Mapping[str, float], nd: int = 2) -> str:
+    return f"{d['value']:.{nd}f} [{d['low']:.{nd}f}, {d['high']:.{nd}f}]"
+
+
+def _write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(float(obj)) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def _interval(d: Mapping[str, float]) -> Interval:
+    return Interval(d["value"], d["low"], d["high"])
+
+
+# ---- command ------------------------------------------------------------------------------
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav study``."""
+    parser.add_argument(
+        "--runs",
+        nargs="+",
+        default=[],
+        metavar="NAME=DIR[,DIR...]",
+        help="learned methods: a name and its training run folders (one per seed), e.g. "
+        "mappo=runs/mappo_s0,runs/mappo_s1 (default: none)",
+    )
+    parser.add_argument(
+        "--heuristics",
+        nargs="+",
+        default=["formation", "sky", "spread"],
+        help="heuristic policies (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--episodes", type=int, default=100, help="held-out episodes (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--planner-episodes",
+        type=int,
+        default=20,
+        help="episodes of the privileged planner, the first ones of the set; 0 skips it "
+        "(default: %(default)s)",
+    )
+    parser.add_argument(
+        "--env-set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="environment settings of the study (default: the first run's)",
+    )
+    parser.add_argument("--out", default="docs/marl", help="output folder (default: %(default)s)")
+    parser.add_argument(
+        "--reps", type=int, default=2000, help="bootstrap replicates (default: %(default)s)"
+    )
+
+
+def _parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
+    out: dict[str, list[Path]] = {}
+    for item in items:
+        name, eq, dirs = item.partition("=")
+        if not eq or not name or not dirs:
+            raise ValueError(f"--runs entries are NAME=DIR[,DIR...], got {item!r}")
+        paths = [Path(d) for d in dirs.split(",") if d]
+        for p in paths:
+            if not (p / "final_model.pt").is_file() and not (p / "final_model.zip").is_file():
+                raise ValueError(f"run folder {p} has no final_model.pt or final_model.zip")
+        out[name] = paths
+    return out
+
+
+def _policy_name(run: Path) -> str:
+    if (run / "final_model.pt").is_file():
+        return f"torchrl:{run}"
+    return f"ppo:{run / 'final_model.zip'}"
+
+
+def _env_of(run: Path) -> dict[str, Any]:
+    if (run / "run.json").is_file():
+        d = json.loads((run / "run.json").read_text())
+        if "env" in d:
+            return dict(d["env"])
+    import yaml
+
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    return dict(cfg.get("env") or {})
+
+
+def run(args: argparse.Namespace) -> int:
+    """``coopnav study``: fly, summarise, write ``report.md``, ``report.json`` and figures."""
+    import yaml
+
+    t0 = time.perf_counter()
+    groups = _parse_runs(args.runs)
+    if args.episodes < 1:
+        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+    env_kwargs: dict[str, Any] = {}
+    first = next(iter(groups.values()), [])
+    if first:
+        env_kwargs = _env_of(first[0])
+    for item in args.env_set:
+        k, eq, v = item.partition("=")
+        if not eq:
+            raise ValueError(f"--env-set takes KEY=VALUE, got {item!r}")
+        env_kwargs[k] = yaml.safe_load(v)
+    seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.episodes))
+    results: dict[str, list[list[EpisodeResult]]] = {}
+    for h in args.heuristics:
+        print(f"flying {h} ({len(seeds)} episodes)", file=sys.stderr, flush=True)
+        results[h] = [fly_episodes(h, env_kwargs, seeds, keep_positions=True)]
+    for name, dirs in groups.items():
+        results[name] = []
+        for d in dirs:
+            print(f"flying {name} from {d} ({len(seeds)} episodes)", file=sys.stderr, flush=True)
+            results[name].append(fly_episodes(_policy_name(d), env_kwargs, seeds, True))
+    summary = summarise(results, list(args.heuristics), args.reps)
+    headroom: dict[str, Any] = {}
+    if args.planner_episodes > 0:
+        sub = seeds[: args.planner_episodes]
+        print(f"flying planner ({len(sub)} episodes)", file=sys.stderr, flush=True)
+        t_p = time.perf_counter()
+        plan = [fly_episodes("planner", env_kwargs, sub, keep_positions=True)]
+        sub_results = {n: [run[: len(sub)] for run in r] for n, r in results.items()}
+        sub_results["planner (privileged)"] = plan
+        headroom = summarise(sub_results, list(args.heuristics), args.reps)
+        headroom["episodes"] = len(sub)
+        headroom["planner_s"] = time.perf_counter() - t_p
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    figs = {}
+    ref = {h: summary["methods"][h]["error_mean"]["value"] for h in args.heuristics}
+    f = plot_learning_curves(groups, out / "learning_curves.png", ref)
+    if f is not None:
+        figs["learning_curves"] = f.name
+    figs["errors"] = plot_errors(summary, out / "errors.png").name
+    show = [h for h in ("formation", "spread") if h in results] + list(groups)[:2]
+    flights = {
+        n: results[n][0][0].pos_enu_m for n in show if results[n][0][0].pos_enu_m is not None
+    }
+    if flights:
+        figs["trajectories"] = plot_trajectories(
+            env_kwargs, seeds[0], flights, out / "trajectories.png"
+        ).name
+    runs_info = {}
+    for name, dirs in groups.items():
+        infos = []
+        for d in dirs:
+            rj = d / "run.json"
+            infos.append(json.loads(rj.read_text()) if rj.is_file() else {"dir": str(d)})
+        runs_info[name] = infos
+    data = {
+        "env": env_kwargs,
+        "episodes": len(seeds),
+        "seeds": [seeds[0], seeds[-1]],
+        "summary": summary,
+        "headroom": headroom,
+        "runs": runs_info,
+        "figures": figs,
+        "command": "coopnav study " + " ".join(sys.argv[2:]),
+        "wall_s": time.perf_counter() - t0,
+    }
+    _write(out / "report.json", json.dumps(_jsonable(data), indent=1, sort_keys=True))
+    _write(out / "report.md", report_markdown(data))
+    print(f"wrote {out / 'report.md'}", file=sys.stderr)
+    return 0
+
+
+def report_markdown(data: Mapping[str, Any]) -> str:
+    """The study's report as Markdown (tables from ``report.json``'s content)."""
+    s = data["summary"]
+    lines = [
+        "# Learning study: learned swarms against heuristics and a privileged planner",
+        "",
+        f"Environment settings `{json.dumps(data['env'], sort_keys=True)}`; "
+        f"{data['episodes']} held-out episodes (reset seeds {data['seeds'][0]}.."
+        f"{data['seeds'][1]}). Regenerate with `{data['command']}`.",
+        "",
+        "Per episode, the score is the mean cooperative 3-D error over UAV-steps with a "
+        "cooperative fix. A learned method has one run per training seed; intervals are 95 % "
+        "stratified-bootstrap intervals (training seeds within episodes, and episodes). "
+        "Paired differences use the same episodes for both policies.",
+        "",
+        "| method | runs | mean error [m] | IQM error [m] | goal rate | collisions | "
+        "per-seed mean error [m] |",
+        "|---|---:|---|---|---|---:|---|",
+    ]
+    for name, m in s["methods"].items():
+        lines.append(
+            f"| {name} | {m['runs']} | {_fmt_iv(m['error_mean'])} | {_fmt_iv(m['error_iqm'])} | "
+            f"{_fmt_iv(m['goal_rate'])} | {m['collision_rate']:.3f} | "
+            + ", ".join(f"{v:.2f}" for v in m["per_run_error_mean"])
+            + " |"
+        )
+    lines += [
+        "",
+        "## Paired differences (row minus column heuristic, same episodes)",
+        "",
+        "| method | vs | error difference [m] | CI excludes 0 | episodes lower | "
+        "goal-rate difference |",
+        "|---|---|---|---|---:|---|",
+    ]
+    for name, d in s["paired"].items():
+        for h, p in d.items():
+            lines.append(
+                f"| {name} | {h} | {_fmt_iv(p['error_diff_m'])} | "
+                f"{'yes' if p['excludes_zero'] else 'no'} | {p['share_episodes_lower']:.2f} | "
+                f"{_fmt_iv(p['goal_rate_diff'])} |"
+            )
+    keys = sorted({k for m in s["methods"].values() for k in m["descriptors"]})
+    lines += [
+        "",
+        "## What each policy does (behaviour descriptors, means over episodes and seeds)",
+        "",
+        "| method | " + " | ".join(keys) + " |",
+        "|---|" + "---:|" * len(keys),
+    ]
+    for name, m in s["methods"].items():
+        lines.append(
+            f"| {name} | "
+            + " | ".join(f"{m['descriptors'].get(k, math.nan):.2f}" for k in keys)
+            + " |"
+        )
+    lines += [
+        "",
+        "`spacing_m`: distance to the nearest other UAV; `altitude_m`; `cross_extent_m`: the "
+        "swarm's extent across its direction of travel (smaller of East/North extents); "
+        "`near_open_share`: share of UAV-steps within 10 m of an intersection or an open "
+        "square; `swarm_sats`: distinct satellites received by the swarm; `time_to_goal_s`: "
+        "over episodes that reached the goal.",
+    ]
+    h = data.get("headroom") or {}
+    if h:
+        lines += [
+            "",
+            f"## Headroom ({h['episodes']} episodes, the first of the set; the planner took "
+            f"{h['planner_s']:.0f} s)",
+            "",
+            "| method | mean error [m] | goal rate |",
+            "|---|---|---|",
+        ]
+        for name, m in h["methods"].items():
+            lines.append(f"| {name} | {_fmt_iv(m['error_mean'])} | {_fmt_iv(m['goal_rate'])} |")
+    figs = data.get("figures", {})
+    for key, title in (
+        ("errors", "Error per method"),
+        ("learning_curves", "Learning curves"),
+        ("trajectories", "Trajectories from above and from the side"),
+    ):
+        if key in figs:
+            lines += ["", f"![{title}]({figs[key]})"]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``coopnav study`` from the command line (``python -m training.marl_study``)."""
+    parser = argparse.ArgumentParser(prog="coopnav study", description=__doc__.split("\n")[0])
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,142 @@
+"""Statistics for comparing RL policies: interquartile mean and stratified bootstrap CIs.
+
+The definitions follow Agarwal et al., *Deep Reinforcement Learning at the Edge of the
+Statistical Precipice* (NeurIPS 2021) and its library ``rliable``: scores form a
+``(runs, tasks)`` matrix (here: training seeds x held-out episodes; a deterministic heuristic
+is one run); the interquartile mean (IQM) is the mean of the middle 50 % of all scores
+(``scipy.stats.trim_mean(x, 0.25)``: ``int(0.25 n)`` scores cut from each end); a stratified
+bootstrap resamples runs with replacement *within* each task and, with
+``task_bootstrap=True``, the tasks too; the CI is the percentile interval. ``rliable`` 1.2.0
+itself does not import beside the ``arch`` and ``pandas`` releases that pip resolves today
+(``TypeError: deprecate_kwarg()``), so the few lines it needs are here, tested against a
+direct formulation (``tests/training/test_stats.py``).
+
+Paired comparisons (:func:`paired_difference`) resample the same episodes for both policies,
+so that the episode-to-episode variation (city, route, satellites) cancels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "Interval",
+    "interquartile_mean",
+    "paired_difference",
+    "stratified_bootstrap_ci",
+]
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A point estimate with its confidence interval."""
+
+    value: float
+    low: float
+    high: float
+
+    def excludes_zero(self) -> bool:
+        """Whether the interval lies entirely above or below zero."""
+        return self.low > 0.0 or self.high < 0.0
+
+    def as_dict(self) -> dict[str, float]:
+        """``{"value", "low", "high"}``."""
+        return {"value": self.value, "low": self.low, "high": self.high}
+
+
+def interquartile_mean(x: np.ndarray) -> float:
+    """Mean of the middle 50 % of all entries of ``x`` (``scipy.stats.trim_mean(x, 0.25)``)."""
+    v = np.sort(np.asarray(x, dtype=float).ravel())
+    if v.size == 0:
+        raise ValueError("interquartile_mean of an empty array")
+    cut = int(0.25 * v.size)
+    return float(v[cut : v.size - cut].mean())
+
+
+def _check_scores(scores: np.ndarray) -> np.ndarray:
+    s = np.asarray(scores, dtype=float)
+    if s.ndim != 2 or s.shape[0] < 1 or s.shape[1] < 1:
+        raise ValueError(f"scores must be a (runs, tasks) matrix, got shape {s.shape}")
+    if not np.all(np.isfinite(s)):
+        raise ValueError("scores must be finite")
+    return s
+
+
+def stratified_bootstrap_ci(
+    scores: np.ndarray,
+    statistic: Callable[[np.ndarray], float],
+    reps: int = 2000,
+    confidence: float = 0.95,
+    seed: int = 0,
+    task_bootstrap: bool = True,
+) -> Interval:
+    """``statistic(scores)`` with its stratified-bootstrap percentile interval.
+
+    Parameters
+    ----------
+    scores : ndarray, shape (runs, tasks)
+    statistic : callable
+        Of a ``(runs, tasks)`` matrix, e.g. ``np.mean`` or :func:`interquartile_mean`.
+    reps : int
+        Bootstrap replicates.
+    confidence : float
+        Coverage of the interval, in (0, 1).
+    seed : int
+        Seed of the resampling generator (results are deterministic).
+    task_bootstrap : bool
+        Also resample the tasks (episodes); needed when there is a single run.
+    """
+    s = _check_scores(scores)
+    if not (0.0 < confidence < 1.0):
+        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
+    rng = np.random.default_rng(seed)
+    n_runs, n_tasks = s.shape
+    stats = np.empty(reps)
+    cols = np.arange(n_tasks)
+    for r in range(reps):
+        tasks = rng.integers(0, n_tasks, n_tasks) if task_bootstrap else cols
+        runs = rng.integers(0, n_runs, (n_runs, n_tasks))  # within each task
+        stats[r] = statistic(s[runs, tasks[None, :]])
+    alpha = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(stats, [alpha, 1.0 - alpha])
+    return Interval(float(statistic(s)), float(lo), float(hi))
+
+
+def paired_difference(
+    a: np.ndarray,
+    b: np.ndarray,
+    reps: int = 2000,
+    confidence: float = 0.95,
+    seed: int = 0,
+) -> tuple[Interval, float]:
+    """Mean of ``a - b`` over paired episodes, with a bootstrap CI; and P(a < b) by episode.
+
+    ``a`` and ``b`` are ``(runs, episodes)`` matrices over the same episodes (columns in the
+    same order); each method's runs are averaged per episode in every replicate after
+    resampling its runs, and the episodes are resampled once for both (pairing).
+
+    Returns
+    -------
+    interval : Interval
+        The mean difference and its percentile interval.
+    share_lower : float
+        Share of episodes where ``a``'s run-mean is below ``b``'s.
+    """
+    a, b = _check_scores(a), _check_scores(b)
+    if a.shape[1] != b.shape[1]:
+        raise ValueError(f"a and b must cover the same episodes, got {a.shape} and {b.shape}")
+    rng = np.random.default_rng(seed)
+    n = a.shape[1]
+    diffs = np.empty(reps)
+    for r in range(reps):
+        ep = rng.integers(0, n, n)
+        ra = rng.integers(0, a.shape[0], a.shape[0])
+        rb = rng.integers(0, b.shape[0], b.shape[0])
+        diffs[r] = float(a[ra][:, ep].mean() - b[rb][:, ep].mean())
+    alpha = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(diffs, [alpha, 1.0 - alpha])
+    per_ep = a.mean(axis=0) - b.mean(axis=0)
+    return Interval(float(per_ep.mean()), float(lo), float(hi)), float(np.mean(per_ep < 0.0))
