@@ -10,6 +10,7 @@ import argparse
 import dataclasses
 import json
 import sys
+import textwrap
 import time
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ import numpy as np
 # --------------------------------------------------------------------------------------------
 from reproduction.config import ReproduceConfig
 from reproduction.figures import write_figures
+from reproduction.files import write_text_atomic
 from reproduction.report import report_markdown
 from reproduction.scenario import (
     PaperScenario,
@@ -66,7 +68,7 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cfg_dict = config.to_dict()
-    (out / "config.json").write_text(json.dumps(cfg_dict, indent=2) + "\n")
+    write_text_atomic(out / "config.json", json.dumps(cfg_dict, indent=2) + "\n")
     raw = run_studies(config)
     t_sim = time.perf_counter() - t0
     summary = summarize(config, raw)
@@ -77,10 +79,11 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
         **summary,
         "timing": {"simulation_s": round(t_sim, 2), "total_s": round(runtime, 2)},
     }
-    (out / "results.json").write_text(
-        json.dumps(results, indent=1, default=_json_default, allow_nan=False) + "\n"
+    write_text_atomic(
+        out / "results.json",
+        json.dumps(results, indent=1, default=_json_default, allow_nan=False) + "\n",
     )
-    (out / "report.md").write_text(report_markdown(config, summary, figs, runtime))
+    write_text_atomic(out / "report.md", report_markdown(config, summary, figs, runtime))
     return out
 
 
@@ -124,27 +127,78 @@ def build_config(args: argparse.Namespace) -> ReproduceConfig:
     return ReproduceConfig.from_dict(data)
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``coopnav reproduce``."""
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument(
-        "--quick", action="store_true", help="small smoke-test configuration (well under a minute)"
+def _defaults_epilog() -> str:
+    """The configuration's defaults, for ``--help`` (every ``--set`` key with its value)."""
+    cfg = ReproduceConfig().to_dict()
+    scen = cfg.pop("scenario")
+
+    def items(d: dict[str, Any]) -> str:
+        return textwrap.fill(
+            ", ".join(f"{k}={json.dumps(v, separators=(',', ':'))}" for k, v in d.items()),
+            width=92,
+            initial_indent="  ",
+            subsequent_indent="  ",
+        )
+
+    return (
+        "configuration defaults (ReproduceConfig; change with --set KEY=VALUE):\n"
+        + items(cfg)
+        + "\n\nscenario defaults (PaperScenario; change with --set KEY=VALUE):\n"
+        + items(scen)
+        + "\n\n--quick (a smoke run) starts from ReproduceConfig.quick() instead, which changes:\n"
+        + items(_quick_changes())
     )
-    parser.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+
+
+def _quick_changes() -> dict[str, Any]:
+    """The fields ``--quick`` changes, with their values."""
+    full, quick = ReproduceConfig().to_dict(), ReproduceConfig.quick().to_dict()
+    return {k: v for k, v in quick.items() if full[k] != v}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav reproduce`` (defaults shown by ``--help``)."""
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = _defaults_epilog()
+    parser.add_argument("--out", required=True, help="output directory (required)")
     parser.add_argument(
-        "--config", default=None, help="JSON configuration, e.g. a previous run's config.json"
+        "--quick",
+        action="store_true",
+        help="smoke run, not the reproduction: the small ReproduceConfig.quick() configuration "
+        "(well under a minute; its report says so); default: %(default)s",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="random seed; default: %(default)s, i.e. the seed of --config, else "
+        f"{ReproduceConfig().seed}",
+    )
+    parser.add_argument(
+        "--config",
+        default=None,
+        help="JSON configuration, e.g. a previous run's config.json; default: %(default)s "
+        "(the defaults listed below, or --quick's)",
     )
     parser.add_argument(
         "--set",
         action="append",
         metavar="KEY=VALUE",
         help="override a configuration field (ReproduceConfig or PaperScenario;"
-        " VALUE parsed as JSON), e.g. --set covariance=paper "
-        "--set h_over_d=2 --set 'gaps_deg=[]'; repeatable",
+        " VALUE parsed as JSON), e.g. --set covariance=exact "
+        "--set h_over_d=2 --set 'gaps_deg=[]'; repeatable; default: none",
     )
-    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity study")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--no-figures", action="store_true", help="skip the PNG figures; default: %(default)s"
+    )
+    parser.add_argument(
+        "--no-sensitivity",
+        action="store_true",
+        help="skip the sensitivity study; default: %(default)s",
+    )
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress bar; default: %(default)s"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,5 +210,6 @@ def run(args: argparse.Namespace) -> int:
         return 2
     out = reproduce(cfg, args.out)
     extra = " and the figures" if cfg.figures else ""
-    print(f"wrote report.md, results.json, config.json{extra} to {out}")
+    smoke = " (a smoke run, not the reproduction)" if cfg.smoke_reasons() else ""
+    print(f"wrote report.md, results.json, config.json{extra} to {out}{smoke}")
     return 0

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from reproduction.config import AXES, FAIL_PLOT_M, PUBLISHED, THRESHOLD_3D_M, ReproduceConfig
+from reproduction.files import write_atomic
 from reproduction.simulation import epoch_times
 
 # --------------------------------------------------------------------------------------------
@@ -44,7 +45,7 @@ def write_figures(
 
     def save(fig: Any, name: str, caption: str) -> None:
         fig.tight_layout()
-        fig.savefig(out / name, dpi=110)
+        write_atomic(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
         plt.close(fig)
         figs.append((name, caption))
 
@@ -117,8 +118,10 @@ def write_figures(
         fig,
         "fig7_error_time.png",
         "Figure 7 analogue: canyon UAV position error (one realisation per epoch) over the "
-        "day, standalone vs cooperative; epochs without a standalone fix are drawn at 16 m "
-        "(yellow circles) as in the paper; the axis is clipped at +/-20 m.",
+        "day, standalone vs cooperative; epochs without a standalone fix"
+        + ("" if cfg.max_pdop is None else f" (or with PDOP > {cfg.max_pdop:g})")
+        + " are drawn at 16 m (yellow circles) as in the paper; the axis is clipped at "
+        "+/-20 m.",
     )
 
     # Figure 8: CDF of the 3-D error, SDT and DDT
