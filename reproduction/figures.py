@@ -107,7 +107,9 @@ def write_figures(
                 mfc="none",
                 mec="gold",
                 ms=7,
-                label="standalone: no fix (drawn at 16 m)",
+                label="standalone: no fix"
+                + ("" if cfg.max_pdop is None else f" or PDOP > {cfg.max_pdop:g}")
+                + " (drawn at 16 m)",
             )
         a.set_ylabel(f"{name} error [m]")
         a.set_ylim(-20, 20)

@@ -245,7 +245,8 @@ def _p3m_caveat(sens: dict[str, Any]) -> str:
         " It is not closest on everything: P(<3 m), standalone / SDT, is nearer the paper's "
         f"37 / 78 % with the iono-free factor ({_fmt(r['p3m_standalone'], 0)} / "
         f"{_fmt(r['p3m_sdt'], 0)} %, `iono-free` row of the sensitivity table) than "
-        f"without ({_fmt(d['p3m_standalone'], 0)} / {_fmt(d['p3m_sdt'], 0)} %): the larger "
+        f"without (`default` row: {_fmt(d['p3m_standalone'], 0)} / {_fmt(d['p3m_sdt'], 0)} %): "
+        "the larger "
         "user error puts fewer fixes within 3 m."
     )
 
