@@ -137,6 +137,8 @@ def test_outputs_exist_and_are_consistent(quick_run):
     assert math.isclose(row["difference"], row["reproduced"] - 57.53)
     assert len(r["comparison"]) == 18 + 2 + 10
     assert r["main"]["exclusions"]["standalone"]["epochs"] == 12
+    # every file went to a temporary name first; none is left behind
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
 
 
 def test_same_seed_gives_identical_results(tmp_path):
