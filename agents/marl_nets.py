@@ -202,14 +202,12 @@ def build_modules(
         activation_class=nn.Tanh,
     )
     if settings.residual_base is not None:
-        # start at the base policy: zero mean output
+        # start exactly at the base policy: the output layer is zero (its weight still gets
+        # a gradient, the hidden layers do once it is no longer zero)
         with torch.no_grad():
-            for p in loc_net.parameters():
-                last = p
-            last.zero_()  # the bias of the output layer
-            for name, p in loc_net.named_parameters():
-                if name.endswith("weight") and p.shape[0] == 3:
-                    p.mul_(0.01)
+            last = loc_net[-1]
+            last.weight.zero_()
+            last.bias.zero_()
     scale = AddStateIndependentNormalScale(
         3, scale_mapping="exp", init_value=float(settings.init_log_std)
     )

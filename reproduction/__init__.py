@@ -60,7 +60,6 @@ Modules, one job each
 ``tables``      reproduced vs published numbers, and the paper's claims checked
 ``figures``     the PNG figures
 ``report``      the Markdown report
-``files``       atomic writes (a temporary file in the same folder, renamed into place)
 ``cli``         :func:`reproduce` (writes everything) and the ``coopnav reproduce`` command
 """
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
 import textwrap
 import time
 from pathlib import Path
@@ -17,18 +16,15 @@ from typing import Any
 
 import numpy as np
 
-# --------------------------------------------------------------------------------------------
-# Entry points
-# --------------------------------------------------------------------------------------------
 from reproduction.config import ReproduceConfig
 from reproduction.figures import write_figures
-from reproduction.files import write_text_atomic
 from reproduction.report import report_markdown
 from reproduction.scenario import (
     PaperScenario,
 )
 from reproduction.simulation import json_float, run_studies
 from reproduction.tables import summarize
+from training.files import atomic_write_text, ensure_folder, write_json
 
 __all__ = [
     "add_arguments",
@@ -64,11 +60,10 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
     """
     if not isinstance(config, ReproduceConfig):
         raise ValueError(f"config must be a ReproduceConfig, got {type(config).__name__}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = ensure_folder(out_dir)
     t0 = time.perf_counter()
     cfg_dict = config.to_dict()
-    write_text_atomic(out / "config.json", json.dumps(cfg_dict, indent=2) + "\n")
+    write_json(out / "config.json", cfg_dict)
     raw = run_studies(config)
     t_sim = time.perf_counter() - t0
     summary = summarize(config, raw)
@@ -79,11 +74,11 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
         **summary,
         "timing": {"simulation_s": round(t_sim, 2), "total_s": round(runtime, 2)},
     }
-    write_text_atomic(
+    atomic_write_text(
         out / "results.json",
         json.dumps(results, indent=1, default=_json_default, allow_nan=False) + "\n",
     )
-    write_text_atomic(out / "report.md", report_markdown(config, summary, figs, runtime))
+    atomic_write_text(out / "report.md", report_markdown(config, summary, figs, runtime))
     return out
 
 
@@ -98,7 +93,12 @@ def build_config(args: argparse.Namespace) -> ReproduceConfig:
     """The configuration from the command line (``--config``, ``--quick``, ``--set``...)."""
     data: dict[str, Any] = {}
     if args.config:
-        data = json.loads(Path(args.config).read_text())
+        try:
+            data = json.loads(Path(args.config).read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"--config {args.config} is not valid JSON: {exc}") from exc
+        if not isinstance(data, dict):
+            raise ValueError(f"--config {args.config} must hold a JSON object")
     elif args.quick:
         data = ReproduceConfig.quick().to_dict()
     scen = dict(data.pop("scenario", {}))
@@ -202,12 +202,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``coopnav reproduce``: returns the process exit status."""
-    try:
-        cfg = build_config(args)
-    except (ValueError, OSError, json.JSONDecodeError) as exc:
-        print(f"coopnav reproduce: {exc}", file=sys.stderr)
-        return 2
+    """``coopnav reproduce``: returns the process exit status (errors: one line and exit 2
+    for a bad configuration, see :mod:`training.cli`)."""
+    cfg = build_config(args)
     out = reproduce(cfg, args.out)
     extra = " and the figures" if cfg.figures else ""
     smoke = " (a smoke run, not the reproduction)" if cfg.smoke_reasons() else ""

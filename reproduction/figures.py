@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from reproduction.config import AXES, FAIL_PLOT_M, PUBLISHED, THRESHOLD_3D_M, ReproduceConfig
-from reproduction.files import write_atomic
 from reproduction.simulation import epoch_times
+from training.files import atomic_path
 
 # --------------------------------------------------------------------------------------------
 # Figures
@@ -45,7 +45,8 @@ def write_figures(
 
     def save(fig: Any, name: str, caption: str) -> None:
         fig.tight_layout()
-        write_atomic(out / name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+        with atomic_path(out / name, suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=110)
         plt.close(fig)
         figs.append((name, caption))
 

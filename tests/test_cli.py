@@ -43,5 +43,5 @@ def test_demo_is_deterministic_and_validates():
     import numpy as np
 
     assert np.array_equal(a.coop_err_m, b.coop_err_m, equal_nan=True)
-    with pytest.raises(ValueError, match="n_epochs must be >= 1"):
+    with pytest.raises(ValueError, match=r"n_epochs \(--epochs\) must be an integer >= 1"):
         run_demo(n_epochs=0)

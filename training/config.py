@@ -45,7 +45,10 @@ __all__ = [
     "apply_overrides",
     "backend_module",
     "check_backend_settings",
+    "check_bool",
+    "check_number",
     "load_config",
+    "parse_yaml",
 ]
 
 DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.yaml"
@@ -74,6 +77,20 @@ PRETRAIN_DEFAULTS: dict[str, Any] = {
 """Settings of the optional behaviour-cloning warm start (``pretrain``)."""
 
 
+def parse_yaml(text: str, what: str) -> Any:
+    """``yaml.safe_load(text)``, with a one-line ``ValueError`` naming ``what`` when the text
+    is not valid YAML (where and why)."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ValueError(f"{what} is not valid YAML{where}: {problem}") from None
+
+
 def backend_module(name: str) -> ModuleType:
     """Import and return the module of backend ``name`` (a key of :data:`BACKENDS`).
 
@@ -100,6 +117,52 @@ def check_backend_settings(cfg: TrainConfig) -> None:
     check = getattr(backend_module(cfg.backend), "check", None)
     if check is not None:
         check(cfg)
+
+
+def check_number(
+    name: str,
+    value: Any,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    integer: bool = False,
+    none: bool = False,
+) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``value`` is a finite number in the range.
+
+    ``integer`` asks for an int; ``none`` also admits None. Booleans are not numbers here.
+    """
+    if none and value is None:
+        return
+    kind = "an integer" if integer else "a number"
+    if integer:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    else:
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        ok = ok and math.isfinite(value)
+    if ok:
+        ok = (lo is None or (value > lo if lo_open else value >= lo)) and (
+            hi is None or (value < hi if hi_open else value <= hi)
+        )
+    if not ok:
+        if lo is not None and hi is not None:
+            rng = f" in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        elif lo is not None:
+            rng = f" {'>' if lo_open else '>='} {lo:g}"
+        elif hi is not None:
+            rng = f" {'<' if hi_open else '<='} {hi:g}"
+        else:
+            rng = ""
+        extra = " (or null)" if none else ""
+        raise ValueError(f"{name} must be {kind}{rng}{extra}, got {value!r}")
+
+
+def check_bool(name: str, value: Any) -> None:
+    """Raise ``ValueError`` naming ``name`` unless ``value`` is true or false."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{name} must be true or false, got {value!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -133,7 +196,7 @@ class TrainConfig:
         environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
         environment (one process; the same observations, rewards and seeding bit for bit, so
         the same training). ``"auto"`` takes the batched one where it applies
-        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1 and no render mode), SuperSuit otherwise
+        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1), SuperSuit otherwise
         (:meth:`vec_env_kind`); ``benchmarks/bench_env.py`` measures both (the batched one
         steps 64 copies about 1.5x as fast; see ``docs/performance.md``).
     checkpoint_freq : int, default 50_000
@@ -149,7 +212,12 @@ class TrainConfig:
         Keyword arguments of ``stable_baselines3.PPO`` (``policy`` included, default
         ``"MlpPolicy"``); unknown keys raise ``ValueError``.
     resume : str or None, default None
-        Checkpoint to continue from, or ``"latest"`` for the newest one in ``out``.
+        Checkpoint to continue from, or ``"latest"`` for the newest one in ``out`` that loads
+        (a finished run: its final model, when ``timesteps`` asks for more; see
+        :mod:`training.runs`).
+    overwrite : bool, default False
+        Start a fresh run in an ``out`` that holds an earlier run, removing that run's
+        outputs first (without it, or ``resume``, such a start is refused).
     normalize_reward : bool, default False
         Scale the rewards PPO learns from by a running estimate of the standard deviation of
         the discounted return (SB3 ``VecNormalize(norm_obs=False, norm_reward=True)``, with
@@ -192,6 +260,7 @@ class TrainConfig:
     env: dict[str, Any] = field(default_factory=dict)
     ppo: dict[str, Any] = field(default_factory=dict)
     resume: str | None = None
+    overwrite: bool = False
     normalize_reward: bool = False
     pretrain: dict[str, Any] | None = None
     progress_bar: bool = True
@@ -229,8 +298,22 @@ class TrainConfig:
             raise ValueError(
                 f"TrainConfig.normalize_reward must be true or false, got {self.normalize_reward!r}"
             )
-        if not str(self.out):
-            raise ValueError("TrainConfig.out must be a directory path")
+        if not isinstance(self.out, (str, Path)) or not str(self.out):
+            raise ValueError(f"TrainConfig.out must be a directory path, got {self.out!r}")
+        if self.resume is not None and (not isinstance(self.resume, str) or not self.resume):
+            raise ValueError(
+                f"TrainConfig.resume must be a checkpoint path or 'latest', got {self.resume!r}"
+            )
+        check_bool("TrainConfig.overwrite", self.overwrite)
+        if self.overwrite and self.resume is not None:
+            raise ValueError(
+                "--overwrite (start afresh, removing the earlier run) and --resume (continue "
+                "it) contradict each other; give one of them"
+            )
+        if not isinstance(self.device, str) or not self.device:
+            raise ValueError(
+                f"TrainConfig.device must be a PyTorch device name, got {self.device!r}"
+            )
         if self.backend not in BACKENDS:
             raise ValueError(
                 f"TrainConfig.backend must be one of {list(BACKENDS)}, got {self.backend!r}"
@@ -245,6 +328,12 @@ class TrainConfig:
                     f"TrainConfig.{name} must be a mapping, got {getattr(self, name)!r}"
                 )
         object.__setattr__(self, "env", dict(self.env))
+        if self.env.get("render_mode") is not None:
+            raise ValueError(
+                f"env.render_mode={self.env['render_mode']!r}: training does not render (it "
+                "would slow training to a few agent-steps per second and stall interrupts); "
+                "remove render_mode and render an episode of the trained policy instead"
+            )
         object.__setattr__(self, "ppo", dict(self.ppo))
         object.__setattr__(self, "rllib", dict(self.rllib))
         object.__setattr__(self, "torchrl", dict(self.torchrl))
@@ -292,17 +381,12 @@ class TrainConfig:
         return cls(**dict(data))
 
     def vec_env_kind(self) -> str:
-        """The vector environment the SB3 backend builds: ``vec_env``, with ``"auto"`` resolved to
-        ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or 1) without a
-        render mode, and to ``"supersuit"`` otherwise (another environment, worker processes,
-        or rendering, which the batched one does not do)."""
+        """The vector environment the SB3 backend builds: ``vec_env``, with ``"auto"``
+        resolved to ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or
+        1), and to ``"supersuit"`` otherwise (another environment, worker processes)."""
         if self.vec_env != "auto":
             return self.vec_env
-        batched = (
-            self.env_id == DEFAULT_ENV_ID
-            and self.num_cpus <= 1
-            and self.env.get("render_mode") is None
-        )
+        batched = self.env_id == DEFAULT_ENV_ID and self.num_cpus <= 1
         return "batched" if batched else "supersuit"
 
     def to_dict(self) -> dict[str, Any]:
@@ -328,16 +412,19 @@ def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) ->
     ValueError
         The file holds no such section.
     """
-    import yaml
-
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     if not p.is_file():
         raise FileNotFoundError(f"hyperparameter file not found: {p}")
-    data = yaml.safe_load(p.read_text()) or {}
+    data = parse_yaml(p.read_text(), f"hyperparameter file {p}") or {}
+    if not isinstance(data, Mapping):
+        raise ValueError(f"hyperparameter file {p} must be a mapping of sections, got {data!r}")
     key = env_id if env_id in data or ":" not in env_id else DEFAULT_ENV_ID
     if key not in data:
         raise ValueError(f"{p} has no section {env_id!r}; sections: {sorted(data)}")
     section = copy.deepcopy(data[key]) or {}
+    if not isinstance(section, Mapping):
+        raise ValueError(f"section {key!r} of {p} must be a mapping of settings, got {section!r}")
+    section = dict(section)
     section.setdefault("env_id", env_id)
     return section
 
@@ -353,15 +440,13 @@ def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str
     ValueError
         An item without ``=`` or with an empty key.
     """
-    import yaml
-
     out = copy.deepcopy(dict(config))
     for item in items:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key or any(not part for part in key.split(".")):
             raise ValueError(f"override {item!r} must look like key=value (dotted keys allowed)")
-        value = yaml.safe_load(raw) if raw.strip() else ""
+        value = parse_yaml(raw, f"the value of {item!r}") if raw.strip() else ""
         # YAML 1.1 reads "1e-4" as a string; accept it as a float
         if isinstance(value, str):
             try:

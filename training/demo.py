@@ -73,10 +73,12 @@ def run_demo(
     from coopnav_env.sim import CanyonMask, measure_relative_positions
     from coopnav_env.sim.swarm import RelativeSensingConfig
 
-    if n_epochs < 1:
-        raise ValueError(f"n_epochs must be >= 1, got {n_epochs}")
-    if not dt_s > 0:
-        raise ValueError(f"dt_s must be > 0, got {dt_s}")
+    if isinstance(n_epochs, bool) or not isinstance(n_epochs, int) or n_epochs < 1:
+        raise ValueError(f"n_epochs (--epochs) must be an integer >= 1, got {n_epochs!r}")
+    if not (isinstance(dt_s, (int, float)) and 0 < dt_s < float("inf")):
+        raise ValueError(f"dt_s (--dt) must be a finite number > 0, got {dt_s!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed (--seed) must be an integer >= 0, got {seed!r}")
     rng = np.random.default_rng(seed)
     const = default_constellation()
     model = ErrorModel(differential=differential)

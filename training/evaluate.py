@@ -19,14 +19,16 @@ in training: ``coopnav train`` keeps its reset seeds below
 Outputs in ``--out DIR``: ``report.json``, ``report.csv``, ``report.md`` (the table printed on
 the terminal), ``errors.npz`` (every error sample), ``error_cdf.png`` (empirical CDF of the
 error per policy) and ``trajectories_<policy>.png`` (top-down view of the first episode).
-Results are deterministic for fixed seeds: the env and every stochastic policy are reseeded
-with the episode seed.
+Every file is written atomically (:mod:`training.files`): a failed write leaves the earlier
+version. Results are deterministic for fixed seeds: the env and every stochastic policy are
+reseeded with the episode seed.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import math
 import re
@@ -40,8 +42,9 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
-from training.config import apply_overrides
+from training.config import apply_overrides, parse_yaml
 from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
+from training.files import atomic_path, atomic_write_text, ensure_folder, write_json
 
 __all__ = [
     "DEFAULT_EPISODES",
@@ -518,8 +521,17 @@ def evaluate(
     if len(set(policies)) != len(policies):
         raise ValueError(f"policy names must be unique, got {policies}")
     env_kwargs = dict(env_kwargs or {})
+    if out is not None:
+        ensure_folder(out)  # before any episode runs
     envs = {name: _make_env(env_id, env_kwargs) for name in policies}
-    made = {name: make_policy(name, envs[name]) for name in policies}
+    made = {}
+    for name in policies:
+        try:
+            made[name] = make_policy(name, envs[name])
+        except (ValueError, FileNotFoundError, ImportError):
+            raise
+        except Exception as exc:  # a damaged checkpoint: the loader's own error
+            raise ValueError(f"policy {name!r} does not load: {type(exc).__name__}: {exc}") from exc
 
     stats: list[PolicyStats] = []
     records: dict[str, list[EpisodeRecord]] = {}
@@ -549,16 +561,17 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
     out.mkdir(parents=True, exist_ok=True)
     files = report.files
     files["json"] = out / "report.json"
-    files["json"].write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+    write_json(files["json"], report.to_dict())
     files["csv"] = out / "report.csv"
     names = [f.name for f in PolicyStats.__dataclass_fields__.values()]
-    with files["csv"].open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(names)
-        for s in report.stats:
-            w.writerow([_csv_cell(getattr(s, k)) for k in names])
+    table = io.StringIO(newline="")
+    w = csv.writer(table)
+    w.writerow(names)
+    for s in report.stats:
+        w.writerow([_csv_cell(getattr(s, k)) for k in names])
+    atomic_write_text(files["csv"], table.getvalue())
     files["md"] = out / "report.md"
-    files["md"].write_text(_markdown_document(report))
+    atomic_write_text(files["md"], _markdown_document(report))
     files["npz"] = out / "errors.npz"
     arrays = {}
     for name, eps in report.episodes.items():
@@ -568,7 +581,8 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
         arrays[f"{_slug(name)}__standalone_error_m"] = np.concatenate(
             [e.standalone_error_m.ravel() for e in eps]
         )
-    np.savez_compressed(files["npz"], **arrays)
+    with atomic_path(files["npz"], suffix=".npz") as tmp:
+        np.savez_compressed(tmp, **arrays)
     if plots:
         files["cdf"] = plot_error_cdf(report, out / "error_cdf.png")
         for name, eps in report.episodes.items():
@@ -633,7 +647,8 @@ def plot_error_cdf(report: Report, path: str | Path) -> Path:
     ax.set_title("Navigation error per policy (held-out episodes)")
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=120)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)
     return path
 
@@ -690,7 +705,8 @@ def plot_trajectories(env: Any, record: EpisodeRecord, path: str | Path, title: 
     ax.set_title(f"{title}\n{record.length} steps, {outcome}", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return True
 
@@ -750,9 +766,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read_train_config(path: Path) -> dict[str, Any]:
-    import yaml
-
-    return dict(yaml.safe_load(path.read_text()) or {})
+    data = parse_yaml(path.read_text(), f"training config {path}") or {}
+    if not isinstance(data, Mapping):
+        raise ValueError(f"training config {path} must be a mapping of settings")
+    return dict(data)
 
 
 def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -806,28 +823,26 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``coopnav evaluate``; returns the exit status."""
-    try:
-        seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
-        if min(seeds) < EVAL_SEED_START:
-            print(
-                f"coopnav evaluate: warning: seeds below {EVAL_SEED_START} may have been seen "
-                "in training",
-                file=sys.stderr,
-            )
-        env_id, env_kwargs = _env_from_args(args)
-        report = evaluate(
-            args.policies,
-            seeds,
-            env_kwargs,
-            args.out,
-            env_id=env_id,
-            plots=not args.no_plots,
-            verbose=True,
+    """Run ``coopnav evaluate``; returns the exit status (errors: see :mod:`training.cli`)."""
+    seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
+    if min(seeds) < 0:
+        raise ValueError(f"--seeds must be >= 0, got {min(seeds)}")
+    if min(seeds) < EVAL_SEED_START:
+        print(
+            f"coopnav evaluate: warning: seeds below {EVAL_SEED_START} may have been seen "
+            "in training",
+            file=sys.stderr,
         )
-    except (ValueError, FileNotFoundError, ImportError) as exc:
-        print(f"coopnav evaluate: error: {exc}", file=sys.stderr)
-        return 2
+    env_id, env_kwargs = _env_from_args(args)
+    report = evaluate(
+        args.policies,
+        seeds,
+        env_kwargs,
+        args.out,
+        env_id=env_id,
+        plots=not args.no_plots,
+        verbose=True,
+    )
     print(report.to_markdown())
     if report.files:
         print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))

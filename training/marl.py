@@ -73,12 +73,12 @@ from agents.marl_nets import (
     load_marl_checkpoint,
     swarm_command,
 )
+from training.files import atomic_path, atomic_write_text, write_json, write_yaml
 from training.runs import (
-    atomic_path,
-    atomic_write_text,
+    checkpoint_candidates,
+    first_loadable,
+    open_run,
     sigterm_as_interrupt,
-    write_json,
-    write_yaml,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -514,32 +514,41 @@ def train(cfg: TrainConfig) -> Path:
 
     settings, env_kwargs = settings_of(cfg)
     out = Path(cfg.out)
-    resume = None
-    if cfg.resume is not None:
-        path = find_latest_checkpoint(out) if cfg.resume == "latest" else Path(cfg.resume)
-        resume = load_marl_checkpoint(path)
-        if resume["env_kwargs"] != env_kwargs:
+    with open_run(cfg) as run:  # lock, fresh/overwrite/resume rules, interrupts (issue 15)
+        if cfg.resume == "latest" and run.nothing_to_do(cfg.timesteps):
+            run.say_finished()
+            return out / "final_model.pt"
+        resume = None
+        if cfg.resume == "latest":  # the newest that loads; a finished run: its final model
+            final = (
+                (run.finished["num_timesteps"], out / "final_model.pt") if run.finished else None
+            )
+            folder = out / "checkpoints"
+            candidates = checkpoint_candidates(folder, "marl_*_steps.pt", CHECKPOINT_RE, final)
+            resume = first_loadable(candidates, load_marl_checkpoint, folder, "TorchRL ")[1]
+        elif cfg.resume is not None:
+            resume = load_marl_checkpoint(Path(cfg.resume))
+        if resume is not None and resume["env_kwargs"] != env_kwargs:
             raise ValueError(
                 f"cannot resume in {out}: the checkpoint was trained with {resume['env_kwargs']}, "
                 f"not {env_kwargs}"
             )
-    torch.set_num_threads(cfg.torch_threads)
-    resolved = cfg.to_dict()
-    resolved["env"] = env_kwargs
-    resolved["backend"] = "torchrl"
-    out.mkdir(parents=True, exist_ok=True)
-    if resume is None:
-        write_yaml(out / "config.yaml", resolved)
-    return train_marl(
-        out,
-        settings,
-        env_kwargs,
-        cfg.seed,
-        cfg.timesteps,
-        checkpoint_freq=cfg.checkpoint_freq,
-        resume=resume,
-        progress=cfg.progress_bar,
-    )
+        torch.set_num_threads(cfg.torch_threads)
+        resolved = cfg.to_dict()
+        resolved["env"] = env_kwargs
+        resolved["backend"] = "torchrl"
+        if resume is None:
+            write_yaml(out / "config.yaml", resolved)
+        return train_marl(
+            out,
+            settings,
+            env_kwargs,
+            cfg.seed,
+            cfg.timesteps,
+            checkpoint_freq=cfg.checkpoint_freq,
+            resume=resume,
+            progress=cfg.progress_bar,
+        )
 
 
 def train_marl(

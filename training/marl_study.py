@@ -230,17 +230,27 @@ def _curves(run_dirs: Sequence[Path], key: str) -> tuple[np.ndarray, np.ndarray]
     """(grid, values per run) of ``key`` in each run's logs/progress.csv, on a common grid."""
     import csv
 
+    # SB3 runs log the same figures under their TensorBoard names
+    sb3 = {
+        "agent_steps": "time/total_timesteps",
+        "ep_coop_error_m": "nav/coop_error_mean_m",
+        "ep_goal": "nav/goal_rate",
+    }
     series = []
     for d in run_dirs:
         f = d / "logs" / "progress.csv"
         if not f.is_file():
             continue
         with f.open() as fh:
-            rows = [r for r in csv.DictReader(fh) if r.get(key) not in (None, "")]
+            rows = list(csv.DictReader(fh))
+        xk, yk = "agent_steps", key
+        if rows and xk not in rows[0]:
+            xk, yk = sb3["agent_steps"], sb3.get(key, key)
+        rows = [r for r in rows if r.get(yk) not in (None, "") and r.get(xk) not in (None, "")]
         if not rows:
             continue
-        x = np.array([float(r["agent_steps"]) for r in rows])
-        y = np.array([float(r[key]) for r in rows])
+        x = np.array([float(r[xk]) for r in rows])
+        y = np.array([float(r[yk]) for r in rows])
         series.append((x, y))
     if not series:
         return None

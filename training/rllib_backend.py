@@ -67,20 +67,22 @@ from typing import Any
 
 from training.config import TrainConfig
 from training.envs import EVAL_SEED_START, make_env_fn
+from training.files import atomic_path, write_json, write_yaml
 from training.runs import (
-    atomic_path,
     check_same_environment,
-    latest_numbered,
-    sigterm_as_interrupt,
-    write_json,
-    write_yaml,
+    checkpoint_candidates,
+    first_loadable,
+    install_interrupt_handlers,
+    open_run,
 )
 
 __all__ = [
     "INSTALL_HINT",
     "SHARED_POLICY",
     "RLlibSettings",
+    "check",
     "check_address",
+    "check_checkpoint",
     "find_latest_rllib_checkpoint",
     "import_rllib",
     "is_rllib_checkpoint",
@@ -548,21 +550,45 @@ def is_rllib_checkpoint(path: str | Path) -> bool:
     return (Path(path) / "rllib_checkpoint.json").is_file()
 
 
-def find_latest_rllib_checkpoint(out: str | Path) -> Path:
-    """The checkpoint with the most agent-steps in ``out/checkpoints``.
+def check_checkpoint(path: Path) -> dict[str, int]:
+    """The counters of the RLlib checkpoint folder ``path``, after checking that it is one.
+
+    Ray is not started: the folder must hold RLlib's ``rllib_checkpoint.json`` and this
+    backend's :data:`STATE_FILE`, both readable JSON (checkpoint folders are written
+    atomically, so a complete one has both).
+
+    Raises
+    ------
+    ValueError
+        It is not a complete RLlib checkpoint.
+    """
+    if not is_rllib_checkpoint(path):
+        raise ValueError(f"{path} is not an RLlib checkpoint (no rllib_checkpoint.json)")
+    try:
+        json.loads((path / "rllib_checkpoint.json").read_text())
+        data = json.loads((path / STATE_FILE).read_text())
+        return {k: int(data.get(k, 0)) for k in _STATE_KEYS}
+    except (OSError, ValueError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path} is not a complete checkpoint: {exc}") from exc
+
+
+def find_latest_rllib_checkpoint(out: str | Path, final: tuple[int, Path] | None = None) -> Path:
+    """The newest complete checkpoint in ``out/checkpoints`` (or ``final``, a finished run's
+    final model, when it is newer); newer incomplete ones are skipped and named.
 
     Raises
     ------
     FileNotFoundError
         There is none.
     """
-    return latest_numbered(
-        Path(out) / "checkpoints", "rllib_*_steps", _CHECKPOINT_RE, "RLlib ", is_rllib_checkpoint
-    )
+    folder = Path(out) / "checkpoints"
+    candidates = checkpoint_candidates(folder, "rllib_*_steps", _CHECKPOINT_RE, final)
+    return first_loadable(candidates, check_checkpoint, folder, "RLlib ")[0]
 
 
-def resolve_resume(cfg: TrainConfig) -> Path | None:
-    """The checkpoint folder ``cfg.resume`` names (``"latest"``: the newest in ``cfg.out``).
+def resolve_resume(cfg: TrainConfig, finished: Mapping[str, Any] | None = None) -> Path | None:
+    """The checkpoint folder ``cfg.resume`` names (``"latest"``: the newest complete one in
+    ``cfg.out``, the final model of a ``finished`` run included).
 
     Raises
     ------
@@ -574,7 +600,10 @@ def resolve_resume(cfg: TrainConfig) -> Path | None:
     if cfg.resume is None:
         return None
     if cfg.resume == "latest":
-        return find_latest_rllib_checkpoint(cfg.out)
+        final = None
+        if finished is not None:
+            final = (int(finished["num_timesteps"]), Path(cfg.out) / "final_model")
+        return find_latest_rllib_checkpoint(cfg.out, final)
     p = Path(cfg.resume)
     if not p.exists():
         raise FileNotFoundError(f"checkpoint to resume from not found: {p}")
@@ -583,17 +612,11 @@ def resolve_resume(cfg: TrainConfig) -> Path | None:
             f"{p} is not an RLlib checkpoint (a folder with rllib_checkpoint.json); SB3 "
             "checkpoints (.zip) resume with --backend sb3"
         )
+    check_checkpoint(p)
     return p
 
 
 _STATE_KEYS: tuple[str, ...] = ("agent_steps", "env_steps", "iterations")
-
-
-def _read_state(path: Path) -> dict[str, int]:
-    """The counters saved with a checkpoint (zeros for a checkpoint written by RLlib alone)."""
-    f = path / STATE_FILE
-    data = json.loads(f.read_text()) if f.is_file() else {}
-    return {k: int(data.get(k, 0)) for k in _STATE_KEYS}
 
 
 def _save(algo: Any, path: Path, state: Mapping[str, int]) -> Path:
@@ -656,6 +679,25 @@ def _iteration_row(result: Mapping[str, Any]) -> dict[str, float]:
     }
 
 
+def check(cfg: TrainConfig) -> RLlibSettings:
+    """Check the settings only this backend reads (``rllib``), before any work; returns them.
+
+    Raises
+    ------
+    ValueError
+        A bad ``rllib`` setting, or a seed whose env seeds would reach the held-out ones.
+    """
+    s = RLlibSettings.from_dict(cfg.rllib)
+    # env seeds: seed + i E + j for runner i <= num_env_runners and copy j < E
+    span = (s.num_env_runners + 1) * s.num_envs_per_env_runner
+    if cfg.seed + span > EVAL_SEED_START:
+        raise ValueError(
+            f"seed {cfg.seed} + (env runners + 1) x envs per runner must stay below "
+            f"{EVAL_SEED_START} (the held-out evaluation seeds), got {cfg.seed + span}"
+        )
+    return s
+
+
 def train(cfg: TrainConfig) -> Path:
     """Train one PPO policy shared by every UAV on Ray RLlib; return the final checkpoint.
 
@@ -682,108 +724,110 @@ def train(cfg: TrainConfig) -> Path:
     KeyboardInterrupt
         Re-raised after writing a checkpoint (``checkpoints/rllib_<N>_steps``).
     """
-    s = RLlibSettings.from_dict(cfg.rllib)
-    # env seeds: seed + i E + j for runner i <= num_env_runners and copy j < E
+    s = check(cfg)
     span = (s.num_env_runners + 1) * s.num_envs_per_env_runner
-    if cfg.seed + span > EVAL_SEED_START:
-        raise ValueError(
-            f"seed {cfg.seed} + (env runners + 1) x envs per runner must stay below "
-            f"{EVAL_SEED_START} (the held-out evaluation seeds), got {cfg.seed + span}"
-        )
     ray = import_rllib()
     import numpy as np
     import torch
 
     out = Path(cfg.out)
-    resume_path = resolve_resume(cfg)
     probe = make_env_fn(cfg.env_id, cfg.env)()  # validates the env kwargs before any output
     n_agents = len(probe.possible_agents)
     probe.close()
-    start = _read_state(resume_path) if resume_path else dict.fromkeys(_STATE_KEYS, 0)
-    if resume_path is not None:
-        check_same_environment(cfg, out / "config.yaml")
-    seed = cfg.seed
-    if start["agent_steps"]:
-        seed = (cfg.seed + start["agent_steps"]) % (EVAL_SEED_START - span)
-
     env_name = f"coopnav_{re.sub(r'[^A-Za-z0-9_]+', '_', cfg.env_id)}"
-    config = build_ppo_config(cfg, s, seed, env_name)  # checks the PPO and model settings
+    build_ppo_config(cfg, s, cfg.seed, env_name)  # checks the PPO and model settings
 
-    out.mkdir(parents=True, exist_ok=True)
-    torch.set_num_threads(cfg.torch_threads)
-    resolved = {k: v for k, v in cfg.to_dict().items() if k not in SB3_ONLY_KEYS}
-    resolved["backend"] = "rllib"
-    resolved["rllib"] = s.to_dict()
-    resolved["resume"] = str(resume_path) if resume_path else None
-    resolved["agent_steps_per_env_step"] = n_agents
-    n0 = start["agent_steps"]
-    write_yaml(out / ("config.yaml" if n0 == 0 else f"config_resumed_at_{n0}.yaml"), resolved)
+    with open_run(cfg) as run:
+        if cfg.resume == "latest" and run.nothing_to_do(cfg.timesteps):
+            run.say_finished()
+            return out / "final_model"
+        resume_path = resolve_resume(cfg, run.finished)
+        start = check_checkpoint(resume_path) if resume_path else dict.fromkeys(_STATE_KEYS, 0)
+        if resume_path is not None:
+            check_same_environment(cfg, out / "config.yaml")
+        seed = cfg.seed
+        if start["agent_steps"]:
+            seed = (cfg.seed + start["agent_steps"]) % (EVAL_SEED_START - span)
+        config = build_ppo_config(cfg, s, seed, env_name)
 
-    logs = out / "logs"
-    logs.mkdir(exist_ok=True)
-    suffix = "" if n0 == 0 else f"_resumed_at_{n0}"
-    counters = dict(start)
-    setup_t0 = time.perf_counter()
-    previous_term = sigterm_as_interrupt()
-    try:
-        with (
-            ray_session(s, out) as session,
-            tempfile.TemporaryDirectory(prefix="coopnav-rllib-") as trial_tmp,
-        ):
-            from ray.tune.registry import register_env
+        torch.set_num_threads(cfg.torch_threads)
+        resolved = {k: v for k, v in cfg.to_dict().items() if k not in SB3_ONLY_KEYS}
+        resolved["backend"] = "rllib"
+        resolved["rllib"] = s.to_dict()
+        resolved["resume"] = str(resume_path) if resume_path else None
+        resolved["agent_steps_per_env_step"] = n_agents
+        n0 = start["agent_steps"]
+        write_yaml(out / ("config.yaml" if n0 == 0 else f"config_resumed_at_{n0}.yaml"), resolved)
 
-            sigterm_as_interrupt()  # again: ray.init installs a SIGTERM handler that aborts
-            register_env(env_name, make_rllib_env)
-            with _trainable_logdir_in(Path(trial_tmp)), _quiet_rllib():
-                algo = config.build_algo()
-            try:
-                if resume_path is not None:
-                    algo.restore_from_path(str(resume_path.absolute()))
-                setup_s = time.perf_counter() - setup_t0
-                wall_s = _train_loop(
-                    cfg, algo, out, logs / f"progress{suffix}.csv", counters, n_agents
+        logs = out / "logs"
+        logs.mkdir(exist_ok=True)
+        suffix = "" if n0 == 0 else f"_resumed_at_{n0}"
+        counters = dict(start)
+        setup_t0 = time.perf_counter()
+        training = False
+        try:
+            with (
+                ray_session(s, out) as session,
+                tempfile.TemporaryDirectory(prefix="coopnav-rllib-") as trial_tmp,
+            ):
+                from ray.tune.registry import register_env
+
+                install_interrupt_handlers()  # again: ray.init installs its own SIGTERM handler
+                register_env(env_name, make_rllib_env)
+                with _trainable_logdir_in(Path(trial_tmp)), _quiet_rllib():
+                    algo = config.build_algo()
+                try:
+                    if resume_path is not None:
+                        algo.restore_from_path(str(resume_path.absolute()))
+                    setup_s = time.perf_counter() - setup_t0
+                    training = True  # from here on an interrupt writes a checkpoint
+                    wall_s = _train_loop(
+                        cfg, algo, out, logs / f"progress{suffix}.csv", counters, n_agents
+                    )
+                    final = _save(algo, out / "final_model", counters)
+                finally:
+                    algo.stop()
+        except KeyboardInterrupt:
+            if not training:
+                print(
+                    "\ninterrupted while starting Ray and building the algorithm: no checkpoint "
+                    f"(nothing was trained in this session); {out / 'config.yaml'} was written",
+                    file=sys.stderr,
                 )
-                final = _save(algo, out / "final_model", counters)
-            finally:
-                algo.stop()
-    finally:
-        if previous_term is not None:
-            import signal
+            raise
+        done_agent = counters["agent_steps"] - start["agent_steps"]
+        done_env = counters["env_steps"] - start["env_steps"]
+        import gymnasium
 
-            signal.signal(signal.SIGTERM, previous_term)
-    done_agent = counters["agent_steps"] - start["agent_steps"]
-    done_env = counters["env_steps"] - start["env_steps"]
-    import gymnasium
-
-    info = {
-        "backend": "rllib",
-        "final_model": str(final),
-        "seed": cfg.seed,
-        "num_timesteps": counters["agent_steps"],
-        "env_steps": counters["env_steps"],
-        "iterations": counters["iterations"],
-        "session_agent_steps": done_agent,
-        "session_env_steps": done_env,
-        "session_iterations": counters["iterations"] - start["iterations"],
-        "session_wall_s": round(wall_s, 3),
-        "setup_s": round(setup_s, 3),
-        "agent_steps_per_s": round(done_agent / wall_s, 1) if wall_s > 0 else None,
-        "env_steps_per_s": round(done_env / wall_s, 1) if wall_s > 0 else None,
-        "num_env_runners": s.num_env_runners,
-        "num_envs_per_env_runner": s.num_envs_per_env_runner,
-        "train_batch_size_per_learner": int(config.train_batch_size_per_learner),
-        "ray": {k: session.get(k) for k in ("address", "temp_dir", "cluster_cpus")},
-        "resumed_from": str(resume_path) if resume_path else None,
-        "versions": {
-            "python": sys.version.split()[0],
-            "numpy": np.__version__,
-            "torch": torch.__version__,
-            "ray": ray.__version__,
-            "gymnasium": gymnasium.__version__,
-        },
-    }
-    write_json(out / "run.json", info)
-    return final
+        info = {
+            "backend": "rllib",
+            "final_model": str(final),
+            "seed": cfg.seed,
+            "num_timesteps": counters["agent_steps"],
+            "env_steps": counters["env_steps"],
+            "iterations": counters["iterations"],
+            "session_agent_steps": done_agent,
+            "session_env_steps": done_env,
+            "session_iterations": counters["iterations"] - start["iterations"],
+            "session_wall_s": round(wall_s, 3),
+            "setup_s": round(setup_s, 3),
+            "agent_steps_per_s": round(done_agent / wall_s, 1) if wall_s > 0 else None,
+            "env_steps_per_s": round(done_env / wall_s, 1) if wall_s > 0 else None,
+            "num_env_runners": s.num_env_runners,
+            "num_envs_per_env_runner": s.num_envs_per_env_runner,
+            "train_batch_size_per_learner": int(config.train_batch_size_per_learner),
+            "ray": {k: session.get(k) for k in ("address", "temp_dir", "cluster_cpus")},
+            "resumed_from": str(resume_path) if resume_path else None,
+            "versions": {
+                "python": sys.version.split()[0],
+                "numpy": np.__version__,
+                "torch": torch.__version__,
+                "ray": ray.__version__,
+                "gymnasium": gymnasium.__version__,
+            },
+        }
+        write_json(out / "run.json", info)
+        return final
 
 
 def _train_loop(

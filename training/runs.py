@@ -1,16 +1,30 @@
-"""Run folders: what every training backend writes, and how it finds it again.
+"""Run folders: the rules that keep a training run's work safe, for every backend.
 
-One home for the rules that keep a run's work safe, whatever the backend:
+A run folder (``--out``) holds one training run: ``config.yaml`` (its settings),
+``checkpoints/``, ``logs/``, the final model and ``run.json`` (written last, when the run is
+finished). :func:`open_run` applies these rules before a backend does any work:
 
-* **Atomic writes.** Every file (and checkpoint folder) goes to a temporary name in the same
-  folder and is renamed into place (:func:`atomic_write_text`, :func:`atomic_path`), so a
-  crash, a kill or a full disk leaves the previous version, never a truncated one.
-* **Checkpoint discovery.** :func:`latest_numbered` finds the newest ``<prefix>_<N>_steps``
-  entry of a folder.
-* **Same environment on resume.** :func:`check_same_environment` refuses to continue a run
-  with other environment settings than it was started with.
-* **Signals.** :func:`sigterm_as_interrupt` makes SIGTERM (a scheduler stopping a job) behave
-  like Ctrl-C, so that a backend writes its checkpoint for both.
+* **The folder is usable**: a path that is a file, or a folder that cannot be written, is a
+  clear error (:class:`RunFolderError`, a ``ValueError``) before anything starts.
+* **One run at a time**: the run holds an exclusive lock (``fcntl.flock`` on
+  ``OUT/.coopnav.lock``) for its whole life; a second run into the same folder fails at once,
+  naming the process that holds it. The operating system releases the lock when the process
+  ends, however it ends (SIGKILL included), so a lock is never left behind.
+* **Fresh, overwrite or resume**: a fresh run into a folder that already holds run outputs is
+  refused unless ``overwrite`` (the old outputs are removed first; other files are left
+  alone) or ``resume`` (continue the run in it) says what is meant.
+* **A finished run** (``run.json`` and its final model present) is recognised: resuming it
+  does nothing unless a larger ``timesteps`` asks for more training, which then continues
+  from the final model.
+* **Interrupts**: SIGINT and SIGTERM raise :class:`Interrupted` (a ``KeyboardInterrupt``)
+  from the moment the folder is opened, so a backend writes a checkpoint and says what it
+  saved for both, in every phase (the behaviour-cloning warm start included); the command
+  exits with ``128 + signal number`` (130, 143).
+
+Checkpoints: :func:`checkpoint_candidates` lists a folder's ``<prefix>_<N>_steps`` entries
+(and a finished run's final model), :func:`first_loadable` takes the newest one that loads
+and names every newer one it had to skip. Every file is written atomically
+(:mod:`training.files`).
 """
 
 from __future__ import annotations
@@ -18,128 +32,139 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import signal
-import tempfile
+import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from training.config import parse_yaml
+from training.files import (
+    atomic_path,
+    atomic_write_text,
+    ensure_folder,
+    write_json,
+    write_yaml,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from training.config import TrainConfig
 
-__all__ = [
+__all__ = [  # atomic_path ... write_yaml: training.files, also importable from here
+    "LOCK_NAME",
+    "RUN_OUTPUTS",
+    "Interrupted",
+    "RunFolderError",
+    "RunState",
     "atomic_path",
     "atomic_write_text",
     "check_same_environment",
-    "latest_numbered",
+    "checkpoint_candidates",
+    "finished_run",
+    "first_loadable",
+    "install_interrupt_handlers",
+    "interrupts_raise",
+    "open_run",
+    "recorded_config",
+    "run_outputs",
     "sigterm_as_interrupt",
     "write_json",
     "write_yaml",
 ]
 
+LOCK_NAME: str = ".coopnav.lock"
+"""The lock file of a run folder (kept; holding it is what counts)."""
+
+RUN_OUTPUTS: tuple[str, ...] = (
+    "config.yaml",
+    "config_resumed_at_*.yaml",
+    "run.json",
+    "pretrain.json",
+    "final_model*",
+    "checkpoints",
+    "logs",
+    "*monitor.csv",
+    "ray",
+)
+"""Glob patterns of what a training run writes into its folder (any backend)."""
+
+
+class RunFolderError(ValueError):
+    """The output folder cannot be used as asked (a usage error: the command exits 2)."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived; ``signum`` says which (the exit status is 128 + signum)."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"signal {signum}")
+        self.signum = int(signum)
+
 
 # --------------------------------------------------------------------------------------------
-# atomic writes
+# what a folder holds
 # --------------------------------------------------------------------------------------------
 
 
-@contextmanager
-def atomic_path(path: str | Path, *, suffix: str = "") -> Iterator[Path]:
-    """A temporary path next to ``path``; on success it is renamed onto ``path``.
+def run_outputs(out: str | Path) -> list[Path]:
+    """The entries of ``out`` that a training run wrote (see :data:`RUN_OUTPUTS`)."""
+    out = Path(out)
+    if not out.is_dir():
+        return []
+    found = {p for pattern in RUN_OUTPUTS for p in out.glob(pattern)}
+    return sorted(found)
 
-    Write the file (or fill the folder) at the yielded path; when the ``with`` block ends
-    without an exception, it replaces ``path`` in one ``os.replace`` (a folder: the old one is
-    moved aside first and removed after). On an exception the temporary is removed and
-    ``path`` is left as it was. ``suffix`` is appended to the temporary name (libraries that
-    add an extension themselves, e.g. ``.zip``, need it).
+
+def finished_run(out: str | Path) -> dict[str, Any] | None:
+    """``run.json`` of a finished run in ``out`` (its final model present), else None.
+
+    ``run.json`` is written last, after the final model, so its presence means the run
+    completed; an unreadable one counts as not finished.
     """
-    import shutil
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{path.name}.", suffix=f".tmp{suffix}", dir=path.parent
-    )
-    os.close(fd)
-    tmp = Path(tmp_name)
-    tmp.unlink()  # the writer creates it (a file or a folder)
+    path = Path(out) / "run.json"
     try:
-        yield tmp
-        if tmp.is_dir():
-            old = None
-            if path.exists():
-                old = path.with_name(f".{path.name}.old-{os.getpid()}")
-                if old.exists():
-                    shutil.rmtree(old)
-                os.replace(path, old)
-            os.replace(tmp, path)
-            if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, path)
-    except BaseException:
-        if tmp.is_dir():
-            shutil.rmtree(tmp, ignore_errors=True)
-        else:
-            tmp.unlink(missing_ok=True)
-        raise
+        info = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(info, dict) or not isinstance(info.get("num_timesteps"), int):
+        return None
+    final = info.get("final_model")
+    if final:
+        return info if (Path(out) / Path(final).name).exists() else None
+    return info if any(Path(out).glob("final_model*")) else None
 
 
-def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder (see
-    :func:`atomic_path`); returns ``path``."""
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        with tmp.open("w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-    return path
+def recorded_config(out: str | Path) -> dict[str, Any] | None:
+    """The settings a run in ``out`` was started with (its ``config.yaml``), or None.
 
-
-def write_yaml(path: str | Path, data: Any) -> Path:
-    """Write ``data`` as YAML (keys in insertion order), atomically."""
-    import yaml
-
-    return atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
-
-
-def write_json(path: str | Path, data: Any) -> Path:
-    """Write ``data`` as indented JSON with a final newline, atomically."""
-    return atomic_write_text(path, json.dumps(data, indent=2) + "\n")
-
-
-# --------------------------------------------------------------------------------------------
-# checkpoints
-# --------------------------------------------------------------------------------------------
-
-
-def latest_numbered(
-    folder: Path,
-    glob: str,
-    pattern: re.Pattern[str],
-    kind: str,
-    valid: Callable[[Path], bool] | None = None,
-) -> Path:
-    """The entry of ``folder`` matching ``glob`` whose ``pattern`` group 1 is largest.
-
-    ``valid`` (optional) filters candidates; ``kind`` names them in the error message.
+    ``timesteps`` is the largest the run was asked for (sessions that trained it further
+    record theirs in ``config_resumed_at_<N>.yaml``).
 
     Raises
     ------
-    FileNotFoundError
-        There is none.
+    RunFolderError
+        The file exists but is not a YAML mapping.
     """
-    found = []
-    for p in folder.glob(glob):
-        m = pattern.search(p.name)
-        if m and (valid is None or valid(p)):
-            found.append((int(m.group(1)), p))
-    if not found:
-        raise FileNotFoundError(f"no {kind}checkpoint to resume from in {folder}")
-    return max(found)[1]
+    path = Path(out) / "config.yaml"
+    if not path.is_file():
+        return None
+    data = parse_yaml(path.read_text(), f"the run's settings {path}")
+    if not isinstance(data, dict):
+        raise RunFolderError(f"{path} does not hold the settings of a run (not a mapping)")
+    # a run trained further (--resume --timesteps M) records M in config_resumed_at_*.yaml
+    for extra in Path(out).glob("config_resumed_at_*.yaml"):
+        try:
+            more = parse_yaml(extra.read_text(), str(extra))
+        except (OSError, ValueError):
+            continue
+        steps = more.get("timesteps") if isinstance(more, dict) else None
+        if isinstance(steps, int) and steps > data.get("timesteps", 0):
+            data["timesteps"] = steps
+    return data
 
 
 def check_same_environment(cfg: TrainConfig, saved: Path) -> None:
@@ -150,33 +175,234 @@ def check_same_environment(cfg: TrainConfig, saved: Path) -> None:
     ValueError
         ``saved`` (the run's ``config.yaml``) names another ``env_id`` or ``env``.
     """
-    import yaml
-
-    if not saved.is_file():
+    old = recorded_config(saved.parent) if saved.name == "config.yaml" else None
+    if old is None:
         return
-    old = yaml.safe_load(saved.read_text()) or {}
     if old.get("env_id") != cfg.env_id or (old.get("env") or {}) != cfg.env:
         raise ValueError(
             f"cannot resume in {cfg.out}: it was trained on {old.get('env_id')} with "
             f"{old.get('env') or {}}, not {cfg.env_id} with {cfg.env}; repeat the original "
             "settings, or use a new --out to fine-tune in another environment"
         )
+    backend = old.get("backend", "sb3")
+    if backend != cfg.backend:
+        raise ValueError(
+            f"cannot resume in {cfg.out} with --backend {cfg.backend}: the run there was "
+            f"trained with --backend {backend}"
+        )
 
 
 # --------------------------------------------------------------------------------------------
-# signals
+# checkpoints
 # --------------------------------------------------------------------------------------------
+
+
+def checkpoint_candidates(
+    folder: Path, glob: str, pattern: re.Pattern[str], final: tuple[int, Path] | None = None
+) -> list[tuple[int, Path]]:
+    """``(agent-steps, path)`` of the checkpoints in ``folder``, newest first.
+
+    Entries matching ``glob`` whose name matches ``pattern`` (group 1: the step count), plus
+    ``final`` (a finished run's final model and its step count) when given. Temporary files
+    of an unfinished atomic write (hidden names) never match.
+    """
+    found = []
+    for p in folder.glob(glob):
+        m = pattern.search(p.name)
+        if m and not p.name.startswith("."):
+            found.append((int(m.group(1)), p))
+    if final is not None:
+        found.append(final)
+    # newest first; at equal steps the final model before a checkpoint
+    return sorted(found, key=lambda x: (x[0], x[1].name.startswith("final")), reverse=True)
+
+
+def first_loadable(
+    candidates: Sequence[tuple[int, Path]],
+    load: Callable[[Path], Any],
+    where: Path,
+    kind: str = "",
+) -> tuple[Path, Any]:
+    """The newest candidate that ``load`` accepts, and what it returned.
+
+    ``kind`` (e.g. ``"RLlib "``) qualifies "checkpoint" in the messages.
+
+    Every newer candidate that fails to load is skipped with a warning on stderr that names
+    it and says why (a truncated file, a corrupt ``policy.pth``, ...).
+
+    Raises
+    ------
+    FileNotFoundError
+        No candidate loads (the message lists the skipped ones).
+    """
+    skipped = []
+    for _, path in candidates:
+        try:
+            return path, load(path)
+        except Exception as exc:  # any failure to load means: not usable
+            reason = f"{type(exc).__name__}: {exc}".strip().splitlines()[0][:200]
+            skipped.append(f"{path} ({reason})")
+            print(
+                f"coopnav train: warning: skipping {kind}checkpoint {path}: it does not load "
+                f"({reason})",
+                file=sys.stderr,
+            )
+    extra = f"; skipped (they do not load): {', '.join(skipped)}" if skipped else ""
+    raise FileNotFoundError(f"no {kind}checkpoint to resume from in {where}{extra}")
+
+
+# --------------------------------------------------------------------------------------------
+# opening a run folder
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class RunState:
+    """What :func:`open_run` found in the folder.
+
+    Attributes
+    ----------
+    out : Path
+    finished : dict or None
+        ``run.json`` of a finished run in the folder (None: not finished, or a fresh run).
+    """
+
+    out: Path
+    finished: dict[str, Any] | None = None
+
+    def nothing_to_do(self, timesteps: int) -> bool:
+        """Whether a resumed run is already finished with at least ``timesteps`` agent-steps
+        (then it stays untouched and a message says so)."""
+        return self.finished is not None and self.finished["num_timesteps"] >= timesteps
+
+    def say_finished(self) -> None:
+        """Tell the user that the finished run is left as it is, and how to train further."""
+        n = self.finished["num_timesteps"] if self.finished else 0
+        print(
+            f"coopnav train: {self.out} holds a finished run ({n} agent-steps); nothing to do. "
+            f"Train it further with --resume latest --timesteps M (M > {n}).",
+            file=sys.stderr,
+        )
+
+
+@contextmanager
+def _folder_lock(out: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``out`` (see the module docstring)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: no locking
+        yield
+        return
+    path = out / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise RunFolderError(f"cannot create the lock file {path}: {exc.strerror}") from exc
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
+            raise RunFolderError(
+                f"{out} is in use by another training run ({holder}); wait for it to end, "
+                "or choose another --out"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()}\n".encode(), 0)
+        try:
+            yield
+        finally:
+            os.ftruncate(fd, 0)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+def _describe(outputs: Sequence[Path], out: Path) -> str:
+    done = finished_run(out)
+    state = f"a finished run ({done['num_timesteps']} agent-steps)" if done else "a run"
+    names = ", ".join(p.name for p in outputs[:4]) + (", ..." if len(outputs) > 4 else "")
+    return f"{out} already holds {state} ({names})"
+
+
+def _remove(paths: Sequence[Path]) -> None:
+    for p in paths:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+
+
+@contextmanager
+def interrupts_raise() -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupted` inside the block (main thread only).
+
+    The previous handlers come back afterwards. Outside the main thread, where handlers
+    can't be set, nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    install_interrupt_handlers()
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def install_interrupt_handlers() -> None:
+    """Make SIGINT and SIGTERM raise :class:`Interrupted` (again: a library such as Ray may
+    have installed its own). Main thread only; elsewhere a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    signal.signal(signal.SIGINT, _raise_interrupted)
+    signal.signal(signal.SIGTERM, _raise_interrupted)
+
+
+def _raise_interrupted(signum: int, frame: Any) -> None:
+    raise Interrupted(signum)
 
 
 def sigterm_as_interrupt() -> Any:
-    """Make SIGTERM (a scheduler stopping the job) behave like Ctrl-C; return the old handler.
+    """Make SIGTERM raise :class:`Interrupted` (as Ctrl-C does); return the old handler.
 
-    Returns None (and changes nothing) outside the main thread, where handlers can't be set.
+    For a backend that manages its handlers itself; :func:`open_run` installs both SIGINT and
+    SIGTERM handlers for the whole run. Returns None (and changes nothing) outside the main
+    thread, where handlers can't be set.
     """
     if threading.current_thread() is not threading.main_thread():
         return None
+    return signal.signal(signal.SIGTERM, _raise_interrupted)
 
-    def _raise(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt(f"signal {signum}")
 
-    return signal.signal(signal.SIGTERM, _raise)
+@contextmanager
+def open_run(cfg: TrainConfig) -> Iterator[RunState]:
+    """Open ``cfg.out`` for a training run: check, lock, apply the fresh/overwrite/resume rules.
+
+    Inside the block the folder is locked and SIGINT/SIGTERM raise :class:`Interrupted`.
+
+    Raises
+    ------
+    RunFolderError
+        ``cfg.out`` is a file or not writable, another run holds it, or it holds a run and
+        neither ``cfg.overwrite`` nor ``cfg.resume`` is set.
+    """
+    out = Path(cfg.out)
+    with interrupts_raise():
+        ensure_folder(out)
+        with _folder_lock(out):
+            outputs = run_outputs(out)
+            if cfg.resume is None and outputs:
+                if not cfg.overwrite:
+                    raise RunFolderError(
+                        f"{_describe(outputs, out)}; continue it with --resume latest, replace "
+                        "it with --overwrite, or choose another --out"
+                    )
+                _remove(outputs)
+                print(
+                    f"coopnav train: --overwrite: removed the earlier run's outputs in {out}",
+                    file=sys.stderr,
+                )
+            yield RunState(out, finished_run(out) if cfg.resume is not None else None)

@@ -33,29 +33,31 @@ training seed range) so it does not replay its first episodes. Training seeds ar
 from __future__ import annotations
 
 import re
-import signal
 import sys
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from training.config import TrainConfig
+from training.config import TrainConfig, check_bool, check_number
 from training.envs import EVAL_SEED_START, make_env_fn
+from training.files import atomic_path, write_json, write_yaml
 from training.runs import (
-    atomic_path,
     check_same_environment,
-    latest_numbered,
-    sigterm_as_interrupt,
-    write_json,
-    write_yaml,
+    checkpoint_candidates,
+    first_loadable,
+    open_run,
 )
 
 __all__ = [
     "MONITOR_INFO_KEYS",
+    "POLICY_KWARGS_RULES",
+    "PPO_RULES",
     "behaviour_clone",
+    "check",
     "find_latest_checkpoint",
     "resolve_resume",
+    "save_checkpoint",
     "save_model",
     "train",
 ]
@@ -81,15 +83,34 @@ def save_model(model: Any, path: Path) -> Path:
     return path
 
 
+def save_checkpoint(model: Any, folder: Path, num_timesteps: int) -> Path:
+    """Save ``model`` as ``folder/ppo_<N>_steps.zip`` (atomically), recording ``N`` =
+    ``num_timesteps`` agent-steps (which may be fewer than the model counts: the start of
+    an unfinished rollout, whose steps are not in the policy)."""
+    path = folder / f"ppo_{int(num_timesteps)}_steps.zip"
+    saved = model.num_timesteps
+    model.num_timesteps = int(num_timesteps)
+    try:
+        save_model(model, path)
+    finally:
+        model.num_timesteps = saved
+    return path
+
+
 def find_latest_checkpoint(out: str | Path) -> Path:
-    """The checkpoint with the most steps in ``out/checkpoints``.
+    """The newest checkpoint in ``out/checkpoints`` that loads (newer ones that don't are
+    skipped, with a warning naming them).
 
     Raises
     ------
     FileNotFoundError
         There is none.
     """
-    return latest_numbered(Path(out) / "checkpoints", "*_steps.zip", CHECKPOINT_RE, "")
+    from stable_baselines3 import PPO
+
+    folder = Path(out) / "checkpoints"
+    candidates = checkpoint_candidates(folder, "*_steps.zip", CHECKPOINT_RE)
+    return first_loadable(candidates, lambda p: PPO.load(p, env=None, device="cpu"), folder)[0]
 
 
 def resolve_resume(cfg: TrainConfig) -> Path | None:
@@ -202,17 +223,9 @@ def _callbacks() -> tuple[Any, Any, Any]:
             self.folder.mkdir(parents=True, exist_ok=True)
             self._last = self.model.num_timesteps
 
-        def save(self, num_timesteps: int | None = None) -> Path:
-            """Save now (optionally under a smaller step count) and return the path."""
-            n = self.model.num_timesteps if num_timesteps is None else int(num_timesteps)
-            path = self.folder / f"ppo_{n}_steps.zip"
-            saved = self.model.num_timesteps
-            self.model.num_timesteps = n
-            try:
-                save_model(self.model, path)
-            finally:
-                self.model.num_timesteps = saved
-            return path
+        def save(self) -> Path:
+            """Save now and return the path."""
+            return save_checkpoint(self.model, self.folder, int(self.model.num_timesteps))
 
         def _on_rollout_start(self) -> None:
             self.collecting = True
@@ -372,6 +385,10 @@ def behaviour_clone(
 def train(cfg: TrainConfig) -> Path:
     """Train a parameter-sharing PPO policy and return the path of the final model.
 
+    Every setting is checked (:func:`check`) and the environment built once before anything
+    is written; then the run folder is opened (:func:`training.runs.open_run`: lock,
+    fresh / overwrite / resume rules, SIGINT and SIGTERM handled from there on).
+
     Parameters
     ----------
     cfg : TrainConfig
@@ -379,19 +396,206 @@ def train(cfg: TrainConfig) -> Path:
     Returns
     -------
     pathlib.Path
-        ``cfg.out / "final_model.zip"``.
+        ``cfg.out / "final_model.zip"`` (also when ``cfg.resume`` finds the run finished with
+        at least ``cfg.timesteps`` agent-steps: then nothing is touched).
 
     Raises
     ------
     FileNotFoundError
-        ``cfg.resume`` names a checkpoint that does not exist.
+        ``cfg.resume`` names a checkpoint that does not exist, or none loads.
     ValueError
-        Unknown environment or PPO setting.
+        Bad settings, a checkpoint that does not load, an unusable run folder
+        (:class:`training.runs.RunFolderError`).
     KeyboardInterrupt
-        Re-raised after writing a checkpoint (``checkpoints/ppo_<N>_steps.zip``).
+        (:class:`training.runs.Interrupted` for SIGINT/SIGTERM) re-raised after writing a
+        checkpoint (``checkpoints/ppo_<N>_steps.zip``) and saying what was saved.
+    """
+    check(cfg)
+    env_fn = make_env_fn(cfg.env_id, cfg.env)
+    probe = env_fn()  # validates the env kwargs before anything is written
+    n_agents = len(probe.possible_agents)
+    _, probe_infos = probe.reset(seed=0)
+    info_keys = set(probe_infos.get(probe.possible_agents[0], {}))
+    probe.close()
+    monitor_keys = tuple(k for k in MONITOR_INFO_KEYS if k in info_keys)
+
+    with open_run(cfg) as run:
+        if cfg.resume == "latest" and run.nothing_to_do(cfg.timesteps):
+            run.say_finished()
+            return Path(cfg.out) / "final_model.zip"
+        resume_path, start_steps = _resume_point(cfg, run.finished)
+        if resume_path is not None:
+            check_same_environment(cfg, Path(cfg.out) / "config.yaml")
+        return _train_in_folder(cfg, env_fn, n_agents, monitor_keys, resume_path, start_steps)
+
+
+def check(cfg: TrainConfig) -> None:
+    """Check the settings only this backend reads (``ppo``, ``device``), before any work.
+
+    Every key of ``ppo`` must be an argument of Stable-Baselines3's ``PPO`` and every value
+    one it accepts (:data:`PPO_RULES`; SB3 itself would reject many only when the model is
+    built or the first rollout ends, and accepts some it should not, such as ``gamma: 2``);
+    ``ppo.policy_kwargs`` must hold arguments of its ``ActorCriticPolicy``.
+
+    Raises
+    ------
+    ValueError
+        The message names the setting and the values it accepts.
+    ImportError
+        Stable-Baselines3 (or torch) is not installed.
     """
     import inspect
 
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    ppo = dict(cfg.ppo)
+    policy = ppo.pop("policy", "MlpPolicy")
+    if not (isinstance(policy, str) and policy in PPO.policy_aliases) and not isinstance(
+        policy, type
+    ):
+        raise ValueError(f"ppo.policy must be one of {sorted(PPO.policy_aliases)}, got {policy!r}")
+    valid = set(inspect.signature(PPO.__init__).parameters) - {"self", "policy", "env", "seed"}
+    valid -= {"device", "tensorboard_log", "verbose", "_init_setup_model"}
+    unknown = sorted(set(ppo) - valid)
+    if unknown:
+        raise ValueError(f"unknown PPO setting(s) {unknown}; valid settings: {sorted(valid)}")
+    for key, value in ppo.items():
+        rule = PPO_RULES.get(key)
+        if rule is not None:
+            rule(f"ppo.{key}", value)
+    kwargs = ppo.get("policy_kwargs") or {}
+    if not isinstance(kwargs, Mapping):
+        raise ValueError(f"ppo.policy_kwargs must be a mapping, got {kwargs!r}")
+    allowed = set(inspect.signature(ActorCriticPolicy.__init__).parameters)
+    allowed -= {"self", "observation_space", "action_space", "lr_schedule"}
+    unknown = sorted(set(kwargs) - allowed)
+    if unknown:
+        raise ValueError(
+            f"unknown ppo.policy_kwargs setting(s) {unknown}; valid settings: {sorted(allowed)}"
+        )
+    for key, value in kwargs.items():
+        rule = POLICY_KWARGS_RULES.get(key, _a_class if key.endswith("_class") else None)
+        if rule is not None:
+            rule(f"ppo.policy_kwargs.{key}", value)
+    device = cfg.device
+    if device != "auto":
+        try:
+            torch.device(device)
+        except (RuntimeError, TypeError) as exc:
+            raise ValueError(
+                f"device must be a PyTorch device such as cpu, cuda, cuda:0, mps or auto, "
+                f"got {device!r}"
+            ) from exc
+
+
+def _net_arch(name: str, value: Any) -> None:
+    """``net_arch``: a list of layer sizes, or ``{pi: [...], vf: [...]}``."""
+
+    def sizes(v: Any) -> bool:
+        return isinstance(v, (list, tuple)) and all(
+            isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in v
+        )
+
+    ok = sizes(value) or (
+        isinstance(value, Mapping)
+        and set(value) <= {"pi", "vf"}
+        and all(map(sizes, value.values()))
+    )
+    if not ok:
+        raise ValueError(
+            f"{name} must be a list of layer sizes (integers >= 1), e.g. [128, 128], or "
+            f"{{pi: [...], vf: [...]}}, got {value!r}"
+        )
+
+
+def _rule(**kw: Any) -> Callable[[str, Any], None]:
+    return lambda name, value: check_number(name, value, **kw)
+
+
+PPO_RULES: dict[str, Callable[[str, Any], None]] = {
+    "learning_rate": _rule(lo=0.0, lo_open=True),
+    "n_steps": _rule(integer=True, lo=1),
+    "batch_size": _rule(integer=True, lo=2),  # SB3 normalises advantages per mini-batch
+    "n_epochs": _rule(integer=True, lo=1),
+    "gamma": _rule(lo=0.0, hi=1.0, lo_open=True),
+    "gae_lambda": _rule(lo=0.0, hi=1.0),
+    "clip_range": _rule(lo=0.0, lo_open=True),
+    "clip_range_vf": _rule(lo=0.0, lo_open=True, none=True),
+    "normalize_advantage": check_bool,
+    "ent_coef": _rule(lo=0.0),
+    "vf_coef": _rule(lo=0.0),
+    "max_grad_norm": _rule(lo=0.0, lo_open=True),
+    "use_sde": check_bool,
+    "sde_sample_freq": _rule(integer=True, lo=-1),
+    "target_kl": _rule(lo=0.0, lo_open=True, none=True),
+    "stats_window_size": _rule(integer=True, lo=1),
+}
+"""What each PPO setting accepts (a function raising ``ValueError`` that names it)."""
+
+
+def _a_class(name: str, value: Any) -> None:
+    if not isinstance(value, type):
+        raise ValueError(
+            f"{name} must be a Python class (e.g. torch.nn.ReLU; it can't be set from YAML), "
+            f"got {value!r}"
+        )
+
+
+POLICY_KWARGS_RULES: dict[str, Callable[[str, Any], None]] = {
+    "net_arch": _net_arch,
+    "activation_fn": _a_class,
+    "log_std_init": _rule(),
+    "ortho_init": check_bool,
+    "full_std": check_bool,
+    "use_expln": check_bool,
+    "squash_output": check_bool,
+    "share_features_extractor": check_bool,
+    "normalize_images": check_bool,
+}
+"""What each ``ppo.policy_kwargs`` setting accepts."""
+
+
+def _resume_point(cfg: TrainConfig, finished: Mapping[str, Any] | None) -> tuple[Path | None, int]:
+    """(checkpoint to resume from, its agent-steps), or (None, 0) for a fresh run.
+
+    ``"latest"``: the newest checkpoint in ``cfg.out/checkpoints`` (or the final model of a
+    finished run being trained further) that loads; newer ones that don't are skipped and
+    named. An explicit path must load.
+    """
+    from stable_baselines3 import PPO
+
+    if cfg.resume is None:
+        return None, 0
+
+    def load(path: Path) -> int:
+        return int(PPO.load(path, env=None, device="cpu").num_timesteps)
+
+    if cfg.resume == "latest":
+        final = None
+        if finished is not None:
+            final = (int(finished["num_timesteps"]), Path(cfg.out) / "final_model.zip")
+        folder = Path(cfg.out) / "checkpoints"
+        candidates = checkpoint_candidates(folder, "*_steps.zip", CHECKPOINT_RE, final)
+        path, steps = first_loadable(candidates, load, folder)
+        return path, steps
+    path = resolve_resume(cfg)
+    try:
+        return path, load(path)
+    except Exception as exc:
+        raise ValueError(f"cannot resume from {path}: it does not load ({exc})") from exc
+
+
+def _train_in_folder(
+    cfg: TrainConfig,
+    env_fn: Callable[[], Any],
+    n_agents: int,
+    monitor_keys: tuple[str, ...],
+    resume_path: Path | None,
+    start_steps: int,
+) -> Path:
+    """The training itself, in the opened (locked) run folder."""
     import numpy as np
     import stable_baselines3
     import torch
@@ -402,31 +606,8 @@ def train(cfg: TrainConfig) -> Path:
     from training.vec_env import make_vec_env
 
     out = Path(cfg.out)
-    resume_path = resolve_resume(cfg)
     ppo_kwargs = dict(cfg.ppo)
     policy = ppo_kwargs.pop("policy", "MlpPolicy")
-    valid = set(inspect.signature(PPO.__init__).parameters) - {"self", "policy", "env", "seed"}
-    valid -= {"device", "tensorboard_log", "verbose", "_init_setup_model"}
-    unknown = sorted(set(ppo_kwargs) - valid)
-    if unknown:
-        raise ValueError(f"unknown PPO setting(s) {unknown}; valid settings: {sorted(valid)}")
-
-    env_fn = make_env_fn(cfg.env_id, cfg.env)
-    probe = env_fn()  # validates the env kwargs before anything is written
-    n_agents = len(probe.possible_agents)
-    _, probe_infos = probe.reset(seed=0)
-    info_keys = set(probe_infos.get(probe.possible_agents[0], {}))
-    probe.close()
-    monitor_keys = tuple(k for k in MONITOR_INFO_KEYS if k in info_keys)
-
-    start_steps = 0
-    if resume_path is not None:
-        model = PPO.load(resume_path, env=None, device=cfg.device)
-        start_steps = int(model.num_timesteps)
-        del model
-        check_same_environment(cfg, out / "config.yaml")
-
-    out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.torch_threads)
     resolved = cfg.to_dict()
     resolved["resume"] = str(resume_path) if resume_path else None
@@ -436,72 +617,102 @@ def train(cfg: TrainConfig) -> Path:
     # the original config.yaml stays: `coopnav evaluate` reads the environment from it
     name = "config.yaml" if start_steps == 0 else f"config_resumed_at_{start_steps}.yaml"
     write_yaml(out / name, resolved)
+    checkpoints = out / "checkpoints"
 
-    venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=vec_kind)
-    suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
-    monitor = VecMonitor(
-        venv,
-        # SB3 appends ".monitor.csv" to any other name
-        filename=str(
-            out / ("monitor.csv" if not suffix else f"resumed_at_{start_steps}.monitor.csv")
-        ),
-        info_keywords=monitor_keys,
-    )
-    learn_env: Any = monitor
-    if cfg.normalize_reward:
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        learn_env = VecNormalize(
-            monitor, norm_obs=False, norm_reward=True, gamma=float(ppo_kwargs.get("gamma", 0.99))
-        )
-    if resume_path is not None:
-        model = PPO.load(resume_path, env=learn_env, device=cfg.device)
-        env_seed = (cfg.seed + start_steps) % (EVAL_SEED_START - cfg.n_envs)
-        model.set_random_seed(env_seed)
-    else:
-        model = PPO(
-            policy, learn_env, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose, **ppo_kwargs
-        )
-        if cfg.pretrain:
-            stats = behaviour_clone(model, env_fn, cfg.pretrain, seed=cfg.seed)
-            write_json(out / "pretrain.json", stats)
-    logs = out / "logs"
-    logs.mkdir(exist_ok=True)
-    formats = [
-        TensorBoardOutputFormat(str(logs)),
-        CSVOutputFormat(str(logs / f"progress{suffix}.csv")),
-    ]
-    if cfg.verbose:
-        from stable_baselines3.common.logger import HumanOutputFormat
-
-        formats.append(HumanOutputFormat(sys.stdout))
-    model.set_logger(Logger(str(logs), formats))
-
+    model = monitor = None
+    phase = "setting up"
     nav_cls, ckpt_cls, progress_cls = _callbacks()
-    ckpt = ckpt_cls(cfg.checkpoint_freq, out / "checkpoints")
-    remaining = cfg.timesteps - start_steps
-    t0 = time.perf_counter()
-    previous_term = sigterm_as_interrupt()
+    ckpt = ckpt_cls(cfg.checkpoint_freq, checkpoints)
     try:
+        venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=vec_kind)
+        suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
+        monitor = VecMonitor(
+            venv,
+            # SB3 appends ".monitor.csv" to any other name
+            filename=str(
+                out / ("monitor.csv" if not suffix else f"resumed_at_{start_steps}.monitor.csv")
+            ),
+            info_keywords=monitor_keys,
+        )
+        learn_env: Any = monitor
+        if cfg.normalize_reward:
+            from stable_baselines3.common.vec_env import VecNormalize
+
+            learn_env = VecNormalize(
+                monitor,
+                norm_obs=False,
+                norm_reward=True,
+                gamma=float(ppo_kwargs.get("gamma", 0.99)),
+            )
+        if resume_path is not None:
+            model = PPO.load(resume_path, env=learn_env, device=cfg.device)
+            env_seed = (cfg.seed + start_steps) % (EVAL_SEED_START - cfg.n_envs)
+            model.set_random_seed(env_seed)
+        else:
+            model = PPO(
+                policy,
+                learn_env,
+                seed=cfg.seed,
+                device=cfg.device,
+                verbose=cfg.verbose,
+                **ppo_kwargs,
+            )
+            if cfg.pretrain:
+                phase = "the behaviour-cloning warm start"
+                print(
+                    f"behaviour-cloning warm start: {cfg.pretrain['episodes']} episodes of the "
+                    f"{cfg.pretrain['policy']} teacher, {cfg.pretrain['epochs']} epochs",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                stats = behaviour_clone(model, env_fn, cfg.pretrain, seed=cfg.seed)
+                write_json(out / "pretrain.json", stats)
+        phase = "PPO"
+        logs = out / "logs"
+        logs.mkdir(exist_ok=True)
+        formats = [
+            TensorBoardOutputFormat(str(logs)),
+            CSVOutputFormat(str(logs / f"progress{suffix}.csv")),
+        ]
+        if cfg.verbose:
+            from stable_baselines3.common.logger import HumanOutputFormat
+
+            formats.append(HumanOutputFormat(sys.stdout))
+        model.set_logger(Logger(str(logs), formats))
+
+        remaining = cfg.timesteps - start_steps
+        t0 = time.perf_counter()
         if remaining > 0:
             model.learn(
                 total_timesteps=remaining,
                 callback=[nav_cls(n_agents), ckpt] + ([progress_cls()] if cfg.progress_bar else []),
                 reset_num_timesteps=resume_path is None,
             )
+        wall_s = time.perf_counter() - t0
     except KeyboardInterrupt:
-        n = ckpt.rollout_start_timesteps if ckpt.collecting else model.num_timesteps
-        path = ckpt.save(n)
-        print(
-            f"\ninterrupted: checkpoint written to {path}; continue with --resume {path}",
-            file=sys.stderr,
-        )
-        monitor.close()
+        if model is None:
+            print(
+                f"\ninterrupted while {phase}: no checkpoint (nothing was trained yet); "
+                f"start again with --overwrite, or --resume if {checkpoints} holds one",
+                file=sys.stderr,
+            )
+        else:
+            n = ckpt.rollout_start_timesteps if ckpt.collecting else int(model.num_timesteps)
+            path = save_checkpoint(model, checkpoints, n)
+            what = (
+                "the policy with an incomplete warm start (PPO had not started)"
+                if phase != "PPO"
+                else f"the policy after {n} agent-steps"
+            )
+            print(
+                f"\ninterrupted during {phase}: saved {what} to {path}; continue with "
+                f"--resume latest (or --resume {path})",
+                file=sys.stderr,
+            )
         raise
     finally:
-        if previous_term is not None:
-            signal.signal(signal.SIGTERM, previous_term)
-    wall_s = time.perf_counter() - t0
+        if monitor is not None:
+            monitor.close()
     final = out / "final_model.zip"
     save_model(model, final)
     done_steps = int(model.num_timesteps) - start_steps
@@ -522,5 +733,4 @@ def train(cfg: TrainConfig) -> Path:
         },
     }
     write_json(out / "run.json", info)
-    monitor.close()
     return final

@@ -11,8 +11,10 @@ modules for what goes in it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
-import sys
+from collections.abc import Mapping
+from pathlib import Path
 
 from training.config import (
     BACKENDS,
@@ -24,6 +26,7 @@ from training.config import (
     load_config,
 )
 from training.envs import DEFAULT_ENV_ID
+from training.runs import recorded_config
 
 __all__ = ["add_arguments", "config_from_args", "run"]
 
@@ -35,7 +38,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--config", default=None, help=f"hyperparameter YAML (default {DEFAULT_CONFIG_PATH.name})"
     )
     parser.add_argument(
-        "--env-id", default=DEFAULT_ENV_ID, help="environment (section of --config)"
+        "--env-id",
+        default=None,
+        help=f"environment (section of --config; default {DEFAULT_ENV_ID}, or the run's own "
+        "with --resume)",
     )
     parser.add_argument(
         "--timesteps", type=int, default=None, help="total agent-steps (SB3 timesteps)"
@@ -75,8 +81,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--resume",
         default=None,
         metavar="CHECKPOINT",
-        help="continue from a checkpoint (SB3: a .zip; rllib: a checkpoint folder "
-        "rllib_<N>_steps) or 'latest' (the newest in OUT/checkpoints)",
+        help="continue the run in OUT from a checkpoint (SB3: a .zip; rllib: a checkpoint "
+        "folder rllib_<N>_steps) or 'latest' (the newest that loads; a finished run: its final "
+        "model, if --timesteps asks for more). The run keeps the settings recorded in "
+        "OUT/config.yaml (--config is not read); flags and --set change single ones",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="start a fresh run in an OUT that holds an earlier run, removing that run's "
+        "outputs (without it, or --resume, such a start is refused)",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     parser.add_argument("--verbose", type=int, default=None, help="SB3 verbosity (0-2)")
@@ -109,9 +123,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    """Merge the YAML section, ``--set``/``--env-set`` and explicit flags (in that order)."""
-    base = load_config(args.config, args.env_id)
-    base["env_id"] = args.env_id
+    """Merge the settings, ``--set``/``--env-set`` and explicit flags (in that order).
+
+    The settings are the YAML section of ``--config`` (default: the packaged file), or, with
+    ``--resume`` in a folder that holds a run, the settings that run recorded
+    (:func:`training.runs.recorded_config`), so that a resumed run continues under its own
+    settings and its own ``timesteps`` unless a flag or ``--set`` changes one.
+    """
+    recorded = recorded_config(args.out) if args.resume is not None else None
+    if recorded is not None:
+        names = {f.name for f in dataclasses.fields(TrainConfig)}
+        base = {
+            k: v for k, v in recorded.items() if k in names and k not in ("resume", "overwrite")
+        }
+    else:
+        base = load_config(args.config, args.env_id or DEFAULT_ENV_ID)
+    base["env_id"] = args.env_id or base.get("env_id") or DEFAULT_ENV_ID
     base["out"] = args.out
     data = apply_overrides(base, args.overrides)
     data = apply_overrides(data, [f"env.{item}" for item in args.env_overrides])
@@ -139,7 +166,10 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         if data.get("backend", "sb3") != "torchrl":
             raise ValueError("--algorithm only applies to --backend torchrl")
         data["torchrl"] = {**(data.get("torchrl") or {}), "algorithm": args.algorithm}
-    env = dict(data.get("env") or {})
+    env = data.get("env") or {}
+    if not isinstance(env, Mapping):
+        raise ValueError(f"TrainConfig.env must be a mapping, got {env!r}")
+    env = dict(env)
     if args.n_uavs is not None:
         env["n_uavs"] = args.n_uavs
     if args.city is not None:
@@ -147,20 +177,20 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     data["env"] = env
     if args.no_progress:
         data["progress_bar"] = False
+    if args.overwrite:
+        data["overwrite"] = True
     return TrainConfig.from_dict(data)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``coopnav train``; returns the exit status."""
-    try:
-        cfg = config_from_args(args)
-        final = backend_module(cfg.backend).train(cfg)
-    except (ValueError, FileNotFoundError, ImportError, ConnectionError) as exc:
-        print(f"coopnav train: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-    info = json.loads((final.parent / "run.json").read_text())
+    """Run ``coopnav train``; returns the exit status.
+
+    Errors propagate to :func:`training.cli.main`, which turns them into one-line messages
+    and exit statuses (2 for a usage error, 130/143 after an interrupt).
+    """
+    cfg = config_from_args(args)
+    final = backend_module(cfg.backend).train(cfg)
+    info = json.loads((Path(cfg.out) / "run.json").read_text())
     print(
         f"final model: {final}  ({info['num_timesteps']} agent-steps, "
         f"{info['agent_steps_per_s']} agent-steps/s)"

@@ -124,11 +124,13 @@ class BatchedUrbanCanyonEnv:
         if seed is None:
             return [None] * self.n_copies
         if isinstance(seed, int | np.integer) and not isinstance(seed, bool):
-            return [int(seed) + k for k in range(self.n_copies)]
+            return [UrbanCanyonEnv.check_seed(seed) + k for k in range(self.n_copies)]
+        if isinstance(seed, bool | str | bytes) or not isinstance(seed, Sequence | np.ndarray):
+            raise ValueError(f"seed must be an int or {self.n_copies} seeds, got {seed!r}")
         seeds = list(seed)
         if len(seeds) != self.n_copies:
             raise ValueError(f"seed must be an int or {self.n_copies} seeds, got {len(seeds)}")
-        return [None if s is None else int(s) for s in seeds]
+        return [None if s is None else UrbanCanyonEnv.check_seed(s) for s in seeds]
 
     def reset(
         self, seed: int | Sequence[int | None] | None = None
@@ -152,9 +154,14 @@ class BatchedUrbanCanyonEnv:
     def _actions(self, actions: Any) -> np.ndarray:
         shape = (self.n_copies, self.n_agents, 3)
         try:
-            cmd = np.asarray(actions, dtype=np.float64)
+            cmd = np.asarray(actions)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"actions must be a numeric array of shape {shape}") from exc
+        if cmd.dtype.kind not in "biuf":  # strings and complex numbers are not commands
+            raise ValueError(
+                f"actions must be a real numeric array of shape {shape}, got dtype {cmd.dtype}"
+            )
+        cmd = cmd.astype(np.float64, copy=False)
         if cmd.shape != shape:
             if cmd.size == np.prod(shape):
                 cmd = cmd.reshape(shape)

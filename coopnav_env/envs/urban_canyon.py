@@ -191,10 +191,17 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             self.render()
         return obs, infos
 
+    @staticmethod
+    def check_seed(seed: Any) -> int:
+        """A reset seed as an int, or ``ValueError``: an integer >= 0 (a bool is refused)."""
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be None or an integer >= 0, got {seed!r}")
+        return int(seed)
+
     def _reset_arrays(self, seed: int | None) -> np.ndarray:
         """Reset (as :meth:`reset`) and return the observations as one ``(N, obs_dim)`` array."""
         if seed is not None:
-            self._rng = np.random.default_rng(seed)
+            self._rng = np.random.default_rng(self.check_seed(seed))
         elif self._rng is None:
             self._rng = np.random.default_rng()
         self.agents = self.possible_agents[:]
@@ -355,12 +362,17 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 f"unknown: {unknown}"
             )
         try:
-            cmd = np.array([actions[a] for a in self.agents], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
+            cmd = np.asarray([actions[a] for a in self.agents])
+        except (TypeError, ValueError):
+            cmd = None  # ragged: the shapes say why
+        if cmd is None or cmd.dtype.kind not in "biuf":  # strings and complex numbers too
+            kinds = {a: np.asarray(actions[a]).dtype.name for a in self.agents}
             shapes = {a: np.shape(actions[a]) for a in self.agents}
             raise ValueError(
-                f"every action must be a numeric array of shape (3,), got shapes {shapes}"
-            ) from exc
+                "every action must be a real numeric array of shape (3,), got dtypes "
+                f"{kinds} and shapes {shapes}"
+            )
+        cmd = cmd.astype(np.float64)
         if cmd.shape != (len(self.agents), 3):
             bad = {a: np.shape(actions[a]) for a in self.agents if np.shape(actions[a]) != (3,)}
             raise ValueError(f"every action must have shape (3,), got {bad}")

@@ -171,6 +171,14 @@ def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
 
 
 @njit(cache=True)
+def _unit(a: np.ndarray) -> None:
+    """Set the square matrix ``a`` to the identity in place."""
+    for i in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            a[i, j] = 1.0 if i == j else 0.0
+
+
+@njit(cache=True)
 def _gauss_newton_update(
     info: np.ndarray,
     rhs: np.ndarray,
@@ -237,6 +245,7 @@ def standalone_gauss_newton(
             n_iter[r] = it
             info[:, :] = 0.0
             rhs[:] = 0.0
+            at_sat = False
             for k in range(n_sv):
                 wk = w[r, k]
                 if wk == 0.0:
@@ -245,6 +254,9 @@ def standalone_gauss_newton(
                 dx1 = sv[k, 1] - pos[r, 1]
                 dx2 = sv[k, 2] - pos[r, 2]
                 rng = np.sqrt(dx0 * dx0 + dx1 * dx1 + dx2 * dx2)
+                if rng == 0.0:  # a satellite at the iterate: no line of sight (singular)
+                    at_sat = True
+                    break
                 sk = system[k]
                 g[:] = 0.0
                 g[0] = -dx0 / rng
@@ -257,6 +269,11 @@ def standalone_gauss_newton(
                     rhs[i] += wg * res
                     for j in range(p_dim):
                         info[i, j] += wg * g[j]
+            if at_sat and usable[r]:
+                _unit(inv[r])
+                singular[r] = True
+                converged[r] = True
+                break
             for s in range(n_sys):
                 if not seen[r, s]:
                     info[3 + s, 3 + s] += 1.0
@@ -370,6 +387,7 @@ def cooperative_gauss_newton(
             atpx[:, :] = 0.0
             g3[:, :, :] = 0.0
             a_all[:, :, :] = 0.0
+            at_sat = False
             for q in range(n):
                 # the block's rows, in satellite order
                 m = 0
@@ -388,6 +406,9 @@ def cooperative_gauss_newton(
                     d1 = sv[k, 1] - pq1
                     d2 = sv[k, 2] - pq2
                     rng = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                    if rng == 0.0:  # a satellite at the UAV's iterate: no line of sight
+                        at_sat = True
+                        break
                     u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
                     for j in range(3):  # lam = u F_q
                         x[i, j] = (
@@ -411,6 +432,8 @@ def cooperative_gauss_newton(
                         p0x[i, j] = wk * x[i, j]
                     for j in range(p_dim):
                         a_all[q, k, j] = x[i, 3 + j]
+                if at_sat:
+                    break
                 # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
                 if q != ref[b]:
                     for s in range(n_sys):
@@ -484,6 +507,11 @@ def cooperative_gauss_newton(
                             + g3[q, k, 1] * p0x[i2, 1]
                             + g3[q, k, 2] * p0x[i2, 2]
                         )
+            if at_sat and usable[b]:  # reported singular, as the numpy formulation does
+                _unit(inv[b])
+                singular[b] = True
+                converged[b] = True
+                break
             # 3. the errors common to all UAVs
             for k in range(n_sv):
                 for k2 in range(n_sv):

@@ -87,7 +87,9 @@ from coopnav_env.nav.types import (
     NavStatus,
     RelativePositions,
     VirtualPoint,
+    check_iteration,
     check_plausible_radius,
+    initial_positions,
 )
 from coopnav_env.nav.wls import (
     StandaloneSolution,
@@ -438,7 +440,8 @@ def _linearize(
     pos_q = pos[:, None, :] + st.base  # (B, N, 3)
     diff = obs.sv_ecef_m[None, None, :, :] - pos_q[:, :, None, :]
     rng = np.linalg.norm(diff, axis=-1)  # (B, N, S)
-    u = diff / rng[..., None]
+    # (a satellite at a UAV's iterate has no line of sight: :func:`_at_satellite` reports it)
+    u = diff / np.where(rng == 0.0, 1.0, rng)[..., None]
     pr = st.pr  # (B or 1, N, S)
     clock_cols = onehot[None, None] * st.has_clock[:, None, None, :]  # (B, 1, S, n_sys)
     clk_term = np.einsum("bs,ks->bk", clk * st.has_clock, onehot)[:, None, :]  # (B, 1, S)
@@ -679,7 +682,11 @@ def _gauss_newton(
     n_iter = 0
     for n_iter in range(1, max_iter + 1):  # noqa: B007 - reported
         lin = _linearize(obs, st, pos, clk, literal)
-        inv, dx, cross, singular = _wls_step(obs, st, lin, transfer, covariance, method, usable)
+        at_sat = _at_satellite(obs, st, pos)
+        inv, dx, cross, singular = _wls_step(
+            obs, st, lin, transfer, covariance, method, usable & ~at_sat
+        )
+        singular |= usable & at_sat
         dx[~usable | singular] = 0.0
         pos = pos + dx[:, :3]
         clk = clk + dx[:, 3:]
@@ -688,6 +695,15 @@ def _gauss_newton(
             break
     n_nuis = _n_nuisance(obs, st) if lin.nuis.shape[-1] else np.zeros(n_b, dtype=int)
     return pos, clk, inv, cross, converged, singular, lin.rows, n_nuis, n_iter
+
+
+def _at_satellite(obs: GnssObservations, st: _Setup, pos: np.ndarray) -> np.ndarray:
+    """(B,) problems in which a satellite of a used row sits exactly at its UAV's iterate:
+    the range has no derivative there, so the geometry is reported singular (the compiled
+    kernel does the same)."""
+    pos_q = pos[:, None, :] + st.base  # (B, N, 3)
+    rng = np.linalg.norm(obs.sv_ecef_m[None, None, :, :] - pos_q[:, :, None, :], axis=-1)
+    return np.any((rng == 0.0) & st.used, axis=(1, 2))
 
 
 def _n_nuisance(obs: GnssObservations, st: _Setup) -> np.ndarray:
@@ -862,19 +878,11 @@ def solve_cooperative(
         raise ValueError(f"covariance must be 'exact' or 'paper', got {covariance!r}")
     if method not in ("structured", "dense"):
         raise ValueError(f"method must be 'structured' or 'dense', got {method!r}")
-    if max_iter < 1:
-        raise ValueError(f"max_iter must be >= 1, got {max_iter}")
-    if not tol_m > 0:
-        raise ValueError(f"tol_m must be > 0, got {tol_m}")
+    max_iter = check_iteration(max_iter, tol_m)
     check_plausible_radius(plausible_radius_m)
     obs, _ = _sort_by_system(obs)
     st = _setup(obs, rel, centroid, transfer, sdt_min_centroid_sats, covariance)
-    n_b = st.ref.shape[0]
-    x0 = np.zeros((n_b, 3))
-    if x0_ecef_m is not None:
-        x0 = x0 + np.asarray(x0_ecef_m, dtype=float)
-        if x0.shape != (n_b, 3) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"x0_ecef_m must be finite with shape ({n_b}, 3) or (3,)")
+    x0 = initial_positions(x0_ecef_m, st.ref.shape[0])
     pos, clk, inv, cross, converged, singular, rows, n_nuis, n_iter = _gauss_newton(
         obs, st, x0, transfer, covariance, method, max_iter, tol_m
     )
@@ -1094,7 +1102,9 @@ def solve_cooperative_samples(
         raise ValueError(f"rel_samples_m must have shape ({k}, {obs.n_rx}, 3)")
     if isinstance(centroid, str):
         raise ValueError("solve_cooperative_samples needs one shared centroid (int/VirtualPoint)")
+    max_iter = check_iteration(max_iter, tol_m)
     check_plausible_radius(plausible_radius_m)
+    x0 = initial_positions(x0_ecef_m, k)
     obs, order = _sort_by_system(obs)
     if order is not None:
         pr_samples_m = pr_samples_m[:, :, order]
@@ -1116,7 +1126,6 @@ def solve_cooperative_samples(
     rep["base"] = np.where(st.avail[0][None, :, None], rel_samples_m, 0.0)
     rep["pr"] = np.where(obs.visible[None], pr_samples_m, 0.0)
     st = replace(st, **rep)
-    x0 = np.zeros((k, 3)) if x0_ecef_m is None else np.broadcast_to(x0_ecef_m, (k, 3)).copy()
     pos, clk, inv, cross, converged, singular, rows, n_nuis, n_iter = _gauss_newton(
         obs, st, x0, transfer, covariance, "structured", max_iter, tol_m
     )

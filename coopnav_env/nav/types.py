@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
@@ -21,6 +22,8 @@ __all__ = [
     "NavStatus",
     "RelativePositions",
     "VirtualPoint",
+    "check_iteration",
+    "initial_positions",
 ]
 
 
@@ -35,7 +38,9 @@ class NavStatus(IntEnum):
         Fewer usable measurements than unknowns (standalone needs ``3 + N_const``; the
         cooperative DDT needs one satellite at the centroid UAV, SDT ``3 + N_const`` there).
     SINGULAR_GEOMETRY
-        Enough measurements, but the normal matrix is numerically singular.
+        Enough measurements, but the normal matrix is numerically singular, or the
+        linearisation is undefined: a satellite at the current iterate (its line of sight,
+        the derivative of the range, has no direction).
     NOT_CONVERGED
         The Gauss-Newton iteration did not converge within ``max_iter``; the last iterate is
         returned.
@@ -62,6 +67,50 @@ class NavStatus(IntEnum):
 #: Default range of geocentric distance [m] of a plausible fix of a UAV: from 6,300 km (below
 #: the polar radius 6,356.8 km by a margin) to 6,500 km (about 120 km above the equator).
 PLAUSIBLE_RADIUS_M: tuple[float, float] = (6.3e6, 6.5e6)
+
+
+def check_iteration(max_iter: Any, tol_m: Any) -> int:
+    """Validate the Gauss-Newton limits of a solver; returns ``max_iter`` as an int.
+
+    Raises
+    ------
+    ValueError
+        ``max_iter`` is not an integer >= 1 (a bool, a float such as 2.5 or a string is
+        refused), or ``tol_m`` is not a finite number > 0.
+    """
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)):
+        raise ValueError(f"max_iter must be an integer, got {max_iter!r}")
+    if max_iter < 1:
+        raise ValueError(f"max_iter must be >= 1, got {max_iter}")
+    real = isinstance(tol_m, (int, float, np.integer, np.floating)) and not isinstance(tol_m, bool)
+    if not real or not 0 < tol_m < np.inf:
+        raise ValueError(f"tol_m must be a finite number > 0, got {tol_m!r}")
+    return int(max_iter)
+
+
+def initial_positions(x0_ecef_m: Any, n: int) -> np.ndarray:
+    """The ``(n, 3)`` start of ``n`` Gauss-Newton problems from an ``x0_ecef_m`` argument.
+
+    None gives zeros (the Earth's centre, Eq. 15's start); a ``(3,)`` point is shared by all.
+
+    Raises
+    ------
+    ValueError
+        Not numeric, another shape (checked before any arithmetic, so the message is ours
+        and not numpy's broadcasting error), or NaN/inf.
+    """
+    x0 = np.zeros((n, 3))
+    if x0_ecef_m is None:
+        return x0
+    try:
+        given = np.asarray(x0_ecef_m, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"x0_ecef_m must be a numeric array, got {x0_ecef_m!r}") from None
+    if given.shape not in ((3,), (n, 3)):
+        raise ValueError(f"x0_ecef_m must have shape ({n}, 3) or (3,), got {given.shape}")
+    if not np.all(np.isfinite(given)):
+        raise ValueError("x0_ecef_m contains NaN or inf")
+    return x0 + given
 
 
 def check_plausible_radius(plausible_radius_m: tuple[float, float] | None) -> None:

@@ -16,8 +16,10 @@ from coopnav_env.nav.types import (
     PLAUSIBLE_RADIUS_M,
     GnssObservations,
     NavStatus,
+    check_iteration,
     check_plausible_radius,
     implausible_radius,
+    initial_positions,
 )
 
 __all__ = ["StandaloneSolution", "solve_standalone"]
@@ -133,18 +135,11 @@ def solve_standalone(
         ``SINGULAR_GEOMETRY``; both have NaN positions. Nothing is raised for such cases.
     """
     check_plausible_radius(plausible_radius_m)
-    if max_iter < 1:
-        raise ValueError(f"max_iter must be >= 1, got {max_iter}")
-    if not tol_m > 0:
-        raise ValueError(f"tol_m must be > 0, got {tol_m}")
+    max_iter = check_iteration(max_iter, tol_m)
     n_rx = obs.pr_m.shape[0]
     n_sys = obs.n_systems
     vis = obs.visible
-    pos = np.zeros((n_rx, 3))
-    if x0_ecef_m is not None:
-        pos = pos + np.asarray(x0_ecef_m, dtype=float)
-        if not np.all(np.isfinite(pos)):
-            raise ValueError("x0_ecef_m contains NaN or inf")
+    pos = initial_positions(x0_ecef_m, n_rx)
     if _USE_KERNEL:
         pos, cov, clock, status, n_used, n_iter = _kernels.standalone_solve(
             np.ascontiguousarray(vis, dtype=bool),
@@ -251,7 +246,9 @@ def _gauss_newton_numpy(obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m):
     for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is reported
         diff = obs.sv_ecef_m[None, :, :] - pos[:, None, :]
         rng_m = np.linalg.norm(diff, axis=-1)
-        los = diff / rng_m[..., None]
+        # a satellite at the iterate: no line of sight, the receiver's geometry is singular
+        at_sat = np.any((rng_m == 0.0) & (w > 0.0), axis=1)
+        los = diff / np.where(rng_m == 0.0, 1.0, rng_m)[..., None]
         # Rows of satellites not received carry zero weight (w = 0), so they drop out.
         g = np.concatenate([-los, np.broadcast_to(onehot, (n_rx, n_sv, n_sys))], axis=-1)
         resid = pr - rng_m - clock @ onehot.T
@@ -260,7 +257,8 @@ def _gauss_newton_numpy(obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m):
         idx = np.arange(3, 3 + n_sys)
         info[:, idx, idx] += ~seen
         rhs = np.einsum("rsp,rs,rs->rp", g, w, resid)
-        inv, singular = _safe_inverse(info, usable)
+        inv, singular = _safe_inverse(info, usable & ~at_sat)
+        singular |= usable & at_sat
         dx = np.einsum("rpq,rq->rp", inv, rhs)
         dx[~usable | singular] = 0.0
         pos = pos + dx[:, :3]

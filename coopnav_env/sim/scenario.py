@@ -411,6 +411,10 @@ class ScenarioConfig:
         _check_real(o, "dead_reckoning_sigma_mps", self.dead_reckoning_sigma_mps, 0.0, 100.0)
         _check_real(o, "start_prior_sigma_m", self.start_prior_sigma_m, 0.0, 1000.0, lo_open=True)
         _check_real(o, "formation_spacing_m", self.formation_spacing_m, kin.min_separation_m, 100.0)
+        if not self.formation_spacing_m > 0:  # min_separation_m = 0 admits 0: no lattice
+            raise ValueError(
+                f"{o}.formation_spacing_m must be > 0, got {self.formation_spacing_m!r}"
+            )
         _check_real(
             o, "start_altitude_m", self.start_altitude_m, kin.altitude_min_m, kin.altitude_max_m
         )

@@ -43,6 +43,10 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
+MIN_STEP_M: float = 1e-6
+"""Smallest allowed ``max_speed_mps * dt_s`` [m] (observations and rewards divide by it)."""
+
+
 @dataclass(frozen=True)
 class KinematicsConfig:
     """Point-mass kinematics of a multirotor UAV.
@@ -85,6 +89,12 @@ class KinematicsConfig:
         )
         _check_real(o, "uav_radius_m", self.uav_radius_m, 0.0, 100.0)
         _check_real(o, "min_separation_m", self.min_separation_m, 0.0, 1000.0)
+        # the environment divides by the largest step; a product that underflows is refused
+        if not self.max_speed_mps * self.dt_s >= MIN_STEP_M:
+            raise ValueError(
+                f"{o}: max_speed_mps * dt_s (the largest step, {self.max_speed_mps!r} m/s x "
+                f"{self.dt_s!r} s) must be >= {MIN_STEP_M} m"
+            )
 
 
 def step_kinematics(

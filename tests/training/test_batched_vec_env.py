@@ -75,7 +75,8 @@ def test_auto_vec_env_is_batched_where_it_applies(tmp_path) -> None:
     assert urban_cfg(tmp_path, num_cpus=0).vec_env_kind() == "batched"
     assert urban_cfg(tmp_path, num_cpus=2).vec_env_kind() == "supersuit"
     rendering = {**urban_cfg(tmp_path).env, "render_mode": "rgb_array"}
-    assert urban_cfg(tmp_path, env=rendering).vec_env_kind() == "supersuit"
+    with pytest.raises(ValueError, match="training does not render"):
+        urban_cfg(tmp_path, env=rendering)  # issue 15: training refuses render modes
     assert urban_cfg(tmp_path, vec_env="supersuit").vec_env_kind() == "supersuit"
     assert toy_cfg(tmp_path / "toy").vec_env_kind() == "supersuit"
     train(toy_cfg(tmp_path / "toy", timesteps=64))  # auto -> supersuit: the toy env trains

@@ -299,14 +299,20 @@ def test_rllib_train_resume_and_evaluate_beside_sb3(tmp_path):
     assert any((rl / "ray").glob("session_*"))  # Ray's files in the output directory
     assert list(home.iterdir()) == []  # ... and none in the home directory
 
-    # resume from the latest checkpoint, in this process (0 env runners), for one iteration
+    # the run is finished: resuming it without asking for more changes nothing (issue 15)
+    before = (rl / "run.json").read_bytes()
+    proc = _coopnav(["train", "--out", str(rl), "--resume", "latest"], env)
+    assert "holds a finished run (384 agent-steps)" in proc.stderr
+    assert (rl / "run.json").read_bytes() == before
+
+    # train it further from its final model, in this process (0 env runners), one iteration
     _coopnav(
         ["train", "--backend", "rllib", "--out", str(rl), "--num-env-runners", "0",
          "--timesteps", "576", "--resume", "latest", *SMALL, *RLLIB_SMALL],
         env,
     )  # fmt: skip
     info = json.loads((rl / "run.json").read_text())
-    assert info["resumed_from"] == str(rl / "checkpoints" / "rllib_384_steps")
+    assert info["resumed_from"] == str(rl / "final_model")
     assert (info["iterations"], info["session_iterations"], info["num_timesteps"]) == (3, 1, 576)
     assert (rl / "config_resumed_at_384.yaml").is_file()
     (row,) = _rows(rl / "logs" / "progress_resumed_at_384.csv")

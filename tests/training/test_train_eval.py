@@ -198,11 +198,9 @@ def test_unknown_ppo_setting_and_missing_resume(tmp_path):
 
 
 def test_cli_negative_timesteps_is_a_clear_error(tmp_path, capsys):
-    from training import train as train_mod
+    from training.cli import main
 
-    parser = argparse.ArgumentParser()
-    train_mod.add_arguments(parser)
-    rc = train_mod.run(parser.parse_args(["--out", str(tmp_path), "--timesteps", "-1"]))
+    rc = main(["train", "--out", str(tmp_path), "--timesteps", "-1"])
     assert rc == 2
     assert "timesteps must be >= 1, got -1" in capsys.readouterr().err
 
@@ -238,15 +236,19 @@ def test_outputs_checkpoints_and_resume(tmp_path):
 
     with pytest.raises(ValueError, match="cannot resume"):
         train(toy_cfg(out, timesteps=1600, resume="latest", env={"n_uavs": 3, "max_steps": 9}))
+    # the run is finished: training it further continues from its final model (issue 15:
+    # not from the last periodic checkpoint, which would lose the steps after it)
+    n_final = saved["num_timesteps"]
+    assert n_final > n_ckpt
     final2 = train(toy_cfg(out, timesteps=1600, resume="latest"))
     from stable_baselines3 import PPO
 
     model = PPO.load(final2, device="cpu")
     assert 1600 <= model.num_timesteps < 1600 + 192
-    assert json.loads((out / "run.json").read_text())["resumed_from"] == str(latest)
-    assert (out / "logs" / f"progress_resumed_at_{n_ckpt}.csv").is_file()
-    assert (out / f"config_resumed_at_{n_ckpt}.yaml").is_file()
-    assert (out / f"resumed_at_{n_ckpt}.monitor.csv").is_file()
+    assert json.loads((out / "run.json").read_text())["resumed_from"] == str(final)
+    assert (out / "logs" / f"progress_resumed_at_{n_final}.csv").is_file()
+    assert (out / f"config_resumed_at_{n_final}.yaml").is_file()
+    assert (out / f"resumed_at_{n_final}.monitor.csv").is_file()
 
 
 # --------------------------------------------------------------------------------------------
@@ -309,11 +311,9 @@ def test_evaluate_bad_policies(tmp_path):
 
 
 def test_evaluate_cli_reports_unknown_policy(capsys):
-    from training import evaluate as ev
+    from training.cli import main
 
-    parser = argparse.ArgumentParser()
-    ev.add_arguments(parser)
-    rc = ev.run(parser.parse_args(["--policies", "nope", "--env-id", TOY, "--episodes", "1"]))
+    rc = main(["evaluate", "--policies", "nope", "--env-id", TOY, "--episodes", "1"])
     assert rc == 2 and "unknown policy 'nope'" in capsys.readouterr().err
 
 

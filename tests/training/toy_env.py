@@ -15,6 +15,21 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+TOY_ENV_ID = "tests.training.toy_env:ToyParallelEnv"
+"""The ``env_id`` of this env for ``coopnav train`` and ``TrainConfig``."""
+
+TOY_TRAINING: dict[str, Any] = {
+    "timesteps": 600,
+    "seed": 0,
+    "n_envs": 2,
+    "checkpoint_freq": 0,
+    "env": {"n_uavs": 3, "max_steps": 12},
+    "ppo": {"n_steps": 32, "batch_size": 64, "n_epochs": 2},
+    "pretrain": None,
+    "progress_bar": False,
+}
+"""Settings of a training run of a few seconds on this env (a section of a YAML file)."""
+
 
 class ToyParallelEnv(ParallelEnv):
     """A seeded toy swarm navigation env; see the module docstring."""

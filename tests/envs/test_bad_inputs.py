@@ -1,0 +1,92 @@
+"""Misuse of ``urban_canyon_v0`` is a clear ``ValueError`` at the call that misuses it
+(issue 15): settings that would divide by zero at reset or step fail at construction; string,
+complex and boolean-seed inputs are refused instead of being cast silently."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coopnav_env import urban_canyon_v0
+from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        (
+            {"formation_spacing_m": 0.0, "kinematics": {"min_separation_m": 0.0}},
+            r"formation_spacing_m must be > 0, got 0\.0",
+        ),
+        (
+            {"kinematics": {"max_speed_mps": 1e-300, "dt_s": 1e-300}},
+            r"max_speed_mps \* dt_s .* must be >= 1e-06 m",
+        ),
+        ({"kinematics": {"max_speed_mps": 1e-320}}, r"max_speed_mps \* dt_s"),
+    ],
+)
+def test_settings_that_would_divide_by_zero_fail_at_construction(kw, match):
+    with pytest.raises(ValueError, match=match):
+        urban_canyon_v0.parallel_env(n_uavs=2, **kw)
+
+
+def test_the_smallest_step_still_works():
+    env = urban_canyon_v0.parallel_env(n_uavs=2, kinematics={"max_speed_mps": 1e-3, "dt_s": 1e-3})
+    env.reset(seed=0)
+    _, rewards, *_ = env.step({a: np.zeros(3, np.float32) for a in env.agents})
+    assert all(np.isfinite(r) for r in rewards.values())
+
+
+@pytest.mark.parametrize(
+    "action",
+    [
+        "abc",
+        np.array(["0.1", "0.2", "0.3"]),  # numpy would cast these strings to floats
+        ["0.1", "0.2", "0.3"],
+        np.array([0.1 + 1j, 0.0, 0.0]),  # numpy would drop the imaginary part (a warning)
+    ],
+    ids=["str", "str-array", "str-list", "complex"],
+)
+def test_string_and_complex_actions_are_refused(action):
+    env = urban_canyon_v0.parallel_env(n_uavs=2)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="every action must be a real numeric array"):
+        env.step({a: action for a in env.agents})
+    batched = BatchedUrbanCanyonEnv(2, n_uavs=2)
+    batched.reset(seed=0)
+    bad = np.broadcast_to(np.asarray(action), (2, 2, 3)) if np.ndim(action) else action
+    with pytest.raises(ValueError, match="actions must be a real numeric array"):
+        batched.step(bad)
+
+
+def test_numeric_actions_of_any_real_dtype_are_the_same():
+    a = urban_canyon_v0.parallel_env(n_uavs=2)
+    b = urban_canyon_v0.parallel_env(n_uavs=2)
+    a.reset(seed=3)
+    b.reset(seed=3)
+    ra = a.step({ag: np.array([1, 0, 0]) for ag in a.agents})[1]  # int
+    rb = b.step({ag: np.array([1.0, 0.0, 0.0], np.float32) for ag in b.agents})[1]
+    assert ra == rb
+
+
+@pytest.mark.parametrize("seed", [True, False, 1.5, -1, "3", [1, 2]])
+def test_bad_reset_seeds_are_refused(seed):
+    env = urban_canyon_v0.parallel_env(n_uavs=2)
+    with pytest.raises(ValueError, match="seed must be None or an integer >= 0"):
+        env.reset(seed=seed)
+
+
+@pytest.mark.parametrize("seed", [True, 1.5, "3", [True, 1], [0, -1]])
+def test_bad_batched_seeds_are_refused(seed):
+    env = BatchedUrbanCanyonEnv(2, n_uavs=2)
+    with pytest.raises(ValueError, match="seed must be"):
+        env.reset(seed=seed)
+
+
+def test_numpy_integer_seeds_are_accepted():
+    a = urban_canyon_v0.parallel_env(n_uavs=2)
+    b = urban_canyon_v0.parallel_env(n_uavs=2)
+    oa, _ = a.reset(seed=np.int64(7))
+    ob, _ = b.reset(seed=7)
+    for k in oa:
+        np.testing.assert_array_equal(oa[k], ob[k])

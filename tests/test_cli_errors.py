@@ -1,0 +1,214 @@
+"""Bad invocations of ``coopnav`` end in a clear one-line message, never a traceback (issue 15).
+
+Each row is one bad invocation: the exit status it must give (2: a usage error; argparse's
+own errors are 2 as well), a fragment of the message that names the setting or the file, and
+no ``Traceback`` on stderr. ``--debug`` (or ``COOPNAV_DEBUG=1``) shows the traceback.
+Invocations are run in this process (``training.cli.main``); none of them starts training.
+"""
+
+from __future__ import annotations
+
+import zipfile
+
+import pytest
+import yaml
+
+from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
+from training.cli import main
+
+TOY = TOY_ENV_ID
+TOY_SECTION = TOY_TRAINING
+
+#: (id, argv with {tmp} placeholders, exit status, message fragment)
+CASES: list[tuple[str, list[str], int, str]] = [
+    # configuration files and --set / --env-set values
+    ("yaml-config-malformed", ["train", "--config", "{tmp}/bad.yaml"], 2, "not valid YAML"),
+    ("yaml-config-missing", ["train", "--config", "{tmp}/none.yaml"], 2, "not found"),
+    ("yaml-config-list", ["train", "--config", "{tmp}/list.yaml"], 2, "must be a mapping"),
+    ("yaml-section-list", ["train", "--config", "{tmp}/section.yaml"], 2, "must be a mapping"),
+    ("yaml-set-malformed", ["train", "--set", "ppo.n_steps=[1,"], 2, "not valid YAML"),
+    ("yaml-env-set-malformed", ["train", "--env-set", "city={a"], 2, "not valid YAML"),
+    ("set-no-equals", ["train", "--set", "timesteps"], 2, "key=value"),
+    ("env-list", ["train", "--set", "env=[1,2]"], 2, "env must be a mapping"),
+    ("ppo-list", ["train", "--set", "ppo=[1]"], 2, "ppo must be a mapping"),
+    ("unknown-setting", ["train", "--set", "bogus=1"], 2, "unknown training setting"),
+    # SB3 settings SB3 rejects late (or not at all)
+    ("lr-abc", ["train", "--set", "ppo.learning_rate=abc"], 2, "ppo.learning_rate must be"),
+    ("lr-zero", ["train", "--set", "ppo.learning_rate=0"], 2, "ppo.learning_rate must be"),
+    ("n-steps-0", ["train", "--set", "ppo.n_steps=0"], 2, "ppo.n_steps must be an integer"),
+    ("batch-size-neg", ["train", "--set", "ppo.batch_size=-1"], 2, "ppo.batch_size must be"),
+    ("n-epochs-1.5", ["train", "--set", "ppo.n_epochs=1.5"], 2, "ppo.n_epochs must be"),
+    ("gamma-2", ["train", "--set", "ppo.gamma=2"], 2, "ppo.gamma must be a number in (0, 1]"),
+    ("gae-lambda", ["train", "--set", "ppo.gae_lambda=-0.1"], 2, "ppo.gae_lambda must be"),
+    ("clip-range-0", ["train", "--set", "ppo.clip_range=0"], 2, "ppo.clip_range must be"),
+    ("ent-coef-nan", ["train", "--set", "ppo.ent_coef=.nan"], 2, "ppo.ent_coef must be"),
+    ("net-arch-abc", ["train", "--set", "ppo.policy_kwargs.net_arch=abc"], 2, "net_arch must"),
+    ("net-arch-0", ["train", "--set", "ppo.policy_kwargs.net_arch=[0]"], 2, "net_arch must"),
+    ("net-arch-top", ["train", "--set", "ppo.net_arch=[64]"], 2, "unknown PPO setting"),
+    ("activation", ["train", "--set", "ppo.policy_kwargs.activation_fn=relu"], 2, "class"),
+    ("policy-kw", ["train", "--set", "ppo.policy_kwargs.foo=1"], 2, "policy_kwargs setting"),
+    ("policy-name", ["train", "--set", "ppo.policy=Foo"], 2, "ppo.policy must be one of"),
+    ("device-foo", ["train", "--set", "device=foo"], 2, "device must be a PyTorch device"),
+    ("log-std", ["train", "--set", "ppo.policy_kwargs.log_std_init=x"], 2, "log_std_init"),
+    # run settings
+    ("timesteps-neg", ["train", "--timesteps", "-1"], 2, "timesteps must be >= 1"),
+    ("timesteps-abc", ["train", "--timesteps", "abc"], 2, "invalid int value"),
+    ("seed-neg", ["train", "--seed", "-1"], 2, "seed must be in [0,"),
+    ("seed-huge", ["train", "--seed", "1000000"], 2, "seed must be in [0,"),
+    ("n-envs-0", ["train", "--n-envs", "0"], 2, "n_envs must be >= 1"),
+    ("num-cpus-neg", ["train", "--num-cpus", "-1"], 2, "num_cpus must be >= 0"),
+    ("threads-0", ["train", "--set", "torch_threads=0"], 2, "torch_threads must be >= 1"),
+    ("verbose-5", ["train", "--verbose", "5"], 2, "verbose must be in [0, 2]"),
+    ("ckpt-freq-neg", ["train", "--checkpoint-freq", "-1"], 2, "checkpoint_freq must be"),
+    ("n-envs-abc", ["train", "--set", "n_envs=abc"], 2, "n_envs must be an integer"),
+    ("batched-cpus", ["train", "--vec-env", "batched", "--num-cpus", "2"], 2, "num_cpus"),
+    ("vec-env-bad", ["train", "--vec-env", "fast"], 2, "invalid choice"),
+    ("backend-bad", ["train", "--backend", "jax"], 2, "invalid choice"),
+    ("pretrain-0", ["train", "--set", "pretrain.episodes=0"], 2, "pretrain.episodes"),
+    ("normalize", ["train", "--set", "normalize_reward=maybe"], 2, "normalize_reward"),
+    ("render-mode", ["train", "--env-set", "render_mode=human"], 2, "does not render"),
+    ("env-unknown", ["train", "--env-set", "bogus=1"], 2, "bogus"),
+    ("n-uavs-0", ["train", "--n-uavs", "0"], 2, "n_uavs"),
+    ("runners-sb3", ["train", "--num-env-runners", "2"], 2, "only apply to --backend rllib"),
+    ("runners-neg", ["train", "--backend", "rllib", "--num-env-runners", "-1"], 2, ">= 0"),
+    ("overwrite-resume", ["train", "--overwrite", "--resume", "latest"], 2, "contradict"),
+    # run folders and checkpoints
+    ("out-is-file", ["train", "--out", "{tmp}/afile", "{toy}"], 2, "is a file"),
+    ("resume-missing", ["train", "--resume", "{tmp}/nope.zip", "{toy}"], 2, "not found"),
+    ("resume-none", ["train", "--resume", "latest", "{toy}"], 2, "no checkpoint to resume"),
+    ("resume-corrupt", ["train", "--resume", "{tmp}/corrupt.zip", "{toy}"], 2, "does not load"),
+    ("resume-empty", ["train", "--resume", "{tmp}/empty.zip", "{toy}"], 2, "does not load"),
+    # coopnav evaluate
+    ("eval-policy", ["evaluate", "--policies", "nope"], 2, "unknown policy 'nope'"),
+    ("eval-episodes-0", ["evaluate", "--episodes", "0"], 2, "episodes must be >= 1"),
+    ("eval-seed-start", ["evaluate", "--seed-start", "5"], 2, "evaluation seeds must be"),
+    ("eval-seeds-neg", ["evaluate", "--seeds", "-1"], 2, "--seeds must be >= 0"),
+    ("eval-ppo-missing", ["evaluate", "--policies", "ppo:{tmp}/nope.zip"], 2, "nope.zip"),
+    ("eval-ppo-corrupt", ["evaluate", "--policies", "ppo:{tmp}/corrupt.zip"], 2, "corrupt.zip"),
+    ("eval-ppo-empty", ["evaluate", "--policies", "ppo:{tmp}/empty.zip"], 2, "empty.zip"),
+    ("eval-train-cfg", ["evaluate", "--train-config", "{tmp}/none.yaml"], 2, "not found"),
+    ("eval-train-bad", ["evaluate", "--train-config", "{tmp}/bad.yaml"], 2, "not valid YAML"),
+    ("eval-env-set", ["evaluate", "--env-set", "n_uavs=[1"], 2, "not valid YAML"),
+    ("eval-n-uavs", ["evaluate", "--n-uavs", "0", "--episodes", "1"], 2, "n_uavs"),
+    ("eval-option", ["evaluate", "--policies", "waypoint@foo=1"], 2, "bad option"),
+    (
+        "eval-out-file",
+        [
+            "evaluate",
+            "--policies",
+            "random",
+            "--out",
+            "{tmp}/afile",
+            "--env-id",
+            TOY,
+            "--episodes",
+            "1",
+            "--no-plots",
+        ],
+        2,
+        "afile",
+    ),
+    # coopnav reproduce
+    ("repro-set", ["reproduce", "--out", "{tmp}/r", "--set", "n_epochs=abc"], 2, "n_epochs"),
+    ("repro-key", ["reproduce", "--out", "{tmp}/r", "--set", "bogus=1"], 2, "unknown --set key"),
+    ("repro-set-eq", ["reproduce", "--out", "{tmp}/r", "--set", "bogus"], 2, "KEY=VALUE"),
+    ("repro-seed", ["reproduce", "--out", "{tmp}/r", "--seed", "-1"], 2, "seed"),
+    ("repro-config", ["reproduce", "--out", "{tmp}/r", "--config", "{tmp}/none.json"], 2, "none"),
+    ("repro-json", ["reproduce", "--out", "{tmp}/r", "--config", "{tmp}/bad.yaml"], 2, "JSON"),
+    (
+        "repro-json-list",
+        ["reproduce", "--out", "{tmp}/r", "--config", "{tmp}/list.json"],
+        2,
+        "JSON object",
+    ),
+    (
+        "repro-out-file",
+        ["reproduce", "--out", "{tmp}/afile", "--quick", "--no-progress"],
+        2,
+        "afile",
+    ),
+    ("repro-no-out", ["reproduce"], 2, "--out"),
+    # coopnav demo
+    ("demo-epochs-0", ["demo", "--epochs", "0"], 2, "--epochs"),
+    ("demo-epochs-neg", ["demo", "--epochs", "-3"], 2, "--epochs"),
+    ("demo-dt-nan", ["demo", "--dt", "nan"], 2, "--dt"),
+    ("demo-dt-inf", ["demo", "--dt", "inf"], 2, "--dt"),
+    ("demo-dt-0", ["demo", "--dt", "0"], 2, "--dt"),
+    ("demo-seed-neg", ["demo", "--seed", "-1"], 2, "--seed"),
+    ("demo-epochs-abc", ["demo", "--epochs", "abc"], 2, "invalid int value"),
+    # the command itself
+    ("no-such-command", ["fly"], 2, "invalid choice"),
+]
+
+
+@pytest.fixture
+def files(tmp_path):
+    """The files the invocations name: malformed YAML/JSON, a file, damaged checkpoints."""
+    (tmp_path / "bad.yaml").write_text("urban_canyon_v0: [unclosed\n  timesteps: 3\n")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    (tmp_path / "section.yaml").write_text("urban_canyon_v0: [1, 2]\n")
+    (tmp_path / "list.json").write_text("[1, 2]\n")
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "empty.zip").write_bytes(b"")
+    with zipfile.ZipFile(tmp_path / "corrupt.zip", "w") as z:  # SB3's layout, broken weights
+        z.writestr("data", "{}")
+        z.writestr("policy.pth", b"not torch")
+        z.writestr("pytorch_variables.pth", b"")
+    (tmp_path / "toy.yaml").write_text(yaml.safe_dump({TOY: TOY_SECTION}))
+    return tmp_path
+
+
+def _argv(template: list[str], tmp) -> list[str]:
+    argv = []
+    for item in template:
+        if item == "{toy}":
+            argv += ["--config", str(tmp / "toy.yaml"), "--env-id", TOY]
+        else:
+            argv.append(item.replace("{tmp}", str(tmp)))
+    if argv[0] == "train":
+        if "--out" not in argv:
+            argv += ["--out", str(tmp / "run")]
+        # should a row pass validation after all, it trains for seconds, not an hour
+        safe = ["--set", "pretrain=null"] + ([] if "--timesteps" in argv else ["--timesteps", "64"])
+        argv = [argv[0], *safe, *argv[1:]]
+    return argv
+
+
+def _run(argv: list[str]) -> int:
+    try:
+        return main(argv)
+    except SystemExit as exc:  # argparse's own usage errors
+        return int(exc.code)
+
+
+@pytest.mark.parametrize(
+    ("argv", "code", "message"), [c[1:] for c in CASES], ids=[c[0] for c in CASES]
+)
+def test_bad_invocation_ends_in_a_clear_message(files, capsys, argv, code, message):
+    rc = _run(_argv(argv, files))
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert rc == code, err
+    assert message in err, err
+    lines = [line for line in err.splitlines() if line.startswith("coopnav ")]
+    if "invalid" not in message and "--out" != message:
+        assert lines and len(lines[-1]) > len("coopnav x: error: "), err  # one line, ours
+
+
+def test_case_count():
+    """The table the closing note of issue 15 quotes (kept honest by this test)."""
+    assert len(CASES) == len({c[0] for c in CASES}) >= 80
+
+
+def test_debug_shows_the_traceback(files, capsys, monkeypatch):
+    argv = _argv(["train", "--set", "ppo.gamma=2"], files)
+    with pytest.raises(ValueError, match=r"ppo\.gamma"):
+        main([*argv, "--debug"])
+    with pytest.raises(ValueError, match=r"ppo\.gamma"):
+        main(["--debug", *argv])
+    monkeypatch.setenv("COOPNAV_DEBUG", "1")
+    with pytest.raises(ValueError, match=r"ppo\.gamma"):
+        main(argv)
+    monkeypatch.setenv("COOPNAV_DEBUG", "0")
+    assert main(argv) == 2
+    capsys.readouterr()

@@ -1,0 +1,177 @@
+"""The TorchRL MAPPO/IPPO backend: settings, learning signal, checkpoints, evaluation."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torchrl")
+torch = pytest.importorskip("torch")
+
+from agents import make_policy  # noqa: E402
+from agents.marl_nets import MARLSettings  # noqa: E402
+from coopnav_env import urban_canyon_v0  # noqa: E402
+from training.cli import main  # noqa: E402
+from training.marl import MARLTrainer  # noqa: E402
+
+SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--no-progress"]
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    torch.set_num_threads(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("algorithm", "qmix"),
+        ("n_copies", 0),
+        ("learning_rate", 0.0),
+        ("gamma", 1.5),
+        ("hidden", [64, 32]),
+        ("residual_mode", "torque"),
+        ("offset_scale_m", [1.0, 2.0]),
+    ],
+)
+def test_bad_settings_name_the_field(field, value) -> None:
+    with pytest.raises(ValueError, match=field):
+        MARLSettings(**{field: value})
+    with pytest.raises(ValueError, match="unknown torchrl setting"):
+        MARLSettings.from_dict({"lr": 1e-3})
+
+
+def test_the_actor_explores_and_learns() -> None:
+    # regression: TorchRL actors return the distribution's mode unless the exploration type
+    # is set, which gave zero policy gradients (a - mean = 0) and no exploration
+    tr = MARLTrainer(MARLSettings(algorithm="ippo", n_copies=2, rollout_steps=8), {}, seed=0)
+    data = tr.collect()
+    loc_in = data["agents", "observation"]
+    with torch.no_grad():
+        mean = tr.actor.module[0](data.clone())["agents", "loc"]
+    assert not torch.allclose(data["agents", "action"], mean)  # sampled, not the mean
+    before = [p.detach().clone() for p in tr.actor.parameters()]
+    tr.update(data)
+    moved = [float((p - b).abs().max()) for p, b in zip(tr.actor.parameters(), before)]
+    assert all(m > 0.0 for m in moved)  # every actor weight got a gradient
+    assert loc_in.shape[-1] == 52
+
+
+def test_mappo_critic_reads_the_state_and_ippo_does_not() -> None:
+    cfg = urban_canyon_v0.parallel_env().config
+    m = MARLTrainer(MARLSettings(algorithm="mappo", n_copies=1, rollout_steps=2), {}, 0)
+    i = MARLTrainer(MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=2), {}, 0)
+    assert m.critic_dim == cfg.obs_dim + cfg.state_dim
+    assert i.critic_dim == cfg.obs_dim
+    data = m.collect()
+    crit = data["agents", "critic_input"][0, 0]  # copy 0, step 0: (N, S + D)
+    state = torch.as_tensor(m.venv.envs[0].state())  # not the same step, but the same layout
+    assert crit.shape == (5, cfg.state_dim + cfg.obs_dim)
+    assert torch.equal(crit[0, : cfg.state_dim], crit[4, : cfg.state_dim])  # shared state
+    assert state.shape == (cfg.state_dim,)
+
+
+def test_an_untrained_offset_policy_flies_exactly_like_its_base(tmp_path) -> None:
+    s = MARLSettings(
+        algorithm="mappo",
+        n_copies=1,
+        rollout_steps=2,
+        residual_base="spread",
+        residual_mode="offset",
+    )
+    tr = MARLTrainer(s, {}, seed=0)
+    tr.save(tmp_path / "final_model.pt")
+    env_a = urban_canyon_v0.parallel_env()
+    env_b = urban_canyon_v0.parallel_env()
+    learned = make_policy(f"mappo:{tmp_path}", env_a)
+    base = make_policy("spread", env_b)
+    obs_a, _ = env_a.reset(seed=1_000_003)
+    obs_b, _ = env_b.reset(seed=1_000_003)
+    learned.reset(1_000_003)
+    base.reset(1_000_003)
+    for _ in range(40):
+        act_a, act_b = learned.act(obs_a), base.act(obs_b)
+        for a in act_a:
+            np.testing.assert_array_equal(act_a[a], act_b[a])
+        obs_a, *_ = env_a.step(act_a)
+        obs_b, *_ = env_b.step(act_b)
+        if not env_a.agents:
+            break
+
+
+def test_train_checkpoint_resume_evaluate_through_the_cli(tmp_path, capsys) -> None:
+    out = tmp_path / "run"
+    args = ["train", "--backend", "torchrl", "--algorithm", "mappo", "--out", str(out)]
+    assert main([*args, "--timesteps", "160", "--checkpoint-freq", "80", *SMALL]) == 0
+    ckpts = sorted(p.name for p in (out / "checkpoints").iterdir())
+    assert ckpts == ["marl_160_steps.pt", "marl_80_steps.pt"]
+    assert (out / "final_model.pt").is_file() and (out / "config.yaml").is_file()
+    import json
+
+    run = json.loads((out / "run.json").read_text())
+    assert run["algorithm"] == "mappo" and run["agent_steps"] == 160
+    assert run["env"]["nav_team_weight"] == 1.0  # the torchrl.env overrides were applied
+    resumed = [*args, "--timesteps", "240", "--resume", "latest", *SMALL]
+    assert main(resumed) == 0
+    assert json.loads((out / "run.json").read_text())["agent_steps"] == 240
+    assert (
+        main(
+            [
+                "evaluate",
+                "--policies",
+                "spread",
+                f"mappo:{out}",
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "eval"),
+                "--no-plots",
+            ]
+        )
+        == 0
+    )
+    text = (tmp_path / "eval" / "report.md").read_text()
+    assert "mappo:" in text and "nav_team_weight" in text  # evaluated in the run's env
+    capsys.readouterr()
+    assert main(["train", "--algorithm", "mappo", "--out", str(tmp_path / "x")]) == 2
+    assert "--algorithm only applies to --backend torchrl" in capsys.readouterr().err
+
+
+def test_same_seed_same_weights(tmp_path) -> None:
+    weights = []
+    for _ in range(2):
+        s = MARLSettings(
+            algorithm="ippo",
+            n_copies=2,
+            rollout_steps=4,
+            residual_base="sky",
+            residual_mode="velocity",
+        )
+        tr = MARLTrainer(s, {}, seed=3)
+        tr.update(tr.collect())
+        weights.append(torch.cat([p.detach().ravel() for p in tr.actor.parameters()]))
+    assert torch.equal(weights[0], weights[1])
+
+
+def test_torchrl_wrapper_accepts_the_environment() -> None:
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+    from torchrl.envs.utils import check_env_specs
+
+    for state in (True, False):
+        env = PettingZooWrapper(
+            urban_canyon_v0.parallel_env(max_steps=20), return_state=state, seed=0
+        )
+        check_env_specs(env)
+        td = env.rollout(5)
+        assert ("agents", "info", "coop_error_m") in td.keys(True, True) or (
+            "next",
+            "agents",
+            "info",
+            "coop_error_m",
+        ) in td.keys(True, True)
+        env.close()

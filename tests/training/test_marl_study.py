@@ -1,0 +1,93 @@
+"""coopnav study: descriptors, statistics and the written report."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from coopnav_env import urban_canyon_v0
+from training.marl_study import EpisodeResult, behaviour_descriptors, summarise
+
+
+def test_descriptors_of_a_known_formation() -> None:
+    env = urban_canyon_v0.parallel_env(n_uavs=3)
+    env.reset(seed=0)
+    city = env.unwrapped.world.city
+    x = float(city.street_centres_x_m[1])
+    y = float(city.street_centres_y_m[1])
+    # three UAVs in a north-south column on a street, 10 m apart, the middle one on an
+    # intersection centre, at 20 m; two steps
+    col = np.array([[x, y - 10.0, 20.0], [x, y, 20.0], [x, y + 10.0, 20.0]])
+    pos = np.stack([col, col])
+    d = behaviour_descriptors(env, pos, np.array([7, 9]))
+    assert d["spacing_m"] == pytest.approx(10.0)
+    assert d["altitude_m"] == pytest.approx(20.0)
+    assert d["cross_extent_m"] == pytest.approx(0.0)  # a column in one street
+    assert d["near_open_share"] == pytest.approx(1.0)  # all within 10 m of the crossing
+    assert d["swarm_sats"] == pytest.approx(8.0)
+    far = pos.copy()
+    far[:, :, 1] += 0.5 * (float(city.street_centres_y_m[2]) - y)  # mid-block
+    assert behaviour_descriptors(env, far, np.array([7, 9]))["near_open_share"] < 1.0
+
+
+def _episodes(errors, success) -> list[EpisodeResult]:
+    return [
+        EpisodeResult(
+            seed=i,
+            coop_error_mean_m=e,
+            p_fix=1.0,
+            success=s,
+            collided=not s,
+            length=10,
+            descriptors={"altitude_m": 20.0},
+        )
+        for i, (e, s) in enumerate(zip(errors, success))
+    ]
+
+
+def test_summary_pairs_by_episode_and_flags_a_real_difference() -> None:
+    rng = np.random.default_rng(0)
+    base = rng.uniform(1.5, 4.0, 60)
+    results = {
+        "formation": [_episodes(base, [True] * 60)],
+        "learned": [_episodes(base - 0.2 + rng.normal(0, 0.02, 60), [True] * 60) for _ in range(3)],
+    }
+    s = summarise(results, ["formation"], reps=400)
+    p = s["paired"]["learned"]["formation"]
+    assert p["excludes_zero"] and p["error_diff_m"]["high"] < 0
+    assert p["error_diff_m"]["value"] == pytest.approx(-0.2, abs=0.02)
+    m = s["methods"]["learned"]
+    assert m["runs"] == 3 and len(m["per_run_error_mean"]) == 3
+    assert m["goal_rate"]["value"] == 1.0
+    assert math.isclose(m["descriptors"]["altitude_m"], 20.0)
+
+
+def test_study_command_writes_its_report(tmp_path) -> None:
+    from training.marl_study import main
+
+    out = tmp_path / "study"
+    rc = main(
+        [
+            "--heuristics",
+            "formation",
+            "spread",
+            "--episodes",
+            "2",
+            "--planner-episodes",
+            "0",
+            "--reps",
+            "100",
+            "--out",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    data = json.loads((out / "report.json").read_text())
+    assert set(data["summary"]["methods"]) == {"formation", "spread"}
+    assert "spread" in data["summary"]["paired"]["formation"] or data["summary"]["paired"]
+    text = (out / "report.md").read_text()
+    assert "| formation |" in text and "| spread |" in text
+    assert (out / "errors.png").is_file() and (out / "trajectories.png").is_file()
