@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import textwrap
 import time
 from pathlib import Path
 from typing import Any
@@ -126,27 +127,78 @@ def build_config(args: argparse.Namespace) -> ReproduceConfig:
     return ReproduceConfig.from_dict(data)
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``coopnav reproduce``."""
-    parser.add_argument("--out", required=True, help="output directory")
-    parser.add_argument(
-        "--quick", action="store_true", help="small smoke-test configuration (well under a minute)"
+def _defaults_epilog() -> str:
+    """The configuration's defaults, for ``--help`` (every ``--set`` key with its value)."""
+    cfg = ReproduceConfig().to_dict()
+    scen = cfg.pop("scenario")
+
+    def items(d: dict[str, Any]) -> str:
+        return textwrap.fill(
+            ", ".join(f"{k}={json.dumps(v, separators=(',', ':'))}" for k, v in d.items()),
+            width=92,
+            initial_indent="  ",
+            subsequent_indent="  ",
+        )
+
+    return (
+        "configuration defaults (ReproduceConfig; change with --set KEY=VALUE):\n"
+        + items(cfg)
+        + "\n\nscenario defaults (PaperScenario; change with --set KEY=VALUE):\n"
+        + items(scen)
+        + "\n\n--quick (a smoke run) starts from ReproduceConfig.quick() instead, which changes:\n"
+        + items(_quick_changes())
     )
-    parser.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+
+
+def _quick_changes() -> dict[str, Any]:
+    """The fields ``--quick`` changes, with their values."""
+    full, quick = ReproduceConfig().to_dict(), ReproduceConfig.quick().to_dict()
+    return {k: v for k, v in quick.items() if full[k] != v}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav reproduce`` (defaults shown by ``--help``)."""
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = _defaults_epilog()
+    parser.add_argument("--out", required=True, help="output directory (required)")
     parser.add_argument(
-        "--config", default=None, help="JSON configuration, e.g. a previous run's config.json"
+        "--quick",
+        action="store_true",
+        help="smoke run, not the reproduction: the small ReproduceConfig.quick() configuration "
+        "(well under a minute; its report says so); default: %(default)s",
+    )
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="random seed; default: %(default)s, i.e. the seed of --config, else "
+        f"{ReproduceConfig().seed}",
+    )
+    parser.add_argument(
+        "--config",
+        default=None,
+        help="JSON configuration, e.g. a previous run's config.json; default: %(default)s "
+        "(the defaults listed below, or --quick's)",
     )
     parser.add_argument(
         "--set",
         action="append",
         metavar="KEY=VALUE",
         help="override a configuration field (ReproduceConfig or PaperScenario;"
-        " VALUE parsed as JSON), e.g. --set covariance=paper "
-        "--set h_over_d=2 --set 'gaps_deg=[]'; repeatable",
+        " VALUE parsed as JSON), e.g. --set covariance=exact "
+        "--set h_over_d=2 --set 'gaps_deg=[]'; repeatable; default: none",
     )
-    parser.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    parser.add_argument("--no-sensitivity", action="store_true", help="skip the sensitivity study")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--no-figures", action="store_true", help="skip the PNG figures; default: %(default)s"
+    )
+    parser.add_argument(
+        "--no-sensitivity",
+        action="store_true",
+        help="skip the sensitivity study; default: %(default)s",
+    )
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress bar; default: %(default)s"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -155,5 +207,6 @@ def run(args: argparse.Namespace) -> int:
     cfg = build_config(args)
     out = reproduce(cfg, args.out)
     extra = " and the figures" if cfg.figures else ""
-    print(f"wrote report.md, results.json, config.json{extra} to {out}")
+    smoke = " (a smoke run, not the reproduction)" if cfg.smoke_reasons() else ""
+    print(f"wrote report.md, results.json, config.json{extra} to {out}{smoke}")
     return 0

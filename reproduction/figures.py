@@ -108,7 +108,9 @@ def write_figures(
                 mfc="none",
                 mec="gold",
                 ms=7,
-                label="standalone: no fix (drawn at 16 m)",
+                label="standalone: no fix"
+                + ("" if cfg.max_pdop is None else f" or PDOP > {cfg.max_pdop:g}")
+                + " (drawn at 16 m)",
             )
         a.set_ylabel(f"{name} error [m]")
         a.set_ylim(-20, 20)
@@ -119,8 +121,10 @@ def write_figures(
         fig,
         "fig7_error_time.png",
         "Figure 7 analogue: canyon UAV position error (one realisation per epoch) over the "
-        "day, standalone vs cooperative; epochs without a standalone fix are drawn at 16 m "
-        "(yellow circles) as in the paper; the axis is clipped at +/-20 m.",
+        "day, standalone vs cooperative; epochs without a standalone fix"
+        + ("" if cfg.max_pdop is None else f" (or with PDOP > {cfg.max_pdop:g})")
+        + " are drawn at 16 m (yellow circles) as in the paper; the axis is clipped at "
+        "+/-20 m.",
     )
 
     # Figure 8: CDF of the 3-D error, SDT and DDT

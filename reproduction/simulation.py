@@ -52,8 +52,10 @@ __all__ = [
     "p_within",
     "rms3d",
     "run_studies",
+    "sensitivity_variants",
     "simulate_epoch",
     "standalone_pdop",
+    "variant_setting",
 ]
 
 
@@ -419,14 +421,60 @@ def _run_setting(
     return Pooled.of(out)
 
 
-#: Sensitivity variants: name -> (description, scenario overrides, config overrides)
+#: Sensitivity variants: name -> (description, scenario overrides, config overrides). Each is
+#: the run's configuration with one choice (or one pair of choices) changed; a variant that
+#: changes nothing in a given run (its overrides are that run's values) or equals an earlier
+#: one is left out of that run (:func:`sensitivity_variants`).
 SENSITIVITY: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
     "default": ("the defaults of this run", {}, {}),
-    "paper-covariance": ("Eq. 18 covariance instead of the exact one", {}, {"covariance": "paper"}),
-    "L1/L2-for-BDS": (
-        "iono-free factor of GPS L1/L2 for BDS too (ErrorModel.paper())",
-        {"frequencies": "paper"},
+    "previous-default": (
+        "the earlier default: Eq. 8 with its iono-free factor and every standalone fix kept "
+        "(no PDOP mask)",
+        {"iono_free": True},
+        {"max_pdop": None},
+    ),
+    "all-fixes": (
+        "every standalone fix kept, near-singular geometry included (no PDOP mask)",
         {},
+        {"max_pdop": None},
+    ),
+    "pdop-25": ("standalone fixes with PDOP > 25 count as no fix", {}, {"max_pdop": 25.0}),
+    "pdop-10": ("standalone fixes with PDOP > 10 count as no fix", {}, {"max_pdop": 10.0}),
+    "pdop-6": ("standalone fixes with PDOP > 6 count as no fix", {}, {"max_pdop": 6.0}),
+    "exact-covariance": (
+        "our exact covariance of the transferred measurements (weights and SIG)",
+        {},
+        {"covariance": "exact"},
+    ),
+    "paper-covariance": (
+        "the paper's Eq. 18 covariance (weights and SIG)",
+        {},
+        {"covariance": "paper"},
+    ),
+    "L1/L2-for-BDS": (
+        "Eq. 8 with its iono-free factor, that of GPS L1/L2 for BDS too (ErrorModel.paper())",
+        {"frequencies": "paper", "iono_free": True},
+        {},
+    ),
+    "iono-free": (
+        "Eq. 8 with its iono-free factor (user error x 2.98 GPS, x 3.53 BDS)",
+        {"iono_free": True},
+        {},
+    ),
+    "no-iono-free": (
+        "Eq. 8 without its iono-free factor (user error sqrt(MP^2 + noise^2))",
+        {"iono_free": False},
+        {},
+    ),
+    "paper-cov-iono-free": (
+        "Eq. 18 covariance and Eq. 8 with its iono-free factor",
+        {"iono_free": True},
+        {"covariance": "paper"},
+    ),
+    "paper-cov-no-iono-free": (
+        "Eq. 18 covariance and no iono-free factor",
+        {"iono_free": False},
+        {"covariance": "paper"},
     ),
     "cutoff-5": ("elevation cut-off 5 deg", {"elevation_cutoff_deg": 5.0}, {}),
     "cutoff-15": ("elevation cut-off 15 deg", {"elevation_cutoff_deg": 15.0}, {}),
@@ -443,21 +491,49 @@ SENSITIVITY: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {
         {},
     ),
     "bds-geo-igso": ("BeiDou GEO and IGSO satellites added", {"bds_geo_igso": True}, {}),
-    "pdop-25": ("standalone fixes with PDOP > 25 count as no fix", {}, {"max_pdop": 25.0}),
-    "pdop-10": ("standalone fixes with PDOP > 10 count as no fix", {}, {"max_pdop": 10.0}),
 }
 
-
-def _needs_simulation(s_over: dict[str, Any], c_over: dict[str, Any]) -> bool:
-    """A variant that changes only the statistics (``max_pdop``) reuses the default's runs."""
-    return bool(s_over) or "covariance" in c_over
-
+TABLE2_VARIANTS: tuple[str, ...] = (
+    "previous-default",
+    "all-fixes",
+    "pdop-25",
+    "pdop-10",
+    "pdop-6",
+    "exact-covariance",
+    "paper-covariance",
+    "iono-free",
+    "no-iono-free",
+    "paper-cov-iono-free",
+    "paper-cov-no-iono-free",
+    "wide-gaps",
+)
+"""Sensitivity variants for which the whole swarm-size study (Table 2) is also computed (those
+that change only the PDOP mask reuse the swarm-size simulations of their setting)."""
 
 SENS_METHODS: tuple[Method, ...] = ("standalone", "ddt", "sdt")
 
 
-TABLE2_VARIANTS: tuple[str, ...] = ("pdop-10", "wide-gaps")
-"""Sensitivity variants for which the whole swarm-size study (Table 2) is also computed."""
+def variant_setting(cfg: ReproduceConfig, name: str) -> tuple[PaperScenario, str, float | None]:
+    """Scenario, covariance and PDOP mask of sensitivity variant ``name`` of run ``cfg``."""
+    _, s_over, c_over = SENSITIVITY[name]
+    return (
+        dataclasses.replace(cfg.scenario, **s_over),
+        c_over.get("covariance", cfg.covariance),
+        c_over.get("max_pdop", cfg.max_pdop),
+    )
+
+
+def sensitivity_variants(cfg: ReproduceConfig) -> list[str]:
+    """The variants run for ``cfg``: ``"default"`` first, then every variant of
+    :data:`SENSITIVITY` whose setting differs from the default's and from every earlier one."""
+    seen: list[tuple[PaperScenario, str, float | None]] = []
+    names = []
+    for name in SENSITIVITY:
+        setting = variant_setting(cfg, name)
+        if setting not in seen:
+            seen.append(setting)
+            names.append(name)
+    return names
 
 
 def _run_swarm(
@@ -489,18 +565,23 @@ def _run_swarm(
     return swarm
 
 
+def _table2_variants(cfg: ReproduceConfig) -> list[str]:
+    """The Table 2 variants run for ``cfg`` (those of :data:`TABLE2_VARIANTS` it keeps)."""
+    kept = sensitivity_variants(cfg)
+    return [name for name in TABLE2_VARIANTS if name in kept]
+
+
 def _n_units(cfg: ReproduceConfig) -> int:
     e = cfg.n_epochs
     n_los = len(cfg.los_h_over_d) if cfg.los_method == "hd_sweep" else cfg.scenario.max_sats
     units = e  # main
     units += 2 * n_los * e + 2 * len(cfg.swarm_sizes) * e + 2 * len(cfg.rel_errors_m) * e
     if cfg.sensitivity:
-        n_sim = sum(_needs_simulation(so, co) for _, so, co in SENSITIVITY.values())
-        units += 2 * (n_sim + 1) * e  # + the default
-        for name in TABLE2_VARIANTS:
-            _, so, co = SENSITIVITY[name]
-            if _needs_simulation(so, co):
-                units += 2 * len(cfg.swarm_sizes) * e
+        sims = {variant_setting(cfg, n)[:2] for n in sensitivity_variants(cfg)}
+        units += 2 * len(sims) * e
+        swarms = {variant_setting(cfg, n)[:2] for n in _table2_variants(cfg)}
+        swarms.discard((cfg.scenario, cfg.covariance))  # the main Table 2 study
+        units += 2 * len(swarms) * len(cfg.swarm_sizes) * e
     return units
 
 
@@ -562,41 +643,37 @@ def run_studies(cfg: ReproduceConfig) -> dict[str, Any]:
                     f"rel sigma={sd:g} diff={diff}",
                 )
         raw["rel_error"] = rel
+        # sensitivity: variants that differ only in the PDOP mask share their simulations
         sens: dict[str, dict[bool, Pooled]] = {}
-        if cfg.sensitivity:
-            for name, (_, s_over, c_over) in SENSITIVITY.items():
-                if name != "default" and not _needs_simulation(s_over, c_over):
-                    sens[name] = sens["default"]
-                    continue
-                sens[name] = {}
-                for diff in (False, True):
-                    s = dataclasses.replace(scen, differential=diff, **s_over)
-                    sens[name][diff] = _run_setting(
-                        cfg,
-                        s,
-                        copy.deepcopy(g_sens),
-                        ks,
-                        SENS_METHODS,
-                        prog,
-                        f"sensitivity {name} diff={diff}",
-                        covariance=c_over.get("covariance"),
-                    )
-        raw["sensitivity"] = sens
         variants: dict[str, dict[bool, dict[int, Pooled]]] = {}
         if cfg.sensitivity:
-            for name in TABLE2_VARIANTS:
-                _, s_over, c_over = SENSITIVITY[name]
-                if not _needs_simulation(s_over, c_over):
-                    variants[name] = raw["swarm"]
-                    continue
-                variants[name] = _run_swarm(
-                    cfg,
-                    dataclasses.replace(scen, **s_over),
-                    g_swarm,
-                    prog,
-                    f"swarm {name}",
-                    covariance=c_over.get("covariance"),
-                )
+            sims: dict[tuple[PaperScenario, str], dict[bool, Pooled]] = {}
+            for name in sensitivity_variants(cfg):
+                s_var, cov, _ = variant_setting(cfg, name)
+                if (s_var, cov) not in sims:
+                    sims[s_var, cov] = {
+                        diff: _run_setting(
+                            cfg,
+                            dataclasses.replace(s_var, differential=diff),
+                            copy.deepcopy(g_sens),
+                            ks,
+                            SENS_METHODS,
+                            prog,
+                            f"sensitivity {name} diff={diff}",
+                            covariance=cov,
+                        )
+                        for diff in (False, True)
+                    }
+                sens[name] = sims[s_var, cov]
+            swarms = {(scen, cfg.covariance): raw["swarm"]}
+            for name in _table2_variants(cfg):
+                s_var, cov, _ = variant_setting(cfg, name)
+                if (s_var, cov) not in swarms:
+                    swarms[s_var, cov] = _run_swarm(
+                        cfg, s_var, g_swarm, prog, f"swarm {name}", covariance=cov
+                    )
+                variants[name] = swarms[s_var, cov]
+        raw["sensitivity"] = sens
         raw["swarm_variants"] = variants
     finally:
         prog.close()

@@ -23,6 +23,7 @@ from reproduction.simulation import (
     json_float,
     p_within,
     rms3d,
+    variant_setting,
 )
 
 # --------------------------------------------------------------------------------------------
@@ -31,6 +32,7 @@ from reproduction.simulation import (
 
 __all__ = [
     "summarize",
+    "table2_distance",
 ]
 
 
@@ -305,11 +307,29 @@ def _comparison(s: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
+def table2_distance(tab: dict[str, Any]) -> dict[str, float | None]:
+    """Mean absolute difference [points] of a reproduced Table 2 from the published one.
+
+    ``tab`` maps ``"without"`` / ``"with"`` to ``{str(N): improvement}`` (SIG-based); only the
+    published swarm sizes that were run count. ``None`` where none was.
+    """
+    out: dict[str, float | None] = {}
+    for key in ("without", "with"):
+        d = [
+            abs(tab[key][str(n)]["sig"] - pub)
+            for n, pub in PUBLISHED["table2"][key].items()
+            if tab[key].get(str(n), {}).get("sig") is not None
+        ]
+        out[key] = json_float(float(np.mean(d))) if d else None
+    return out
+
+
 def summarize(cfg: ReproduceConfig, raw: dict[str, Any]) -> dict[str, Any]:
     """All statistics of a run (the content of ``results.json`` without timing)."""
     mp = cfg.max_pdop
     s: dict[str, Any] = {"seed": cfg.seed}
     s["main"] = _main_summary(raw["main"].with_pdop_mask(mp), cfg.transfer)
+    s["main"]["standalone_solver_failures"] = exclusions(raw["main"], ["standalone"])["standalone"]
     max_n = cfg.scenario.max_sats
     s["los"] = _los_summary(
         {d: p.with_pdop_mask(mp) for d, p in raw["los"].items()}, cfg.los_min_epochs, max_n
@@ -333,8 +353,8 @@ def summarize(cfg: ReproduceConfig, raw: dict[str, Any]) -> dict[str, Any]:
     }
     sens = []
     for name, pooled in raw.get("sensitivity", {}).items():
-        desc, _, c_over = SENSITIVITY[name]
-        mpv = c_over.get("max_pdop", mp)
+        desc = SENSITIVITY[name][0]
+        mpv = variant_setting(cfg, name)[2]
         p0, p1 = pooled[False].with_pdop_mask(mpv), pooled[True].with_pdop_mask(mpv)
         both = p0.ok["standalone"] & p0.ok["ddt"]
         a, b = axis_stats(p0, "standalone", both), axis_stats(p0, "ddt", both)
@@ -365,12 +385,16 @@ def summarize(cfg: ReproduceConfig, raw: dict[str, Any]) -> dict[str, Any]:
     s["sensitivity"] = sens
     s["table2_variants"] = {}
     for name, sw in raw.get("swarm_variants", {}).items():
-        desc, _, c_over = SENSITIVITY[name]
-        mpv = c_over.get("max_pdop", mp)
+        desc = SENSITIVITY[name][0]
+        mpv = variant_setting(cfg, name)[2]
         s["table2_variants"][name] = {"description": desc} | {
             key: {str(n): improvement(p.with_pdop_mask(mpv), "ddt") for n, p in sw[diff].items()}
             for diff, key in ((False, "without"), (True, "with"))
         }
+    s["table2_distance"] = {
+        name: table2_distance(tab)
+        for name, tab in {"default": s["swarm"], **s["table2_variants"]}.items()
+    }
     s["comparison"] = _comparison(s)
     s["claims"] = _claims(s)
     s["published"] = {
