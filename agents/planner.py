@@ -21,11 +21,12 @@ swarm's velocity commands by sampling-based model-predictive control: at every s
    ``iterations`` rounds and applies the first command of the best plan found.
 
 It is slow (``n_samples * iterations * horizon`` environment steps and ``n_samples *
-iterations`` deep copies per step: about 0.2-0.3 s per step with the defaults on an idle core), uses information no on-board policy has, and is reported as a
-reference only: how much lower the error could be on the same episodes, so that the share of
-the gap between ``formation`` and the best possible that a learned policy closes can be
-stated. Its result is an estimate of the headroom from above (a better planner could do
-better still), not a bound.
+iterations`` deep copies per step: about 0.2-0.3 s per step with the defaults on an idle
+core), uses information no on-board policy has, and is reported as a reference only: how
+much lower the error could be on the same episodes, so that the share of the gap between
+``formation`` and the best possible that a learned policy closes can be stated. Its result
+is what one planner achieves, so the headroom it shows is a lower estimate of the true one
+(a better planner could do better still), not a bound.
 """
 
 from __future__ import annotations
