@@ -487,6 +487,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--reps", type=int, default=2000, help="bootstrap replicates (default: %(default)s)"
     )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="worker processes flying policies (default: %(default)s)",
+    )
 
 
 def _parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
@@ -538,27 +544,26 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--env-set takes KEY=VALUE, got {item!r}")
         env_kwargs[k] = yaml.safe_load(v)
     seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.episodes))
-    results: dict[str, list[list[EpisodeResult]]] = {}
-    for h in args.heuristics:
-        print(f"flying {h} ({len(seeds)} episodes)", file=sys.stderr, flush=True)
-        results[h] = [fly_episodes(h, env_kwargs, seeds, keep_positions=True)]
+    units: list[tuple[str, str, list[int]]] = [(h, h, seeds) for h in args.heuristics]
     for name, dirs in groups.items():
-        results[name] = []
-        for d in dirs:
-            print(f"flying {name} from {d} ({len(seeds)} episodes)", file=sys.stderr, flush=True)
-            results[name].append(fly_episodes(_policy_name(d), env_kwargs, seeds, True))
+        units += [(name, _policy_name(d), seeds) for d in dirs]
+    if args.planner_episodes > 0:
+        units.append(("planner (privileged)", "planner", seeds[: args.planner_episodes]))
+    flown = _fly_all(units, env_kwargs, args.jobs)
+    results: dict[str, list[list[EpisodeResult]]] = {}
+    for (name, _policy, _seeds), episodes in zip(units, flown):
+        if name != "planner (privileged)":
+            results.setdefault(name, []).append(episodes)
     summary = summarise(results, list(args.heuristics), args.reps)
     headroom: dict[str, Any] = {}
     if args.planner_episodes > 0:
+        plan = flown[-1]
         sub = seeds[: args.planner_episodes]
-        print(f"flying planner ({len(sub)} episodes)", file=sys.stderr, flush=True)
-        t_p = time.perf_counter()
-        plan = [fly_episodes("planner", env_kwargs, sub, keep_positions=True)]
         sub_results = {n: [run[: len(sub)] for run in r] for n, r in results.items()}
-        sub_results["planner (privileged)"] = plan
+        sub_results["planner (privileged)"] = [plan]
         headroom = summarise(sub_results, list(args.heuristics), args.reps)
         headroom["episodes"] = len(sub)
-        headroom["planner_s"] = time.perf_counter() - t_p
+        headroom["planner_s"] = _timings.get("planner", math.nan)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     figs = {}
@@ -597,6 +602,43 @@ def run(args: argparse.Namespace) -> int:
     _write(out / "report.md", report_markdown(data))
     print(f"wrote {out / 'report.md'}", file=sys.stderr)
     return 0
+
+
+_timings: dict[str, float] = {}
+
+
+def _fly_unit(unit: tuple[str, str, list[int]], env_kwargs: Mapping[str, Any]) -> tuple:
+    _name, policy, seeds = unit
+    t0 = time.perf_counter()
+    import torch
+
+    torch.set_num_threads(1)
+    eps = fly_episodes(policy, env_kwargs, seeds, keep_positions=True)
+    return eps, time.perf_counter() - t0
+
+
+def _fly_all(
+    units: Sequence[tuple[str, str, list[int]]], env_kwargs: Mapping[str, Any], jobs: int
+) -> list[list[EpisodeResult]]:
+    """Fly every (name, policy, seeds) unit, in ``jobs`` worker processes (1: in this one)."""
+    out: list[Any] = [None] * len(units)
+    if jobs <= 1:
+        for i, u in enumerate(units):
+            print(f"flying {u[1]} ({len(u[2])} episodes)", file=sys.stderr, flush=True)
+            out[i], dt = _fly_unit(u, env_kwargs)
+            _timings[u[1]] = dt
+        return out
+    from concurrent.futures import ProcessPoolExecutor
+
+    # the slowest (the planner, last) first, so that it overlaps the rest
+    order = sorted(range(len(units)), key=lambda i: units[i][1] != "planner")
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = {i: pool.submit(_fly_unit, units[i], dict(env_kwargs)) for i in order}
+        for i in order:
+            out[i], dt = futures[i].result()
+            _timings[units[i][1]] = dt
+            print(f"flown {units[i][1]} ({dt:.0f} s)", file=sys.stderr, flush=True)
+    return out
 
 
 def report_markdown(data: Mapping[str, Any]) -> str:
