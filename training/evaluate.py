@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
+from training.compile_notice import compile_notice, warm_up_env
 from training.config import apply_overrides, parse_yaml
 from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
 from training.files import atomic_path, atomic_write_text, ensure_folder, write_json
@@ -834,6 +835,8 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     env_id, env_kwargs = _env_from_args(args)
+    with compile_notice("about a minute", prefix="coopnav evaluate"):
+        warm_up_env(make_env_fn(env_id, env_kwargs))
     report = evaluate(
         args.policies,
         seeds,

@@ -16,6 +16,7 @@ import json
 from collections.abc import Mapping
 from pathlib import Path
 
+from training.compile_notice import compile_notice, warm_up_env
 from training.config import (
     BACKENDS,
     DEFAULT_CONFIG_PATH,
@@ -25,7 +26,7 @@ from training.config import (
     backend_module,
     load_config,
 )
-from training.envs import DEFAULT_ENV_ID
+from training.envs import DEFAULT_ENV_ID, make_env_fn
 from training.runs import recorded_config
 
 __all__ = ["add_arguments", "config_from_args", "run"]
@@ -189,6 +190,8 @@ def run(args: argparse.Namespace) -> int:
     and exit statuses (2 for a usage error, 130/143 after an interrupt).
     """
     cfg = config_from_args(args)
+    with compile_notice("about a minute", prefix="coopnav train"):
+        warm_up_env(make_env_fn(cfg.env_id, cfg.env))
     final = backend_module(cfg.backend).train(cfg)
     info = json.loads((Path(cfg.out) / "run.json").read_text())
     print(
