@@ -171,10 +171,18 @@ def _summary(res: DemoResult) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``coopnav demo``."""
-    parser.add_argument("--epochs", type=int, default=60, help="number of epochs (default 60)")
-    parser.add_argument("--dt", type=float, default=60.0, help="seconds between epochs")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
-    parser.add_argument("--differential", action="store_true", help="apply differential correction")
+    parser.add_argument(
+        "--epochs", type=int, default=60, help="number of epochs (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--dt", type=float, default=60.0, help="seconds between epochs (default: %(default)s)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+    parser.add_argument(
+        "--differential",
+        action="store_true",
+        help="apply differential correction (default: off)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
