@@ -258,6 +258,7 @@ def _callbacks() -> tuple[Any, Any, Any]:
             rollout = max(int(getattr(self.model, "n_steps", 1)) * self.training_env.num_envs, 1)
             todo = self.locals["total_timesteps"] - self.model.num_timesteps
             self.bar = tqdm(
+                desc="PPO",
                 total=-(-todo // rollout) * rollout,
                 unit="agent-step",
                 unit_scale=True,
