@@ -18,7 +18,14 @@ import numpy as np
 
 from coopnav_env.constants import SHANGHAI_ALT_M, SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG
 
-__all__ = ["DemoResult", "add_arguments", "run", "run_demo"]
+__all__ = ["DEMO_KERNEL_MODULES", "DemoResult", "add_arguments", "run", "run_demo"]
+
+DEMO_KERNEL_MODULES: tuple[str, ...] = (
+    "coopnav_env.gnss._kernels",
+    "coopnav_env.nav._kernels",
+    "coopnav_env.sim._kernels",
+)
+"""The kernel modules the demo compiles (see :mod:`training.compile_notice`)."""
 
 
 @dataclass(frozen=True)
@@ -52,7 +59,9 @@ def run_demo(
     differential : bool
         Apply differential correction (removes common errors).
     progress : bool
-        Show a progress bar (tqdm, if installed).
+        Show a progress bar (tqdm, if installed), started after the first epoch (which
+        compiles or loads the numba kernels; when that takes a while a line on stderr says
+        so: :func:`training.compile_notice.compile_notice`).
     """
     from coopnav_env.gnss import (
         ErrorModel,
@@ -90,16 +99,9 @@ def run_demo(
     clocks = draw_clock_biases(rng, len(enu), 2)
     out = {k: np.full(n_epochs, np.nan) for k in ("sa", "co", "sig", "ns")}
     t = np.arange(n_epochs) * dt_s
-    it = range(n_epochs)
-    if progress:
-        try:
-            from tqdm import tqdm
+    x0 = {"sa": None, "co": None}
 
-            it = tqdm(it, desc="demo epochs", unit="epoch")
-        except ImportError:
-            pass
-    x0_sa = x0_co = None
-    for i in it:
+    def one_epoch(i: int) -> None:
         sv = const.positions_ecef(float(t[i]))
         az, el = azimuth_elevation(pos, sv)
         vis = el > 10.0
@@ -109,16 +111,36 @@ def run_demo(
         obs = GnssObservations.from_epoch(epoch)
         rel_enu, cov_enu, avail = measure_relative_positions(rng, enu, sensing)
         rel = RelativePositions.from_enu(rel_enu, cov_enu, avail, lat, lon)
-        sa = solve_standalone(obs.subset_receivers([0]), x0_sa)
-        co = solve_cooperative(obs, rel, centroid=0, x0_ecef_m=x0_co)
+        sa = solve_standalone(obs.subset_receivers([0]), x0["sa"])
+        co = solve_cooperative(obs, rel, centroid=0, x0_ecef_m=x0["co"])
         out["ns"][i] = vis[0].sum()
         if sa.status[0] == NavStatus.OK:
             out["sa"][i] = np.linalg.norm(sa.pos_ecef_m[0] - pos[0])
-            x0_sa = sa.pos_ecef_m
+            x0["sa"] = sa.pos_ecef_m
         if co.status[0] == NavStatus.OK:
             out["co"][i] = np.linalg.norm(co.pos_ecef_m[0] - pos[0])
             out["sig"][i] = np.sqrt(np.trace(co.cov_ecef_m2[0]))
-            x0_co = co.centroid_pos_ecef_m[0]
+            x0["co"] = co.centroid_pos_ecef_m[0]
+
+    # the first epoch compiles (or loads) the numba kernels: run it before the progress bar
+    # starts, so that the bar's rate and ETA measure the epochs, not the compilation
+    if progress:
+        from training.compile_notice import compile_notice
+
+        with compile_notice("about 20 s", modules=DEMO_KERNEL_MODULES, prefix="coopnav demo"):
+            one_epoch(0)
+    else:
+        one_epoch(0)
+    rest = range(1, n_epochs)
+    if progress and n_epochs > 1:
+        try:
+            from tqdm import tqdm
+
+            rest = tqdm(rest, desc="demo epochs", unit="epoch", initial=1, total=n_epochs)
+        except ImportError:
+            pass
+    for i in rest:
+        one_epoch(i)
     return DemoResult(t, out["ns"], out["sa"], out["co"], out["sig"])
 
 
@@ -149,10 +171,18 @@ def _summary(res: DemoResult) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``coopnav demo``."""
-    parser.add_argument("--epochs", type=int, default=60, help="number of epochs (default 60)")
-    parser.add_argument("--dt", type=float, default=60.0, help="seconds between epochs")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
-    parser.add_argument("--differential", action="store_true", help="apply differential correction")
+    parser.add_argument(
+        "--epochs", type=int, default=60, help="number of epochs (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--dt", type=float, default=60.0, help="seconds between epochs (default: %(default)s)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+    parser.add_argument(
+        "--differential",
+        action="store_true",
+        help="apply differential correction (default: off)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -17,8 +17,12 @@ in training: ``coopnav train`` keeps its reset seeds below
   standalone, else dead reckoning), episode return and length.
 
 Outputs in ``--out DIR``: ``report.json``, ``report.csv``, ``report.md`` (the table printed on
-the terminal), ``errors.npz`` (every error sample), ``error_cdf.png`` (empirical CDF of the
-error per policy) and ``trajectories_<policy>.png`` (top-down view of the first episode).
+the terminal, under a header naming the environment settings and where they came from),
+``errors.npz`` (every error sample), ``error_cdf.png`` (empirical CDF of the error per policy)
+and ``trajectories_<policy>.png`` (top view and altitude along the route of the first
+episode), drawn by :mod:`training.eval_plots`. A trained policy (``ppo:`` ...) is flown
+in the environment its run's ``config.yaml`` records; without one, a warning on stderr names
+the settings used instead.
 Every file is written atomically (:mod:`training.files`): a failed write leaves the earlier
 version. Results are deterministic for fixed seeds: the env and every stochastic policy are
 reseeded with the episode seed.
@@ -42,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
+from training.compile_notice import compile_notice, warm_up_env
 from training.config import apply_overrides, parse_yaml
 from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
 from training.files import atomic_path, atomic_write_text, ensure_folder, write_json
@@ -270,6 +275,8 @@ class Report:
         Raw records per policy (JSON gets a per-episode summary; errors go to ``errors.npz``).
     files : dict of str to Path
         What was written (empty when ``out`` was None).
+    env_source : str
+        Where the environment settings came from (in words; "" when not said).
     """
 
     stats: list[PolicyStats]
@@ -278,6 +285,23 @@ class Report:
     env_id: str
     episodes: dict[str, list[EpisodeRecord]] = field(default_factory=dict, repr=False)
     files: dict[str, Path] = field(default_factory=dict)
+    env_source: str = ""
+
+    def header(self) -> str:
+        """The environment and episodes the table was measured on (printed above it).
+
+        Names the environment, the settings given (every other setting at the
+        environment's default) and where they came from (:attr:`env_source`, e.g. the
+        training run's ``config.yaml``), and the held-out reset seeds.
+        """
+        seeds = self.seeds
+        span = f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+        source = f"; {self.env_source}" if self.env_source else ""
+        return (
+            f"Environment `{self.env_id}`, settings `{json.dumps(_jsonable(self.env_kwargs))}` "
+            f"(all others at their defaults{source}); {len(seeds)} held-out episodes (reset "
+            f"seeds {span})."
+        )
 
     def __getitem__(self, policy: str) -> PolicyStats:
         for s in self.stats:
@@ -290,6 +314,7 @@ class Report:
         return {
             "env_id": self.env_id,
             "env_kwargs": _jsonable(self.env_kwargs),
+            "env_source": self.env_source,
             "seeds": list(self.seeds),
             "error_threshold_m": ERROR_THRESHOLD_M,
             "policies": [_jsonable(asdict(s)) for s in self.stats],
@@ -477,6 +502,7 @@ def evaluate(
     env_id: str = "urban_canyon_v0",
     plots: bool = True,
     verbose: bool = False,
+    env_source: str = "",
 ) -> Report:
     """Evaluate named policies on the same held-out episodes.
 
@@ -498,6 +524,9 @@ def evaluate(
         Write the CDF and trajectory plots (needs matplotlib).
     verbose : bool, default False
         Print progress per policy.
+    env_source : str, default ""
+        Where ``env_kwargs`` came from, in words, for the report's header
+        (:meth:`Report.header`).
 
     Returns
     -------
@@ -544,7 +573,7 @@ def evaluate(
         if verbose:
             print(f"  {name}: {len(eps)} episodes in {wall:.1f} s", file=sys.stderr)
 
-    report = Report(stats, seeds, env_kwargs, env_id, records)
+    report = Report(stats, seeds, env_kwargs, env_id, records, env_source=env_source)
     if out is not None:
         _write(report, Path(out), envs[policies[0]], plots)
     for env in envs.values():
@@ -584,10 +613,13 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
     with atomic_path(files["npz"], suffix=".npz") as tmp:
         np.savez_compressed(tmp, **arrays)
     if plots:
+        from training.eval_plots import plot_error_cdf, plot_trajectories, short_labels
+
         files["cdf"] = plot_error_cdf(report, out / "error_cdf.png")
+        labels = short_labels(list(report.episodes))
         for name, eps in report.episodes.items():
             path = out / f"trajectories_{_slug(name)}.png"
-            if plot_trajectories(env, eps[0], path, title=f"{name}, seed {eps[0].seed}"):
+            if plot_trajectories(env, eps[0], path, title=f"{labels[name]}, seed {eps[0].seed}"):
                 files[f"trajectories:{name}"] = path
 
 
@@ -598,13 +630,10 @@ def _csv_cell(v: Any) -> Any:
 
 
 def _markdown_document(report: Report) -> str:
-    seeds = report.seeds
-    span = f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
     lines = [
         "# Policy evaluation",
         "",
-        f"Environment `{report.env_id}` with settings `{json.dumps(_jsonable(report.env_kwargs))}`;"
-        f" {len(seeds)} held-out episodes (reset seeds {span}).",
+        report.header(),
         "Errors are true-minus-estimated 3-D position errors over all UAV-steps; mean, median"
         " and p95 over steps with a fix, P(< 3 m) over all steps. Goal rate: episodes in which"
         " the whole swarm reached the goal area; collisions: episodes ended by a crash.",
@@ -613,102 +642,6 @@ def _markdown_document(report: Report) -> str:
         "",
     ]
     return "\n".join(lines)
-
-
-def plot_error_cdf(report: Report, path: str | Path) -> Path:
-    """Empirical CDF of the cooperative (solid) and standalone (dashed) 3-D error per policy."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    for k, (name, eps) in enumerate(report.episodes.items()):
-        c = colors[k % len(colors)]
-        for key, style, label in (
-            ("coop_error_m", "-", "cooperative"),
-            ("standalone_error_m", "--", "standalone"),
-        ):
-            err = np.concatenate([getattr(e, key).ravel() for e in eps])
-            n = err.size
-            fin = np.sort(err[np.isfinite(err)])
-            if fin.size == 0:
-                continue
-            y = np.arange(1, fin.size + 1) / n  # steps without a fix never reach the curve
-            ax.step(fin, y, where="post", color=c, ls=style, label=f"{name} ({label})")
-    ax.axvline(ERROR_THRESHOLD_M, color="0.5", lw=0.8, ls=":")
-    ax.set_xscale("log")
-    ax.set_xlabel("3-D position error [m]")
-    ax.set_ylabel("P(error ≤ x)")
-    ax.set_ylim(0.0, 1.0)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
-    ax.set_title("Navigation error per policy (held-out episodes)")
-    fig.tight_layout()
-    path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def _world(env: Any) -> tuple[np.ndarray | None, np.ndarray | None, tuple[float, ...] | None]:
-    """(building footprints (n_b, 4), goal (2,), extent) of the env's current world."""
-    base = getattr(env, "unwrapped", env)
-    world = getattr(base, "world", base)
-    city = getattr(world, "city", None)
-    footprints = extent = None
-    if city is not None:
-        footprints = np.asarray(city.buildings.footprints_m)
-        extent = tuple(city.extent_m)
-    goal = getattr(world, "goal_enu_m", None)
-    goal = np.asarray(goal, dtype=float)[:2] if goal is not None else None
-    return footprints, goal, extent
-
-
-def plot_trajectories(env: Any, record: EpisodeRecord, path: str | Path, title: str = "") -> bool:
-    """Top-down view of one episode: buildings, goal and the true track of every UAV.
-
-    The env is reset with the record's seed to show the episode's world. Returns False (and
-    writes nothing) when the positions are unknown.
-    """
-    if record.pos_enu_m is None:
-        return False
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
-
-    env.reset(seed=record.seed)
-    footprints, goal, extent = _world(env)
-    fig, ax = plt.subplots(figsize=(6, 6))
-    if footprints is not None:
-        for x0, y0, x1, y1 in footprints:
-            ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.75", lw=0))
-    pos = record.pos_enu_m
-    for i in range(pos.shape[1]):
-        (line,) = ax.plot(pos[:, i, 0], pos[:, i, 1], lw=1.2, label=f"uav_{i}")
-        ax.plot(pos[0, i, 0], pos[0, i, 1], "o", color=line.get_color(), ms=4)
-        end = "x" if record.collided else ("*" if record.goal_reached[i] else "s")
-        ax.plot(pos[-1, i, 0], pos[-1, i, 1], end, color=line.get_color(), ms=7)
-    if goal is not None:
-        ax.plot(goal[0], goal[1], marker="*", color="gold", mec="k", ms=16, ls="", label="goal")
-    if extent is not None:
-        ax.set_xlim(extent[0], extent[1])
-        ax.set_ylim(extent[2], extent[3])
-    ax.set_aspect("equal")
-    ax.set_xlabel("East [m]")
-    ax.set_ylabel("North [m]")
-    outcome = "collision" if record.collided else f"{int(record.goal_reached.sum())} at goal"
-    ax.set_title(f"{title}\n{record.length} steps, {outcome}", fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    return True
 
 
 # --------------------------------------------------------------------------------------------
@@ -727,42 +660,67 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
     )
-    parser.add_argument("--out", default=None, help="directory for report.* and plots")
     parser.add_argument(
-        "--episodes", type=int, default=DEFAULT_EPISODES, help="held-out episodes per policy"
+        "--out",
+        default=None,
+        help="directory for report.* and plots (default: none, only the table is printed)",
+    )
+    parser.add_argument(
+        "--episodes",
+        type=int,
+        default=DEFAULT_EPISODES,
+        help="held-out episodes per policy (default: %(default)s)",
     )
     parser.add_argument(
         "--seed-start",
         type=int,
         default=EVAL_SEED_START,
-        help=f"first held-out reset seed (>= {EVAL_SEED_START}; training uses seeds below)",
+        help=f"first held-out reset seed (>= {EVAL_SEED_START}; training uses seeds below) "
+        "(default: %(default)s)",
     )
     parser.add_argument(
-        "--seeds", type=int, nargs="+", default=None, help="explicit reset seeds (override)"
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=None,
+        help="explicit reset seeds, instead of --episodes seeds from --seed-start (default: none)",
     )
     parser.add_argument(
         "--env-id",
         default=None,
-        help="environment (default: the one a ppo:/rllib: policy was trained in, else "
+        help="environment (default: the one a trained policy's run was trained in, else "
         "urban_canyon_v0)",
     )
     parser.add_argument(
         "--train-config",
         default=None,
-        help="config.yaml of a training run: evaluate in its environment (default: the run "
-        "directory of the first ppo:/rllib: policy)",
+        help="config.yaml of a training run: evaluate in its environment (default: the one "
+        "in the run folder of the first trained policy; without one, a warning)",
     )
-    parser.add_argument("--n-uavs", type=int, default=None, help="UAVs per swarm (env n_uavs)")
-    parser.add_argument("--city", default=None, help="city layout (env setting 'city')")
+    parser.add_argument(
+        "--n-uavs",
+        type=int,
+        default=None,
+        help="UAVs per swarm, env setting n_uavs (default: the training run's, else the "
+        "environment's)",
+    )
+    parser.add_argument(
+        "--city",
+        default=None,
+        help="city layout, env setting 'city' (default: the training run's, else the "
+        "environment's)",
+    )
     parser.add_argument(
         "--env-set",
         dest="env_overrides",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override an environment setting (repeatable)",
+        help="override an environment setting (repeatable; default: none)",
     )
-    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument(
+        "--no-plots", action="store_true", help="skip the PNG plots (default: plots are made)"
+    )
 
 
 def _read_train_config(path: Path) -> dict[str, Any]:
@@ -772,23 +730,114 @@ def _read_train_config(path: Path) -> dict[str, Any]:
     return dict(data)
 
 
-def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
-    """(env id, env kwargs): ``--train-config``, else the run of a ``ppo:`` policy, then flags."""
+TRAINED_KINDS: tuple[str, ...] = ("ppo", "rllib", "mappo", "ippo", "torchrl")
+"""Policy prefixes of trained policies, whose run folder records their environment."""
+
+
+def _is_trained(name: str) -> bool:
+    """Whether a policy name is a trained policy, ``KIND:PATH`` (KIND in TRAINED_KINDS)."""
+    kind, sep, _ = name.partition(":")
+    return bool(sep) and kind in TRAINED_KINDS
+
+
+def _config_of_policy(name: str) -> Path | None:
+    """The ``config.yaml`` of the run a trained policy came from (None: not found, or the
+    policy is not a trained one): beside the model, or one or two folders up."""
+    if not _is_trained(name):
+        return None
+    model = Path(name.partition(":")[2])
+    for folder in (model, model.parent, model.parent.parent):
+        cfg = folder / "config.yaml"
+        if cfg.is_file():
+            return cfg
+    return None
+
+
+def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
+    """(env id, env kwargs, where they came from): ``--train-config``, else the run of a
+    trained policy, then flags; warns on stderr about a trained policy without its run's
+    settings (see :func:`_warn_untracked`)."""
     trained: dict[str, Any] = {}
     if args.train_config:
         p = Path(args.train_config)
         if not p.is_file():
             raise FileNotFoundError(f"training config not found: {p}")
         trained = _read_train_config(p)
+        source = f"from --train-config {p}"
     else:
         trained = train_config_of_policies(args.policies)
+        found = [c for c in map(_config_of_policy, args.policies) if c is not None]
+        if found:
+            source = f"from {found[0]}"
+        elif any(map(_is_trained, args.policies)):
+            source = "NO config.yaml of the trained policy's run: maybe not its training settings"
+        else:
+            source = ""
     env_id = args.env_id or trained.get("env_id") or "urban_canyon_v0"
     env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
     if args.n_uavs is not None:
         env["n_uavs"] = args.n_uavs
     if args.city is not None:
         env["city"] = args.city
-    return env_id, env
+    flags = bool(args.env_overrides) or args.n_uavs is not None or args.city is not None
+    if flags:
+        source = "; ".join(x for x in (source, "changed by --env-set/--n-uavs/--city") if x)
+    if not args.train_config:
+        _warn_untracked(args.policies, env_id, env, bool(trained))
+    return env_id, env, source
+
+
+def _warn_untracked(
+    policies: Sequence[str], env_id: str, env_kwargs: Mapping[str, Any], have_config: bool
+) -> None:
+    """Say loudly on stderr when a trained policy is flown without its run's settings.
+
+    A policy trained with other rewards (``nav_reward``, weights, collision penalty), another
+    number of UAVs or episode length is not comparable with the others in an environment it
+    was not trained in: its return, goal rate and crashes mean something else. Names the
+    settings used, and the reward settings they resolve to where the environment has a
+    ``config`` (``urban_canyon_v0``).
+    """
+    missing = [n for n in policies if _is_trained(n) and _config_of_policy(n) is None]
+    if not missing:
+        return
+    where = "the other policy's run settings" if have_config else "the environment's defaults"
+    resolved = _reward_settings(env_id, env_kwargs)
+    print(
+        f"coopnav evaluate: warning: no config.yaml of a training run beside (or one or two "
+        f"folders above) {', '.join(missing)}: evaluating in {env_id} with {where}, settings "
+        f"{json.dumps(_jsonable(dict(env_kwargs)))}"
+        + (f" (resolved: {resolved})" if resolved else "")
+        + ". If it was trained with other settings (rewards, n_uavs, max_steps, ...), its "
+        "returns and goal rate are not comparable; pass --train-config RUN/config.yaml or the "
+        "settings with --env-set KEY=VALUE.",
+        file=sys.stderr,
+    )
+
+
+#: settings of ``urban_canyon_v0`` named in the warning of :func:`_warn_untracked`
+_NAMED_SETTINGS: tuple[str, ...] = (
+    "n_uavs",
+    "max_steps",
+    "nav_reward",
+    "nav_reward_weight",
+    "nav_team_weight",
+    "progress_reward_weight",
+    "collision_penalty",
+    "goal_bonus",
+)
+
+
+def _reward_settings(env_id: str, env_kwargs: Mapping[str, Any]) -> str:
+    """``key=value`` of the main reward and episode settings the env resolves, or ""."""
+    try:
+        env = _make_env(env_id, env_kwargs)
+    except Exception:  # the evaluation itself reports bad settings, with its own message
+        return ""
+    config = getattr(getattr(env, "unwrapped", env), "config", None)
+    env.close()
+    values = [(k, getattr(config, k)) for k in _NAMED_SETTINGS if hasattr(config, k)]
+    return ", ".join(f"{k}={v!r}" for k, v in values)
 
 
 def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
@@ -797,28 +846,24 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
 
     ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
     ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
-    in the environment it was trained in unless told otherwise (empty if none is found).
+    in the environment it was trained in unless told otherwise (empty if none is found; then
+    ``coopnav evaluate`` warns on stderr).
     Trained policies from runs with different environment settings raise ``ValueError``.
     """
     found: dict[str, Any] | None = None
     for name in policies:
-        kind, sep, path = name.partition(":")
-        if not sep or kind not in ("ppo", "rllib", "mappo", "ippo", "torchrl"):
+        cfg = _config_of_policy(name)
+        if cfg is None:
             continue
-        model = Path(path)
-        for folder in (model, model.parent, model.parent.parent):
-            cfg = folder / "config.yaml"
-            if cfg.is_file():
-                data = _read_train_config(cfg)
-                key = (data.get("env_id"), data.get("env") or {})
-                if found is not None and key != (found.get("env_id"), found.get("env") or {}):
-                    raise ValueError(
-                        "the PPO policies were trained in different environments "
-                        f"({found.get('env')} vs {data.get('env')}); pass --train-config or "
-                        "--env-set explicitly"
-                    )
-                found = data
-                break
+        data = _read_train_config(cfg)
+        key = (data.get("env_id"), data.get("env") or {})
+        if found is not None and key != (found.get("env_id"), found.get("env") or {}):
+            raise ValueError(
+                "the PPO policies were trained in different environments "
+                f"({found.get('env')} vs {data.get('env')}); pass --train-config or "
+                "--env-set explicitly"
+            )
+        found = data
     return found or {}
 
 
@@ -833,7 +878,9 @@ def run(args: argparse.Namespace) -> int:
             "in training",
             file=sys.stderr,
         )
-    env_id, env_kwargs = _env_from_args(args)
+    env_id, env_kwargs, source = _env_from_args(args)
+    with compile_notice("about a minute", prefix="coopnav evaluate"):
+        warm_up_env(make_env_fn(env_id, env_kwargs))
     report = evaluate(
         args.policies,
         seeds,
@@ -842,7 +889,10 @@ def run(args: argparse.Namespace) -> int:
         env_id=env_id,
         plots=not args.no_plots,
         verbose=True,
+        env_source=source,
     )
+    print(report.header())
+    print()
     print(report.to_markdown())
     if report.files:
         print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))

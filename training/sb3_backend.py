@@ -258,6 +258,7 @@ def _callbacks() -> tuple[Any, Any, Any]:
             rollout = max(int(getattr(self.model, "n_steps", 1)) * self.training_env.num_envs, 1)
             todo = self.locals["total_timesteps"] - self.model.num_timesteps
             self.bar = tqdm(
+                desc="PPO",
                 total=-(-todo // rollout) * rollout,
                 unit="agent-step",
                 unit_scale=True,
@@ -289,7 +290,11 @@ def _callbacks() -> tuple[Any, Any, Any]:
 
 
 def behaviour_clone(
-    model: Any, env_fn: Callable[[], Any], spec: Mapping[str, Any], seed: int = 0
+    model: Any,
+    env_fn: Callable[[], Any],
+    spec: Mapping[str, Any],
+    seed: int = 0,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Fit a fresh PPO model to a teacher policy (behaviour cloning) before PPO starts.
 
@@ -299,6 +304,9 @@ def behaviour_clone(
     at ``log_std_init``, so PPO keeps exploring), and the critic to the teacher's discounted
     returns (``gamma`` of the model; rewards scaled like ``VecNormalize`` when the model's
     environment normalises them), for ``spec["epochs"]`` passes with Adam.
+
+    ``progress`` shows two ``tqdm`` bars on stderr (teacher episodes, then fitting epochs);
+    they change nothing in the result.
 
     Returns
     -------
@@ -317,7 +325,7 @@ def behaviour_clone(
     act_all: list[np.ndarray] = []
     ret_all: list[np.ndarray] = []
     goals = 0
-    for i in range(int(spec["episodes"])):
+    for i in _bar(range(int(spec["episodes"])), progress, "warm start: teacher", "episode"):
         ep_seed = EVAL_SEED_START // 2 + seed + i
         obs, _ = env.reset(seed=ep_seed)
         teacher.reset(seed=ep_seed)
@@ -352,7 +360,7 @@ def behaviour_clone(
     batch = 256
     pi_loss = vf_loss = float("nan")
     policy.set_training_mode(True)
-    for _ in range(int(spec["epochs"])):
+    for _ in _bar(range(int(spec["epochs"])), progress, "warm start: fitting", "epoch"):
         perm = torch.randperm(x.shape[0], generator=gen)
         for k in range(0, x.shape[0], batch):
             idx = perm[k : k + batch]
@@ -380,6 +388,17 @@ def behaviour_clone(
         "final_action_mse": pi_loss,
         "final_value_mse": vf_loss,
     }
+
+
+def _bar(items: range, show: bool, desc: str, unit: str) -> Any:
+    """``items`` behind a ``tqdm`` progress bar on stderr when ``show`` (and tqdm is there)."""
+    if not show:
+        return items
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a training dependency
+        return items
+    return tqdm(items, desc=desc, unit=unit, dynamic_ncols=True, mininterval=0.5)
 
 
 def train(cfg: TrainConfig) -> Path:
@@ -665,7 +684,9 @@ def _train_in_folder(
                     file=sys.stderr,
                     flush=True,
                 )
-                stats = behaviour_clone(model, env_fn, cfg.pretrain, seed=cfg.seed)
+                stats = behaviour_clone(
+                    model, env_fn, cfg.pretrain, seed=cfg.seed, progress=cfg.progress_bar
+                )
                 write_json(out / "pretrain.json", stats)
         phase = "PPO"
         logs = out / "logs"

@@ -16,6 +16,7 @@ import json
 from collections.abc import Mapping
 from pathlib import Path
 
+from training.compile_notice import compile_notice, warm_up_env
 from training.config import (
     BACKENDS,
     DEFAULT_CONFIG_PATH,
@@ -25,7 +26,7 @@ from training.config import (
     backend_module,
     load_config,
 )
-from training.envs import DEFAULT_ENV_ID
+from training.envs import DEFAULT_ENV_ID, make_env_fn
 from training.runs import recorded_config
 
 __all__ = ["add_arguments", "config_from_args", "run"]
@@ -33,22 +34,39 @@ __all__ = ["add_arguments", "config_from_args", "run"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``coopnav train``."""
-    parser.add_argument("--out", default="runs/ppo", help="output directory (default runs/ppo)")
+    parser.add_argument("--out", default="runs/ppo", help="output directory (default: %(default)s)")
     parser.add_argument(
-        "--config", default=None, help=f"hyperparameter YAML (default {DEFAULT_CONFIG_PATH.name})"
+        "--config",
+        default=None,
+        help=f"hyperparameter YAML (default: the packaged {DEFAULT_CONFIG_PATH.name})",
     )
     parser.add_argument(
         "--env-id",
         default=None,
-        help=f"environment (section of --config; default {DEFAULT_ENV_ID}, or the run's own "
+        help=f"environment (section of --config; default: {DEFAULT_ENV_ID}, or the run's own "
         "with --resume)",
     )
     parser.add_argument(
-        "--timesteps", type=int, default=None, help="total agent-steps (SB3 timesteps)"
+        "--timesteps",
+        type=int,
+        default=None,
+        help="total agent-steps, SB3 timesteps (default: the --config file's)",
     )
-    parser.add_argument("--seed", type=int, default=None, help="training seed")
-    parser.add_argument("--n-envs", type=int, default=None, help="swarm copies stepped together")
-    parser.add_argument("--num-cpus", type=int, default=None, help="worker processes (default 1)")
+    parser.add_argument(
+        "--seed", type=int, default=None, help="training seed (default: the --config file's)"
+    )
+    parser.add_argument(
+        "--n-envs",
+        type=int,
+        default=None,
+        help="swarm copies stepped together (default: the --config file's)",
+    )
+    parser.add_argument(
+        "--num-cpus",
+        type=int,
+        default=None,
+        help="worker processes (default: the --config file's, 1 in the packaged one)",
+    )
     parser.add_argument(
         "--vec-env",
         choices=VEC_ENVS,
@@ -57,17 +75,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "else supersuit), supersuit, or batched (urban_canyon_v0 only)",
     )
     parser.add_argument(
-        "--checkpoint-freq", type=int, default=None, help="agent-steps between checkpoints"
+        "--checkpoint-freq",
+        type=int,
+        default=None,
+        help="agent-steps between checkpoints (default: the --config file's)",
     )
-    parser.add_argument("--n-uavs", type=int, default=None, help="UAVs per swarm (env n_uavs)")
-    parser.add_argument("--city", default=None, help="city layout (env setting 'city')")
+    parser.add_argument(
+        "--n-uavs",
+        type=int,
+        default=None,
+        help="UAVs per swarm, env setting n_uavs (default: the --config file's, else the "
+        "environment's)",
+    )
+    parser.add_argument(
+        "--city",
+        default=None,
+        help="city layout, env setting 'city' (default: the --config file's, else the "
+        "environment's)",
+    )
     parser.add_argument(
         "--set",
         dest="overrides",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a setting, e.g. ppo.learning_rate=1e-4 or n_envs=4 (repeatable)",
+        help="override a setting, e.g. ppo.learning_rate=1e-4 or n_envs=4 (repeatable; "
+        "default: none)",
     )
     parser.add_argument(
         "--env-set",
@@ -75,7 +108,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override an environment setting, e.g. max_steps=300 (repeatable)",
+        help="override an environment setting, e.g. max_steps=300 (repeatable; default: none)",
     )
     parser.add_argument(
         "--resume",
@@ -84,21 +117,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="continue the run in OUT from a checkpoint (SB3: a .zip; rllib: a checkpoint "
         "folder rllib_<N>_steps) or 'latest' (the newest that loads; a finished run: its final "
         "model, if --timesteps asks for more). The run keeps the settings recorded in "
-        "OUT/config.yaml (--config is not read); flags and --set change single ones",
+        "OUT/config.yaml (--config is not read); flags and --set change single ones "
+        "(default: a fresh run)",
     )
     parser.add_argument(
         "--overwrite",
         action="store_true",
         help="start a fresh run in an OUT that holds an earlier run, removing that run's "
-        "outputs (without it, or --resume, such a start is refused)",
+        "outputs (without it, or --resume, such a start is refused) (default: off)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    parser.add_argument("--verbose", type=int, default=None, help="SB3 verbosity (0-2)")
+    parser.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="hide the progress bars (default: shown, unless the config's progress_bar is false)",
+    )
+    parser.add_argument(
+        "--verbose",
+        type=int,
+        default=None,
+        help="SB3 verbosity, 0-2 (default: the --config file's)",
+    )
     parser.add_argument(
         "--backend",
         choices=list(BACKENDS),
         default=None,
-        help=f"training backend, one of: {', '.join(BACKENDS)} (default sb3: Stable-Baselines3 "
+        help=f"training backend, one of: {', '.join(BACKENDS)} (default: sb3, Stable-Baselines3 "
         'in this process; rllib: Ray RLlib, needs pip install -e ".[ray]")',
     )
     parser.add_argument(
@@ -112,7 +155,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--num-env-runners",
         type=int,
         default=None,
-        help="rllib: Ray actors stepping the environment (0: this process samples)",
+        help="rllib: Ray actors stepping the environment, 0: this process samples (default: "
+        "the --config file's rllib.num_env_runners)",
     )
     parser.add_argument(
         "--address",
@@ -189,6 +233,8 @@ def run(args: argparse.Namespace) -> int:
     and exit statuses (2 for a usage error, 130/143 after an interrupt).
     """
     cfg = config_from_args(args)
+    with compile_notice("about a minute", prefix="coopnav train"):
+        warm_up_env(make_env_fn(cfg.env_id, cfg.env))
     final = backend_module(cfg.backend).train(cfg)
     info = json.loads((Path(cfg.out) / "run.json").read_text())
     print(

@@ -24,6 +24,25 @@ all UAVs. Three gaps of that path are closed here:
 SB3 counts agent-steps as timesteps: one step of ``n_envs`` swarms of ``n_uavs`` UAVs is
 ``n_envs * n_uavs`` timesteps.
 
+**From your own script.** PettingZoo's published SuperSuit recipe fails with
+``PPO(..., seed=0)`` (``'ConcatVecEnv' object has no attribute 'seed'``) and never sets
+``TimeLimit.truncated``; :func:`urban_canyon_vec_env` (``urban_canyon_v0`` from its keyword
+arguments) and :func:`make_vec_env` (any PettingZoo ParallelEnv) are the public entry points
+that ``coopnav train`` itself uses, with both fixed::
+
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from training.vec_env import urban_canyon_vec_env
+
+    torch.set_num_threads(1)  # one torch thread per process: much faster on small machines
+    venv = VecMonitor(urban_canyon_vec_env(n_copies=2, n_uavs=3, max_steps=100))
+    model = PPO("MlpPolicy", venv, seed=0, device="cpu").learn(10_000)
+
+``examples/sb3_vec_env.py`` is a complete script (tested). ``VecMonitor`` is optional; it
+records episode returns (per UAV slot) for SB3's logger.
+
 Two kinds build the same vector environment (``make_vec_env(..., kind=...)``, the
 ``vec_env`` setting of ``coopnav train``):
 
@@ -51,7 +70,13 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 from supersuit.vector import MakeCPUAsyncConstructor, MarkovVectorEnv
 from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
-__all__ = ["VEC_ENV_KINDS", "BatchedVecEnv", "SeededVecEnv", "make_vec_env"]
+__all__ = [
+    "VEC_ENV_KINDS",
+    "BatchedVecEnv",
+    "SeededVecEnv",
+    "make_vec_env",
+    "urban_canyon_vec_env",
+]
 
 VEC_ENV_KINDS: tuple[str, ...] = ("supersuit", "batched")
 """Kinds of vector environment :func:`make_vec_env` builds (``coopnav train``'s ``vec_env``)."""
@@ -296,6 +321,19 @@ def make_vec_env(
     SeededVecEnv or BatchedVecEnv
         ``num_envs = n_copies * n_agents`` slots, agent-major inside each copy
         (``uav_0 .. uav_{N-1}`` of copy 0, then copy 1, ...).
+
+    Notes
+    -----
+    * ``PPO(..., seed=s)`` works: SB3 calls ``seed(s)``, and the next ``reset()`` resets
+      swarm copy ``k`` with ``s + k`` (whatever ``num_cpus``); later episodes continue each
+      copy's generator, so the same seed gives the same episodes and, in one process, the
+      same trained weights.
+    * An episode cut by the environment's ``max_steps`` ends with ``done`` and
+      ``info["TimeLimit.truncated"] = True`` in every slot of that swarm (and
+      ``info["terminal_observation"]``), so that PPO bootstraps the value of the last
+      observation instead of treating the time limit as a terminal state; a crash or the
+      goal ends the episode without that flag.
+    * Both kinds give the same observations, rewards, dones and infos, bit for bit.
     """
     if int(n_copies) < 1:
         raise ValueError(f"n_copies must be >= 1, got {n_copies}")
@@ -332,3 +370,41 @@ def make_vec_env(
         probe.close()
         venv = SB3VecEnvWrapper(gym_venv)
     return SeededVecEnv(venv, n_copies)
+
+
+def urban_canyon_vec_env(
+    n_copies: int = 1,
+    *,
+    kind: str = "batched",
+    num_cpus: int = 1,
+    **env_kwargs: Any,
+) -> SeededVecEnv | BatchedVecEnv:
+    """The parameter-sharing SB3 vector env of ``n_copies`` ``urban_canyon_v0`` swarms.
+
+    The entry point for training ``urban_canyon_v0`` with Stable-Baselines3 from your own
+    script: ``PPO("MlpPolicy", urban_canyon_vec_env(2, n_uavs=3), seed=0)`` works and
+    repeats, and time-limit truncation reaches PPO as ``TimeLimit.truncated`` (see
+    :func:`make_vec_env`, which this calls, and the module docstring).
+
+    Parameters
+    ----------
+    n_copies : int, default 1
+        Independent swarms stepped together, >= 1 (``num_envs = n_copies * n_uavs``).
+    kind : {"batched", "supersuit"}, default "batched"
+        ``"batched"``: the environment's own batched stepping (one ``(K, N, 3)`` action array,
+        1.3-1.6x as fast); ``"supersuit"``: SuperSuit's per-agent adapters (needed for
+        ``num_cpus > 1``). Same episodes either way.
+    num_cpus : int, default 1
+        Worker processes of the ``"supersuit"`` kind (0 or 1: this process).
+    **env_kwargs
+        Settings of ``urban_canyon_v0.parallel_env`` (:class:`coopnav_env.envs.config.
+        UrbanCanyonConfig`), e.g. ``n_uavs=3, max_steps=100``; an unknown or bad one raises
+        ``ValueError`` naming it when the first swarm is built.
+
+    Returns
+    -------
+    SeededVecEnv or BatchedVecEnv
+    """
+    from training.envs import make_env_fn
+
+    return make_vec_env(make_env_fn("urban_canyon_v0", env_kwargs), n_copies, num_cpus, kind=kind)
