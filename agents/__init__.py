@@ -19,7 +19,8 @@ name                      policy
                           (:mod:`agents.rllib_policy`; needs the ``ray`` extra)
 ``mappo:<path>``          a TorchRL MAPPO or IPPO checkpoint of ``coopnav train --backend
 ``ippo:<path>``           torchrl`` (:mod:`agents.marl_policy`; needs the ``marl`` extra);
-                          ``<path>`` a ``.pt`` file or a run folder
+                          ``<path>`` a ``.pt`` file or a run folder; ``mappo:pretrained``
+                          (``ippo:pretrained``, ``.../s1``) the shipped study policies
 ========================  ==================================================================
 
 A heuristic takes constructor options after ``@`` as ``key=value`` pairs separated by commas,
@@ -152,7 +153,8 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
                 raise ValueError(f"policy '{prefix}<path>' needs the path of a TorchRL checkpoint")
             from agents.marl_policy import MARLPolicy
 
-            return MARLPolicy(env, path, make_base=make_policy, **kwargs)
+            algorithm = "ippo" if prefix == "ippo:" else "mappo"
+            return MARLPolicy(env, path, make_base=make_policy, algorithm=algorithm, **kwargs)
     valid = ", ".join([*POLICY_NAMES, *_REGISTERED])
     raise ValueError(f"unknown policy {name!r}; valid policies: {valid}")
 

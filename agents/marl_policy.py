@@ -24,14 +24,31 @@ from agents.marl_nets import (
     swarm_command,
 )
 
-__all__ = ["MARLPolicy", "resolve_marl_checkpoint"]
+__all__ = ["PRETRAINED_DIR", "MARLPolicy", "resolve_marl_checkpoint"]
 
 
-def resolve_marl_checkpoint(path: str | Path) -> Path:
+PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
+"""The policies of the documented learning study (``docs/marl/report.md``), actor only."""
+
+
+def resolve_marl_checkpoint(path: str | Path, algorithm: str = "mappo") -> Path:
     """The checkpoint file of ``path``: the file itself, or ``final_model.pt`` of a run folder.
 
-    ``"pretrained:<name>"`` is not resolved here (see :func:`agents.make_policy`).
+    ``pretrained`` names the shipped policy of training seed 0 of ``algorithm``
+    (``agents/pretrained/<algorithm>_s0``), ``pretrained/s<k>`` the one of seed ``k``.
     """
+    text = str(path)
+    if text == "pretrained" or text.startswith("pretrained/"):
+        seed = text.partition("/")[2] or "s0"
+        folder = PRETRAINED_DIR / f"{algorithm}_{seed}"
+        if not folder.is_dir():
+            have = (
+                sorted(p.name for p in PRETRAINED_DIR.glob("*_s*"))
+                if PRETRAINED_DIR.is_dir()
+                else []
+            )
+            raise FileNotFoundError(f"no shipped policy {algorithm}:{text}; shipped: {have}")
+        path = folder
     p = Path(path)
     if p.is_dir():
         p = p / "final_model.pt"
@@ -52,6 +69,8 @@ class MARLPolicy:
         The environment to act in (its observation size must match the checkpoint's).
     path : str or Path
         Checkpoint file or run folder.
+    algorithm : str
+        ``mappo`` or ``ippo``: which shipped policies ``pretrained`` names.
     make_base : callable, optional
         ``make_base(name, env, **options)`` builds the base heuristic of a residual policy
         (:func:`agents.make_policy`, which passes itself).
@@ -59,10 +78,12 @@ class MARLPolicy:
 
     name = "mappo"
 
-    def __init__(self, env: Any, path: str | Path, make_base: Any = None) -> None:
+    def __init__(
+        self, env: Any, path: str | Path, make_base: Any = None, algorithm: str = "mappo"
+    ) -> None:
         import torch
 
-        ckpt = load_marl_checkpoint(resolve_marl_checkpoint(path))
+        ckpt = load_marl_checkpoint(resolve_marl_checkpoint(path, algorithm))
         self.settings = MARLSettings.from_dict(ckpt["settings"])
         self.name = self.settings.algorithm
         self.env = env

@@ -88,6 +88,7 @@ __all__ = [
     "MARLSettings",
     "MARLTrainer",
     "check",
+    "export_policy",
     "find_latest_checkpoint",
     "settings_of",
     "train",
@@ -499,6 +500,52 @@ def find_latest_checkpoint(out: str | Path) -> Path:
             continue
         return p
     raise FileNotFoundError(f"no TorchRL checkpoint to resume from in {folder}")
+
+
+def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
+    """Write the acting part of a run into ``out_dir``: ``final_model.pt`` (the actor, its
+    settings and the environment; no critic, no optimiser: about 100 kB instead of 700),
+    and the run's ``run.json`` and ``logs/progress.csv`` when they exist beside it.
+
+    ``checkpoint`` is a run folder (its ``final_model.pt``) or a checkpoint file. The result is
+    a folder that ``coopnav evaluate --policies mappo:OUT_DIR`` and ``coopnav study --runs``
+    read like a run; it cannot be resumed.
+    """
+    import shutil
+
+    import torch
+
+    src = Path(checkpoint)
+    run_dir = src if src.is_dir() else src.parent
+    if src.is_dir():
+        src = src / "final_model.pt"
+    d = load_marl_checkpoint(src)
+    small = {
+        k: d[k]
+        for k in (
+            "format",
+            "settings",
+            "env_kwargs",
+            "n_agents",
+            "actor_dim",
+            "critic_dim",
+            "actor",
+            "agent_steps",
+            "seed",
+        )
+    }
+    small["policy_only"] = True
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out / "final_model.pt") as tmp:
+        torch.save(small, tmp)
+    for name in ("run.json", "logs/progress.csv"):
+        f = run_dir / name
+        if f.is_file():
+            (out / name).parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(out / name) as tmp:
+                shutil.copyfile(f, tmp)
+    return out / "final_model.pt"
 
 
 def train(cfg: TrainConfig) -> Path:

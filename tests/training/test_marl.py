@@ -173,3 +173,34 @@ def test_torchrl_wrapper_accepts_the_environment() -> None:
         assert any(k[-1] == "coop_error_m" and "info" in k for k in keys)
         assert any(k[-1] == "coop_fix" and "info" in k for k in keys)
         env.close()
+
+
+def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
+    from training.marl import export_policy
+
+    s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
+    tr = MARLTrainer(s, {}, seed=0)
+    tr.update(tr.collect())
+    tr.save(tmp_path / "run" / "final_model.pt")
+    small = export_policy(tmp_path / "run", tmp_path / "shipped")
+    assert small.stat().st_size < 0.3 * (tmp_path / "run" / "final_model.pt").stat().st_size
+    env_a, env_b = urban_canyon_v0.parallel_env(), urban_canyon_v0.parallel_env()
+    full = make_policy(f"ippo:{tmp_path / 'run'}", env_a)
+    shipped = make_policy(f"ippo:{tmp_path / 'shipped'}", env_b)
+    obs, _ = env_a.reset(seed=1_000_000)
+    a, b = full.act(obs), shipped.act(obs)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+@pytest.mark.parametrize("name", ["mappo:pretrained", "mappo:pretrained/s2", "ippo:pretrained/s1"])
+def test_shipped_policies_load_and_fly(name) -> None:
+    env = urban_canyon_v0.parallel_env()
+    policy = make_policy(name, env)
+    obs, _ = env.reset(seed=1_000_000)
+    policy.reset(1_000_000)
+    acts = policy.act(obs)
+    assert set(acts) == set(env.agents)
+    assert all(np.all(np.abs(v) <= 1.0) for v in acts.values())
+    with pytest.raises(FileNotFoundError, match="shipped"):
+        make_policy("mappo:pretrained/s9", env)
