@@ -282,28 +282,54 @@ def plot_learning_curves(
             if c is None:
                 continue
             grid, vals = c
+            vals = _smooth(vals, 5)  # per-iteration figures are means of few episodes
             mean = vals.mean(axis=0)
             line = ax.plot(grid / 1e6, mean, label=f"{name} ({vals.shape[0]} seeds)")[0]
             if vals.shape[0] > 1:
                 half = _t975(vals.shape[0] - 1) * vals.std(axis=0, ddof=1) / np.sqrt(len(vals))
+                lo_b, hi_b = (0.0, 1.0) if key == "ep_goal" else (0.0, np.inf)
                 ax.fill_between(
-                    grid / 1e6, mean - half, mean + half, color=line.get_color(), alpha=0.2
+                    grid / 1e6,
+                    np.clip(mean - half, lo_b, hi_b),
+                    np.clip(mean + half, lo_b, hi_b),
+                    color=line.get_color(),
+                    alpha=0.2,
                 )
             ax.set_xlabel("agent-steps [millions]")
             ax.set_ylabel(label)
             drawn = True
     for h, v in ref.items():
-        axes[0].axhline(v, ls="--", lw=1, color="grey")
+        axes[0].axhline(v, ls="--", lw=0.8, color="grey")
         axes[0].annotate(
-            f"{h} (held-out)", (0.0, v), textcoords="offset points", xytext=(2, 2), fontsize=7
+            f"{_short(h)}: {v:.2f}",
+            (1.0, v),
+            xycoords=("axes fraction", "data"),
+            xytext=(3, 0),
+            textcoords="offset points",
+            fontsize=7,
+            va="center",
         )
+    axes[0].set_title("dashed: heuristics on the held-out episodes", fontsize=8)
+    axes[1].set_ylim(-0.02, 1.02)
     if not drawn:
         plt.close(fig)
         return None
     axes[0].legend(fontsize=8)
-    fig.suptitle("Learning curves: mean and 95 % band over training seeds")
+    fig.suptitle(
+        "Learning curves (training episodes, 5-iteration moving mean): mean and 95 % t-interval "
+        "over training seeds",
+        fontsize=10,
+    )
     fig.tight_layout()
     return _save(fig, path)
+
+
+def _smooth(vals: np.ndarray, k: int) -> np.ndarray:
+    """Moving mean over ``k`` points along the last axis (shorter windows at the ends)."""
+    kernel = np.ones(k)
+    num = np.apply_along_axis(lambda r: np.convolve(r, kernel, "same"), -1, vals)
+    den = np.convolve(np.ones(vals.shape[-1]), kernel, "same")
+    return num / den
 
 
 def _t975(dof: int) -> float:
@@ -368,7 +394,7 @@ def plot_trajectories(
     route = Polyline(np.asarray(world.route_xy_m))
     names = list(flights)
     fig, axes = plt.subplots(
-        2, len(names), figsize=(3.6 * len(names), 7.2), gridspec_kw={"height_ratios": [3, 1.4]}
+        2, len(names), figsize=(4.0 * len(names), 5.6), gridspec_kw={"height_ratios": [2, 1.5]}
     )
     axes = np.asarray(axes).reshape(2, len(names))
     for j, name in enumerate(names):
@@ -386,12 +412,12 @@ def plot_trajectories(
         hi_xy = np.maximum(pos[:, :, :2].max(axis=(0, 1)), world.goal_enu_m[:2]) + 40
         ax.set_xlim(lo_xy[0], hi_xy[0])
         ax.set_ylim(lo_xy[1], hi_xy[1])
-        ax.set_aspect("equal")
+        ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(_short(name), fontsize=9)
         ax.set_xlabel("East [m]", fontsize=8)
         if j == 0:
             ax.set_ylabel("North [m]", fontsize=8)
-            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3)
+            ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.3), ncol=3)
         side = axes[1, j]
         t = np.arange(pos.shape[0])
         s = route.project(
@@ -554,14 +580,15 @@ def run(args: argparse.Namespace) -> int:
     for (name, _policy, _seeds), episodes in zip(units, flown):
         if name != "planner (privileged)":
             results.setdefault(name, []).append(episodes)
-    summary = summarise(results, list(args.heuristics), args.reps)
+    # every method against every heuristic and every other learned method
+    summary = summarise(results, [*args.heuristics, *groups], args.reps)
     headroom: dict[str, Any] = {}
     if args.planner_episodes > 0:
         plan = flown[-1]
         sub = seeds[: args.planner_episodes]
         sub_results = {n: [run[: len(sub)] for run in r] for n, r in results.items()}
         sub_results["planner (privileged)"] = [plan]
-        headroom = summarise(sub_results, list(args.heuristics), args.reps)
+        headroom = summarise(sub_results, [*args.heuristics, "planner (privileged)"], args.reps)
         headroom["episodes"] = len(sub)
         headroom["planner_s"] = _timings.get("planner", math.nan)
     out = Path(args.out)
@@ -669,7 +696,7 @@ def report_markdown(data: Mapping[str, Any]) -> str:
         )
     lines += [
         "",
-        "## Paired differences (row minus column heuristic, same episodes)",
+        "## Paired differences (row minus the method in `vs`, same episodes)",
         "",
         "| method | vs | error difference [m] | CI excludes 0 | episodes lower | "
         "goal-rate difference |",
