@@ -364,9 +364,10 @@ def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
         lo = np.array([summary["methods"][n][key]["low"] for n in names])
         hi = np.array([summary["methods"][n][key]["high"] for n in names])
         ax.errorbar(v, y + off, xerr=[v - lo, hi - v], fmt="o", capsize=3, label=lab)
-    ax.set_yticks(y, names, fontsize=8)
+    ax.set_yticks(y, [_short(n) for n in names], fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("cooperative 3-D error per episode [m] (95 % stratified-bootstrap CI)")
+    ax.set_xlabel("cooperative 3-D error per episode [m]", fontsize=9)
+    ax.set_title("mean and IQM with 95 % stratified-bootstrap intervals", fontsize=9)
     ax.legend(loc="lower right", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
@@ -743,6 +744,15 @@ def report_markdown(data: Mapping[str, Any]) -> str:
         ]
         for name, m in h["methods"].items():
             lines.append(f"| {name} | {_fmt_iv(m['error_mean'])} | {_fmt_iv(m['goal_rate'])} |")
+        plan = h.get("paired", {}).get("planner (privileged)", {})
+        if plan:
+            lines += [
+                "",
+                "The planner against each heuristic on these episodes (paired, planner minus "
+                "heuristic): "
+                + "; ".join(f"{k}: {_fmt_iv(v['error_diff_m'])} m" for k, v in plan.items())
+                + ".",
+            ]
     figs = data.get("figures", {})
     for key, title in (
         ("errors", "Error per method"),
