@@ -29,8 +29,6 @@ from training.files import atomic_path
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
 
-    from training.evaluate import EpisodeRecord
-
 __all__ = [
     "error_cdf_figure",
     "plot_error_cdf",
@@ -105,7 +103,7 @@ def _save(fig: Figure, path: str | Path, dpi: int) -> Path:
 
 
 def error_cdf_figure(
-    episodes: Mapping[str, Sequence[EpisodeRecord]],
+    episodes: Mapping[str, Sequence[Any]],
     threshold_m: float,
     labels: Mapping[str, str] | None = None,
 ) -> Figure:
@@ -156,11 +154,10 @@ def error_cdf_figure(
     return fig
 
 
-def plot_error_cdf(report: Any, path: str | Path) -> Path:
-    """Write the error CDF of a :class:`training.evaluate.Report` to ``path`` (PNG)."""
-    from training.evaluate import ERROR_THRESHOLD_M
-
-    return _save(error_cdf_figure(report.episodes, ERROR_THRESHOLD_M), path, dpi=120)
+def plot_error_cdf(report: Any, path: str | Path, threshold_m: float = 3.0) -> Path:
+    """Write the error CDF of a :class:`training.evaluate.Report` to ``path`` (PNG), with a
+    labelled line at ``threshold_m`` (``training.evaluate.ERROR_THRESHOLD_M``)."""
+    return _save(error_cdf_figure(report.episodes, threshold_m), path, dpi=120)
 
 
 # --------------------------------------------------------------------------------------------
@@ -209,7 +206,7 @@ def _flown_distance(xy: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((1, xy.shape[1])), np.cumsum(step, axis=0)])
 
 
-def trajectory_figure(env: Any, record: EpisodeRecord, title: str = "") -> Figure | None:
+def trajectory_figure(env: Any, record: Any, title: str = "") -> Figure | None:
     """The figure of :func:`plot_trajectories` (not saved); None without true positions."""
     if record.pos_enu_m is None:
         return None
@@ -295,7 +292,7 @@ def trajectory_figure(env: Any, record: EpisodeRecord, title: str = "") -> Figur
     return fig
 
 
-def plot_trajectories(env: Any, record: EpisodeRecord, path: str | Path, title: str = "") -> bool:
+def plot_trajectories(env: Any, record: Any, path: str | Path, title: str = "") -> bool:
     """Top and side view of one episode (module docstring) written to ``path`` (PNG).
 
     The env is reset with the record's seed to show the episode's world. Returns False (and

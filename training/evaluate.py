@@ -615,7 +615,7 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
     if plots:
         from training.eval_plots import plot_error_cdf, plot_trajectories, short_labels
 
-        files["cdf"] = plot_error_cdf(report, out / "error_cdf.png")
+        files["cdf"] = plot_error_cdf(report, out / "error_cdf.png", ERROR_THRESHOLD_M)
         labels = short_labels(list(report.episodes))
         for name, eps in report.episodes.items():
             path = out / f"trajectories_{_slug(name)}.png"
@@ -802,7 +802,7 @@ def _warn_untracked(
     if not missing:
         return
     where = "the other policy's run settings" if have_config else "the environment's defaults"
-    resolved = _reward_settings(env_id, env_kwargs)
+    resolved = reward_settings(env_id, env_kwargs)
     print(
         f"coopnav evaluate: warning: no config.yaml of a training run beside (or one or two "
         f"folders above) {', '.join(missing)}: evaluating in {env_id} with {where}, settings "
@@ -828,7 +828,7 @@ _NAMED_SETTINGS: tuple[str, ...] = (
 )
 
 
-def _reward_settings(env_id: str, env_kwargs: Mapping[str, Any]) -> str:
+def reward_settings(env_id: str, env_kwargs: Mapping[str, Any]) -> str:
     """``key=value`` of the main reward and episode settings the env resolves, or ""."""
     try:
         env = _make_env(env_id, env_kwargs)

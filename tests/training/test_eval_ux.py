@@ -186,10 +186,10 @@ def test_the_run_settings_are_named_in_the_header(toy_run, tmp_path, capsys) -> 
 
 
 @pytest.mark.skipif(not HAS_ENV, reason="urban_canyon_v0 not available")
-def test_the_warning_names_the_reward_settings() -> None:
-    from training.evaluate import _reward_settings
+def test_the_warning_names_thereward_settings() -> None:
+    from training.evaluate import reward_settings
 
-    text = _reward_settings("urban_canyon_v0", {"n_uavs": 3, "collision_penalty": 7.0})
+    text = reward_settings("urban_canyon_v0", {"n_uavs": 3, "collision_penalty": 7.0})
     assert "n_uavs=3" in text and "collision_penalty=7.0" in text
     assert "nav_reward='error'" in text and "max_steps=200" in text
-    assert _reward_settings("urban_canyon_v0", {"bogus": 1}) == ""  # the evaluation says why
+    assert reward_settings("urban_canyon_v0", {"bogus": 1}) == ""  # the evaluation says why
