@@ -837,6 +837,33 @@ def sqrtm_diagonal(cov):
 
 
 @njit(cache=True)
+def isotropic_setup(rel, var, avail, cen):
+    """The relative-position arrays of ``cooperative._setup`` for isotropic covariances.
+
+    ``rel`` (B, N, 3), ``var`` and ``avail`` (B, N), ``cen`` (B,). Returns ``bavail`` (the
+    centroid UAV's own entry set: a UAV always "sees" itself, as ``RelativePositions`` marks
+    the diagonal), the baselines and covariances ``var * I`` masked to the available UAVs, and
+    their square roots (:func:`sqrtm_diagonal`).
+    """
+    n_b, n = avail.shape
+    bavail = avail.copy()
+    for b in range(n_b):
+        bavail[b, cen[b]] = True
+    base = np.zeros((n_b, n, 3))
+    bcov = np.zeros((n_b, n, 3, 3))
+    for b in range(n_b):
+        for q in range(n):
+            if bavail[b, q]:
+                v = var[b, q]
+                for a in range(3):
+                    base[b, q, a] = rel[b, q, a]
+                    for c in range(3):
+                        bcov[b, q, a, c] = v * (1.0 if a == c else 0.0)
+    froot = sqrtm_diagonal(bcov.reshape((n_b * n, 3, 3)))[0].reshape((n_b, n, 3, 3))
+    return bavail, base, bcov, froot
+
+
+@njit(cache=True)
 def cooperative_isotropic(
     pr,  # (N, S) pseudoranges, NaN where not received
     vis,  # (N, S) bool received
@@ -875,24 +902,10 @@ def cooperative_isotropic(
     """
     n_b, n = avail.shape
     s = vis.shape[1]
-    # a UAV always "sees" itself (RelativePositions marks the diagonal available)
-    bavail = avail.copy()
-    for b in range(n_b):
-        bavail[b, cen[b]] = True
-    base = np.zeros((n_b, n, 3))
-    bcov = np.zeros((n_b, n, 3, 3))
-    for b in range(n_b):
-        for q in range(n):
-            if bavail[b, q]:
-                v = var[b, q]
-                for a in range(3):
-                    base[b, q, a] = rel[b, q, a]
-                    for c in range(3):
-                        bcov[b, q, a, c] = v * (1.0 if a == c else 0.0)
+    bavail, base, bcov, froot = isotropic_setup(rel, var, avail, cen)
     ref, used, has_clock, _pivot, too_few = setup_masks(
         vis, bavail, cen, system, el, n_sys, ddt, need_override
     )
-    froot = sqrtm_diagonal(bcov.reshape((n_b * n, 3, 3)))[0].reshape((n_b, n, 3, 3))
     pr0 = np.zeros((1, n, s))
     for q in range(n):
         for k in range(s):

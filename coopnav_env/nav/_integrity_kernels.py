@@ -1,0 +1,947 @@
+r"""Compiled (numba) kernels of the integrity monitor (:mod:`coopnav_env.nav.integrity`).
+
+Three groups:
+
+* **Distributions** (no scipy at run time): the regularised incomplete gamma function
+  (series / Lentz continued fraction), the chi-square upper quantile (Wilson-Hilferty start,
+  safeguarded Newton on ``log Q``), the non-central chi-square CDF (Poisson mixture summed
+  downward from its upper end, where the recurrence adds positive terms only) and the
+  non-centrality whose CDF at a threshold is a given missed-detection probability
+  (safeguarded Newton with ``dF/dlambda = (F_{k+2} - F_k) / 2``); the standard normal
+  quantile (Acklam's rational start, one Halley step on ``erfc``). The tests compare every
+  one with scipy.
+* **Statistics of one fix** (:func:`problem_statistics`): the weighted sum of squared
+  residuals ``T = a^T R a``, its degrees of freedom, Baarda's normalised residuals
+  ``w_i = (R a)_i / sqrt(R_ii)``, and each measurement's position gain ``K_i`` (the shift of
+  the fix per metre of bias on it) projected horizontally and vertically per unit
+  ``sqrt(R_ii)`` (the RAIM slopes), where ``R = P~ - P~ A (A^T P~ A)^-1 A^T P~`` is the
+  residual projector of the GLS with the exact structured covariance ``C*`` (nuisance clocks
+  eliminated; see :mod:`coopnav_env.nav.integrity`). ``C*`` is never formed: the elimination
+  is that of ``cooperative._structured_normal`` (per-UAV nuisance clocks and rank-3 relative
+  errors per block, then one ``n_sv x n_sv`` solve for the errors common to all UAVs), kept
+  here per row because the per-row quantities need the blocks themselves.
+* **FDE loops** (:func:`standalone_fde`, :func:`cooperative_fde`): test, identify, exclude,
+  re-solve with the solvers' own kernels, until the test passes or redundancy runs out.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from coopnav_env.nav._kernels import (
+    _cholesky_inverse,
+    _inv3,
+    cooperative_finish,
+    cooperative_gauss_newton,
+    n_nuisance,
+    setup_masks,
+    standalone_solve,
+)
+
+# integrity statuses (coopnav_env.nav.integrity.IntegrityStatus)
+INT_OK = 0
+INT_EXCLUDED = 1
+INT_FAULT_DETECTED = 2
+INT_NO_REDUNDANCY = 3
+INT_NO_FIX = 4
+# NavStatus.OK and NavStatus.FAULT_DETECTED
+_NAV_OK = 0
+_NAV_FAULT = 6
+
+#: a row whose residual variance ``R_ii`` is below this fraction of its own weight carries no
+#: redundancy (a fault on it cannot be seen in the residuals)
+UNOBSERVABLE_RII = 1e-9
+#: ... and a fault on such a row that moves the fix by less than this [m per m of bias] is
+#: harmless (it is absorbed by a clock)
+HARMLESS_GAIN = 1e-6
+
+
+# --------------------------------------------------------------------------------------------
+# distributions
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _gamma_p_series(a, x):
+    """Lower regularised gamma ``P(a, x)`` by its series (for ``x < a + 1``)."""
+    if x <= 0.0:
+        return 0.0
+    ap = a
+    term = 1.0 / a
+    total = term
+    for _ in range(100000):
+        ap += 1.0
+        term *= x / ap
+        total += term
+        if abs(term) < abs(total) * 1e-17:
+            break
+    return total * math.exp(-x + a * math.log(x) - math.lgamma(a))
+
+
+@njit(cache=True)
+def _gamma_q_fraction(a, x):
+    """Upper regularised gamma ``Q(a, x)`` by Lentz's continued fraction (``x >= a + 1``)."""
+    tiny = 1e-300
+    b = x + 1.0 - a
+    c = 1.0 / tiny
+    d = 1.0 / b
+    h = d
+    for i in range(1, 100000):
+        an = -i * (i - a)
+        b += 2.0
+        d = an * d + b
+        if abs(d) < tiny:
+            d = tiny
+        c = b + an / c
+        if abs(c) < tiny:
+            c = tiny
+        d = 1.0 / d
+        delta = d * c
+        h *= delta
+        if abs(delta - 1.0) < 1e-16:
+            break
+    return math.exp(-x + a * math.log(x) - math.lgamma(a)) * h
+
+
+@njit(cache=True)
+def gamma_p(a, x):
+    """Lower regularised incomplete gamma function ``P(a, x)``, ``a > 0``."""
+    if x <= 0.0:
+        return 0.0
+    if x < a + 1.0:
+        return _gamma_p_series(a, x)
+    return 1.0 - _gamma_q_fraction(a, x)
+
+
+@njit(cache=True)
+def gamma_q(a, x):
+    """Upper regularised incomplete gamma function ``Q(a, x) = 1 - P(a, x)``, ``a > 0``."""
+    if x <= 0.0:
+        return 1.0
+    if x < a + 1.0:
+        return 1.0 - _gamma_p_series(a, x)
+    return _gamma_q_fraction(a, x)
+
+
+@njit(cache=True)
+def chi2_sf(x, k):
+    """Survival function of the chi-square distribution with ``k`` degrees of freedom."""
+    return gamma_q(0.5 * k, 0.5 * x)
+
+
+@njit(cache=True)
+def norm_ppf(p):
+    """Standard normal quantile, ``0 < p < 1`` (Acklam's approximation + one Halley step)."""
+    a1, a2, a3 = -3.969683028665376e01, 2.209460984245205e02, -2.759285104469687e02
+    a4, a5, a6 = 1.383577518672690e02, -3.066479806614716e01, 2.506628277459239e00
+    b1, b2, b3 = -5.447609879822406e01, 1.615858368580409e02, -1.556989798598866e02
+    b4, b5 = 6.680131188771972e01, -1.328068155288572e01
+    c1, c2, c3 = -7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e00
+    c4, c5, c6 = -2.549732539343734e00, 4.374664141464968e00, 2.938163982698783e00
+    d1, d2, d3 = 7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e00
+    d4 = 3.754408661907416e00
+    p_low = 0.02425
+    if p < p_low:
+        q = math.sqrt(-2.0 * math.log(p))
+        x = (((((c1 * q + c2) * q + c3) * q + c4) * q + c5) * q + c6) / (
+            (((d1 * q + d2) * q + d3) * q + d4) * q + 1.0
+        )
+    elif p <= 1.0 - p_low:
+        q = p - 0.5
+        r = q * q
+        x = (
+            (((((a1 * r + a2) * r + a3) * r + a4) * r + a5) * r + a6)
+            * q
+            / (((((b1 * r + b2) * r + b3) * r + b4) * r + b5) * r + 1.0)
+        )
+    else:
+        q = math.sqrt(-2.0 * math.log(1.0 - p))
+        x = -(((((c1 * q + c2) * q + c3) * q + c4) * q + c5) * q + c6) / (
+            (((d1 * q + d2) * q + d3) * q + d4) * q + 1.0
+        )
+    # one Halley step on Phi(x) - p, Phi from erfc (accurate in both tails)
+    e = 0.5 * math.erfc(-x / math.sqrt(2.0)) - p
+    u = e * math.sqrt(2.0 * math.pi) * math.exp(0.5 * x * x)
+    return x - u / (1.0 + 0.5 * x * u)
+
+
+@njit(cache=True)
+def chi2_isf(p, k):
+    """Upper quantile of the chi-square distribution: ``x`` with ``Q(k/2, x/2) = p``.
+
+    Wilson-Hilferty start, then Newton on ``log Q`` (the density over ``Q`` is its
+    derivative), safeguarded by bisection inside a bracket that every step narrows.
+    """
+    z = -norm_ppf(p)
+    h = 2.0 / (9.0 * k)
+    x = k * (1.0 - h + z * math.sqrt(h)) ** 3
+    if not x > 0.0:
+        x = 0.5 * k
+    lo, hi = 0.0, math.inf
+    a = 0.5 * k
+    target = math.log(p)
+    for _ in range(200):
+        q = chi2_sf(x, k)
+        if q > p:
+            lo = x
+        else:
+            hi = x
+        if q <= 0.0:  # far in the tail: step back
+            x = 0.5 * (lo + x)
+            continue
+        f = math.log(q) - target
+        dens = math.exp((a - 1.0) * math.log(0.5 * x) - 0.5 * x - math.lgamma(a)) * 0.5
+        step = f / (dens / q)  # Newton on log Q: f' = -dens / Q
+        x_new = x + step
+        if not (lo < x_new < hi):
+            x_new = 0.5 * (lo + hi) if hi < math.inf else 2.0 * x
+        if abs(x_new - x) <= 1e-14 * x:
+            return x_new
+        x = x_new
+    return x
+
+
+@njit(cache=True)
+def ncx2_cdf(x, k, lam):
+    """CDF of the non-central chi-square distribution (``k`` degrees of freedom,
+    non-centrality ``lam``) at ``x``: the Poisson(``lam / 2``) mixture of central CDFs.
+
+    ``P(a + j, y)`` is computed once at the upper end of the sum by its own series or
+    fraction and recurred downward, ``P(a, y) = P(a + 1, y) + y^a e^-y / Gamma(a + 1)``,
+    which adds positive terms only (stable even where the CDF is tiny).
+    """
+    if x <= 0.0:
+        return 0.0
+    a = 0.5 * k
+    y = 0.5 * x
+    if lam <= 0.0:
+        return gamma_p(a, y)
+    h = 0.5 * lam
+    j_hi = int(h + 12.0 * math.sqrt(h) + 40.0)
+    p_j = gamma_p(a + j_hi, y)
+    log_y = math.log(y)
+    log_h = math.log(h)
+    total = 0.0
+    for j in range(j_hi, -1, -1):
+        if j < j_hi:
+            aj = a + j
+            p_j += math.exp(aj * log_y - y - math.lgamma(aj + 1.0))
+        total += math.exp(-h + j * log_h - math.lgamma(j + 1.0)) * p_j
+    return min(total, 1.0)
+
+
+@njit(cache=True)
+def ncx2_lambda(x, k, p_md):
+    """The non-centrality ``lam`` with ``ncx2_cdf(x, k, lam) = p_md`` (0 if already below).
+
+    The CDF falls with ``lam``; Newton on ``log F`` with ``dF/dlam = (F_{k+2} - F_k) / 2``,
+    safeguarded by bisection in a bracket found by doubling.
+    """
+    if ncx2_cdf(x, k, 0.0) <= p_md:
+        return 0.0
+    lo = 0.0
+    hi = max(1.0, (math.sqrt(x) - norm_ppf(p_md)) ** 2)
+    while ncx2_cdf(x, k, hi) > p_md:
+        lo = hi
+        hi *= 2.0
+    lam = 0.5 * (lo + hi)
+    target = math.log(p_md)
+    for _ in range(200):
+        f_k = ncx2_cdf(x, k, lam)
+        if f_k > p_md:
+            lo = lam
+        else:
+            hi = lam
+        if f_k <= 0.0:
+            lam_new = 0.5 * (lo + hi)
+        else:
+            deriv = 0.5 * (ncx2_cdf(x, k + 2.0, lam) - f_k)  # < 0
+            g = math.log(f_k) - target
+            lam_new = lam - g * f_k / deriv if deriv < 0.0 else 0.5 * (lo + hi)
+            if not (lo < lam_new < hi):
+                lam_new = 0.5 * (lo + hi)
+        if abs(lam_new - lam) <= 1e-13 * max(lam, 1.0) or hi - lo <= 1e-13 * max(hi, 1.0):
+            return lam_new
+        lam = lam_new
+    return lam
+
+
+@njit(cache=True)
+def threshold_tables(p_fa, p_md, dof_max):
+    """``thr[d]`` (chi-square threshold for false-alarm ``p_fa``) and ``lam[d]`` (the
+    non-centrality detected with probability ``1 - p_md``) for ``d = 0 .. dof_max``
+    (entry 0 is NaN: no test)."""
+    thr = np.full(dof_max + 1, np.nan)
+    lam = np.full(dof_max + 1, np.nan)
+    for d in range(1, dof_max + 1):
+        thr[d] = chi2_isf(p_fa, float(d))
+        lam[d] = ncx2_lambda(thr[d], float(d), p_md)
+    return thr, lam
+
+
+# --------------------------------------------------------------------------------------------
+# statistics of one fix
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def problem_statistics(pr, sv, system, rows, w, sig_c, pos, clk, base, froot, ref, has_clock, rot):
+    """Residual test quantities of one GLS fix (a receiver's or a centroid problem's).
+
+    Model (the undifferenced form of ``cooperative._linearize``): row ``(q, k)`` is UAV
+    ``q``'s pseudorange to satellite ``k`` with design ``[-u_qk, e_sys (if has_clock)]`` at
+    ``pos + base[q]``, one flat-prior nuisance clock per constellation for every ``q != ref``,
+    and the error ``e_c^k + e_u,qk + u_qk . F_q z_q`` (``sig_c``, ``1 / w``, ``froot``).
+
+    Parameters
+    ----------
+    pr : (N, S) pseudoranges (any value where ``rows`` is False)
+    sv : (S, 3); system : (S,) sorted constellation indices
+    rows : (N, S) bool measurements of the fix
+    w : (N, S) inverse variance of the per-receiver error of each row
+    sig_c : (S,) sigma of the errors common to all receivers (all zero: none)
+    pos : (3,) the fix (centroid) position; clk : (n_sys,) its clocks (0 where unknown)
+    base : (N, 3) offsets of the UAVs from ``pos``; froot : (N, 3, 3) relative-error roots
+    ref : the UAV without nuisance clocks; has_clock : (n_sys,) clock columns estimated
+    rot : (3, 3) ECEF -> local ENU rotation (horizontal / vertical split)
+
+    Returns
+    -------
+    ok, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
+        ``ok`` False when the normal matrix is not positive definite. ``q_star, k_star``:
+        the row with the largest ``|w_i|`` among the observable ones (-1 if none),
+        ``w_star`` its ``|w_i|``. ``h_slope, v_slope``: the largest horizontal / vertical
+        position gain per unit ``sqrt(non-centrality)``, ``|K_i| / sqrt(R_ii)`` (inf when an
+        unobservable row moves the fix).
+    """
+    n, s = rows.shape
+    n_sys = has_clock.shape[0]
+    p_dim = 3 + n_sys
+    pc = p_dim + 1  # columns [A | a]
+    start = np.zeros(n_sys + 1, dtype=np.int64)
+    for j in range(n_sys + 1):
+        c = 0
+        for k in range(s):
+            if system[k] < j:
+                c += 1
+        start[j] = c
+    m_q = np.zeros(n, dtype=np.int64)
+    idx = np.empty((n, s), dtype=np.int64)
+    for q in range(n):
+        for k in range(s):
+            if rows[q, k]:
+                idx[q, m_q[q]] = k
+                m_q[q] += 1
+    common = False
+    for k in range(s):
+        if sig_c[k] != 0.0:
+            common = True
+    a_x = np.zeros((n, s, pc))  # [A | a] per block row
+    pq = np.zeros((n, s, s))  # P_q: block precision with nuisance and latent eliminated
+    pax = np.zeros((n, s, pc))  # P_q [A | a]
+    lam = np.empty((s, 3))
+    p0l = np.empty((s, 3))
+    m3 = np.empty((3, 3))
+    m3i = np.empty((3, 3))
+    g3 = np.empty((s, 3))
+    n_rows = 0
+    n_nuis = 0
+    for q in range(n):
+        mq = m_q[q]
+        if mq == 0:
+            continue
+        n_rows += mq
+        p0 = pq[q]
+        for i in range(mq):
+            k = idx[q, i]
+            d0 = sv[k, 0] - (pos[0] + base[q, 0])
+            d1 = sv[k, 1] - (pos[1] + base[q, 1])
+            d2 = sv[k, 2] - (pos[2] + base[q, 2])
+            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
+            for j in range(3):
+                lam[i, j] = u0 * froot[q, 0, j] + u1 * froot[q, 1, j] + u2 * froot[q, 2, j]
+            a_x[q, i, 0] = -u0
+            a_x[q, i, 1] = -u1
+            a_x[q, i, 2] = -u2
+            sk = system[k]
+            res = pr[q, k] - rng
+            if has_clock[sk]:
+                a_x[q, i, 3 + sk] = 1.0
+                res -= clk[sk]
+            a_x[q, i, p_dim] = res
+            p0[i, i] = w[q, k]
+        # 1. nuisance clocks: P0 = W - W N (N^T W N)^-1 N^T W, one group per constellation
+        if q != ref:
+            for j in range(n_sys):
+                dsum = 0.0
+                amean = 0.0
+                for i in range(mq):
+                    if start[j] <= idx[q, i] < start[j + 1]:
+                        dsum += w[q, idx[q, i]]
+                        amean += w[q, idx[q, i]] * a_x[q, i, p_dim]
+                if dsum > 0.0:
+                    n_nuis += 1
+                    # remove the group's weighted mean from the residuals: a shift along a
+                    # nuisance column leaves R a unchanged, and the clock offsets between
+                    # receivers (tens of km) would otherwise cost digits in T
+                    amean /= dsum
+                    for i in range(mq):
+                        if start[j] <= idx[q, i] < start[j + 1]:
+                            a_x[q, i, p_dim] -= amean
+                    for i in range(mq):
+                        ki = idx[q, i]
+                        if not start[j] <= ki < start[j + 1]:
+                            continue
+                        for i2 in range(mq):
+                            k2 = idx[q, i2]
+                            if start[j] <= k2 < start[j + 1]:
+                                p0[i, i2] -= w[q, ki] * w[q, k2] / dsum
+        # 2. rank-3 relative-error latent: P_q = P0 - P0 lam (I + lam^T P0 lam)^-1 lam^T P0
+        has_rel = False
+        for a_ in range(3):
+            for c in range(3):
+                if froot[q, a_, c] != 0.0:
+                    has_rel = True
+        if has_rel:
+            for i in range(mq):
+                for j in range(3):
+                    acc = 0.0
+                    for i2 in range(mq):
+                        acc += p0[i, i2] * lam[i2, j]
+                    p0l[i, j] = acc
+            for j1 in range(3):
+                for j2 in range(3):
+                    acc = 1.0 if j1 == j2 else 0.0
+                    for i in range(mq):
+                        acc += lam[i, j1] * p0l[i, j2]
+                    m3[j1, j2] = acc
+            _inv3(m3, m3i)
+            for i in range(mq):
+                for j in range(3):
+                    g3[i, j] = p0l[i, 0] * m3i[0, j] + p0l[i, 1] * m3i[1, j] + p0l[i, 2] * m3i[2, j]
+            for i in range(mq):
+                for i2 in range(mq):
+                    p0[i, i2] -= (
+                        g3[i, 0] * p0l[i2, 0] + g3[i, 1] * p0l[i2, 1] + g3[i, 2] * p0l[i2, 2]
+                    )
+        for i in range(mq):
+            for c in range(pc):
+                acc = 0.0
+                for i2 in range(mq):
+                    acc += p0[i, i2] * a_x[q, i2, c]
+                pax[q, i, c] = acc
+    # 3. errors common to all receivers: P~ = Pblk - Pblk E (I + E^T Pblk E)^-1 E^T Pblk
+    ptx = pax.copy()  # P~ [A | a] per row
+    ptd = np.zeros((n, s))  # diag(P~)
+    for q in range(n):
+        for i in range(m_q[q]):
+            ptd[q, i] = pq[q, i, i]
+    if common:
+        mg = np.zeros((s, s))
+        for q in range(n):
+            for i in range(m_q[q]):
+                k = idx[q, i]
+                for i2 in range(m_q[q]):
+                    k2 = idx[q, i2]
+                    mg[k, k2] += sig_c[k] * pq[q, i, i2] * sig_c[k2]
+        for k in range(s):
+            mg[k, k] += 1.0
+        mgi = np.empty((s, s))
+        if not _cholesky_inverse(mg, mgi):
+            return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
+        u_mat = np.zeros((s, pc))  # E^T Pblk [A | a]
+        for q in range(n):
+            for i in range(m_q[q]):
+                k = idx[q, i]
+                for c in range(pc):
+                    u_mat[k, c] += sig_c[k] * pax[q, i, c]
+        v_mat = np.zeros((s, pc))  # (I + E^T Pblk E)^-1 E^T Pblk [A | a]
+        for k in range(s):
+            for k2 in range(s):
+                f = mgi[k, k2]
+                if f != 0.0:
+                    for c in range(pc):
+                        v_mat[k, c] += f * u_mat[k2, c]
+        # per block, with local (contiguous) copies: Vloc = Sigma V[sats], Mloc = Sigma
+        # Mginv[sats, sats] Sigma; then P~ [A | a] = P_q ([A | a] ... ) - P_q Vloc and
+        # diag(P~) = diag(P_q) - diag(P_q Mloc P_q)
+        vloc = np.empty((s, pc))
+        mloc = np.empty((s, s))
+        bq = np.empty((s, s))
+        for q in range(n):
+            mq = m_q[q]
+            if mq == 0:
+                continue
+            p_q = pq[q]
+            for i in range(mq):
+                k = idx[q, i]
+                for c in range(pc):
+                    vloc[i, c] = sig_c[k] * v_mat[k, c]
+                for i2 in range(mq):
+                    mloc[i, i2] = sig_c[k] * mgi[k, idx[q, i2]] * sig_c[idx[q, i2]]
+            for i in range(mq):
+                for c in range(pc):
+                    ptx[q, i, c] = pax[q, i, c]
+                for i2 in range(mq):
+                    f = p_q[i, i2]
+                    for c in range(pc):
+                        ptx[q, i, c] -= f * vloc[i2, c]
+                for i2 in range(mq):
+                    acc = 0.0
+                    for i3 in range(mq):
+                        acc += p_q[i, i3] * mloc[i3, i2]
+                    bq[i, i2] = acc
+                acc = 0.0
+                for i2 in range(mq):
+                    acc += bq[i, i2] * p_q[i2, i]
+                ptd[q, i] = p_q[i, i] - acc
+    # normal equations and the residual projector R = P~ - P~ A info^-1 A^T P~
+    info = np.zeros((p_dim, p_dim))
+    rhs = np.zeros(p_dim)
+    apa = 0.0
+    for q in range(n):
+        for i in range(m_q[q]):
+            for p1 in range(p_dim):
+                ap = a_x[q, i, p1]
+                if ap != 0.0:
+                    for p2 in range(p_dim):
+                        info[p1, p2] += ap * ptx[q, i, p2]
+                    rhs[p1] += ap * ptx[q, i, p_dim]
+            apa += a_x[q, i, p_dim] * ptx[q, i, p_dim]
+    for j in range(n_sys):
+        if not has_clock[j]:
+            info[3 + j, 3 + j] += 1.0
+    for p1 in range(p_dim):  # symmetrise (the two triangles differ by rounding only)
+        for p2 in range(p1 + 1, p_dim):
+            v = 0.5 * (info[p1, p2] + info[p2, p1])
+            info[p1, p2] = v
+            info[p2, p1] = v
+    infoi = np.empty((p_dim, p_dim))
+    if not _cholesky_inverse(info, infoi):
+        return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
+    xr = np.zeros(p_dim)
+    t_stat = apa
+    for p1 in range(p_dim):
+        acc = 0.0
+        for p2 in range(p_dim):
+            acc += infoi[p1, p2] * rhs[p2]
+        xr[p1] = acc
+        t_stat -= rhs[p1] * acc
+    if t_stat < 0.0:  # rounding of a (near) zero statistic
+        t_stat = 0.0
+    n_clk = 0
+    for j in range(n_sys):
+        if has_clock[j]:
+            n_clk += 1
+    dof = n_rows - n_nuis - 3 - n_clk
+    q_star, k_star = -1, -1
+    w_star = 0.0
+    h_slope = 0.0
+    v_slope = 0.0
+    g = np.empty(p_dim)
+    for q in range(n):
+        for i in range(m_q[q]):
+            k = idx[q, i]
+            for p1 in range(p_dim):
+                acc = 0.0
+                for p2 in range(p_dim):
+                    acc += infoi[p1, p2] * ptx[q, i, p2]
+                g[p1] = acc
+            r_ii = ptd[q, i]
+            ra = ptx[q, i, p_dim]
+            for p1 in range(p_dim):
+                r_ii -= ptx[q, i, p1] * g[p1]
+                ra -= ptx[q, i, p1] * xr[p1]
+            ke = rot[0, 0] * g[0] + rot[0, 1] * g[1] + rot[0, 2] * g[2]
+            kn = rot[1, 0] * g[0] + rot[1, 1] * g[1] + rot[1, 2] * g[2]
+            ku = rot[2, 0] * g[0] + rot[2, 1] * g[1] + rot[2, 2] * g[2]
+            kh = math.sqrt(ke * ke + kn * kn)
+            if r_ii <= UNOBSERVABLE_RII * w[q, k]:
+                if kh > HARMLESS_GAIN:
+                    h_slope = math.inf
+                if abs(ku) > HARMLESS_GAIN:
+                    v_slope = math.inf
+                continue
+            sr = math.sqrt(r_ii)
+            h_slope = max(h_slope, kh / sr)
+            v_slope = max(v_slope, abs(ku) / sr)
+            wi = abs(ra) / sr
+            if wi > w_star or q_star < 0:
+                q_star, k_star, w_star = q, k, wi
+    return True, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
+
+
+# --------------------------------------------------------------------------------------------
+# protection levels
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def protection_level(slope_h, slope_v, sqrt_lam, cov_ecef, rot, k_h, k_v):
+    """``(HPL, VPL)`` of one fix: faulted slope bound plus the fault-free bound.
+
+    ``HPL = slope_h sqrt(lam) + k_h sigma_major``, ``VPL = slope_v sqrt(lam) + k_v sigma_u``
+    with ``sigma_major`` the semi-major axis of the horizontal error ellipse and ``sigma_u``
+    the vertical sigma of ``cov_ecef`` rotated by ``rot`` (see the integrity module's
+    docstring for why the sum bounds the misleading-information probability).
+    """
+    c = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for a in range(3):
+                for b in range(3):
+                    acc += rot[i, a] * cov_ecef[a, b] * rot[j, b]
+            c[i, j] = acc
+    half_tr = 0.5 * (c[0, 0] + c[1, 1])
+    half_diff = 0.5 * (c[0, 0] - c[1, 1])
+    major = half_tr + math.sqrt(half_diff * half_diff + c[0, 1] * c[1, 0])
+    sig_major = math.sqrt(max(major, 0.0))
+    sig_u = math.sqrt(max(c[2, 2], 0.0))
+    return slope_h * sqrt_lam + k_h * sig_major, slope_v * sqrt_lam + k_v * sig_u
+
+
+# --------------------------------------------------------------------------------------------
+# fault detection and exclusion
+# --------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def standalone_fde(
+    vis,
+    pr,
+    sv,
+    sigma_user,
+    sigma_common,
+    system,
+    n_sys,
+    max_iter,
+    tol_m,
+    check,
+    lo,
+    hi,
+    pos,  # (R, 3) the solver's fixes: updated in place
+    cov,  # (R, 3, 3)
+    clock,  # (R, n_sys)
+    status,  # (R,)
+    n_used,  # (R,)
+    rot,  # (R, 3, 3)
+    thr,  # (D + 1,) chi-square thresholds per degree of freedom
+    max_excl,  # exclusions allowed per fix (a large number: until redundancy runs out)
+):
+    """RAIM FDE of every standalone fix; the solver's outputs are updated in place.
+
+    Per receiver: test (chi-square on ``T``), and while it fails with at least two degrees
+    of freedom and exclusions left, exclude the row of the largest normalised residual and
+    re-solve with :func:`coopnav_env.nav._kernels.standalone_solve` (warm start at the
+    current fix). A fault that cannot be cleared leaves the receiver's original fix with
+    ``NavStatus.FAULT_DETECTED``.
+
+    Returns ``istat, detected, n_excl, excluded (R, S), t_stat, dof, h_slope, v_slope``.
+    """
+    n_rx, s = vis.shape
+    istat = np.full(n_rx, INT_NO_FIX, dtype=np.int64)
+    detected = np.zeros(n_rx, dtype=np.bool_)
+    n_excl = np.zeros(n_rx, dtype=np.int64)
+    excluded = np.zeros((n_rx, s), dtype=np.bool_)
+    t_out = np.full(n_rx, np.nan)
+    dof_out = np.zeros(n_rx, dtype=np.int64)
+    h_out = np.full(n_rx, np.inf)
+    v_out = np.full(n_rx, np.inf)
+    zeros_base = np.zeros((1, 3))
+    zeros_root = np.zeros((1, 3, 3))
+    no_common = np.zeros(s)
+    w = np.zeros((1, s))
+    has_clock = np.zeros(n_sys, dtype=np.bool_)
+    clk = np.zeros(n_sys)
+    for r in range(n_rx):
+        vis_r = vis[r : r + 1].copy()
+        pr_r = pr[r : r + 1].copy()
+        su_r = sigma_user[r : r + 1]
+        keep = (pos[r].copy(), cov[r].copy(), clock[r].copy(), status[r], n_used[r])
+        t_first, dof_first = np.nan, 0
+        while True:
+            if status[r] != _NAV_OK:
+                istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_FIX
+                break
+            has_clock[:] = False
+            for k in range(s):
+                w[0, k] = 0.0
+                if vis_r[0, k]:
+                    w[0, k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
+                    has_clock[system[k]] = True
+            for j in range(n_sys):
+                clk[j] = clock[r, j] if has_clock[j] else 0.0
+            ok, t_stat, dof, _q, k_s, _w, h_sl, v_sl = problem_statistics(
+                pr_r,
+                sv,
+                system,
+                vis_r,
+                w,
+                no_common,
+                pos[r],
+                clk,
+                zeros_base,
+                zeros_root,
+                0,
+                has_clock,
+                rot[r],
+            )
+            if not ok:
+                istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_FIX
+                break
+            if not detected[r]:  # the statistic of the solver's own fix
+                t_first, dof_first = t_stat, dof
+            t_out[r] = t_stat
+            dof_out[r] = dof
+            if dof < 1:
+                istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_REDUNDANCY
+                break
+            if t_stat <= thr[dof]:
+                istat[r] = INT_EXCLUDED if n_excl[r] > 0 else INT_OK
+                h_out[r] = h_sl
+                v_out[r] = v_sl
+                break
+            detected[r] = True
+            if dof < 2 or n_excl[r] >= max_excl or k_s < 0:
+                istat[r] = INT_FAULT_DETECTED
+                break
+            vis_r[0, k_s] = False
+            pr_r[0, k_s] = np.nan
+            excluded[r, k_s] = True
+            n_excl[r] += 1
+            p1, c1, k1, st1, nu1, _it = standalone_solve(
+                vis_r,
+                pr_r,
+                sv,
+                su_r,
+                sigma_common,
+                system,
+                n_sys,
+                pos[r : r + 1].copy(),
+                max_iter,
+                tol_m,
+                check,
+                lo,
+                hi,
+            )
+            pos[r] = p1[0]
+            cov[r] = c1[0]
+            clock[r] = k1[0]
+            status[r] = st1[0]
+            n_used[r] = nu1[0]
+        if istat[r] == INT_FAULT_DETECTED:  # the original fix, flagged
+            pos[r], cov[r], clock[r], n_used[r] = keep[0], keep[1], keep[2], keep[4]
+            status[r] = _NAV_FAULT
+            t_out[r], dof_out[r] = t_first, dof_first
+            excluded[r, :] = False
+            n_excl[r] = 0
+    return istat, detected, n_excl, excluded, t_out, dof_out, h_out, v_out
+
+
+@njit(cache=True)
+def cooperative_fde(
+    pr,  # (N, S) pseudoranges, NaN where not received
+    vis,  # (N, S)
+    sv,
+    system,
+    sigma_user,
+    sig_c,
+    el,
+    n_sys,
+    base,  # (B, N, 3) masked baselines (as the solver set them up)
+    bcov,  # (B, N, 3, 3)
+    froot,  # (B, N, 3, 3)
+    bavail,  # (B, N) with the centroid UAV's own entry True
+    cen,  # (B,) centroid UAV, -1 for a virtual point
+    ddt,
+    need_override,
+    max_iter,
+    tol_m,
+    check,
+    lo,
+    hi,
+    with_uavs,
+    c_pos,  # (B, 3) the solver's outputs, updated in place
+    c_clk,  # (B, n_sys)
+    c_status,  # (B,)
+    h_star,  # (B, 3, 3)
+    n_uavs,  # (B,)
+    n_meas,  # (B,)
+    uav_pos,  # (B, N, 3) (with_uavs; else (B, 0, 3))
+    uav_cov,  # (B, N, 3, 3)
+    uav_status,  # (B, N)
+    rot,  # (B, 3, 3)
+    thr,
+    max_excl,
+):
+    """RAIM FDE of every centroid problem; the solver's outputs are updated in place.
+
+    As :func:`standalone_fde`, per centroid problem, on the rows the solver used
+    (:func:`~coopnav_env.nav._kernels.setup_masks`, so DDT's pivot rule and SDT's
+    availability rule hold after every exclusion), re-solving one problem with the solver's
+    kernels (``setup_masks``, ``cooperative_gauss_newton``, ``n_nuisance``,
+    ``cooperative_finish``) from its current fix.
+
+    Returns ``istat, detected, n_excl, excluded (B, N, S), t_stat, dof, h_slope, v_slope``.
+    """
+    n_b, n = bavail.shape
+    s = vis.shape[1]
+    istat = np.full(n_b, INT_NO_FIX, dtype=np.int64)
+    detected = np.zeros(n_b, dtype=np.bool_)
+    n_excl = np.zeros(n_b, dtype=np.int64)
+    excluded = np.zeros((n_b, n, s), dtype=np.bool_)
+    t_out = np.full(n_b, np.nan)
+    dof_out = np.zeros(n_b, dtype=np.int64)
+    h_out = np.full(n_b, np.inf)
+    v_out = np.full(n_b, np.inf)
+    w = np.zeros((n, s))
+    for q in range(n):
+        for k in range(s):
+            if vis[q, k]:
+                w[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
+    clk = np.zeros(n_sys)
+    m = uav_pos.shape[1]
+    for b in range(n_b):
+        vis_b = vis
+        pr_b = pr
+        el_b = el
+        copied = False
+        keep_c = (c_pos[b].copy(), c_clk[b].copy(), h_star[b].copy())
+        keep_n = (c_status[b], n_uavs[b], n_meas[b])
+        keep_u = (uav_pos[b].copy(), uav_cov[b].copy(), uav_status[b].copy())
+        t_first, dof_first = np.nan, 0
+        ref, used, has_clock, _piv, too_few = setup_masks(
+            vis_b, bavail[b : b + 1], cen[b : b + 1], system, el_b, n_sys, ddt, need_override
+        )
+        while True:
+            if c_status[b] != _NAV_OK:
+                istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_FIX
+                break
+            for j in range(n_sys):
+                clk[j] = c_clk[b, j] if has_clock[0, j] else 0.0
+            ok, t_stat, dof, q_s, k_s, _w, h_sl, v_sl = problem_statistics(
+                pr_b,
+                sv,
+                system,
+                used[0],
+                w,
+                sig_c,
+                c_pos[b],
+                clk,
+                base[b],
+                froot[b],
+                ref[0],
+                has_clock[0],
+                rot[b],
+            )
+            if not ok:
+                istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_FIX
+                break
+            if not detected[b]:  # the statistic of the solver's own fix
+                t_first, dof_first = t_stat, dof
+            t_out[b] = t_stat
+            dof_out[b] = dof
+            if dof < 1:
+                istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_REDUNDANCY
+                break
+            if t_stat <= thr[dof]:
+                istat[b] = INT_EXCLUDED if n_excl[b] > 0 else INT_OK
+                h_out[b] = h_sl
+                v_out[b] = v_sl
+                break
+            detected[b] = True
+            if dof < 2 or n_excl[b] >= max_excl or k_s < 0:
+                istat[b] = INT_FAULT_DETECTED
+                break
+            if not copied:
+                vis_b, pr_b, el_b = vis.copy(), pr.copy(), el.copy()
+                copied = True
+            vis_b[q_s, k_s] = False
+            pr_b[q_s, k_s] = np.nan
+            el_b[q_s, k_s] = np.nan
+            excluded[b, q_s, k_s] = True
+            n_excl[b] += 1
+            ref, used, has_clock, _piv, too_few = setup_masks(
+                vis_b,
+                bavail[b : b + 1],
+                cen[b : b + 1],
+                system,
+                el_b,
+                n_sys,
+                ddt,
+                need_override,
+            )
+            pr0 = np.zeros((1, n, s))
+            for q in range(n):
+                for k in range(s):
+                    if vis_b[q, k]:
+                        pr0[0, q, k] = pr_b[q, k]
+            usable = np.empty(1, dtype=np.bool_)
+            usable[0] = not too_few[0]
+            x0 = c_pos[b : b + 1].copy()
+            pos1, clk1, inv1, cross1, conv1, sing1, _it = cooperative_gauss_newton(
+                pr0,
+                sv,
+                vis_b,
+                sigma_user,
+                sig_c,
+                system,
+                used,
+                base[b : b + 1],
+                froot[b : b + 1],
+                ref,
+                has_clock,
+                usable,
+                x0,
+                max_iter,
+                tol_m,
+            )
+            nn = n_nuisance(used, system, ref, n_sys)
+            out = cooperative_finish(
+                pos1,
+                clk1,
+                inv1,
+                cross1,
+                conv1,
+                sing1,
+                used,
+                nn,
+                too_few,
+                has_clock,
+                base[b : b + 1],
+                bcov[b : b + 1],
+                froot[b : b + 1],
+                bavail[b : b + 1],
+                check,
+                lo,
+                hi,
+                with_uavs,
+            )
+            c_pos[b] = out[0][0]
+            h_star[b] = out[1][0]
+            c_clk[b] = out[2][0]
+            c_status[b] = out[3][0]
+            n_uavs[b] = out[4][0]
+            n_meas[b] = out[5][0]
+            if m > 0:
+                uav_pos[b] = out[6][0]
+                uav_cov[b] = out[7][0]
+                uav_status[b] = out[8][0]
+        if istat[b] == INT_FAULT_DETECTED:  # the original fix, flagged
+            c_pos[b], c_clk[b], h_star[b] = keep_c[0], keep_c[1], keep_c[2]
+            c_status[b] = _NAV_FAULT
+            t_out[b], dof_out[b] = t_first, dof_first
+            n_uavs[b], n_meas[b] = keep_n[1], keep_n[2]
+            excluded[b] = False
+            n_excl[b] = 0
+            if m > 0:
+                uav_pos[b], uav_cov[b] = keep_u[0], keep_u[1]
+                for q in range(m):
+                    st = keep_u[2][q]
+                    uav_status[b, q] = _NAV_FAULT if st == _NAV_OK else st
+    return istat, detected, n_excl, excluded, t_out, dof_out, h_out, v_out
