@@ -57,6 +57,11 @@ UNOBSERVABLE_RII = 1e-9
 #: ... and a fault on such a row that moves the fix by less than this [m per m of bias] is
 #: harmless (it is absorbed by a clock)
 HARMLESS_GAIN = 1e-6
+#: normalised residuals equal to this relative tolerance are a tie: structurally
+#: indistinguishable rows (e.g. the only two satellites of a constellation at the clock
+#: reference: a bias on one and the opposite bias on the other leave the same residuals); the
+#: tie goes to the positive residual, the sign of an NLOS bias
+TIE_RTOL = 1e-9
 
 
 # --------------------------------------------------------------------------------------------
@@ -540,6 +545,7 @@ def problem_statistics(pr, sv, system, rows, w, sig_c, pos, clk, base, froot, re
     dof = n_rows - n_nuis - 3 - n_clk
     q_star, k_star = -1, -1
     w_star = 0.0
+    star_positive = False
     h_slope = 0.0
     v_slope = 0.0
     g = np.empty(p_dim)
@@ -570,8 +576,12 @@ def problem_statistics(pr, sv, system, rows, w, sig_c, pos, clk, base, froot, re
             h_slope = max(h_slope, kh / sr)
             v_slope = max(v_slope, abs(ku) / sr)
             wi = abs(ra) / sr
-            if wi > w_star or q_star < 0:
-                q_star, k_star, w_star = q, k, wi
+            if (
+                q_star < 0
+                or wi > w_star * (1.0 + TIE_RTOL)
+                or (wi >= w_star * (1.0 - TIE_RTOL) and ra > 0.0 and not star_positive)
+            ):
+                q_star, k_star, w_star, star_positive = q, k, wi, ra > 0.0
     return True, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
 
 

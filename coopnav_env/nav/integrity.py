@@ -40,8 +40,11 @@ uses the residual covariance ``R`` itself (the raw residual over its sigma would
 not diagonal); (ii) ``w_i^2`` is exactly the drop of ``T`` when row ``i`` is excluded, so the
 largest ``|w_i|`` names the exclusion that leaves the smallest statistic -- what RTKLIB finds
 by re-solving once per satellite and what solution separation approximates -- in one pass,
-without ``n`` re-solves; (iii) it needs nothing beyond what the test computes. The
-identified row is excluded, the fix re-solved by the solver's own kernels from the current
+without ``n`` re-solves; (iii) it needs nothing beyond what the test computes. Rows that
+no residual can tell apart (``|w_i|`` equal, e.g. the only two satellites of a constellation
+at the clock reference, where a bias on one and the opposite bias on the other leave the
+same residuals) are a tie, broken toward the positive residual, the sign of an NLOS bias
+(either exclusion leaves a set the test accepts). The identified row is excluded, the fix re-solved by the solver's own kernels from the current
 fix (for the cooperative solution with the solver's set-up, so DDT's pivot rule and SDT's
 availability rule hold after the exclusion), and the test repeated until it passes, or
 identification is impossible (fewer than 2 degrees of freedom: with 1, every ``|w_i|`` is
@@ -692,7 +695,8 @@ def _problem_statistics_dense(
     """The numpy formulation of :func:`coopnav_env.nav._integrity_kernels.problem_statistics`:
     the covariance formed densely (``diag(1/w) + sig_c sig_c^T [same satellite] +
     u^T C_d u [same UAV]``), the nuisance clocks as explicit columns, ``numpy.linalg`` for
-    every inverse. Returns the same tuple (``ok`` always True) plus ``R a`` and ``diag R``."""
+    every inverse. Returns the same tuple (``ok`` always True) plus ``R a``, ``diag R`` and
+    the ECEF position gains ``K`` (3, m) of the rows (``numpy.nonzero(rows)`` order)."""
     qq, kk = np.nonzero(rows)
     m = qq.size
     n_sys = has_clock.shape[0]
@@ -742,6 +746,9 @@ def _problem_statistics_dense(
         v_slope = math.inf
     wstat = np.where(obs_ok, np.abs(ra) / sr, -1.0)
     i = int(np.argmax(wstat))
+    tie = obs_ok & (wstat >= wstat[i] * (1.0 - _ik.TIE_RTOL)) & (ra > 0.0)
+    if ra[i] <= 0.0 and tie.any():  # an exact tie goes to the positive residual
+        i = int(np.flatnonzero(tie)[0])
     return (
         True,
         t_stat,
@@ -753,4 +760,5 @@ def _problem_statistics_dense(
         v_slope,
         ra,
         r_ii,
+        gain,
     )
