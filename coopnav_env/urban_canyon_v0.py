@@ -109,6 +109,10 @@ With the defaults: 0-2 position, 3-5 velocity, 6-8 sigma, 9-10 satellite counts,
 19-34 four neighbour slots, 35-37 flags and time, 38-39 next waypoint, 40-41 the leg after it,
 42 remaining route, 43 altitude, 44-51 wall distances.
 
+With `obs_protection_level=True` (needs `integrity` on) two entries follow the table:
+`min(HPL / (2 alert_limit_m), 1)` and `min(VPL / (2 alert_limit_m), 1)` of the estimate used
+(0.5 at the alert limit, 1 without protection), `obs_dim + 2` in all (54 by default).
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -136,6 +140,10 @@ Per agent, the sum of six terms, each also reported in `infos[agent]["reward_ter
 * `goal` = `+goal_bonus` (10) for every UAV when all UAVs are in the goal area (not on a step
   where a UAV crashes).
 
+With `integrity` on, a seventh term: `integrity` = `-integrity_penalty` (default 0) for a UAV
+whose estimate is not available (horizontal protection level above `alert_limit_m`, dead
+reckoning included) or misleading (true horizontal error above the HPL).
+
 Crashing never pays: a crash costs `collision_penalty` = 40, more than the worst a whole
 episode can lose to the per-step penalties without one, `max_steps * (0.1 * 10 / 10 + 0.05 +
 0.02)` = 200 x 0.17 = 34 (`UrbanCanyonConfig.worst_episode_penalty`; a 200-step episode at a
@@ -160,7 +168,15 @@ position: the spurious far root), `nav_source`
 `goal_distance_m`, `next_waypoint` (index into `world.route_xy_m`), `coop_rejected` and
 `standalone_rejected` (the solver's fix was OK but the integrity gate `max_fix_sigma_m`
 rejected it: its error is reported as `inf`), `in_goal`, `collided`, `separation_violation`,
-`out_of_contact`, `step`, and `reward_terms`.
+`out_of_contact`, `step`, and `reward_terms`. With `integrity` on also: `hpl_m`, `vpl_m`
+(protection levels of the estimate used [m], `inf` when not available), `nav_h_error_m`,
+`nav_v_error_m` (its true horizontal and vertical errors [m]), `integrity_status`
+(`coopnav_env.nav.IntegrityStatus`: 0 OK, 1 excluded, 2 fault detected, 3 no redundancy,
+4 no fix), `fault_detected` (the UAV's cooperative or standalone test failed this step) and
+`fde_excluded` (pseudoranges excluded from the fix used); a fix whose fault could not be
+cleared has status 6 (`FAULT_DETECTED`) and is not used. `coopnav_env.nav.integrity_rates`
+turns arrays of errors and protection levels into availability and misleading-information
+rates.
 
 `reset()` returns, per agent, `{"initial": {...}}`: the same figures for the first epoch,
 nested so that SuperSuit's automatic reset, which merges the reset infos into the terminal
@@ -263,6 +279,21 @@ street canyons some fixes come from barely enough satellites (4-5 measurements f
 unknowns) in a narrow strip of sky; they are valid least-squares solutions, but off by tens to
 hundreds of metres, and their covariance says so.
 
+`integrity` (`"off"`): integrity monitoring of every fix (`coopnav_env.nav.integrity`):
+`"raim"` tests each standalone and cooperative fix's residuals (chi-square with the exact
+covariance) and computes protection levels, and a fix that fails is not used; `"fde"` also
+excludes the measurement the test identifies and re-solves until the test passes. Needs
+`covariance="exact"`. `integrity_p_fa` (1e-3): false-alarm probability per test;
+`integrity_risk` (1e-7): integrity risk of a fix (protection levels);
+`integrity_fault_sign` (`"any"`): `"positive"` excludes only measurements with a positive
+residual (NLOS delays are positive). `alert_limit_m` (30):
+horizontal alert limit [m] (availability, the reward term and the observation scale).
+`integrity_penalty` (0) and `obs_protection_level` (False): above. With `"off"` every episode
+is exactly as before. The preset `coopnav_env.envs.preset_config("urban_nlos", **fields)`
+turns on realistic urban reception: half of the blocked satellites received through
+reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with
+`integrity_fault_sign="positive"`.
+
 `max_steps` (200): truncation.
 
 `obs_neighbours`, `obs_sky_azimuths`, `obs_sigma_max_m` (4, 8, 20): observation layout.
@@ -301,7 +332,8 @@ world state): a restored copy continues exactly like the original.
   (next waypoint, the leg after it, remaining route), the altitude in the band and the wall
   distances (38 -> 52 entries by default), the progress reward moved from the straight-line
   distance to the goal to the remaining street route, the reward defaults changed so that a
-  crash never pays (above), and the integrity gate `max_fix_sigma_m` was added.
+  crash never pays (above), and the integrity gate `max_fix_sigma_m` was added. Optional
+  integrity monitoring (`integrity`, off by default: episodes unchanged) was added later.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env

@@ -100,7 +100,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
         self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
-        self._obs_low = lo.astype(np.float64)  # the clip bounds as numpy's clip sees them
+        n_base = cfg.obs_dim - (2 if cfg.obs_protection_level else 0)  # the kernel's columns
+        self._obs_low = lo[:n_base].astype(np.float64)  # the clip bounds as numpy sees them
         self._reward_params = np.array(
             [
                 cfg.nav_reward_weight,
@@ -116,7 +117,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             ],
             dtype=np.float64,
         )
-        self._obs_high = hi.astype(np.float64)
+        self._obs_high = hi[:n_base].astype(np.float64)
 
     # ---- spaces -----------------------------------------------------------------------------
 
@@ -251,7 +252,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 self._reward_params,
             )
             terms = dict(zip(REWARD_TERMS, stacked))
-            reward = stacked.sum(axis=0)
+            reward = self._integrity_term(terms, stacked.sum(axis=0))
             terminated = bool(crash or reached)
             truncated = (self._steps >= cfg.max_steps) and not terminated
             return self._observation_array(), reward, terminated, truncated, terms, in_goal
@@ -284,11 +285,23 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "contact": -cfg.contact_penalty * ep.out_of_contact,
             "goal": np.full(n, cfg.goal_bonus if reached else 0.0),
         }
-        reward = np.sum([terms[t] for t in REWARD_TERMS], axis=0)
+        reward = self._integrity_term(terms, np.sum([terms[t] for t in REWARD_TERMS], axis=0))
 
         terminated = crash or reached
         truncated = (self._steps >= cfg.max_steps) and not terminated
         return self._observation_array(), reward, terminated, truncated, terms, in_goal
+
+    def _integrity_term(self, terms: dict[str, np.ndarray], reward: np.ndarray) -> np.ndarray:
+        """With ``integrity`` on, add the reward term ``integrity`` (``-integrity_penalty`` for
+        a UAV whose estimate is not available or misleading) to ``terms`` and ``reward``."""
+        cfg = self.config
+        if cfg.integrity == "off":
+            return reward
+        ep = self._epoch
+        h_err = np.hypot(*(ep.nav_pos_enu_m - ep.pos_enu_m)[:, :2].T)
+        bad = ~((h_err <= ep.hpl_m) & (ep.hpl_m <= cfg.alert_limit_m))
+        terms["integrity"] = -cfg.integrity_penalty * bad
+        return reward + terms["integrity"]
 
     def _action_array(self, actions: dict[str, Any]) -> np.ndarray:
         if not isinstance(actions, dict):
@@ -324,8 +337,19 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
         Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows`; the numpy
         formulation :meth:`_observation_array_numpy` (``_USE_KERNEL = False``) is the readable
-        definition, and the two agree bit for bit.
+        definition, and the two agree bit for bit. With ``obs_protection_level`` the two
+        protection-level columns follow.
         """
+        obs = self._observation_rows()
+        if not self.config.obs_protection_level:
+            return obs
+        ep = self._epoch
+        scale = 2.0 * self.config.alert_limit_m
+        pl = np.clip(np.stack([ep.hpl_m, ep.vpl_m], axis=1) / scale, 0.0, 1.0)
+        return np.concatenate([obs, pl.astype(np.float32)], axis=1)
+
+    def _observation_rows(self) -> np.ndarray:
+        """The observation without the optional protection-level columns."""
         if not _USE_KERNEL:
             return self._observation_array_numpy()
         cfg = self.config
@@ -416,7 +440,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             axis=1,
         )
         space = self.observation_spaces[self.possible_agents[0]]
-        return np.clip(obs, space.low, space.high).astype(np.float32)
+        n_base = obs.shape[1]  # the protection-level columns are appended by the caller
+        return np.clip(obs, space.low[:n_base], space.high[:n_base]).astype(np.float32)
 
     def _info_floats_numpy(self) -> np.ndarray:
         """The per-agent real numbers of the infos, ``(8, N)``: errors of the estimate used, the
@@ -499,6 +524,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "separation_violation": bools[4],
             "out_of_contact": bools[5],
         }
+        if self.config.integrity != "off":
+            cols.update(self._integrity_infos())
         keys = list(cols)
         term_keys = list(terms)
         term_rows = zip(*(np.asarray(v, dtype=float).tolist() for v in terms.values()))
@@ -510,6 +537,22 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             info["step"] = step
             infos[a] = info
         return infos
+
+    def _integrity_infos(self) -> dict[str, list]:
+        """The integrity figures of the estimate each UAV uses (``integrity`` on): protection
+        levels, status, FDE, and its true horizontal and vertical errors (to compare with the
+        protection levels, e.g. by :func:`coopnav_env.nav.integrity_rates`)."""
+        ep = self._epoch
+        d = ep.nav_pos_enu_m - ep.pos_enu_m
+        return {
+            "hpl_m": ep.hpl_m.tolist(),
+            "vpl_m": ep.vpl_m.tolist(),
+            "nav_h_error_m": np.hypot(d[:, 0], d[:, 1]).tolist(),
+            "nav_v_error_m": np.abs(d[:, 2]).tolist(),
+            "integrity_status": ep.integrity_status.tolist(),
+            "fault_detected": ep.fault_detected.tolist(),
+            "fde_excluded": ep.fde_excluded.tolist(),
+        }
 
     def state(self) -> np.ndarray:
         """Global state for centralised critics (truth included), inside ``state_space``.
@@ -615,6 +658,7 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(3),  # flags, time left
             -np.ones(4),  # next waypoint, leg after it
             np.zeros(2 + a),  # remaining route, altitude, wall distances
+            np.zeros(2 if cfg.obs_protection_level else 0),  # HPL, VPL / (2 alert limit)
         ]
     )
     hi = np.ones(cfg.obs_dim)

@@ -293,7 +293,9 @@ def threshold_tables(p_fa, p_md, dof_max):
 
 
 @njit(cache=True)
-def problem_statistics(pr, sv, system, rows, w, sig_c, pos, clk, base, froot, ref, has_clock, rot):
+def problem_statistics(
+    pr, sv, system, rows, w, sig_c, pos, clk, base, froot, ref, has_clock, rot, positive_only
+):
     """Residual test quantities of one GLS fix (a receiver's or a centroid problem's).
 
     Model (the undifferenced form of ``cooperative._linearize``): row ``(q, k)`` is UAV
@@ -312,6 +314,8 @@ def problem_statistics(pr, sv, system, rows, w, sig_c, pos, clk, base, froot, re
     base : (N, 3) offsets of the UAVs from ``pos``; froot : (N, 3, 3) relative-error roots
     ref : the UAV without nuisance clocks; has_clock : (n_sys,) clock columns estimated
     rot : (3, 3) ECEF -> local ENU rotation (horizontal / vertical split)
+    positive_only : identify among positive residuals only (faults known to be positive
+        range biases, as NLOS reception)
 
     Returns
     -------
@@ -576,6 +580,8 @@ def problem_statistics(pr, sv, system, rows, w, sig_c, pos, clk, base, froot, re
             h_slope = max(h_slope, kh / sr)
             v_slope = max(v_slope, abs(ku) / sr)
             wi = abs(ra) / sr
+            if positive_only and not ra > 0.0:
+                continue
             if (
                 q_star < 0
                 or wi > w_star * (1.0 + TIE_RTOL)
@@ -642,6 +648,7 @@ def standalone_fde(
     rot,  # (R, 3, 3)
     thr,  # (D + 1,) chi-square thresholds per degree of freedom
     max_excl,  # exclusions allowed per fix (a large number: until redundancy runs out)
+    positive_only,  # identify among positive residuals only
 ):
     """RAIM FDE of every standalone fix; the solver's outputs are updated in place.
 
@@ -700,6 +707,7 @@ def standalone_fde(
                 0,
                 has_clock,
                 rot[r],
+                positive_only,
             )
             if not ok:
                 istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_FIX
@@ -788,6 +796,7 @@ def cooperative_fde(
     rot,  # (B, 3, 3)
     thr,
     max_excl,
+    positive_only,
 ):
     """RAIM FDE of every centroid problem; the solver's outputs are updated in place.
 
@@ -848,6 +857,7 @@ def cooperative_fde(
                 ref[0],
                 has_clock[0],
                 rot[b],
+                positive_only,
             )
             if not ok:
                 istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_FIX

@@ -35,21 +35,23 @@ RTKLIB). A bias ``b`` on row ``i`` makes ``T`` non-central with ``lambda = b^2 R
 
 *Identification: the largest normalised residual* (Baarda's w-test) with the residual
 covariance: ``w_i = (R a)_i / sqrt(R_ii)``. We chose it over solution separation because (i)
-with correlated rows it is the uniformly most powerful invariant test for a single bias and
-uses the residual covariance ``R`` itself (the raw residual over its sigma would not: ``C`` is
-not diagonal); (ii) ``w_i^2`` is exactly the drop of ``T`` when row ``i`` is excluded, so the
-largest ``|w_i|`` names the exclusion that leaves the smallest statistic -- what RTKLIB finds
-by re-solving once per satellite and what solution separation approximates -- in one pass,
-without ``n`` re-solves; (iii) it needs nothing beyond what the test computes. Rows that
-no residual can tell apart (``|w_i|`` equal, e.g. the only two satellites of a constellation
-at the clock reference, where a bias on one and the opposite bias on the other leave the
-same residuals) are a tie, broken toward the positive residual, the sign of an NLOS bias
-(either exclusion leaves a set the test accepts). The identified row is excluded, the fix re-solved by the solver's own kernels from the current
-fix (for the cooperative solution with the solver's set-up, so DDT's pivot rule and SDT's
-availability rule hold after the exclusion), and the test repeated until it passes, or
-identification is impossible (fewer than 2 degrees of freedom: with 1, every ``|w_i|`` is
-equal), or ``max_exclusions`` is spent. A fault that cannot be cleared leaves the solver's
-original fix with :attr:`NavStatus.FAULT_DETECTED` (not valid), never an exception.
+with correlated rows each ``w_i`` is the uniformly most powerful invariant test of a bias on
+row ``i``, and the largest one is the generalised likelihood-ratio choice among the
+single-fault hypotheses; it uses the residual covariance ``R`` itself (the raw residual over
+its own sigma would not: ``C`` is not diagonal); (ii) ``w_i^2`` is exactly the drop of ``T``
+when row ``i`` is excluded, so the largest ``|w_i|`` names the exclusion that leaves the
+smallest statistic -- what RTKLIB finds by re-solving once per satellite and what solution
+separation approximates -- in one pass, without ``n`` re-solves; (iii) it needs nothing beyond
+what the test computes. Rows that no residual can tell apart (``|w_i|`` equal, e.g. the only
+two satellites of a constellation at the clock reference, where a bias on one and the opposite
+bias on the other leave the same residuals) are a tie, broken toward the positive residual, the
+sign of an NLOS bias (either exclusion leaves a set the test accepts). The identified row is
+excluded, the fix re-solved by the solver's own kernels from the current fix (for the
+cooperative solution with the solver's set-up, so DDT's pivot rule and SDT's availability rule
+hold after the exclusion), and the test repeated until it passes, or identification is
+impossible (fewer than 2 degrees of freedom: with 1, every ``|w_i|`` is equal), or
+``max_exclusions`` is spent. A fault that cannot be cleared leaves the solver's original fix
+with :attr:`NavStatus.FAULT_DETECTED` (not valid), never an exception.
 
 *Protection levels.* Slope-based RAIM bound plus a fault-free term:
 ``HPL = max_i(|K_H,i| / sqrt(R_ii)) sqrt(lambda_md) + k_H sigma_major`` and
@@ -274,6 +276,12 @@ def threshold_tables(
     return hit
 
 
+def _positive_only(fault_sign: str) -> bool:
+    if fault_sign not in ("any", "positive"):
+        raise ValueError(f"fault_sign must be 'any' or 'positive', got {fault_sign!r}")
+    return fault_sign == "positive"
+
+
 def _max_exclusions(max_exclusions: int | None) -> int:
     if max_exclusions is None:
         return 1 << 30
@@ -357,6 +365,7 @@ def fde_standalone(
     tol_m: float = 1e-4,
     plausible_radius_m: tuple[float, float] | None = PLAUSIBLE_RADIUS_M,
     enu_rotation: np.ndarray | None = None,
+    fault_sign: Literal["any", "positive"] = "any",
 ) -> tuple[StandaloneSolution, IntegrityResult]:
     """RAIM FDE and protection levels of every receiver's standalone WLS fix.
 
@@ -379,6 +388,12 @@ def fde_standalone(
     enu_rotation : ndarray, shape (3, 3), optional
         The ECEF -> ENU rotation that splits horizontal and vertical for every fix (e.g. a
         city's local frame); default: the local frame at each fix.
+    fault_sign : {"any", "positive"}
+        ``"positive"``: identify (and exclude) only among measurements with a positive
+        normalised residual, for faults known to be positive range biases (NLOS reception:
+        a reflected signal arrives late). Under many simultaneous NLOS faults the fix is
+        pulled toward them and good measurements can show the largest residuals, of the
+        opposite sign; the one-sided choice never excludes those. Detection stays two-sided.
 
     Returns
     -------
@@ -391,6 +406,7 @@ def fde_standalone(
     p_fa = _check_probability("p_fa", p_fa)
     ir = _check_probability("integrity_risk", integrity_risk)
     max_excl = _max_exclusions(max_exclusions)
+    _positive_only(fault_sign)
     check_plausible_radius(plausible_radius_m)
     if solution is None:
         solution = solve_standalone(
@@ -427,6 +443,7 @@ def fde_standalone(
         rot,
         thr,
         max_excl,
+        _positive_only(fault_sign),
     )
     hpl, vpl = _protection_levels(istat, dof, h_sl, v_sl, cov, rot, lam, k_h, k_v)
     n = obs.n_rx
@@ -459,6 +476,7 @@ def fde_cooperative(
     tol_m: float = 1e-4,
     plausible_radius_m: tuple[float, float] | None = PLAUSIBLE_RADIUS_M,
     enu_rotation: np.ndarray | None = None,
+    fault_sign: Literal["any", "positive"] = "any",
 ) -> tuple[CooperativeSolution, IntegrityResult]:
     """RAIM FDE and protection levels of the virtual-centroid cooperative fixes.
 
@@ -476,7 +494,7 @@ def fde_cooperative(
     solution : CooperativeSolution, optional
         The solution of exactly this problem by ``solve_cooperative(...,
         covariance="exact")``; solved here when omitted.
-    p_fa, integrity_risk, max_exclusions, enu_rotation
+    p_fa, integrity_risk, max_exclusions, enu_rotation, fault_sign
         As :func:`fde_standalone` (the rotation default: the frame at each centroid).
 
     Returns
@@ -490,6 +508,7 @@ def fde_cooperative(
     p_fa = _check_probability("p_fa", p_fa)
     ir = _check_probability("integrity_risk", integrity_risk)
     max_excl = _max_exclusions(max_exclusions)
+    _positive_only(fault_sign)
     check_plausible_radius(plausible_radius_m)
     if transfer not in ("sdt", "ddt"):
         raise ValueError(f"transfer must be 'sdt' or 'ddt', got {transfer!r}")
@@ -562,6 +581,7 @@ def fde_cooperative(
         rot,
         thr,
         max_excl,
+        _positive_only(fault_sign),
     )
     if order is not None:  # back to the caller's satellite order
         inv_order = np.empty_like(order)
@@ -690,7 +710,7 @@ def integrity_rates(
 
 
 def _problem_statistics_dense(
-    pr, sv, system, rows, w, sig_c, pos, clk, base, bcov, ref, has_clock, rot
+    pr, sv, system, rows, w, sig_c, pos, clk, base, bcov, ref, has_clock, rot, positive_only=False
 ):
     """The numpy formulation of :func:`coopnav_env.nav._integrity_kernels.problem_statistics`:
     the covariance formed densely (``diag(1/w) + sig_c sig_c^T [same satellite] +
@@ -744,7 +764,7 @@ def _problem_statistics_dense(
         h_slope = math.inf
     if np.any(~obs_ok & (ku > _ik.HARMLESS_GAIN)):
         v_slope = math.inf
-    wstat = np.where(obs_ok, np.abs(ra) / sr, -1.0)
+    wstat = np.where(obs_ok & ((ra > 0.0) | (not positive_only)), np.abs(ra) / sr, -1.0)
     i = int(np.argmax(wstat))
     tie = obs_ok & (wstat >= wstat[i] * (1.0 - _ik.TIE_RTOL)) & (ra > 0.0)
     if ra[i] <= 0.0 and tie.any():  # an exact tie goes to the positive residual

@@ -197,7 +197,7 @@ def test_compiled_statistics_equal_the_dense_reference(transfer, centroid) -> No
             continue
         args, st = _problem_args(obs, rel, cen, transfer, sol, b)
         ref, hc = int(st.ref[b]), st.has_clock[b]
-        got = ik.problem_statistics(*args, st.froot[b], ref, hc, ROT)
+        got = ik.problem_statistics(*args, st.froot[b], ref, hc, ROT, False)
         want = integ._problem_statistics_dense(*args, st.bcov[b], ref, hc, ROT)
         assert got[0]
         assert got[1] == pytest.approx(want[1], rel=1e-9)
@@ -221,7 +221,7 @@ def test_ddt_statistic_equals_the_literal_double_differences_with_dense_c_star(c
     obs_s, _ = _sort_by_system(obs)
     for b in range(sol.centroid_pos_ecef_m.shape[0]):
         args, st = _problem_args(obs, rel, centroid, "ddt", sol, b)
-        got = ik.problem_statistics(*args, st.froot[b], int(st.ref[b]), st.has_clock[b], ROT)
+        got = ik.problem_statistics(*args, st.froot[b], int(st.ref[b]), st.has_clock[b], ROT, False)
         clk = np.nan_to_num(sol.centroid_clock_m)
         lin = _linearize(obs_s, st, sol.centroid_pos_ecef_m, clk, True)
         g, a, cov, _eps = _dense_system(obs_s, st, lin, "ddt", "exact", b)
@@ -652,6 +652,31 @@ def test_several_faults_are_excluded_one_by_one() -> None:
     assert np.all(h_error(sc, co.pos_ecef_m) < 5.0)
 
 
+def test_one_sided_identification_under_many_nlos_faults() -> None:
+    """35 % of the swarm's pseudoranges carry an NLOS-like delay (3 m + Exp(30 m)); six draws.
+    With ``fault_sign="positive"`` FDE excludes only delayed measurements, in every draw; the
+    two-sided choice also excludes good ones (the fix is pulled toward the many delayed
+    measurements, and good ones show large negative residuals), here in four of the six."""
+    sc = paper_swarm(7200.0)
+    wrong_two_sided = 0
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        obs, rel = sc.observations(rng), sc.relative(rng)
+        faulty = sc.visible & (rng.random(sc.visible.shape) < 0.35)
+        pr = obs.pr_m.copy()
+        pr[faulty] += 3.0 + rng.exponential(30.0, faulty.sum())
+        obs = GnssObservations(
+            pr, obs.sv_ecef_m, obs.system, obs.sigma_user_m, obs.sigma_common_m, obs.el_deg
+        )
+        co, res = fde_cooperative(obs, rel, centroid=1, fault_sign="positive")
+        assert res.status[1] == IntegrityStatus.EXCLUDED
+        assert not np.any(res.excluded[1] & ~faulty) and res.n_excluded[1] >= 0.6 * faulty.sum()
+        assert h_error(sc, co.pos_ecef_m)[1] < 3.0
+        _co, res2 = fde_cooperative(obs, rel, centroid=1)
+        wrong_two_sided += int(np.any(res2.excluded[1] & ~faulty))
+    assert wrong_two_sided == 4
+
+
 def test_satellite_order_does_not_matter() -> None:
     """Satellites not grouped by constellation (the solver sorts them): the result is the
     same, and ``excluded`` is reported in the caller's satellite order."""
@@ -686,6 +711,7 @@ def test_bad_arguments_raise_value_errors_naming_them() -> None:
         ({"max_exclusions": -1}, "max_exclusions"),
         ({"max_exclusions": 1.5}, "max_exclusions"),
         ({"enu_rotation": np.ones((3, 3))}, "enu_rotation"),
+        ({"fault_sign": "negative"}, "fault_sign"),
     ):
         with pytest.raises(ValueError, match=name):
             fde_standalone(obs, **kw)
