@@ -298,8 +298,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         if cfg.integrity == "off":
             return reward
         ep = self._epoch
-        h_err = np.hypot(*(ep.nav_pos_enu_m - ep.pos_enu_m)[:, :2].T)
-        bad = ~((h_err <= ep.hpl_m) & (ep.hpl_m <= cfg.alert_limit_m))
+        d = ep.nav_pos_enu_m - ep.pos_enu_m
+        h_err = np.hypot(d[:, 0], d[:, 1])
+        hpl = ep.hpl_m
+        bad = (h_err > hpl) | (hpl > cfg.alert_limit_m)  # (hpl is never NaN)
         terms["integrity"] = -cfg.integrity_penalty * bad
         return reward + terms["integrity"]
 

@@ -32,7 +32,6 @@ import numpy as np
 from numba import njit
 
 from coopnav_env.nav._kernels import (
-    _cholesky_inverse,
     _inv3,
     cooperative_finish,
     cooperative_gauss_newton,
@@ -293,26 +292,102 @@ def threshold_tables(p_fa, p_md, dof_max):
 
 
 @njit(cache=True)
-def problem_statistics(
-    pr, sv, system, rows, w, sig_c, pos, clk, base, froot, ref, has_clock, rot, positive_only
-):
+def _chol_inverse(a, out, low, linv):
+    """``coopnav_env.nav._kernels._cholesky_inverse`` (the same operations in the same
+    order) in the scratch matrices ``low``, ``linv`` (at least ``a``'s size)."""
+    n = a.shape[0]
+    for j in range(n):
+        for i in range(n):
+            low[i, j] = 0.0
+            linv[i, j] = 0.0
+    for j in range(n):
+        s = a[j, j]
+        for k in range(j):
+            s -= low[j, k] * low[j, k]
+        if not s > 0.0:
+            return False
+        d = np.sqrt(s)
+        low[j, j] = d
+        for i in range(j + 1, n):
+            s = a[i, j]
+            for k in range(j):
+                s -= low[i, k] * low[j, k]
+            low[i, j] = s / d
+    for j in range(n):
+        linv[j, j] = 1.0 / low[j, j]
+        for i in range(j + 1, n):
+            s = 0.0
+            for k in range(j, i):
+                s -= low[i, k] * linv[k, j]
+            linv[i, j] = s / low[i, i]
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.0
+            for k in range(j, n):
+                s += linv[k, i] * linv[k, j]
+            out[i, j] = s
+            out[j, i] = s
+    return True
+
+
+@njit(cache=True)
+def workspace(n, s):
+    """Scratch arrays of :func:`_statistics` for ``n`` UAVs and ``s`` satellites (allocated
+    once per FDE call, reused by every fix it tests)."""
+    return (
+        np.empty(s + 1, dtype=np.int64),  # gs: a block's constellation row ranges
+        np.empty(n, dtype=np.int64),  # m_q
+        np.empty((n, s), dtype=np.int64),  # idx
+        np.empty((n, s, 4)),  # a_x: [A | a]
+        np.empty((n, s, s)),  # pq
+        np.empty((n, s, 4)),  # pax
+        np.empty((n, s, 4)),  # ptx
+        np.empty((n, s)),  # ptd
+        np.empty((s, 3)),  # lam
+        np.empty((s, 3)),  # p0l
+        np.empty((s, 3)),  # g3
+        np.empty(s),  # wrow
+        np.empty(s * s),  # mgf (flat: the compact S' x S' system)
+        np.empty(s * s),  # mgif
+        np.empty((s, 4)),  # u_mat
+        np.empty((s, 4)),  # v_mat
+        np.empty((s, 4)),  # vloc
+        np.empty((s, s)),  # mloc
+        np.empty((s, s)),  # bq
+        np.empty((max(s, 3), max(s, 3))),  # low (Cholesky scratch)
+        np.empty((max(s, 3), max(s, 3))),  # linv
+        np.empty(s, dtype=np.int64),  # loc
+        np.empty((3, 3)),  # m3
+        np.empty((3, 3)),  # m3i
+        np.empty((3, 4)),  # t3
+        np.empty((3, 3)),  # info
+        np.empty((3, 3)),  # infoi
+        np.empty(3),  # rhs
+        np.empty(3),  # xr
+    )
+
+
+@njit(cache=True)
+def problem_statistics(pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot, positive_only):
     """Residual test quantities of one GLS fix (a receiver's or a centroid problem's).
 
     Model (the undifferenced form of ``cooperative._linearize``): row ``(q, k)`` is UAV
-    ``q``'s pseudorange to satellite ``k`` with design ``[-u_qk, e_sys (if has_clock)]`` at
-    ``pos + base[q]``, one flat-prior nuisance clock per constellation for every ``q != ref``,
-    and the error ``e_c^k + e_u,qk + u_qk . F_q z_q`` (``sig_c``, ``1 / w``, ``froot``).
+    ``q``'s pseudorange to satellite ``k`` with design ``-u_qk`` (position) at
+    ``pos + base[q]`` and the error ``e_c^k + e_u,qk + u_qk . F_q z_q`` (``sig_c``, ``1 / w``,
+    ``froot``). Every UAV has one flat-prior clock per constellation it has rows of, all
+    eliminated as nuisance parameters. The solvers estimate the clock reference's clocks
+    instead (and the others relative to it); the column space is the same, so the residuals,
+    the statistic and the position gains are too, and no clock estimate is needed here.
 
     Parameters
     ----------
     pr : (N, S) pseudoranges (any value where ``rows`` is False)
-    sv : (S, 3); system : (S,) sorted constellation indices
+    sv : (S, 3); system : (S,) sorted constellation indices; n_sys : constellations
     rows : (N, S) bool measurements of the fix
     w : (N, S) inverse variance of the per-receiver error of each row
     sig_c : (S,) sigma of the errors common to all receivers (all zero: none)
-    pos : (3,) the fix (centroid) position; clk : (n_sys,) its clocks (0 where unknown)
+    pos : (3,) the fix (centroid) position
     base : (N, 3) offsets of the UAVs from ``pos``; froot : (N, 3, 3) relative-error roots
-    ref : the UAV without nuisance clocks; has_clock : (n_sys,) clock columns estimated
     rot : (3, 3) ECEF -> local ENU rotation (horizontal / vertical split)
     positive_only : identify among positive residuals only (faults known to be positive
         range biases, as NLOS reception)
@@ -321,25 +396,68 @@ def problem_statistics(
     -------
     ok, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
         ``ok`` False when the normal matrix is not positive definite. ``q_star, k_star``:
-        the row with the largest ``|w_i|`` among the observable ones (-1 if none),
-        ``w_star`` its ``|w_i|``. ``h_slope, v_slope``: the largest horizontal / vertical
-        position gain per unit ``sqrt(non-centrality)``, ``|K_i| / sqrt(R_ii)`` (inf when an
-        unobservable row moves the fix).
+        the row with the largest ``|w_i|`` among the observable ones (with
+        ``positive_only``: among those with a positive residual) (-1 if none; an exact tie
+        goes to a positive residual, see :data:`TIE_RTOL`), ``w_star`` its ``|w_i|``.
+        ``h_slope, v_slope``: the largest horizontal / vertical position gain per unit
+        ``sqrt(non-centrality)``, ``|K_i| / sqrt(R_ii)`` (inf when an unobservable row moves
+        the fix).
     """
     n, s = rows.shape
-    n_sys = has_clock.shape[0]
-    p_dim = 3 + n_sys
-    pc = p_dim + 1  # columns [A | a]
-    start = np.zeros(n_sys + 1, dtype=np.int64)
-    for j in range(n_sys + 1):
-        c = 0
-        for k in range(s):
-            if system[k] < j:
-                c += 1
-        start[j] = c
-    m_q = np.zeros(n, dtype=np.int64)
-    idx = np.empty((n, s), dtype=np.int64)
+    return _statistics(
+        workspace(n, s),
+        pr,
+        sv,
+        system,
+        n_sys,
+        rows,
+        w,
+        sig_c,
+        pos,
+        base,
+        froot,
+        rot,
+        positive_only,
+    )
+
+
+@njit(cache=True)
+def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot, positive_only):
+    """:func:`problem_statistics` in the scratch arrays ``ws`` (:func:`workspace`)."""
+    (
+        gs,
+        m_q,
+        idx,
+        a_x,
+        pq,
+        pax,
+        ptx,
+        ptd,
+        lam,
+        p0l,
+        g3,
+        wrow,
+        mgf,
+        mgif,
+        u_mat,
+        v_mat,
+        vloc,
+        mloc,
+        bq,
+        low,
+        linv,
+        loc,
+        m3,
+        m3i,
+        t3,
+        info,
+        infoi,
+        rhs,
+        xr,
+    ) = ws
+    n, s = rows.shape
     for q in range(n):
+        m_q[q] = 0
         for k in range(s):
             if rows[q, k]:
                 idx[q, m_q[q]] = k
@@ -348,22 +466,24 @@ def problem_statistics(
     for k in range(s):
         if sig_c[k] != 0.0:
             common = True
-    a_x = np.zeros((n, s, pc))  # [A | a] per block row
-    pq = np.zeros((n, s, s))  # P_q: block precision with nuisance and latent eliminated
-    pax = np.zeros((n, s, pc))  # P_q [A | a]
-    lam = np.empty((s, 3))
-    p0l = np.empty((s, 3))
-    m3 = np.empty((3, 3))
-    m3i = np.empty((3, 3))
-    g3 = np.empty((s, 3))
+    # a_x: [A | a] per block row; pq: P_q, the block precision with the clocks and the
+    # relative-error latent eliminated; pax: P_q [A | a]. A block's rows follow the
+    # satellite order, so the rows of one constellation are contiguous: [gs[j], gs[j + 1]).
     n_rows = 0
-    n_nuis = 0
+    n_clocks = 0
     for q in range(n):
         mq = m_q[q]
         if mq == 0:
             continue
         n_rows += mq
         p0 = pq[q]
+        ax = a_x[q]
+        px = pax[q]
+        i = 0
+        for j in range(n_sys + 1):
+            while i < mq and system[idx[q, i]] < j:
+                i += 1
+            gs[j] = i
         for i in range(mq):
             k = idx[q, i]
             d0 = sv[k, 0] - (pos[0] + base[q, 0])
@@ -373,131 +493,153 @@ def problem_statistics(
             u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
             for j in range(3):
                 lam[i, j] = u0 * froot[q, 0, j] + u1 * froot[q, 1, j] + u2 * froot[q, 2, j]
-            a_x[q, i, 0] = -u0
-            a_x[q, i, 1] = -u1
-            a_x[q, i, 2] = -u2
-            sk = system[k]
-            res = pr[q, k] - rng
-            if has_clock[sk]:
-                a_x[q, i, 3 + sk] = 1.0
-                res -= clk[sk]
-            a_x[q, i, p_dim] = res
-            p0[i, i] = w[q, k]
-        # 1. nuisance clocks: P0 = W - W N (N^T W N)^-1 N^T W, one group per constellation
-        if q != ref:
-            for j in range(n_sys):
-                dsum = 0.0
-                amean = 0.0
-                for i in range(mq):
-                    if start[j] <= idx[q, i] < start[j + 1]:
-                        dsum += w[q, idx[q, i]]
-                        amean += w[q, idx[q, i]] * a_x[q, i, p_dim]
-                if dsum > 0.0:
-                    n_nuis += 1
-                    # remove the group's weighted mean from the residuals: a shift along a
-                    # nuisance column leaves R a unchanged, and the clock offsets between
-                    # receivers (tens of km) would otherwise cost digits in T
-                    amean /= dsum
-                    for i in range(mq):
-                        if start[j] <= idx[q, i] < start[j + 1]:
-                            a_x[q, i, p_dim] -= amean
-                    for i in range(mq):
-                        ki = idx[q, i]
-                        if not start[j] <= ki < start[j + 1]:
-                            continue
-                        for i2 in range(mq):
-                            k2 = idx[q, i2]
-                            if start[j] <= k2 < start[j + 1]:
-                                p0[i, i2] -= w[q, ki] * w[q, k2] / dsum
+            ax[i, 0] = -u0
+            ax[i, 1] = -u1
+            ax[i, 2] = -u2
+            ax[i, 3] = pr[q, k] - rng
+            wrow[i] = w[q, k]
+            for i2 in range(mq):
+                p0[i, i2] = 0.0
+            p0[i, i] = wrow[i]
+        # 1. the clocks: P0 = W - W N (N^T W N)^-1 N^T W, one group per constellation
+        for j in range(n_sys):
+            i0, i1 = gs[j], gs[j + 1]
+            if i1 == i0:
+                continue
+            n_clocks += 1
+            dsum = 0.0
+            amean = 0.0
+            for i in range(i0, i1):
+                dsum += wrow[i]
+                amean += wrow[i] * ax[i, 3]
+            # remove the group's weighted mean from the residuals (its clock, tens of km):
+            # a shift along a clock column leaves R a unchanged, and costs no digits in T
+            amean /= dsum
+            for i in range(i0, i1):
+                ax[i, 3] -= amean
+            for c in range(4):  # P0 [A | a] = W X - w (w^T X) / d over the group
+                acc = 0.0
+                for i in range(i0, i1):
+                    acc += wrow[i] * ax[i, c]
+                acc /= dsum
+                for i in range(i0, i1):
+                    px[i, c] = wrow[i] * (ax[i, c] - acc)
+            for i in range(i0, i1):
+                f = wrow[i] / dsum
+                for i2 in range(i0, i1):
+                    p0[i, i2] -= f * wrow[i2]
         # 2. rank-3 relative-error latent: P_q = P0 - P0 lam (I + lam^T P0 lam)^-1 lam^T P0
         has_rel = False
         for a_ in range(3):
             for c in range(3):
                 if froot[q, a_, c] != 0.0:
                     has_rel = True
-        if has_rel:
-            for i in range(mq):
-                for j in range(3):
-                    acc = 0.0
-                    for i2 in range(mq):
-                        acc += p0[i, i2] * lam[i2, j]
-                    p0l[i, j] = acc
-            for j1 in range(3):
-                for j2 in range(3):
-                    acc = 1.0 if j1 == j2 else 0.0
-                    for i in range(mq):
-                        acc += lam[i, j1] * p0l[i, j2]
-                    m3[j1, j2] = acc
-            _inv3(m3, m3i)
-            for i in range(mq):
-                for j in range(3):
-                    g3[i, j] = p0l[i, 0] * m3i[0, j] + p0l[i, 1] * m3i[1, j] + p0l[i, 2] * m3i[2, j]
-            for i in range(mq):
-                for i2 in range(mq):
-                    p0[i, i2] -= (
-                        g3[i, 0] * p0l[i2, 0] + g3[i, 1] * p0l[i2, 1] + g3[i, 2] * p0l[i2, 2]
-                    )
+        if not has_rel:
+            continue
         for i in range(mq):
-            for c in range(pc):
+            for j in range(3):
                 acc = 0.0
                 for i2 in range(mq):
-                    acc += p0[i, i2] * a_x[q, i2, c]
-                pax[q, i, c] = acc
-    # 3. errors common to all receivers: P~ = Pblk - Pblk E (I + E^T Pblk E)^-1 E^T Pblk
-    ptx = pax.copy()  # P~ [A | a] per row
-    ptd = np.zeros((n, s))  # diag(P~)
+                    acc += p0[i, i2] * lam[i2, j]
+                p0l[i, j] = acc
+        for j1 in range(3):
+            for j2 in range(3):
+                acc = 1.0 if j1 == j2 else 0.0
+                for i in range(mq):
+                    acc += lam[i, j1] * p0l[i, j2]
+                m3[j1, j2] = acc
+        _inv3(m3, m3i)
+        for i in range(mq):
+            for j in range(3):
+                g3[i, j] = p0l[i, 0] * m3i[0, j] + p0l[i, 1] * m3i[1, j] + p0l[i, 2] * m3i[2, j]
+        for j in range(3):  # t3 = (P0 lam)^T [A | a]: P_q [A | a] = P0 [A | a] - g3 t3
+            for c in range(4):
+                acc = 0.0
+                for i in range(mq):
+                    acc += p0l[i, j] * ax[i, c]
+                t3[j, c] = acc
+        for i in range(mq):
+            for c in range(4):
+                px[i, c] -= g3[i, 0] * t3[0, c] + g3[i, 1] * t3[1, c] + g3[i, 2] * t3[2, c]
+            for i2 in range(mq):
+                p0[i, i2] -= g3[i, 0] * p0l[i2, 0] + g3[i, 1] * p0l[i2, 1] + g3[i, 2] * p0l[i2, 2]
+    # 3. errors common to all receivers: P~ = Pblk - Pblk E (I + E^T Pblk E)^-1 E^T Pblk;
+    # ptx: P~ [A | a] per row, ptd: diag(P~)
     for q in range(n):
         for i in range(m_q[q]):
             ptd[q, i] = pq[q, i, i]
+            for c in range(4):
+                ptx[q, i, c] = pax[q, i, c]
     if common:
-        mg = np.zeros((s, s))
+        # the latent common errors of the satellites the fix uses (loc: their index in the
+        # compact S' x S' system; the other columns of E are zero)
+        sl = 0
+        for k in range(s):
+            loc[k] = -1
         for q in range(n):
             for i in range(m_q[q]):
                 k = idx[q, i]
+                if loc[k] < 0 and sig_c[k] != 0.0:
+                    loc[k] = 0
+        for k in range(s):
+            if loc[k] == 0:
+                loc[k] = sl
+                sl += 1
+        mg = mgf[: sl * sl].reshape((sl, sl))
+        mgi = mgif[: sl * sl].reshape((sl, sl))
+        for k in range(sl):
+            for k2 in range(sl):
+                mg[k, k2] = 0.0
+            mg[k, k] = 1.0
+            for c in range(4):
+                u_mat[k, c] = 0.0  # u_mat: E^T Pblk [A | a]
+        for q in range(n):
+            for i in range(m_q[q]):
+                k = idx[q, i]
+                lk = loc[k]
+                if lk < 0:
+                    continue
                 for i2 in range(m_q[q]):
                     k2 = idx[q, i2]
-                    mg[k, k2] += sig_c[k] * pq[q, i, i2] * sig_c[k2]
-        for k in range(s):
-            mg[k, k] += 1.0
-        mgi = np.empty((s, s))
-        if not _cholesky_inverse(mg, mgi):
+                    if loc[k2] >= 0:
+                        mg[lk, loc[k2]] += sig_c[k] * pq[q, i, i2] * sig_c[k2]
+                for c in range(4):
+                    u_mat[lk, c] += sig_c[k] * pax[q, i, c]
+        if not _chol_inverse(mg, mgi, low, linv):
             return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
-        u_mat = np.zeros((s, pc))  # E^T Pblk [A | a]
-        for q in range(n):
-            for i in range(m_q[q]):
-                k = idx[q, i]
-                for c in range(pc):
-                    u_mat[k, c] += sig_c[k] * pax[q, i, c]
-        v_mat = np.zeros((s, pc))  # (I + E^T Pblk E)^-1 E^T Pblk [A | a]
-        for k in range(s):
-            for k2 in range(s):
+        for k in range(sl):  # v_mat: (I + E^T Pblk E)^-1 E^T Pblk [A | a]
+            for c in range(4):
+                v_mat[k, c] = 0.0
+            for k2 in range(sl):
                 f = mgi[k, k2]
-                if f != 0.0:
-                    for c in range(pc):
-                        v_mat[k, c] += f * u_mat[k2, c]
+                for c in range(4):
+                    v_mat[k, c] += f * u_mat[k2, c]
         # per block, with local (contiguous) copies: Vloc = Sigma V[sats], Mloc = Sigma
-        # Mginv[sats, sats] Sigma; then P~ [A | a] = P_q ([A | a] ... ) - P_q Vloc and
+        # Mginv[sats, sats] Sigma; P~ [A | a] = P_q [A | a] - P_q Vloc and
         # diag(P~) = diag(P_q) - diag(P_q Mloc P_q)
-        vloc = np.empty((s, pc))
-        mloc = np.empty((s, s))
-        bq = np.empty((s, s))
         for q in range(n):
             mq = m_q[q]
             if mq == 0:
                 continue
             p_q = pq[q]
             for i in range(mq):
-                k = idx[q, i]
-                for c in range(pc):
-                    vloc[i, c] = sig_c[k] * v_mat[k, c]
+                lk = loc[idx[q, i]]
+                if lk < 0:
+                    for c in range(4):
+                        vloc[i, c] = 0.0
+                    for i2 in range(mq):
+                        mloc[i, i2] = 0.0
+                    continue
+                sk = sig_c[idx[q, i]]
+                for c in range(4):
+                    vloc[i, c] = sk * v_mat[lk, c]
                 for i2 in range(mq):
-                    mloc[i, i2] = sig_c[k] * mgi[k, idx[q, i2]] * sig_c[idx[q, i2]]
+                    lk2 = loc[idx[q, i2]]
+                    mloc[i, i2] = 0.0 if lk2 < 0 else sk * mgi[lk, lk2] * sig_c[idx[q, i2]]
             for i in range(mq):
-                for c in range(pc):
-                    ptx[q, i, c] = pax[q, i, c]
                 for i2 in range(mq):
                     f = p_q[i, i2]
-                    for c in range(pc):
+                    for c in range(4):
                         ptx[q, i, c] -= f * vloc[i2, c]
                 for i2 in range(mq):
                     acc = 0.0
@@ -507,68 +649,52 @@ def problem_statistics(
                 acc = 0.0
                 for i2 in range(mq):
                     acc += bq[i, i2] * p_q[i2, i]
-                ptd[q, i] = p_q[i, i] - acc
+                ptd[q, i] -= acc
     # normal equations and the residual projector R = P~ - P~ A info^-1 A^T P~
-    info = np.zeros((p_dim, p_dim))
-    rhs = np.zeros(p_dim)
+    for p1 in range(3):
+        rhs[p1] = 0.0
+        for p2 in range(3):
+            info[p1, p2] = 0.0
     apa = 0.0
     for q in range(n):
         for i in range(m_q[q]):
-            for p1 in range(p_dim):
+            for p1 in range(3):
                 ap = a_x[q, i, p1]
-                if ap != 0.0:
-                    for p2 in range(p_dim):
-                        info[p1, p2] += ap * ptx[q, i, p2]
-                    rhs[p1] += ap * ptx[q, i, p_dim]
-            apa += a_x[q, i, p_dim] * ptx[q, i, p_dim]
-    for j in range(n_sys):
-        if not has_clock[j]:
-            info[3 + j, 3 + j] += 1.0
-    for p1 in range(p_dim):  # symmetrise (the two triangles differ by rounding only)
-        for p2 in range(p1 + 1, p_dim):
+                for p2 in range(3):
+                    info[p1, p2] += ap * ptx[q, i, p2]
+                rhs[p1] += ap * ptx[q, i, 3]
+            apa += a_x[q, i, 3] * ptx[q, i, 3]
+    for p1 in range(3):  # symmetrise (the two triangles differ by rounding only)
+        for p2 in range(p1 + 1, 3):
             v = 0.5 * (info[p1, p2] + info[p2, p1])
             info[p1, p2] = v
             info[p2, p1] = v
-    infoi = np.empty((p_dim, p_dim))
-    if not _cholesky_inverse(info, infoi):
+    if not _chol_inverse(info, infoi, low, linv):
         return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
-    xr = np.zeros(p_dim)
     t_stat = apa
-    for p1 in range(p_dim):
-        acc = 0.0
-        for p2 in range(p_dim):
-            acc += infoi[p1, p2] * rhs[p2]
-        xr[p1] = acc
-        t_stat -= rhs[p1] * acc
+    for p1 in range(3):
+        xr[p1] = infoi[p1, 0] * rhs[0] + infoi[p1, 1] * rhs[1] + infoi[p1, 2] * rhs[2]
+        t_stat -= rhs[p1] * xr[p1]
     if t_stat < 0.0:  # rounding of a (near) zero statistic
         t_stat = 0.0
-    n_clk = 0
-    for j in range(n_sys):
-        if has_clock[j]:
-            n_clk += 1
-    dof = n_rows - n_nuis - 3 - n_clk
+    dof = n_rows - n_clocks - 3
     q_star, k_star = -1, -1
     w_star = 0.0
     star_positive = False
     h_slope = 0.0
     v_slope = 0.0
-    g = np.empty(p_dim)
     for q in range(n):
         for i in range(m_q[q]):
             k = idx[q, i]
-            for p1 in range(p_dim):
-                acc = 0.0
-                for p2 in range(p_dim):
-                    acc += infoi[p1, p2] * ptx[q, i, p2]
-                g[p1] = acc
-            r_ii = ptd[q, i]
-            ra = ptx[q, i, p_dim]
-            for p1 in range(p_dim):
-                r_ii -= ptx[q, i, p1] * g[p1]
-                ra -= ptx[q, i, p1] * xr[p1]
-            ke = rot[0, 0] * g[0] + rot[0, 1] * g[1] + rot[0, 2] * g[2]
-            kn = rot[1, 0] * g[0] + rot[1, 1] * g[1] + rot[1, 2] * g[2]
-            ku = rot[2, 0] * g[0] + rot[2, 1] * g[1] + rot[2, 2] * g[2]
+            t0, t1, t2 = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2]
+            g0 = infoi[0, 0] * t0 + infoi[0, 1] * t1 + infoi[0, 2] * t2
+            g1 = infoi[1, 0] * t0 + infoi[1, 1] * t1 + infoi[1, 2] * t2
+            g2 = infoi[2, 0] * t0 + infoi[2, 1] * t1 + infoi[2, 2] * t2
+            r_ii = ptd[q, i] - (t0 * g0 + t1 * g1 + t2 * g2)
+            ra = ptx[q, i, 3] - (t0 * xr[0] + t1 * xr[1] + t2 * xr[2])
+            ke = rot[0, 0] * g0 + rot[0, 1] * g1 + rot[0, 2] * g2
+            kn = rot[1, 0] * g0 + rot[1, 1] * g1 + rot[1, 2] * g2
+            ku = rot[2, 0] * g0 + rot[2, 1] * g1 + rot[2, 2] * g2
             kh = math.sqrt(ke * ke + kn * kn)
             if r_ii <= UNOBSERVABLE_RII * w[q, k]:
                 if kh > HARMLESS_GAIN:
@@ -673,39 +799,37 @@ def standalone_fde(
     zeros_root = np.zeros((1, 3, 3))
     no_common = np.zeros(s)
     w = np.zeros((1, s))
-    has_clock = np.zeros(n_sys, dtype=np.bool_)
-    clk = np.zeros(n_sys)
+    ws = workspace(1, s)
+    vis_r = np.empty((1, s), dtype=np.bool_)
+    pr_r = np.empty((1, s))
+    # the solver's fix, kept from its first detection on (restored if not cleared)
+    keep_pos, keep_cov, keep_clk = np.empty(3), np.empty((3, 3)), np.empty(n_sys)
     for r in range(n_rx):
-        vis_r = vis[r : r + 1].copy()
-        pr_r = pr[r : r + 1].copy()
+        vis_r[0] = vis[r]
+        pr_r[0] = pr[r]
         su_r = sigma_user[r : r + 1]
-        keep = (pos[r].copy(), cov[r].copy(), clock[r].copy(), status[r], n_used[r])
+        keep_used = n_used[r]
         t_first, dof_first = np.nan, 0
         while True:
             if status[r] != _NAV_OK:
                 istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_FIX
                 break
-            has_clock[:] = False
             for k in range(s):
                 w[0, k] = 0.0
                 if vis_r[0, k]:
                     w[0, k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
-                    has_clock[system[k]] = True
-            for j in range(n_sys):
-                clk[j] = clock[r, j] if has_clock[j] else 0.0
-            ok, t_stat, dof, _q, k_s, _w, h_sl, v_sl = problem_statistics(
+            ok, t_stat, dof, _q, k_s, _w, h_sl, v_sl = _statistics(
+                ws,
                 pr_r,
                 sv,
                 system,
+                n_sys,
                 vis_r,
                 w,
                 no_common,
                 pos[r],
-                clk,
                 zeros_base,
                 zeros_root,
-                0,
-                has_clock,
                 rot[r],
                 positive_only,
             )
@@ -724,6 +848,10 @@ def standalone_fde(
                 h_out[r] = h_sl
                 v_out[r] = v_sl
                 break
+            if not detected[r]:
+                keep_pos[:] = pos[r]
+                keep_cov[:, :] = cov[r]
+                keep_clk[:] = clock[r]
             detected[r] = True
             if dof < 2 or n_excl[r] >= max_excl or k_s < 0:
                 istat[r] = INT_FAULT_DETECTED
@@ -753,7 +881,7 @@ def standalone_fde(
             status[r] = st1[0]
             n_used[r] = nu1[0]
         if istat[r] == INT_FAULT_DETECTED:  # the original fix, flagged
-            pos[r], cov[r], clock[r], n_used[r] = keep[0], keep[1], keep[2], keep[4]
+            pos[r], cov[r], clock[r], n_used[r] = keep_pos, keep_cov, keep_clk, keep_used
             status[r] = _NAV_FAULT
             t_out[r], dof_out[r] = t_first, dof_first
             excluded[r, :] = False
@@ -823,39 +951,41 @@ def cooperative_fde(
         for k in range(s):
             if vis[q, k]:
                 w[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
-    clk = np.zeros(n_sys)
     m = uav_pos.shape[1]
+    ws = workspace(n, s)
+    # the solver's own set-up of every problem (as cooperative_isotropic / _setup made it)
+    _ref, used_all, _hc, _piv, _tf = setup_masks(
+        vis, bavail, cen, system, el, n_sys, ddt, need_override
+    )
+    # the solver's fix of a problem, kept from its first detection on (restored if the fault
+    # cannot be cleared)
+    keep_pos, keep_clk, keep_h = np.empty(3), np.empty(n_sys), np.empty((3, 3))
+    keep_upos, keep_ucov = np.empty((m, 3)), np.empty((m, 3, 3))
+    keep_ustat = np.empty(m, dtype=np.int64)
     for b in range(n_b):
         vis_b = vis
         pr_b = pr
         el_b = el
         copied = False
-        keep_c = (c_pos[b].copy(), c_clk[b].copy(), h_star[b].copy())
         keep_n = (c_status[b], n_uavs[b], n_meas[b])
-        keep_u = (uav_pos[b].copy(), uav_cov[b].copy(), uav_status[b].copy())
         t_first, dof_first = np.nan, 0
-        ref, used, has_clock, _piv, too_few = setup_masks(
-            vis_b, bavail[b : b + 1], cen[b : b + 1], system, el_b, n_sys, ddt, need_override
-        )
+        rows_b = used_all[b]
         while True:
             if c_status[b] != _NAV_OK:
                 istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_FIX
                 break
-            for j in range(n_sys):
-                clk[j] = c_clk[b, j] if has_clock[0, j] else 0.0
-            ok, t_stat, dof, q_s, k_s, _w, h_sl, v_sl = problem_statistics(
+            ok, t_stat, dof, q_s, k_s, _w, h_sl, v_sl = _statistics(
+                ws,
                 pr_b,
                 sv,
                 system,
-                used[0],
+                n_sys,
+                rows_b,
                 w,
                 sig_c,
                 c_pos[b],
-                clk,
                 base[b],
                 froot[b],
-                ref[0],
-                has_clock[0],
                 rot[b],
                 positive_only,
             )
@@ -874,6 +1004,14 @@ def cooperative_fde(
                 h_out[b] = h_sl
                 v_out[b] = v_sl
                 break
+            if not detected[b]:
+                keep_pos[:] = c_pos[b]
+                keep_clk[:] = c_clk[b]
+                keep_h[:, :] = h_star[b]
+                if m > 0:
+                    keep_upos[:, :] = uav_pos[b]
+                    keep_ucov[:, :, :] = uav_cov[b]
+                    keep_ustat[:] = uav_status[b]
             detected[b] = True
             if dof < 2 or n_excl[b] >= max_excl or k_s < 0:
                 istat[b] = INT_FAULT_DETECTED
@@ -921,6 +1059,7 @@ def cooperative_fde(
                 max_iter,
                 tol_m,
             )
+            rows_b = used[0]
             nn = n_nuisance(used, system, ref, n_sys)
             out = cooperative_finish(
                 pos1,
@@ -953,15 +1092,15 @@ def cooperative_fde(
                 uav_cov[b] = out[7][0]
                 uav_status[b] = out[8][0]
         if istat[b] == INT_FAULT_DETECTED:  # the original fix, flagged
-            c_pos[b], c_clk[b], h_star[b] = keep_c[0], keep_c[1], keep_c[2]
+            c_pos[b], c_clk[b], h_star[b] = keep_pos, keep_clk, keep_h
             c_status[b] = _NAV_FAULT
             t_out[b], dof_out[b] = t_first, dof_first
             n_uavs[b], n_meas[b] = keep_n[1], keep_n[2]
             excluded[b] = False
             n_excl[b] = 0
             if m > 0:
-                uav_pos[b], uav_cov[b] = keep_u[0], keep_u[1]
+                uav_pos[b], uav_cov[b] = keep_upos, keep_ucov
                 for q in range(m):
-                    st = keep_u[2][q]
+                    st = keep_ustat[q]
                     uav_status[b, q] = _NAV_FAULT if st == _NAV_OK else st
     return istat, detected, n_excl, excluded, t_out, dof_out, h_out, v_out

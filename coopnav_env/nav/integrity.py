@@ -714,9 +714,12 @@ def _problem_statistics_dense(
 ):
     """The numpy formulation of :func:`coopnav_env.nav._integrity_kernels.problem_statistics`:
     the covariance formed densely (``diag(1/w) + sig_c sig_c^T [same satellite] +
-    u^T C_d u [same UAV]``), the nuisance clocks as explicit columns, ``numpy.linalg`` for
-    every inverse. Returns the same tuple (``ok`` always True) plus ``R a``, ``diag R`` and
-    the ECEF position gains ``K`` (3, m) of the rows (``numpy.nonzero(rows)`` order)."""
+    u^T C_d u [same UAV]``), the clocks as the solvers parametrise them (the clock reference's
+    clocks ``has_clock`` and one nuisance clock per other UAV and constellation) as explicit
+    columns, ``numpy.linalg`` for every inverse (the kernel eliminates every UAV's own clocks
+    instead: the same column space). Returns the same tuple (``ok`` always True) plus
+    ``R a``, ``diag R`` and the ECEF position gains ``K`` (3, m) of the rows
+    (``numpy.nonzero(rows)`` order)."""
     qq, kk = np.nonzero(rows)
     m = qq.size
     n_sys = has_clock.shape[0]

@@ -41,14 +41,23 @@ def _max_exclusions(config: Any) -> int | None:
 def fused_arguments(config: Any, received: np.ndarray) -> tuple:
     """The trailing arguments of ``epoch_navigation_fde``: thresholds and non-centralities
     (tables covering every degree of freedom this epoch can have), the fault-free factors,
-    the exclusions allowed per fix and the one-sided identification flag."""
-    thr, lam = threshold_tables(
-        config.integrity_p_fa, config.integrity_risk, max(int(received.sum()), 1)
-    )
-    k_h, k_v = protection_factors(config.integrity_risk)
-    max_excl = _max_exclusions(config)
-    max_excl = (1 << 30) if max_excl is None else max_excl
-    return thr, lam, k_h, k_v, max_excl, config.integrity_fault_sign == "positive"
+    the exclusions allowed per fix and the one-sided identification flag (cached per
+    setting; the tables grow when an epoch has more measurements than they cover)."""
+    key = (config.integrity, config.integrity_p_fa, config.integrity_risk)
+    key += (config.integrity_fault_sign,)
+    hit = _FUSED.get(key)
+    n_rows = int(received.sum())
+    if hit is None or hit[0].shape[0] <= n_rows:
+        thr, lam = threshold_tables(config.integrity_p_fa, config.integrity_risk, max(n_rows, 1))
+        k_h, k_v = protection_factors(config.integrity_risk)
+        max_excl = _max_exclusions(config)
+        max_excl = (1 << 30) if max_excl is None else max_excl
+        hit = (thr, lam, k_h, k_v, max_excl, config.integrity_fault_sign == "positive")
+        _FUSED[key] = hit
+    return hit
+
+
+_FUSED: dict[tuple, tuple] = {}
 
 
 def modular_fde(world: Any, obs, sa, co, rel_b, var_b, avail_b, centroid):
