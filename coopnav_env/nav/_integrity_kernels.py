@@ -32,6 +32,7 @@ import numpy as np
 from numba import njit
 
 from coopnav_env.nav._kernels import (
+    _cholesky_inverse_into,
     _inv3,
     cooperative_finish,
     cooperative_gauss_newton,
@@ -292,45 +293,6 @@ def threshold_tables(p_fa, p_md, dof_max):
 
 
 @njit(cache=True)
-def _chol_inverse(a, out, low, linv):
-    """``coopnav_env.nav._kernels._cholesky_inverse`` (the same operations in the same
-    order) in the scratch matrices ``low``, ``linv`` (at least ``a``'s size)."""
-    n = a.shape[0]
-    for j in range(n):
-        for i in range(n):
-            low[i, j] = 0.0
-            linv[i, j] = 0.0
-    for j in range(n):
-        s = a[j, j]
-        for k in range(j):
-            s -= low[j, k] * low[j, k]
-        if not s > 0.0:
-            return False
-        d = np.sqrt(s)
-        low[j, j] = d
-        for i in range(j + 1, n):
-            s = a[i, j]
-            for k in range(j):
-                s -= low[i, k] * low[j, k]
-            low[i, j] = s / d
-    for j in range(n):
-        linv[j, j] = 1.0 / low[j, j]
-        for i in range(j + 1, n):
-            s = 0.0
-            for k in range(j, i):
-                s -= low[i, k] * linv[k, j]
-            linv[i, j] = s / low[i, i]
-    for i in range(n):
-        for j in range(i, n):
-            s = 0.0
-            for k in range(j, n):
-                s += linv[k, i] * linv[k, j]
-            out[i, j] = s
-            out[j, i] = s
-    return True
-
-
-@njit(cache=True)
 def workspace(n, s):
     """Scratch arrays of :func:`_statistics` for ``n`` UAVs and ``s`` satellites (allocated
     once per FDE call, reused by every fix it tests)."""
@@ -536,12 +498,20 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
                     has_rel = True
         if not has_rel:
             continue
-        for i in range(mq):
-            for j in range(3):
+        for j in range(n_sys):  # P0 lam = W lam - w (w^T lam) / d over each group
+            i0, i1 = gs[j], gs[j + 1]
+            if i1 == i0:
+                continue
+            dsum = 0.0
+            for i in range(i0, i1):
+                dsum += wrow[i]
+            for c in range(3):
                 acc = 0.0
-                for i2 in range(mq):
-                    acc += p0[i, i2] * lam[i2, j]
-                p0l[i, j] = acc
+                for i in range(i0, i1):
+                    acc += wrow[i] * lam[i, c]
+                acc /= dsum
+                for i in range(i0, i1):
+                    p0l[i, c] = wrow[i] * (lam[i, c] - acc)
         for j1 in range(3):
             for j2 in range(3):
                 acc = 1.0 if j1 == j2 else 0.0
@@ -605,7 +575,7 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
                         mg[lk, loc[k2]] += sig_c[k] * pq[q, i, i2] * sig_c[k2]
                 for c in range(4):
                     u_mat[lk, c] += sig_c[k] * pax[q, i, c]
-        if not _chol_inverse(mg, mgi, low, linv):
+        if not _cholesky_inverse_into(mg, mgi, low, linv):
             return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
         for k in range(sl):  # v_mat: (I + E^T Pblk E)^-1 E^T Pblk [A | a]
             for c in range(4):
@@ -669,7 +639,7 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
             v = 0.5 * (info[p1, p2] + info[p2, p1])
             info[p1, p2] = v
             info[p2, p1] = v
-    if not _chol_inverse(info, infoi, low, linv):
+    if not _cholesky_inverse_into(info, infoi, low, linv):
         return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
     t_stat = apa
     for p1 in range(3):
@@ -752,30 +722,35 @@ def protection_level(slope_h, slope_v, sqrt_lam, cov_ecef, rot, k_h, k_v):
 # --------------------------------------------------------------------------------------------
 
 
+_EXCLUDE = -1  # a verdict of _record: exclude the identified row and test again
+
+
 @njit(cache=True)
-def standalone_fde(
-    vis,
-    pr,
-    sv,
-    sigma_user,
-    sigma_common,
-    system,
-    n_sys,
-    max_iter,
-    tol_m,
-    check,
-    lo,
-    hi,
-    pos,  # (R, 3) the solver's fixes: updated in place
-    cov,  # (R, 3, 3)
-    clock,  # (R, n_sys)
-    status,  # (R,)
-    n_used,  # (R,)
-    rot,  # (R, 3, 3)
-    thr,  # (D + 1,) chi-square thresholds per degree of freedom
-    max_excl,  # exclusions allowed per fix (a large number: until redundancy runs out)
-    positive_only,  # identify among positive residuals only
-):
+def _record(f, stats, detected, n_excl, test, figs):
+    """The verdict of one test of fix ``f`` of an FDE loop, and its figures stored in ``figs``
+    (``t_out, dof_out, h_out, v_out``). ``stats``: :func:`_statistics`' outputs; ``detected``:
+    a fault was detected before. Returns ``(verdict, failed)``: the IntegrityStatus to stop
+    with, or ``_EXCLUDE``; whether this test failed."""
+    ok, t_stat, dof, _q, k_s, _w, h_sl, v_sl = stats
+    thr, max_excl, _pos = test
+    t_out, dof_out, h_out, v_out = figs
+    if not ok:
+        return (INT_FAULT_DETECTED if detected else INT_NO_FIX), False
+    t_out[f] = t_stat
+    dof_out[f] = dof
+    if dof < 1:
+        return (INT_FAULT_DETECTED if detected else INT_NO_REDUNDANCY), False
+    if t_stat <= thr[dof]:
+        h_out[f] = h_sl
+        v_out[f] = v_sl
+        return (INT_EXCLUDED if n_excl > 0 else INT_OK), False
+    if dof < 2 or n_excl >= max_excl or k_s < 0:
+        return INT_FAULT_DETECTED, True
+    return _EXCLUDE, True
+
+
+@njit(cache=True)
+def standalone_fde(obs, solver, fix, rot, test):
     """RAIM FDE of every standalone fix; the solver's outputs are updated in place.
 
     Per receiver: test (chi-square on ``T``), and while it fails with at least two degrees
@@ -784,8 +759,23 @@ def standalone_fde(
     current fix). A fault that cannot be cleared leaves the receiver's original fix with
     ``NavStatus.FAULT_DETECTED``.
 
+    Parameters (grouped)
+    --------------------
+    obs : ``(vis, pr, sigma_user, sigma_common, sv, system, n_sys)``, the observations
+    solver : ``(max_iter, tol_m, check, r_lo, r_hi)``, the re-solves' settings
+    fix : ``(pos, cov, clock, status, n_used)``, the solver's fixes (R receivers), updated in
+        place
+    rot : (R, 3, 3) ECEF -> ENU rotations
+    test : ``(thr, max_excl, positive_only)``: chi-square thresholds per degree of freedom,
+        exclusions allowed per fix (a large number: until redundancy runs out), whether only
+        positive residuals are identified
+
     Returns ``istat, detected, n_excl, excluded (R, S), t_stat, dof, h_slope, v_slope``.
     """
+    vis, pr, sigma_user, sigma_common, sv, system, n_sys = obs
+    max_iter, tol_m, check, lo, hi = solver
+    pos, cov, clock, status, n_used = fix
+    positive_only = test[2]
     n_rx, s = vis.shape
     istat = np.full(n_rx, INT_NO_FIX, dtype=np.int64)
     detected = np.zeros(n_rx, dtype=np.bool_)
@@ -795,6 +785,7 @@ def standalone_fde(
     dof_out = np.zeros(n_rx, dtype=np.int64)
     h_out = np.full(n_rx, np.inf)
     v_out = np.full(n_rx, np.inf)
+    figs = (t_out, dof_out, h_out, v_out)
     zeros_base = np.zeros((1, 3))
     zeros_root = np.zeros((1, 3, 3))
     no_common = np.zeros(s)
@@ -818,7 +809,7 @@ def standalone_fde(
                 w[0, k] = 0.0
                 if vis_r[0, k]:
                     w[0, k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
-            ok, t_stat, dof, _q, k_s, _w, h_sl, v_sl = _statistics(
+            stats = _statistics(
                 ws,
                 pr_r,
                 sv,
@@ -833,29 +824,17 @@ def standalone_fde(
                 rot[r],
                 positive_only,
             )
-            if not ok:
-                istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_FIX
-                break
-            if not detected[r]:  # the statistic of the solver's own fix
-                t_first, dof_first = t_stat, dof
-            t_out[r] = t_stat
-            dof_out[r] = dof
-            if dof < 1:
-                istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_REDUNDANCY
-                break
-            if t_stat <= thr[dof]:
-                istat[r] = INT_EXCLUDED if n_excl[r] > 0 else INT_OK
-                h_out[r] = h_sl
-                v_out[r] = v_sl
-                break
-            if not detected[r]:
+            verdict, failed = _record(r, stats, detected[r], n_excl[r], test, figs)
+            if failed and not detected[r]:  # the solver's own fix, kept
+                t_first, dof_first = stats[1], stats[2]
                 keep_pos[:] = pos[r]
                 keep_cov[:, :] = cov[r]
                 keep_clk[:] = clock[r]
-            detected[r] = True
-            if dof < 2 or n_excl[r] >= max_excl or k_s < 0:
-                istat[r] = INT_FAULT_DETECTED
+            detected[r] |= failed
+            if verdict != _EXCLUDE:
+                istat[r] = verdict
                 break
+            k_s = stats[4]
             vis_r[0, k_s] = False
             pr_r[0, k_s] = np.nan
             excluded[r, k_s] = True
@@ -890,42 +869,7 @@ def standalone_fde(
 
 
 @njit(cache=True)
-def cooperative_fde(
-    pr,  # (N, S) pseudoranges, NaN where not received
-    vis,  # (N, S)
-    sv,
-    system,
-    sigma_user,
-    sig_c,
-    el,
-    n_sys,
-    base,  # (B, N, 3) masked baselines (as the solver set them up)
-    bcov,  # (B, N, 3, 3)
-    froot,  # (B, N, 3, 3)
-    bavail,  # (B, N) with the centroid UAV's own entry True
-    cen,  # (B,) centroid UAV, -1 for a virtual point
-    ddt,
-    need_override,
-    max_iter,
-    tol_m,
-    check,
-    lo,
-    hi,
-    with_uavs,
-    c_pos,  # (B, 3) the solver's outputs, updated in place
-    c_clk,  # (B, n_sys)
-    c_status,  # (B,)
-    h_star,  # (B, 3, 3)
-    n_uavs,  # (B,)
-    n_meas,  # (B,)
-    uav_pos,  # (B, N, 3) (with_uavs; else (B, 0, 3))
-    uav_cov,  # (B, N, 3, 3)
-    uav_status,  # (B, N)
-    rot,  # (B, 3, 3)
-    thr,
-    max_excl,
-    positive_only,
-):
+def cooperative_fde(obs, setup, solver, sol, rot, test):
     """RAIM FDE of every centroid problem; the solver's outputs are updated in place.
 
     As :func:`standalone_fde`, per centroid problem, on the rows the solver used
@@ -934,8 +878,26 @@ def cooperative_fde(
     kernels (``setup_masks``, ``cooperative_gauss_newton``, ``n_nuisance``,
     ``cooperative_finish``) from its current fix.
 
+    Parameters (grouped)
+    --------------------
+    obs : ``(vis, pr, sigma_user, sigma_common, sv, system, n_sys, el)``; ``pr`` NaN where not
+        received
+    setup : ``(base, bcov, froot, bavail, cen, ddt, need_override, with_uavs)``: the masked
+        baselines, their covariances and roots (B, N, ...), the links with the centroid UAV's
+        own entry True, the centroid UAVs (-1: a virtual point), the transfer, the SDT rule
+    solver : as :func:`standalone_fde`
+    sol : ``(c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status)``,
+        the solver's outputs (those of ``cooperative_finish``; the UAV arrays (B, 0, ...)
+        without ``with_uavs``), updated in place
+    rot : (B, 3, 3); test : as :func:`standalone_fde`
+
     Returns ``istat, detected, n_excl, excluded (B, N, S), t_stat, dof, h_slope, v_slope``.
     """
+    vis, pr, sigma_user, sig_c, sv, system, n_sys, el = obs
+    base, bcov, froot, bavail, cen, ddt, need_override, with_uavs = setup
+    max_iter, tol_m, check, lo, hi = solver
+    c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = sol
+    positive_only = test[2]
     n_b, n = bavail.shape
     s = vis.shape[1]
     istat = np.full(n_b, INT_NO_FIX, dtype=np.int64)
@@ -946,6 +908,7 @@ def cooperative_fde(
     dof_out = np.zeros(n_b, dtype=np.int64)
     h_out = np.full(n_b, np.inf)
     v_out = np.full(n_b, np.inf)
+    figs = (t_out, dof_out, h_out, v_out)
     w = np.zeros((n, s))
     for q in range(n):
         for k in range(s):
@@ -974,7 +937,7 @@ def cooperative_fde(
             if c_status[b] != _NAV_OK:
                 istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_FIX
                 break
-            ok, t_stat, dof, q_s, k_s, _w, h_sl, v_sl = _statistics(
+            stats = _statistics(
                 ws,
                 pr_b,
                 sv,
@@ -989,22 +952,9 @@ def cooperative_fde(
                 rot[b],
                 positive_only,
             )
-            if not ok:
-                istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_FIX
-                break
-            if not detected[b]:  # the statistic of the solver's own fix
-                t_first, dof_first = t_stat, dof
-            t_out[b] = t_stat
-            dof_out[b] = dof
-            if dof < 1:
-                istat[b] = INT_FAULT_DETECTED if detected[b] else INT_NO_REDUNDANCY
-                break
-            if t_stat <= thr[dof]:
-                istat[b] = INT_EXCLUDED if n_excl[b] > 0 else INT_OK
-                h_out[b] = h_sl
-                v_out[b] = v_sl
-                break
-            if not detected[b]:
+            verdict, failed = _record(b, stats, detected[b], n_excl[b], test, figs)
+            if failed and not detected[b]:  # the solver's own fix, kept
+                t_first, dof_first = stats[1], stats[2]
                 keep_pos[:] = c_pos[b]
                 keep_clk[:] = c_clk[b]
                 keep_h[:, :] = h_star[b]
@@ -1012,10 +962,11 @@ def cooperative_fde(
                     keep_upos[:, :] = uav_pos[b]
                     keep_ucov[:, :, :] = uav_cov[b]
                     keep_ustat[:] = uav_status[b]
-            detected[b] = True
-            if dof < 2 or n_excl[b] >= max_excl or k_s < 0:
-                istat[b] = INT_FAULT_DETECTED
+            detected[b] |= failed
+            if verdict != _EXCLUDE:
+                istat[b] = verdict
                 break
+            q_s, k_s = stats[3], stats[4]
             if not copied:
                 vis_b, pr_b, el_b = vis.copy(), pr.copy(), el.copy()
                 copied = True

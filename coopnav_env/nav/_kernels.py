@@ -43,7 +43,16 @@ COND_LIMIT = 1e10
 def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
     """Inverse of the symmetric positive definite ``a`` into ``out``; False if not SPD."""
     n = a.shape[0]
-    low = np.zeros((n, n))
+    return _cholesky_inverse_into(a, out, np.zeros((n, n)), np.zeros((n, n)))
+
+
+@njit(cache=True)
+def _cholesky_inverse_into(
+    a: np.ndarray, out: np.ndarray, low: np.ndarray, linv: np.ndarray
+) -> bool:
+    """:func:`_cholesky_inverse` in the scratch matrices ``low`` and ``linv`` (at least the
+    size of ``a``; only the lower triangles the factorisation writes are read)."""
+    n = a.shape[0]
     for j in range(n):
         s = a[j, j]
         for k in range(j):
@@ -58,7 +67,6 @@ def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
                 s -= low[i, k] * low[j, k]
             low[i, j] = s / d
     # inverse of the triangular factor, then inv(a) = inv(L)^T inv(L)
-    linv = np.zeros((n, n))
     for j in range(n):
         linv[j, j] = 1.0 / low[j, j]
         for i in range(j + 1, n):

@@ -307,6 +307,26 @@ def _enu_rotations(pos_ecef_m: np.ndarray) -> np.ndarray:
     return out
 
 
+def _observation_arrays(obs: GnssObservations) -> tuple:
+    """The kernels' ``obs`` tuple: ``(vis, pr, sigma_user, sigma_common, sv, system, n_sys,
+    el)``, writable copies where an exclusion edits copies of them."""
+    return (
+        np.array(obs.visible, dtype=bool),
+        np.array(obs.pr_m, dtype=float),
+        np.ascontiguousarray(obs.sigma_user_m, dtype=float),
+        np.ascontiguousarray(obs.sigma_common_m, dtype=float),
+        np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+        np.ascontiguousarray(obs.system, dtype=np.int64),
+        int(obs.n_systems),
+        np.array(obs.el_deg, dtype=float),
+    )
+
+
+def _solver_settings(max_iter: int, tol_m: float, plausible_radius_m) -> tuple:
+    """The kernels' ``solver`` tuple: ``(max_iter, tol_m, check, r_lo, r_hi)``."""
+    return (int(max_iter), float(tol_m), *_radius_args(plausible_radius_m))
+
+
 def _rotations(enu_rotation: np.ndarray | None, pos_ecef_m: np.ndarray) -> np.ndarray:
     """One rotation per position: ``enu_rotation`` for all, or the local frame at each."""
     if enu_rotation is None:
@@ -425,25 +445,11 @@ def fde_standalone(
     n_used = np.array(solution.n_used, dtype=np.int64)
     rot = _rotations(enu_rotation, pos)
     istat, detected, n_excl, excl, t_stat, dof, h_sl, v_sl = _ik.standalone_fde(
-        np.ascontiguousarray(obs.visible),
-        np.ascontiguousarray(obs.pr_m, dtype=float),
-        np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
-        np.ascontiguousarray(obs.sigma_user_m, dtype=float),
-        np.ascontiguousarray(obs.sigma_common_m, dtype=float),
-        np.ascontiguousarray(obs.system, dtype=np.int64),
-        int(obs.n_systems),
-        int(max_iter),
-        float(tol_m),
-        *_radius_args(plausible_radius_m),
-        pos,
-        cov,
-        clock,
-        status,
-        n_used,
+        _observation_arrays(obs)[:7],
+        _solver_settings(max_iter, tol_m, plausible_radius_m),
+        (pos, cov, clock, status, n_used),
         rot,
-        thr,
-        max_excl,
-        _positive_only(fault_sign),
+        (thr, max_excl, _positive_only(fault_sign)),
     )
     hpl, vpl = _protection_levels(istat, dof, h_sl, v_sl, cov, rot, lam, k_h, k_v)
     n = obs.n_rx
@@ -549,39 +555,15 @@ def fde_cooperative(
         uav_status = np.array(solution.status, dtype=np.int64)[None]
     rot = _rotations(enu_rotation, c_pos)
     need = -1 if sdt_min_centroid_sats is None else int(sdt_min_centroid_sats)
+    setup = (st.base, st.bcov, st.froot, st.avail, st.centroid_uav, transfer == "ddt", need)
+    sol = (c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status)
     istat, detected, n_excl, excl, t_stat, dof, h_sl, v_sl = _ik.cooperative_fde(
-        np.array(obs_s.pr_m, dtype=float),  # writable copies: exclusion edits copies of them
-        np.array(obs_s.visible, dtype=bool),
-        np.ascontiguousarray(obs_s.sv_ecef_m, dtype=float),
-        np.ascontiguousarray(obs_s.system, dtype=np.int64),
-        np.ascontiguousarray(obs_s.sigma_user_m, dtype=float),
-        np.ascontiguousarray(obs_s.sigma_common_m, dtype=float),
-        np.array(obs_s.el_deg, dtype=float),
-        int(obs_s.n_systems),
-        np.ascontiguousarray(st.base, dtype=float),
-        np.ascontiguousarray(st.bcov, dtype=float),
-        np.ascontiguousarray(st.froot, dtype=float),
-        np.ascontiguousarray(st.avail, dtype=bool),
-        np.ascontiguousarray(st.centroid_uav, dtype=np.int64),
-        transfer == "ddt",
-        need,
-        int(max_iter),
-        float(tol_m),
-        *_radius_args(plausible_radius_m),
-        not self_c,
-        c_pos,
-        c_clk,
-        c_status,
-        h_star,
-        n_uavs,
-        n_meas,
-        uav_pos,
-        uav_cov,
-        uav_status,
+        _observation_arrays(obs_s),
+        (*(np.ascontiguousarray(a) for a in setup[:4]), *setup[4:], not self_c),
+        _solver_settings(max_iter, tol_m, plausible_radius_m),
+        sol,
         rot,
-        thr,
-        max_excl,
-        _positive_only(fault_sign),
+        (thr, max_excl, _positive_only(fault_sign)),
     )
     if order is not None:  # back to the caller's satellite order
         inv_order = np.empty_like(order)

@@ -4,8 +4,9 @@
 With ``integrity="raim"`` or ``"fde"`` every epoch's standalone and cooperative fixes go
 through the residual test (and, for ``"fde"``, exclusion) before the estimate selection; a
 fix whose fault is not cleared has ``NavStatus.FAULT_DETECTED`` and the UAV falls back to its
-next source. The default (fused) path runs it inside one compiled call,
-:func:`coopnav_env.sim._integrity_kernels.epoch_navigation_fde`; the modular path
+next source. The default (fused) path runs it inside its one compiled call
+(:func:`coopnav_env.sim._kernels.epoch_navigation` with ``fde``, the stage
+:func:`coopnav_env.sim._integrity_kernels.epoch_fde`); the modular path
 (:meth:`UrbanWorld._navigate`, when a kernel is switched off or the satellites are not grouped
 by constellation) calls the public :func:`~coopnav_env.nav.fde_standalone` and
 :func:`~coopnav_env.nav.fde_cooperative`, which run the same kernels on the same arguments.
@@ -39,7 +40,7 @@ def _max_exclusions(config: Any) -> int | None:
 
 
 def fused_arguments(config: Any, received: np.ndarray) -> tuple:
-    """The trailing arguments of ``epoch_navigation_fde``: thresholds and non-centralities
+    """The ``fde`` argument of ``epoch_navigation``: thresholds and non-centralities
     (tables covering every degree of freedom this epoch can have), the fault-free factors,
     the exclusions allowed per fix and the one-sided identification flag (cached per
     setting; the tables grow when an epoch has more measurements than they cover)."""

@@ -21,6 +21,7 @@ from numba import njit
 
 from coopnav_env.gnss import _kernels as _gnss_kernels
 from coopnav_env.nav import _kernels as _nav_kernels
+from coopnav_env.sim import _integrity_kernels
 
 
 @njit(cache=True, inline="always")
@@ -566,6 +567,7 @@ def epoch_navigation(
     next_wp,  # (N,) int64
     reach_m,
     avail,  # (N, N) bool relative links
+    fde=None,  # integrity monitoring: None (off) or sim._integrity_kernels' settings tuple
 ):
     """``UrbanWorld._epoch`` from the receiver geometry and the random draws to the estimates.
 
@@ -577,94 +579,12 @@ def epoch_navigation(
     :func:`advance_waypoints`, and the swarm's satellite count; so the results are the
     modular path's bit for bit (the golden episodes of ``tests/envs/test_golden.py`` run
     through both). Returns ``sa_status, sa_n_iter, co_n_iter, select_navigation's ten
-    arrays, next_wp, n_swarm``.
+    arrays, next_wp, n_swarm`` and the integrity figures of the estimates used: with ``fde``
+    (:mod:`coopnav_env.sim._integrity_kernels`) the RAIM / FDE of both solutions runs
+    between the solvers and the selection (:func:`~coopnav_env.sim._integrity_kernels.
+    epoch_fde`, the kernels of ``fde_standalone`` / ``fde_cooperative``); without it (the
+    default) that stage is compiled out and the figures are those of no monitoring.
     """
-    pr, vis, su, sc, el = epoch_observations(
-        range_m,
-        el_deg,
-        system,
-        received,
-        clock,
-        iono,
-        z_common,
-        z_user,
-        extra,
-        el_ref,
-        sigma_ure,
-        tropo,
-        differential,
-    )
-    sa, out = epoch_solutions(
-        pr,
-        vis,
-        sv,
-        system,
-        su,
-        sc,
-        el,
-        n_sys,
-        x0,
-        rel_b,
-        var_b,
-        avail_b,
-        cen,
-        x0_co,
-        ddt,
-        max_iter,
-        tol_m,
-        check,
-        r_lo,
-        r_hi,
-    )
-    sa_pos, sa_cov, _clk, sa_status, _n_used, sa_n_iter = sa
-    co_pos, co_cov, co_status = cooperative_fixes(out, cen.shape[0])
-    sel, wp, n_swarm = epoch_selection(
-        sa_status,
-        sa_pos,
-        sa_cov,
-        co_status,
-        co_pos,
-        co_cov,
-        linked,
-        gate_on,
-        gate2,
-        origin,
-        rot,
-        pred_enu,
-        prev_cov,
-        dr_var,
-        route,
-        next_wp,
-        reach_m,
-        avail,
-        received,
-    )
-    co_n_iter = out[9]
-    return sa_status, sa_n_iter, co_n_iter, sel, wp, n_swarm
-
-
-# The stages of epoch_navigation (also composed by coopnav_env.sim._integrity_kernels).
-
-
-@njit(cache=True)
-def epoch_observations(
-    range_m,
-    el_deg,
-    system,
-    received,
-    clock,
-    iono,
-    z_common,
-    z_user,
-    extra,
-    el_ref,
-    sigma_ure,
-    tropo,
-    differential,
-):
-    """The pseudoranges of an epoch and the stored fields of
-    ``GnssObservations._trusted_from_epoch`` (received = finite pseudorange; NaN sigmas and
-    elevations elsewhere). Returns ``pr, vis, sigma_user, sigma_common, el``."""
     n, s = received.shape
     _sc, _su, _ce, _ue, pr = _gnss_kernels.pseudorange_model(
         range_m,
@@ -690,36 +610,8 @@ def epoch_observations(
             vis[q, k] = v
             su[q, k] = _su[q, k] if v else np.nan
             el[q, k] = el_deg[q, k] if v else np.nan
-    return pr, vis, su, _sc, el
-
-
-@njit(cache=True)
-def epoch_solutions(
-    pr,
-    vis,
-    sv,
-    system,
-    su,
-    sc,
-    el,
-    n_sys,
-    x0,
-    rel_b,
-    var_b,
-    avail_b,
-    cen,
-    x0_co,
-    ddt,
-    max_iter,
-    tol_m,
-    check,
-    r_lo,
-    r_hi,
-):
-    """Both solvers of an epoch: ``standalone_solve``'s six outputs and
-    ``cooperative_isotropic``'s ten (UAV outputs only for one shared centroid)."""
-    sa = _nav_kernels.standalone_solve(
-        vis, pr, sv, su, sc, system, n_sys, x0.copy(), max_iter, tol_m, check, r_lo, r_hi
+    sa_pos, sa_cov, _clk, sa_status, _n_used, sa_n_iter = _nav_kernels.standalone_solve(
+        vis, pr, sv, su, _sc, system, n_sys, x0.copy(), max_iter, tol_m, check, r_lo, r_hi
     )
     out = _nav_kernels.cooperative_isotropic(
         pr,
@@ -727,7 +619,7 @@ def epoch_solutions(
         sv,
         system,
         su,
-        sc,
+        _sc,
         el,
         n_sys,
         rel_b,
@@ -744,43 +636,29 @@ def epoch_solutions(
         r_hi,
         cen.shape[0] == 1,
     )
-    return sa, out
-
-
-@njit(cache=True)
-def cooperative_fixes(out, n_b):
-    """Each UAV's cooperative fix from ``cooperative_isotropic``'s outputs: one shared
-    centroid, its UAV outputs; ``"self"``, UAV q's solution is centroid q's."""
-    if n_b == 1:
-        return out[6][0], out[7][0], out[8][0]
-    return out[0], out[1], out[3].copy()
-
-
-@njit(cache=True)
-def epoch_selection(
-    sa_status,
-    sa_pos,
-    sa_cov,
-    co_status,
-    co_pos,
-    co_cov,
-    linked,
-    gate_on,
-    gate2,
-    origin,
-    rot,
-    pred_enu,
-    prev_cov,
-    dr_var,
-    route,
-    next_wp,
-    reach_m,
-    avail,
-    received,
-):
-    """:func:`select_navigation`, :func:`advance_waypoints` and the swarm's satellite count.
-    Returns ``sel, next_wp, n_swarm``."""
-    n, s = received.shape
+    if fde is not None:  # updates the solutions in place
+        fixes = _integrity_kernels.epoch_fde(
+            fde,
+            (vis, pr, su, _sc, sv, system, n_sys, el),
+            (rel_b, var_b, avail_b, cen, ddt),
+            (max_iter, tol_m, check, r_lo, r_hi),
+            rot,
+            (sa_pos, sa_cov, _clk, sa_status, _n_used),
+            out,
+        )
+    c_pos, h_star, c_status, uav_pos, uav_cov, uav_status, co_n_iter = (
+        out[0],
+        out[1],
+        out[3],
+        out[6],
+        out[7],
+        out[8],
+        out[9],
+    )
+    if cen.shape[0] == 1:  # one shared centroid: its UAV outputs
+        co_pos, co_cov, co_status = uav_pos[0], uav_cov[0], uav_status[0]
+    else:  # "self": UAV q's solution is centroid q's
+        co_pos, co_cov, co_status = c_pos, h_star, c_status.copy()
     sel = select_navigation(
         sa_status,
         sa_pos,
@@ -810,4 +688,8 @@ def epoch_selection(
                 if (p == q or avail[q, p]) and received[p, k]:
                     n_swarm[q] += 1
                     break
-    return sel, wp, n_swarm
+    if fde is None:
+        used = _integrity_kernels.no_integrity(n)
+    else:
+        used = _integrity_kernels.used_integrity(sel[5], *fixes)
+    return sa_status, sa_n_iter, co_n_iter, sel, wp, n_swarm, used

@@ -133,7 +133,7 @@ from coopnav_env.nav import wls as _wls
 from coopnav_env.nav.cooperative import _solve_isotropic
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
-from coopnav_env.sim import _integrity, _integrity_kernels
+from coopnav_env.sim import _integrity
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import route as _route
 from coopnav_env.sim.city import (
@@ -1179,9 +1179,8 @@ class UrbanWorld:
         :func:`coopnav_env.sim._kernels.epoch_navigation` (the same kernels on the same
         arguments, so the same results bit for bit). The random draws are those of the
         modular path, in its order; the rotations to ECEF stay numpy matmuls (their rounding
-        is numpy's). With ``config.integrity`` on, the compiled call is
-        :func:`coopnav_env.sim._integrity_kernels.epoch_navigation_fde` (the same stages with
-        the FDE of both solutions before the selection)."""
+        is numpy's). With ``config.integrity`` on, the call takes the integrity settings
+        (``fde``: the FDE of both solutions before the selection, in the same call)."""
         cfg = self.config
         n = cfg.n_uavs
         model = cfg.error_model
@@ -1241,12 +1240,12 @@ class UrbanWorld:
             float(cfg.route_reach_m),
             avail,
         )
-        integrity = None
         if cfg.integrity == "off":
-            out = _sim_kernels.epoch_navigation(*args)
+            *out, _none = _sim_kernels.epoch_navigation(*args)
+            integrity = None
         else:  # with RAIM / FDE between the solvers and the selection
-            extra = _integrity.fused_arguments(cfg, received)
-            *out, integrity = _integrity_kernels.epoch_navigation_fde(*args, *extra)
+            fde = _integrity.fused_arguments(cfg, received)
+            *out, integrity = _sim_kernels.epoch_navigation(*args, fde)
         sa_status, sa_n_iter, co_n_iter, sel, next_wp, n_swarm = out
         return (
             rel_enu,

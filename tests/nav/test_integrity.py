@@ -94,6 +94,31 @@ def h_error(sc: Scenario, pos_ecef: np.ndarray) -> np.ndarray:
     return np.hypot(d[..., 0], d[..., 1])
 
 
+def standalone_reference(sc: Scenario, q: int):
+    """Receiver ``q``'s noiseless observations and the dense reference statistics of its
+    standalone fix at the truth (``_problem_statistics_dense``'s outputs)."""
+    sub = sc.observations(noise=False).subset_receivers([q])
+    w = np.where(sub.visible, 1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2), 0.0)
+    hc = np.zeros(2, bool)
+    hc[np.unique(sub.system[sub.visible[0]])] = True
+    out = integ._problem_statistics_dense(
+        np.nan_to_num(sub.pr_m),
+        sub.sv_ecef_m,
+        sub.system,
+        sub.visible,
+        np.nan_to_num(w),
+        np.zeros(sub.n_sv),
+        sc.pos_ecef[q],
+        sc.clock[q],
+        np.zeros((1, 3)),
+        np.zeros((1, 3, 3)),
+        0,
+        hc,
+        ROT,
+    )
+    return sub, out
+
+
 def gls_statistic(g: np.ndarray, a: np.ndarray, cov: np.ndarray) -> float:
     """Minimum weighted sum of squared residuals of ``a ~ g x`` with covariance ``cov``."""
     ci = np.linalg.inv(cov)
@@ -350,26 +375,7 @@ def test_detection_rate_follows_the_noncentral_chi_square(solver) -> None:
     rng = np.random.default_rng(23)
     obs0, rel0 = sc.observations(noise=False), sc.relative(noise=False)
     if solver == "standalone":
-        sub = obs0.subset_receivers([q])
-        sol = solve_standalone(sub)
-        w = np.where(sub.visible, 1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2), 0.0)
-        hc = np.zeros(2, bool)
-        hc[np.unique(sub.system[sub.visible[0]])] = True
-        ref_stats = integ._problem_statistics_dense(
-            np.nan_to_num(sub.pr_m),
-            sub.sv_ecef_m,
-            sub.system,
-            sub.visible,
-            np.nan_to_num(w),
-            np.zeros(sub.n_sv),
-            sol.pos_ecef_m[0],
-            np.nan_to_num(sol.clock_m[0]),
-            np.zeros((1, 3)),
-            np.zeros((1, 3, 3)),
-            0,
-            hc,
-            ROT,
-        )
+        sub, ref_stats = standalone_reference(sc, q)
         row = int(np.searchsorted(np.flatnonzero(sub.visible[0]), k))
     else:
         sol = solve_cooperative(obs0, rel0, centroid=1)
@@ -446,24 +452,7 @@ def test_misleading_information_rate_is_within_the_integrity_risk(solver) -> Non
     rel0 = sc.relative(noise=False)
     # the worst row and its minimal detectable bias, from the noiseless geometry
     if solver == "standalone":
-        sub = obs0.subset_receivers([q])
-        w = 1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2)
-        hc = np.ones(2, bool)
-        out = integ._problem_statistics_dense(
-            np.nan_to_num(sub.pr_m),
-            sub.sv_ecef_m,
-            sub.system,
-            sub.visible,
-            w,
-            np.zeros(sub.n_sv),
-            sc.pos_ecef[q],
-            sc.clock[q],
-            np.zeros((1, 3)),
-            np.zeros((1, 3, 3)),
-            0,
-            hc,
-            ROT,
-        )
+        sub, out = standalone_reference(sc, q)
         rows_k = np.flatnonzero(sub.visible[0])
         rows_q = np.full(rows_k.size, q)
     else:
@@ -509,23 +498,7 @@ def test_the_slope_only_bound_would_mislead_below_the_detectable_bias() -> None:
     ir = 0.01
     sc = _open_sky_swarm()
     q = 1
-    sub = sc.observations(noise=False).subset_receivers([q])
-    w = 1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2)
-    out = integ._problem_statistics_dense(
-        np.nan_to_num(sub.pr_m),
-        sub.sv_ecef_m,
-        sub.system,
-        sub.visible,
-        w,
-        np.zeros(sub.n_sv),
-        sc.pos_ecef[q],
-        sc.clock[q],
-        np.zeros((1, 3)),
-        np.zeros((1, 3, 3)),
-        0,
-        np.ones(2, bool),
-        ROT,
-    )
+    sub, out = standalone_reference(sc, q)
     dof, r_ii, gain = out[2], out[9], out[10]
     _thr, lam = integ.threshold_tables(1e-3, ir, dof)
     k_h, _k_v = integ.protection_factors(ir)
