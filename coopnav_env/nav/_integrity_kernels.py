@@ -294,38 +294,76 @@ def threshold_tables(p_fa, p_md, dof_max):
 
 @njit(cache=True)
 def workspace(n, s):
-    """Scratch arrays of :func:`_statistics` for ``n`` UAVs and ``s`` satellites (allocated
-    once per FDE call, reused by every fix it tests)."""
+    """Scratch arrays of :func:`_statistics` for ``n`` UAVs and ``s`` satellites: views of one
+    float and one integer buffer (allocated once per FDE call, reused by every fix it
+    tests)."""
+    sm = max(s, 3)
+    shapes = (
+        (n, s, 4),  # a_x: [A | a]
+        (n, s, s),  # pq
+        (n, s, 4),  # pax
+        (n, s, 4),  # ptx
+        (n, s, 1),  # ptd
+        (s, 3, 1),  # lam
+        (s, 3, 1),  # p0l
+        (s, 3, 1),  # g3
+        (s, 1, 1),  # wrow
+        (s * s, 1, 1),  # mgf (flat: the compact S' x S' system)
+        (s * s, 1, 1),  # mgif
+        (s, 4, 1),  # u_mat
+        (s, 4, 1),  # v_mat
+        (s, 4, 1),  # vloc
+        (s, s, 1),  # mloc
+        (s, s, 1),  # bq
+        (sm, sm, 1),  # low (Cholesky scratch)
+        (sm, sm, 1),  # linv
+        (3, 3, 1),  # m3
+        (3, 3, 1),  # m3i
+        (3, 4, 1),  # t3
+        (3, 3, 1),  # info
+        (3, 3, 1),  # infoi
+        (3, 1, 1),  # rhs
+        (3, 1, 1),  # xr
+    )
+    total = 0
+    for a, b, c in shapes:
+        total += a * b * c
+    buf = np.empty(total)
+    ints = np.empty(s + 1 + n + n * s + s, dtype=np.int64)
+    o = np.zeros(len(shapes) + 1, dtype=np.int64)
+    for i in range(len(shapes)):
+        a, b, c = shapes[i]
+        o[i + 1] = o[i] + a * b * c
     return (
-        np.empty(s + 1, dtype=np.int64),  # gs: a block's constellation row ranges
-        np.empty(n, dtype=np.int64),  # m_q
-        np.empty((n, s), dtype=np.int64),  # idx
-        np.empty((n, s, 4)),  # a_x: [A | a]
-        np.empty((n, s, s)),  # pq
-        np.empty((n, s, 4)),  # pax
-        np.empty((n, s, 4)),  # ptx
-        np.empty((n, s)),  # ptd
-        np.empty((s, 3)),  # lam
-        np.empty((s, 3)),  # p0l
-        np.empty((s, 3)),  # g3
-        np.empty(s),  # wrow
-        np.empty(s * s),  # mgf (flat: the compact S' x S' system)
-        np.empty(s * s),  # mgif
-        np.empty((s, 4)),  # u_mat
-        np.empty((s, 4)),  # v_mat
-        np.empty((s, 4)),  # vloc
-        np.empty((s, s)),  # mloc
-        np.empty((s, s)),  # bq
-        np.empty((max(s, 3), max(s, 3))),  # low (Cholesky scratch)
-        np.empty((max(s, 3), max(s, 3))),  # linv
-        np.empty(s, dtype=np.int64),  # loc
-        np.empty((3, 3)),  # m3
-        np.empty((3, 3)),  # m3i
-        np.empty((3, 4)),  # t3
-        np.empty((3, 3)),  # info
-        np.empty((3, 3)),  # infoi
-        np.empty(3),  # rhs
-        np.empty(3),  # xr
+        ints[: s + 1],  # gs: a block's constellation row ranges
+        ints[s + 1 : s + 1 + n],  # m_q
+        ints[s + 1 + n : s + 1 + n + n * s].reshape((n, s)),  # idx
+        buf[o[0] : o[1]].reshape((n, s, 4)),
+        buf[o[1] : o[2]].reshape((n, s, s)),
+        buf[o[2] : o[3]].reshape((n, s, 4)),
+        buf[o[3] : o[4]].reshape((n, s, 4)),
+        buf[o[4] : o[5]].reshape((n, s)),
+        buf[o[5] : o[6]].reshape((s, 3)),
+        buf[o[6] : o[7]].reshape((s, 3)),
+        buf[o[7] : o[8]].reshape((s, 3)),
+        buf[o[8] : o[9]],
+        buf[o[9] : o[10]],
+        buf[o[10] : o[11]],
+        buf[o[11] : o[12]].reshape((s, 4)),
+        buf[o[12] : o[13]].reshape((s, 4)),
+        buf[o[13] : o[14]].reshape((s, 4)),
+        buf[o[14] : o[15]].reshape((s, s)),
+        buf[o[15] : o[16]].reshape((s, s)),
+        buf[o[16] : o[17]].reshape((sm, sm)),
+        buf[o[17] : o[18]].reshape((sm, sm)),
+        ints[s + 1 + n + n * s :],  # loc
+        buf[o[18] : o[19]].reshape((3, 3)),
+        buf[o[19] : o[20]].reshape((3, 3)),
+        buf[o[20] : o[21]].reshape((3, 4)),
+        buf[o[21] : o[22]].reshape((3, 3)),
+        buf[o[22] : o[23]].reshape((3, 3)),
+        buf[o[23] : o[24]],
+        buf[o[24] : o[25]],
     )
 
 
@@ -648,43 +686,132 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
     if t_stat < 0.0:  # rounding of a (near) zero statistic
         t_stat = 0.0
     dof = n_rows - n_clocks - 3
-    q_star, k_star = -1, -1
-    w_star = 0.0
-    star_positive = False
-    h_slope = 0.0
-    v_slope = 0.0
+    state = (0.0, 0.0, -1, -1, 0.0, False)
     for q in range(n):
         for i in range(m_q[q]):
-            k = idx[q, i]
             t0, t1, t2 = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2]
             g0 = infoi[0, 0] * t0 + infoi[0, 1] * t1 + infoi[0, 2] * t2
             g1 = infoi[1, 0] * t0 + infoi[1, 1] * t1 + infoi[1, 2] * t2
             g2 = infoi[2, 0] * t0 + infoi[2, 1] * t1 + infoi[2, 2] * t2
             r_ii = ptd[q, i] - (t0 * g0 + t1 * g1 + t2 * g2)
             ra = ptx[q, i, 3] - (t0 * xr[0] + t1 * xr[1] + t2 * xr[2])
-            ke = rot[0, 0] * g0 + rot[0, 1] * g1 + rot[0, 2] * g2
-            kn = rot[1, 0] * g0 + rot[1, 1] * g1 + rot[1, 2] * g2
-            ku = rot[2, 0] * g0 + rot[2, 1] * g1 + rot[2, 2] * g2
-            kh = math.sqrt(ke * ke + kn * kn)
-            if r_ii <= UNOBSERVABLE_RII * w[q, k]:
-                if kh > HARMLESS_GAIN:
-                    h_slope = math.inf
-                if abs(ku) > HARMLESS_GAIN:
-                    v_slope = math.inf
-                continue
-            sr = math.sqrt(r_ii)
-            h_slope = max(h_slope, kh / sr)
-            v_slope = max(v_slope, abs(ku) / sr)
-            wi = abs(ra) / sr
-            if positive_only and not ra > 0.0:
-                continue
-            if (
-                q_star < 0
-                or wi > w_star * (1.0 + TIE_RTOL)
-                or (wi >= w_star * (1.0 - TIE_RTOL) and ra > 0.0 and not star_positive)
-            ):
-                q_star, k_star, w_star, star_positive = q, k, wi, ra > 0.0
+            k = idx[q, i]
+            state = _row(state, q, k, r_ii, ra, g0, g1, g2, w[q, k], rot, positive_only)
+    h_slope, v_slope, q_star, k_star, w_star, _sp = state
     return True, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
+
+
+@njit(cache=True, inline="always")
+def _row(state, q, k, r_ii, ra, g0, g1, g2, w_qk, rot, positive_only):
+    """One row's share of a test: its slopes (the largest so far) and its normalised residual
+    (the identified row so far). ``state``: ``(h_slope, v_slope, q_star, k_star, w_star,
+    star_positive)``; ``g``: the row's ECEF position gain ``K_i``."""
+    h_slope, v_slope, q_star, k_star, w_star, star_positive = state
+    ke = rot[0, 0] * g0 + rot[0, 1] * g1 + rot[0, 2] * g2
+    kn = rot[1, 0] * g0 + rot[1, 1] * g1 + rot[1, 2] * g2
+    ku = rot[2, 0] * g0 + rot[2, 1] * g1 + rot[2, 2] * g2
+    kh = math.sqrt(ke * ke + kn * kn)
+    if r_ii <= UNOBSERVABLE_RII * w_qk:
+        if kh > HARMLESS_GAIN:
+            h_slope = math.inf
+        if abs(ku) > HARMLESS_GAIN:
+            v_slope = math.inf
+        return h_slope, v_slope, q_star, k_star, w_star, star_positive
+    sr = math.sqrt(r_ii)
+    h_slope = max(h_slope, kh / sr)
+    v_slope = max(v_slope, abs(ku) / sr)
+    wi = abs(ra) / sr
+    if positive_only and not ra > 0.0:
+        return h_slope, v_slope, q_star, k_star, w_star, star_positive
+    if (
+        q_star < 0
+        or wi > w_star * (1.0 + TIE_RTOL)
+        or (wi >= w_star * (1.0 - TIE_RTOL) and ra > 0.0 and not star_positive)
+    ):
+        return h_slope, v_slope, q, k, wi, ra > 0.0
+    return h_slope, v_slope, q_star, k_star, w_star, star_positive
+
+
+@njit(cache=True)
+def standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_only, u):
+    """:func:`problem_statistics` of one receiver's standalone fix (diagonal covariance, no
+    relative or common-error terms), in ``O(m)``: the clocks are eliminated by weighted mean
+    removal per constellation, after which ``P~ = W - w w^T / d`` per group is applied to
+    the design in closed form. ``pr``, ``vis``, ``w``: the receiver's rows (S,); ``u``: (S, 4)
+    scratch. The same quantities as :func:`problem_statistics` (compared in the tests)."""
+    s = vis.shape[0]
+    n_rows = 0
+    n_clocks = 0
+    info = np.zeros((3, 3))
+    infoi = np.empty((3, 3))
+    low = np.empty((3, 3))
+    linv = np.empty((3, 3))
+    rhs = np.zeros(3)
+    apa = 0.0
+    dsum = np.zeros(n_sys)
+    for k in range(s):  # [A | a] of the rows, then each group's weighted means removed
+        if not vis[k]:
+            continue
+        d0 = sv[k, 0] - pos[0]
+        d1 = sv[k, 1] - pos[1]
+        d2 = sv[k, 2] - pos[2]
+        rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        u[k, 0] = -d0 / rng
+        u[k, 1] = -d1 / rng
+        u[k, 2] = -d2 / rng
+        u[k, 3] = pr[k] - rng
+        dsum[system[k]] += w[k]
+        n_rows += 1
+    for j in range(n_sys):
+        if dsum[j] > 0.0:
+            n_clocks += 1
+    mean = np.zeros((n_sys, 4))
+    for k in range(s):
+        if vis[k]:
+            for c in range(4):
+                mean[system[k], c] += w[k] * u[k, c] / dsum[system[k]]
+    for k in range(s):
+        if not vis[k]:
+            continue
+        for c in range(4):
+            u[k, c] -= mean[system[k], c]
+        for p1 in range(3):
+            for p2 in range(3):
+                info[p1, p2] += w[k] * u[k, p1] * u[k, p2]
+            rhs[p1] += w[k] * u[k, p1] * u[k, 3]
+        apa += w[k] * u[k, 3] * u[k, 3]
+    if not _cholesky_inverse_into(info, infoi, low, linv):
+        return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
+    xr = np.empty(3)
+    t_stat = apa
+    for p1 in range(3):
+        xr[p1] = infoi[p1, 0] * rhs[0] + infoi[p1, 1] * rhs[1] + infoi[p1, 2] * rhs[2]
+        t_stat -= rhs[p1] * xr[p1]
+    if t_stat < 0.0:
+        t_stat = 0.0
+    state = (0.0, 0.0, -1, -1, 0.0, False)
+    for k in range(s):
+        if not vis[k]:
+            continue
+        wk = w[k]
+        t0, t1, t2 = wk * u[k, 0], wk * u[k, 1], wk * u[k, 2]  # (P~ A)_k
+        g0 = infoi[0, 0] * t0 + infoi[0, 1] * t1 + infoi[0, 2] * t2
+        g1 = infoi[1, 0] * t0 + infoi[1, 1] * t1 + infoi[1, 2] * t2
+        g2 = infoi[2, 0] * t0 + infoi[2, 1] * t1 + infoi[2, 2] * t2
+        r_ii = wk - wk * wk / dsum[system[k]] - (t0 * g0 + t1 * g1 + t2 * g2)
+        ra = wk * u[k, 3] - (t0 * xr[0] + t1 * xr[1] + t2 * xr[2])
+        state = _row(state, 0, k, r_ii, ra, g0, g1, g2, wk, rot, positive_only)
+    h_slope, v_slope, _q, k_star, w_star, _sp = state
+    return (
+        True,
+        t_stat,
+        n_rows - n_clocks - 3,
+        0 if k_star >= 0 else -1,
+        k_star,
+        w_star,
+        h_slope,
+        v_slope,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -786,11 +913,8 @@ def standalone_fde(obs, solver, fix, rot, test):
     h_out = np.full(n_rx, np.inf)
     v_out = np.full(n_rx, np.inf)
     figs = (t_out, dof_out, h_out, v_out)
-    zeros_base = np.zeros((1, 3))
-    zeros_root = np.zeros((1, 3, 3))
-    no_common = np.zeros(s)
     w = np.zeros((1, s))
-    ws = workspace(1, s)
+    u = np.empty((s, 4))
     vis_r = np.empty((1, s), dtype=np.bool_)
     pr_r = np.empty((1, s))
     # the solver's fix, kept from its first detection on (restored if not cleared)
@@ -809,20 +933,8 @@ def standalone_fde(obs, solver, fix, rot, test):
                 w[0, k] = 0.0
                 if vis_r[0, k]:
                     w[0, k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
-            stats = _statistics(
-                ws,
-                pr_r,
-                sv,
-                system,
-                n_sys,
-                vis_r,
-                w,
-                no_common,
-                pos[r],
-                zeros_base,
-                zeros_root,
-                rot[r],
-                positive_only,
+            stats = standalone_statistics(
+                pr_r[0], sv, system, n_sys, vis_r[0], w[0], pos[r], rot[r], positive_only, u
             )
             verdict, failed = _record(r, stats, detected[r], n_excl[r], test, figs)
             if failed and not detected[r]:  # the solver's own fix, kept

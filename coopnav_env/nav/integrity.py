@@ -750,10 +750,10 @@ def _problem_statistics_dense(
     if np.any(~obs_ok & (ku > _ik.HARMLESS_GAIN)):
         v_slope = math.inf
     wstat = np.where(obs_ok & ((ra > 0.0) | (not positive_only)), np.abs(ra) / sr, -1.0)
-    i = int(np.argmax(wstat))
-    tie = obs_ok & (wstat >= wstat[i] * (1.0 - _ik.TIE_RTOL)) & (ra > 0.0)
-    if ra[i] <= 0.0 and tie.any():  # an exact tie goes to the positive residual
-        i = int(np.flatnonzero(tie)[0])
+    # the largest; an exact tie (within TIE_RTOL) goes to the first positive residual
+    tie = (wstat >= 0.0) & (wstat >= wstat.max() * (1.0 - _ik.TIE_RTOL))
+    positive_tie = tie & (ra > 0.0)
+    i = int(np.flatnonzero(positive_tie if positive_tie.any() else tie)[0])
     return (
         True,
         t_stat,

@@ -27,7 +27,7 @@ from coopnav_env.nav.integrity import (
 )
 from coopnav_env.sim._integrity_kernels import used_integrity
 
-__all__ = ["EpochIntegrity", "fused_arguments", "modular_fde"]
+__all__ = ["EpochIntegrity", "fused_arguments", "modular_fde", "unpack"]
 
 #: The integrity figures of the estimate each UAV uses, in this order (``Epoch`` fields):
 #: ``hpl_m, vpl_m, integrity_status, fault_detected, fde_excluded``.
@@ -47,6 +47,8 @@ def fused_arguments(config: Any, received: np.ndarray) -> tuple:
     key = (config.integrity, config.integrity_p_fa, config.integrity_risk)
     key += (config.integrity_fault_sign,)
     hit = _FUSED.get(key)
+    if hit is not None and hit[0].shape[0] > received.size:  # covers every possible row
+        return hit
     n_rows = int(received.sum())
     if hit is None or hit[0].shape[0] <= n_rows:
         thr, lam = threshold_tables(config.integrity_p_fa, config.integrity_risk, max(n_rows, 1))
@@ -90,18 +92,32 @@ def modular_fde(world: Any, obs, sa, co, rel_b, var_b, avail_b, centroid):
     co, co_r = fde_cooperative(obs, rel, co, transfer=cfg.transfer, centroid=centroid, **kw)
 
     def used(source: np.ndarray) -> EpochIntegrity:
-        return used_integrity(
-            np.ascontiguousarray(source, dtype=np.int64),
-            co_r.status,
-            co_r.fault_detected,
-            co_r.n_excluded,
-            co_r.hpl_m,
-            co_r.vpl_m,
-            sa_r.status,
-            sa_r.fault_detected,
-            sa_r.n_excluded,
-            sa_r.hpl_m,
-            sa_r.vpl_m,
+        return unpack(
+            used_integrity(
+                np.ascontiguousarray(source, dtype=np.int64),
+                co_r.status,
+                co_r.fault_detected,
+                co_r.n_excluded,
+                co_r.hpl_m,
+                co_r.vpl_m,
+                sa_r.status,
+                sa_r.fault_detected,
+                sa_r.n_excluded,
+                sa_r.hpl_m,
+                sa_r.vpl_m,
+            )
         )
 
     return sa, co, used
+
+
+def unpack(packed: np.ndarray) -> EpochIntegrity:
+    """The :data:`EpochIntegrity` of :func:`~coopnav_env.sim._integrity_kernels.used_integrity`'s
+    packed ``(5, N)`` array."""
+    return (
+        packed[0],
+        packed[1],
+        packed[2].astype(np.int64),
+        packed[3] != 0.0,
+        packed[4].astype(np.int64),
+    )

@@ -25,34 +25,39 @@ def used_integrity(
     source, co_istat, co_det, co_excl, co_hpl, co_vpl, sa_istat, sa_det, sa_excl, sa_hpl, sa_vpl
 ):
     """The integrity figures of the estimate each UAV uses (``NavSource``: 0 cooperative,
-    1 standalone, 2 dead reckoning: no protection, ``NO_FIX``). ``fault_detected`` is
-    whether either of the UAV's fixes detected a fault. Returns ``hpl, vpl, istat,
-    fault_detected, n_excluded``."""
+    1 standalone, 2 dead reckoning: no protection, ``NO_FIX``), packed in one ``(5, N)``
+    array (one array to return to Python; :func:`coopnav_env.sim._integrity.unpack`): the
+    rows ``hpl, vpl, istat, fault_detected`` (either of the UAV's fixes detected a fault)
+    and ``n_excluded``."""
     n = source.shape[0]
-    hpl = np.full(n, np.inf)
-    vpl = np.full(n, np.inf)
-    istat = np.full(n, _ik.INT_NO_FIX, dtype=np.int64)
-    n_excl = np.zeros(n, dtype=np.int64)
-    det = np.zeros(n, dtype=np.bool_)
+    out = np.empty((5, n))
     for q in range(n):
-        det[q] = co_det[q] or sa_det[q]
+        out[0, q] = np.inf
+        out[1, q] = np.inf
+        out[2, q] = _ik.INT_NO_FIX
+        out[3, q] = 1.0 if (co_det[q] or sa_det[q]) else 0.0
+        out[4, q] = 0.0
         if source[q] == 0:
-            hpl[q], vpl[q], istat[q], n_excl[q] = co_hpl[q], co_vpl[q], co_istat[q], co_excl[q]
+            out[0, q], out[1, q], out[2, q], out[4, q] = (
+                co_hpl[q],
+                co_vpl[q],
+                co_istat[q],
+                co_excl[q],
+            )
         elif source[q] == 1:
-            hpl[q], vpl[q], istat[q], n_excl[q] = sa_hpl[q], sa_vpl[q], sa_istat[q], sa_excl[q]
-    return hpl, vpl, istat, det, n_excl
+            out[0, q], out[1, q], out[2, q], out[4, q] = (
+                sa_hpl[q],
+                sa_vpl[q],
+                sa_istat[q],
+                sa_excl[q],
+            )
+    return out
 
 
 @njit(cache=True)
-def no_integrity(n):
-    """:func:`used_integrity`'s outputs without monitoring: no protection, ``NO_FIX``."""
-    return (
-        np.full(n, np.inf),
-        np.full(n, np.inf),
-        np.full(n, _ik.INT_NO_FIX, dtype=np.int64),
-        np.zeros(n, dtype=np.bool_),
-        np.zeros(n, dtype=np.int64),
-    )
+def no_integrity():
+    """:func:`used_integrity`'s output type without monitoring (empty)."""
+    return np.empty((0, 0))
 
 
 @njit(cache=True)

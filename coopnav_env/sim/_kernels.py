@@ -689,7 +689,7 @@ def epoch_navigation(
                     n_swarm[q] += 1
                     break
     if fde is None:
-        used = _integrity_kernels.no_integrity(n)
+        used = _integrity_kernels.no_integrity()
     else:
         used = _integrity_kernels.used_integrity(sel[5], *fixes)
     return sa_status, sa_n_iter, co_n_iter, sel, wp, n_swarm, used

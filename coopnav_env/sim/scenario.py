@@ -1245,7 +1245,8 @@ class UrbanWorld:
             integrity = None
         else:  # with RAIM / FDE between the solvers and the selection
             fde = _integrity.fused_arguments(cfg, received)
-            *out, integrity = _sim_kernels.epoch_navigation(*args, fde)
+            *out, packed = _sim_kernels.epoch_navigation(*args, fde)
+            integrity = _integrity.unpack(packed)
         sa_status, sa_n_iter, co_n_iter, sel, next_wp, n_swarm = out
         return (
             rel_enu,

@@ -241,6 +241,57 @@ def test_compiled_statistics_equal_the_dense_reference(transfer, centroid) -> No
         assert got[7] == pytest.approx(want[7], rel=1e-8)
 
 
+@pytest.mark.parametrize("q", [0, 1])
+def test_standalone_statistics_equal_the_dense_reference(q) -> None:
+    """The O(m) standalone path (clocks by weighted mean removal) against the general
+    compiled path and the dense reference, on a receiver with a 25 m fault (the canyon UAV,
+    one degree of freedom at t = 0, and an open-sky one)."""
+    sc = paper_swarm(0.0)
+    rng = np.random.default_rng(6)
+    k = int(np.flatnonzero(sc.visible[q])[2])
+    sub = with_bias(sc.observations(rng), q, k, 25.0).subset_receivers([q])
+    sol = solve_standalone(sub, sc.pos_ecef[q])
+    w = np.nan_to_num(1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2))
+    pr, zs = np.nan_to_num(sub.pr_m), np.zeros(sub.n_sv)
+    fast = ik.standalone_statistics(
+        pr[0],
+        sub.sv_ecef_m,
+        sub.system,
+        2,
+        sub.visible[0],
+        w[0],
+        sol.pos_ecef_m[0],
+        ROT,
+        False,
+        np.empty((sub.n_sv, 4)),
+    )
+    pos, base, root = sol.pos_ecef_m[0], np.zeros((1, 3)), np.zeros((1, 3, 3))
+    general = ik.problem_statistics(
+        pr, sub.sv_ecef_m, sub.system, 2, sub.visible, w, zs, pos, base, root, ROT, False
+    )
+    hc = np.ones(2, bool)
+    dense = integ._problem_statistics_dense(
+        pr,
+        sub.sv_ecef_m,
+        sub.system,
+        sub.visible,
+        w,
+        zs,
+        pos,
+        sol.clock_m[0],
+        base,
+        root,
+        0,
+        hc,
+        ROT,
+    )
+    assert fast[2] == general[2] == dense[2] == (1 if q == 0 else 8)
+    assert fast[3:5] == general[3:5] == dense[3:5]
+    for i in (1, 5, 6, 7):
+        assert fast[i] == pytest.approx(dense[i], rel=1e-9)
+        assert general[i] == pytest.approx(dense[i], rel=1e-9)
+
+
 @pytest.mark.parametrize("centroid", ["self", 1])
 def test_ddt_statistic_equals_the_literal_double_differences_with_dense_c_star(centroid) -> None:
     """The undifferenced form with nuisance clocks gives exactly the residual statistic of the
