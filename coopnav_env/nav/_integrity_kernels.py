@@ -15,11 +15,13 @@ Three groups:
   ``w_i = (R a)_i / sqrt(R_ii)``, and each measurement's position gain ``K_i`` (the shift of
   the fix per metre of bias on it) projected horizontally and vertically per unit
   ``sqrt(R_ii)`` (the RAIM slopes), where ``R = P~ - P~ A (A^T P~ A)^-1 A^T P~`` is the
-  residual projector of the GLS with the exact structured covariance ``C*`` (nuisance clocks
-  eliminated; see :mod:`coopnav_env.nav.integrity`). ``C*`` is never formed: the elimination
-  is that of ``cooperative._structured_normal`` (per-UAV nuisance clocks and rank-3 relative
-  errors per block, then one ``n_sv x n_sv`` solve for the errors common to all UAVs), kept
-  here per row because the per-row quantities need the blocks themselves.
+  residual projector of the GLS with the exact structured covariance ``C*`` (every UAV's
+  clocks eliminated; see :mod:`coopnav_env.nav.integrity`). ``C*`` is never formed: the
+  elimination is that of ``cooperative._structured_normal`` (per-UAV clocks and rank-3
+  relative errors per block, then one ``S' x S'`` solve for the errors common to all UAVs,
+  over the ``S'`` satellites the fix uses), kept here per row because the per-row quantities
+  need the blocks themselves. A standalone fix (diagonal covariance) has its own ``O(m)``
+  path, :func:`standalone_statistics`.
 * **FDE loops** (:func:`standalone_fde`, :func:`cooperative_fde`): test, identify, exclude,
   re-solve with the solvers' own kernels, until the test passes or redundancy runs out.
 """

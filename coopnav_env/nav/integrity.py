@@ -9,27 +9,29 @@ bounds the position error that a fault the test could miss can cause.
 
 What is computed, per fix
 -------------------------
-*Model.* The linearised GLS of the solver at its fix: ``a = A theta + N c + e`` with ``theta``
-the position and the estimated clocks, ``N c`` the nuisance clocks and ``e ~ N(0, C)``. For
+*Model.* The linearised GLS of the solver at its fix: ``a = A x + N c + e`` with ``x`` the
+position, ``N c`` the receivers' clocks and ``e ~ N(0, C)``. For
 :func:`~coopnav_env.nav.solve_standalone`, ``C`` is diagonal (Eq. 3). For
 :func:`~coopnav_env.nav.solve_cooperative` (SDT or DDT, any centroid) it is the exact
 covariance ``C*`` of the transferred measurements (module docstring of
 :mod:`coopnav_env.nav.cooperative`): errors common to all UAVs per satellite, per-receiver
 errors, and each UAV's relative-position error projected on its lines of sight, so the rows
 are correlated across UAVs (common errors) and within a UAV (its relative error); for DDT the
-pivot errors correlate them further. We work in the undifferenced form (one nuisance clock per
-UAV other than the clock reference and constellation), which gives DDT's estimate and
-residual statistic with the exact ``C*`` exactly (double differencing is a full-row-rank map
-whose null space is the nuisance clocks; ``tests/nav/test_integrity.py`` checks the statistic
-against the literal double differences with the dense ``C*`` of the solver's reference,
-``cooperative._dense_system``), and whose rows are the receivers' own pseudoranges, which is
-what a fault hits and what exclusion removes. Nothing is formed densely: the elimination is
-the solver's (nuisance clocks and the rank-3 relative errors per UAV, then one ``n_sv x n_sv``
-solve for the common errors), see :mod:`coopnav_env.nav._integrity_kernels`.
+pivot errors correlate them further. We work in the undifferenced form (one clock per UAV and
+constellation, all eliminated as nuisance parameters: the same column space as the solvers'
+clock reference plus relative clocks, so the same residuals and position gains, without a
+clock estimate), which gives DDT's estimate and residual statistic with the exact ``C*``
+exactly (double differencing is a full-row-rank map whose null space is the clock columns;
+``tests/nav/test_integrity.py`` checks the statistic against the literal double differences
+with the dense ``C*`` of the solver's reference, ``cooperative._dense_system``), and whose
+rows are the receivers' own pseudoranges, which is what a fault hits and what exclusion
+removes. Nothing is formed densely: the elimination is the solver's (clocks and the rank-3
+relative errors per UAV, then one solve for the common errors of the satellites in use), see
+:mod:`coopnav_env.nav._integrity_kernels`.
 
-*Test.* ``T = a^T R a`` with ``R = P - P A (A^T P A)^-1 A^T P`` and ``P`` the precision with
-the nuisance clocks eliminated: the minimum weighted sum of squared residuals. Without a fault
-``T ~ chi2(dof)`` with ``dof = measurements - nuisance clocks - 3 - clocks``; a fault is
+*Test.* ``T = a^T R a`` with ``R = P - P A (A^T P A)^-1 A^T P``, ``A`` the position columns
+and ``P`` the precision with the clocks eliminated: the minimum weighted sum of squared
+residuals. Without a fault ``T ~ chi2(dof)`` with ``dof = measurements - clocks - 3``; a fault is
 declared when ``T`` exceeds the ``1 - p_fa`` quantile (``p_fa`` default 1e-3 per test, as
 RTKLIB). A bias ``b`` on row ``i`` makes ``T`` non-central with ``lambda = b^2 R_ii``.
 
