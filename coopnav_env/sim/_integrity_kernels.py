@@ -37,20 +37,12 @@ def used_integrity(
         out[2, q] = _ik.INT_NO_FIX
         out[3, q] = 1.0 if (co_det[q] or sa_det[q]) else 0.0
         out[4, q] = 0.0
-        if source[q] == 0:
-            out[0, q], out[1, q], out[2, q], out[4, q] = (
-                co_hpl[q],
-                co_vpl[q],
-                co_istat[q],
-                co_excl[q],
-            )
-        elif source[q] == 1:
-            out[0, q], out[1, q], out[2, q], out[4, q] = (
-                sa_hpl[q],
-                sa_vpl[q],
-                sa_istat[q],
-                sa_excl[q],
-            )
+        if source[q] <= 1:  # a fix: the cooperative (0) or the standalone (1) one's figures
+            co = source[q] == 0
+            out[0, q] = co_hpl[q] if co else sa_hpl[q]
+            out[1, q] = co_vpl[q] if co else sa_vpl[q]
+            out[2, q] = co_istat[q] if co else sa_istat[q]
+            out[4, q] = co_excl[q] if co else sa_excl[q]
     return out
 
 
