@@ -116,6 +116,10 @@ units, scale (and offset), bounds and description, for any configuration, e.g.
 `neighbour_k_present` (k = 0..K-1), `cooperative_fix`, `fresh_fix`, `time_left`,
 `next_waypoint`, `next_leg`, `remaining_route`, `altitude`, `wall_distance`.
 
+With `obs_protection_level=True` (needs `integrity` on) two entries follow the table:
+`min(HPL / (2 alert_limit_m), 1)` and `min(VPL / (2 alert_limit_m), 1)` of the estimate used
+(0.5 at the alert limit, 1 without protection), `obs_dim + 2` in all (54 by default).
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -145,6 +149,10 @@ Per agent, the sum of six terms, each also reported in `infos[agent]["reward_<te
 * `contact` = `-contact_penalty` (0.02) for a UAV with no other UAV in relative-sensing range;
 * `goal` = `+goal_bonus` (10) for every UAV when all UAVs are in the goal area (not on a step
   where a UAV crashes).
+
+With `integrity` on, a seventh term: `integrity` = `-integrity_penalty` (default 0) for a UAV
+whose estimate is not available (horizontal protection level above `alert_limit_m`, dead
+reckoning included) or misleading (true horizontal error above the HPL).
 
 Crashing never pays: a crash costs `collision_penalty` = 40, more than the worst a whole
 episode can lose to the per-step penalties without one, `max_steps * (0.1 * 10 / 10 + 0.05 +
@@ -177,7 +185,16 @@ not converged, 4 no relative position, 5 implausible position: the spurious far 
 rejected it: the fix counts as missing), `in_goal`, `collided`, `separation_violation`,
 `out_of_contact`, the reward terms `reward_nav`, `reward_progress`, `reward_collision`,
 `reward_separation`, `reward_contact`, `reward_goal` (0 at reset; their sum is the reward),
-and `step` (0 at reset).
+and `step` (0 at reset). With `integrity` on, `reward_integrity` follows `reward_goal`,
+and after `step` (in this order): `hpl_m`,
+`vpl_m` (protection levels of the estimate used [m]; -1 where none is available,
+`integrity_status` says why), `nav_h_error_m`, `nav_v_error_m` (its true horizontal and
+vertical errors [m]), `integrity_status` (`coopnav_env.nav.IntegrityStatus`: 0 OK, 1
+excluded, 2 fault detected, 3 no redundancy, 4 no fix), `fault_detected` (the UAV's
+cooperative or standalone test failed this step) and `fde_excluded` (pseudoranges excluded
+from the fix used); a fix whose fault could not be cleared has status 6 (`FAULT_DETECTED`)
+and is not used. `coopnav_env.nav.integrity_rates` turns arrays of errors and protection
+levels into availability and misleading-information rates.
 
 The reset infos describe the first epoch of the new episode. SuperSuit's own automatic reset
 (`pettingzoo_env_to_vec_env_v1`) merges them over the terminal step's infos
@@ -282,6 +299,21 @@ street canyons some fixes come from barely enough satellites (4-5 measurements f
 unknowns) in a narrow strip of sky; they are valid least-squares solutions, but off by tens to
 hundreds of metres, and their covariance says so.
 
+`integrity` (`"off"`): integrity monitoring of every fix (`coopnav_env.nav.integrity`):
+`"raim"` tests each standalone and cooperative fix's residuals (chi-square with the exact
+covariance) and computes protection levels, and a fix that fails is not used; `"fde"` also
+excludes the measurement the test identifies and re-solves until the test passes. Needs
+`covariance="exact"`. `integrity_p_fa` (1e-3): false-alarm probability per test;
+`integrity_risk` (1e-7): integrity risk of a fix (protection levels);
+`integrity_fault_sign` (`"any"`): `"positive"` excludes only measurements with a positive
+residual (NLOS delays are positive). `alert_limit_m` (30):
+horizontal alert limit [m] (availability, the reward term and the observation scale).
+`integrity_penalty` (0) and `obs_protection_level` (False): above. With `"off"` every episode
+is exactly as before. The preset `coopnav_env.envs.preset_config("urban_nlos", **fields)`
+turns on realistic urban reception: half of the blocked satellites received through
+reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with
+`integrity_fault_sign="positive"`.
+
 `max_steps` (200): truncation. `max_cycles`, the name PettingZoo's own environments and
 BenchMARL use, is accepted as an alias (giving both with different values raises
 `ValueError`); `config.max_cycles` reads it.
@@ -345,6 +377,8 @@ world state): a restored copy continues exactly like the original.
   checks the recorded digests), so learning results do not change and the version is not
   bumped (PettingZoo bumps it for changes that can change learning results); code that read
   `infos[agent]["initial"]` or `infos[agent]["reward_terms"]` must read the flat keys.
+  Optional integrity monitoring (`integrity`, off by default: episodes unchanged) was added
+  with them.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env

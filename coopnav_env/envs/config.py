@@ -13,9 +13,9 @@ from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
 from coopnav_env.sim.city import _check_int, _check_real
-from coopnav_env.sim.scenario import ScenarioConfig, _check_choice
+from coopnav_env.sim.scenario import ScenarioConfig, _check_bool, _check_choice
 
-__all__ = ["UrbanCanyonConfig", "config_field_names", "make_config"]
+__all__ = ["PRESETS", "UrbanCanyonConfig", "config_field_names", "make_config", "preset_config"]
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,18 @@ class UrbanCanyonConfig(ScenarioConfig):
         satellites at that epoch. In [-1, n_uavs - 1].
     render_width_px, render_height_px : int, default 1280, 640
         Size of a rendered frame, each in [320, 4096] [pixel].
+    alert_limit_m : float, default 30.0
+        Horizontal alert limit of the integrity monitor (``integrity`` on): a UAV's estimate
+        is *available* when its horizontal protection level is at most this, in (0, 1e4] [m].
+    integrity_penalty : float, default 0.0
+        With ``integrity`` on, subtracted per step from each UAV whose estimate is not
+        available (HPL above ``alert_limit_m``, dead reckoning included) or misleading (true
+        horizontal error above the HPL), reward term ``integrity``; in [0, 1000]. Needs
+        ``integrity`` on when > 0.
+    obs_protection_level : bool, default False
+        Append ``min(HPL / (2 alert_limit_m), 1)`` and ``min(VPL / (2 alert_limit_m), 1)`` of
+        the estimate used to the observation (0.5: at the alert limit; 1: beyond twice it or
+        none). Needs ``integrity`` on.
     """
 
     max_steps: int = 200
@@ -104,6 +116,9 @@ class UrbanCanyonConfig(ScenarioConfig):
     render_sky_uav: int = -1
     render_width_px: int = 1280
     render_height_px: int = 640
+    alert_limit_m: float = 30.0
+    integrity_penalty: float = 0.0
+    obs_protection_level: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -127,11 +142,26 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_int(o, "render_sky_uav", self.render_sky_uav, -1, self.n_uavs - 1)
         _check_int(o, "render_width_px", self.render_width_px, 320, 4096)
         _check_int(o, "render_height_px", self.render_height_px, 320, 4096)
+        _check_real(o, "alert_limit_m", self.alert_limit_m, 0.0, 1e4, lo_open=True)
+        _check_real(o, "integrity_penalty", self.integrity_penalty, 0.0, 1000.0)
+        _check_bool(o, "obs_protection_level", self.obs_protection_level)
+        if self.integrity == "off":
+            for name, on in (
+                ("integrity_penalty", self.integrity_penalty > 0.0),
+                ("obs_protection_level", self.obs_protection_level),
+            ):
+                if on:
+                    raise ValueError(
+                        f"{o}.{name} needs integrity='raim' or 'fde' (protection levels), got "
+                        f"integrity='off'"
+                    )
 
     @property
     def obs_dim(self) -> int:
-        """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``."""
-        return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours
+        """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
+        with ``obs_protection_level``."""
+        extra = 2 if self.obs_protection_level else 0
+        return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours + extra
 
     @property
     def max_cycles(self) -> int:
@@ -143,15 +173,17 @@ class UrbanCanyonConfig(ScenarioConfig):
         """The most a whole episode without a crash can lose to the per-step penalties.
 
         ``max_steps * (nav_reward_weight * nav_reward_cap_m / nav_reward_scale_m +
-        separation_penalty + contact_penalty)``: every step at the capped navigation error,
-        too close to another UAV and out of contact. (The progress term is left out: summed
-        over an episode it is the net decrease of the remaining route, which crashing does
-        not improve.) The defaults keep ``collision_penalty`` above it.
+        separation_penalty + contact_penalty + integrity_penalty)``: every step at the capped
+        navigation error, too close to another UAV, out of contact and without integrity.
+        (The progress term is left out: summed over an episode it is the net decrease of the
+        remaining route, which crashing does not improve.) The defaults keep
+        ``collision_penalty`` above it.
         """
         per_step = (
             self.nav_reward_weight * self.nav_reward_cap_m / self.nav_reward_scale_m
             + self.separation_penalty
             + self.contact_penalty
+            + self.integrity_penalty
         )
         return float(self.max_steps * per_step)
 
@@ -208,3 +240,45 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
         )
     base = config if config is not None else UrbanCanyonConfig()
     return replace(base, **overrides) if overrides else base
+
+
+#: Named settings on top of the defaults (:func:`preset_config`).
+#:
+#: ``"urban_nlos"``: realistic urban reception. Half of the satellites a building blocks are still
+#: received through a reflection (``nlos_probability=0.5``), with a positive range bias of ``3 m +
+#: Exp(30 m)`` (NLOS delays in street canyons are typically metres to a hundred metres; the
+#: defaults, 1 m + Exp(15 m), are milder), and the navigation defends itself with residual RAIM
+#: and fault detection and exclusion at every fix (``integrity="fde"``, false-alarm probability
+#: 1e-3 per test, integrity risk 1e-7, 30 m horizontal alert limit), identifying among positive
+#: residuals only (``integrity_fault_sign="positive"``: NLOS delays are positive; with many of
+#: them in view, a two-sided choice excludes good measurements). The protection levels and FDE
+#: figures are in the infos (``hpl_m``, ``vpl_m``, ``integrity_status``, ``fault_detected``,
+#: ``fde_excluded``); the observation and the reward are those of the defaults unless
+#: ``obs_protection_level`` / ``integrity_penalty`` are also given.
+PRESETS: dict[str, dict[str, Any]] = {
+    "urban_nlos": {
+        "nlos_probability": 0.5,
+        "nlos_bias_mean_m": 30.0,
+        "nlos_bias_floor_m": 3.0,
+        "integrity": "fde",
+        "integrity_fault_sign": "positive",
+        "integrity_p_fa": 1e-3,
+        "integrity_risk": 1e-7,
+        "alert_limit_m": 30.0,
+    },
+}
+
+
+def preset_config(name: str, **overrides: Any) -> UrbanCanyonConfig:
+    """The config of a named preset (:data:`PRESETS`) with ``overrides`` on top.
+
+    Example: ``urban_canyon_v0.parallel_env(config=preset_config("urban_nlos", n_uavs=8))``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown preset (the message lists them) or a bad override.
+    """
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; presets are {sorted(PRESETS)}")
+    return make_config(**{**PRESETS[name], **overrides})

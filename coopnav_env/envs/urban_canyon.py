@@ -143,7 +143,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
         self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
-        self._obs_low = lo.astype(np.float64)  # the clip bounds as numpy's clip sees them
+        n_base = cfg.obs_dim - (2 if cfg.obs_protection_level else 0)  # the kernel's columns
+        self._obs_low = lo[:n_base].astype(np.float64)  # the clip bounds as numpy sees them
         self._reward_params = np.array(
             [
                 cfg.nav_reward_weight,
@@ -159,7 +160,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             ],
             dtype=np.float64,
         )
-        self._obs_high = hi.astype(np.float64)
+        self._obs_high = hi[:n_base].astype(np.float64)
 
     # ---- spaces -----------------------------------------------------------------------------
 
@@ -235,6 +236,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         BenchMARL) see every key they will get later.
         """
         terms = {t: np.zeros(self.config.n_uavs) for t in REWARD_TERMS}
+        if self.config.integrity != "off":
+            terms["integrity"] = np.zeros(self.config.n_uavs)
         return self._infos(terms, self._epoch.goal_distance_m <= self.config.goal_radius_m)
 
     def step(
@@ -307,7 +310,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             if cfg.nav_team_weight > 0.0:
                 stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
             terms = dict(zip(REWARD_TERMS, stacked))
-            reward = stacked.sum(axis=0)
+            reward = self._integrity_term(terms, stacked.sum(axis=0))
             terminated = bool(crash or reached)
             truncated = (self._steps >= cfg.max_steps) and not terminated
             return self._observation_array(), reward, terminated, truncated, terms, in_goal
@@ -343,11 +346,28 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "contact": -cfg.contact_penalty * ep.out_of_contact,
             "goal": np.full(n, cfg.goal_bonus if reached else 0.0),
         }
-        reward = np.sum([terms[t] for t in REWARD_TERMS], axis=0)
+        reward = self._integrity_term(terms, np.sum([terms[t] for t in REWARD_TERMS], axis=0))
 
         terminated = crash or reached
         truncated = (self._steps >= cfg.max_steps) and not terminated
         return self._observation_array(), reward, terminated, truncated, terms, in_goal
+
+    def _integrity_term(self, terms: dict[str, np.ndarray], reward: np.ndarray) -> np.ndarray:
+        """With ``integrity`` on, add the reward term ``integrity`` (``-integrity_penalty`` for
+        a UAV whose estimate is not available or misleading) to ``terms`` and ``reward``."""
+        cfg = self.config
+        if cfg.integrity == "off":
+            return reward
+        if cfg.integrity_penalty == 0.0:  # the term is reported, and is zero
+            terms["integrity"] = np.zeros(reward.shape[0])
+            return reward
+        ep = self._epoch
+        d = ep.nav_pos_enu_m - ep.pos_enu_m
+        h_err = np.hypot(d[:, 0], d[:, 1])
+        hpl = ep.hpl_m
+        bad = (h_err > hpl) | (hpl > cfg.alert_limit_m)  # (hpl is never NaN)
+        terms["integrity"] = -cfg.integrity_penalty * bad
+        return reward + terms["integrity"]
 
     def _action_array(self, actions: dict[str, Any]) -> np.ndarray:
         if not isinstance(actions, dict):
@@ -388,8 +408,19 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
         Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows`; the numpy
         formulation :meth:`_observation_array_numpy` (``_USE_KERNEL = False``) is the readable
-        definition, and the two agree bit for bit.
+        definition, and the two agree bit for bit. With ``obs_protection_level`` the two
+        protection-level columns follow.
         """
+        obs = self._observation_rows()
+        if not self.config.obs_protection_level:
+            return obs
+        ep = self._epoch
+        scale = 2.0 * self.config.alert_limit_m
+        pl = np.clip(np.stack([ep.hpl_m, ep.vpl_m], axis=1) / scale, 0.0, 1.0)
+        return np.concatenate([obs, pl.astype(np.float32)], axis=1)
+
+    def _observation_rows(self) -> np.ndarray:
+        """The observation without the optional protection-level columns."""
         if not _USE_KERNEL:
             return self._observation_array_numpy()
         cfg = self.config
@@ -480,7 +511,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             axis=1,
         )
         space = self.observation_spaces[self.possible_agents[0]]
-        return np.clip(obs, space.low, space.high).astype(np.float32)
+        n_base = obs.shape[1]  # the protection-level columns are appended by the caller
+        return np.clip(obs, space.low[:n_base], space.high[:n_base]).astype(np.float32)
 
     def _info_floats_numpy(self) -> np.ndarray:
         """The per-agent real numbers of the infos, ``(8, N)``: errors of the estimate used, the
@@ -577,12 +609,31 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "separation_violation": bools[4],
             "out_of_contact": bools[5],
         }
-        for t in REWARD_TERMS:
-            cols[f"reward_{t}"] = np.asarray(terms[t], dtype=float).tolist()
+        for t, v in terms.items():  # REWARD_TERMS, then "integrity" when it is on
+            cols[f"reward_{t}"] = np.asarray(v, dtype=float).tolist()
         cols["step"] = [self._steps] * n
+        if self.config.integrity != "off":
+            cols.update(self._integrity_infos())
         keys = list(cols)
         return {
             a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
+        }
+
+    def _integrity_infos(self) -> dict[str, list]:
+        """The integrity figures of the estimate each UAV uses (``integrity`` on): protection
+        levels, status, FDE, and its true horizontal and vertical errors (to compare with the
+        protection levels, e.g. by :func:`coopnav_env.nav.integrity_rates`)."""
+        ep = self._epoch
+        d = ep.nav_pos_enu_m - ep.pos_enu_m
+        # finite numbers only (loggers average infos): -1 where no protection level exists
+        return {
+            "hpl_m": np.where(np.isfinite(ep.hpl_m), ep.hpl_m, -1.0).tolist(),
+            "vpl_m": np.where(np.isfinite(ep.vpl_m), ep.vpl_m, -1.0).tolist(),
+            "nav_h_error_m": np.hypot(d[:, 0], d[:, 1]).tolist(),
+            "nav_v_error_m": np.abs(d[:, 2]).tolist(),
+            "integrity_status": ep.integrity_status.tolist(),
+            "fault_detected": ep.fault_detected.tolist(),
+            "fde_excluded": ep.fde_excluded.tolist(),
         }
 
     def state(self) -> np.ndarray:
@@ -689,6 +740,7 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(3),  # flags, time left
             -np.ones(4),  # next waypoint, leg after it
             np.zeros(2 + a),  # remaining route, altitude, wall distances
+            np.zeros(2 if cfg.obs_protection_level else 0),  # HPL, VPL / (2 alert limit)
         ]
     )
     hi = np.ones(cfg.obs_dim)

@@ -1,4 +1,5 @@
-"""Navigation: standalone WLS, virtual-centroid cooperative solver (SDT/DDT), master-slave."""
+"""Navigation: standalone WLS, virtual-centroid cooperative solver (SDT/DDT), master-slave,
+integrity monitoring (RAIM FDE and protection levels)."""
 
 from coopnav_env.nav.cooperative import (
     CooperativeSolution,
@@ -6,6 +7,14 @@ from coopnav_env.nav.cooperative import (
     solve_cooperative,
     solve_cooperative_samples,
     solve_master_slave,
+)
+from coopnav_env.nav.integrity import (
+    IntegrityRates,
+    IntegrityResult,
+    IntegrityStatus,
+    fde_cooperative,
+    fde_standalone,
+    integrity_rates,
 )
 from coopnav_env.nav.types import (
     PLAUSIBLE_RADIUS_M,
@@ -20,11 +29,17 @@ __all__ = [
     "PLAUSIBLE_RADIUS_M",
     "CooperativeSolution",
     "GnssObservations",
+    "IntegrityRates",
+    "IntegrityResult",
+    "IntegrityStatus",
     "MasterSlaveSolution",
     "NavStatus",
     "RelativePositions",
     "StandaloneSolution",
     "VirtualPoint",
+    "fde_cooperative",
+    "fde_standalone",
+    "integrity_rates",
     "solve_cooperative",
     "solve_cooperative_samples",
     "solve_master_slave",

@@ -43,7 +43,16 @@ COND_LIMIT = 1e10
 def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
     """Inverse of the symmetric positive definite ``a`` into ``out``; False if not SPD."""
     n = a.shape[0]
-    low = np.zeros((n, n))
+    return _cholesky_inverse_into(a, out, np.zeros((n, n)), np.zeros((n, n)))
+
+
+@njit(cache=True)
+def _cholesky_inverse_into(
+    a: np.ndarray, out: np.ndarray, low: np.ndarray, linv: np.ndarray
+) -> bool:
+    """:func:`_cholesky_inverse` in the scratch matrices ``low`` and ``linv`` (at least the
+    size of ``a``; only the lower triangles the factorisation writes are read)."""
+    n = a.shape[0]
     for j in range(n):
         s = a[j, j]
         for k in range(j):
@@ -58,7 +67,6 @@ def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
                 s -= low[i, k] * low[j, k]
             low[i, j] = s / d
     # inverse of the triangular factor, then inv(a) = inv(L)^T inv(L)
-    linv = np.zeros((n, n))
     for j in range(n):
         linv[j, j] = 1.0 / low[j, j]
         for i in range(j + 1, n):
@@ -865,6 +873,33 @@ def sqrtm_diagonal(cov):
 
 
 @njit(cache=True)
+def isotropic_setup(rel, var, avail, cen):
+    """The relative-position arrays of ``cooperative._setup`` for isotropic covariances.
+
+    ``rel`` (B, N, 3), ``var`` and ``avail`` (B, N), ``cen`` (B,). Returns ``bavail`` (the
+    centroid UAV's own entry set: a UAV always "sees" itself, as ``RelativePositions`` marks
+    the diagonal), the baselines and covariances ``var * I`` masked to the available UAVs, and
+    their square roots (:func:`sqrtm_diagonal`).
+    """
+    n_b, n = avail.shape
+    bavail = avail.copy()
+    for b in range(n_b):
+        bavail[b, cen[b]] = True
+    base = np.zeros((n_b, n, 3))
+    bcov = np.zeros((n_b, n, 3, 3))
+    for b in range(n_b):
+        for q in range(n):
+            if bavail[b, q]:
+                v = var[b, q]
+                for a in range(3):
+                    base[b, q, a] = rel[b, q, a]
+                    for c in range(3):
+                        bcov[b, q, a, c] = v * (1.0 if a == c else 0.0)
+    froot = sqrtm_diagonal(bcov.reshape((n_b * n, 3, 3)))[0].reshape((n_b, n, 3, 3))
+    return bavail, base, bcov, froot
+
+
+@njit(cache=True)
 def cooperative_isotropic(
     pr,  # (N, S) pseudoranges, NaN where not received
     vis,  # (N, S) bool received
@@ -903,24 +938,10 @@ def cooperative_isotropic(
     """
     n_b, n = avail.shape
     s = vis.shape[1]
-    # a UAV always "sees" itself (RelativePositions marks the diagonal available)
-    bavail = avail.copy()
-    for b in range(n_b):
-        bavail[b, cen[b]] = True
-    base = np.zeros((n_b, n, 3))
-    bcov = np.zeros((n_b, n, 3, 3))
-    for b in range(n_b):
-        for q in range(n):
-            if bavail[b, q]:
-                v = var[b, q]
-                for a in range(3):
-                    base[b, q, a] = rel[b, q, a]
-                    for c in range(3):
-                        bcov[b, q, a, c] = v * (1.0 if a == c else 0.0)
+    bavail, base, bcov, froot = isotropic_setup(rel, var, avail, cen)
     ref, used, has_clock, _pivot, too_few = setup_masks(
         vis, bavail, cen, system, el, n_sys, ddt, need_override
     )
-    froot = sqrtm_diagonal(bcov.reshape((n_b * n, 3, 3)))[0].reshape((n_b, n, 3, 3))
     pr0 = np.zeros((1, n, s))
     for q in range(n):
         for k in range(s):

@@ -736,65 +736,20 @@ def _dense_normal(
     """Normal equations by forming ``C*`` densely and inverting it with ``numpy.linalg.inv``.
 
     Builds the literal transferred measurements (DDT: Eq. 12) and the covariance from the
-    independent error sources (exact) or from Eq. 18 (paper). Slow; the reference for tests.
+    independent error sources (exact) or from Eq. 18 (paper), :func:`_dense_system`. Slow; the
+    reference for tests.
     """
-    n_b, n, s = lin.rows.shape
+    n_b, n = lin.rows.shape[:2]
     n_sys = obs.n_systems
     p_dim = 3 + n_sys
     info = np.zeros((n_b, p_dim, p_dim))
     rhs = np.zeros((n_b, p_dim))
     cross = np.zeros((n_b, n, p_dim, 3))
     for bi in range(n_b):
-        qq, kk = np.nonzero(lin.rows[bi])
-        m = qq.size
-        if m == 0:
+        system = _dense_system(obs, st, lin, transfer, covariance, bi)
+        if system is None:
             continue
-        a_vec = lin.a[bi, qq, kk]
-        g = lin.A[bi, qq, kk]
-        if lin.nuis.shape[-1]:
-            nz = lin.nuis[bi, qq, kk]  # (m, Q)
-            cols = [np.where(qq == q, nz[:, c], 0.0) for q in range(n) for c in range(n_sys)]
-            cols = [c for c in cols if np.any(c)]
-            if cols:
-                g = np.concatenate([g, np.stack(cols, axis=1)], axis=1)
-        su = np.nan_to_num(obs.sigma_user_m)
-        u_row = lin.u[bi, qq, kk]
-        f = st.froot[bi]
-        if covariance == "paper":
-            fp = st.froot_paper[bi]
-            lv = np.einsum("mi,mij->mj", u_row, fp[qq])
-            cov = np.diag(su[qq, kk] ** 2)
-            cov += (qq[:, None] == qq[None, :]) * (lv @ lv.T)
-            sc = obs.sigma_common_m[kk]
-            cov += (kk[:, None] == kk[None, :]) * np.outer(sc, sc)
-            eps_cols = np.zeros((m, n, 3))
-            eps_cols[np.arange(m), qq] = np.einsum("mi,mij->mj", u_row, f[qq])
-        else:
-            # Loadings of the independent sources: common (S), user (N*S), relative (N*3)
-            n_src = s + n * s + 3 * n
-            bm = np.zeros((m, n_src))
-            sig = np.zeros(n_src)
-            sig[:s] = obs.sigma_common_m
-            sig[s : s + n * s] = su.ravel()
-            sig[s + n * s :] = 1.0  # relative errors enter through F z with z ~ N(0, I)
-            rows = np.arange(m)
-            bm[rows, kk] = 1.0
-            bm[rows, s + qq * s + kk] += 1.0
-            eps_cols = np.zeros((m, n, 3))
-            eps_cols[rows, qq] = np.einsum("mi,mij->mj", u_row, f[qq])
-            if transfer == "ddt":
-                ref = st.ref[bi]
-                jj = lin.piv_idx[bi, qq, kk]
-                notref = qq != ref
-                r_ = rows[notref]
-                bm[r_, s + qq[notref] * s + jj[notref]] -= 1.0
-                bm[r_, s + ref * s + jj[notref]] += 1.0
-                u_qj = lin.u_piv[bi, qq[notref], kk[notref]]
-                u_rj = lin.u_piv_ref[bi, qq[notref], kk[notref]]
-                eps_cols[r_, qq[notref]] -= np.einsum("mi,mij->mj", u_qj, f[qq[notref]])
-                eps_cols[r_, ref] += np.einsum("mi,ij->mj", u_rj, f[ref])
-            bm[:, s + n * s :] = eps_cols.reshape(m, 3 * n)
-            cov = (bm * sig**2) @ bm.T
+        g, a_vec, cov, eps_cols = system
         cinv = np.linalg.inv(cov)
         full_info = g.T @ cinv @ g
         full_rhs = g.T @ cinv @ a_vec
@@ -811,6 +766,77 @@ def _dense_normal(
             proj = cinv @ g
         cross[bi] = np.einsum("mp,mnl->npl", proj, eps_cols)
     return info, rhs, cross
+
+
+def _dense_system(
+    obs: GnssObservations,
+    st: _Setup,
+    lin: _Linear,
+    transfer: Transfer,
+    covariance: CovarianceModel,
+    bi: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The dense linear system of centroid problem ``bi`` at the linearisation ``lin``.
+
+    Returns ``g`` (m, P [+ nuisance columns]), the residuals ``a`` (m,), the dense covariance
+    ``C*`` (m, m) of the rows (literal DDT rows when ``lin`` is the literal linearisation)
+    and the loadings of every UAV's relative error on the rows (m, N, 3); ``None`` without
+    rows. Also the reference of the integrity tests (the residual statistic with this ``C*``).
+    """
+    n = lin.rows.shape[1]
+    s = lin.rows.shape[2]
+    n_sys = obs.n_systems
+    qq, kk = np.nonzero(lin.rows[bi])
+    m = qq.size
+    if m == 0:
+        return None
+    a_vec = lin.a[bi, qq, kk]
+    g = lin.A[bi, qq, kk]
+    if lin.nuis.shape[-1]:
+        nz = lin.nuis[bi, qq, kk]  # (m, Q)
+        cols = [np.where(qq == q, nz[:, c], 0.0) for q in range(n) for c in range(n_sys)]
+        cols = [c for c in cols if np.any(c)]
+        if cols:
+            g = np.concatenate([g, np.stack(cols, axis=1)], axis=1)
+    su = np.nan_to_num(obs.sigma_user_m)
+    u_row = lin.u[bi, qq, kk]
+    f = st.froot[bi]
+    if covariance == "paper":
+        fp = st.froot_paper[bi]
+        lv = np.einsum("mi,mij->mj", u_row, fp[qq])
+        cov = np.diag(su[qq, kk] ** 2)
+        cov += (qq[:, None] == qq[None, :]) * (lv @ lv.T)
+        sc = obs.sigma_common_m[kk]
+        cov += (kk[:, None] == kk[None, :]) * np.outer(sc, sc)
+        eps_cols = np.zeros((m, n, 3))
+        eps_cols[np.arange(m), qq] = np.einsum("mi,mij->mj", u_row, f[qq])
+        return g, a_vec, cov, eps_cols
+    # Loadings of the independent sources: common (S), user (N*S), relative (N*3)
+    n_src = s + n * s + 3 * n
+    bm = np.zeros((m, n_src))
+    sig = np.zeros(n_src)
+    sig[:s] = obs.sigma_common_m
+    sig[s : s + n * s] = su.ravel()
+    sig[s + n * s :] = 1.0  # relative errors enter through F z with z ~ N(0, I)
+    rows = np.arange(m)
+    bm[rows, kk] = 1.0
+    bm[rows, s + qq * s + kk] += 1.0
+    eps_cols = np.zeros((m, n, 3))
+    eps_cols[rows, qq] = np.einsum("mi,mij->mj", u_row, f[qq])
+    if transfer == "ddt":
+        ref = st.ref[bi]
+        jj = lin.piv_idx[bi, qq, kk]
+        notref = qq != ref
+        r_ = rows[notref]
+        bm[r_, s + qq[notref] * s + jj[notref]] -= 1.0
+        bm[r_, s + ref * s + jj[notref]] += 1.0
+        u_qj = lin.u_piv[bi, qq[notref], kk[notref]]
+        u_rj = lin.u_piv_ref[bi, qq[notref], kk[notref]]
+        eps_cols[r_, qq[notref]] -= np.einsum("mi,mij->mj", u_qj, f[qq[notref]])
+        eps_cols[r_, ref] += np.einsum("mi,ij->mj", u_rj, f[ref])
+    bm[:, s + n * s :] = eps_cols.reshape(m, 3 * n)
+    cov = (bm * sig**2) @ bm.T
+    return g, a_vec, cov, eps_cols
 
 
 # --------------------------------------------------------------------------------------------

@@ -54,6 +54,11 @@ class NavStatus(IntEnum):
         unknowns) Gauss-Newton started at the Earth's centre, the paper's start, can converge
         to it, tens of thousands of km away, with a consistent (zero) residual. The last
         iterate and its covariance are returned for diagnosis, but the fix is not valid.
+    FAULT_DETECTED
+        Set only by the integrity monitor (:mod:`coopnav_env.nav.integrity`): its residual
+        test found a fault that exclusion could not clear (no redundancy left to identify it,
+        or the exclusion budget spent). The solver's fix with all measurements is returned
+        for diagnosis, but it is not valid.
     """
 
     OK = 0
@@ -62,6 +67,7 @@ class NavStatus(IntEnum):
     NOT_CONVERGED = 3
     NO_RELATIVE_POSITION = 4
     IMPLAUSIBLE_POSITION = 5
+    FAULT_DETECTED = 6
 
 
 #: Default range of geocentric distance [m] of a plausible fix of a UAV: from 6,300 km (below

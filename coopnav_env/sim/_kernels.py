@@ -21,6 +21,7 @@ from numba import njit
 
 from coopnav_env.gnss import _kernels as _gnss_kernels
 from coopnav_env.nav import _kernels as _nav_kernels
+from coopnav_env.sim import _integrity_kernels
 
 
 @njit(cache=True, inline="always")
@@ -566,6 +567,7 @@ def epoch_navigation(
     next_wp,  # (N,) int64
     reach_m,
     avail,  # (N, N) bool relative links
+    fde=None,  # integrity monitoring: None (off) or sim._integrity_kernels' settings tuple
 ):
     """``UrbanWorld._epoch`` from the receiver geometry and the random draws to the estimates.
 
@@ -577,7 +579,11 @@ def epoch_navigation(
     :func:`advance_waypoints`, and the swarm's satellite count; so the results are the
     modular path's bit for bit (the golden episodes of ``tests/envs/test_golden.py`` run
     through both). Returns ``sa_status, sa_n_iter, co_n_iter, select_navigation's ten
-    arrays, next_wp, n_swarm``.
+    arrays, next_wp, n_swarm`` and the integrity figures of the estimates used: with ``fde``
+    (:mod:`coopnav_env.sim._integrity_kernels`) the RAIM / FDE of both solutions runs
+    between the solvers and the selection (:func:`~coopnav_env.sim._integrity_kernels.
+    epoch_fde`, the kernels of ``fde_standalone`` / ``fde_cooperative``); without it (the
+    default) that stage is compiled out and the figures are those of no monitoring.
     """
     n, s = received.shape
     _sc, _su, _ce, _ue, pr = _gnss_kernels.pseudorange_model(
@@ -630,6 +636,16 @@ def epoch_navigation(
         r_hi,
         cen.shape[0] == 1,
     )
+    if fde is not None:  # updates the solutions in place
+        fixes = _integrity_kernels.epoch_fde(
+            fde,
+            (vis, pr, su, _sc, sv, system, n_sys, el),
+            (rel_b, var_b, avail_b, cen, ddt),
+            (max_iter, tol_m, check, r_lo, r_hi),
+            rot,
+            (sa_pos, sa_cov, _clk, sa_status, _n_used),
+            out,
+        )
     c_pos, h_star, c_status, uav_pos, uav_cov, uav_status, co_n_iter = (
         out[0],
         out[1],
@@ -672,4 +688,8 @@ def epoch_navigation(
                 if (p == q or avail[q, p]) and received[p, k]:
                     n_swarm[q] += 1
                     break
-    return sa_status, sa_n_iter, co_n_iter, sel, wp, n_swarm
+    if fde is None:
+        used = _integrity_kernels.no_integrity()
+    else:
+        used = _integrity_kernels.used_integrity(sel[5], *fixes)
+    return sa_status, sa_n_iter, co_n_iter, sel, wp, n_swarm, used

@@ -62,6 +62,13 @@ The flow of one epoch (:meth:`UrbanWorld.step`)
    velocity, with its covariance grown by ``(dead_reckoning_sigma_mps * dt)^2`` per axis.
    Degenerate geometry is a reported :class:`~coopnav_env.nav.NavStatus`, never an exception.
 
+   *Integrity monitoring* (``integrity="raim"`` or ``"fde"``, off by default): before the
+   selection every standalone and cooperative fix goes through the residual (chi-square)
+   test of :mod:`coopnav_env.nav.integrity` with its exact covariance; with ``"fde"`` the
+   measurement the test identifies is excluded and the fix re-solved until the test passes.
+   A fault that cannot be cleared makes the fix ``FAULT_DETECTED`` (not valid), and the
+   protection levels of the estimate used are reported in the epoch (``hpl_m``, ``vpl_m``).
+
    *Integrity gate.* A fix is valid when its solver reports OK **and** its predicted 3-D
    sigma ``sqrt(trace(cov))`` is at most ``max_fix_sigma_m`` (default 30 m). Fixes from
    barely enough satellites in a canyon (4-5 measurements for 4-5 unknowns, all from a narrow
@@ -126,6 +133,7 @@ from coopnav_env.nav import wls as _wls
 from coopnav_env.nav.cooperative import _solve_isotropic
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
+from coopnav_env.sim import _integrity
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import route as _route
 from coopnav_env.sim.city import (
@@ -182,6 +190,8 @@ __all__ = [
     "formation_offsets",
     "make_city",
 ]
+
+_INTEGRITY_FIELDS = ("hpl_m", "vpl_m", "integrity_status", "fault_detected", "fde_excluded")
 
 AUTO_SHARED_MIN_UAVS: int = 11
 """With ``centroid="auto"``, swarms of at least this many UAVs use one shared centroid (cost
@@ -319,6 +329,24 @@ class ScenarioConfig:
         ``sqrt(trace(cov))`` exceeds this is rejected (reported as no fix, ``*_rejected``)
         and the UAV falls back to the next source (standalone, then dead reckoning), in
         (0, 1e6] [m]; None disables the gate.
+    integrity : {"off", "raim", "fde"}, default "off"
+        Integrity monitoring of every standalone and cooperative fix
+        (:mod:`coopnav_env.nav.integrity`): ``"raim"`` tests each fix's residuals (chi-square
+        with the exact covariance) and computes protection levels; a fix that fails is
+        reported ``FAULT_DETECTED`` and not used. ``"fde"`` also excludes the measurement the
+        test identifies and re-solves, until the test passes or redundancy runs out. The
+        protection levels and FDE figures of the estimate used go to
+        ``Epoch.hpl_m``/``vpl_m``/``integrity_status``/``fault_detected``/``fde_excluded``.
+        Needs ``covariance="exact"``. ``"off"`` (default) leaves every episode as before.
+    integrity_p_fa : float, default 1e-3
+        False-alarm probability of each residual test, in (0, 0.5].
+    integrity_risk : float, default 1e-7
+        Integrity risk of a fix, in (0, 0.5]: the missed-detection allocation and the
+        fault-free tail of the protection levels.
+    integrity_fault_sign : {"any", "positive"}, default "any"
+        ``"positive"``: FDE identifies only measurements with a positive residual (faults
+        known to be positive range biases, as NLOS reception), see
+        :func:`coopnav_env.nav.fde_cooperative`.
     """
 
     n_uavs: int = 5
@@ -355,6 +383,10 @@ class ScenarioConfig:
     goal_radius_m: float = 25.0
     route_reach_m: float = 5.0
     max_fix_sigma_m: float | None = 30.0
+    integrity: Literal["off", "raim", "fde"] = "off"
+    integrity_p_fa: float = 1e-3
+    integrity_risk: float = 1e-7
+    integrity_fault_sign: Literal["any", "positive"] = "any"
 
     def __post_init__(self) -> None:
         o = type(self).__name__
@@ -423,6 +455,16 @@ class ScenarioConfig:
         _check_real(o, "route_reach_m", self.route_reach_m, 0.0, 1000.0)
         if self.max_fix_sigma_m is not None:
             _check_real(o, "max_fix_sigma_m", self.max_fix_sigma_m, 0.0, 1e6, lo_open=True)
+        _check_choice(o, "integrity", self.integrity, ("off", "raim", "fde"))
+        _check_real(o, "integrity_p_fa", self.integrity_p_fa, 0.0, 0.5, lo_open=True)
+        _check_real(o, "integrity_risk", self.integrity_risk, 0.0, 0.5, lo_open=True)
+        _check_choice(o, "integrity_fault_sign", self.integrity_fault_sign, ("any", "positive"))
+        if self.integrity != "off" and self.covariance != "exact":
+            raise ValueError(
+                f"{o}.integrity={self.integrity!r} needs covariance='exact' (the residual "
+                f"test's distribution is known only with the exact covariance), got "
+                f"covariance={self.covariance!r}"
+            )
 
     @property
     def dt_s(self) -> float:
@@ -636,6 +678,16 @@ class Epoch:
     next_waypoint : ndarray of int, shape (N,)
         Index into ``UrbanWorld.route_xy_m`` of each UAV's next waypoint, after this epoch's
         update from the estimates used.
+    hpl_m, vpl_m : ndarray, shape (N,), or None
+        With ``integrity`` on: horizontal and vertical protection levels of the estimate
+        used [m] (inf: not available, dead reckoning included); None otherwise.
+    integrity_status : ndarray of int, shape (N,), or None
+        :class:`~coopnav_env.nav.IntegrityStatus` of the fix used (``NO_FIX`` for dead
+        reckoning); None with ``integrity="off"``.
+    fault_detected : ndarray of bool, shape (N,), or None
+        The UAV's cooperative or standalone test detected a fault this epoch.
+    fde_excluded : ndarray of int, shape (N,), or None
+        Pseudoranges excluded from the fix used.
     """
 
     t_s: float
@@ -672,6 +724,11 @@ class Epoch:
     standalone_rejected: BoolArray
     coop_rejected: BoolArray
     next_waypoint: np.ndarray
+    hpl_m: FloatArray | None = None
+    vpl_m: FloatArray | None = None
+    integrity_status: np.ndarray | None = None
+    fault_detected: BoolArray | None = None
+    fde_excluded: np.ndarray | None = None
 
     @property
     def n_uavs(self) -> int:
@@ -1021,6 +1078,7 @@ class UrbanWorld:
             (sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej),
             next_wp,
             n_swarm,
+            integrity,
         ) = navigate(rng, pos, sky, received, bias, pred_enu, dr_var)
         self.nav_pos_enu_m, self.nav_cov_enu_m2 = nav_pos, nav_cov
         self._warm = True
@@ -1060,13 +1118,17 @@ class UrbanWorld:
             standalone_rejected=sa_rej,
             coop_rejected=co_rej,
             next_waypoint=self.next_wp.copy(),
+            **({} if integrity is None else dict(zip(_INTEGRITY_FIELDS, integrity))),
         )
 
     def _navigate(self, rng, pos, sky, received, bias, pred_enu, dr_var):
         """Pseudoranges, relative sensing, both solvers, the estimate selection and the
         waypoints of one epoch, function by function (the definition of
         :meth:`_navigate_fused`). Returns ``rel_enu, avail, n_sats, centroid_uav, sa_status,
-        sa_n_iter, co_n_iter, the selection's ten arrays, next_wp, n_swarm``."""
+        sa_n_iter, co_n_iter, the selection's ten arrays, next_wp, n_swarm, integrity``
+        (``integrity``: None, or with ``config.integrity`` on the FDE of both solutions by
+        :func:`coopnav_env.sim._integrity.modular_fde` before the selection and the figures
+        of the estimates used)."""
         cfg = self.config
         n = cfg.n_uavs
         rx_ecef = self.enu_to_ecef(pos)
@@ -1090,9 +1152,13 @@ class UrbanWorld:
         centroid, linked, centroid_uav = self._centroids(n_sats, avail)
         x0_co = x0 if isinstance(centroid, str) else x0[centroid]
         co = self._solve_cooperative(obs, rel_enu, rel_var, avail, centroid, x0_co)
+        if cfg.integrity != "off":  # the FDE of the fused path, by the public functions
+            rows = self._relative_rows(rel_enu, rel_var, avail, centroid)
+            sa, co, used = _integrity.modular_fde(self, obs, sa, co, *rows, centroid)
 
         select = _select_navigation if _USE_KERNEL else _select_navigation_numpy
         sel = select(self, sa, co, linked, pred_enu, dr_var)
+        integrity = used(sel[5]) if cfg.integrity != "off" else None
         next_wp = advance_waypoints(self.route_xy_m, sel[6][:, :2], self.next_wp, cfg.route_reach_m)
         link_or_self = avail | np.eye(n, dtype=bool)
         n_swarm = (link_or_self.astype(np.int64) @ received.astype(np.int64) > 0).sum(axis=1)
@@ -1108,6 +1174,7 @@ class UrbanWorld:
             sel,
             next_wp,
             n_swarm,
+            integrity,
         )
 
     def _navigate_fused(self, rng, pos, sky, received, bias, pred_enu, dr_var):
@@ -1116,7 +1183,8 @@ class UrbanWorld:
         :func:`coopnav_env.sim._kernels.epoch_navigation` (the same kernels on the same
         arguments, so the same results bit for bit). The random draws are those of the
         modular path, in its order; the rotations to ECEF stay numpy matmuls (their rounding
-        is numpy's)."""
+        is numpy's). With ``config.integrity`` on, the call takes the integrity settings
+        (``fde``: the FDE of both solutions before the selection, in the same call)."""
         cfg = self.config
         n = cfg.n_uavs
         model = cfg.error_model
@@ -1137,7 +1205,7 @@ class UrbanWorld:
             rel_b, var_b, avail_b = rel_b[None], var_b[None], avail_b[None]
             cen, x0_co = np.array([centroid], dtype=np.int64), x0[centroid][None]
         gate = cfg.max_fix_sigma_m
-        sa_status, sa_n_iter, co_n_iter, sel, next_wp, n_swarm = _sim_kernels.epoch_navigation(
+        args = (
             range_m,
             el_deg,
             sv,
@@ -1176,6 +1244,14 @@ class UrbanWorld:
             float(cfg.route_reach_m),
             avail,
         )
+        if cfg.integrity == "off":
+            *out, _none = _sim_kernels.epoch_navigation(*args)
+            integrity = None
+        else:  # with RAIM / FDE between the solvers and the selection
+            fde = _integrity.fused_arguments(cfg, received)
+            *out, packed = _sim_kernels.epoch_navigation(*args, fde)
+            integrity = _integrity.unpack(packed)
+        sa_status, sa_n_iter, co_n_iter, sel, next_wp, n_swarm = out
         return (
             rel_enu,
             avail,
@@ -1187,6 +1263,7 @@ class UrbanWorld:
             sel,
             next_wp,
             n_swarm,
+            integrity,
         )
 
 
