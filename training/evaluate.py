@@ -99,6 +99,9 @@ class EpisodeRecord:
         Sum of the rewards of all UAVs, divided by N.
     length : int
         Steps.
+    h_error_m, hpl_m : ndarray, shape (T, N), or None
+        With integrity monitoring on (the env's ``integrity`` setting): the horizontal error of
+        the estimate used and its horizontal protection level (inf: none); None otherwise.
     """
 
     seed: int
@@ -113,6 +116,8 @@ class EpisodeRecord:
     collided: bool
     episode_return: float
     length: int
+    h_error_m: np.ndarray | None = None
+    hpl_m: np.ndarray | None = None
 
 
 @dataclass
@@ -144,10 +149,25 @@ class PolicyStats:
     return_mean: float
     length_mean: float
     wall_s: float
+    availability: float = math.nan
+    misleading_rate: float = math.nan
+    alert_limit_m: float = math.nan
 
     @classmethod
-    def from_episodes(cls, policy: str, eps: Sequence[EpisodeRecord], wall_s: float) -> PolicyStats:
-        """Aggregate episode records."""
+    def from_episodes(
+        cls,
+        policy: str,
+        eps: Sequence[EpisodeRecord],
+        wall_s: float,
+        alert_limit_m: float = 30.0,
+    ) -> PolicyStats:
+        """Aggregate episode records.
+
+        With integrity monitoring (records with ``hpl_m``): ``availability`` is the share of
+        UAV-steps whose horizontal protection level is within ``alert_limit_m``, and
+        ``misleading_rate`` the share whose true horizontal error exceeds the protection
+        level (:func:`coopnav_env.nav.integrity_rates`); NaN without integrity.
+        """
         coop = np.concatenate([e.coop_error_m.ravel() for e in eps])
         alone = np.concatenate([e.standalone_error_m.ravel() for e in eps])
         sats = np.concatenate([e.n_sats.ravel() for e in eps])
@@ -182,7 +202,32 @@ class PolicyStats:
             return_mean=float(np.mean([e.episode_return for e in eps])),
             length_mean=float(np.mean([e.length for e in eps])),
             wall_s=round(float(wall_s), 3),
+            **_integrity_stats(eps, alert_limit_m),
         )
+
+
+def _alert_limit_m(env: Any) -> float:
+    """The environment's horizontal alert limit (``alert_limit_m``; 30 m if it has none)."""
+    cfg = getattr(getattr(env, "unwrapped", env), "config", None)
+    return float(getattr(cfg, "alert_limit_m", 30.0))
+
+
+def _integrity_stats(eps: Sequence[EpisodeRecord], alert_limit_m: float) -> dict[str, float]:
+    """Availability and MI rate of episodes with integrity monitoring (else nothing)."""
+    if not eps or any(e.hpl_m is None or e.h_error_m is None for e in eps):
+        return {}
+    from coopnav_env.nav import integrity_rates
+
+    r = integrity_rates(
+        np.concatenate([e.h_error_m.ravel() for e in eps]),
+        np.concatenate([e.hpl_m.ravel() for e in eps]),
+        alert_limit_m,
+    )
+    return {
+        "availability": r.availability,
+        "misleading_rate": r.misleading_rate,
+        "alert_limit_m": float(alert_limit_m),
+    }
 
 
 def clustered_se(per_episode: Sequence[np.ndarray]) -> float:
@@ -257,7 +302,11 @@ _TABLE: tuple[tuple[str, str, str], ...] = (
     ("collisions", "collisions", "{:d}"),
     ("sats/UAV", "n_sats_mean", "{:.1f}"),
     ("return", "return_mean", "{:.1f}"),
+    ("availability", "availability", "{:.3f}"),
+    ("MI rate", "misleading_rate", "{:.4f}"),
 )
+_INTEGRITY_COLUMNS = ("availability", "misleading_rate")
+"""Shown only when some policy was evaluated with integrity monitoring on."""
 
 
 @dataclass
@@ -354,8 +403,12 @@ class Report:
 
     def to_markdown(self) -> str:
         """The summary table in GitHub Markdown."""
-        head = [t for t, _, _ in _TABLE]
-        rows = [[_fmt(getattr(s, f), fmt) for _, f, fmt in _TABLE] for s in self.stats]
+        integrity = any(
+            math.isfinite(getattr(s, f)) for s in self.stats for f in _INTEGRITY_COLUMNS
+        )
+        table = [c for c in _TABLE if integrity or c[1] not in _INTEGRITY_COLUMNS]
+        head = [t for t, _, _ in table]
+        rows = [[_fmt(getattr(s, f), fmt) for _, f, fmt in table] for s in self.stats]
         lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
         lines += ["| " + " | ".join(r) + " |" for r in rows]
         return "\n".join(lines)
@@ -451,6 +504,9 @@ def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) 
         k: []
         for k in ("coop_error_m", "standalone_error_m", "n_sats", "n_sats_swarm", "nav_error_m")
     }
+    integrity = bool(infos) and "hpl_m" in next(iter(infos.values()))
+    h_rows: list[np.ndarray] = []
+    pl_rows: list[np.ndarray] = []
     pos0 = _true_positions(env, infos)
     positions = [pos0] if pos0 is not None else None
     goal = np.zeros(n, dtype=bool)
@@ -466,6 +522,12 @@ def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) 
         total += float(sum(rewards.values()))
         for key, lst in rows.items():
             lst.append(np.array([_info_float(infos.get(a, {}), key) for a in agents]))
+        if integrity:
+            h_rows.append(
+                np.array([_info_float(infos.get(a, {}), "nav_h_error_m") for a in agents])
+            )
+            pl = np.array([_info_float(infos.get(a, {}), "hpl_m") for a in agents])
+            pl_rows.append(np.where(pl >= 0.0, pl, np.inf))  # the infos' -1: none
         at_goal = np.array([_in_goal(infos.get(a, {})) for a in agents])
         goal |= at_goal
         collided |= any(bool(infos.get(a, {}).get("collided", False)) for a in agents)
@@ -490,6 +552,8 @@ def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) 
         collided=collided,
         episode_return=total / n,
         length=steps,
+        h_error_m=np.array(h_rows, dtype=float).reshape(-1, n) if integrity else None,
+        hpl_m=np.array(pl_rows, dtype=float).reshape(-1, n) if integrity else None,
     )
 
 
@@ -569,7 +633,8 @@ def evaluate(
         eps = [run_episode(envs[name], made[name], s) for s in seeds]
         wall = time.perf_counter() - t0
         records[name] = eps
-        stats.append(PolicyStats.from_episodes(name, eps, wall))
+        alert = _alert_limit_m(envs[name])
+        stats.append(PolicyStats.from_episodes(name, eps, wall, alert))
         if verbose:
             print(f"  {name}: {len(eps)} episodes in {wall:.1f} s", file=sys.stderr)
 
