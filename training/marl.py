@@ -73,6 +73,7 @@ from agents.marl_nets import (
     load_marl_checkpoint,
     swarm_command,
 )
+from training.envs import EVAL_SEED_START
 from training.files import atomic_path, atomic_write_text, write_json, write_yaml
 from training.runs import (
     checkpoint_candidates,
@@ -150,9 +151,18 @@ class MARLTrainer:
         ``urban_canyon_v0`` settings of every swarm copy.
     seed : int
         Copy ``k`` is reset with ``seed + k`` at the start; torch is seeded with ``seed``.
+    env_seed : int, optional
+        Reset seed of the copies instead of ``seed`` (a resumed run: ``seed`` plus the
+        agent-steps done, so that it meets new episodes).
     """
 
-    def __init__(self, settings: MARLSettings, env_kwargs: Mapping[str, Any], seed: int) -> None:
+    def __init__(
+        self,
+        settings: MARLSettings,
+        env_kwargs: Mapping[str, Any],
+        seed: int,
+        env_seed: int | None = None,
+    ) -> None:
         import torch
         from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
@@ -199,7 +209,7 @@ class MARLTrainer:
         self.agent_steps = 0
         self.iterations = 0
         self._bases = self._make_bases()
-        obs, _ = self.venv.reset(seed=self.seed)
+        obs, _ = self.venv.reset(seed=self.seed if env_seed is None else int(env_seed))
         self._obs = obs.copy()
         for b in self._bases:
             if b is not None:
@@ -395,6 +405,11 @@ class MARLTrainer:
 
     def load_state_dict(self, d: Mapping[str, Any]) -> None:
         """Continue from :meth:`state_dict` (weights, optimiser, reward scale, counters)."""
+        if d.get("policy_only"):
+            raise ValueError(
+                "this is an exported policy (actor only, export_policy): it can be evaluated "
+                "but not resumed; resume from the run's own checkpoint"
+            )
         self.actor.load_state_dict(d["actor"])
         self.critic.load_state_dict(d["critic"])
         self.optim.load_state_dict(d["optimizer"])
@@ -618,7 +633,11 @@ def train_marl(
 
     out = Path(out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
-    trainer = MARLTrainer(settings, env_kwargs, seed)
+    # a resumed run continues with new episodes (training seeds below the held-out ones)
+    env_seed = None
+    if resume is not None:
+        env_seed = (seed + int(resume["agent_steps"])) % (EVAL_SEED_START - settings.n_copies)
+    trainer = MARLTrainer(settings, env_kwargs, seed, env_seed=env_seed)
     if resume is not None:
         trainer.load_state_dict(resume)
     rows: list[dict[str, float]] = []
