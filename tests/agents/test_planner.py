@@ -7,26 +7,15 @@ import pytest
 
 from agents import make_policy
 from coopnav_env import urban_canyon_v0
+from tests.fly_alike import assert_fly_alike
 
 
 def test_with_only_the_zero_candidate_the_planner_flies_its_base() -> None:
     # one candidate, one round: the offset is zero, so the command is the base's, and the
     # look-ahead in copies must not disturb the real episode (its generator included)
-    env_p = urban_canyon_v0.parallel_env()
-    env_b = urban_canyon_v0.parallel_env()
-    planner = make_policy("planner@n_samples=1,n_elite=1,iterations=1,horizon=2", env_p)
-    base = make_policy("spread", env_b)
-    obs_p, _ = env_p.reset(seed=1_000_001)
-    obs_b, _ = env_b.reset(seed=1_000_001)
-    planner.reset(1_000_001)
-    base.reset(1_000_001)
-    for _ in range(15):
-        a_p, a_b = planner.act(obs_p), base.act(obs_b)
-        for a in a_p:
-            np.testing.assert_array_equal(a_p[a], a_b[a])
-        obs_p, r_p, *_ = env_p.step(a_p)
-        obs_b, r_b, *_ = env_b.step(a_b)
-        assert r_p == r_b
+    assert_fly_alike(
+        "planner@n_samples=1,n_elite=1,iterations=1,horizon=2", "spread", seed=1_000_001, steps=15
+    )
 
 
 def test_the_planner_chooses_the_cheapest_candidate() -> None:

@@ -13,6 +13,7 @@ torch = pytest.importorskip("torch")
 from agents import make_policy  # noqa: E402
 from agents.marl_nets import MARLSettings  # noqa: E402
 from coopnav_env import urban_canyon_v0  # noqa: E402
+from tests.fly_alike import assert_fly_alike  # noqa: E402
 from training.cli import main  # noqa: E402
 from training.marl import MARLTrainer  # noqa: E402
 
@@ -86,22 +87,7 @@ def test_an_untrained_offset_policy_flies_exactly_like_its_base(tmp_path) -> Non
     )
     tr = MARLTrainer(s, {}, seed=0)
     tr.save(tmp_path / "final_model.pt")
-    env_a = urban_canyon_v0.parallel_env()
-    env_b = urban_canyon_v0.parallel_env()
-    learned = make_policy(f"mappo:{tmp_path}", env_a)
-    base = make_policy("spread", env_b)
-    obs_a, _ = env_a.reset(seed=1_000_003)
-    obs_b, _ = env_b.reset(seed=1_000_003)
-    learned.reset(1_000_003)
-    base.reset(1_000_003)
-    for _ in range(40):
-        act_a, act_b = learned.act(obs_a), base.act(obs_b)
-        for a in act_a:
-            np.testing.assert_array_equal(act_a[a], act_b[a])
-        obs_a, *_ = env_a.step(act_a)
-        obs_b, *_ = env_b.step(act_b)
-        if not env_a.agents:
-            break
+    assert_fly_alike(f"mappo:{tmp_path}", "spread", seed=1_000_003, steps=40)
 
 
 def test_train_checkpoint_resume_evaluate_through_the_cli(tmp_path, capsys) -> None:
