@@ -100,6 +100,7 @@ class _ColumnFollower:
         self._sky = self.layout["skyline"].slice
         self._present = self.layout.neighbour_present_indices()
         self._path: Polyline | None = None
+        self._shifts: np.ndarray | None = None  # learned slot shifts (set_slot_shifts)
 
     # -- to be specialised ----------------------------------------------------------------
 
@@ -193,10 +194,9 @@ class _ColumnFollower:
         self._shifts = arr
 
     def _slot_shift(self, idx: np.ndarray) -> np.ndarray:
-        shifts = getattr(self, "_shifts", None)
-        if shifts is None:
+        if self._shifts is None:
             return np.zeros((idx.size, 3))
-        return shifts[idx]
+        return self._shifts[idx]
 
     def _spacing_now(self) -> float:
         """Slot spacing: ``spacing_m`` en route, closing linearly to ``goal_spacing_m`` over

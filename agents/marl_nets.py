@@ -193,14 +193,16 @@ def build_modules(
     # centralized=False) computes; TorchRL's MLP is used because, with torchrl 0.14,
     # MultiAgentMLP's vmapped parameters receive no gradient through ClipPPOLoss's
     # functional parameters (zero gradient on every weight, checked here).
-    depth, width = len(settings.hidden), settings.hidden[0]
-    loc_net = MLP(
-        in_features=actor_dim,
-        out_features=3,
-        depth=depth,
-        num_cells=width,
-        activation_class=nn.Tanh,
-    )
+    def mlp(in_features: int, out_features: int) -> MLP:
+        return MLP(
+            in_features=in_features,
+            out_features=out_features,
+            depth=len(settings.hidden),
+            num_cells=settings.hidden[0],
+            activation_class=nn.Tanh,
+        )
+
+    loc_net = mlp(actor_dim, 3)
     if settings.residual_base is not None:
         # start exactly at the base policy: the output layer is zero (its weight still gets
         # a gradient, the hidden layers do once it is no longer zero)
@@ -224,13 +226,7 @@ def build_modules(
         return_log_prob=True,
         log_prob_key=("agents", "action_log_prob"),
     )
-    critic_net = MLP(
-        in_features=critic_dim,
-        out_features=1,
-        depth=depth,
-        num_cells=width,
-        activation_class=nn.Tanh,
-    )
+    critic_net = mlp(critic_dim, 1)
     critic = TensorDictModule(
         critic_net,
         in_keys=[("agents", "critic_input")],

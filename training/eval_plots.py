@@ -89,7 +89,8 @@ def _pyplot() -> Any:
     return plt
 
 
-def _save(fig: Figure, path: str | Path, dpi: int) -> Path:
+def save_figure(fig: Figure, path: str | Path, dpi: int = 120) -> Path:
+    """Write ``fig`` to ``path`` (PNG) through a temporary file, and close it."""
     path = Path(path)
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
@@ -157,7 +158,7 @@ def error_cdf_figure(
 def plot_error_cdf(report: Any, path: str | Path, threshold_m: float = 3.0) -> Path:
     """Write the error CDF of a :class:`training.evaluate.Report` to ``path`` (PNG), with a
     labelled line at ``threshold_m`` (``training.evaluate.ERROR_THRESHOLD_M``)."""
-    return _save(error_cdf_figure(report.episodes, threshold_m), path, dpi=120)
+    return save_figure(error_cdf_figure(report.episodes, threshold_m), path, dpi=120)
 
 
 # --------------------------------------------------------------------------------------------
@@ -301,5 +302,5 @@ def plot_trajectories(env: Any, record: Any, path: str | Path, title: str = "") 
     fig = trajectory_figure(env, record, title)
     if fig is None:
         return False
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
     return True

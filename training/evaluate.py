@@ -49,7 +49,7 @@ from coopnav_env.envs.urban_canyon import fix_error_m
 from training.compile_notice import compile_notice, warm_up_env
 from training.config import apply_overrides, parse_yaml
 from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
-from training.files import atomic_path, atomic_write_text, ensure_folder, write_json
+from training.files import atomic_path, atomic_write_text, ensure_folder, jsonable, write_json
 
 __all__ = [
     "DEFAULT_EPISODES",
@@ -347,7 +347,7 @@ class Report:
         span = f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
         source = f"; {self.env_source}" if self.env_source else ""
         return (
-            f"Environment `{self.env_id}`, settings `{json.dumps(_jsonable(self.env_kwargs))}` "
+            f"Environment `{self.env_id}`, settings `{json.dumps(jsonable(self.env_kwargs))}` "
             f"(all others at their defaults{source}); {len(seeds)} held-out episodes (reset "
             f"seeds {span})."
         )
@@ -362,13 +362,13 @@ class Report:
         """JSON-serialisable summary (NaN written as null)."""
         return {
             "env_id": self.env_id,
-            "env_kwargs": _jsonable(self.env_kwargs),
+            "env_kwargs": jsonable(self.env_kwargs),
             "env_source": self.env_source,
             "seeds": list(self.seeds),
             "error_threshold_m": ERROR_THRESHOLD_M,
-            "policies": [_jsonable(asdict(s)) for s in self.stats],
+            "policies": [jsonable(asdict(s)) for s in self.stats],
             "episodes": {
-                name: [_jsonable(_episode_summary(e)) for e in eps]
+                name: [jsonable(_episode_summary(e)) for e in eps]
                 for name, eps in self.episodes.items()
             },
         }
@@ -418,22 +418,6 @@ def _fmt(value: Any, fmt: str) -> str:
     if isinstance(value, float) and not math.isfinite(value):
         return "n/a"
     return fmt.format(value)
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
 
 
 def _slug(name: str) -> str:
@@ -871,7 +855,7 @@ def _warn_untracked(
     print(
         f"coopnav evaluate: warning: no config.yaml of a training run beside (or one or two "
         f"folders above) {', '.join(missing)}: evaluating in {env_id} with {where}, settings "
-        f"{json.dumps(_jsonable(dict(env_kwargs)))}"
+        f"{json.dumps(jsonable(dict(env_kwargs)))}"
         + (f" (resolved: {resolved})" if resolved else "")
         + ". If it was trained with other settings (rewards, n_uavs, max_steps, ...), its "
         "returns and goal rate are not comparable; pass --train-config RUN/config.yaml or the "

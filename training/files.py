@@ -27,6 +27,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "ensure_folder",
+    "jsonable",
     "write_json",
     "write_yaml",
 ]
@@ -127,3 +128,27 @@ def write_yaml(path: str | Path, data: Any) -> Path:
 def write_json(path: str | Path, data: Any) -> Path:
     """Write ``data`` as JSON indented by 2 with a final newline, atomically."""
     return atomic_write_text(path, json.dumps(data, indent=2) + "\n")
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` with numpy scalars and arrays, paths and tuples turned into JSON types;
+    non-finite floats become None (JSON has no NaN or inf)."""
+    import math
+
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, bool | np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(float(obj)) else None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj

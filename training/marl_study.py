@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 import time
 from collections.abc import Mapping, Sequence
@@ -33,6 +32,9 @@ from typing import Any
 
 import numpy as np
 
+from training.envs import heldout_seeds
+from training.eval_plots import save_figure
+from training.files import atomic_write_text, jsonable
 from training.stats import (
     Interval,
     interquartile_mean,
@@ -48,7 +50,6 @@ __all__ = [
     "summarise",
 ]
 
-EVAL_SEED_START = 1_000_000
 NEAR_M = 10.0
 
 
@@ -321,7 +322,7 @@ def plot_learning_curves(
         fontsize=10,
     )
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=110)
 
 
 def _smooth(vals: np.ndarray, k: int) -> np.ndarray:
@@ -336,17 +337,6 @@ def _t975(dof: int) -> float:
     """97.5 % quantile of Student's t (table for small dof, normal beyond)."""
     table = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306}
     return table.get(dof, 1.96 if dof > 30 else 2.2)
-
-
-def _save(fig: Any, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
 
 
 def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
@@ -371,7 +361,7 @@ def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
     ax.legend(loc="lower right", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=110)
 
 
 def plot_trajectories(
@@ -436,7 +426,7 @@ def plot_trajectories(
     fig.suptitle(f"Episode seed {seed}: from above and from the side (one line per UAV)")
     fig.tight_layout()
     env.close()
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=110)
 
 
 def _short(name: str) -> str:
@@ -447,27 +437,6 @@ def _short(name: str) -> str:
 
 def _fmt_iv(d: Mapping[str, float], nd: int = 2) -> str:
     return f"{d['value']:.{nd}f} [{d['low']:.{nd}f}, {d['high']:.{nd}f}]"
-
-
-def _write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float | np.floating):
-        return float(obj) if math.isfinite(float(obj)) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
 
 
 def _interval(d: Mapping[str, float]) -> Interval:
@@ -559,8 +528,6 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     groups = _parse_runs(args.runs)
-    if args.episodes < 1:
-        raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
     env_kwargs: dict[str, Any] = {}
     first = next(iter(groups.values()), [])
     if first:
@@ -570,7 +537,7 @@ def run(args: argparse.Namespace) -> int:
         if not eq:
             raise ValueError(f"--env-set takes KEY=VALUE, got {item!r}")
         env_kwargs[k] = yaml.safe_load(v)
-    seeds = list(range(EVAL_SEED_START, EVAL_SEED_START + args.episodes))
+    seeds = heldout_seeds(args.episodes)
     units: list[tuple[str, str, list[int]]] = [(h, h, seeds) for h in args.heuristics]
     for name, dirs in groups.items():
         units += [(name, _policy_name(d), seeds) for d in dirs]
@@ -626,8 +593,8 @@ def run(args: argparse.Namespace) -> int:
         "command": "coopnav study " + " ".join(sys.argv[2:]),
         "wall_s": time.perf_counter() - t0,
     }
-    _write(out / "report.json", json.dumps(_jsonable(data), indent=1, sort_keys=True))
-    _write(out / "report.md", report_markdown(data))
+    atomic_write_text(out / "report.json", json.dumps(jsonable(data), indent=1, sort_keys=True))
+    atomic_write_text(out / "report.md", report_markdown(data))
     print(f"wrote {out / 'report.md'}", file=sys.stderr)
     return 0
 
