@@ -188,17 +188,15 @@ def _world(env: Any) -> dict[str, Any]:
 
 def distance_along_route(xy: np.ndarray, route: np.ndarray) -> np.ndarray:
     """Arc length [m] of the point of the polyline ``route`` (n_r, 2) nearest each of ``xy``
-    (..., 2): how far along the route a position is."""
-    a, b = route[:-1], route[1:]
-    seg = b - a
-    length = np.linalg.norm(seg, axis=1)
-    start = np.concatenate([[0.0], np.cumsum(length)])[:-1]
-    pts = np.asarray(xy, dtype=float)[..., None, :]  # (..., 1, 2)
-    t = np.clip(np.sum((pts - a) * seg, axis=-1) / np.maximum(length**2, 1e-12), 0.0, 1.0)
-    near = a + t[..., None] * seg
-    d2 = np.sum((pts - near) ** 2, axis=-1)
-    k = np.argmin(d2, axis=-1)
-    return np.take_along_axis(start + t * length, k[..., None], axis=-1)[..., 0]
+    (..., 2): how far along the route a position is (:meth:`Polyline.project` over the
+    whole route)."""
+    from coopnav_env.sim.route import Polyline
+
+    line = Polyline(np.asarray(route, dtype=float))
+    pts = np.asarray(xy, dtype=float)
+    flat = pts.reshape(-1, 2)
+    n = flat.shape[0]
+    return line.project(flat, np.zeros(n), np.full(n, line.length)).reshape(pts.shape[:-1])
 
 
 def _flown_distance(xy: np.ndarray) -> np.ndarray:

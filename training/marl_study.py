@@ -33,10 +33,9 @@ from typing import Any
 import numpy as np
 
 from training.envs import heldout_seeds
-from training.eval_plots import save_figure
+from training.eval_plots import distance_along_route, save_figure, short_label
 from training.files import atomic_write_text, jsonable
 from training.stats import (
-    Interval,
     interquartile_mean,
     paired_difference,
     stratified_bootstrap_ci,
@@ -302,7 +301,7 @@ def plot_learning_curves(
     for h, v in ref.items():
         axes[0].axhline(v, ls="--", lw=0.8, color="grey")
         axes[0].annotate(
-            f"{_short(h)}: {v:.2f}",
+            f"{short_label(h)}: {v:.2f}",
             (1.0, v),
             xycoords=("axes fraction", "data"),
             xytext=(3, 0),
@@ -354,7 +353,7 @@ def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
         lo = np.array([summary["methods"][n][key]["low"] for n in names])
         hi = np.array([summary["methods"][n][key]["high"] for n in names])
         ax.errorbar(v, y + off, xerr=[v - lo, hi - v], fmt="o", capsize=3, label=lab)
-    ax.set_yticks(y, [_short(n) for n in names], fontsize=8)
+    ax.set_yticks(y, [short_label(n) for n in names], fontsize=8)
     ax.invert_yaxis()
     ax.set_xlabel("cooperative 3-D error per episode [m]", fontsize=9)
     ax.set_title("mean and IQM with 95 % stratified-bootstrap intervals", fontsize=9)
@@ -376,13 +375,12 @@ def plot_trajectories(
     from matplotlib.patches import Rectangle
 
     from coopnav_env import urban_canyon_v0
-    from coopnav_env.sim.route import Polyline
 
     env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
     env.reset(seed=seed)
     world = env.unwrapped.world
     b = world.city.buildings
-    route = Polyline(np.asarray(world.route_xy_m))
+    route_xy = np.asarray(world.route_xy_m)
     names = list(flights)
     fig, axes = plt.subplots(
         2, len(names), figsize=(4.0 * len(names), 5.6), gridspec_kw={"height_ratios": [2, 1.5]}
@@ -404,18 +402,14 @@ def plot_trajectories(
         ax.set_xlim(lo_xy[0], hi_xy[0])
         ax.set_ylim(lo_xy[1], hi_xy[1])
         ax.set_aspect("equal", adjustable="datalim")
-        ax.set_title(_short(name), fontsize=9)
+        ax.set_title(short_label(name), fontsize=9)
         ax.set_xlabel("East [m]", fontsize=8)
         if j == 0:
             ax.set_ylabel("North [m]", fontsize=8)
             ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.3), ncol=3)
         side = axes[1, j]
         t = np.arange(pos.shape[0])
-        s = route.project(
-            pos[:, :, :2].reshape(-1, 2),
-            np.zeros(pos.shape[0] * pos.shape[1]),
-            np.full(pos.shape[0] * pos.shape[1], route.length),
-        ).reshape(pos.shape[0], pos.shape[1])
+        s = distance_along_route(pos[:, :, :2], route_xy)
         for i in range(pos.shape[1]):
             side.plot(s[:, i], pos[:, i, 2], lw=1.0)
         side.set_ylim(0, 32)
@@ -429,18 +423,8 @@ def plot_trajectories(
     return save_figure(fig, path, dpi=110)
 
 
-def _short(name: str) -> str:
-    """Policy label for plots: heuristic options abbreviated."""
-    base, _, opts = name.partition("@")
-    return base if not opts else f"{base} (tuned)"
-
-
 def _fmt_iv(d: Mapping[str, float], nd: int = 2) -> str:
     return f"{d['value']:.{nd}f} [{d['low']:.{nd}f}, {d['high']:.{nd}f}]"
-
-
-def _interval(d: Mapping[str, float]) -> Interval:
-    return Interval(d["value"], d["low"], d["high"])
 
 
 # ---- command ------------------------------------------------------------------------------
