@@ -9,7 +9,10 @@ name                      policy
 ``sky``                   like ``formation``, but each UAV steers toward open sky while
                           keeping contact with its neighbours (:mod:`agents.heuristics`)
 ``spread``                ``sky`` as a stretched column (20 m spacing) that closes up at the
-                          goal: the tuned heuristic (:mod:`agents.heuristics`)
+                          goal (:mod:`agents.heuristics`)
+``wide``                  ``spread`` as a 45 m column that opens ahead of the start and
+                          closes at the goal: the best heuristic of the learning study
+                          (:mod:`agents.heuristics`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
 ``planner``               privileged MPC that looks ahead in copies of the environment with
@@ -52,6 +55,7 @@ POLICY_NAMES: tuple[str, ...] = (
     "formation",
     "sky",
     "spread",
+    "wide",
     "waypoint",
     "planner",
     "ppo:<path>",
@@ -123,10 +127,14 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import SpreadColumnPolicy
 
         return SpreadColumnPolicy(env, **kwargs)
+    if name == "wide":
+        from agents.heuristics import WideColumnPolicy
+
+        return WideColumnPolicy(env, **kwargs)
     if name == "planner":
         from agents.planner import PrivilegedPlanner
 
-        base = kwargs.pop("base", "spread")
+        base = kwargs.pop("base", "wide")
         return PrivilegedPlanner(env, make_policy(base, env), **kwargs)
     if name == "waypoint":
         from agents.heuristics import WaypointPolicy

@@ -8,7 +8,7 @@ future exactly but not its noise: it cannot pick a path for a lucky noise draw. 
 swarm's velocity commands by sampling-based model-predictive control: at every step it
 
 1. proposes ``n_samples`` candidate plans: the command of a base heuristic (default
-   :class:`~agents.heuristics.SpreadColumnPolicy`, copied with the environment so that it
+   :class:`~agents.heuristics.WideColumnPolicy`, copied with the environment so that it
    keeps planning the route) plus a per-UAV velocity offset held for the horizon (one
    candidate is always the base alone, offset zero);
 2. flies each candidate ``horizon`` steps in a deep copy of the environment (with fresh noise) and
@@ -48,8 +48,8 @@ class PrivilegedPlanner:
     env : urban_canyon_v0 ParallelEnv
         The environment itself (the planner copies it; it must be the object being stepped).
     base : Policy
-        The base heuristic, acting in ``env`` (:func:`agents.make_policy` builds ``spread``
-        unless told otherwise with ``planner@base='sky'``).
+        The base heuristic, acting in ``env`` (:func:`agents.make_policy` builds ``wide``,
+        the best heuristic, unless told otherwise, e.g. ``planner@base='spread'``).
     horizon : int
         Look-ahead steps, >= 1.
     n_samples, n_elite, iterations : int

@@ -117,7 +117,7 @@ def test_heuristics_use_the_route_module():
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["random", "formation", "sky", "waypoint"])
+@pytest.mark.parametrize("name", ["random", "formation", "sky", "spread", "wide", "waypoint"])
 def test_policies_give_valid_actions_on_the_env(name):
     env = urban(max_steps=25)
     pol = make_policy(name, env)
@@ -128,7 +128,7 @@ def test_policies_give_valid_actions_on_the_env(name):
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["formation", "sky", "waypoint"])
+@pytest.mark.parametrize("name", ["formation", "sky", "spread", "wide", "waypoint"])
 def test_heuristics_reach_the_goal_along_the_canyon(name):
     """The paper's straight canyon: flying the street is enough to get there."""
     env = urban(city="canyon", n_uavs=4, max_steps=120)
@@ -180,3 +180,40 @@ def test_waypoint_follower_turns_corners_of_the_grid():
         infos, _ = fly(env, pol, seed=seed)
         reached += all(infos[a]["in_goal"] for a in env.possible_agents)
     assert reached >= 3
+
+
+@needs_env
+def test_opening_column_starts_tight_and_opens_ahead():
+    """``open_distance_m``: the column starts at ``goal_spacing_m`` and opens to ``spacing_m``
+    as the head advances, its tail held (the rear UAV is not sent back along the route)."""
+    env = urban()
+    pol = make_policy("spread@spacing_m=30,close_distance_m=120,open_distance_m=96", env)
+    obs, _ = env.reset(seed=1_000_000)
+    pol.reset(1_000_000)
+    pol.act(obs)
+    head0 = pol._head0
+    assert pol._spacing_now() == pytest.approx(6.0 + 24.0 * (pol._head - head0) / 96.0)
+    assert pol._spacing_now() < 10.0
+    tail = pol._head - 4 * pol._spacing_now()
+    for _ in range(40):
+        obs, *_ = env.step(pol.act(obs))
+        # with open_distance = (N - 1)(spacing - goal_spacing) the tail's slot never goes back
+        new_tail = pol._head - 4 * pol._spacing_now()
+        assert new_tail >= tail - 1e-9
+        tail = new_tail
+    assert pol._head - head0 > 96.0
+    assert pol._spacing_now() == pytest.approx(30.0)
+    with pytest.raises(ValueError, match="open_distance_m"):
+        make_policy("spread@open_distance_m=0", env)
+
+
+@needs_env
+def test_wide_column_defaults_follow_its_spacing():
+    """``wide``: close over 4 x spacing, open over (N - 1)(spacing - goal spacing); options
+    after ``@`` still override them."""
+    env = urban(n_uavs=4)
+    pol = make_policy("wide", env)
+    assert (pol.spacing_m, pol.goal_spacing_m) == (45.0, 6.0)
+    assert pol.close_distance_m == 180.0 and pol.open_distance_m == 3 * 39.0
+    pol = make_policy("wide@spacing_m=30,open_distance_m=50", env)
+    assert pol.close_distance_m == 120.0 and pol.open_distance_m == 50.0

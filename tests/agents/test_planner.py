@@ -14,7 +14,13 @@ def test_with_only_the_zero_candidate_the_planner_flies_its_base() -> None:
     # one candidate, one round: the offset is zero, so the command is the base's, and the
     # look-ahead in copies must not disturb the real episode (its generator included)
     assert_fly_alike(
-        "planner@n_samples=1,n_elite=1,iterations=1,horizon=2", "spread", seed=1_000_001, steps=15
+        "planner@n_samples=1,n_elite=1,iterations=1,horizon=2", "wide", seed=1_000_001, steps=15
+    )
+    assert_fly_alike(
+        "planner@n_samples=1,n_elite=1,iterations=1,horizon=1,base='spread'",
+        "spread",
+        seed=1_000_001,
+        steps=10,
     )
 
 
