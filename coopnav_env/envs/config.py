@@ -267,6 +267,13 @@ PRESETS: dict[str, dict[str, Any]] = {
         "alert_limit_m": 30.0,
     },
 }
+#: ``"urban_nlos_3dma"``: the reception and FDE of ``"urban_nlos"``, plus 3D-mapping-aided NLOS
+#: exclusion (``nlos_exclusion="map"``, :mod:`coopnav_env.sim.map_aided`): each UAV does not use
+#: the satellites the city model predicts blocked within 2 sigma (at most 10 m) of the position
+#: it believes it is at; FDE deals with the NLOS rows the prediction lets through. Fewer
+#: satellites per fix, far fewer faults among them (``benchmarks/study_urban_nlos.py`` measures
+#: both presets side by side). The infos add ``n_map_excluded``.
+PRESETS["urban_nlos_3dma"] = {**PRESETS["urban_nlos"], "nlos_exclusion": "map"}
 
 
 def preset_config(name: str, **overrides: Any) -> UrbanCanyonConfig:
