@@ -11,7 +11,9 @@ heuristics (``agents.make_policy``), in three variants:
 * ``map``: the ``urban_nlos_3dma`` preset: the same FDE after 3D-mapping-aided NLOS
   exclusion (``nlos_exclusion="map"``, ``coopnav_env.sim.map_aided``: satellites the city
   model predicts blocked within 2 sigma of the position a UAV believes it is at are not
-  used).
+  used), with the fix gate ``max_fix_sigma_m`` at 15 m instead of 30 m;
+* the two controls that separate the map from the gate: ``fde15`` (``urban_nlos`` with the
+  15 m gate) and ``map30`` (``urban_nlos_3dma`` with the 30 m gate).
 
 The same episode seeds for every variant (the episodes still differ: the policies fly by
 the estimates).
@@ -37,7 +39,7 @@ the standard deviation of the statistic over them.
 
 Usage::
 
-    python benchmarks/study_urban_nlos.py                      # 40 episodes per variant
+    python benchmarks/study_urban_nlos.py                      # 200 episodes per variant
     python benchmarks/study_urban_nlos.py --episodes 10 --variants fde map --json study.json
 """
 
@@ -61,13 +63,20 @@ from coopnav_env.nav import integrity_rates
 
 ALERT_LIMIT_M = 30.0
 RECEPTION = ("nlos_probability", "nlos_bias_mean_m", "nlos_bias_floor_m")
-VARIANTS = ("off", "fde", "map")
-_PRESET = {"fde": "urban_nlos", "map": "urban_nlos_3dma"}
+VARIANTS = ("off", "fde", "fde15", "map30", "map")
+_PRESET = {
+    "fde": "urban_nlos",
+    "fde15": "urban_nlos",
+    "map30": "urban_nlos_3dma",
+    "map": "urban_nlos_3dma",
+}
+# the controls: each preset with the other one's fix gate (max_fix_sigma_m)
+_GATE = {"fde15": {"max_fix_sigma_m": 15.0}, "map30": {"max_fix_sigma_m": 30.0}}
 
 
 def variant_config(variant: str, n_uavs: int) -> dict:
-    """The environment arguments of one variant: the preset's reception, and ``off``: no
-    defence, ``fde``: the ``urban_nlos`` preset, ``map``: the ``urban_nlos_3dma`` preset."""
+    """The environment arguments of one variant (:data:`VARIANTS`, see the module
+    docstring)."""
     if variant not in VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; variants are {VARIANTS}")
     if variant == "off":
@@ -76,6 +85,7 @@ def variant_config(variant: str, n_uavs: int) -> dict:
         kw = dict(PRESETS[_PRESET[variant]])
         kw["alert_limit_m"] = ALERT_LIMIT_M
     kw["n_uavs"] = n_uavs
+    kw.update(_GATE.get(variant, {}))
     return kw
 
 
@@ -143,7 +153,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--episodes", type=int, default=40, help="episodes per variant (40)")
+    ap.add_argument("--episodes", type=int, default=200, help="episodes per variant (200)")
     ap.add_argument("--first-seed", type=int, default=1000, help="seed of the first episode")
     ap.add_argument("--n-uavs", type=int, default=5, help="swarm size (5)")
     ap.add_argument(
@@ -154,7 +164,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         nargs="+",
         default=list(VARIANTS),
         choices=VARIANTS,
-        help="variants (off fde map)",
+        help="variants (off fde fde15 map30 map)",
     )
     ap.add_argument("--bootstrap", type=int, default=400, help="bootstrap resamples (400)")
     ap.add_argument("--json", default=None, help="also write the figures to this JSON file")
@@ -168,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     seeds = list(range(args.first_seed, args.first_seed + args.episodes))
     out: dict = {"episodes": args.episodes, "seeds": seeds, "results": {}}
-    head = f"{'policy':>10} {'def.':>4} | {'UAV-steps':>9} | {'coop OK':>7} | "
+    head = f"{'policy':>10} {'def.':>5} | {'UAV-steps':>9} | {'coop OK':>7} | "
     head += f"{'p95 coop [m]':>13} | {'OK > 30 m':>16} | {'> 3 sig':>16} | "
     head += f"{'p95 used [m]':>13} | {'avail':>5} | "
     head += f"{'MI':>7} | {'HMI':>7}"
@@ -180,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
             fig = figures(eps)
             se = bootstrap_se(eps, args.bootstrap, seed=0)
             out["results"][f"{policy}/{variant}"] = {"figures": fig, "se": se}
-            line = f"{policy:>10} {variant:>4} | {fig['uav_steps']:9d} | {fig['coop_ok']:7.3f} | "
+            line = f"{policy:>10} {variant:>5} | {fig['uav_steps']:9d} | {fig['coop_ok']:7.3f} | "
             line += f"{fig['p95_coop_m']:5.1f} +- {se['p95_coop_m']:4.1f} | "
             line += f"{fig['ok_over_30m']:6.4f} +- {se['ok_over_30m']:.4f} | "
             line += f"{fig['ok_over_30m_3sig']:6.4f} +- {se['ok_over_30m_3sig']:.4f} | "

@@ -7,10 +7,11 @@ positive range bias of metres to hundreds of metres, and in the ``urban_nlos`` p
 once the least-squares fix is pulled toward them, the residuals of the faulty rows shrink
 and those of good rows grow (masking), and one-at-a-time exclusion by the largest normalised
 residual can stop with a wrong fix that the test accepts. The field's standard answer in
-urban canyons is 3D-mapping-aided (3DMA) GNSS (Groves 2011, "Shadow matching"; Hsu et al.
-2016, "3D building model-based pedestrian positioning"; the "NLOS exclusion" step of 3DMA
-ranging): the receiver knows the buildings around it and its approximate position, predicts
-from them which satellites are in line of sight, and does not use the ones predicted blocked.
+urban canyons is 3D-mapping-aided (3DMA) GNSS (Groves, J. Navigation 2011, shadow
+matching; Hsu, Gu and Kamijo, GPS Solutions 2016; Groves and Adjrad, GPS Solutions 2017; the
+NLOS exclusion step of 3DMA ranging): the receiver knows the buildings around it and its
+approximate position, predicts from them which satellites are in line of sight, and does not
+use the ones predicted blocked.
 This module is that step; the environment applies it with ``nlos_exclusion="map"``
 (:class:`~coopnav_env.sim.scenario.ScenarioConfig`) before the solvers and before the
 residual test, which then deals with the NLOS rows the prediction lets through.
@@ -30,6 +31,49 @@ row let through can cost the fix (the residual test is what remains against it).
 candidate is inside a building (the estimate is badly off) the map says nothing and every
 satellite is kept.
 
+Why this design
+---------------
+The single-fault FDE of :mod:`coopnav_env.nav.integrity` (Baarda's largest normalised
+residual, repeated) and the public designs it was compared with share one limit here.
+RTKLIB's ``raim_fde`` (``pntpos.c``) excludes at most one satellite; gnss_lib_py's residual
+FDE tests single-satellite subsets and its greedy EDM FDE (Knowles and Gao) removes one
+measurement per round: each round assumes that the remaining set is mostly clean, which
+40 % of reflected rows denies. The cooperative problem adds a blind spot of its own: every
+UAV has its own clocks, so NLOS delays of similar size on one UAV's satellites look like a
+clock offset and leave no residual at all. Against that no residual test helps; knowing
+*which* rows may be reflected does. Tried during the design (prototype runs of the study,
+``formation`` and ``sky``, 10-100 episodes each; not kept): the prediction at the believed
+position alone (margin 0) did no better than FDE alone, because that position is off by
+metres and the prediction errs both ways; candidates without the vertical pair let several
+times more NLOS rows through (the vertical sigma of a GNSS fix is its largest); wider margins
+(3 sigma, 15 m) removed more good satellites and left more fixes with a large, honest sigma;
+using the doubtful satellites as suspects, excluded only when the residual test fails and
+kept while it passes, did worse than excluding them outright: the test passes with a UAV's
+similar delays absorbed by its clock, and going back to the full set when the suspect-free
+set cannot be cleared brings the masking back. Dropping the candidates that contradict the
+reception (a satellite in line of sight from there that is not received), as shadow matching
+would, restored satellites but multiplied the wrong fixes several times, and so did turning
+the map off for a UAV that had dead-reckoned for 10-20 epochs (a way back for a UAV whose
+believed position is wrong, below). What is kept: exclude every satellite blocked from any
+candidate, then FDE (one-sided) on what is left; the ``urban_nlos_3dma`` preset also
+tightens the fix gate (``max_fix_sigma_m`` 15 m), because the fewer satellites make weak
+geometries common, and a fix whose own sigma is 15-30 m is often tens of metres off and
+moves the position the next prediction is made at.
+
+What it costs: fewer satellites per fix, so fewer valid cooperative fixes and a lower
+availability of protection levels within the alert limit (the UAVs dead-reckon more), for
+far fewer wrong ones; ``benchmarks/study_urban_nlos.py`` measures both sides, and
+``benchmarks/bench_integrity.py`` the step time (the prediction traces seven candidates per
+UAV). Dead reckoning is cheap in this simulation (it moves the estimate by the true
+velocity, so its error does not grow), which flatters any design that rejects fixes.
+
+A limitation: the prediction trusts the believed position. When that is off by more than
+the margin (an unlucky fix, tens of metres), the map at the wrong place excludes the
+satellites the UAV could use and keeps some reflected ones; typically no fix passes again
+and the UAV dead-reckons with the error it had (a few episodes in a hundred of the study).
+A way back would need the measurements to relocate the UAV (shadow matching over a grid of
+candidate positions, Groves 2011); that is not implemented.
+
 Honesty about the map
 ---------------------
 The simulated reception is computed from the same box city the prediction uses, so the map
@@ -37,8 +81,8 @@ here is perfect: at the true position it would name every NLOS row exactly, and 
 comes only from the position uncertainty. A real UAV's 3-D city model has errors of metres
 (building outlines, heights, missing structures, trees), and real reception near a building
 edge is not binary (diffraction); a real 3DMA receiver widens its margins accordingly. A UAV
-flying with a city model is realistic (urban air mobility plans rely on one), but the figures
-measured with this option are an upper bound on what a real map gives.
+carrying a city model is plausible, but the figures measured with this option are an upper
+bound on what a real map gives.
 """
 
 from __future__ import annotations

@@ -66,7 +66,8 @@ def test_fused_path_equals_the_modular_path(monkeypatch, kw) -> None:
 
 def test_preset_infos_and_determinism() -> None:
     cfg = preset_config("urban_nlos_3dma", n_uavs=4)
-    assert PRESETS["urban_nlos_3dma"] == {**PRESETS["urban_nlos"], "nlos_exclusion": "map"}
+    extra = {"nlos_exclusion": "map", "max_fix_sigma_m": 15.0}
+    assert PRESETS["urban_nlos_3dma"] == {**PRESETS["urban_nlos"], **extra}
     assert cfg.nlos_exclusion == "map" and cfg.integrity == "fde" and cfg.n_uavs == 4
 
     def run():
@@ -119,12 +120,14 @@ def test_the_map_removes_the_misleading_fixes_that_fde_alone_accepts() -> None:
     """The reception and FDE of ``urban_nlos`` (about 40 % of the pseudoranges NLOS, so the
     single-fault residual test is masked), 10 hovering swarms x 60 epochs x 5 UAVs = 3000
     UAV-epochs. Misleading: a cooperative fix reported valid that is off by more than 30 m and
-    by more than 3 times its own predicted 3-D sigma. FDE alone: 74 of 2997 valid fixes
-    (2.5 %); with the map exclusion of ``urban_nlos_3dma``: 0 of 1280 (its price: fewer
-    satellites, fewer valid fixes). The assertions: FDE alone at least 1 % (the epochs are
-    correlated within an episode; across the 10 episodes the count is 2-15 per episode), and
-    with the map at most 1 misleading fix: were its true rate 0.5 %, 1280 fixes would show
-    at most one with probability about 1.3 % (Poisson, mean 6.4)."""
+    by more than 3 times its own predicted 3-D sigma. FDE alone (``urban_nlos``): 74 of 2997
+    valid fixes (2.5 %); ``urban_nlos_3dma`` (map exclusion, 15 m fix gate): 0 of 1200, and
+    none off by more than 30 m at all (its price: fewer satellites, fewer valid fixes). The
+    assertions: FDE alone at least 1 % (the epochs are correlated within an episode; across
+    the 10 episodes the count is 2-15 per episode), and with the map at most 1 misleading fix:
+    were its true rate 0.5 %, 1200 fixes would show at most one with probability about 1.7 %
+    (Poisson, mean 6). 15 NLOS rows of 17753 reached the solvers (the others were excluded by
+    the map)."""
     fde = _hover(S.ScenarioConfig(**_preset_world("urban_nlos")), range(10), 60)
     mapped = _hover(S.ScenarioConfig(**_preset_world("urban_nlos_3dma")), range(10), 60)
 
