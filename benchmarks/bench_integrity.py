@@ -11,15 +11,21 @@ episode ends; bench_env's ``RandomStepper``), for
   every standalone and cooperative fix, no exclusion (a false alarm, p_fa = 1e-3 per test,
   excludes now and then);
 * ``raim``: ``integrity="raim"`` (the same test without exclusion);
+* ``fde+map``: ``integrity="fde"`` and 3D-mapping-aided NLOS exclusion
+  (``nlos_exclusion="map"``: the city model's line-of-sight prediction at seven candidate
+  positions per UAV) with no fault present: the cost of the ``urban_nlos_3dma`` defences
+  without faults;
 * ``fde+nlos``: the ``urban_nlos`` preset (about 40 % of the pseudoranges NLOS in the grid
-  city, FDE excluding them): the cost with faults, for information.
+  city, FDE excluding them): the cost with faults, for information;
+* ``3dma+nlos``: the ``urban_nlos_3dma`` preset (the same reception, map exclusion and FDE),
+  for information.
 
 The variants run in alternating rounds of ``--steps`` steps each; the best round of each
 counts, and the ratio ``step time / step time off`` is printed (the target for ``fde`` without
-faults is at most 1.30). Two clocks: the process CPU time (``time.process_time``: what the
-step costs this process, robust when other processes load the machine) and the wall clock.
-Every variant steps the same seeded episodes (the truth does not depend on the estimates,
-so the geometry is the same).
+faults is at most 1.30; ``fde+map`` is measured against the same reference). Two clocks: the
+process CPU time (``time.process_time``: what the step costs this process, robust when other
+processes load the machine) and the wall clock. Every variant steps the same seeded episodes
+(the truth does not depend on the estimates, so the geometry is the same).
 
 Usage::
 
@@ -46,7 +52,7 @@ from bench_env import RandomStepper
 from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import preset_config
 
-VARIANTS = ("off", "fde", "raim", "fde+nlos")
+VARIANTS = ("off", "fde", "raim", "fde+map", "fde+nlos", "3dma+nlos")
 
 
 def make_env(variant: str, n: int):
@@ -57,8 +63,12 @@ def make_env(variant: str, n: int):
         return urban_canyon_v0.parallel_env(n_uavs=n, integrity="fde")
     if variant == "raim":
         return urban_canyon_v0.parallel_env(n_uavs=n, integrity="raim")
+    if variant == "fde+map":
+        return urban_canyon_v0.parallel_env(n_uavs=n, integrity="fde", nlos_exclusion="map")
     if variant == "fde+nlos":
         return urban_canyon_v0.parallel_env(config=preset_config("urban_nlos", n_uavs=n))
+    if variant == "3dma+nlos":
+        return urban_canyon_v0.parallel_env(config=preset_config("urban_nlos_3dma", n_uavs=n))
     raise ValueError(f"unknown variant {variant!r}; variants are {VARIANTS}")
 
 

@@ -314,6 +314,15 @@ turns on realistic urban reception: half of the blocked satellites received thro
 reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with
 `integrity_fault_sign="positive"`.
 
+`nlos_exclusion` (`"off"`): `"map"` is 3D-mapping-aided NLOS exclusion
+(`coopnav_env.sim.map_aided`): a UAV does not use the satellites that the city model predicts
+blocked from the position it believes it is at or from the candidates
+`nlos_exclusion_margin_sigma` (2) sigma around it, each displacement capped at
+`nlos_exclusion_max_margin_m` (10 m); `n_sats` and the observation count the satellites used,
+and the infos end with `n_map_excluded` (satellites received but not used). The simulated map
+is perfect, a real one is not. The preset `preset_config("urban_nlos_3dma")` is `urban_nlos`
+with it on and the fix gate `max_fix_sigma_m` at 15 m (fewer satellites, weaker geometry).
+
 `max_steps` (200): truncation. `max_cycles`, the name PettingZoo's own environments and
 BenchMARL use, is accepted as an alias (giving both with different values raises
 `ValueError`); `config.max_cycles` reads it.

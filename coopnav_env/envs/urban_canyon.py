@@ -614,6 +614,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         cols["step"] = [self._steps] * n
         if self.config.integrity != "off":
             cols.update(self._integrity_infos())
+        if self.config.nlos_exclusion != "off":
+            cols["n_map_excluded"] = ep.map_excluded.sum(axis=1).tolist()
         keys = list(cols)
         return {
             a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))

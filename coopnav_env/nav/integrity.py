@@ -76,6 +76,16 @@ bound, as in the classic RAIM it follows). For a UAV located from a shared centr
 ``sigma`` comes from its own covariance ``H_p`` (Eq. 19) and the slopes from the centroid's
 rows (a GNSS fault moves the centroid; the UAV's offset is a relative measurement).
 
+*Many simultaneous faults.* The identification assumes that the faults are few: with many
+biased rows at once (street-canyon NLOS, about 40 % of the rows in the ``urban_nlos``
+preset) the fix is pulled toward them and one-at-a-time exclusion can stop at a wrong fix
+that passes (masking); ``fault_sign="positive"`` helps but does not cure it, and NLOS
+delays of similar size on one UAV's satellites are absorbed by its clocks, invisible to any
+residual test. The navigation core has no map; the environment's answer is to remove the
+rows a 3-D city model predicts reflected before the test (3D-mapping-aided NLOS exclusion,
+:mod:`coopnav_env.sim.map_aided`, ``nlos_exclusion="map"``), which leaves this FDE few
+faults to deal with.
+
 Compared with the public designs
 --------------------------------
 * RTKLIB (``pntpos.c``, ``valsol`` / ``raim_fde``): a chi-square test at 0.001 on the

@@ -25,7 +25,10 @@ The flow of one epoch (:meth:`UrbanWorld.step`)
    Optionally a blocked satellite is still received through a reflection with probability
    ``nlos_probability`` and a positive range bias (:func:`~coopnav_env.sim.city.draw_nlos`);
    the navigation does not know which measurements are NLOS. Optionally a receiver tracks only
-   its ``max_sats`` highest satellites (:func:`~coopnav_env.gnss.select_highest`).
+   its ``max_sats`` highest satellites (:func:`~coopnav_env.gnss.select_highest`). Optionally
+   (``nlos_exclusion="map"``) a UAV does not use the satellites that the city model predicts
+   may be blocked around the position it believes it is at
+   (:mod:`~coopnav_env.sim.map_aided`, 3D-mapping-aided NLOS exclusion).
 4. **Measurements.** Pseudoranges by :func:`~coopnav_env.gnss.simulate_pseudoranges` (paper
    Eq. 1-8; the common clock/ephemeris/troposphere error is drawn once per satellite and
    shared by the swarm, and redrawn each epoch; the NLOS bias goes in ``extra_bias_m``);
@@ -151,6 +154,7 @@ from coopnav_env.sim.city import (
     generate_city,
     sky_directions,
 )
+from coopnav_env.sim.map_aided import predicted_line_of_sight
 from coopnav_env.sim.route import advance_waypoints, route_tail_lengths_m, street_route
 from coopnav_env.sim.swarm import (
     KinematicsConfig,
@@ -347,6 +351,23 @@ class ScenarioConfig:
         ``"positive"``: FDE identifies only measurements with a positive residual (faults
         known to be positive range biases, as NLOS reception), see
         :func:`coopnav_env.nav.fde_cooperative`.
+    nlos_exclusion : {"off", "map"}, default "off"
+        ``"map"``: 3D-mapping-aided NLOS exclusion (:mod:`coopnav_env.sim.map_aided`). Each
+        UAV predicts, from the city model and the position it believes it is at (its
+        previous estimate moved by its velocity, with that estimate's covariance grown by
+        one step of dead reckoning), which satellites may be blocked, and does not use them:
+        a satellite is used only when it is in line of sight from the predicted position and
+        from the candidates ``nlos_exclusion_margin_sigma`` sigma around it (horizontal
+        principal axes and vertical). The excluded ones are ``Epoch.map_excluded``; the
+        ``received`` mask, ``n_sats`` and everything downstream (solvers, integrity
+        monitoring, observation) count the satellites used. The simulated reception comes
+        from the same city, so this map is perfect, which a real one is not (see the
+        module). ``"off"`` (default) leaves every episode as before.
+    nlos_exclusion_margin_sigma : float, default 2.0
+        Candidates this many sigma from the predicted position, in [0, 10] (0: the predicted
+        position only).
+    nlos_exclusion_max_margin_m : float, default 10.0
+        Cap on each candidate's displacement [m], in [0, 1000].
     """
 
     n_uavs: int = 5
@@ -387,6 +408,9 @@ class ScenarioConfig:
     integrity_p_fa: float = 1e-3
     integrity_risk: float = 1e-7
     integrity_fault_sign: Literal["any", "positive"] = "any"
+    nlos_exclusion: Literal["off", "map"] = "off"
+    nlos_exclusion_margin_sigma: float = 2.0
+    nlos_exclusion_max_margin_m: float = 10.0
 
     def __post_init__(self) -> None:
         o = type(self).__name__
@@ -459,6 +483,9 @@ class ScenarioConfig:
         _check_real(o, "integrity_p_fa", self.integrity_p_fa, 0.0, 0.5, lo_open=True)
         _check_real(o, "integrity_risk", self.integrity_risk, 0.0, 0.5, lo_open=True)
         _check_choice(o, "integrity_fault_sign", self.integrity_fault_sign, ("any", "positive"))
+        _check_choice(o, "nlos_exclusion", self.nlos_exclusion, ("off", "map"))
+        _check_real(o, "nlos_exclusion_margin_sigma", self.nlos_exclusion_margin_sigma, 0.0, 10.0)
+        _check_real(o, "nlos_exclusion_max_margin_m", self.nlos_exclusion_max_margin_m, 0.0, 1000.0)
         if self.integrity != "off" and self.covariance != "exact":
             raise ValueError(
                 f"{o}.integrity={self.integrity!r} needs covariance='exact' (the residual "
@@ -641,7 +668,8 @@ class Epoch:
     los : ndarray of bool, shape (N, S)
         Line of sight (not blocked by a building).
     received : ndarray of bool, shape (N, S)
-        Satellites whose pseudorange the UAV uses (line of sight or NLOS, channel limit).
+        Satellites whose pseudorange the UAV uses (line of sight or NLOS, channel limit;
+        with ``nlos_exclusion="map"``, not those in ``map_excluded``).
     nlos : ndarray of bool, shape (N, S)
         Received through a reflection (biased; unknown to the navigation).
     n_above_mask : int
@@ -688,6 +716,9 @@ class Epoch:
         The UAV's cooperative or standalone test detected a fault this epoch.
     fde_excluded : ndarray of int, shape (N,), or None
         Pseudoranges excluded from the fix used.
+    map_excluded : ndarray of bool, shape (N, S), or None
+        With ``nlos_exclusion="map"``: satellites received but not used because the city
+        model predicts they may be blocked (not in ``received``); None otherwise.
     """
 
     t_s: float
@@ -729,6 +760,7 @@ class Epoch:
     integrity_status: np.ndarray | None = None
     fault_detected: BoolArray | None = None
     fde_excluded: np.ndarray | None = None
+    map_excluded: BoolArray | None = None
 
     @property
     def n_uavs(self) -> int:
@@ -1058,13 +1090,27 @@ class UrbanWorld:
             received, bias = los, None
         if cfg.max_sats is not None:
             received = select_highest(np.broadcast_to(el, received.shape), received, cfg.max_sats)
-        nlos = received & ~los
 
         # measurements and navigation
         # warm start: the previous estimates moved by the velocity; at the first epoch of an
         # episode, the known launch positions
         pred_enu = self.nav_pos_enu_m + self.vel_enu_mps * dt if self._warm else self.nav_pos_enu_m
         dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (1.0 if self._warm else 0.0)
+        map_excluded = None
+        if cfg.nlos_exclusion == "map":  # 3DMA: not used where the city model predicts NLOS
+            kin = cfg.kinematics
+            predicted = predicted_line_of_sight(
+                self.city.buildings,
+                sky.directions,
+                pred_enu,
+                self.nav_cov_enu_m2 + np.eye(3) * dr_var,
+                margin_sigma=cfg.nlos_exclusion_margin_sigma,
+                max_margin_m=cfg.nlos_exclusion_max_margin_m,
+                altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
+            )
+            map_excluded = received & ~predicted
+            received = received & predicted
+        nlos = received & ~los
         fused = _fused_path_on() and cfg.covariance == "exact" and sky.grouped
         navigate = self._navigate_fused if fused else self._navigate
         (
@@ -1119,6 +1165,7 @@ class UrbanWorld:
             coop_rejected=co_rej,
             next_waypoint=self.next_wp.copy(),
             **({} if integrity is None else dict(zip(_INTEGRITY_FIELDS, integrity))),
+            map_excluded=map_excluded,
         )
 
     def _navigate(self, rng, pos, sky, received, bias, pred_enu, dr_var):
