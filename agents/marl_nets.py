@@ -67,7 +67,7 @@ class MARLSettings:
         base command is part of the actor's input). ``offset``: the learned action moves each
         UAV's slot of the base column (along the route, to the left, up) by the action times
         ``offset_scale_m`` (the base must be a column follower: ``formation``, ``sky``,
-        ``spread``), so the policy shapes the formation while the base flies the route.
+        ``spread``, ``wide``), so the policy shapes the formation while the base flies the route.
     offset_scale_m : list of 3 floats
         Largest slot shift along the route, to the left and up [m] (``offset`` mode).
     """

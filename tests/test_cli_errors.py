@@ -136,6 +136,7 @@ CASES: list[tuple[str, list[str], int, str]] = [
     ("demo-dt-0", ["demo", "--dt", "0"], 2, "--dt"),
     ("demo-seed-neg", ["demo", "--seed", "-1"], 2, "--seed"),
     ("demo-epochs-abc", ["demo", "--epochs", "abc"], 2, "invalid int value"),
+    ("study-planner-not", ["study", "--episodes", "1", "--planner", "spread"], 2, "--planner must"),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]

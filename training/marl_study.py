@@ -298,13 +298,20 @@ def plot_learning_curves(
             ax.set_xlabel("agent-steps [millions]")
             ax.set_ylabel(label)
             drawn = True
-    for h, v in ref.items():
+    lo, hi = axes[0].get_ylim()
+    # points per data unit, so that labels of nearly equal values are stacked upwards
+    # (8 points apart) instead of drawn over each other
+    ppu = axes[0].bbox.height * 72.0 / fig.dpi / max(hi - lo, 1e-9)
+    last_pt = -math.inf
+    for h, v in sorted(ref.items(), key=lambda kv: kv[1]):
+        y_pt = max(v * ppu, last_pt + 8.0)
+        shift, last_pt = y_pt - v * ppu, y_pt
         axes[0].axhline(v, ls="--", lw=0.8, color="grey")
         axes[0].annotate(
             f"{short_label(h)}: {v:.2f}",
             (1.0, v),
             xycoords=("axes fraction", "data"),
-            xytext=(3, 0),
+            xytext=(3, shift),
             textcoords="offset points",
             fontsize=7,
             va="center",
@@ -443,7 +450,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--heuristics",
         nargs="+",
-        default=["formation", "sky", "spread"],
+        default=["formation", "sky", "spread", "wide"],
         help="heuristic policies (default: %(default)s)",
     )
     parser.add_argument(
@@ -455,6 +462,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=20,
         help="episodes of the privileged planner, the first ones of the set; 0 skips it "
         "(default: %(default)s)",
+    )
+    parser.add_argument(
+        "--planner",
+        default="planner",
+        help="the privileged planner and its options, e.g. "
+        "planner@horizon=10,n_samples=16 (default: %(default)s: CEM over offsets to the "
+        "'wide' column, agents/planner.py)",
     )
     parser.add_argument(
         "--env-set",
@@ -526,7 +540,9 @@ def run(args: argparse.Namespace) -> int:
     for name, dirs in groups.items():
         units += [(name, _policy_name(d), seeds) for d in dirs]
     if args.planner_episodes > 0:
-        units.append(("planner (privileged)", "planner", seeds[: args.planner_episodes]))
+        if args.planner.split("@")[0] != "planner":
+            raise ValueError(f"--planner must name the planner (planner@...), got {args.planner!r}")
+        units.append(("planner (privileged)", args.planner, seeds[: args.planner_episodes]))
     flown = _fly_all(units, env_kwargs, args.jobs)
     results: dict[str, list[list[EpisodeResult]]] = {}
     for (name, _policy, _seeds), episodes in zip(units, flown):
@@ -542,7 +558,8 @@ def run(args: argparse.Namespace) -> int:
         sub_results["planner (privileged)"] = [plan]
         headroom = summarise(sub_results, [*args.heuristics, "planner (privileged)"], args.reps)
         headroom["episodes"] = len(sub)
-        headroom["planner_s"] = _timings.get("planner", math.nan)
+        headroom["planner_s"] = _timings.get(args.planner, math.nan)
+        headroom["planner"] = args.planner
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     figs = {}
@@ -551,7 +568,7 @@ def run(args: argparse.Namespace) -> int:
     if f is not None:
         figs["learning_curves"] = f.name
     figs["errors"] = plot_errors(summary, out / "errors.png").name
-    show = [h for h in ("formation", "spread") if h in results] + list(groups)[:2]
+    show = [h for h in ("formation", "wide") if h in results] + list(groups)[:2]
     flights = {
         n: results[n][0][0].pos_enu_m for n in show if results[n][0][0].pos_enu_m is not None
     }
@@ -610,7 +627,7 @@ def _fly_all(
     from concurrent.futures import ProcessPoolExecutor
 
     # the slowest (the planner, last) first, so that it overlaps the rest
-    order = sorted(range(len(units)), key=lambda i: units[i][1] != "planner")
+    order = sorted(range(len(units)), key=lambda i: not units[i][1].startswith("planner"))
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         futures = {i: pool.submit(_fly_unit, units[i], dict(env_kwargs)) for i in order}
         for i in order:
@@ -687,8 +704,8 @@ def report_markdown(data: Mapping[str, Any]) -> str:
     if h:
         lines += [
             "",
-            f"## Headroom ({h['episodes']} episodes, the first of the set; the planner took "
-            f"{h['planner_s']:.0f} s)",
+            f"## Headroom ({h['episodes']} episodes, the first of the set; "
+            f"`{h.get('planner', 'planner')}` took {h['planner_s']:.0f} s)",
             "",
             "| method | mean error [m] | goal rate |",
             "|---|---|---|",
