@@ -168,10 +168,11 @@ class ObsLayout(Mapping[str, ObsField]):
 
     def __repr__(self) -> str:
         rows = [f"ObsLayout(dim={self.dim}, city_scale_m={self.city_scale_m:g})"]
+        width = max(22, *(len(name) for name in self))
         for f in self.values():
             offset = f" + {f.offset:g}" if f.offset else ""
             where = f"{f.start:>3}:{f.stop:<3}"
-            rows.append(f"  {where} {f.name:<22} {f.units:<5} x {f.scale:g}{offset}")
+            rows.append(f"  {where} {f.name:<{width}} {f.units:<5} x {f.scale:g}{offset}")
         return "\n".join(rows)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

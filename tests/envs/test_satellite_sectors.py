@@ -176,3 +176,14 @@ def test_layout_names_the_optional_blocks() -> None:
 
 def test_parallel_api_with_the_option() -> None:
     parallel_api_test(_env({"n_uavs": 3}), num_cycles=100)
+
+
+def test_gymnasium_view_stacks_the_longer_observation() -> None:
+    import gymnasium as gym
+
+    env = gym.make("coopnav/UrbanCanyonSwarm-v0", n_uavs=3, obs_satellite_sectors=True)
+    obs, _ = env.reset(seed=4)
+    d = env.unwrapped.config.obs_dim
+    assert d == 52 + 16 and obs.shape == env.observation_space.shape == (3 * d,)
+    assert env.observation_space.contains(obs)
+    env.close()
