@@ -120,6 +120,14 @@ With `obs_protection_level=True` (needs `integrity` on) two entries follow the t
 `min(HPL / (2 alert_limit_m), 1)` and `min(VPL / (2 alert_limit_m), 1)` of the estimate used
 (0.5 at the alert limit, 1 without protection), `obs_dim + 2` in all (54 by default).
 
+With `obs_satellite_sectors=True`, `2 A` entries follow last (after the protection levels when
+those are on): `satellites_received_sector`, per azimuth sector of the skyline (sector `i`
+centred on azimuth `360 i / A`, clockwise from North, `360 / A` wide), the number of
+satellites the UAV tracks there (its pseudoranges, NLOS reflections included, before any map
+exclusion) / 4, and `satellites_blocked_sector`, the number above the cut-off it does not
+track there / 4, each clipped to [0, 1] (68 entries by default). What a real receiver knows
+from its almanac and tracking loops: not only how many satellites it misses, but where.
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -308,7 +316,8 @@ excludes the measurement the test identifies and re-solves until the test passes
 `integrity_fault_sign` (`"any"`): `"positive"` excludes only measurements with a positive
 residual (NLOS delays are positive). `alert_limit_m` (30):
 horizontal alert limit [m] (availability, the reward term and the observation scale).
-`integrity_penalty` (0) and `obs_protection_level` (False): above. With `"off"` every episode
+`integrity_penalty` (0), `obs_protection_level` (False) and `obs_satellite_sectors` (False):
+above. With `"off"` every episode
 is exactly as before. The preset `coopnav_env.envs.preset_config("urban_nlos", **fields)`
 turns on realistic urban reception: half of the blocked satellites received through
 reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with

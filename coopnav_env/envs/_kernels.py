@@ -231,3 +231,27 @@ def info_floats(
         floats[6, i] = np.sqrt(acc)
         floats[7, i] = np.hypot(pos[i, 0] - goal[0], pos[i, 1] - goal[1])
     return floats
+
+
+@njit(cache=True)
+def satellite_sectors(tracked, az_deg, n_az):
+    """The ``obs_satellite_sectors`` columns (the numpy formulation is
+    ``UrbanCanyonEnv._satellite_sectors_numpy``), ``(n, 2 n_az)`` float32: per sector of the
+    skyline azimuths ``360 a / n_az`` (the sector centred on each, ``floor(az n_az / 360 +
+    0.5) mod n_az``), the satellites tracked, then those above the cut-off not tracked, each
+    count / 4 clipped to [0, 1]. ``tracked`` is ``(n, S)`` bool, ``az_deg`` ``(S,)``."""
+    n, n_sv = tracked.shape
+    sector = np.empty(n_sv, dtype=np.int64)
+    for j in range(n_sv):
+        sector[j] = np.int64(np.floor(az_deg[j] * (n_az / 360.0) + 0.5)) % n_az
+    counts = np.zeros((n, 2 * n_az))
+    for i in range(n):
+        for j in range(n_sv):
+            col = sector[j] if tracked[i, j] else n_az + sector[j]
+            counts[i, col] += 1.0
+    out = np.empty((n, 2 * n_az), dtype=np.float32)
+    for i in range(n):
+        for c in range(2 * n_az):
+            v = counts[i, c] / 4.0
+            out[i, c] = np.float32(v if v < 1.0 else 1.0)
+    return out

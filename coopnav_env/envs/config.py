@@ -95,6 +95,13 @@ class UrbanCanyonConfig(ScenarioConfig):
         Append ``min(HPL / (2 alert_limit_m), 1)`` and ``min(VPL / (2 alert_limit_m), 1)`` of
         the estimate used to the observation (0.5: at the alert limit; 1: beyond twice it or
         none). Needs ``integrity`` on.
+    obs_satellite_sectors : bool, default False
+        Append two blocks of ``obs_sky_azimuths`` entries after everything else (after the
+        protection levels when those are on): per azimuth sector of the skyline, the number
+        of satellites the UAV tracks (``satellites_received_sector``) and the number above the
+        elevation cut-off it does not track (``satellites_blocked_sector``), each divided by 4
+        and clipped to [0, 1]. What a real receiver knows from its almanac and its tracking
+        loops: where the satellites it misses are.
     """
 
     max_steps: int = 200
@@ -119,6 +126,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     alert_limit_m: float = 30.0
     integrity_penalty: float = 0.0
     obs_protection_level: bool = False
+    obs_satellite_sectors: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -145,6 +153,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_real(o, "alert_limit_m", self.alert_limit_m, 0.0, 1e4, lo_open=True)
         _check_real(o, "integrity_penalty", self.integrity_penalty, 0.0, 1000.0)
         _check_bool(o, "obs_protection_level", self.obs_protection_level)
+        _check_bool(o, "obs_satellite_sectors", self.obs_satellite_sectors)
         if self.integrity == "off":
             for name, on in (
                 ("integrity_penalty", self.integrity_penalty > 0.0),
@@ -159,9 +168,21 @@ class UrbanCanyonConfig(ScenarioConfig):
     @property
     def obs_dim(self) -> int:
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
-        with ``obs_protection_level``."""
-        extra = 2 if self.obs_protection_level else 0
-        return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours + extra
+        with ``obs_protection_level``, plus ``2 obs_sky_azimuths`` with
+        ``obs_satellite_sectors``."""
+        return self.obs_base_dim + self.obs_extra_dim
+
+    @property
+    def obs_base_dim(self) -> int:
+        """Entries before the optional blocks: ``20 + 2 obs_sky_azimuths + 4 K``."""
+        return 20 + 2 * self.obs_sky_azimuths + 4 * self.obs_neighbours
+
+    @property
+    def obs_extra_dim(self) -> int:
+        """Entries of the optional blocks appended after the base ones: 2 with
+        ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``."""
+        pl = 2 if self.obs_protection_level else 0
+        return pl + (2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0)
 
     @property
     def max_cycles(self) -> int:

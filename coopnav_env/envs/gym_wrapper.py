@@ -11,7 +11,8 @@ swarm with one policy. It is registered with Gymnasium when :mod:`coopnav_env` i
     env = gymnasium.make("coopnav/UrbanCanyonSwarm-v0", n_uavs=3, reward="sum")
     obs, info = env.reset(seed=0)
 
-Spaces (``N = n_uavs``, ``D = obs_dim = 20 + 2A + 4K``):
+Spaces (``N = n_uavs``, ``D = obs_dim = 20 + 2A + 4K`` plus the optional blocks of
+``obs_protection_level`` and ``obs_satellite_sectors``):
 
 * observation ``Box((N * D,), float32)``: the agents' observations stacked in the order of
   ``possible_agents`` (``uav_0`` first), so agent ``i`` owns ``obs[i * D : (i + 1) * D]`` and

@@ -38,7 +38,17 @@ name                       size   units       scale (offset)
 ``altitude``               1      m           band ``altitude_max_m - altitude_min_m``
                                               (offset ``altitude_min_m``)
 ``wall_distance``          A      m           ``obs_wall_scale_m``
+``protection_level``       2      m           ``2 alert_limit_m``; only with
+                                              ``obs_protection_level`` (HPL, VPL)
+``satellites_received_     A      1           4 (satellites tracked per azimuth sector); only
+sector``                                      with ``obs_satellite_sectors``
+``satellites_blocked_      A      1           4 (satellites above the cut-off not tracked,
+sector``                                      per azimuth sector); only with
+                                              ``obs_satellite_sectors``
 =========================  =====  ==========  ==============================================
+
+The sector of skyline azimuth ``360 a / A`` is centred on it and ``360 / A`` degrees wide
+(see ``UrbanCanyonEnv._satellite_sectors``); a count of 4 or more reads 1.
 
 ``L`` depends only on the configuration (the grid's extent is ``n * block + (n + 1) * street``
 whatever the buildings; the canyon is fixed), so it is known before any episode. The layout
@@ -158,10 +168,11 @@ class ObsLayout(Mapping[str, ObsField]):
 
     def __repr__(self) -> str:
         rows = [f"ObsLayout(dim={self.dim}, city_scale_m={self.city_scale_m:g})"]
+        width = max(22, *(len(name) for name in self))
         for f in self.values():
             offset = f" + {f.offset:g}" if f.offset else ""
             where = f"{f.start:>3}:{f.stop:<3}"
-            rows.append(f"  {where} {f.name:<22} {f.units:<5} x {f.scale:g}{offset}")
+            rows.append(f"  {where} {f.name:<{width}} {f.units:<5} x {f.scale:g}{offset}")
         return "\n".join(rows)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -342,6 +353,38 @@ def obs_layout(config: Any = None, **overrides: Any) -> ObsLayout:
         "obs_wall_scale_m",
         az,
     )
+    if cfg.obs_protection_level:
+        add(
+            "protection_level",
+            2,
+            "m",
+            2.0 * cfg.alert_limit_m,
+            0,
+            "horizontal and vertical protection level of the estimate used (1: none)",
+            "2 alert_limit_m",
+            ("H", "V"),
+        )
+    if cfg.obs_satellite_sectors:
+        add(
+            "satellites_received_sector",
+            a,
+            "1",
+            4,
+            0,
+            "satellites tracked whose azimuth is in the sector (clockwise from North)",
+            "4",
+            az,
+        )
+        add(
+            "satellites_blocked_sector",
+            a,
+            "1",
+            4,
+            0,
+            "satellites above the cut-off not tracked whose azimuth is in the sector",
+            "4",
+            az,
+        )
     if fields[-1].stop != cfg.obs_dim:  # pragma: no cover - guarded by the tests
         raise AssertionError(f"layout covers {fields[-1].stop} entries, obs_dim {cfg.obs_dim}")
     return ObsLayout(fields, cfg, big)

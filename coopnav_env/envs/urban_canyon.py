@@ -10,7 +10,10 @@ Observation layout
 One float32 vector per agent, ``20 + 2 A + 4 K`` long (``A = obs_sky_azimuths``, default 8;
 ``K = obs_neighbours``, default 4; 52 by default), clipped to its bounds. The index table (with
 units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it is built by
-:meth:`UrbanCanyonEnv._observation_array` below, in the same order.
+:meth:`UrbanCanyonEnv._observation_array` below, in the same order. Optional blocks follow,
+in this order: the two protection levels (``obs_protection_level``), then the satellites
+tracked and the satellites above the cut-off not tracked per skyline azimuth sector, ``A``
+entries each (``obs_satellite_sectors``, :meth:`UrbanCanyonEnv._satellite_sectors`).
 """
 
 from __future__ import annotations
@@ -143,7 +146,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
         self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
-        n_base = cfg.obs_dim - (2 if cfg.obs_protection_level else 0)  # the kernel's columns
+        n_base = cfg.obs_base_dim  # the kernel's columns (the optional blocks follow)
         self._obs_low = lo[:n_base].astype(np.float64)  # the clip bounds as numpy sees them
         self._reward_params = np.array(
             [
@@ -409,18 +412,71 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows`; the numpy
         formulation :meth:`_observation_array_numpy` (``_USE_KERNEL = False``) is the readable
         definition, and the two agree bit for bit. With ``obs_protection_level`` the two
-        protection-level columns follow.
+        protection-level columns follow, then with ``obs_satellite_sectors`` the ``2 A``
+        satellite-sector columns (:meth:`_satellite_sectors`).
         """
         obs = self._observation_rows()
-        if not self.config.obs_protection_level:
+        cfg = self.config
+        if not (cfg.obs_protection_level or cfg.obs_satellite_sectors):
             return obs
         ep = self._epoch
-        scale = 2.0 * self.config.alert_limit_m
-        pl = np.clip(np.stack([ep.hpl_m, ep.vpl_m], axis=1) / scale, 0.0, 1.0)
-        return np.concatenate([obs, pl.astype(np.float32)], axis=1)
+        blocks = [obs]
+        if cfg.obs_protection_level:
+            scale = 2.0 * cfg.alert_limit_m
+            pl = np.clip(np.stack([ep.hpl_m, ep.vpl_m], axis=1) / scale, 0.0, 1.0)
+            blocks.append(pl.astype(np.float32))
+        if cfg.obs_satellite_sectors:
+            blocks.append(self._satellite_sectors())
+        return np.concatenate(blocks, axis=1)
+
+    def _tracked(self) -> np.ndarray:
+        """``(N, S)`` bool: the satellites each UAV's receiver tracks this epoch, i.e. those
+        its pseudoranges come from (line of sight, or NLOS through a reflection when NLOS
+        reception is on; after the ``max_sats`` channel limit) *before* 3D-mapping-aided
+        exclusion: a satellite the map excludes is still tracked, only not used."""
+        ep = self._epoch
+        return ep.received if ep.map_excluded is None else ep.received | ep.map_excluded
+
+    def _satellite_sectors(self) -> np.ndarray:
+        """The ``obs_satellite_sectors`` columns, ``(N, 2 A)`` float32.
+
+        Columns ``0..A-1`` (``satellites_received_sector``): satellites the UAV tracks
+        (:meth:`_tracked`) whose azimuth falls in sector ``a``; columns ``A..2A-1``
+        (``satellites_blocked_sector``): satellites above ``elevation_mask_deg`` it does not
+        track, per sector. Each count is divided by 4 and clipped to [0, 1]. Sector ``a`` is
+        centred on the skyline azimuth ``360 a / A`` (clockwise from North) and spans
+        ``360 / A`` degrees: a satellite at azimuth ``az`` is in sector
+        ``floor(az A / 360 + 1/2) mod A``, the skyline direction nearest to it.
+
+        The azimuths are those of the world (``Epoch.sv_az_deg``, computed at the city's
+        geodetic origin), in [0, 360). A receiver would compute them from its almanac and its
+        approximate position; the satellites are some 20,000 km away, so moving the receiver
+        by ``d`` turns the line of sight by at most ``d / 20,000 km`` (0.003 deg for the 1 km
+        of a city, or a navigation error of tens of metres far less), far below the sector
+        width of ``360 / A`` deg: the origin, the true position and the estimate give the
+        same sectors except for a satellite within that hair of a sector boundary (or so
+        near the zenith that its azimuth is meaningless anyway). The compiled
+        :func:`coopnav_env.envs._kernels.satellite_sectors` computes it (``_USE_KERNEL``);
+        :meth:`_satellite_sectors_numpy` is the definition (equal: small integer counts).
+        """
+        if not _USE_KERNEL:
+            return self._satellite_sectors_numpy()
+        return _kernels.satellite_sectors(
+            self._tracked(), self._epoch.sv_az_deg, self.config.obs_sky_azimuths
+        )
+
+    def _satellite_sectors_numpy(self) -> np.ndarray:
+        """The numpy formulation of :meth:`_satellite_sectors` (the definition)."""
+        a = self.config.obs_sky_azimuths
+        tracked = self._tracked()
+        sector = np.floor(self._epoch.sv_az_deg * (a / 360.0) + 0.5).astype(np.int64) % a
+        one_hot = (sector[:, None] == np.arange(a)[None, :]).astype(np.float64)  # (S, A)
+        counts = np.concatenate([tracked @ one_hot, ~tracked @ one_hot], axis=1)
+        return np.minimum(counts / 4.0, 1.0).astype(np.float32)
 
     def _observation_rows(self) -> np.ndarray:
-        """The observation without the optional protection-level columns."""
+        """The observation without the optional blocks (protection levels, satellite
+        sectors)."""
         if not _USE_KERNEL:
             return self._observation_array_numpy()
         cfg = self.config
@@ -511,7 +567,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             axis=1,
         )
         space = self.observation_spaces[self.possible_agents[0]]
-        n_base = obs.shape[1]  # the protection-level columns are appended by the caller
+        n_base = obs.shape[1]  # the optional blocks are appended by the caller
         return np.clip(obs, space.low[:n_base], space.high[:n_base]).astype(np.float32)
 
     def _info_floats_numpy(self) -> np.ndarray:
@@ -743,6 +799,7 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             -np.ones(4),  # next waypoint, leg after it
             np.zeros(2 + a),  # remaining route, altitude, wall distances
             np.zeros(2 if cfg.obs_protection_level else 0),  # HPL, VPL / (2 alert limit)
+            np.zeros(2 * a if cfg.obs_satellite_sectors else 0),  # satellites per sector / 4
         ]
     )
     hi = np.ones(cfg.obs_dim)
