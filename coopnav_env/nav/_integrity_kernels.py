@@ -299,10 +299,11 @@ def threshold_tables(p_fa, p_md, dof_max):
 # removes the pairs it can prove redundant; it cannot when an array dies in the middle of the
 # function (numba releases it after its last use, at a loop exit that LLVM has duplicated) or
 # when a path leaves the function early (a ``return`` inside the computation, or an exception:
-# Python's float division raises on a zero divisor). The kernels of the tests below therefore
-# use ``error_model="numpy"`` (a zero divisor gives inf / NaN, for every other divisor the
-# quotient is the same bit for bit), return at the end only, and keep their arrays alive to
-# the end (:func:`keep_alive`), which lets numba remove every pair.
+# Python's float division raises on a zero divisor, and a call to another compiled function
+# may raise). The statistics kernels below therefore use ``error_model="numpy"`` (a zero
+# divisor gives inf / NaN, for every other divisor the quotient is the same bit for bit),
+# call only inlined helpers before their end, return at the end only, and keep their arrays
+# alive to the end (:func:`keep_alive`), which lets numba remove every pair.
 
 
 @njit(cache=True)
@@ -372,6 +373,23 @@ def cholesky_inverse3(a00, a10, a11, a20, a21, a22):
     o22 = 0.0
     o22 += v22 * v22
     return True, o00, o01, o02, o11, o12, o22
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa):
+    """``x = info^-1 r`` (``info^-1`` by its upper triangle, :func:`cholesky_inverse3`) and
+    the test statistic ``T = a^T P a - r^T x`` (0 where rounding makes a (near) zero
+    statistic negative)."""
+    x0 = o00 * r0 + o01 * r1 + o02 * r2
+    x1 = o01 * r0 + o11 * r1 + o12 * r2
+    x2 = o02 * r0 + o12 * r1 + o22 * r2
+    t_stat = apa
+    t_stat -= r0 * x0
+    t_stat -= r1 * x1
+    t_stat -= r2 * x2
+    if t_stat < 0.0:
+        t_stat = 0.0
+    return x0, x1, x2, t_stat
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -841,15 +859,7 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
         v12 = 0.5 * (f12 + f21)
         ok, o00, o01, o02, o11, o12, o22 = cholesky_inverse3(f00, v01, f11, v02, v12, f22)
         if ok:
-            x0 = o00 * r0 + o01 * r1 + o02 * r2  # info^-1 r
-            x1 = o01 * r0 + o11 * r1 + o12 * r2
-            x2 = o02 * r0 + o12 * r1 + o22 * r2
-            t_stat = apa
-            t_stat -= r0 * x0
-            t_stat -= r1 * x1
-            t_stat -= r2 * x2
-            if t_stat < 0.0:  # rounding of a (near) zero statistic
-                t_stat = 0.0
+            x0, x1, x2, t_stat = _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa)
             for q in range(n):
                 for i in range(m_q[q]):
                     t0, t1, t2 = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2]
@@ -968,15 +978,7 @@ def _standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_onl
     t_stat = np.nan
     state = (0.0, 0.0, -1, -1, 0.0, False)
     if ok:
-        x0 = o00 * r0 + o01 * r1 + o02 * r2
-        x1 = o01 * r0 + o11 * r1 + o12 * r2
-        x2 = o02 * r0 + o12 * r1 + o22 * r2
-        t_stat = apa
-        t_stat -= r0 * x0
-        t_stat -= r1 * x1
-        t_stat -= r2 * x2
-        if t_stat < 0.0:
-            t_stat = 0.0
+        x0, x1, x2, t_stat = _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa)
         for k in range(s):
             if vis[k]:
                 wk = w[k]
