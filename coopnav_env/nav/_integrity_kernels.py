@@ -34,8 +34,6 @@ import numpy as np
 from numba import njit
 
 from coopnav_env.nav._kernels import (
-    _cholesky_inverse_into,
-    _inv3,
     cooperative_finish,
     cooperative_gauss_newton,
     n_nuisance,
@@ -64,6 +62,9 @@ HARMLESS_GAIN = 1e-6
 #: reference: a bias on one and the opposite bias on the other leave the same residuals); the
 #: tie goes to the positive residual, the sign of an NLOS bias
 TIE_RTOL = 1e-9
+#: the figures of a test that could not run (normal matrix not positive definite):
+#: ``t_stat, dof, q_star, k_star, w_star, h_slope, v_slope``
+_FAILED = (np.nan, 0, -1, -1, np.nan, np.inf, np.inf)
 
 
 # --------------------------------------------------------------------------------------------
@@ -292,6 +293,114 @@ def threshold_tables(p_fa, p_md, dof_max):
 # --------------------------------------------------------------------------------------------
 # statistics of one fix
 # --------------------------------------------------------------------------------------------
+#
+# Reference counting. numba counts references to every array a function binds (atomic
+# increments and decrements, about as costly as the arithmetic of these small problems) and
+# removes the pairs it can prove redundant; it cannot when an array dies in the middle of the
+# function (numba releases it after its last use, at a loop exit that LLVM has duplicated) or
+# when a path leaves the function early (a ``return`` inside the computation, or an exception:
+# Python's float division raises on a zero divisor, and a call to another compiled function
+# may raise). The statistics kernels below therefore use ``error_model="numpy"`` (a zero
+# divisor gives inf / NaN, for every other divisor the quotient is the same bit for bit),
+# call only inlined helpers before their end, return at the end only, and keep their arrays
+# alive to the end (:func:`keep_alive`), which lets numba remove every pair.
+
+
+@njit(cache=True)
+def keep_alive(*arrays):
+    """Does nothing with ``arrays``: a last use at the end of a kernel, so that numba releases
+    them there (see the note above)."""
+    return None
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def cholesky_inverse3(a00, a10, a11, a20, a21, a22):
+    """:func:`coopnav_env.nav._kernels._cholesky_inverse_into` of a symmetric 3x3 matrix
+    given by its lower triangle, in scalars (no arrays): the same operations in the same
+    order, so the same result bit for bit (``tests/nav/test_integrity.py``). Returns ``ok,
+    o00, o01, o02, o11, o12, o22`` (the inverse's upper triangle; NaN when not positive
+    definite)."""
+    nan = np.nan
+    s = a00
+    if not s > 0.0:
+        return False, nan, nan, nan, nan, nan, nan
+    d = math.sqrt(s)
+    l00 = d
+    l10 = a10 / d
+    l20 = a20 / d
+    s = a11
+    s -= l10 * l10
+    if not s > 0.0:
+        return False, nan, nan, nan, nan, nan, nan
+    d = math.sqrt(s)
+    l11 = d
+    s = a21
+    s -= l20 * l10
+    l21 = s / d
+    s = a22
+    s -= l20 * l20
+    s -= l21 * l21
+    if not s > 0.0:
+        return False, nan, nan, nan, nan, nan, nan
+    l22 = math.sqrt(s)
+    v00 = 1.0 / l00  # inv(L), column by column
+    s = 0.0
+    s -= l10 * v00
+    v10 = s / l11
+    s = 0.0
+    s -= l20 * v00
+    s -= l21 * v10
+    v20 = s / l22
+    v11 = 1.0 / l11
+    s = 0.0
+    s -= l21 * v11
+    v21 = s / l22
+    v22 = 1.0 / l22
+    o00 = 0.0  # inv(a)[i, j] = sum_{k >= j} inv(L)[k, i] inv(L)[k, j]
+    o00 += v00 * v00
+    o00 += v10 * v10
+    o00 += v20 * v20
+    o01 = 0.0
+    o01 += v10 * v11
+    o01 += v20 * v21
+    o02 = 0.0
+    o02 += v20 * v22
+    o11 = 0.0
+    o11 += v11 * v11
+    o11 += v21 * v21
+    o12 = 0.0
+    o12 += v21 * v22
+    o22 = 0.0
+    o22 += v22 * v22
+    return True, o00, o01, o02, o11, o12, o22
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa):
+    """``x = info^-1 r`` (``info^-1`` by its upper triangle, :func:`cholesky_inverse3`) and
+    the test statistic ``T = a^T P a - r^T x`` (0 where rounding makes a (near) zero
+    statistic negative)."""
+    x0 = o00 * r0 + o01 * r1 + o02 * r2
+    x1 = o01 * r0 + o11 * r1 + o12 * r2
+    x2 = o02 * r0 + o12 * r1 + o22 * r2
+    t_stat = apa
+    t_stat -= r0 * x0
+    t_stat -= r1 * x1
+    t_stat -= r2 * x2
+    if t_stat < 0.0:
+        t_stat = 0.0
+    return x0, x1, x2, t_stat
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def inverse3_sym(a, b, c, d, e, f):
+    """:func:`coopnav_env.nav._kernels._inv3` in scalars: the closed-form inverse of the
+    symmetric matrix ``[[a, b, c], [b, d, e], [c, e, f]]``, the same operations (bit for
+    bit). Returns its upper triangle ``o00, o01, o02, o11, o12, o22``."""
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    return c00 / det, c01 / det, c02 / det, c11 / det, c12 / det, c22 / det
 
 
 @njit(cache=True)
@@ -310,8 +419,8 @@ def workspace(n, s):
         (s, 3, 1),  # p0l
         (s, 3, 1),  # g3
         (s, 1, 1),  # wrow
-        (s * s, 1, 1),  # mgf (flat: the compact S' x S' system)
-        (s * s, 1, 1),  # mgif
+        (s, s, 1),  # mg (the compact S' x S' system in its leading block)
+        (s, s, 1),  # mgi
         (s, 4, 1),  # u_mat
         (s, 4, 1),  # v_mat
         (s, 4, 1),  # vloc
@@ -319,13 +428,8 @@ def workspace(n, s):
         (s, s, 1),  # bq
         (sm, sm, 1),  # low (Cholesky scratch)
         (sm, sm, 1),  # linv
-        (3, 3, 1),  # m3
-        (3, 3, 1),  # m3i
         (3, 4, 1),  # t3
-        (3, 3, 1),  # info
-        (3, 3, 1),  # infoi
-        (3, 1, 1),  # rhs
-        (3, 1, 1),  # xr
+        (s, 1, 1),  # ddiag
     )
     total = 0
     for a, b, c in shapes:
@@ -349,8 +453,8 @@ def workspace(n, s):
         buf[o[6] : o[7]].reshape((s, 3)),
         buf[o[7] : o[8]].reshape((s, 3)),
         buf[o[8] : o[9]],
-        buf[o[9] : o[10]],
-        buf[o[10] : o[11]],
+        buf[o[9] : o[10]].reshape((s, s)),
+        buf[o[10] : o[11]].reshape((s, s)),
         buf[o[11] : o[12]].reshape((s, 4)),
         buf[o[12] : o[13]].reshape((s, 4)),
         buf[o[13] : o[14]].reshape((s, 4)),
@@ -359,13 +463,8 @@ def workspace(n, s):
         buf[o[16] : o[17]].reshape((sm, sm)),
         buf[o[17] : o[18]].reshape((sm, sm)),
         ints[s + 1 + n + n * s :],  # loc
-        buf[o[18] : o[19]].reshape((3, 3)),
-        buf[o[19] : o[20]].reshape((3, 3)),
-        buf[o[20] : o[21]].reshape((3, 4)),
-        buf[o[21] : o[22]].reshape((3, 3)),
-        buf[o[22] : o[23]].reshape((3, 3)),
-        buf[o[23] : o[24]],
-        buf[o[24] : o[25]],
+        buf[o[18] : o[19]].reshape((3, 4)),
+        buf[o[19] : o[20]],
     )
 
 
@@ -423,9 +522,16 @@ def problem_statistics(pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, 
     )
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot, positive_only):
-    """:func:`problem_statistics` in the scratch arrays ``ws`` (:func:`workspace`)."""
+    """:func:`problem_statistics` in the scratch arrays ``ws`` (:func:`workspace`).
+
+    Written for the compiler as much as for the reader: no array views, no ``continue`` or
+    ``return`` inside a loop (either keeps numba from pruning the reference counting of the
+    arrays, which otherwise costs more than the arithmetic on these small problems), and
+    every sum accumulated over its index in increasing order, with the loops nested so that
+    the innermost one updates independent entries (no serial chain of additions).
+    """
     (
         gs,
         m_q,
@@ -439,8 +545,8 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
         p0l,
         g3,
         wrow,
-        mgf,
-        mgif,
+        mg,
+        mgi,
         u_mat,
         v_mat,
         vloc,
@@ -449,13 +555,8 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
         low,
         linv,
         loc,
-        m3,
-        m3i,
         t3,
-        info,
-        infoi,
-        rhs,
-        xr,
+        ddiag,
     ) = ws
     n, s = rows.shape
     for q in range(n):
@@ -475,12 +576,7 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
     n_clocks = 0
     for q in range(n):
         mq = m_q[q]
-        if mq == 0:
-            continue
         n_rows += mq
-        p0 = pq[q]
-        ax = a_x[q]
-        px = pax[q]
         i = 0
         for j in range(n_sys + 1):
             while i < mq and system[idx[q, i]] < j:
@@ -495,84 +591,113 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
             u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
             for j in range(3):
                 lam[i, j] = u0 * froot[q, 0, j] + u1 * froot[q, 1, j] + u2 * froot[q, 2, j]
-            ax[i, 0] = -u0
-            ax[i, 1] = -u1
-            ax[i, 2] = -u2
-            ax[i, 3] = pr[q, k] - rng
+            a_x[q, i, 0] = -u0
+            a_x[q, i, 1] = -u1
+            a_x[q, i, 2] = -u2
+            a_x[q, i, 3] = pr[q, k] - rng
             wrow[i] = w[q, k]
             for i2 in range(mq):
-                p0[i, i2] = 0.0
-            p0[i, i] = wrow[i]
+                pq[q, i, i2] = 0.0
+            pq[q, i, i] = wrow[i]
         # 1. the clocks: P0 = W - W N (N^T W N)^-1 N^T W, one group per constellation
         for j in range(n_sys):
             i0, i1 = gs[j], gs[j + 1]
-            if i1 == i0:
-                continue
-            n_clocks += 1
-            dsum = 0.0
-            amean = 0.0
-            for i in range(i0, i1):
-                dsum += wrow[i]
-                amean += wrow[i] * ax[i, 3]
-            # remove the group's weighted mean from the residuals (its clock, tens of km):
-            # a shift along a clock column leaves R a unchanged, and costs no digits in T
-            amean /= dsum
-            for i in range(i0, i1):
-                ax[i, 3] -= amean
-            for c in range(4):  # P0 [A | a] = W X - w (w^T X) / d over the group
-                acc = 0.0
+            if i1 > i0:
+                n_clocks += 1
+                dsum = 0.0
+                amean = 0.0
                 for i in range(i0, i1):
-                    acc += wrow[i] * ax[i, c]
-                acc /= dsum
+                    dsum += wrow[i]
+                    amean += wrow[i] * a_x[q, i, 3]
+                # remove the group's weighted mean from the residuals (its clock, tens of
+                # km): a shift along a clock column leaves R a unchanged, and costs no
+                # digits in T
+                amean /= dsum
                 for i in range(i0, i1):
-                    px[i, c] = wrow[i] * (ax[i, c] - acc)
-            for i in range(i0, i1):
-                f = wrow[i] / dsum
-                for i2 in range(i0, i1):
-                    p0[i, i2] -= f * wrow[i2]
+                    a_x[q, i, 3] -= amean
+                # P0 [A | a] = W X - w (w^T X) / d over the group
+                acc0 = acc1 = acc2 = acc3 = 0.0
+                for i in range(i0, i1):
+                    wi = wrow[i]
+                    acc0 += wi * a_x[q, i, 0]
+                    acc1 += wi * a_x[q, i, 1]
+                    acc2 += wi * a_x[q, i, 2]
+                    acc3 += wi * a_x[q, i, 3]
+                acc0 /= dsum
+                acc1 /= dsum
+                acc2 /= dsum
+                acc3 /= dsum
+                for i in range(i0, i1):
+                    wi = wrow[i]
+                    pax[q, i, 0] = wi * (a_x[q, i, 0] - acc0)
+                    pax[q, i, 1] = wi * (a_x[q, i, 1] - acc1)
+                    pax[q, i, 2] = wi * (a_x[q, i, 2] - acc2)
+                    pax[q, i, 3] = wi * (a_x[q, i, 3] - acc3)
+                for i in range(i0, i1):
+                    f = wrow[i] / dsum
+                    for i2 in range(i0, i1):
+                        pq[q, i, i2] -= f * wrow[i2]
         # 2. rank-3 relative-error latent: P_q = P0 - P0 lam (I + lam^T P0 lam)^-1 lam^T P0
         has_rel = False
         for a_ in range(3):
             for c in range(3):
                 if froot[q, a_, c] != 0.0:
                     has_rel = True
-        if not has_rel:
-            continue
-        for j in range(n_sys):  # P0 lam = W lam - w (w^T lam) / d over each group
-            i0, i1 = gs[j], gs[j + 1]
-            if i1 == i0:
-                continue
-            dsum = 0.0
-            for i in range(i0, i1):
-                dsum += wrow[i]
-            for c in range(3):
-                acc = 0.0
-                for i in range(i0, i1):
-                    acc += wrow[i] * lam[i, c]
-                acc /= dsum
-                for i in range(i0, i1):
-                    p0l[i, c] = wrow[i] * (lam[i, c] - acc)
-        for j1 in range(3):
-            for j2 in range(3):
-                acc = 1.0 if j1 == j2 else 0.0
-                for i in range(mq):
-                    acc += lam[i, j1] * p0l[i, j2]
-                m3[j1, j2] = acc
-        _inv3(m3, m3i)
-        for i in range(mq):
+        if has_rel and mq > 0:
+            for j in range(n_sys):  # P0 lam = W lam - w (w^T lam) / d over each group
+                i0, i1 = gs[j], gs[j + 1]
+                if i1 > i0:
+                    dsum = 0.0
+                    for i in range(i0, i1):
+                        dsum += wrow[i]
+                    acc0 = acc1 = acc2 = 0.0
+                    for i in range(i0, i1):
+                        wi = wrow[i]
+                        acc0 += wi * lam[i, 0]
+                        acc1 += wi * lam[i, 1]
+                        acc2 += wi * lam[i, 2]
+                    acc0 /= dsum
+                    acc1 /= dsum
+                    acc2 /= dsum
+                    for i in range(i0, i1):
+                        wi = wrow[i]
+                        p0l[i, 0] = wi * (lam[i, 0] - acc0)
+                        p0l[i, 1] = wi * (lam[i, 1] - acc1)
+                        p0l[i, 2] = wi * (lam[i, 2] - acc2)
+            # m3 = I + lam^T P0 lam (its upper triangle: what the inverse reads) and
+            # t3 = (P0 lam)^T [A | a] (P_q [A | a] = P0 [A | a] - g3 t3, g3 = P0 lam m3^-1)
+            m00 = m11 = m22 = 1.0
+            m01 = m02 = m12 = 0.0
             for j in range(3):
-                g3[i, j] = p0l[i, 0] * m3i[0, j] + p0l[i, 1] * m3i[1, j] + p0l[i, 2] * m3i[2, j]
-        for j in range(3):  # t3 = (P0 lam)^T [A | a]: P_q [A | a] = P0 [A | a] - g3 t3
-            for c in range(4):
-                acc = 0.0
-                for i in range(mq):
-                    acc += p0l[i, j] * ax[i, c]
-                t3[j, c] = acc
-        for i in range(mq):
-            for c in range(4):
-                px[i, c] -= g3[i, 0] * t3[0, c] + g3[i, 1] * t3[1, c] + g3[i, 2] * t3[2, c]
-            for i2 in range(mq):
-                p0[i, i2] -= g3[i, 0] * p0l[i2, 0] + g3[i, 1] * p0l[i2, 1] + g3[i, 2] * p0l[i2, 2]
+                for c in range(4):
+                    t3[j, c] = 0.0
+            for i in range(mq):
+                l0, l1, l2 = lam[i, 0], lam[i, 1], lam[i, 2]
+                e0, e1, e2 = p0l[i, 0], p0l[i, 1], p0l[i, 2]
+                m00 += l0 * e0
+                m01 += l0 * e1
+                m02 += l0 * e2
+                m11 += l1 * e1
+                m12 += l1 * e2
+                m22 += l2 * e2
+                for c in range(4):
+                    x = a_x[q, i, c]
+                    t3[0, c] += e0 * x
+                    t3[1, c] += e1 * x
+                    t3[2, c] += e2 * x
+            i00, i01, i02, i11, i12, i22 = inverse3_sym(m00, m01, m02, m11, m12, m22)
+            for i in range(mq):
+                e0, e1, e2 = p0l[i, 0], p0l[i, 1], p0l[i, 2]
+                g3[i, 0] = e0 * i00 + e1 * i01 + e2 * i02
+                g3[i, 1] = e0 * i01 + e1 * i11 + e2 * i12
+                g3[i, 2] = e0 * i02 + e1 * i12 + e2 * i22
+            for i in range(mq):
+                for c in range(4):
+                    pax[q, i, c] -= g3[i, 0] * t3[0, c] + g3[i, 1] * t3[1, c] + g3[i, 2] * t3[2, c]
+                for i2 in range(mq):
+                    pq[q, i, i2] -= (
+                        g3[i, 0] * p0l[i2, 0] + g3[i, 1] * p0l[i2, 1] + g3[i, 2] * p0l[i2, 2]
+                    )
     # 3. errors common to all receivers: P~ = Pblk - Pblk E (I + E^T Pblk E)^-1 E^T Pblk;
     # ptx: P~ [A | a] per row, ptd: diag(P~)
     for q in range(n):
@@ -580,9 +705,10 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
             ptd[q, i] = pq[q, i, i]
             for c in range(4):
                 ptx[q, i, c] = pax[q, i, c]
+    ok = True
     if common:
         # the latent common errors of the satellites the fix uses (loc: their index in the
-        # compact S' x S' system; the other columns of E are zero)
+        # compact S' x S' system, the leading block of mg; the other columns of E are zero)
         sl = 0
         for k in range(s):
             loc[k] = -1
@@ -595,8 +721,6 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
             if loc[k] == 0:
                 loc[k] = sl
                 sl += 1
-        mg = mgf[: sl * sl].reshape((sl, sl))
-        mgi = mgif[: sl * sl].reshape((sl, sl))
         for k in range(sl):
             for k2 in range(sl):
                 mg[k, k2] = 0.0
@@ -607,103 +731,156 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
             for i in range(m_q[q]):
                 k = idx[q, i]
                 lk = loc[k]
-                if lk < 0:
-                    continue
-                for i2 in range(m_q[q]):
-                    k2 = idx[q, i2]
-                    if loc[k2] >= 0:
-                        mg[lk, loc[k2]] += sig_c[k] * pq[q, i, i2] * sig_c[k2]
-                for c in range(4):
-                    u_mat[lk, c] += sig_c[k] * pax[q, i, c]
-        if not _cholesky_inverse_into(mg, mgi, low, linv):
-            return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
-        for k in range(sl):  # v_mat: (I + E^T Pblk E)^-1 E^T Pblk [A | a]
-            for c in range(4):
-                v_mat[k, c] = 0.0
-            for k2 in range(sl):
-                f = mgi[k, k2]
-                for c in range(4):
-                    v_mat[k, c] += f * u_mat[k2, c]
-        # per block, with local (contiguous) copies: Vloc = Sigma V[sats], Mloc = Sigma
-        # Mginv[sats, sats] Sigma; P~ [A | a] = P_q [A | a] - P_q Vloc and
-        # diag(P~) = diag(P_q) - diag(P_q Mloc P_q)
-        for q in range(n):
-            mq = m_q[q]
-            if mq == 0:
-                continue
-            p_q = pq[q]
-            for i in range(mq):
-                lk = loc[idx[q, i]]
-                if lk < 0:
+                if lk >= 0:
+                    for i2 in range(m_q[q]):
+                        k2 = idx[q, i2]
+                        if loc[k2] >= 0:
+                            mg[lk, loc[k2]] += sig_c[k] * pq[q, i, i2] * sig_c[k2]
                     for c in range(4):
-                        vloc[i, c] = 0.0
+                        u_mat[lk, c] += sig_c[k] * pax[q, i, c]
+        # mgi = mg^-1 by Cholesky: nav._kernels._cholesky_inverse_into's sums in its order
+        # (the same result bit for bit), with the loops nested so that the innermost one
+        # updates independent entries; written out here because a call in the middle of
+        # this kernel would bring back its reference counting (see the note above)
+        for j in range(sl):
+            s_ = 0.0
+            if ok:
+                s_ = mg[j, j]
+                for k in range(j):
+                    s_ -= low[j, k] * low[j, k]
+                ok = s_ > 0.0
+            if ok:
+                d = math.sqrt(s_)
+                low[j, j] = d
+                for i in range(j + 1, sl):  # (mg[i, j] - sum_k low[i, k] low[j, k]) / d
+                    low[i, j] = mg[i, j]
+                for k in range(j):
+                    f = low[j, k]
+                    for i in range(j + 1, sl):
+                        low[i, j] -= low[i, k] * f
+                for i in range(j + 1, sl):
+                    low[i, j] /= d
+        if ok:
+            # inverse of the factor, column by column (forward substitution):
+            # linv[i, j] = (-sum_{k = j .. i-1} low[i, k] linv[k, j]) / low[i, i]
+            for j in range(sl):
+                linv[j, j] = 1.0 / low[j, j]
+                for i in range(j + 1, sl):
+                    linv[i, j] = 0.0
+                for k in range(j, sl):
+                    if k > j:
+                        linv[k, j] /= low[k, k]
+                    f = linv[k, j]
+                    for i in range(k + 1, sl):
+                        linv[i, j] -= low[i, k] * f
+            # mgi[i, j] = sum_{k = j .. sl-1} linv[k, i] linv[k, j] (j >= i), symmetric
+            for i in range(sl):
+                for j in range(i, sl):
+                    mgi[i, j] = 0.0
+                for k in range(i, sl):
+                    f = linv[k, i]
+                    for j in range(i, k + 1):
+                        mgi[i, j] += f * linv[k, j]
+                for j in range(i + 1, sl):
+                    mgi[j, i] = mgi[i, j]
+            for k in range(sl):  # v_mat: (I + E^T Pblk E)^-1 E^T Pblk [A | a]
+                for c in range(4):
+                    v_mat[k, c] = 0.0
+                for k2 in range(sl):
+                    f = mgi[k, k2]
+                    for c in range(4):
+                        v_mat[k, c] += f * u_mat[k2, c]
+            # per block, with local (contiguous) copies: Vloc = Sigma V[sats], Mloc = Sigma
+            # Mginv[sats, sats] Sigma; P~ [A | a] = P_q [A | a] - P_q Vloc and
+            # diag(P~) = diag(P_q) - diag(P_q Mloc P_q)
+            for q in range(n):
+                mq = m_q[q]
+                for i in range(mq):
+                    lk = loc[idx[q, i]]
+                    if lk < 0:
+                        for c in range(4):
+                            vloc[i, c] = 0.0
+                        for i2 in range(mq):
+                            mloc[i, i2] = 0.0
+                    else:
+                        sk = sig_c[idx[q, i]]
+                        for c in range(4):
+                            vloc[i, c] = sk * v_mat[lk, c]
+                        for i2 in range(mq):
+                            lk2 = loc[idx[q, i2]]
+                            mloc[i, i2] = 0.0 if lk2 < 0 else sk * mgi[lk, lk2] * sig_c[idx[q, i2]]
+                for i2 in range(mq):  # P~ [A | a] = P_q [A | a] - P_q Vloc
+                    for i in range(mq):
+                        f = pq[q, i, i2]
+                        for c in range(4):
+                            ptx[q, i, c] -= f * vloc[i2, c]
+                for i in range(mq):  # bq = P_q Mloc
                     for i2 in range(mq):
-                        mloc[i, i2] = 0.0
-                    continue
-                sk = sig_c[idx[q, i]]
-                for c in range(4):
-                    vloc[i, c] = sk * v_mat[lk, c]
-                for i2 in range(mq):
-                    lk2 = loc[idx[q, i2]]
-                    mloc[i, i2] = 0.0 if lk2 < 0 else sk * mgi[lk, lk2] * sig_c[idx[q, i2]]
-            for i in range(mq):
-                for i2 in range(mq):
-                    f = p_q[i, i2]
-                    for c in range(4):
-                        ptx[q, i, c] -= f * vloc[i2, c]
-                for i2 in range(mq):
-                    acc = 0.0
+                        bq[i, i2] = 0.0
                     for i3 in range(mq):
-                        acc += p_q[i, i3] * mloc[i3, i2]
-                    bq[i, i2] = acc
-                acc = 0.0
+                        f = pq[q, i, i3]
+                        for i2 in range(mq):
+                            bq[i, i2] += f * mloc[i3, i2]
+                for i in range(mq):  # diag(P_q Mloc P_q), staged in ddiag
+                    ddiag[i] = 0.0
                 for i2 in range(mq):
-                    acc += bq[i, i2] * p_q[i2, i]
-                ptd[q, i] -= acc
-    # normal equations and the residual projector R = P~ - P~ A info^-1 A^T P~
-    for p1 in range(3):
-        rhs[p1] = 0.0
-        for p2 in range(3):
-            info[p1, p2] = 0.0
-    apa = 0.0
-    for q in range(n):
-        for i in range(m_q[q]):
-            for p1 in range(3):
-                ap = a_x[q, i, p1]
-                for p2 in range(3):
-                    info[p1, p2] += ap * ptx[q, i, p2]
-                rhs[p1] += ap * ptx[q, i, 3]
-            apa += a_x[q, i, 3] * ptx[q, i, 3]
-    for p1 in range(3):  # symmetrise (the two triangles differ by rounding only)
-        for p2 in range(p1 + 1, 3):
-            v = 0.5 * (info[p1, p2] + info[p2, p1])
-            info[p1, p2] = v
-            info[p2, p1] = v
-    if not _cholesky_inverse_into(info, infoi, low, linv):
-        return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
-    t_stat = apa
-    for p1 in range(3):
-        xr[p1] = infoi[p1, 0] * rhs[0] + infoi[p1, 1] * rhs[1] + infoi[p1, 2] * rhs[2]
-        t_stat -= rhs[p1] * xr[p1]
-    if t_stat < 0.0:  # rounding of a (near) zero statistic
-        t_stat = 0.0
-    dof = n_rows - n_clocks - 3
+                    for i in range(mq):
+                        ddiag[i] += bq[i, i2] * pq[q, i2, i]
+                for i in range(mq):
+                    ptd[q, i] -= ddiag[i]
+    # normal equations (info = A^T P~ A, r = A^T P~ a) and the residual projector
+    # R = P~ - P~ A info^-1 A^T P~
+    t_stat = np.nan
     state = (0.0, 0.0, -1, -1, 0.0, False)
-    for q in range(n):
-        for i in range(m_q[q]):
-            t0, t1, t2 = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2]
-            g0 = infoi[0, 0] * t0 + infoi[0, 1] * t1 + infoi[0, 2] * t2
-            g1 = infoi[1, 0] * t0 + infoi[1, 1] * t1 + infoi[1, 2] * t2
-            g2 = infoi[2, 0] * t0 + infoi[2, 1] * t1 + infoi[2, 2] * t2
-            r_ii = ptd[q, i] - (t0 * g0 + t1 * g1 + t2 * g2)
-            ra = ptx[q, i, 3] - (t0 * xr[0] + t1 * xr[1] + t2 * xr[2])
-            k = idx[q, i]
-            state = _row(state, q, k, r_ii, ra, g0, g1, g2, w[q, k], rot, positive_only)
+    if ok:
+        f00 = f01 = f02 = f10 = f11 = f12 = f20 = f21 = f22 = 0.0
+        r0 = r1 = r2 = 0.0
+        apa = 0.0
+        for q in range(n):
+            for i in range(m_q[q]):
+                a0, a1, a2, a3 = a_x[q, i, 0], a_x[q, i, 1], a_x[q, i, 2], a_x[q, i, 3]
+                t0, t1, t2, t3_ = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2], ptx[q, i, 3]
+                f00 += a0 * t0
+                f01 += a0 * t1
+                f02 += a0 * t2
+                r0 += a0 * t3_
+                f10 += a1 * t0
+                f11 += a1 * t1
+                f12 += a1 * t2
+                r1 += a1 * t3_
+                f20 += a2 * t0
+                f21 += a2 * t1
+                f22 += a2 * t2
+                r2 += a2 * t3_
+                apa += a3 * t3_
+        # symmetrise (the two triangles differ by rounding only), invert
+        v01 = 0.5 * (f01 + f10)
+        v02 = 0.5 * (f02 + f20)
+        v12 = 0.5 * (f12 + f21)
+        ok, o00, o01, o02, o11, o12, o22 = cholesky_inverse3(f00, v01, f11, v02, v12, f22)
+        if ok:
+            x0, x1, x2, t_stat = _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa)
+            for q in range(n):
+                for i in range(m_q[q]):
+                    t0, t1, t2 = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2]
+                    g0 = o00 * t0 + o01 * t1 + o02 * t2  # the row's position gain
+                    g1 = o01 * t0 + o11 * t1 + o12 * t2
+                    g2 = o02 * t0 + o12 * t1 + o22 * t2
+                    r_ii = ptd[q, i] - (t0 * g0 + t1 * g1 + t2 * g2)
+                    ra = ptx[q, i, 3] - (t0 * x0 + t1 * x1 + t2 * x2)
+                    k = idx[q, i]
+                    state = _row(state, q, k, r_ii, ra, g0, g1, g2, w[q, k], rot, positive_only)
     h_slope, v_slope, q_star, k_star, w_star, _sp = state
-    return True, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
+    keep_alive(gs, m_q, idx, a_x, pq, pax, ptx, ptd, lam, p0l, g3, wrow, mg, mgi, u_mat, v_mat)
+    keep_alive(vloc, mloc, bq, low, linv, loc, t3, ddiag)
+    keep_alive(pr, sv, system, rows, w, sig_c, pos, base, froot, rot)
+    dof = n_rows - n_clocks - 3
+    if not ok:
+        t_stat, dof, q_star, k_star, w_star, h_slope, v_slope = _FAILED
+    return ok, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _row(state, q, k, r_ii, ra, g0, g1, g2, w_qk, rot, positive_only):
     """One row's share of a test: its slopes (the largest so far) and its normalised residual
     (the identified row so far). ``state``: ``(h_slope, v_slope, q_star, k_star, w_star,
@@ -741,79 +918,84 @@ def standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_only
     removal per constellation, after which ``P~ = W - w w^T / d`` per group is applied to
     the design in closed form. ``pr``, ``vis``, ``w``: the receiver's rows (S,); ``u``: (S, 4)
     scratch. The same quantities as :func:`problem_statistics` (compared in the tests)."""
+    return _standalone_statistics(
+        pr, sv, system, n_sys, vis, w, pos, rot, positive_only, u, np.empty((n_sys, 5))
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_only, u, grp):
+    """:func:`standalone_statistics` with the group scratch ``grp`` (n_sys, 5) given (each
+    constellation's weighted means of ``[A | a]`` and its weight sum): no allocation."""
     s = vis.shape[0]
     n_rows = 0
     n_clocks = 0
-    info = np.zeros((3, 3))
-    infoi = np.empty((3, 3))
-    low = np.empty((3, 3))
-    linv = np.empty((3, 3))
-    rhs = np.zeros(3)
-    apa = 0.0
-    dsum = np.zeros(n_sys)
-    for k in range(s):  # [A | a] of the rows, then each group's weighted means removed
-        if not vis[k]:
-            continue
-        d0 = sv[k, 0] - pos[0]
-        d1 = sv[k, 1] - pos[1]
-        d2 = sv[k, 2] - pos[2]
-        rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        u[k, 0] = -d0 / rng
-        u[k, 1] = -d1 / rng
-        u[k, 2] = -d2 / rng
-        u[k, 3] = pr[k] - rng
-        dsum[system[k]] += w[k]
-        n_rows += 1
     for j in range(n_sys):
-        if dsum[j] > 0.0:
+        for c in range(5):
+            grp[j, c] = 0.0
+    for k in range(s):  # [A | a] of the rows, then each group's weighted means removed
+        if vis[k]:
+            d0 = sv[k, 0] - pos[0]
+            d1 = sv[k, 1] - pos[1]
+            d2 = sv[k, 2] - pos[2]
+            rng = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            u[k, 0] = -d0 / rng
+            u[k, 1] = -d1 / rng
+            u[k, 2] = -d2 / rng
+            u[k, 3] = pr[k] - rng
+            grp[system[k], 4] += w[k]
+            n_rows += 1
+    for j in range(n_sys):
+        if grp[j, 4] > 0.0:
             n_clocks += 1
-    mean = np.zeros((n_sys, 4))
     for k in range(s):
         if vis[k]:
+            j = system[k]
             for c in range(4):
-                mean[system[k], c] += w[k] * u[k, c] / dsum[system[k]]
+                grp[j, c] += w[k] * u[k, c] / grp[j, 4]
+    # the normal matrix (its lower triangle: what the factorisation reads), A^T P a, a^T P a
+    a00 = a10 = a11 = a20 = a21 = a22 = 0.0
+    r0 = r1 = r2 = 0.0
+    apa = 0.0
     for k in range(s):
-        if not vis[k]:
-            continue
-        for c in range(4):
-            u[k, c] -= mean[system[k], c]
-        for p1 in range(3):
-            for p2 in range(3):
-                info[p1, p2] += w[k] * u[k, p1] * u[k, p2]
-            rhs[p1] += w[k] * u[k, p1] * u[k, 3]
-        apa += w[k] * u[k, 3] * u[k, 3]
-    if not _cholesky_inverse_into(info, infoi, low, linv):
-        return False, np.nan, 0, -1, -1, np.nan, np.inf, np.inf
-    xr = np.empty(3)
-    t_stat = apa
-    for p1 in range(3):
-        xr[p1] = infoi[p1, 0] * rhs[0] + infoi[p1, 1] * rhs[1] + infoi[p1, 2] * rhs[2]
-        t_stat -= rhs[p1] * xr[p1]
-    if t_stat < 0.0:
-        t_stat = 0.0
+        if vis[k]:
+            j = system[k]
+            for c in range(4):
+                u[k, c] -= grp[j, c]
+            wk = w[k]
+            u0, u1, u2, u3 = u[k, 0], u[k, 1], u[k, 2], u[k, 3]
+            a00 += wk * u0 * u0
+            a10 += wk * u1 * u0
+            a11 += wk * u1 * u1
+            a20 += wk * u2 * u0
+            a21 += wk * u2 * u1
+            a22 += wk * u2 * u2
+            r0 += wk * u0 * u3
+            r1 += wk * u1 * u3
+            r2 += wk * u2 * u3
+            apa += wk * u3 * u3
+    ok, o00, o01, o02, o11, o12, o22 = cholesky_inverse3(a00, a10, a11, a20, a21, a22)
+    t_stat = np.nan
     state = (0.0, 0.0, -1, -1, 0.0, False)
-    for k in range(s):
-        if not vis[k]:
-            continue
-        wk = w[k]
-        t0, t1, t2 = wk * u[k, 0], wk * u[k, 1], wk * u[k, 2]  # (P~ A)_k
-        g0 = infoi[0, 0] * t0 + infoi[0, 1] * t1 + infoi[0, 2] * t2
-        g1 = infoi[1, 0] * t0 + infoi[1, 1] * t1 + infoi[1, 2] * t2
-        g2 = infoi[2, 0] * t0 + infoi[2, 1] * t1 + infoi[2, 2] * t2
-        r_ii = wk - wk * wk / dsum[system[k]] - (t0 * g0 + t1 * g1 + t2 * g2)
-        ra = wk * u[k, 3] - (t0 * xr[0] + t1 * xr[1] + t2 * xr[2])
-        state = _row(state, 0, k, r_ii, ra, g0, g1, g2, wk, rot, positive_only)
+    if ok:
+        x0, x1, x2, t_stat = _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa)
+        for k in range(s):
+            if vis[k]:
+                wk = w[k]
+                t0, t1, t2 = wk * u[k, 0], wk * u[k, 1], wk * u[k, 2]  # (P~ A)_k
+                g0 = o00 * t0 + o01 * t1 + o02 * t2
+                g1 = o01 * t0 + o11 * t1 + o12 * t2
+                g2 = o02 * t0 + o12 * t1 + o22 * t2
+                r_ii = wk - wk * wk / grp[system[k], 4] - (t0 * g0 + t1 * g1 + t2 * g2)
+                ra = wk * u[k, 3] - (t0 * x0 + t1 * x1 + t2 * x2)
+                state = _row(state, 0, k, r_ii, ra, g0, g1, g2, wk, rot, positive_only)
     h_slope, v_slope, _q, k_star, w_star, _sp = state
-    return (
-        True,
-        t_stat,
-        n_rows - n_clocks - 3,
-        0 if k_star >= 0 else -1,
-        k_star,
-        w_star,
-        h_slope,
-        v_slope,
-    )
+    q_star = 0 if k_star >= 0 else -1
+    dof = n_rows - n_clocks - 3
+    if not ok:
+        t_stat, dof, q_star, k_star, w_star, h_slope, v_slope = _FAILED
+    keep_alive(pr, sv, system, vis, w, pos, rot, u, grp)
+    return ok, t_stat, dof, q_star, k_star, w_star, h_slope, v_slope
 
 
 # --------------------------------------------------------------------------------------------
@@ -830,19 +1012,21 @@ def protection_level(slope_h, slope_v, sqrt_lam, cov_ecef, rot, k_h, k_v):
     the vertical sigma of ``cov_ecef`` rotated by ``rot`` (see the integrity module's
     docstring for why the sum bounds the misleading-information probability).
     """
-    c = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for a in range(3):
-                for b in range(3):
-                    acc += rot[i, a] * cov_ecef[a, b] * rot[j, b]
-            c[i, j] = acc
-    half_tr = 0.5 * (c[0, 0] + c[1, 1])
-    half_diff = 0.5 * (c[0, 0] - c[1, 1])
-    major = half_tr + math.sqrt(half_diff * half_diff + c[0, 1] * c[1, 0])
+    # the entries of rot cov rot^T used (no array: this runs for every fix of every epoch)
+    c00 = c01 = c10 = c11 = c22 = 0.0
+    for a in range(3):
+        for b in range(3):
+            cab = cov_ecef[a, b]
+            c00 += rot[0, a] * cab * rot[0, b]
+            c01 += rot[0, a] * cab * rot[1, b]
+            c10 += rot[1, a] * cab * rot[0, b]
+            c11 += rot[1, a] * cab * rot[1, b]
+            c22 += rot[2, a] * cab * rot[2, b]
+    half_tr = 0.5 * (c00 + c11)
+    half_diff = 0.5 * (c00 - c11)
+    major = half_tr + math.sqrt(half_diff * half_diff + c01 * c10)
     sig_major = math.sqrt(max(major, 0.0))
-    sig_u = math.sqrt(max(c[2, 2], 0.0))
+    sig_u = math.sqrt(max(c22, 0.0))
     return slope_h * sqrt_lam + k_h * sig_major, slope_v * sqrt_lam + k_v * sig_u
 
 
@@ -915,10 +1099,13 @@ def standalone_fde(obs, solver, fix, rot, test):
     h_out = np.full(n_rx, np.inf)
     v_out = np.full(n_rx, np.inf)
     figs = (t_out, dof_out, h_out, v_out)
-    w = np.zeros((1, s))
+    w = np.zeros(s)
     u = np.empty((s, 4))
+    grp = np.empty((n_sys, 5))
     vis_r = np.empty((1, s), dtype=np.bool_)
     pr_r = np.empty((1, s))
+    vis1 = vis_r[0]  # the same memory, 1-D
+    pr1 = pr_r[0]
     # the solver's fix, kept from its first detection on (restored if not cleared)
     keep_pos, keep_cov, keep_clk = np.empty(3), np.empty((3, 3)), np.empty(n_sys)
     for r in range(n_rx):
@@ -932,11 +1119,11 @@ def standalone_fde(obs, solver, fix, rot, test):
                 istat[r] = INT_FAULT_DETECTED if detected[r] else INT_NO_FIX
                 break
             for k in range(s):
-                w[0, k] = 0.0
-                if vis_r[0, k]:
-                    w[0, k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
-            stats = standalone_statistics(
-                pr_r[0], sv, system, n_sys, vis_r[0], w[0], pos[r], rot[r], positive_only, u
+                w[k] = 0.0
+                if vis1[k]:
+                    w[k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
+            stats = _standalone_statistics(
+                pr1, sv, system, n_sys, vis1, w, pos[r], rot[r], positive_only, u, grp
             )
             verdict, failed = _record(r, stats, detected[r], n_excl[r], test, figs)
             if failed and not detected[r]:  # the solver's own fix, kept

@@ -41,26 +41,32 @@ def _max_exclusions(config: Any) -> int | None:
 
 def fused_arguments(config: Any, received: np.ndarray) -> tuple:
     """The ``fde`` argument of ``epoch_navigation``: thresholds and non-centralities
-    (tables covering every degree of freedom this epoch can have), the fault-free factors,
-    the exclusions allowed per fix and the one-sided identification flag (cached per
-    setting; the tables grow when an epoch has more measurements than they cover)."""
+    (tables covering every degree of freedom this epoch can have: one per possible
+    measurement, entry d computed alone, so a larger table has the same entries), the
+    fault-free factors, the exclusions allowed per fix and the one-sided identification flag
+    (cached per setting, grown when an epoch could have more measurements than they cover;
+    the last config's entry is kept beside the cache, found by identity: this runs every
+    epoch)."""
+    last_config, last_hit = _LAST
+    if config is last_config and last_hit[0].shape[0] > received.size:
+        return last_hit
     key = (config.integrity, config.integrity_p_fa, config.integrity_risk)
     key += (config.integrity_fault_sign,)
     hit = _FUSED.get(key)
-    if hit is not None and hit[0].shape[0] > received.size:  # covers every possible row
-        return hit
-    n_rows = int(received.sum())
-    if hit is None or hit[0].shape[0] <= n_rows:
-        thr, lam = threshold_tables(config.integrity_p_fa, config.integrity_risk, max(n_rows, 1))
+    if hit is None or hit[0].shape[0] <= received.size:  # grown to cover every possible row
+        size = max(received.size, 1)
+        thr, lam = threshold_tables(config.integrity_p_fa, config.integrity_risk, size)
         k_h, k_v = protection_factors(config.integrity_risk)
         max_excl = _max_exclusions(config)
         max_excl = (1 << 30) if max_excl is None else max_excl
         hit = (thr, lam, k_h, k_v, max_excl, config.integrity_fault_sign == "positive")
         _FUSED[key] = hit
+    _LAST[:] = [config, hit]
     return hit
 
 
 _FUSED: dict[tuple, tuple] = {}
+_LAST: list = [None, (np.empty(0),)]  # (config, its entry of _FUSED)
 
 
 def modular_fde(world: Any, obs, sa, co, rel_b, var_b, avail_b, centroid):

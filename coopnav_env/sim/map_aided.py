@@ -278,19 +278,21 @@ def _predict_kernel(pos, cov, margin, cap, z_lo, z_hi, b_lo, b_hi, up, order, co
         cand[base + 6, 2] -= d_up
         for j in range(nc):
             cand[base + j, 2] = min(max(cand[base + j, 2], z_lo), z_hi)
-    vis = _kernels.line_of_sight(cand, b_lo, b_hi, up, order, cot_s, h_dir)
     s = up.shape[0]
     pred = np.ones((n, s), dtype=np.bool_)
+    sub_lo, sub_hi = np.empty_like(b_lo), np.empty_like(b_hi)
     for q in range(n):
+        c = cand[q * nc : (q + 1) * nc]
+        m = _near_buildings(c, b_lo, b_hi, cot_s, sub_lo, sub_hi)
+        vis = _kernels.line_of_sight(c, sub_lo[:m], sub_hi[:m], up, order, cot_s, h_dir)
         any_possible = False
         for j in range(nc):
-            i = q * nc + j
             inside = False
-            for m in range(b_lo.shape[0]):
+            for b in range(m):
                 if (
-                    b_lo[m, 0] < cand[i, 0] < b_hi[m, 0]
-                    and b_lo[m, 1] < cand[i, 1] < b_hi[m, 1]
-                    and b_lo[m, 2] < cand[i, 2] < b_hi[m, 2]
+                    sub_lo[b, 0] < c[j, 0] < sub_hi[b, 0]
+                    and sub_lo[b, 1] < c[j, 1] < sub_hi[b, 1]
+                    and sub_lo[b, 2] < c[j, 2] < sub_hi[b, 2]
                 ):
                     inside = True
                     break
@@ -298,9 +300,51 @@ def _predict_kernel(pos, cov, margin, cap, z_lo, z_hi, b_lo, b_hi, up, order, co
                 continue
             any_possible = True
             for k in range(s):
-                if not vis[i, k]:
+                if not vis[j, k]:
                     pred[q, k] = False
         if not any_possible:  # the map says nothing
             for k in range(s):
                 pred[q, k] = True
     return pred
+
+
+@njit(cache=True, error_model="numpy")
+def _near_buildings(cand, b_lo, b_hi, cot_s, sub_lo, sub_hi):
+    """Copies into ``sub_lo, sub_hi`` the buildings that may matter to one UAV's candidates
+    ``cand`` (k, 3) and returns their number: every building except those that
+    :func:`coopnav_env.sim._kernels.blocked_sorted` skips for every candidate (no roof above
+    it, or its footprint beyond the reach of the lowest rising ray: the skip tested on the
+    candidates' bounding box, which bounds each candidate's test, as rounding is monotone and
+    ``hypot(x, y) >= max(x, y)``), and those contain no candidate either. So the line of sight
+    and the inside test on the subset are those on all buildings, at a fraction of the cost
+    (the candidates lie within ``2 max_margin_m`` of each other). With no rising satellite
+    (or a negative cotangent) or a candidate that is not finite, all buildings."""
+    m = b_lo.shape[0]
+    x_lo = y_lo = z_lo = np.inf
+    x_hi = y_hi = -np.inf
+    finite = True
+    for j in range(cand.shape[0]):
+        x, y, z = cand[j, 0], cand[j, 1], cand[j, 2]
+        finite = finite and math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+        x_lo, x_hi = min(x_lo, x), max(x_hi, x)
+        y_lo, y_hi = min(y_lo, y), max(y_hi, y)
+        z_lo = min(z_lo, z)
+    n_up = cot_s.shape[0]
+    cot_max = cot_s[n_up - 1] if n_up > 0 else 0.0
+    cull = finite and n_up > 0 and cot_max >= 0.0
+    k = 0
+    for b in range(m):
+        if cull:
+            climb = b_hi[b, 2] - z_lo  # >= each candidate's climb
+            if not climb > 0.0:
+                continue
+            # <= each candidate's horizontal distance to the footprint (_fmax as numpy's)
+            ddx = max(max(b_lo[b, 0] - x_hi, 0.0), x_lo - b_hi[b, 0])
+            ddy = max(max(b_lo[b, 1] - y_hi, 0.0), y_lo - b_hi[b, 1])
+            if max(ddx, ddy) > climb * cot_max:
+                continue
+        for a in range(3):
+            sub_lo[k, a] = b_lo[b, a]
+            sub_hi[k, a] = b_hi[b, a]
+        k += 1
+    return k

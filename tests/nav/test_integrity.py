@@ -37,6 +37,7 @@ from coopnav_env.nav import (
     solve_standalone,
 )
 from coopnav_env.nav import _integrity_kernels as ik
+from coopnav_env.nav import _kernels as nav_kernels
 from coopnav_env.nav import integrity as integ
 from coopnav_env.nav.cooperative import _dense_system, _linearize, _setup, _sort_by_system
 from coopnav_env.sim import CanyonMask
@@ -239,6 +240,38 @@ def test_compiled_statistics_equal_the_dense_reference(transfer, centroid) -> No
         assert got[5] == pytest.approx(want[5], rel=1e-8)
         assert got[6] == pytest.approx(want[6], rel=1e-8)
         assert got[7] == pytest.approx(want[7], rel=1e-8)
+
+
+def _bits(values) -> np.ndarray:
+    return np.asarray(values, dtype=np.float64).view(np.int64)
+
+
+def test_scalar_3x3_inverses_equal_the_solvers_bit_for_bit() -> None:
+    """The statistics kernels invert their 3x3 matrices in scalars (no arrays: no allocation
+    or reference counting); they must give what the solvers' array versions
+    (``nav._kernels._cholesky_inverse_into``, ``_inv3``) give, bit for bit: 3000 random
+    symmetric positive definite matrices with scales over 12 orders of magnitude, and
+    matrices that are not positive definite (reported by both)."""
+    rng = np.random.default_rng(11)
+    low, linv, out = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    upper = np.triu_indices(3)  # (0,0) (0,1) (0,2) (1,1) (1,2) (2,2): the scalars' order
+    n_failed = 0
+    for t in range(3000):
+        g = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-6.0, 6.0, size=3)[:, None]
+        a = g @ g.T
+        if t % 10 == 0:  # indefinite or singular
+            a[2, 2] = -abs(a[2, 2]) if t % 20 == 0 else a[2, 0] ** 2 / a[0, 0]
+        ok = nav_kernels._cholesky_inverse_into(a, out, low, linv)
+        got = ik.cholesky_inverse3(a[0, 0], a[1, 0], a[1, 1], a[2, 0], a[2, 1], a[2, 2])
+        assert got[0] == ok
+        n_failed += not ok
+        if ok:
+            assert (_bits(got[1:]) == _bits(out[upper])).all()
+        a_sym = np.triu(a) + np.triu(a, 1).T  # _inv3 reads the upper triangle
+        nav_kernels._inv3(a_sym, out)
+        got3 = ik.inverse3_sym(a[0, 0], a[0, 1], a[0, 2], a[1, 1], a[1, 2], a[2, 2])
+        assert (_bits(got3) == _bits(out[upper])).all()
+    assert n_failed >= 150  # every 20th matrix is indefinite
 
 
 @pytest.mark.parametrize("q", [0, 1])
