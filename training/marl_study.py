@@ -62,6 +62,9 @@ class EpisodeResult:
     success: bool
     collided: bool
     length: int
+    # over every UAV-step: the 3-D error of the estimate each UAV used (its cooperative fix,
+    # else its standalone fix, else dead reckoning); NaN where the env does not report it
+    nav_error_mean_m: float = math.nan
     descriptors: dict[str, float] = field(default_factory=dict)
     pos_enu_m: np.ndarray | None = None  # (T+1, N, 3) true positions
 
@@ -140,6 +143,9 @@ def fly_episodes(
         desc["time_to_goal_s"] = (
             float(rec.length * env.unwrapped.config.dt_s) if rec.success else math.nan
         )
+        desc["fix_share"] = float(fix.mean()) if fix.size else 0.0
+        nav = np.asarray(rec.nav_error_m, dtype=float)
+        nav_ok = np.isfinite(nav)
         out.append(
             EpisodeResult(
                 seed=int(seed),
@@ -148,6 +154,7 @@ def fly_episodes(
                 success=bool(rec.success),
                 collided=bool(rec.collided),
                 length=int(rec.length),
+                nav_error_mean_m=float(nav[nav_ok].mean()) if nav_ok.any() else math.nan,
                 descriptors=desc,
                 pos_enu_m=rec.pos_enu_m if keep_positions else None,
             )
@@ -159,12 +166,23 @@ def fly_episodes(
 # ---- statistics ---------------------------------------------------------------------------
 
 
+#: The study's scores (``--score``): what the per-episode error is the mean of.
+SCORES = {
+    "coop": "the mean cooperative 3-D error over UAV-steps with a cooperative fix",
+    "nav": "the mean 3-D error of the estimate each UAV used (its cooperative fix, else its "
+    "standalone fix, else dead reckoning) over every UAV-step",
+}
+
+
 def _matrix(runs: Sequence[Sequence[EpisodeResult]], key: str) -> np.ndarray:
-    """(runs, episodes) matrix of ``key``; an episode without any fix scores its crash cap."""
+    """(runs, episodes) matrix of ``key`` ("coop", "nav", "success" or a descriptor); NaN
+    where an episode has no value (e.g. no cooperative fix at all)."""
     rows = []
     for run in runs:
-        if key == "error":
+        if key == "coop":
             rows.append([r.coop_error_mean_m for r in run])
+        elif key == "nav":
+            rows.append([r.nav_error_mean_m for r in run])
         elif key == "success":
             rows.append([float(r.success) for r in run])
         else:
@@ -176,19 +194,32 @@ def summarise(
     results: Mapping[str, Sequence[Sequence[EpisodeResult]]],
     heuristics: Sequence[str],
     reps: int = 2000,
+    score: str = "coop",
 ) -> dict[str, Any]:
-    """Per-method statistics and paired differences (see the module docstring)."""
+    """Per-method statistics and paired differences (see the module docstring).
+
+    ``score`` (a key of :data:`SCORES`) is the error every ``error_*`` figure is of; the other
+    score is reported beside it as ``other_error_mean`` and ``other_error_diff_m``.
+    """
+    if score not in SCORES:
+        raise ValueError(f"score must be one of {sorted(SCORES)}, got {score!r}")
+    other = next(k for k in SCORES if k != score)
     methods: dict[str, Any] = {}
     for name, runs in results.items():
-        err = _matrix(runs, "error")
+        err = _matrix(runs, score)
         succ = _matrix(runs, "success")
         ok = np.all(np.isfinite(err), axis=0)  # episodes where every run had fixes
         e = err[:, ok]
+        oth = _matrix(runs, other)
+        o = oth[:, np.all(np.isfinite(oth), axis=0)]
         m: dict[str, Any] = {
             "runs": len(runs),
             "episodes": int(err.shape[1]),
             "error_mean": stratified_bootstrap_ci(e, np.mean, reps).as_dict(),
             "error_iqm": stratified_bootstrap_ci(e, interquartile_mean, reps).as_dict(),
+            "other_error_mean": (
+                stratified_bootstrap_ci(o, np.mean, reps).as_dict() if o.size else None
+            ),
             "goal_rate": stratified_bootstrap_ci(succ, np.mean, reps).as_dict(),
             "collision_rate": float(np.mean([[r.collided for r in run] for run in runs])),
             "per_run_error_mean": [float(np.nanmean(row)) for row in err],
@@ -207,20 +238,24 @@ def summarise(
         for h in heuristics:
             if h == name or h not in results:
                 continue
-            a, b = _matrix(runs, "error"), _matrix(results[h], "error")
+            a, b = _matrix(runs, score), _matrix(results[h], score)
             if a.shape[1] != b.shape[1]:
                 continue
             ok = np.all(np.isfinite(a), axis=0) & np.all(np.isfinite(b), axis=0)
             iv, share = paired_difference(a[:, ok], b[:, ok], reps)
             sa, sb = _matrix(runs, "success"), _matrix(results[h], "success")
             giv, _ = paired_difference(sa, sb, reps)
+            oa, ob = _matrix(runs, other), _matrix(results[h], other)
+            ook = np.all(np.isfinite(oa), axis=0) & np.all(np.isfinite(ob), axis=0)
+            oiv = paired_difference(oa[:, ook], ob[:, ook], reps)[0] if ook.any() else None
             paired[name][h] = {
                 "error_diff_m": iv.as_dict(),
                 "excludes_zero": iv.excludes_zero(),
                 "share_episodes_lower": share,
                 "goal_rate_diff": giv.as_dict(),
+                "other_error_diff_m": oiv.as_dict() if oiv is not None else None,
             }
-    return {"methods": methods, "paired": paired}
+    return {"methods": methods, "paired": paired, "score": score, "other_score": other}
 
 
 # ---- figures ------------------------------------------------------------------------------
@@ -345,8 +380,17 @@ def _t975(dof: int) -> float:
     return table.get(dof, 1.96 if dof > 30 else 2.2)
 
 
-def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
-    """Mean and IQM of the cooperative error per method, with 95 % intervals."""
+#: x-axis label of the error figure per score
+SCORE_AXIS = {
+    "coop": "cooperative 3-D error per episode [m]",
+    "nav": "3-D error of the estimate used, per episode [m]",
+}
+
+
+def plot_errors(
+    summary: Mapping[str, Any], path: Path, xlabel: str = SCORE_AXIS["coop"]
+) -> Path:
+    """Mean and IQM of the study's score per method, with 95 % intervals."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -362,7 +406,7 @@ def plot_errors(summary: Mapping[str, Any], path: Path) -> Path:
         ax.errorbar(v, y + off, xerr=[v - lo, hi - v], fmt="o", capsize=3, label=lab)
     ax.set_yticks(y, [short_label(n) for n in names], fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("cooperative 3-D error per episode [m]", fontsize=9)
+    ax.set_xlabel(xlabel, fontsize=9)
     ax.set_title("mean and IQM with 95 % stratified-bootstrap intervals", fontsize=9)
     ax.legend(loc="lower right", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
@@ -477,6 +521,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="environment settings of the study (default: the first run's)",
     )
+    parser.add_argument(
+        "--score",
+        choices=sorted(SCORES),
+        default="coop",
+        help="the per-episode error the study ranks by: coop = "
+        + SCORES["coop"]
+        + "; nav = "
+        + SCORES["nav"]
+        + " (use nav where policies differ in how often they have a cooperative fix, e.g. "
+        "with fault exclusion); the other is reported beside it (default: %(default)s)",
+    )
     parser.add_argument("--out", default="docs/marl", help="output folder (default: %(default)s)")
     parser.add_argument(
         "--reps", type=int, default=2000, help="bootstrap replicates (default: %(default)s)"
@@ -549,14 +604,16 @@ def run(args: argparse.Namespace) -> int:
         if name != "planner (privileged)":
             results.setdefault(name, []).append(episodes)
     # every method against every heuristic and every other learned method
-    summary = summarise(results, [*args.heuristics, *groups], args.reps)
+    summary = summarise(results, [*args.heuristics, *groups], args.reps, args.score)
     headroom: dict[str, Any] = {}
     if args.planner_episodes > 0:
         plan = flown[-1]
         sub = seeds[: args.planner_episodes]
         sub_results = {n: [run[: len(sub)] for run in r] for n, r in results.items()}
         sub_results["planner (privileged)"] = [plan]
-        headroom = summarise(sub_results, [*args.heuristics, "planner (privileged)"], args.reps)
+        headroom = summarise(
+            sub_results, [*args.heuristics, "planner (privileged)"], args.reps, args.score
+        )
         headroom["episodes"] = len(sub)
         headroom["planner_s"] = _timings.get(args.planner, math.nan)
         headroom["planner"] = args.planner
@@ -567,7 +624,7 @@ def run(args: argparse.Namespace) -> int:
     f = plot_learning_curves(groups, out / "learning_curves.png", ref)
     if f is not None:
         figs["learning_curves"] = f.name
-    figs["errors"] = plot_errors(summary, out / "errors.png").name
+    figs["errors"] = plot_errors(summary, out / "errors.png", SCORE_AXIS[args.score]).name
     show = [h for h in ("formation", "wide") if h in results] + list(groups)[:2]
     flights = {
         n: results[n][0][0].pos_enu_m for n in show if results[n][0][0].pos_enu_m is not None
@@ -640,6 +697,8 @@ def _fly_all(
 def report_markdown(data: Mapping[str, Any]) -> str:
     """The study's report as Markdown (tables from ``report.json``'s content)."""
     s = data["summary"]
+    score = s.get("score", "coop")
+    other = s.get("other_score", "nav")
     lines = [
         "# Learning study: learned swarms against heuristics and a privileged planner",
         "",
@@ -647,36 +706,39 @@ def report_markdown(data: Mapping[str, Any]) -> str:
         f"{data['episodes']} held-out episodes (reset seeds {data['seeds'][0]}.."
         f"{data['seeds'][1]}). Regenerate with `{data['command']}`.",
         "",
-        "Per episode, the score is the mean cooperative 3-D error over UAV-steps with a "
-        "cooperative fix. A learned method has one run per training seed; intervals are 95 % "
+        f"Per episode, the score (`--score {score}`) is {SCORES[score]}; the "
+        f"`{other}` score ({SCORES[other]}) is reported beside it. A learned method has one "
+        "run per training seed; intervals are 95 % "
         "stratified-bootstrap intervals (training seeds within episodes, and episodes). "
         "Paired differences use the same episodes for both policies.",
         "",
-        "| method | runs | mean error [m] | IQM error [m] | goal rate | collisions | "
-        "per-seed mean error [m] |",
-        "|---|---:|---|---|---|---:|---|",
+        f"| method | runs | mean error [m] | IQM error [m] | goal rate | collisions | "
+        f"per-seed mean error [m] | mean `{other}` error [m] |",
+        "|---|---:|---|---|---|---:|---|---|",
     ]
     for name, m in s["methods"].items():
+        oth = m.get("other_error_mean")
         lines.append(
             f"| {name} | {m['runs']} | {_fmt_iv(m['error_mean'])} | {_fmt_iv(m['error_iqm'])} | "
             f"{_fmt_iv(m['goal_rate'])} | {m['collision_rate']:.3f} | "
             + ", ".join(f"{v:.2f}" for v in m["per_run_error_mean"])
-            + " |"
+            + f" | {_fmt_iv(oth) if oth else 'n/a'} |"
         )
     lines += [
         "",
         "## Paired differences (row minus the method in `vs`, same episodes)",
         "",
         "| method | vs | error difference [m] | CI excludes 0 | episodes lower | "
-        "goal-rate difference |",
-        "|---|---|---|---|---:|---|",
+        f"goal-rate difference | `{other}` error difference [m] |",
+        "|---|---|---|---|---:|---|---|",
     ]
     for name, d in s["paired"].items():
         for h, p in d.items():
+            od = p.get("other_error_diff_m")
             lines.append(
                 f"| {name} | {h} | {_fmt_iv(p['error_diff_m'])} | "
                 f"{'yes' if p['excludes_zero'] else 'no'} | {p['share_episodes_lower']:.2f} | "
-                f"{_fmt_iv(p['goal_rate_diff'])} |"
+                f"{_fmt_iv(p['goal_rate_diff'])} | {_fmt_iv(od) if od else 'n/a'} |"
             )
     keys = sorted({k for m in s["methods"].values() for k in m["descriptors"]})
     lines += [
@@ -698,7 +760,8 @@ def report_markdown(data: Mapping[str, Any]) -> str:
         "swarm's extent across its direction of travel (smaller of East/North extents); "
         "`near_open_share`: share of UAV-steps within 10 m of an intersection or an open "
         "square; `swarm_sats`: distinct satellites received by the swarm; `time_to_goal_s`: "
-        "over episodes that reached the goal.",
+        "over episodes that reached the goal; `fix_share`: share of UAV-steps with a "
+        "cooperative fix.",
     ]
     h = data.get("headroom") or {}
     if h:

@@ -228,15 +228,25 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
         Starting point; default ``UrbanCanyonConfig()``.
     **overrides
         Field values. ``max_cycles`` is an alias of ``max_steps`` (PettingZoo's name).
+        ``preset=NAME`` starts from a named preset (:data:`PRESETS`; the other overrides go
+        on top), so that a training config or a command line can name one:
+        ``--env-set preset=urban_nlos_3dma``.
 
     Raises
     ------
     ValueError
-        For an unknown name (the message lists the valid ones), a bad value, or
-        ``max_cycles`` and ``max_steps`` both given with different values.
+        For an unknown name (the message lists the valid ones), a bad value, an unknown
+        preset, or ``max_cycles`` and ``max_steps`` both given with different values.
     """
     if config is not None and not isinstance(config, UrbanCanyonConfig):
         raise ValueError(f"config must be an UrbanCanyonConfig or None, got {config!r}")
+    if "preset" in overrides:
+        overrides = dict(overrides)
+        name = overrides.pop("preset")
+        if name is not None:
+            if not isinstance(name, str) or name not in PRESETS:
+                raise ValueError(f"unknown preset {name!r}; presets are {sorted(PRESETS)}")
+            overrides = {**PRESETS[name], **overrides}
     if "max_cycles" in overrides:
         overrides = dict(overrides)
         cycles = overrides.pop("max_cycles")
@@ -257,7 +267,8 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
     if unknown:
         raise ValueError(
             f"unknown urban_canyon_v0 argument(s) {unknown}; valid arguments are "
-            f"render_mode, config, {', '.join(valid)} (and max_cycles, an alias of max_steps)"
+            f"render_mode, config, preset, {', '.join(valid)} (and max_cycles, an alias of "
+            "max_steps)"
         )
     base = config if config is not None else UrbanCanyonConfig()
     return replace(base, **overrides) if overrides else base

@@ -7,7 +7,13 @@ import pytest
 
 import coopnav_env.sim.scenario as S
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import PRESETS, UrbanCanyonConfig, make_config, preset_config
+from coopnav_env.envs import (
+    PRESETS,
+    BatchedUrbanCanyonEnv,
+    UrbanCanyonConfig,
+    make_config,
+    preset_config,
+)
 from coopnav_env.nav import IntegrityStatus, NavStatus, integrity_rates
 from coopnav_env.sim import NavSource
 from tests.sim.test_fast_paths import _assert_epochs_identical, _world_epochs, count_fused_calls
@@ -121,6 +127,14 @@ def test_preset_and_its_determinism() -> None:
     assert cfg.n_uavs == 4 and cfg.integrity == "fde" and cfg.nlos_probability > 0
     with pytest.raises(ValueError, match="unknown preset"):
         preset_config("rural")
+    # the same preset named as an argument (as a training config or --env-set names it)
+    assert urban_canyon_v0.parallel_env(preset="urban_nlos", n_uavs=4).unwrapped.config == cfg
+    assert urban_canyon_v0.parallel_env(preset=None).unwrapped.config == UrbanCanyonConfig()
+    over = urban_canyon_v0.parallel_env(preset="urban_nlos", nlos_probability=0.2)
+    assert over.unwrapped.config.nlos_probability == 0.2  # overrides go on top
+    assert BatchedUrbanCanyonEnv(2, preset="urban_nlos", n_uavs=4).config == cfg
+    with pytest.raises(ValueError, match="unknown preset 'rural'"):
+        urban_canyon_v0.parallel_env(preset="rural")
     a = _episode(urban_canyon_v0.parallel_env(config=cfg), 25, seed=9)
     b = _episode(urban_canyon_v0.parallel_env(config=cfg), 25, seed=9)
     for (oa, ra, ia, _ea), (ob, rb, ib, _eb) in zip(a, b):

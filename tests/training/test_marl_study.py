@@ -65,6 +65,34 @@ def test_summary_pairs_by_episode_and_flags_a_real_difference() -> None:
     assert math.isclose(m["descriptors"]["altitude_m"], 20.0)
 
 
+def test_summary_ranks_by_the_chosen_score() -> None:
+    rng = np.random.default_rng(1)
+    base = rng.uniform(1.5, 4.0, 40)
+
+    def eps(coop, nav):
+        out = _episodes(coop, [True] * len(coop))
+        for r, v in zip(out, nav):
+            r.nav_error_mean_m = float(v)
+        return out
+
+    # "learned" is better in the nav score and worse in the coop score
+    results = {
+        "wide": [eps(base, base)],
+        "learned": [eps(base + 0.3, base - 0.5)],
+    }
+    coop = summarise(results, ["wide"], reps=300)
+    nav = summarise(results, ["wide"], reps=300, score="nav")
+    assert coop["score"] == "coop" and nav["score"] == "nav" and nav["other_score"] == "coop"
+    assert coop["paired"]["learned"]["wide"]["error_diff_m"]["value"] == pytest.approx(0.3)
+    assert nav["paired"]["learned"]["wide"]["error_diff_m"]["value"] == pytest.approx(-0.5)
+    assert nav["paired"]["learned"]["wide"]["other_error_diff_m"]["value"] == pytest.approx(0.3)
+    assert nav["methods"]["learned"]["other_error_mean"]["value"] == pytest.approx(
+        float(np.mean(base + 0.3))
+    )
+    with pytest.raises(ValueError, match="score must be one of"):
+        summarise(results, ["wide"], reps=10, score="sigma")
+
+
 def test_study_command_writes_its_report(tmp_path) -> None:
     from training.marl_study import main
 
