@@ -387,9 +387,7 @@ SCORE_AXIS = {
 }
 
 
-def plot_errors(
-    summary: Mapping[str, Any], path: Path, xlabel: str = SCORE_AXIS["coop"]
-) -> Path:
+def plot_errors(summary: Mapping[str, Any], path: Path, xlabel: str = SCORE_AXIS["coop"]) -> Path:
     """Mean and IQM of the study's score per method, with 95 % intervals."""
     import matplotlib
 
