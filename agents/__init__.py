@@ -13,6 +13,9 @@ name                      policy
 ``wide``                  ``spread`` as a 45 m column that opens ahead of the start and
                           closes at the goal: the best heuristic of the learning study
                           (:mod:`agents.heuristics`)
+``guarded``               ``wide`` with a wall guard (range sensor) and soft slot tracking,
+                          for degraded navigation: the best heuristic of the study under
+                          realistic urban reception (:mod:`agents.heuristics`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
 ``planner``               privileged MPC that looks ahead in copies of the environment with
@@ -56,6 +59,7 @@ POLICY_NAMES: tuple[str, ...] = (
     "sky",
     "spread",
     "wide",
+    "guarded",
     "waypoint",
     "planner",
     "ppo:<path>",
@@ -131,6 +135,10 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import WideColumnPolicy
 
         return WideColumnPolicy(env, **kwargs)
+    if name == "guarded":
+        from agents.heuristics import GuardedColumnPolicy
+
+        return GuardedColumnPolicy(env, **kwargs)
     if name == "planner":
         from agents.planner import PrivilegedPlanner
 

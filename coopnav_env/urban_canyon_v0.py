@@ -291,6 +291,11 @@ up to 10 UAVs, `"shared"` from 11).
 
 `dead_reckoning_sigma_mps` (1): sigma growth while dead reckoning [m/s].
 
+`dead_reckoning_noise` (False): the previous estimate is carried forward with the true
+velocity (off: dead reckoning never drifts, which flatters a design that rejects fixes) or,
+on, with the true velocity plus `N(0, dead_reckoning_sigma_mps^2)` per axis drawn every step,
+a random walk that matches the covariance. Turn it on where fixes are often rejected.
+
 `start_prior_sigma_m` (10): sigma of the launch position if the first epoch has no fix [m].
 
 `formation_spacing_m`, `start_altitude_m` (5, 15): start formation [m].
@@ -331,6 +336,8 @@ blocked from the position it believes it is at or from the candidates
 and the infos end with `n_map_excluded` (satellites received but not used). The simulated map
 is perfect, a real one is not. The preset `preset_config("urban_nlos_3dma")` is `urban_nlos`
 with it on and the fix gate `max_fix_sigma_m` at 15 m (fewer satellites, weaker geometry).
+A preset can also be named as an argument, `parallel_env(preset="urban_nlos_3dma", **fields)`
+(the fields go on top), and so from a training config or `--env-set preset=urban_nlos_3dma`.
 
 `max_steps` (200): truncation. `max_cycles`, the name PettingZoo's own environments and
 BenchMARL use, is accepted as an alias (giving both with different values raises

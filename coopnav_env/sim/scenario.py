@@ -310,6 +310,16 @@ class ScenarioConfig:
         Gauss-Newton iteration limit of both solvers, in [1, 50].
     dead_reckoning_sigma_mps : float, default 1.0
         Growth of the per-axis position sigma while dead reckoning, in [0, 100] [m/s].
+    dead_reckoning_noise : bool, default False
+        Whether the velocity that carries the previous estimate forward (the prediction that
+        dead reckoning uses, and that 3DMA exclusion predicts blockage at) is measured with
+        noise: the true velocity plus ``N(0, dead_reckoning_sigma_mps^2)`` per axis, drawn
+        afresh every step, so that the prediction's error grows as the random walk its
+        covariance already assumes. Off (the default, unchanged episodes): the prediction
+        moves by the *true* velocity, so dead reckoning never drifts, and a design that
+        rejects fixes is flattered (it keeps the error of its last good fix for ever). Turn it
+        on wherever fixes are often rejected (the ``urban_nlos_3dma`` study of
+        docs/marl/README.md).
     start_prior_sigma_m : float, default 10.0
         Per-axis sigma of the known launch position, used only when a UAV has no fix at the
         first epoch, in (0, 1000] [m].
@@ -397,6 +407,7 @@ class ScenarioConfig:
     covariance: Literal["exact", "paper"] = "exact"
     nav_max_iter: int = 10
     dead_reckoning_sigma_mps: float = 1.0
+    dead_reckoning_noise: bool = False
     start_prior_sigma_m: float = 10.0
     formation_spacing_m: float = 5.0
     start_altitude_m: float = 15.0
@@ -465,6 +476,7 @@ class ScenarioConfig:
         _check_choice(o, "covariance", self.covariance, ("exact", "paper"))
         _check_int(o, "nav_max_iter", self.nav_max_iter, 1, 50)
         _check_real(o, "dead_reckoning_sigma_mps", self.dead_reckoning_sigma_mps, 0.0, 100.0)
+        _check_bool(o, "dead_reckoning_noise", self.dead_reckoning_noise)
         _check_real(o, "start_prior_sigma_m", self.start_prior_sigma_m, 0.0, 1000.0, lo_open=True)
         _check_real(o, "formation_spacing_m", self.formation_spacing_m, kin.min_separation_m, 100.0)
         if not self.formation_spacing_m > 0:  # min_separation_m = 0 admits 0: no lattice
@@ -1095,6 +1107,8 @@ class UrbanWorld:
         # warm start: the previous estimates moved by the velocity; at the first epoch of an
         # episode, the known launch positions
         pred_enu = self.nav_pos_enu_m + self.vel_enu_mps * dt if self._warm else self.nav_pos_enu_m
+        if cfg.dead_reckoning_noise and self._warm:  # measured velocity: truth + noise
+            pred_enu = pred_enu + rng.normal(0.0, cfg.dead_reckoning_sigma_mps * dt, (n, 3))
         dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (1.0 if self._warm else 0.0)
         map_excluded = None
         if cfg.nlos_exclusion == "map":  # 3DMA: not used where the city model predicts NLOS

@@ -117,7 +117,9 @@ def test_heuristics_use_the_route_module():
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["random", "formation", "sky", "spread", "wide", "waypoint"])
+@pytest.mark.parametrize(
+    "name", ["random", "formation", "sky", "spread", "wide", "guarded", "waypoint"]
+)
 def test_policies_give_valid_actions_on_the_env(name):
     env = urban(max_steps=25)
     pol = make_policy(name, env)
@@ -128,7 +130,7 @@ def test_policies_give_valid_actions_on_the_env(name):
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["formation", "sky", "spread", "wide", "waypoint"])
+@pytest.mark.parametrize("name", ["formation", "sky", "spread", "wide", "guarded", "waypoint"])
 def test_heuristics_reach_the_goal_along_the_canyon(name):
     """The paper's straight canyon: flying the street is enough to get there."""
     env = urban(city="canyon", n_uavs=4, max_steps=120)
@@ -217,3 +219,61 @@ def test_wide_column_defaults_follow_its_spacing():
     assert pol.close_distance_m == 180.0 and pol.open_distance_m == 3 * 39.0
     pol = make_policy("wide@spacing_m=30,open_distance_m=50", env)
     assert pol.close_distance_m == 120.0 and pol.open_distance_m == 50.0
+
+
+@needs_env
+def test_wall_guard_pushes_away_from_a_near_wall():
+    """With ``wall_margin_m``, a wall the range sensor puts inside the margin pushes the UAV
+    away by ``wall_gain_per_s`` times the intrusion; walls outside it change nothing."""
+    from coopnav_env.envs import obs_layout
+
+    env = urban(n_uavs=3)
+    obs, _ = env.reset(seed=1_000_002)
+    walls = obs_layout(env.unwrapped.config)["wall_distance"]
+    n_az = walls.size
+    east = n_az // 4  # azimuth 90 deg: East
+    far = {a: o.copy() for a, o in obs.items()}
+    for o in far.values():
+        o[walls.slice] = 1.0  # every wall at the sensor's range (50 m)
+    near = {a: o.copy() for a, o in far.items()}
+    a0 = env.possible_agents[0]
+    near[a0][walls.start + east] = 2.0 / walls.scale  # a wall 2 m to the East of UAV 0
+    vmax = env.unwrapped.config.kinematics.max_speed_mps
+
+    def cmd(name, o):
+        pol = make_policy(name, env)
+        pol.reset(seed=1_000_002)
+        return pol.act(o)
+
+    g = "wide@wall_margin_m=8,wall_gain_per_s=0.5"
+    c_far, c_near = cmd(g, far), cmd(g, near)
+    assert c_far[a0][0] - c_near[a0][0] == pytest.approx(0.5 * (8.0 - 2.0) / vmax, abs=1e-6)
+    assert c_far[a0][1] == pytest.approx(c_near[a0][1], abs=1e-6)  # nothing to the North
+    for a in env.possible_agents[1:]:
+        assert np.array_equal(c_far[a], c_near[a])
+    # no guard: the wall is ignored
+    assert np.array_equal(cmd("wide", far)[a0], cmd("wide", near)[a0])
+    with pytest.raises(ValueError, match="wall_margin_m must be in"):
+        make_policy("wide@wall_margin_m=0", env)
+    with pytest.raises(ValueError, match="wall_gain_per_s must be in"):
+        make_policy("wide@wall_margin_m=5,wall_gain_per_s=-1", env)
+
+
+@needs_env
+@pytest.mark.slow
+def test_guarded_defaults_and_fewer_crashes_under_degraded_navigation():
+    """``guarded`` = ``wide`` + wall guard + soft tracking; under NLOS reception with a
+    drifting dead reckoning it crashes far less than ``wide`` on the same episodes."""
+    env = urban(preset="urban_nlos_3dma", dead_reckoning_noise=True)
+    pol = make_policy("guarded", env)
+    assert (pol.wall_margin_m, pol.wall_gain_per_s, pol.gain_per_s) == (8.0, 4.0, 0.2)
+    assert pol.spacing_m == 45.0  # wide's column
+    crashes = {}
+    for name in ("wide", "guarded"):
+        p = make_policy(name, env)
+        crashes[name] = sum(
+            any(fly(env, p, seed=s)[0][a]["collided"] for a in env.possible_agents)
+            for s in range(1_000_000, 1_000_100)
+        )
+    # measured on these 100 episodes: wide 16, guarded 2 (300 episodes: 17 % against 2 %)
+    assert crashes["guarded"] <= crashes["wide"] - 8, crashes
