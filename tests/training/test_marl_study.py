@@ -119,3 +119,24 @@ def test_study_command_writes_its_report(tmp_path) -> None:
     text = (out / "report.md").read_text()
     assert "| formation |" in text and "| spread |" in text
     assert (out / "errors.png").is_file() and (out / "trajectories.png").is_file()
+
+
+def test_heuristic_search_script_prints_its_table(capsys) -> None:
+    """benchmarks/search_heuristics.py: one row per variant, the scores of the study."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "search_heuristics.py"
+    spec = importlib.util.spec_from_file_location("search_heuristics", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rc = mod.main(
+        ["--variants", "formation", "wide@spacing_m=30", "--episodes", "2", "--env-set", "n_uavs=3"]
+    )
+    assert rc == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("| `")]
+    assert [r.split("|")[1].strip() for r in rows] == ["`formation`", "`wide@spacing_m=30`"]
+    assert "'n_uavs': 3" in out
+    with pytest.raises(SystemExit, match="--episodes must be >= 2"):
+        mod.main(["--variants", "formation", "--episodes", "1"])
