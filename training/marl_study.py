@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from training.envs import heldout_seeds
+from training.envs import EVAL_SEED_START, heldout_seeds
 from training.eval_plots import distance_along_route, save_figure, short_label
 from training.files import atomic_write_text, jsonable
 from training.stats import (
@@ -499,6 +499,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--episodes", type=int, default=100, help="held-out episodes (default: %(default)s)"
     )
     parser.add_argument(
+        "--first-seed",
+        type=int,
+        default=EVAL_SEED_START,
+        help="reset seed of the first held-out episode, >= %(default)s (training uses the "
+        "seeds below); a later start gives a fresh set of episodes, e.g. to confirm on "
+        "episodes no design choice has seen what was found on the first ones "
+        "(default: %(default)s)",
+    )
+    parser.add_argument(
         "--planner-episodes",
         type=int,
         default=20,
@@ -588,7 +597,7 @@ def run(args: argparse.Namespace) -> int:
         if not eq:
             raise ValueError(f"--env-set takes KEY=VALUE, got {item!r}")
         env_kwargs[k] = yaml.safe_load(v)
-    seeds = heldout_seeds(args.episodes)
+    seeds = heldout_seeds(args.episodes, args.first_seed)
     units: list[tuple[str, str, list[int]]] = [(h, h, seeds) for h in args.heuristics]
     for name, dirs in groups.items():
         units += [(name, _policy_name(d), seeds) for d in dirs]

@@ -180,7 +180,16 @@ def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
         np.testing.assert_array_equal(a[k], b[k])
 
 
-@pytest.mark.parametrize("name", ["mappo:pretrained", "mappo:pretrained/s2", "ippo:pretrained/s1"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "mappo:pretrained",
+        "mappo:pretrained/s2",
+        "ippo:pretrained/s1",
+        "mappo:pretrained/nlos_s2",
+        "ippo:pretrained/nlos_s1",
+    ],
+)
 def test_shipped_policies_load_and_fly(name) -> None:
     env = urban_canyon_v0.parallel_env()
     policy = make_policy(name, env)

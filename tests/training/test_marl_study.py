@@ -119,6 +119,15 @@ def test_study_command_writes_its_report(tmp_path) -> None:
     text = (out / "report.md").read_text()
     assert "| formation |" in text and "| spread |" in text
     assert (out / "errors.png").is_file() and (out / "trajectories.png").is_file()
+    assert data["seeds"] == [1_000_000, 1_000_001]
+    # a fresh set of episodes, ranked by the nav score
+    out2 = tmp_path / "later"
+    args = ["--heuristics", "formation", "--episodes", "2", "--planner-episodes", "0"]
+    assert main([*args, "--first-seed", "1000500", "--score", "nav", "--out", str(out2)]) == 0
+    later = json.loads((out2 / "report.json").read_text())
+    assert later["seeds"] == [1_000_500, 1_000_501]
+    assert later["summary"]["score"] == "nav"
+    assert "(`--score nav`)" in (out2 / "report.md").read_text()
 
 
 def test_heuristic_search_script_prints_its_table(capsys) -> None:
