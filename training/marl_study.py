@@ -632,7 +632,13 @@ def run(args: argparse.Namespace) -> int:
     if f is not None:
         figs["learning_curves"] = f.name
     figs["errors"] = plot_errors(summary, out / "errors.png", SCORE_AXIS[args.score]).name
-    show = [h for h in ("formation", "wide") if h in results] + list(groups)[:2]
+    # formation, the best heuristic (lowest mean score) and the first two learned methods
+    best = min(
+        (h for h in args.heuristics if h != "formation"),
+        key=lambda h: summary["methods"][h]["error_mean"]["value"],
+        default=None,
+    )
+    show = [h for h in ("formation", best) if h in results] + list(groups)[:2]
     flights = {
         n: results[n][0][0].pos_enu_m for n in show if results[n][0][0].pos_enu_m is not None
     }
