@@ -186,6 +186,13 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     base["out"] = args.out
     data = apply_overrides(base, args.overrides)
     data = apply_overrides(data, [f"env.{item}" for item in args.env_overrides])
+    # environment settings given on the command line (--env-set KEY=VALUE, --set env.KEY=VALUE)
+    # also win over the torchrl backend's own env block, which otherwise overrides env
+    cli_env = [i[len("env.") :] for i in args.overrides if i.startswith("env.")]
+    cli_env += list(args.env_overrides)
+    torchrl_section = data.get("torchrl")
+    if cli_env and isinstance(torchrl_section, Mapping) and torchrl_section.get("env"):
+        data = apply_overrides(data, [f"torchrl.env.{item}" for item in cli_env])
     flags = {
         "timesteps": args.timesteps,
         "seed": args.seed,

@@ -228,3 +228,25 @@ def test_train_and_evaluate_with_satellite_sectors(tmp_path) -> None:
     cmd = ["evaluate", "--policies", f"mappo:{out}", "--episodes", "1", "--out", str(report)]
     assert main([*cmd, "--no-plots"]) == 0
     assert '"obs_satellite_sectors": true' in (report / "report.md").read_text()
+
+
+def test_command_line_env_settings_win_over_the_backends_env_block(tmp_path) -> None:
+    """``--env-set`` (and ``--set env.KEY``) change the environment of the torchrl backend
+    too, although its ``torchrl.env`` block of the config file overrides ``env``."""
+    import argparse
+
+    from training.marl import settings_of
+    from training.train import add_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    base = ["--backend", "torchrl", "--out", str(tmp_path / "run")]
+    _, env = settings_of(config_from_args(parser.parse_args(base)))
+    assert env["collision_penalty"] == 250.0 and env["nav_reward_weight"] == 1.0  # the block
+    args = parser.parse_args(
+        [*base, "--env-set", "collision_penalty=700", "--set", "env.nav_reward_weight=0.5"]
+    )
+    cfg = config_from_args(args)
+    _, env = settings_of(cfg)
+    assert env["collision_penalty"] == 700 and env["nav_reward_weight"] == 0.5
+    assert env["nav_team_weight"] == 1.0  # the rest of the block stays
