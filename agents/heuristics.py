@@ -477,7 +477,7 @@ class GuardedColumnPolicy(WideColumnPolicy):
     adds the wall guard (``wall_margin_m=8``, ``wall_gain_per_s=4``: pushed away from any
     wall its range sensor puts within 8 m) and tracks its slots softly (``gain_per_s=0.2``
     instead of 0.6, so that a jump of the estimate is not turned into a dash at full speed).
-    On 300 such episodes it crashes in 2 % (``wide``: 17 %); docs/marl/README.md lists the
+    On 300 such episodes it crashes in 2 % (``wide``: 15 %); docs/marl/README.md lists the
     variants tried. In the default environment, where the estimate is good, the guard and
     the lagging slots only cost accuracy: 2.34 m mean cooperative error against ``wide``'s
     2.05 m on the study's 100 episodes; use ``wide`` there.
