@@ -53,8 +53,7 @@ def _row(name: str, episodes: list, seconds: float) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Fly every variant and print the table (``--help`` for the options)."""
-    import yaml
-
+    from training.config import apply_overrides
     from training.envs import heldout_seeds
     from training.marl_study import fly_episodes
 
@@ -80,12 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.episodes < 2:
         raise SystemExit(f"--episodes must be >= 2, got {args.episodes}")
-    env_kwargs = {}
-    for item in args.env_set:
-        k, eq, v = item.partition("=")
-        if not eq:
-            raise SystemExit(f"--env-set takes KEY=VALUE, got {item!r}")
-        env_kwargs[k] = yaml.safe_load(v)
+    try:
+        env_kwargs = apply_overrides({}, args.env_set)
+    except ValueError as exc:
+        raise SystemExit(f"--env-set: {exc}") from None
     seeds = heldout_seeds(args.episodes)
     print(f"environment {env_kwargs}; {args.episodes} episodes from seed {seeds[0]}")
     print()

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from training.config import apply_overrides
 from training.envs import EVAL_SEED_START, heldout_seeds
 from training.eval_plots import distance_along_route, save_figure, short_label
 from training.files import atomic_write_text, jsonable
@@ -584,19 +585,13 @@ def _env_of(run: Path) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """``coopnav study``: fly, summarise, write ``report.md``, ``report.json`` and figures."""
-    import yaml
-
     t0 = time.perf_counter()
     groups = _parse_runs(args.runs)
     env_kwargs: dict[str, Any] = {}
     first = next(iter(groups.values()), [])
     if first:
         env_kwargs = _env_of(first[0])
-    for item in args.env_set:
-        k, eq, v = item.partition("=")
-        if not eq:
-            raise ValueError(f"--env-set takes KEY=VALUE, got {item!r}")
-        env_kwargs[k] = yaml.safe_load(v)
+    env_kwargs = apply_overrides(env_kwargs, args.env_set)
     seeds = heldout_seeds(args.episodes, args.first_seed)
     units: list[tuple[str, str, list[int]]] = [(h, h, seeds) for h in args.heuristics]
     for name, dirs in groups.items():

@@ -123,8 +123,13 @@ def test_study_command_writes_its_report(tmp_path) -> None:
     # a fresh set of episodes, ranked by the nav score
     out2 = tmp_path / "later"
     args = ["--heuristics", "formation", "--episodes", "2", "--planner-episodes", "0"]
-    assert main([*args, "--first-seed", "1000500", "--score", "nav", "--out", str(out2)]) == 0
+    env_set = ["--env-set", "integrity_p_fa=1e-3"]  # YAML reads 1e-3 as a string
+    assert (
+        main([*args, *env_set, "--first-seed", "1000500", "--score", "nav", "--out", str(out2)])
+        == 0
+    )
     later = json.loads((out2 / "report.json").read_text())
+    assert later["env"] == {"integrity_p_fa": 1e-3}
     assert later["seeds"] == [1_000_500, 1_000_501]
     assert later["summary"]["score"] == "nav"
     assert "(`--score nav`)" in (out2 / "report.md").read_text()
@@ -139,13 +144,14 @@ def test_heuristic_search_script_prints_its_table(capsys) -> None:
     spec = importlib.util.spec_from_file_location("search_heuristics", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    rc = mod.main(
-        ["--variants", "formation", "wide@spacing_m=30", "--episodes", "2", "--env-set", "n_uavs=3"]
-    )
-    assert rc == 0
+    variants = ["--variants", "formation", "wide@spacing_m=30", "--episodes", "2"]
+    assert mod.main([*variants, "--env-set", "n_uavs=3", "integrity_p_fa=1e-3"]) == 0
     out = capsys.readouterr().out
+    assert "'integrity_p_fa': 0.001" in out  # a float, not YAML's string "1e-3"
     rows = [line for line in out.splitlines() if line.startswith("| `")]
     assert [r.split("|")[1].strip() for r in rows] == ["`formation`", "`wide@spacing_m=30`"]
     assert "'n_uavs': 3" in out
     with pytest.raises(SystemExit, match="--episodes must be >= 2"):
         mod.main(["--variants", "formation", "--episodes", "1"])
+    with pytest.raises(SystemExit, match="--env-set: override 'n_uavs' must look like key=value"):
+        mod.main([*variants, "--env-set", "n_uavs"])
