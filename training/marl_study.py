@@ -144,14 +144,15 @@ def fly_episodes(
         desc["time_to_goal_s"] = (
             float(rec.length * env.unwrapped.config.dt_s) if rec.success else math.nan
         )
-        desc["fix_share"] = float(fix.mean()) if fix.size else 0.0
+        p_fix = float(fix.mean()) if fix.size else 0.0
+        desc["fix_share"] = p_fix
         nav = np.asarray(rec.nav_error_m, dtype=float)
         nav_ok = np.isfinite(nav)
         out.append(
             EpisodeResult(
                 seed=int(seed),
                 coop_error_mean_m=float(err[fix].mean()) if fix.any() else math.nan,
-                p_fix=float(fix.mean()) if fix.size else 0.0,
+                p_fix=p_fix,
                 success=bool(rec.success),
                 collided=bool(rec.collided),
                 length=int(rec.length),
@@ -191,6 +192,12 @@ def _matrix(runs: Sequence[Sequence[EpisodeResult]], key: str) -> np.ndarray:
     return np.array(rows, dtype=float)
 
 
+def _finite_episodes(*matrices: np.ndarray) -> np.ndarray:
+    """Mask of the episodes (columns) where every run of every (runs, episodes) matrix has a
+    finite value."""
+    return np.logical_and.reduce([np.all(np.isfinite(m), axis=0) for m in matrices])
+
+
 def summarise(
     results: Mapping[str, Sequence[Sequence[EpisodeResult]]],
     heuristics: Sequence[str],
@@ -209,10 +216,9 @@ def summarise(
     for name, runs in results.items():
         err = _matrix(runs, score)
         succ = _matrix(runs, "success")
-        ok = np.all(np.isfinite(err), axis=0)  # episodes where every run had fixes
-        e = err[:, ok]
+        e = err[:, _finite_episodes(err)]  # episodes where every run had fixes
         oth = _matrix(runs, other)
-        o = oth[:, np.all(np.isfinite(oth), axis=0)]
+        o = oth[:, _finite_episodes(oth)]
         m: dict[str, Any] = {
             "runs": len(runs),
             "episodes": int(err.shape[1]),
@@ -242,12 +248,12 @@ def summarise(
             a, b = _matrix(runs, score), _matrix(results[h], score)
             if a.shape[1] != b.shape[1]:
                 continue
-            ok = np.all(np.isfinite(a), axis=0) & np.all(np.isfinite(b), axis=0)
+            ok = _finite_episodes(a, b)
             iv, share = paired_difference(a[:, ok], b[:, ok], reps)
             sa, sb = _matrix(runs, "success"), _matrix(results[h], "success")
             giv, _ = paired_difference(sa, sb, reps)
             oa, ob = _matrix(runs, other), _matrix(results[h], other)
-            ook = np.all(np.isfinite(oa), axis=0) & np.all(np.isfinite(ob), axis=0)
+            ook = _finite_episodes(oa, ob)
             oiv = paired_difference(oa[:, ook], ob[:, ook], reps)[0] if ook.any() else None
             paired[name][h] = {
                 "error_diff_m": iv.as_dict(),
