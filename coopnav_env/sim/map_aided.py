@@ -64,8 +64,10 @@ What it costs: fewer satellites per fix, so fewer valid cooperative fixes and a 
 availability of protection levels within the alert limit (the UAVs dead-reckon more), for
 far fewer wrong ones; ``benchmarks/study_urban_nlos.py`` measures both sides, and
 ``benchmarks/bench_integrity.py`` the step time (the prediction traces seven candidates per
-UAV). Dead reckoning is cheap in this simulation (it moves the estimate by the true
-velocity, so its error does not grow), which flatters any design that rejects fixes.
+UAV). Dead reckoning is cheap in this simulation by default (it moves the estimate by the
+true velocity, so its error does not grow), which flatters any design that rejects fixes;
+``dead_reckoning_noise=True`` (:class:`~coopnav_env.sim.scenario.ScenarioConfig`) makes it
+drift as its covariance says.
 
 A limitation: the prediction trusts the believed position. When that is off by more than
 the margin (an unlucky fix, tens of metres), the map at the wrong place excludes the
