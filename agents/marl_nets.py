@@ -49,6 +49,10 @@ class MARLSettings:
         Passes over each rollout and agent-samples per gradient step.
     learning_rate, gamma, gae_lambda, clip_epsilon, entropy_coef, critic_coef, max_grad_norm
         PPO's settings.
+    lr_schedule : {"constant", "linear"}
+        ``linear``: the learning rate falls linearly from ``learning_rate`` to zero over the
+        run's agent-step budget (as in SB3's and MAPPO's reference code), so that the last
+        updates only fine-tune; ``constant`` keeps ``learning_rate``.
     hidden : list of int
         Hidden layer sizes of actor and critic (equal widths; depth = len).
     init_log_std : float
@@ -78,6 +82,7 @@ class MARLSettings:
     epochs: int = 5
     minibatch_size: int = 2560
     learning_rate: float = 3e-4
+    lr_schedule: str = "constant"
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip_epsilon: float = 0.2
@@ -137,6 +142,8 @@ class MARLSettings:
         if not isinstance(self.residual_base_kwargs, Mapping):
             raise bad("residual_base_kwargs", "a mapping of policy options")
         self.residual_base_kwargs = dict(self.residual_base_kwargs)
+        if self.lr_schedule not in ("constant", "linear"):
+            raise bad("lr_schedule", "'constant' or 'linear'")
         if self.residual_mode not in ("velocity", "offset"):
             raise bad("residual_mode", "'velocity' or 'offset'")
         if self.residual_mode == "offset" and self.residual_base is None:

@@ -383,6 +383,19 @@ class MARLTrainer:
         self.iterations += 1
         return {k: v / max(count, 1) for k, v in sums.items()}
 
+    def learning_rate_at(self, agent_steps: int, total_agent_steps: int) -> float:
+        """The learning rate of the iteration that starts at ``agent_steps`` (``lr_schedule``)."""
+        s = self.settings
+        if s.lr_schedule == "constant":
+            return float(s.learning_rate)
+        frac = 1.0 - agent_steps / max(int(total_agent_steps), 1)
+        return float(s.learning_rate) * min(max(frac, 0.0), 1.0)
+
+    def set_learning_rate(self, lr: float) -> None:
+        """Set the optimiser's learning rate (every parameter group)."""
+        for group in self.optim.param_groups:
+            group["lr"] = lr
+
     # ---- checkpoints ----------------------------------------------------------------------
 
     def state_dict(self) -> dict[str, Any]:
@@ -432,8 +445,14 @@ class MARLTrainer:
         total_agent_steps: int,
         on_iteration: Callable[[dict[str, float]], None] | None = None,
     ) -> None:
-        """Iterate collect/update until ``total_agent_steps`` agent-steps are reached."""
+        """Iterate collect/update until ``total_agent_steps`` agent-steps are reached.
+
+        With ``lr_schedule: linear`` the learning rate of each iteration is
+        ``learning_rate * (1 - agent_steps / total_agent_steps)`` at the iteration's start (a
+        function of the step count only, so a resumed run continues the same schedule).
+        """
         while self.agent_steps < total_agent_steps:
+            self.set_learning_rate(self.learning_rate_at(self.agent_steps, total_agent_steps))
             t0 = time.perf_counter()
             data = self.collect()
             t1 = time.perf_counter()
@@ -443,6 +462,7 @@ class MARLTrainer:
             row = {
                 "iteration": float(self.iterations),
                 "agent_steps": float(self.agent_steps),
+                "learning_rate": float(self.optim.param_groups[0]["lr"]),
                 "collect_s": t1 - t0,
                 "update_s": t2 - t1,
                 **losses,

@@ -39,6 +39,7 @@ def _one_thread():
         ("hidden", [64, 32]),
         ("residual_mode", "torque"),
         ("offset_scale_m", [1.0, 2.0]),
+        ("lr_schedule", "cosine"),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -46,6 +47,28 @@ def test_bad_settings_name_the_field(field, value) -> None:
         MARLSettings(**{field: value})
     with pytest.raises(ValueError, match="unknown torchrl setting"):
         MARLSettings.from_dict({"lr": 1e-3})
+
+
+def test_linear_learning_rate_falls_to_zero_over_the_budget(tmp_path) -> None:
+    s = MARLSettings(algorithm="ippo", n_copies=2, rollout_steps=8, lr_schedule="linear")
+    tr = MARLTrainer(s, {}, seed=0)
+    assert tr.learning_rate_at(0, 400) == pytest.approx(3e-4)
+    assert tr.learning_rate_at(100, 400) == pytest.approx(2.25e-4)
+    assert tr.learning_rate_at(400, 400) == 0.0
+    const = MARLTrainer(MARLSettings(algorithm="ippo", n_copies=2, rollout_steps=8), {}, 0)
+    assert const.learning_rate_at(300, 400) == pytest.approx(3e-4)
+    # through the CLI: progress.csv logs the rate of every iteration, falling linearly
+    out = tmp_path / "lin"
+    args = ["train", "--backend", "torchrl", "--algorithm", "ippo", "--out", str(out)]
+    lin = ["--set", "torchrl.lr_schedule=linear"]
+    assert main([*args, "--timesteps", "240", *lin, *SMALL]) == 0
+    import csv
+
+    rows = list(csv.DictReader(open(out / "logs" / "progress.csv")))
+    lrs = [float(r["learning_rate"]) for r in rows]
+    steps = [0.0] + [float(r["agent_steps"]) for r in rows[:-1]]
+    assert lrs == pytest.approx([3e-4 * (1 - x / 240) for x in steps], rel=1e-4)
+    assert lrs[0] > lrs[-1] > 0.0
 
 
 def test_the_actor_explores_and_learns() -> None:
