@@ -16,6 +16,9 @@ name                      policy
 ``guarded``               ``wide`` with a wall guard (range sensor) and soft slot tracking,
                           for degraded navigation: the best heuristic of the study under
                           realistic urban reception (:mod:`agents.heuristics`)
+``ceiling``               ``guarded`` that climbs hard and holds the top of the altitude
+                          band: what the learned swarm does there, by hand
+                          (:mod:`agents.heuristics`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
 ``planner``               privileged MPC that looks ahead in copies of the environment with
@@ -60,6 +63,7 @@ POLICY_NAMES: tuple[str, ...] = (
     "spread",
     "wide",
     "guarded",
+    "ceiling",
     "waypoint",
     "planner",
     "ppo:<path>",
@@ -139,6 +143,10 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import GuardedColumnPolicy
 
         return GuardedColumnPolicy(env, **kwargs)
+    if name == "ceiling":
+        from agents.heuristics import CeilingColumnPolicy
+
+        return CeilingColumnPolicy(env, **kwargs)
     if name == "planner":
         from agents.planner import PrivilegedPlanner
 

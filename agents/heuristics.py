@@ -34,6 +34,7 @@ from coopnav_env.envs.observation_layout import obs_layout
 from coopnav_env.sim.route import Polyline, extend_route, street_route
 
 __all__ = [
+    "CeilingColumnPolicy",
     "FormationPolicy",
     "GuardedColumnPolicy",
     "Polyline",
@@ -327,7 +328,10 @@ class SkySeekingPolicy(_ColumnFollower):
     max_offset_m : float, default 4.0
         Largest lateral shift from the street centre line [m].
     ceiling_margin_m : float, default 2.0
-        Altitude kept below the top of the altitude band [m].
+        Altitude kept below the top of the altitude band [m], in [-50, 50]. The altitude is
+        held by a proportional term on the *estimated* altitude; a negative margin puts the
+        target above the band, so that the UAV climbs and stays at the band's top (the world
+        clamps it there) whatever its estimated altitude reads (``ceiling``).
     smoothing : float, default 0.7
         Low-pass factor of the lateral shift between steps, in [0, 1).
     **kwargs
@@ -355,6 +359,8 @@ class SkySeekingPolicy(_ColumnFollower):
     ):
         super().__init__(env, **kwargs)
         self.max_offset_m = float(max_offset_m)
+        if not -50.0 <= float(ceiling_margin_m) <= 50.0:
+            raise ValueError(f"ceiling_margin_m must be in [-50, 50] m, got {ceiling_margin_m!r}")
         self.ceiling_margin_m = float(ceiling_margin_m)
         self.smoothing = float(smoothing)
         self._offset = np.zeros(len(self._index))
@@ -495,6 +501,32 @@ class GuardedColumnPolicy(WideColumnPolicy):
     def __init__(self, env: Any, **kwargs: Any) -> None:
         defaults = {"wall_margin_m": 8.0, "wall_gain_per_s": 4.0, "gain_per_s": 0.2}
         super().__init__(env, **{**defaults, **kwargs})
+
+
+class CeilingColumnPolicy(GuardedColumnPolicy):
+    """:class:`GuardedColumnPolicy` that climbs hard and holds the top of the altitude band.
+
+    ``guarded`` tracks its altitude (0.5 m below the band's top) with a soft proportional
+    term on the *estimated* altitude: it climbs slowly from the start altitude and, with a
+    vertical error of a metre or two, hovers below the top. What the learned MAPPO swarm of
+    the study does instead is climb fast and stay at the top, where the roofs mask the least
+    sky (docs/marl/README.md, Part 2). This heuristic does the same by hand: its altitude
+    target lies ``-ceiling_margin_m`` above the band (default 10 m), so that the vertical
+    command is always upward, about 2 m/s at the top, and the world holds every UAV at the
+    band's top whatever its estimate reads. Found by a small search over the margin (-3, -6,
+    -10, -20 m) on the study's exploratory episodes (docs/marl/README.md).
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+    **kwargs
+        As :class:`GuardedColumnPolicy`; the default here is ``ceiling_margin_m=-10``.
+    """
+
+    name = "ceiling"
+
+    def __init__(self, env: Any, **kwargs: Any) -> None:
+        super().__init__(env, **{"ceiling_margin_m": -10.0, **kwargs})
 
 
 class WaypointPolicy:

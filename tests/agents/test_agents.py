@@ -118,7 +118,7 @@ def test_heuristics_use_the_route_module():
 
 @needs_env
 @pytest.mark.parametrize(
-    "name", ["random", "formation", "sky", "spread", "wide", "guarded", "waypoint"]
+    "name", ["random", "formation", "sky", "spread", "wide", "guarded", "ceiling", "waypoint"]
 )
 def test_policies_give_valid_actions_on_the_env(name):
     env = urban(max_steps=25)
@@ -130,7 +130,9 @@ def test_policies_give_valid_actions_on_the_env(name):
 
 
 @needs_env
-@pytest.mark.parametrize("name", ["formation", "sky", "spread", "wide", "guarded", "waypoint"])
+@pytest.mark.parametrize(
+    "name", ["formation", "sky", "spread", "wide", "guarded", "ceiling", "waypoint"]
+)
 def test_heuristics_reach_the_goal_along_the_canyon(name):
     """The paper's straight canyon: flying the street is enough to get there."""
     env = urban(city="canyon", n_uavs=4, max_steps=120)
@@ -257,6 +259,35 @@ def test_wall_guard_pushes_away_from_a_near_wall():
         make_policy("wide@wall_margin_m=0", env)
     with pytest.raises(ValueError, match="wall_gain_per_s must be in"):
         make_policy("wide@wall_margin_m=5,wall_gain_per_s=-1", env)
+
+
+@needs_env
+def test_ceiling_climbs_to_and_holds_the_top_of_the_band():
+    """``ceiling`` = ``guarded`` with its altitude target 10 m above the band: it climbs
+    faster and then sits at the band's top, where ``guarded`` hovers below it."""
+    env = urban(preset="urban_nlos_3dma", dead_reckoning_noise=True, max_steps=60)
+    pol = make_policy("ceiling", env)
+    assert pol.ceiling_margin_m == -10.0
+    assert (pol.wall_margin_m, pol.gain_per_s, pol.spacing_m) == (8.0, 0.2, 45.0)
+    top = env.unwrapped.config.kinematics.altitude_max_m
+    alt = {}
+    for name in ("guarded", "ceiling"):
+        p = make_policy(name, env)
+        obs, _ = env.reset(seed=1_000_000)
+        p.reset(seed=1_000_000)
+        zs = []
+        for _ in range(60):
+            obs, _, term, trunc, _ = env.step(p.act(obs))
+            zs.append(env.unwrapped.world.pos_enu_m[:, 2].copy())
+            if not env.agents:
+                break
+        alt[name] = np.array(zs)
+    # after 30 s every UAV of ``ceiling`` is within 0.5 m of the top; ``guarded`` is not
+    assert np.all(alt["ceiling"][30:] >= top - 0.5), alt["ceiling"][30:].min()
+    assert alt["ceiling"][30:].mean() > alt["guarded"][30:].mean()
+    assert alt["ceiling"][:10].mean() > alt["guarded"][:10].mean()  # climbs faster
+    with pytest.raises(ValueError, match="ceiling_margin_m must be in"):
+        make_policy("ceiling@ceiling_margin_m=-60", env)
 
 
 @needs_env
