@@ -277,7 +277,7 @@ def test_ceiling_climbs_to_and_holds_the_top_of_the_band():
         p.reset(seed=1_000_000)
         zs = []
         for _ in range(60):
-            obs, _, term, trunc, _ = env.step(p.act(obs))
+            obs, *_ = env.step(p.act(obs))
             zs.append(env.unwrapped.world.pos_enu_m[:, 2].copy())
             if not env.agents:
                 break

@@ -155,3 +155,30 @@ def test_heuristic_search_script_prints_its_table(capsys) -> None:
         mod.main(["--variants", "formation", "--episodes", "1"])
     with pytest.raises(SystemExit, match="--env-set: override 'n_uavs' must look like key=value"):
         mod.main([*variants, "--env-set", "n_uavs"])
+
+
+def test_paired_variants_script_pairs_groups_by_episode(capsys) -> None:
+    """benchmarks/paired_variants.py: a group against itself differs by exactly zero; a group
+    of two policies averages them episode by episode."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "paired_variants.py"
+    spec = importlib.util.spec_from_file_location("paired_variants", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    groups = ["--groups", "a=formation", "same=formation", "two=formation,wide"]
+    args = [*groups, "--episodes", "2", "--jobs", "1", "--env-set", "n_uavs=3", "max_steps=20"]
+    assert mod.main(args) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [ln.split()[0] for ln in lines[:3]] == ["a", "same", "two"]
+    assert "  same - a nav: +0.000 [+0.000,+0.000]" in lines
+    per = [float(x) for x in lines[2].split("per-seed [")[1].rstrip("]").split(",")]
+    a_nav = float(lines[0].split("nav ")[1].split()[0])
+    two_nav = float(lines[2].split("nav ")[1].split()[0])
+    assert per[0] == pytest.approx(a_nav, abs=0.006)  # its first policy is formation again
+    assert two_nav == pytest.approx(sum(per) / 2, abs=0.006)
+    with pytest.raises(SystemExit, match="NAME=POLICY"):
+        mod.main(["--groups", "formation"])
+    with pytest.raises(SystemExit, match="--episodes must be >= 1"):
+        mod.main(["--groups", "a=formation", "--episodes", "0"])

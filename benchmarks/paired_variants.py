@@ -1,0 +1,121 @@
+"""Paired screening of policy variants on the same episodes (the learning study's exploration).
+
+Flies every policy of every group through the same held-out episodes and prints, per group,
+the mean ``nav`` error (the 3-D error of the estimate each UAV used, every UAV-step), the mean
+``coop`` error (steps with a cooperative fix), the goal rate and each policy's ``nav`` mean;
+then, for every group against the first one, the paired difference of the per-episode errors
+(averaged over the group's policies, i.e. its training seeds) with a 95 % bootstrap interval
+over episodes (2000 resamples, generator seed 0). A cheaper, plainer cousin of
+``coopnav study`` (no stratification over training seeds, no figures) for screening training
+variants before a confirmatory study; docs/marl/README.md (Part 2) uses it::
+
+    python benchmarks/paired_variants.py --episodes 1000 --first-seed 1000000 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true \\
+        --groups base=guarded ceiling=ceiling
+
+A group is ``NAME=POLICY[,POLICY...]`` with :func:`agents.make_policy` names, e.g.
+``mappo=torchrl:runs/x/mappo_s0,torchrl:runs/x/mappo_s1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, np.ndarray]:
+    import torch
+
+    from training.marl_study import fly_episodes
+
+    torch.set_num_threads(1)
+    eps = fly_episodes(policy, env_kwargs, seeds, keep_positions=False)
+    return {
+        "nav": np.array([e.nav_error_mean_m for e in eps], dtype=float),
+        "coop": np.array([e.coop_error_mean_m for e in eps], dtype=float),
+        "goal": np.array([e.success for e in eps], dtype=float),
+    }
+
+
+def _parse_groups(items: list[str]) -> dict[str, list[str]]:
+    groups: dict[str, list[str]] = {}
+    for item in items:
+        name, sep, pols = item.partition("=")
+        if not sep or not name or not pols:
+            raise SystemExit(f"--groups: expected NAME=POLICY[,POLICY...], got {item!r}")
+        if name in groups:
+            raise SystemExit(f"--groups: the name {name!r} is given twice")
+        groups[name] = [p for p in pols.split(",") if p]
+    return groups
+
+
+def paired_table(
+    results: dict[str, list[dict[str, np.ndarray]]], reps: int = 2000, seed: int = 0
+) -> list[str]:
+    """The printed lines: one per group, then each group minus the first (nav, coop)."""
+    rng = np.random.default_rng(seed)
+    stats = {}
+    lines = []
+    for name, runs in results.items():
+        nav = np.mean([r["nav"] for r in runs], axis=0)
+        coop = np.mean([r["coop"] for r in runs], axis=0)
+        goal = np.mean([r["goal"] for r in runs], axis=0)
+        per = [round(float(np.nanmean(r["nav"])), 2) for r in runs]
+        stats[name] = (nav, coop)
+        lines.append(
+            f"{name:14s} nav {np.nanmean(nav):.3f} coop {np.nanmean(coop):.3f} "
+            f"goal {goal.mean():.3f} per-seed {per}"
+        )
+    base = next(iter(results))
+    for name in results:
+        if name == base:
+            continue
+        for j, label in ((0, "nav"), (1, "coop")):
+            d = stats[name][j] - stats[base][j]
+            d = d[np.isfinite(d)]
+            boot = [rng.choice(d, d.size).mean() for _ in range(reps)]
+            lo, hi = np.percentile(boot, [2.5, 97.5])
+            lines.append(f"  {name} - {base} {label}: {d.mean():+.3f} [{lo:+.3f},{hi:+.3f}]")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    from training.config import apply_overrides
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--groups", nargs="+", required=True, help="NAME=POLICY[,POLICY...]")
+    p.add_argument("--episodes", type=int, default=300, help="episodes (default: 300)")
+    p.add_argument(
+        "--first-seed", type=int, default=1_000_000, help="first reset seed (default: 1000000)"
+    )
+    p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
+    args = p.parse_args(argv)
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    groups = _parse_groups(args.groups)
+    env_kwargs = apply_overrides({}, [f"{kv}" for kv in args.env_set])
+    seeds = list(range(args.first_seed, args.first_seed + args.episodes))
+    units = [(g, pol) for g, pols in groups.items() for pol in pols]
+    if args.jobs <= 1:
+        flown = [_fly(pol, dict(env_kwargs), seeds) for _, pol in units]
+    else:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            futures = [pool.submit(_fly, pol, dict(env_kwargs), seeds) for _, pol in units]
+            flown = [f.result() for f in futures]
+    results: dict[str, list[dict[str, np.ndarray]]] = {g: [] for g in groups}
+    for (g, _), r in zip(units, flown):
+        results[g].append(r)
+    print("\n".join(paired_table(results)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
