@@ -14,10 +14,10 @@ name                      policy
                           closes at the goal: the best heuristic of the learning study
                           (:mod:`agents.heuristics`)
 ``guarded``               ``wide`` with a wall guard (range sensor) and soft slot tracking,
-                          for degraded navigation: the best heuristic of the study under
-                          realistic urban reception (:mod:`agents.heuristics`)
+                          for degraded navigation (:mod:`agents.heuristics`)
 ``ceiling``               ``guarded`` that climbs hard and holds the top of the altitude
-                          band: what the learned swarm does there, by hand
+                          band: what the learned swarm does under realistic urban
+                          reception, by hand, and the best policy of the study there
                           (:mod:`agents.heuristics`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
