@@ -212,6 +212,7 @@ def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
         "mappo:pretrained/nlos_s2",
         "ippo:pretrained/nlos_s1",
         "mappo:pretrained/nlos_ceiling_s2",
+        "mappo:pretrained/nlos_ceiling_lowstd_s1",
     ],
 )
 def test_shipped_policies_load_and_fly(name) -> None:
