@@ -45,15 +45,12 @@ def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str,
 
 
 def _parse_groups(items: list[str]) -> dict[str, list[str]]:
-    groups: dict[str, list[str]] = {}
-    for item in items:
-        name, sep, pols = item.partition("=")
-        if not sep or not name or not pols:
-            raise SystemExit(f"--groups: expected NAME=POLICY[,POLICY...], got {item!r}")
-        if name in groups:
-            raise SystemExit(f"--groups: the name {name!r} is given twice")
-        groups[name] = [p for p in pols.split(",") if p]
-    return groups
+    from training.marl_study import parse_named_lists
+
+    try:
+        return parse_named_lists(items, "--groups", "NAME=POLICY[,POLICY...]")
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
 
 
 def paired_table(
@@ -101,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
     groups = _parse_groups(args.groups)
-    env_kwargs = apply_overrides({}, [f"{kv}" for kv in args.env_set])
+    env_kwargs = apply_overrides({}, args.env_set)
     seeds = list(range(args.first_seed, args.first_seed + args.episodes))
     units = [(g, pol) for g, pols in groups.items() for pol in pols]
     if args.jobs <= 1:

@@ -558,17 +558,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
-    out: dict[str, list[Path]] = {}
+def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str, list[str]]:
+    """``NAME=A[,B...]`` items (``--runs``, ``paired_variants.py --groups``) as a mapping.
+
+    Raises ``ValueError`` naming ``option`` and the expected ``form`` for a malformed item,
+    and for a name given twice (which would otherwise drop the first silently).
+    """
+    out: dict[str, list[str]] = {}
     for item in items:
-        name, eq, dirs = item.partition("=")
-        if not eq or not name or not dirs:
-            raise ValueError(f"--runs entries are NAME=DIR[,DIR...], got {item!r}")
-        paths = [Path(d) for d in dirs.split(",") if d]
+        name, eq, values = item.partition("=")
+        if not eq or not name or not values:
+            raise ValueError(f"{option} entries are {form}, got {item!r}")
+        if name in out:
+            raise ValueError(f"{option}: the name {name!r} is given twice")
+        out[name] = [v for v in values.split(",") if v]
+    return out
+
+
+def _parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
+    out = {
+        name: [Path(d) for d in dirs]
+        for name, dirs in parse_named_lists(items, "--runs", "NAME=DIR[,DIR...]").items()
+    }
+    for paths in out.values():
         for p in paths:
             if not (p / "final_model.pt").is_file() and not (p / "final_model.zip").is_file():
                 raise ValueError(f"run folder {p} has no final_model.pt or final_model.zip")
-        out[name] = paths
     return out
 
 

@@ -180,5 +180,24 @@ def test_paired_variants_script_pairs_groups_by_episode(capsys) -> None:
     assert two_nav == pytest.approx(sum(per) / 2, abs=0.006)
     with pytest.raises(SystemExit, match="NAME=POLICY"):
         mod.main(["--groups", "formation"])
+    with pytest.raises(SystemExit, match="'a' is given twice"):
+        mod.main(["--groups", "a=formation", "a=wide"])
     with pytest.raises(SystemExit, match="--episodes must be >= 1"):
         mod.main(["--groups", "a=formation", "--episodes", "0"])
+
+
+def test_runs_entries_are_checked(tmp_path) -> None:
+    """``--runs``: malformed entries, a name given twice and a folder without a model are
+    errors that name the problem."""
+    from training.marl_study import _parse_runs
+
+    run = tmp_path / "r0"
+    run.mkdir()
+    (run / "final_model.pt").write_bytes(b"")
+    assert _parse_runs([f"m={run},{run}"]) == {"m": [run, run]}
+    with pytest.raises(ValueError, match=r"--runs entries are NAME=DIR\[,DIR\.\.\.\]"):
+        _parse_runs(["m"])
+    with pytest.raises(ValueError, match="--runs: the name 'm' is given twice"):
+        _parse_runs([f"m={run}", f"m={run}"])
+    with pytest.raises(ValueError, match=r"has no final_model\.pt or final_model\.zip"):
+        _parse_runs([f"m={tmp_path / 'missing'}"])
