@@ -187,17 +187,20 @@ def test_paired_variants_script_pairs_groups_by_episode(capsys) -> None:
 
 
 def test_runs_entries_are_checked(tmp_path) -> None:
-    """``--runs``: malformed entries, a name given twice and a folder without a model are
-    errors that name the problem."""
-    from training.marl_study import _parse_runs
+    """``coopnav study --runs``: malformed entries, a name given twice and a folder without a
+    model are errors that name the problem, raised before anything is flown."""
+    from training.marl_study import main as study_main
+    from training.marl_study import parse_named_lists
 
+    assert parse_named_lists(["m=a,b", "n=c"], "--x", "F") == {"m": ["a", "b"], "n": ["c"]}
     run = tmp_path / "r0"
     run.mkdir()
     (run / "final_model.pt").write_bytes(b"")
-    assert _parse_runs([f"m={run},{run}"]) == {"m": [run, run]}
+    out = ["--out", str(tmp_path / "out")]
     with pytest.raises(ValueError, match=r"--runs entries are NAME=DIR\[,DIR\.\.\.\]"):
-        _parse_runs(["m"])
+        study_main(["--runs", "m", *out])
     with pytest.raises(ValueError, match="--runs: the name 'm' is given twice"):
-        _parse_runs([f"m={run}", f"m={run}"])
+        study_main(["--runs", f"m={run}", f"m={run}", *out])
     with pytest.raises(ValueError, match=r"has no final_model\.pt or final_model\.zip"):
-        _parse_runs([f"m={tmp_path / 'missing'}"])
+        study_main(["--runs", f"m={tmp_path / 'missing'}", *out])
+    assert not (tmp_path / "out").exists()
