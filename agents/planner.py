@@ -110,6 +110,7 @@ class PrivilegedPlanner:
         self._rng = np.random.default_rng(seed)
         base_env = getattr(env, "unwrapped", env)
         self._agents = list(base_env.possible_agents)
+        self.last_plan: dict[str, Any] = {}
 
     def reset(self, seed: int | None = None) -> None:
         """Reset the base heuristic and the sampling generator."""
@@ -155,7 +156,15 @@ class PrivilegedPlanner:
         return cost
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The first command of the best plan found (see the module docstring)."""
+        """The first command of the best plan found (see the module docstring).
+
+        Afterwards :attr:`last_plan` describes the choice, for analyses of what the planner
+        does (``benchmarks/planner_headroom.py``): ``base_cost`` (the look-ahead cost of the
+        base heuristic alone, offset zero), ``best_cost`` (of the plan applied; at most
+        ``base_cost``), ``offsets`` (``(n_agents, 3)``, the per-UAV offset applied, in the
+        order of ``possible_agents``, before clipping) and ``base_command`` (the base
+        heuristic's command per agent).
+        """
         live = list(observations)
         if not live:
             return {}
@@ -163,6 +172,7 @@ class PrivilegedPlanner:
         mean = np.zeros((n, 3))
         std = np.full((n, 3), self.offset_std)
         best_cost, best = np.inf, np.zeros((n, 3))
+        base_cost = np.inf
         noise_seeds = self._rng.integers(0, 2**63 - 1, self.noise_samples)
         for it in range(self.iterations):
             cands = mean + std * self._rng.standard_normal((self.n_samples, n, 3))
@@ -174,12 +184,20 @@ class PrivilegedPlanner:
                     for c in cands
                 ]
             )
+            if it == 0:
+                base_cost = costs[0]
             order = np.argsort(costs, kind="stable")
             if costs[order[0]] < best_cost:
                 best_cost, best = float(costs[order[0]]), cands[order[0]].copy()
             elite = cands[order[: self.n_elite]]
             mean, std = elite.mean(axis=0), elite.std(axis=0) + 1e-3
         cmd = self.base.act(observations)  # advances the real base heuristic by one step
+        self.last_plan = {
+            "base_cost": float(base_cost),
+            "best_cost": best_cost,
+            "offsets": best.copy(),
+            "base_command": {a: np.asarray(cmd[a], dtype=np.float32).copy() for a in cmd},
+        }
         return {
             a: np.clip(cmd[a] + best[self._agents.index(a)], -1.0, 1.0).astype(np.float32)
             for a in live

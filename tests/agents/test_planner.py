@@ -44,3 +44,20 @@ def test_bad_planner_settings(bad) -> None:
     env = urban_canyon_v0.parallel_env()
     with pytest.raises(ValueError, match="planner"):
         make_policy(f"planner@{bad}", env)
+
+
+def test_last_plan_describes_the_command_applied() -> None:
+    env = urban_canyon_v0.parallel_env()
+    obs, _ = env.reset(seed=1_000_003)
+    planner = make_policy("planner@n_samples=4,n_elite=2,iterations=2,horizon=2", env)
+    planner.reset(1_000_003)
+    assert planner.last_plan == {}
+    cmd = planner.act(obs)
+    plan = planner.last_plan
+    # the base alone is a candidate, so the plan applied is never dearer than it
+    assert plan["best_cost"] <= plan["base_cost"] < np.inf
+    assert plan["offsets"].shape == (len(env.possible_agents), 3)
+    assert set(plan["base_command"]) == set(cmd)
+    for i, a in enumerate(env.possible_agents):
+        expect = np.clip(plan["base_command"][a] + plan["offsets"][i], -1.0, 1.0)
+        np.testing.assert_allclose(cmd[a], expect, rtol=0, atol=1e-6)

@@ -1,0 +1,284 @@
+"""Where the privileged planner's headroom comes from, and whether a policy could copy it.
+
+Flies the privileged planner over a base heuristic (``planner@base='BASE'``) and the base
+heuristic alone through the same episodes, keeps every step (the actor's inputs of a residual
+policy over the base: observation and base command; the planner's offset to the base
+command; the look-ahead cost of the base alone and of the plan applied; each UAV's fix and
+the 3-D error of the estimate it used) and reports:
+
+1. **the headroom**: mean ``nav`` error (every UAV-step, as ``coopnav study --score nav``)
+   of planner and base, and their paired difference by episode with a 95 % bootstrap interval
+   (4000 resamples over episodes, generator seed 0);
+2. **where it comes from**: the share of UAV-steps with a cooperative fix, and how much of
+   the mean error comes from UAV-steps with an error above 5 m and 10 m, split into steps
+   with and without a cooperative fix (dead reckoning or a standalone fix);
+3. **whether an on-board policy could copy it**: how much of the planner's per-UAV offset
+   a regression on the actor's inputs explains on held-out episodes (R^2 per axis, 5-fold
+   cross-validation by episode, ridge regression on standardised inputs), once unweighted and
+   once weighted by the planner's gain at that step (base cost minus best cost), which is
+   what a distillation that imitates the planner where its choice matters would fit.
+
+The planner is slow (about 15-25 s per episode on one core with its defaults); episodes are
+written one file each into ``--out`` (a temporary name, then renamed), so an interrupted run
+continues where it stopped, and a folder holds one setting only. docs/marl/README.md (Part 2,
+"What the planner does") uses::
+
+    python benchmarks/planner_headroom.py --episodes 60 --first-seed 5000000 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true nav_reward=error \\
+        nav_reward_weight=1.0 collision_penalty=250 nav_team_weight=1.0 \\
+        progress_reward_weight=0.2 --base ceiling --out runs/planner_headroom
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def _save_npz(path: Path, **arrays: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
+    """One episode of ``planner`` from ``reset(seed)``, every step kept (agents in
+    ``possible_agents`` order; ``alive`` marks the UAVs still flying at that step)."""
+    agents = list(env.possible_agents)
+    obs, _ = env.reset(seed=seed)
+    planner.reset(seed)
+    rows: dict[str, list[Any]] = {k: [] for k in ("obs", "base", "offset", "fix", "nav", "alive")}
+    costs: list[tuple[float, float]] = []
+    while env.agents:
+        live = list(env.agents)
+        cmd = planner.act(obs)
+        plan = planner.last_plan
+        zero3 = np.zeros(3, dtype=np.float32)
+        rows["obs"].append(np.stack([obs.get(a, np.zeros_like(obs[live[0]])) for a in agents]))
+        rows["base"].append(np.stack([plan["base_command"].get(a, zero3) for a in agents]))
+        rows["offset"].append(plan["offsets"].astype(np.float32))
+        costs.append((plan["base_cost"], plan["best_cost"]))
+        obs, _r, _te, _tr, infos = env.step(cmd)
+        rows["fix"].append([bool(infos[a]["coop_fix"]) if a in infos else False for a in agents])
+        rows["nav"].append(
+            [float(infos[a]["nav_error_m"]) if a in infos else np.nan for a in agents]
+        )
+        rows["alive"].append([a in live for a in agents])
+    out = {k: np.asarray(v) for k, v in rows.items()}
+    c = np.asarray(costs, dtype=float).reshape(-1, 2)
+    out["cost_base"], out["cost_best"] = c[:, 0], c[:, 1]
+    return out
+
+
+def fly_base(env: Any, policy: Any, seed: int) -> dict[str, np.ndarray]:
+    """One episode of the base heuristic: per UAV-step ``nav`` error and fix flag."""
+    from training.evaluate import run_episode
+
+    rec = run_episode(env, policy, int(seed))
+    nav = np.asarray(rec.nav_error_m, dtype=float)
+    coop = np.asarray(rec.coop_error_m, dtype=float)
+    alive = np.isfinite(nav)
+    return {"nav": nav[alive], "fix": np.isfinite(coop)[alive]}
+
+
+def _worker(env_kwargs: dict[str, Any], base: str, seeds: list[int], out: str) -> int:
+    import torch
+
+    from agents import make_policy
+    from coopnav_env import urban_canyon_v0
+
+    torch.set_num_threads(1)
+    env = urban_canyon_v0.parallel_env(**env_kwargs)
+    planner = make_policy(f"planner@base={base!r}", env)
+    base_policy = make_policy(base, env)
+    for seed in seeds:
+        p_file, b_file = Path(out, f"{seed}.npz"), Path(out, f"{seed}_base.npz")
+        if not p_file.exists():
+            _save_npz(p_file, **fly_planner(env, planner, seed))
+        if not b_file.exists():
+            _save_npz(b_file, **fly_base(env, base_policy, seed))
+    return len(seeds)
+
+
+def ridge_r2(
+    x: np.ndarray,
+    y: np.ndarray,
+    groups: np.ndarray,
+    w: np.ndarray | None = None,
+    folds: int = 5,
+    lam: float = 10.0,
+) -> np.ndarray:
+    """Cross-validated R^2 per column of ``y`` of a ridge regression on ``x`` (folds by
+    ``groups``, the episode; inputs standardised on the training folds; weighted by ``w``)."""
+    w = np.ones(len(x)) if w is None else np.asarray(w, dtype=float)
+    pred = np.zeros_like(y, dtype=float)
+    for k in range(folds):
+        te = groups % folds == k
+        tr = ~te
+        mu, sd = x[tr].mean(0), x[tr].std(0) + 1e-6
+        a_tr = np.c_[(x[tr] - mu) / sd, np.ones(tr.sum())]
+        a_te = np.c_[(x[te] - mu) / sd, np.ones(te.sum())]
+        sw = w[tr][:, None]
+        coef = np.linalg.solve(
+            a_tr.T @ (sw * a_tr) + lam * np.eye(a_tr.shape[1]), a_tr.T @ (sw * y[tr])
+        )
+        pred[te] = a_te @ coef
+    mean = (w[:, None] * y).sum(0) / w.sum()
+    return 1.0 - (w[:, None] * (y - pred) ** 2).sum(0) / (w[:, None] * (y - mean) ** 2).sum(0)
+
+
+def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
+    """The report's numbers from the episode files of ``seeds`` in ``folder``."""
+    folder = Path(folder)
+    p_nav, b_nav, xs, ys, ws, gs = [], [], [], [], [], []
+    p_err, p_fix, b_err, b_fix = [], [], [], []
+    for i, seed in enumerate(seeds):
+        p = np.load(folder / f"{seed}.npz")
+        b = np.load(folder / f"{seed}_base.npz")
+        alive = p["alive"]
+        p_err.append(p["nav"][alive])
+        p_fix.append(p["fix"][alive])
+        b_err.append(b["nav"])
+        b_fix.append(b["fix"])
+        p_nav.append(float(np.nanmean(p["nav"][alive])))
+        b_nav.append(float(np.nanmean(b["nav"])))
+        gain = np.maximum(p["cost_base"] - p["cost_best"], 0.0)
+        xs.append(np.concatenate([p["obs"], p["base"]], axis=-1)[alive])
+        ys.append(p["offset"][alive])
+        ws.append(np.broadcast_to(gain[:, None], alive.shape)[alive])
+        gs.append(np.full(int(alive.sum()), i))
+    d = np.asarray(p_nav) - np.asarray(b_nav)
+    rng = np.random.default_rng(0)
+    boot = [rng.choice(d, d.size).mean() for _ in range(4000)]
+
+    def tails(err: list[np.ndarray], fix: list[np.ndarray]) -> dict[str, float]:
+        e, f = np.concatenate(err), np.concatenate(fix).astype(bool)
+        ok = np.isfinite(e)
+        e, f = e[ok], f[ok]
+        out = {"fix_share": float(f.mean()), "mean_m": float(e.mean())}
+        for t in (5, 10):
+            big = e > t
+            out[f"above_{t}m_share"] = float(big.mean())
+            out[f"above_{t}m_with_fix_m"] = float((e * (big & f)).sum() / e.size)
+            out[f"above_{t}m_no_fix_m"] = float((e * (big & ~f)).sum() / e.size)
+        return out
+
+    x, y, w, g = (np.concatenate(v) for v in (xs, ys, ws, gs))
+    return {
+        "episodes": len(seeds),
+        "planner_nav_m": float(np.mean(p_nav)),
+        "base_nav_m": float(np.mean(b_nav)),
+        "paired_m": [float(d.mean()), *np.percentile(boot, [2.5, 97.5]).tolist()],
+        "planner_better_share": float((d < 0).mean()),
+        "planner": tails(p_err, p_fix),
+        "base": tails(b_err, b_fix),
+        "offset_std": y.std(0).tolist(),
+        "r2_unweighted": ridge_r2(x, y, g).tolist(),
+        "r2_gain_weighted": ridge_r2(x, y, g, w).tolist(),
+        "gain_share_top10pct": float(
+            np.sort(w)[-max(1, len(w) // 10) :].sum() / max(w.sum(), 1e-12)
+        ),
+    }
+
+
+def report_lines(r: dict[str, Any], base: str) -> list[str]:
+    pm, lo, hi = r["paired_m"]
+    lines = [
+        f"episodes {r['episodes']}: nav error planner {r['planner_nav_m']:.3f} m, {base} "
+        f"{r['base_nav_m']:.3f} m, paired {pm:+.3f} m [{lo:+.3f}, {hi:+.3f}] "
+        f"(planner lower in {r['planner_better_share']:.0%} of episodes)",
+        "where the error comes from (metres of the mean error; UAV-steps above the threshold):",
+    ]
+    for name in ("planner", base):
+        t = r["planner" if name == "planner" else "base"]
+        lines.append(
+            f"  {name:10s} fix share {t['fix_share']:.3f}; above 5 m: "
+            f"{t['above_5m_share']:.3f} of steps, {t['above_5m_with_fix_m']:.3f} m with a fix "
+            f"+ {t['above_5m_no_fix_m']:.3f} m without; above 10 m: "
+            f"{t['above_10m_with_fix_m']:.3f} + {t['above_10m_no_fix_m']:.3f} m"
+        )
+    fmt = lambda v: "[" + ", ".join(f"{a:+.3f}" for a in v) + "]"  # noqa: E731
+    lines += [
+        f"planner offsets: std per axis {fmt(r['offset_std'])} (command units)",
+        "  explained by the actor's inputs (5-fold CV by episode, ridge): "
+        f"R^2 {fmt(r['r2_unweighted'])}, "
+        f"weighted by the planner's gain {fmt(r['r2_gain_weighted'])}; "
+        f"the top 10 % of UAV-steps carry {r['gain_share_top10pct']:.0%} of the gain",
+    ]
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    from training.config import apply_overrides
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--base", default="ceiling", help="base heuristic (default: ceiling)")
+    p.add_argument("--episodes", type=int, default=60, help="episodes (default: 60)")
+    p.add_argument(
+        "--first-seed", type=int, default=5_000_000, help="first reset seed (default: 5000000)"
+    )
+    p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--out", required=True, help="folder of the episode files and report.json")
+    args = p.parse_args(argv)
+    if args.episodes < 2:
+        raise SystemExit(f"--episodes must be >= 2, got {args.episodes}")
+    if args.jobs < 1:
+        raise SystemExit(f"--jobs must be >= 1, got {args.jobs}")
+    env_kwargs = apply_overrides({}, args.env_set)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    settings = {"env": env_kwargs, "base": args.base}
+    sfile = out / "settings.json"
+    if sfile.exists():
+        old = json.loads(sfile.read_text())
+        if old != settings:
+            raise SystemExit(f"{out} holds episodes of other settings ({old}); use another --out")
+    else:
+        tmp = sfile.with_name("settings.json.tmp")
+        tmp.write_text(json.dumps(settings, indent=1, sort_keys=True))
+        os.replace(tmp, sfile)
+    seeds = list(range(args.first_seed, args.first_seed + args.episodes))
+    chunks = [seeds[i :: args.jobs] for i in range(args.jobs)]
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover
+        tqdm = None
+    if args.jobs == 1:
+        _worker(env_kwargs, args.base, seeds, str(out))
+    else:
+        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+            futs = [pool.submit(_worker, env_kwargs, args.base, c, str(out)) for c in chunks if c]
+            bar = tqdm(total=len(seeds), unit="episode") if tqdm is not None else None
+            import time
+
+            while not all(f.done() for f in futs):
+                time.sleep(2.0)
+                if bar is not None:
+                    bar.n = sum((out / f"{s}_base.npz").exists() for s in seeds)
+                    bar.refresh()
+            for f in futs:
+                f.result()
+            if bar is not None:
+                bar.n = len(seeds)
+                bar.close()
+    r = analyse(out, seeds)
+    r["command"] = "python benchmarks/planner_headroom.py " + " ".join(argv or sys.argv[1:])
+    tmp = out / "report.json.tmp"
+    tmp.write_text(json.dumps(r, indent=1))
+    os.replace(tmp, out / "report.json")
+    print("\n".join(report_lines(r, args.base)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

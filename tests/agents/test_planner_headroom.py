@@ -1,0 +1,66 @@
+"""benchmarks/planner_headroom.py: the planner's episodes kept step by step, the analysis."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+
+def _module():
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "planner_headroom.py"
+    spec = importlib.util.spec_from_file_location("planner_headroom", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_ridge_r2_finds_a_linear_rule_and_not_noise() -> None:
+    mod = _module()
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((2000, 6))
+    groups = np.repeat(np.arange(40), 50)
+    y_rule = np.c_[x[:, 0] - 0.5 * x[:, 3], 0.2 * x[:, 1]] + 0.01 * rng.standard_normal((2000, 2))
+    assert np.all(mod.ridge_r2(x, y_rule, groups) > 0.99)
+    y_noise = rng.standard_normal((2000, 2))
+    # out of sample, noise cannot be explained: R^2 near 0 (slightly below, by overfitting);
+    # 2000 samples, 7 coefficients: |R^2| well under 0.02
+    r2 = mod.ridge_r2(x, y_noise, groups)
+    assert np.all(np.abs(r2) < 0.02)
+    # weights select the samples the fit must explain: a rule that holds only where the
+    # weight is non-zero is found with the weights, not without them
+    w = (np.arange(2000) % 2 == 0).astype(float)
+    y_half = np.where(w[:, None] > 0, y_rule, y_noise)
+    assert np.all(mod.ridge_r2(x, y_half, groups, w) > 0.99)
+    assert np.all(mod.ridge_r2(x, y_half, groups) < 0.9)
+
+
+def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_path, capsys) -> None:
+    mod = _module()
+    out = tmp_path / "h"
+    env = ["--env-set", "n_uavs=3", "max_steps=4"]
+    args = ["--episodes", "2", "--first-seed", "1000000", "--jobs", "1", "--base", "wide"]
+    assert mod.main([*args, *env, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "nav error planner" in text and "R^2" in text
+    r = json.loads((out / "report.json").read_text())
+    assert r["episodes"] == 2
+    pm, lo, hi = r["paired_m"]
+    assert lo <= pm <= hi
+    assert pm == pytest.approx(r["planner_nav_m"] - r["base_nav_m"], abs=1e-9)
+    ep = np.load(out / "1000000.npz")
+    steps, n = ep["alive"].shape
+    assert 1 <= steps <= 4 and n == 3
+    assert ep["obs"].shape[:2] == (steps, 3) and ep["offset"].shape == (steps, 3, 3)
+    assert np.all(ep["cost_best"] <= ep["cost_base"])
+    # a second run flies nothing again: the episode files are kept as they are
+    before = {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")}
+    assert mod.main([*args, *env, "--out", str(out)]) == 0
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")} == before
+    with pytest.raises(SystemExit, match="other settings"):
+        mod.main([*args, "--env-set", "n_uavs=4", "max_steps=4", "--out", str(out)])
+    with pytest.raises(SystemExit, match="--episodes must be >= 2"):
+        mod.main(["--episodes", "1", "--out", str(out)])
