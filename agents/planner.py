@@ -65,6 +65,15 @@ class PrivilegedPlanner:
         mean; the same draws for every candidate of a step).
     seed : int
         Seed of the planner's own sampling generator (reset per episode with the episode seed).
+    from_estimate : bool
+        Look ahead from where the swarm *believes* it is: in each copy every UAV's true
+        position is replaced by its estimate before the look-ahead (the copy's truth is the
+        belief, so its errors start at zero). The planner then no longer knows where the UAVs
+        truly are, nor their current errors; it still knows the map, the satellites and the
+        simulator's error model. An on-board look-ahead, to tell how much of the headroom
+        needs the truth (``benchmarks/planner_headroom.py --planner-set from_estimate=True``).
+        A believed position inside a building makes every candidate crash in the copy, so
+        the planner keeps its base command there.
     """
 
     name = "planner"
@@ -82,6 +91,7 @@ class PrivilegedPlanner:
         progress_weight_m: float = 1.0,
         noise_samples: int = 1,
         seed: int = 0,
+        from_estimate: bool = False,
     ) -> None:
         for name, v, lo in (
             ("horizon", horizon, 1),
@@ -107,6 +117,9 @@ class PrivilegedPlanner:
         self.progress_weight_m = float(progress_weight_m)
         self.noise_samples = noise_samples
         self.seed = int(seed)
+        if not isinstance(from_estimate, bool):
+            raise ValueError(f"planner from_estimate must be True or False, got {from_estimate!r}")
+        self.from_estimate = from_estimate
         self._rng = np.random.default_rng(seed)
         base_env = getattr(env, "unwrapped", env)
         self._agents = list(base_env.possible_agents)
@@ -128,7 +141,11 @@ class PrivilegedPlanner:
         foreseeing the noise.
         """
         env, base = copy.deepcopy((self.env, self.base))
-        getattr(env, "unwrapped", env)._rng = np.random.default_rng(noise_seed)
+        inner = getattr(env, "unwrapped", env)
+        inner._rng = np.random.default_rng(noise_seed)
+        if self.from_estimate:
+            world = inner.world
+            world.pos_enu_m = np.array(world.nav_pos_enu_m, dtype=float, copy=True)
         obs = dict(first_obs)
         cost = 0.0
         for _ in range(self.horizon):

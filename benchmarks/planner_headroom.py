@@ -90,7 +90,9 @@ def fly_base(env: Any, policy: Any, seed: int) -> dict[str, np.ndarray]:
     return {"nav": nav[alive], "fix": np.isfinite(coop)[alive]}
 
 
-def _worker(env_kwargs: dict[str, Any], base: str, seeds: list[int], out: str) -> int:
+def _worker(
+    env_kwargs: dict[str, Any], base: str, seeds: list[int], out: str, planner_set: list[str]
+) -> int:
     import torch
 
     from agents import make_policy
@@ -98,7 +100,7 @@ def _worker(env_kwargs: dict[str, Any], base: str, seeds: list[int], out: str) -
 
     torch.set_num_threads(1)
     env = urban_canyon_v0.parallel_env(**env_kwargs)
-    planner = make_policy(f"planner@base={base!r}", env)
+    planner = make_policy(",".join([f"planner@base={base!r}", *planner_set]), env)
     base_policy = make_policy(base, env)
     for seed in seeds:
         p_file, b_file = Path(out, f"{seed}.npz"), Path(out, f"{seed}_base.npz")
@@ -227,6 +229,13 @@ def main(argv: list[str] | None = None) -> int:
         "--first-seed", type=int, default=5_000_000, help="first reset seed (default: 5000000)"
     )
     p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument(
+        "--planner-set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="planner options (agents.planner.PrivilegedPlanner), e.g. from_estimate=True",
+    )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument("--out", required=True, help="folder of the episode files and report.json")
     args = p.parse_args(argv)
@@ -237,7 +246,10 @@ def main(argv: list[str] | None = None) -> int:
     env_kwargs = apply_overrides({}, args.env_set)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    settings = {"env": env_kwargs, "base": args.base}
+    for item in args.planner_set:
+        if "=" not in item:
+            raise SystemExit(f"--planner-set takes KEY=VALUE, got {item!r}")
+    settings = {"env": env_kwargs, "base": args.base, "planner": args.planner_set}
     sfile = out / "settings.json"
     if sfile.exists():
         old = json.loads(sfile.read_text())
@@ -254,10 +266,14 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:  # pragma: no cover
         tqdm = None
     if args.jobs == 1:
-        _worker(env_kwargs, args.base, seeds, str(out))
+        _worker(env_kwargs, args.base, seeds, str(out), args.planner_set)
     else:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            futs = [pool.submit(_worker, env_kwargs, args.base, c, str(out)) for c in chunks if c]
+            futs = [
+                pool.submit(_worker, env_kwargs, args.base, c, str(out), args.planner_set)
+                for c in chunks
+                if c
+            ]
             bar = tqdm(total=len(seeds), unit="episode") if tqdm is not None else None
             import time
 

@@ -61,3 +61,28 @@ def test_last_plan_describes_the_command_applied() -> None:
     for i, a in enumerate(env.possible_agents):
         expect = np.clip(plan["base_command"][a] + plan["offsets"][i], -1.0, 1.0)
         np.testing.assert_allclose(cmd[a], expect, rtol=0, atol=1e-6)
+
+
+def test_the_on_board_planner_looks_ahead_from_the_estimate() -> None:
+    # with the base as its only candidate it flies the base, like the privileged one
+    assert_fly_alike(
+        "planner@n_samples=1,n_elite=1,iterations=1,horizon=2,from_estimate=True",
+        "wide",
+        seed=1_000_001,
+        steps=10,
+    )
+    env = urban_canyon_v0.parallel_env()
+    obs, _ = env.reset(seed=1_000_004)
+    for _ in range(5):  # fly a little so that the estimates are off the truth
+        obs, *_ = env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+    world = env.unwrapped.world
+    truth = world.pos_enu_m.copy()
+    assert np.abs(world.nav_pos_enu_m - truth).max() > 0.0
+    onboard = make_policy("planner@from_estimate=True,horizon=2", env)
+    privileged = make_policy("planner@horizon=2", env)
+    zero = np.zeros((len(env.possible_agents), 3))
+    # the same noise and candidate, a different start (the belief): a different cost
+    assert onboard._rollout(zero, obs, 7) != privileged._rollout(zero, obs, 7)
+    np.testing.assert_array_equal(world.pos_enu_m, truth)  # the real world is untouched
+    with pytest.raises(ValueError, match="from_estimate must be True or False"):
+        make_policy("planner@from_estimate=1", env)

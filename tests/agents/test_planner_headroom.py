@@ -62,5 +62,7 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
     assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")} == before
     with pytest.raises(SystemExit, match="other settings"):
         mod.main([*args, "--env-set", "n_uavs=4", "max_steps=4", "--out", str(out)])
+    with pytest.raises(SystemExit, match="--planner-set takes KEY=VALUE"):
+        mod.main([*args, *env, "--planner-set", "from_estimate", "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit, match="--episodes must be >= 2"):
         mod.main(["--episodes", "1", "--out", str(out)])
