@@ -9,9 +9,11 @@ the 3-D error of the estimate it used) and reports:
 1. **the headroom**: mean ``nav`` error (every UAV-step, as ``coopnav study --score nav``)
    of planner and base, and their paired difference by episode with a 95 % bootstrap interval
    (4000 resamples over episodes, generator seed 0);
-2. **where it comes from**: the share of UAV-steps with a cooperative fix, and how much of
+2. **where it comes from**: the share of UAV-steps with a cooperative fix, how much of
    the mean error comes from UAV-steps with an error above 5 m and 10 m, split into steps
-   with and without a cooperative fix (dead reckoning or a standalone fix);
+   with and without a cooperative fix (dead reckoning or a standalone fix), and how many of
+   the UAV-steps without a fix fall in steps when no UAV of the swarm has one (an outage of
+   the centroid solution, not of one UAV);
 3. **whether an on-board policy could copy it**: how much of the planner's per-UAV offset
    a regression on the actor's inputs explains on held-out episodes (R^2 per axis, 5-fold
    cross-validation by episode, ridge regression on standardised inputs), once unweighted and
@@ -80,14 +82,14 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
 
 
 def fly_base(env: Any, policy: Any, seed: int) -> dict[str, np.ndarray]:
-    """One episode of the base heuristic: per UAV-step ``nav`` error and fix flag."""
+    """One episode of the base heuristic: per step and UAV the ``nav`` error, the fix flag and
+    whether the UAV was still flying (``(steps, n_agents)`` each)."""
     from training.evaluate import run_episode
 
     rec = run_episode(env, policy, int(seed))
     nav = np.asarray(rec.nav_error_m, dtype=float)
     coop = np.asarray(rec.coop_error_m, dtype=float)
-    alive = np.isfinite(nav)
-    return {"nav": nav[alive], "fix": np.isfinite(coop)[alive]}
+    return {"nav": nav, "fix": np.isfinite(coop), "alive": np.isfinite(nav)}
 
 
 def _worker(
@@ -138,21 +140,29 @@ def ridge_r2(
     return 1.0 - (w[:, None] * (y - pred) ** 2).sum(0) / (w[:, None] * (y - mean) ** 2).sum(0)
 
 
+def _swarm_wide(fix: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """Per flying UAV-step: True where no flying UAV of the swarm has a cooperative fix."""
+    none = ~(fix & alive).any(axis=1)
+    return np.broadcast_to(none[:, None], alive.shape)[alive]
+
+
 def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     """The report's numbers from the episode files of ``seeds`` in ``folder``."""
     folder = Path(folder)
     p_nav, b_nav, xs, ys, ws, gs = [], [], [], [], [], []
-    p_err, p_fix, b_err, b_fix = [], [], [], []
+    p_err, p_fix, b_err, b_fix, p_all, b_all = [], [], [], [], [], []
     for i, seed in enumerate(seeds):
         p = np.load(folder / f"{seed}.npz")
         b = np.load(folder / f"{seed}_base.npz")
         alive = p["alive"]
         p_err.append(p["nav"][alive])
         p_fix.append(p["fix"][alive])
-        b_err.append(b["nav"])
-        b_fix.append(b["fix"])
+        b_err.append(b["nav"][b["alive"]])
+        b_fix.append(b["fix"][b["alive"]])
+        p_all.append(_swarm_wide(p["fix"], alive))
+        b_all.append(_swarm_wide(b["fix"], b["alive"]))
         p_nav.append(float(np.nanmean(p["nav"][alive])))
-        b_nav.append(float(np.nanmean(b["nav"])))
+        b_nav.append(float(np.nanmean(b["nav"][b["alive"]])))
         gain = np.maximum(p["cost_base"] - p["cost_best"], 0.0)
         xs.append(np.concatenate([p["obs"], p["base"]], axis=-1)[alive])
         ys.append(p["offset"][alive])
@@ -162,11 +172,18 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     rng = np.random.default_rng(0)
     boot = [rng.choice(d, d.size).mean() for _ in range(4000)]
 
-    def tails(err: list[np.ndarray], fix: list[np.ndarray]) -> dict[str, float]:
+    def tails(
+        err: list[np.ndarray], fix: list[np.ndarray], wide: list[np.ndarray]
+    ) -> dict[str, float]:
         e, f = np.concatenate(err), np.concatenate(fix).astype(bool)
+        w = np.concatenate(wide).astype(bool)
         ok = np.isfinite(e)
-        e, f = e[ok], f[ok]
-        out = {"fix_share": float(f.mean()), "mean_m": float(e.mean())}
+        e, f, w = e[ok], f[ok], w[ok]
+        out = {
+            "fix_share": float(f.mean()),
+            "mean_m": float(e.mean()),
+            "no_fix_swarm_wide_share": float(w[~f].mean()) if (~f).any() else float("nan"),
+        }
         for t in (5, 10):
             big = e > t
             out[f"above_{t}m_share"] = float(big.mean())
@@ -181,8 +198,8 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
         "base_nav_m": float(np.mean(b_nav)),
         "paired_m": [float(d.mean()), *np.percentile(boot, [2.5, 97.5]).tolist()],
         "planner_better_share": float((d < 0).mean()),
-        "planner": tails(p_err, p_fix),
-        "base": tails(b_err, b_fix),
+        "planner": tails(p_err, p_fix, p_all),
+        "base": tails(b_err, b_fix, b_all),
         "offset_std": y.std(0).tolist(),
         "r2_unweighted": ridge_r2(x, y, g).tolist(),
         "r2_gain_weighted": ridge_r2(x, y, g, w).tolist(),
@@ -206,7 +223,9 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
             f"  {name:10s} fix share {t['fix_share']:.3f}; above 5 m: "
             f"{t['above_5m_share']:.3f} of steps, {t['above_5m_with_fix_m']:.3f} m with a fix "
             f"+ {t['above_5m_no_fix_m']:.3f} m without; above 10 m: "
-            f"{t['above_10m_with_fix_m']:.3f} + {t['above_10m_no_fix_m']:.3f} m"
+            f"{t['above_10m_with_fix_m']:.3f} + {t['above_10m_no_fix_m']:.3f} m; "
+            f"{t['no_fix_swarm_wide_share']:.0%} of the UAV-steps without a fix are steps "
+            "when no UAV of the swarm has one"
         )
     fmt = lambda v: "[" + ", ".join(f"{a:+.3f}" for a in v) + "]"  # noqa: E731
     lines += [

@@ -56,6 +56,12 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
     assert 1 <= steps <= 4 and n == 3
     assert ep["obs"].shape[:2] == (steps, 3) and ep["offset"].shape == (steps, 3, 3)
     assert np.all(ep["cost_best"] <= ep["cost_base"])
+    base = np.load(out / "1000000_base.npz")
+    assert base["fix"].shape == base["alive"].shape == base["nav"].shape
+    assert base["alive"].shape[1] == 3
+    for who in ("planner", "base"):
+        share = r[who]["no_fix_swarm_wide_share"]
+        assert np.isnan(share) or 0.0 <= share <= 1.0
     # a second run flies nothing again: the episode files are kept as they are
     before = {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")}
     assert mod.main([*args, *env, "--out", str(out)]) == 0
