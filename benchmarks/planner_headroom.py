@@ -20,12 +20,13 @@ the 3-D error of the estimate it used) and reports:
    once weighted by the planner's gain at that step (base cost minus best cost), which is
    what a distillation that imitates the planner where its choice matters would fit.
 
-The planner is slow (about 15-25 s per episode on one core with its defaults); episodes are
+The planner is slow (about 11-13 s per episode on one core with its defaults); episodes are
 written one file each into ``--out`` (a temporary name, then renamed), so an interrupted run
 continues where it stopped, and a folder holds one setting only. docs/marl/README.md (Part 2,
-"What the planner does") uses::
+"What the planner does, and what that means for learning") uses, once as below and once
+with ``--planner-set from_estimate=True --out runs/planner_headroom_onboard``::
 
-    python benchmarks/planner_headroom.py --episodes 60 --first-seed 5000000 \\
+    python benchmarks/planner_headroom.py --episodes 200 --first-seed 5000000 \\
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true nav_reward=error \\
         nav_reward_weight=1.0 collision_penalty=250 nav_team_weight=1.0 \\
         progress_reward_weight=0.2 --base ceiling --out runs/planner_headroom
