@@ -72,8 +72,8 @@ class PrivilegedPlanner:
         truly are, nor their current errors; it still knows the map, the satellites and the
         simulator's error model. An on-board look-ahead, to tell how much of the headroom
         needs the truth (``benchmarks/planner_headroom.py --planner-set from_estimate=True``).
-        A believed position inside a building makes every candidate crash in the copy, so
-        the planner keeps its base command there.
+        The belief is taken as it is, even where it lies inside a building (the look-ahead
+        then starts there).
     """
 
     name = "planner"

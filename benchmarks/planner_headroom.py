@@ -123,7 +123,8 @@ def ridge_r2(
     lam: float = 10.0,
 ) -> np.ndarray:
     """Cross-validated R^2 per column of ``y`` of a ridge regression on ``x`` (folds by
-    ``groups``, the episode; inputs standardised on the training folds; weighted by ``w``)."""
+    ``groups``, the episode; inputs standardised on the training folds; weighted by ``w``).
+    NaN for a column with nothing to explain (no variance, or every weight zero)."""
     w = np.ones(len(x)) if w is None else np.asarray(w, dtype=float)
     pred = np.zeros_like(y, dtype=float)
     for k in range(folds):
@@ -137,8 +138,13 @@ def ridge_r2(
             a_tr.T @ (sw * a_tr) + lam * np.eye(a_tr.shape[1]), a_tr.T @ (sw * y[tr])
         )
         pred[te] = a_te @ coef
+    if not w.sum() > 0.0:  # nothing to weigh (e.g. a planner that never left its base)
+        return np.full(y.shape[1], np.nan)
     mean = (w[:, None] * y).sum(0) / w.sum()
-    return 1.0 - (w[:, None] * (y - pred) ** 2).sum(0) / (w[:, None] * (y - mean) ** 2).sum(0)
+    ss_res = (w[:, None] * (y - pred) ** 2).sum(0)
+    ss_tot = (w[:, None] * (y - mean) ** 2).sum(0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ss_tot > 0.0, 1.0 - ss_res / ss_tot, np.nan)
 
 
 def _swarm_wide(fix: np.ndarray, alive: np.ndarray) -> np.ndarray:

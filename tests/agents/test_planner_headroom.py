@@ -72,3 +72,24 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
         mod.main([*args, *env, "--planner-set", "from_estimate", "--out", str(tmp_path / "x")])
     with pytest.raises(SystemExit, match="--episodes must be >= 2"):
         mod.main(["--episodes", "1", "--out", str(out)])
+
+
+def test_a_planner_that_only_has_its_base_is_recorded_as_its_base(tmp_path) -> None:
+    # with the base as its only candidate the planner flies the base, so the two recordings
+    # (the planner's from its infos, the base's from run_episode) must agree step by step
+    mod = _module()
+    out = tmp_path / "same"
+    args = ["--episodes", "2", "--first-seed", "1000010", "--jobs", "1", "--base", "wide"]
+    env = ["--env-set", "n_uavs=3", "max_steps=12"]
+    one = ["--planner-set", "n_samples=1", "n_elite=1", "iterations=1", "horizon=1"]
+    assert mod.main([*args, *env, *one, "--out", str(out)]) == 0
+    for seed in (1000010, 1000011):
+        p, b = np.load(out / f"{seed}.npz"), np.load(out / f"{seed}_base.npz")
+        np.testing.assert_array_equal(p["alive"], b["alive"])
+        np.testing.assert_array_equal(p["fix"][p["alive"]], b["fix"][b["alive"]])
+        np.testing.assert_array_equal(p["nav"][p["alive"]], b["nav"][b["alive"]])
+        assert not p["offset"].any()
+    r = json.loads((out / "report.json").read_text())
+    assert r["paired_m"] == [0.0, 0.0, 0.0]
+    # no offsets, so nothing to explain: R^2 is undefined (NaN), not a number made up
+    assert np.all(np.isnan(r["r2_unweighted"])) and np.all(np.isnan(r["r2_gain_weighted"]))
