@@ -128,6 +128,13 @@ exclusion) / 4, and `satellites_blocked_sector`, the number above the cut-off it
 track there / 4, each clipped to [0, 1] (68 entries by default). What a real receiver knows
 from its almanac and tracking loops: not only how many satellites it misses, but where.
 
+With `obs_lookahead=True`, 4 entries follow last (after the sectors when those are on):
+`satellites_ahead`, the satellites the city model predicts in line of sight from the points
+15 m and 30 m further along the UAV's route (from its estimated position, through its next
+waypoint and on, at its estimated altitude), and `swarm_satellites_ahead`, the distinct ones
+over the swarm's flying UAVs' points, each / 20, clipped to [0, 1]; a point inside a building
+counts none. What a receiver with the map and the almanac can predict of the sky ahead.
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -321,8 +328,8 @@ excludes the measurement the test identifies and re-solves until the test passes
 `integrity_fault_sign` (`"any"`): `"positive"` excludes only measurements with a positive
 residual (NLOS delays are positive). `alert_limit_m` (30):
 horizontal alert limit [m] (availability, the reward term and the observation scale).
-`integrity_penalty` (0), `obs_protection_level` (False) and `obs_satellite_sectors` (False):
-above. With `"off"` every episode
+`integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False) and
+`obs_lookahead` (False): above. With `"off"` every episode
 is exactly as before. The preset `coopnav_env.envs.preset_config("urban_nlos", **fields)`
 turns on realistic urban reception: half of the blocked satellites received through
 reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with

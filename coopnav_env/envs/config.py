@@ -102,6 +102,14 @@ class UrbanCanyonConfig(ScenarioConfig):
         elevation cut-off it does not track (``satellites_blocked_sector``), each divided by 4
         and clipped to [0, 1]. What a real receiver knows from its almanac and its tracking
         loops: where the satellites it misses are.
+    obs_lookahead : bool, default False
+        Append four entries after everything else: the satellites the city model predicts in
+        line of sight from the point ``15`` and ``30`` m further along the UAV's route (from
+        its *estimated* position, through its next waypoint and on, at its estimated
+        altitude), for the UAV and for the swarm (distinct satellites over every flying UAV's
+        point), each divided by 20 and clipped to [0, 1]; a point inside a building
+        counts none. What a receiver with the map and the almanac can predict of the sky
+        ahead (the look-ahead that ``docs/marl`` found the remaining headroom to need).
     """
 
     max_steps: int = 200
@@ -127,6 +135,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     integrity_penalty: float = 0.0
     obs_protection_level: bool = False
     obs_satellite_sectors: bool = False
+    obs_lookahead: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -154,6 +163,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_real(o, "integrity_penalty", self.integrity_penalty, 0.0, 1000.0)
         _check_bool(o, "obs_protection_level", self.obs_protection_level)
         _check_bool(o, "obs_satellite_sectors", self.obs_satellite_sectors)
+        _check_bool(o, "obs_lookahead", self.obs_lookahead)
         if self.integrity == "off":
             for name, on in (
                 ("integrity_penalty", self.integrity_penalty > 0.0),
@@ -169,7 +179,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     def obs_dim(self) -> int:
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
         with ``obs_protection_level``, plus ``2 obs_sky_azimuths`` with
-        ``obs_satellite_sectors``."""
+        ``obs_satellite_sectors``, plus 4 with ``obs_lookahead``."""
         return self.obs_base_dim + self.obs_extra_dim
 
     @property
@@ -180,9 +190,11 @@ class UrbanCanyonConfig(ScenarioConfig):
     @property
     def obs_extra_dim(self) -> int:
         """Entries of the optional blocks appended after the base ones: 2 with
-        ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``."""
+        ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``, 4
+        with ``obs_lookahead``."""
         pl = 2 if self.obs_protection_level else 0
-        return pl + (2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0)
+        sectors = 2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0
+        return pl + sectors + (4 if self.obs_lookahead else 0)
 
     @property
     def max_cycles(self) -> int:

@@ -45,6 +45,11 @@ sector``                                      with ``obs_satellite_sectors``
 ``satellites_blocked_      A      1           4 (satellites above the cut-off not tracked,
 sector``                                      per azimuth sector); only with
                                               ``obs_satellite_sectors``
+``satellites_ahead``       2      1           20 (satellites the map predicts in line of
+                                              sight 15 m and 30 m along the route); only
+                                              with ``obs_lookahead``
+``swarm_satellites_ahead`` 2      1           20 (the same, distinct over the swarm); only
+                                              with ``obs_lookahead``
 =========================  =====  ==========  ==============================================
 
 The sector of skyline azimuth ``360 a / A`` is centred on it and ``360 / A`` degrees wide
@@ -384,6 +389,27 @@ def obs_layout(config: Any = None, **overrides: Any) -> ObsLayout:
             "satellites above the cut-off not tracked whose azimuth is in the sector",
             "4",
             az,
+        )
+    if cfg.obs_lookahead:
+        add(
+            "satellites_ahead",
+            2,
+            "1",
+            20,
+            0,
+            "satellites the map predicts in line of sight 15 m and 30 m further along the route",
+            "20",
+            ("15m", "30m"),
+        )
+        add(
+            "swarm_satellites_ahead",
+            2,
+            "1",
+            20,
+            0,
+            "distinct satellites predicted in line of sight over the swarm's points ahead",
+            "20",
+            ("15m", "30m"),
         )
     if fields[-1].stop != cfg.obs_dim:  # pragma: no cover - guarded by the tests
         raise AssertionError(f"layout covers {fields[-1].stop} entries, obs_dim {cfg.obs_dim}")

@@ -13,7 +13,9 @@ units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it 
 :meth:`UrbanCanyonEnv._observation_array` below, in the same order. Optional blocks follow,
 in this order: the two protection levels (``obs_protection_level``), then the satellites
 tracked and the satellites above the cut-off not tracked per skyline azimuth sector, ``A``
-entries each (``obs_satellite_sectors``, :meth:`UrbanCanyonEnv._satellite_sectors`).
+entries each (``obs_satellite_sectors``, :meth:`UrbanCanyonEnv._satellite_sectors`), then the
+satellites predicted in line of sight along the route ahead, 4 entries (``obs_lookahead``,
+:meth:`UrbanCanyonEnv._lookahead`).
 """
 
 from __future__ import annotations
@@ -417,7 +419,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         """
         obs = self._observation_rows()
         cfg = self.config
-        if not (cfg.obs_protection_level or cfg.obs_satellite_sectors):
+        if not (cfg.obs_protection_level or cfg.obs_satellite_sectors or cfg.obs_lookahead):
             return obs
         ep = self._epoch
         blocks = [obs]
@@ -427,7 +429,72 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             blocks.append(pl.astype(np.float32))
         if cfg.obs_satellite_sectors:
             blocks.append(self._satellite_sectors())
+        if cfg.obs_lookahead:
+            blocks.append(self._lookahead())
         return np.concatenate(blocks, axis=1)
+
+    #: Distances along the route of the ``obs_lookahead`` points [m].
+    LOOKAHEAD_M: ClassVar[tuple[float, ...]] = (15.0, 30.0)
+
+    def _lookahead_points(self) -> np.ndarray:
+        """``(D, N, 3)``: each UAV's point ``LOOKAHEAD_M[d]`` metres along its route.
+
+        From the UAV's *estimated* position, straight to its next waypoint and on along the
+        route's polyline (past its end: on along the last leg's direction; with no leg, the
+        position itself), at the estimated altitude clamped to the flight band.
+        """
+        ep = self._epoch
+        world = self.world
+        route = np.asarray(world.route_xy_m, dtype=float)
+        kin = self.config.kinematics
+        est = np.asarray(ep.nav_pos_enu_m, dtype=float)
+        z = np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
+        out = np.empty((len(self.LOOKAHEAD_M), est.shape[0], 3))
+        for i in range(est.shape[0]):
+            pts = np.vstack([est[i, :2], route[int(ep.next_waypoint[i]) :]])
+            seg = np.diff(pts, axis=0)
+            seg_len = np.hypot(seg[:, 0], seg[:, 1])
+            cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+            for d, dist in enumerate(self.LOOKAHEAD_M):
+                if cum[-1] <= 0.0:
+                    xy = est[i, :2]
+                elif dist >= cum[-1]:  # past the end: on along the last non-zero leg
+                    j = int(np.flatnonzero(seg_len > 0.0)[-1])
+                    xy = pts[-1] + seg[j] / seg_len[j] * (dist - cum[-1])
+                else:
+                    j = int(np.searchsorted(cum, dist, side="right") - 1)
+                    xy = pts[j] + seg[j] / seg_len[j] * (dist - cum[j])
+                out[d, i] = (xy[0], xy[1], z[i])
+        return out
+
+    def _lookahead(self) -> np.ndarray:
+        """The ``obs_lookahead`` columns, ``(N, 4)`` float32 (see the config's docstring):
+        satellites predicted in line of sight (no margin) at the points of
+        :meth:`_lookahead_points`, for the UAV and distinct over the swarm's flying UAVs,
+        per distance, each ``/ 20``; a point inside a building counts none."""
+        from coopnav_env.sim.map_aided import predicted_line_of_sight
+
+        world = self.world
+        kin = self.config.kinematics
+        pts = self._lookahead_points()
+        n_d, n = pts.shape[:2]
+        flat = pts.reshape(-1, 3)
+        los = predicted_line_of_sight(
+            world.city.buildings,
+            world._sky(world.t_s).directions,
+            flat,
+            np.zeros((flat.shape[0], 3, 3)),
+            margin_sigma=0.0,
+            max_margin_m=0.0,
+            altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
+        )
+        inside = _city.is_inside_building(world.city.buildings, flat)
+        los = (los & ~inside[:, None]).reshape(n_d, n, -1)
+        flying = np.array([a in self.agents for a in self.possible_agents], dtype=bool)
+        own = los.sum(axis=2).T / 20.0  # (N, D)
+        swarm = (los & flying[None, :, None]).any(axis=1).sum(axis=1) / 20.0  # (D,)
+        cols = np.concatenate([own, np.broadcast_to(swarm, (n, n_d))], axis=1)
+        return np.clip(cols, 0.0, 1.0).astype(np.float32)
 
     def _tracked(self) -> np.ndarray:
         """``(N, S)`` bool: the satellites each UAV's receiver tracks this epoch, i.e. those
@@ -801,6 +868,7 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(2 + a),  # remaining route, altitude, wall distances
             np.zeros(2 if cfg.obs_protection_level else 0),  # HPL, VPL / (2 alert limit)
             np.zeros(2 * a if cfg.obs_satellite_sectors else 0),  # satellites per sector / 4
+            np.zeros(4 if cfg.obs_lookahead else 0),  # satellites predicted ahead
         ]
     )
     hi = np.ones(cfg.obs_dim)
