@@ -410,7 +410,9 @@ world state): a restored copy continues exactly like the original.
   bumped (PettingZoo bumps it for changes that can change learning results); code that read
   `infos[agent]["initial"]` or `infos[agent]["reward_terms"]` must read the flat keys.
   Optional integrity monitoring (`integrity`, off by default: episodes unchanged) was added
-  with them.
+  with them. Also off by default, with the defaults' episodes unchanged: the observation
+  options `obs_protection_level`, `obs_satellite_sectors` and `obs_lookahead`, and the world
+  options `dead_reckoning_noise` and `preset`.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env
