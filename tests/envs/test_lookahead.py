@@ -7,9 +7,10 @@ import pytest
 from pettingzoo.test import parallel_api_test
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import BatchedUrbanCanyonEnv, make_config, obs_layout, preset_config
+from coopnav_env.envs import make_config, obs_layout, preset_config
 from coopnav_env.sim.city import is_inside_building
 from coopnav_env.sim.map_aided import predicted_line_of_sight
+from tests.batched_alike import assert_batched_obs_equal_separate
 
 
 def _fly(env, seed, steps, act_seed=1):
@@ -112,21 +113,8 @@ def test_a_point_inside_a_building_counts_none(monkeypatch) -> None:
 
 def test_batched_equals_separate_environments() -> None:
     kwargs = {"n_uavs": 3, "max_steps": 12, "obs_lookahead": True}
-    batch = BatchedUrbanCanyonEnv(2, **kwargs)
+    batch = assert_batched_obs_equal_separate(kwargs, seed=20)
     assert batch.obs_dim == 56
-    separate = [urban_canyon_v0.parallel_env(**kwargs) for _ in range(2)]
-    obs, _ = batch.reset(seed=20)
-    ref = [e.reset(seed=20 + k)[0] for k, e in enumerate(separate)]
-    rng = np.random.default_rng(0)
-    for _ in range(30):
-        for k in range(2):
-            assert obs[k].tobytes() == np.stack(list(ref[k].values())).tobytes()
-        cmd = rng.uniform(-1.0, 1.0, (2, 3, 3))
-        obs, *_ = batch.step(cmd)
-        for k, e in enumerate(separate):
-            ref[k], _, term, trunc, _ = e.step(dict(zip(e.agents, cmd[k])))
-            if any(term.values()) or any(trunc.values()):
-                ref[k], _ = e.reset()
 
 
 def test_parallel_api_with_the_option() -> None:

@@ -7,8 +7,9 @@ import pytest
 from pettingzoo.test import parallel_api_test
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import BatchedUrbanCanyonEnv, make_config, obs_layout, preset_config
+from coopnav_env.envs import make_config, obs_layout, preset_config
 from coopnav_env.envs import urban_canyon as uc
+from tests.batched_alike import assert_batched_obs_equal_separate
 
 CASES = [
     {"n_uavs": 5},
@@ -141,21 +142,8 @@ def test_batched_equals_separate_environments() -> None:
     """Copy k of the batched environment equals a separate environment seeded with seed + k,
     satellite-sector entries included, across episode ends (max_steps=12)."""
     kwargs = {"n_uavs": 3, "max_steps": 12, "obs_satellite_sectors": True}
-    batch = BatchedUrbanCanyonEnv(2, **kwargs)
+    batch = assert_batched_obs_equal_separate(kwargs, seed=10)
     assert batch.obs_dim == batch.config.obs_dim == 52 + 16
-    separate = [urban_canyon_v0.parallel_env(**kwargs) for _ in range(2)]
-    obs, _ = batch.reset(seed=10)
-    ref = [e.reset(seed=10 + k)[0] for k, e in enumerate(separate)]
-    rng = np.random.default_rng(0)
-    for _ in range(30):
-        for k in range(2):
-            assert obs[k].tobytes() == np.stack(list(ref[k].values())).tobytes()
-        cmd = rng.uniform(-1.0, 1.0, (2, 3, 3))
-        obs, *_ = batch.step(cmd)
-        for k, e in enumerate(separate):
-            ref[k], _, term, trunc, _ = e.step(dict(zip(e.agents, cmd[k])))
-            if any(term.values()) or any(trunc.values()):
-                ref[k], _ = e.reset()
 
 
 def test_layout_names_the_optional_blocks() -> None:
