@@ -38,6 +38,7 @@ import argparse
 import json
 import os
 import sys
+import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -301,8 +302,6 @@ def main(argv: list[str] | None = None) -> int:
                 if c
             ]
             bar = tqdm(total=len(seeds), unit="episode") if tqdm is not None else None
-            import time
-
             while not all(f.done() for f in futs):
                 time.sleep(2.0)
                 if bar is not None:

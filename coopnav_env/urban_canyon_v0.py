@@ -132,7 +132,7 @@ With `obs_lookahead=True`, 4 entries follow last (after the sectors when those a
 `satellites_ahead`, the satellites the city model predicts in line of sight from the points
 15 m and 30 m further along the UAV's route (from its estimated position, through its next
 waypoint and on, at its estimated altitude), and `swarm_satellites_ahead`, the distinct ones
-over the swarm's flying UAVs' points, each / 20, clipped to [0, 1]; a point inside a building
+over the swarm's points, each / 20, clipped to [0, 1]; a point inside a building
 counts none. What a receiver with the map and the almanac can predict of the sky ahead.
 
 `state()` returns the global state for centralised critics (truth included), float32 in

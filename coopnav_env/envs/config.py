@@ -106,10 +106,10 @@ class UrbanCanyonConfig(ScenarioConfig):
         Append four entries after everything else: the satellites the city model predicts in
         line of sight from the point ``15`` and ``30`` m further along the UAV's route (from
         its *estimated* position, through its next waypoint and on, at its estimated
-        altitude), for the UAV and for the swarm (distinct satellites over every flying UAV's
+        altitude), for the UAV and for the swarm (distinct satellites over every UAV's
         point), each divided by 20 and clipped to [0, 1]; a point inside a building
         counts none. What a receiver with the map and the almanac can predict of the sky
-        ahead (the look-ahead that ``docs/marl`` found the remaining headroom to need).
+        ahead (the kind of look-ahead the remaining headroom seems to need, ``docs/marl``).
     """
 
     max_steps: int = 200

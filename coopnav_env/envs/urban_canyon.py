@@ -470,8 +470,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
     def _lookahead(self) -> np.ndarray:
         """The ``obs_lookahead`` columns, ``(N, 4)`` float32 (see the config's docstring):
         satellites predicted in line of sight (no margin) at the points of
-        :meth:`_lookahead_points`, for the UAV and distinct over the swarm's flying UAVs,
-        per distance, each ``/ 20``; a point inside a building counts none."""
+        :meth:`_lookahead_points`, for the UAV and distinct over the swarm (its UAVs all fly
+        until the episode ends for all of them), per distance, each ``/ 20``; a point inside
+        a building counts none."""
         from coopnav_env.sim.map_aided import predicted_line_of_sight
 
         world = self.world
@@ -490,9 +491,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         )
         inside = _city.is_inside_building(world.city.buildings, flat)
         los = (los & ~inside[:, None]).reshape(n_d, n, -1)
-        flying = np.array([a in self.agents for a in self.possible_agents], dtype=bool)
         own = los.sum(axis=2).T / 20.0  # (N, D)
-        swarm = (los & flying[None, :, None]).any(axis=1).sum(axis=1) / 20.0  # (D,)
+        swarm = los.any(axis=1).sum(axis=1) / 20.0  # (D,)
         cols = np.concatenate([own, np.broadcast_to(swarm, (n, n_d))], axis=1)
         return np.clip(cols, 0.0, 1.0).astype(np.float32)
 
