@@ -135,6 +135,17 @@ waypoint and on, at its estimated altitude), and `swarm_satellites_ahead`, the d
 over the swarm's points, each / 20, clipped to [0, 1]; a point inside a building
 counts none. What a receiver with the map and the almanac can predict of the sky ahead.
 
+With `obs_candidate_sky=True`, 10 entries follow last (after `obs_lookahead`'s when those are
+on): `candidate_satellites`, for five candidate positions of the UAV (where it believes it is;
+10 m further along its route; that point 6 m to the left and to the right; 25 m along the
+route; at its estimated altitude clamped to the flight band), the satellites its receiver
+would *use* there by the rule of its 3D-mapping-aided exclusion (in line of sight from every
+point within the configured sigma margin, with its current covariance; plain line of sight
+with `nlos_exclusion="off"`), and `candidate_swarm_satellites`, the distinct satellites over
+the swarm with the UAV at that candidate and every other UAV 10 m along its own route, each
+/ 20, clipped to [0, 1]; a candidate inside a building counts none. What a move would change,
+in the satellites the receiver keeps (fewer as its uncertainty grows).
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -328,8 +339,8 @@ excludes the measurement the test identifies and re-solves until the test passes
 `integrity_fault_sign` (`"any"`): `"positive"` excludes only measurements with a positive
 residual (NLOS delays are positive). `alert_limit_m` (30):
 horizontal alert limit [m] (availability, the reward term and the observation scale).
-`integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False) and
-`obs_lookahead` (False): above. With `"off"` every episode
+`integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False),
+`obs_lookahead` (False) and `obs_candidate_sky` (False): above. With `"off"` every episode
 is exactly as before. The preset `coopnav_env.envs.preset_config("urban_nlos", **fields)`
 turns on realistic urban reception: half of the blocked satellites received through
 reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with
@@ -411,8 +422,8 @@ world state): a restored copy continues exactly like the original.
   `infos[agent]["initial"]` or `infos[agent]["reward_terms"]` must read the flat keys.
   Optional integrity monitoring (`integrity`, off by default: episodes unchanged) was added
   with them. Also off by default, with the defaults' episodes unchanged: the observation
-  options `obs_protection_level`, `obs_satellite_sectors` and `obs_lookahead`, and the world
-  options `dead_reckoning_noise` and `preset`.
+  options `obs_protection_level`, `obs_satellite_sectors`, `obs_lookahead` and
+  `obs_candidate_sky`, and the world options `dead_reckoning_noise` and `preset`.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env

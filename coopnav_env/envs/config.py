@@ -110,6 +110,19 @@ class UrbanCanyonConfig(ScenarioConfig):
         point), each divided by 20 and clipped to [0, 1]; a point inside a building
         counts none. What a receiver with the map and the almanac can predict of the sky
         ahead (the kind of look-ahead the remaining headroom seems to need, ``docs/marl``).
+    obs_candidate_sky : bool, default False
+        Append ten entries after everything else (after ``obs_lookahead``'s when those are
+        on): for five candidate positions of the UAV (where it believes it is; 10 m further
+        along its route; that point 6 m to the left and to the right; 25 m along the route;
+        from its *estimated* position, at its estimated altitude clamped to the flight
+        band), the satellites its receiver would *use* there, by the rule of its
+        3D-mapping-aided exclusion (line of sight from every point within the configured
+        margin of sigma, with its current covariance; plain line of sight when
+        ``nlos_exclusion="off"``), then the distinct satellites over the swarm if it were
+        there and every other UAV 10 m along its own route. Each count is divided by 20 and
+        clipped to [0, 1]; a candidate inside a building counts none. Unlike
+        ``obs_lookahead`` these say what a move would change, and they count what the
+        receiver keeps after the exclusion, which shrinks as its uncertainty grows.
     """
 
     max_steps: int = 200
@@ -136,6 +149,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     obs_protection_level: bool = False
     obs_satellite_sectors: bool = False
     obs_lookahead: bool = False
+    obs_candidate_sky: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -164,6 +178,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_bool(o, "obs_protection_level", self.obs_protection_level)
         _check_bool(o, "obs_satellite_sectors", self.obs_satellite_sectors)
         _check_bool(o, "obs_lookahead", self.obs_lookahead)
+        _check_bool(o, "obs_candidate_sky", self.obs_candidate_sky)
         if self.integrity == "off":
             for name, on in (
                 ("integrity_penalty", self.integrity_penalty > 0.0),
@@ -179,7 +194,8 @@ class UrbanCanyonConfig(ScenarioConfig):
     def obs_dim(self) -> int:
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
         with ``obs_protection_level``, plus ``2 obs_sky_azimuths`` with
-        ``obs_satellite_sectors``, plus 4 with ``obs_lookahead``."""
+        ``obs_satellite_sectors``, plus 4 with ``obs_lookahead``, plus 10 with
+        ``obs_candidate_sky``."""
         return self.obs_base_dim + self.obs_extra_dim
 
     @property
@@ -194,7 +210,8 @@ class UrbanCanyonConfig(ScenarioConfig):
         with ``obs_lookahead``."""
         pl = 2 if self.obs_protection_level else 0
         sectors = 2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0
-        return pl + sectors + (4 if self.obs_lookahead else 0)
+        ahead = 4 if self.obs_lookahead else 0
+        return pl + sectors + ahead + (10 if self.obs_candidate_sky else 0)
 
     @property
     def max_cycles(self) -> int:

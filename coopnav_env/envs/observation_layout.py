@@ -50,6 +50,12 @@ sector``                                      per azimuth sector); only with
                                               with ``obs_lookahead``
 ``swarm_satellites_ahead`` 2      1           20 (the same, distinct over the swarm); only
                                               with ``obs_lookahead``
+``candidate_satellites``   5      1           20 (satellites the receiver would use at its
+                                              5 candidates: here, ahead, left, right,
+                                              far); only with ``obs_candidate_sky``
+``candidate_swarm_         5      1           20 (distinct over the swarm, the UAV at the
+satellites``                                  candidate, the others ahead); only with
+                                              ``obs_candidate_sky``
 =========================  =====  ==========  ==============================================
 
 The sector of skyline azimuth ``360 a / A`` is centred on it and ``360 / A`` degrees wide
@@ -410,6 +416,28 @@ def obs_layout(config: Any = None, **overrides: Any) -> ObsLayout:
             "distinct satellites predicted in line of sight over the swarm's points ahead",
             "20",
             ("15m", "30m"),
+        )
+    if cfg.obs_candidate_sky:
+        cands = ("here", "ahead", "left", "right", "far")
+        add(
+            "candidate_satellites",
+            5,
+            "1",
+            20,
+            0,
+            "satellites the receiver would use at 5 candidate positions (3DMA exclusion rule)",
+            "20",
+            cands,
+        )
+        add(
+            "candidate_swarm_satellites",
+            5,
+            "1",
+            20,
+            0,
+            "distinct satellites over the swarm with the UAV at the candidate, others ahead",
+            "20",
+            cands,
         )
     if fields[-1].stop != cfg.obs_dim:  # pragma: no cover - guarded by the tests
         raise AssertionError(f"layout covers {fields[-1].stop} entries, obs_dim {cfg.obs_dim}")
