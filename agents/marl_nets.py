@@ -43,8 +43,8 @@ class MARLSettings:
     n_copies : int
         Swarm copies stepped together (``BatchedUrbanCanyonEnv``), >= 1.
     rollout_steps : int
-        Swarm steps per copy and iteration; one iteration is ``n_copies * rollout_steps *
-        n_uavs`` agent-steps.
+        Decisions per copy and iteration (swarm steps with ``action_repeat`` 1); one
+        iteration is ``n_copies * rollout_steps * action_repeat * n_uavs`` agent-steps.
     epochs, minibatch_size : int
         Passes over each rollout and agent-samples per gradient step.
     learning_rate, gamma, gae_lambda, clip_epsilon, entropy_coef, critic_coef, max_grad_norm
@@ -74,6 +74,17 @@ class MARLSettings:
         ``spread``, ``wide``), so the policy shapes the formation while the base flies the route.
     offset_scale_m : list of 3 floats
         Largest slot shift along the route, to the left and up [m] (``offset`` mode).
+    action_repeat : int
+        Swarm steps per decision of the actor, >= 1 (default 1: a decision every step). The
+        network's output is held for ``action_repeat`` steps while the base heuristic keeps
+        acting every step (velocity mode: the held residual is added to each step's base
+        command; offset mode: the held slot shifts stay), so that exploration tries a
+        manoeuvre held for several seconds, as the privileged planner's look-ahead does.
+        Training stores one PPO transition per decision with the rewards of its steps
+        summed, and discounts by ``gamma ** action_repeat`` per decision (``gamma`` stays
+        the per-step discount). A copy whose episode ends within a decision ends that
+        transition there; the copy's next episode starts with the rest of the held output
+        (at most ``action_repeat - 1`` steps), which no transition is credited with.
     """
 
     algorithm: str = "mappo"
@@ -97,6 +108,7 @@ class MARLSettings:
     residual_scale: float = 0.5
     residual_mode: str = "velocity"
     offset_scale_m: list[float] = field(default_factory=lambda: [15.0, 8.0, 8.0])
+    action_repeat: int = 1
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -104,7 +116,7 @@ class MARLSettings:
 
         if self.algorithm not in ALGORITHMS:
             raise bad("algorithm", f"one of {list(ALGORITHMS)}")
-        for name in ("n_copies", "rollout_steps", "epochs", "minibatch_size"):
+        for name in ("n_copies", "rollout_steps", "epochs", "minibatch_size", "action_repeat"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(name, "an integer >= 1")

@@ -118,14 +118,19 @@ class MARLPolicy:
             self._base = make_base(
                 self.settings.residual_base, env, **self.settings.residual_base_kwargs
             )
+        self._held = None  # the actor's output, held for action_repeat steps
+        self._since = 0  # steps it has been held
 
     def reset(self, seed: int | None = None) -> None:
-        """Reset the base heuristic (the network itself has no state)."""
+        """Reset the base heuristic and the held output (the network itself has no state)."""
         if self._base is not None:
             self._base.reset(seed)
+        self._held: np.ndarray | None = None
+        self._since = 0
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The mean action of every UAV, combined with the base policy as in training."""
+        """The mean action of every UAV, combined with the base policy as in training (a new
+        decision every ``action_repeat`` steps after :meth:`reset`, held in between)."""
         from tensordict import TensorDict
 
         live = list(observations)
@@ -138,10 +143,13 @@ class MARLPolicy:
             )
         obs = np.stack([np.asarray(observations[a], dtype=np.float32) for a in self.agents])
         base_cmd = base_command_before(self.settings, self._base, observations, self.agents)
-        inp = obs if base_cmd is None else np.concatenate([obs, base_cmd], axis=1)
-        td = TensorDict({("agents", "observation"): self._torch.from_numpy(inp[None])}, [1])
-        with self._torch.no_grad():
-            td = self._actor.module[0](td)  # the loc/scale module: the mean is "loc"
-        mean = td["agents", "loc"][0].numpy()
+        if self._held is None or self._since >= self.settings.action_repeat:
+            inp = obs if base_cmd is None else np.concatenate([obs, base_cmd], axis=1)
+            td = TensorDict({("agents", "observation"): self._torch.from_numpy(inp[None])}, [1])
+            with self._torch.no_grad():
+                td = self._actor.module[0](td)  # the loc/scale module: the mean is "loc"
+            self._held, self._since = td["agents", "loc"][0].numpy(), 0
+        self._since += 1
+        mean = self._held
         cmd = swarm_command(self.settings, mean, self._base, base_cmd, observations, self.agents)
         return {a: cmd[i].astype(np.float32) for i, a in enumerate(self.agents)}

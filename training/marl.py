@@ -201,8 +201,12 @@ class MARLTrainer:
             advantage=("agents", "advantage"),
             value_target=("agents", "value_target"),
         )
+        # one transition per decision: with action_repeat R it spans R steps, discounted by
+        # gamma^R (gamma ** 1 == gamma, so R = 1 is the per-step estimator as before)
         self.loss.make_value_estimator(
-            ValueEstimators.GAE, gamma=settings.gamma, lmbda=settings.gae_lambda
+            ValueEstimators.GAE,
+            gamma=settings.gamma**settings.action_repeat,
+            lmbda=settings.gae_lambda,
         )
         self.optim = torch.optim.Adam(self.loss.parameters(), lr=settings.learning_rate)
         self.reward_std = _RunningStd((settings.n_copies, self.n_agents), settings.gamma)
@@ -235,7 +239,8 @@ class MARLTrainer:
         return np.stack([e.state() for e in self.venv.envs])
 
     def collect(self) -> Any:
-        """One rollout of ``rollout_steps`` swarm steps of every copy, as a TensorDict."""
+        """One rollout of ``rollout_steps`` decisions of every copy (``action_repeat`` swarm
+        steps each), as a TensorDict."""
         import torch
         from tensordict import TensorDict
         from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -258,44 +263,17 @@ class MARLTrainer:
                 )
                 td = self.actor(td)
             raw = td["agents", "action"].numpy()
-            cmd = np.stack(
-                [
-                    swarm_command(
-                        s,
-                        raw[k],
-                        self._bases[k],
-                        None if base is None else base[k],
-                        obs_d[k],
-                        agents,
-                    )
-                    for k in range(k_)
-                ]
-            )
-            obs, rew, terminated, truncated, infos, final_obs = self.venv.step(cmd)
-            done = terminated | truncated
-            # the critic's input after the step; a finished copy has been reset already, so
-            # its episode end is treated as terminal (no bootstrap, see _end_flags)
-            n_c_in = _critic_inputs(final_obs, self._states())
-            self._log_episodes(rew, done, infos)
-            scaled = (
-                self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
-                if (s.normalize_reward)
-                else rew
-            )
+            n_c_in, acc, ended = self._act_held(raw, obs_d, base)
             actor_in.append(a_in)
             critic_in.append(c_in)
             next_critic_in.append(n_c_in)
             acts.append(raw)
             logps.append(td["agents", "action_log_prob"].numpy())
-            rewards.append(scaled)
-            dones.append(done)
-            terms.append(done)
-            self._obs = obs.copy()
-            for kk in np.flatnonzero(done).tolist():
-                if self._bases[kk] is not None:
-                    self._bases[kk].reset()
+            rewards.append(acc)
+            dones.append(ended)
+            terms.append(ended)
             state = self._states()
-        self.agent_steps += k_ * t_ * n_
+        self.agent_steps += k_ * t_ * n_ * s.action_repeat
 
         def stack(xs: list[np.ndarray], dtype: Any = torch.float32) -> Any:
             return torch.as_tensor(np.stack(xs, axis=1), dtype=dtype)  # [K, T, ...]
@@ -316,6 +294,64 @@ class MARLTrainer:
             batch_size=[k_, t_],
         )
         return data
+
+    def _act_held(
+        self, raw: np.ndarray, obs_d: list[dict[str, np.ndarray]], base: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fly every copy ``action_repeat`` steps on the actor's output ``raw`` (K, N, 3).
+
+        Returns the critic's input after the decision (at the episode's end for a copy that
+        finished within it), the scaled rewards summed over the decision's steps up to that
+        end, and which copies finished. ``base``: the base commands before the first step
+        (velocity mode), recomputed before every later step.
+        """
+        s = self.settings
+        k_, n_ = s.n_copies, self.n_agents
+        agents = self.venv.possible_agents
+        acc = np.zeros((k_, n_))
+        ended = np.zeros(k_, dtype=bool)
+        n_c_in: np.ndarray | None = None
+        for j in range(s.action_repeat):
+            if j > 0:
+                obs_d = [dict(zip(agents, self._obs[k])) for k in range(k_)]
+                base = self._before(obs_d)
+            cmd = np.stack(
+                [
+                    swarm_command(
+                        s,
+                        raw[k],
+                        self._bases[k],
+                        None if base is None else base[k],
+                        obs_d[k],
+                        agents,
+                    )
+                    for k in range(k_)
+                ]
+            )
+            obs, rew, terminated, truncated, infos, final_obs = self.venv.step(cmd)
+            done = terminated | truncated
+            # the critic's input after the step; a finished copy has been reset already, so
+            # its episode end is treated as terminal (no bootstrap, see _end_flags)
+            after = _critic_inputs(final_obs, self._states())
+            self._log_episodes(rew, done, infos)
+            scaled = (
+                self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
+                if s.normalize_reward
+                else rew
+            )
+            live = ~ended
+            if n_c_in is None:
+                n_c_in = after.copy()
+            else:  # copies still in the decision's episode take the newer input
+                n_c_in[live] = after[live]
+            acc[live] += scaled[live]
+            ended |= done
+            self._obs = obs.copy()
+            for kk in np.flatnonzero(done).tolist():
+                if self._bases[kk] is not None:
+                    self._bases[kk].reset()
+        assert n_c_in is not None
+        return n_c_in, acc, ended
 
     def _before(self, obs_d: list[dict[str, np.ndarray]]) -> np.ndarray | None:
         """Every copy's base command the actor reads (velocity mode), else None."""

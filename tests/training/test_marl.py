@@ -40,6 +40,7 @@ def _one_thread():
         ("residual_mode", "torque"),
         ("offset_scale_m", [1.0, 2.0]),
         ("lr_schedule", "cosine"),
+        ("action_repeat", 0),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -112,6 +113,79 @@ def test_an_untrained_offset_policy_flies_exactly_like_its_base(tmp_path) -> Non
     tr = MARLTrainer(s, {}, seed=0)
     tr.save(tmp_path / "final_model.pt")
     assert_fly_alike(f"mappo:{tmp_path}", "spread", seed=1_000_003, steps=40)
+
+
+def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch) -> None:
+    import training.marl as marl
+
+    s = MARLSettings(
+        algorithm="mappo",
+        n_copies=2,
+        rollout_steps=4,
+        residual_base="ceiling",
+        action_repeat=3,
+        normalize_reward=False,
+    )
+    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 7}, seed=2)
+    raws, steps = [], []
+    real_command, real_step = marl.swarm_command, tr.venv.step
+
+    def command(settings, raw, *args):
+        raws.append(np.array(raw))
+        return real_command(settings, raw, *args)
+
+    def step(cmd):
+        out = real_step(cmd)
+        steps.append((out[1].copy(), (out[2] | out[3]).copy()))  # rewards, episode ends
+        return out
+
+    monkeypatch.setattr(marl, "swarm_command", command)
+    monkeypatch.setattr(tr.venv, "step", step)
+    data = tr.collect()
+    assert tr.agent_steps == 2 * 4 * 3 * 3  # copies x decisions x repeat x UAVs
+    assert len(steps) == 4 * 3  # 3 swarm steps per decision
+    raws = np.array(raws).reshape(4, 3, 2, 3, 3)  # decision, step, copy, UAV, axis
+    assert np.all(raws == raws[:, :1])  # held within a decision
+    np.testing.assert_array_equal(raws[:, 0], data["agents", "action"].numpy().swapaxes(0, 1))
+    rew = data["next", "agents", "reward"].numpy()[..., 0]  # (copy, decision, UAV)
+    done = data["next", "agents", "done"].numpy()[..., 0, 0]  # (copy, decision)
+    for d in range(4):
+        for k in range(2):
+            want, ended = np.zeros(3), False
+            for j in range(3):  # summed up to the episode's end, nothing after it
+                r, e = steps[3 * d + j]
+                if not ended:
+                    want += r[k]
+                ended |= bool(e[k])
+            np.testing.assert_allclose(rew[k, d], want, rtol=1e-6)
+            assert done[k, d] == ended
+    assert done.any()  # an episode of 7 steps ended within the 12 steps
+    # the per-decision discount
+    assert tr.loss.value_estimator.gamma == pytest.approx(0.99**3)
+
+
+def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) -> None:
+    s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=2, action_repeat=3)
+    MARLTrainer(s, {"n_uavs": 3}, seed=0).save(tmp_path / "final_model.pt")
+    env = urban_canyon_v0.parallel_env(n_uavs=3)
+    policy = make_policy(f"ippo:{tmp_path}", env)
+    calls = []
+    real = policy._actor.module[0].forward
+    monkeypatch.setattr(
+        policy._actor.module[0], "forward", lambda td: calls.append(1) or real(td)
+    )
+    obs, _ = env.reset(seed=4)
+    policy.reset(4)
+    acts = []
+    for _ in range(7):
+        act = policy.act(obs)
+        acts.append(np.stack([act[a] for a in env.possible_agents]))
+        obs, *_ = env.step(act)
+    assert len(calls) == 3  # decisions at steps 0, 3 and 6
+    assert np.array_equal(acts[0], acts[1]) and np.array_equal(acts[0], acts[2])
+    policy.reset(5)  # a new episode decides at once
+    policy.act(env.reset(seed=5)[0])
+    assert len(calls) == 4
 
 
 def test_train_checkpoint_resume_evaluate_through_the_cli(tmp_path, capsys) -> None:
