@@ -171,9 +171,7 @@ def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) 
     policy = make_policy(f"ippo:{tmp_path}", env)
     calls = []
     real = policy._actor.module[0].forward
-    monkeypatch.setattr(
-        policy._actor.module[0], "forward", lambda td: calls.append(1) or real(td)
-    )
+    monkeypatch.setattr(policy._actor.module[0], "forward", lambda td: calls.append(1) or real(td))
     obs, _ = env.reset(seed=4)
     policy.reset(4)
     acts = []
