@@ -113,7 +113,7 @@ def fly(
         nav.append(nav_sum / max(nav_n, 1.0))
         coop.append(coop_sum / coop_n if coop_n else np.nan)
         goal.append(float(bool(infos) and all(i["in_goal"] for i in infos.values())))
-    return {"nav": nav, "coop": coop, "goal": goal, "steps": steps}
+    return {"nav": nav, "coop": coop, "goal": goal, "steps": steps, "config": env.config}
 
 
 def auc(score: np.ndarray, label: np.ndarray) -> float:
@@ -198,9 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.episodes < 1 or args.jobs < 1:
         raise SystemExit("--episodes and --jobs must be >= 1")
-    env_kwargs: dict[str, Any] = {}
     try:
-        apply_overrides(env_kwargs, list(args.env_set))
+        env_kwargs = apply_overrides({}, list(args.env_set))
     except ValueError as e:
         raise SystemExit(f"--env-set: {e}") from None
     steers = [None, *(_parse_steer(s) for s in args.steer)]
@@ -215,9 +214,13 @@ def main(argv: list[str] | None = None) -> int:
         "policy": args.policy,
         "episodes": args.episodes,
         "first_seed": args.first_seed,
+        "env_kwargs": env_kwargs,
         "env_set": args.env_set,
     }
-    report.update(anatomy(runs[0]["steps"]))
+    cfg = runs[0]["config"]
+    report.update(
+        {"n_uavs": cfg.n_uavs, "nlos_exclusion": cfg.nlos_exclusion, **anatomy(runs[0]["steps"])}
+    )
     print(f"{args.policy}: {report['uav_steps_without_fix']} UAV-steps without a cooperative fix")
     for name, share in report["no_fix_status_shares"].items():
         print(f"  {name:22s} {share:6.1%}")

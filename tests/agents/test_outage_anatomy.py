@@ -107,11 +107,15 @@ def test_command_line_runs_and_writes_its_report(tmp_path, capsys) -> None:
     mod = _module()
     out = tmp_path / "anatomy.json"
     args = ["--episodes", "2", "--jobs", "1", "--steer", "0.2:8", "--out", str(out)]
+    args += ["--env-set", "n_uavs=3", "preset=urban_nlos_3dma"]
     assert mod.main(args) == 0
     printed = capsys.readouterr().out
     assert "onset of a swarm-wide outage" in printed and "steer 0.2:8" in printed
     report = json.loads(out.read_text())
     assert report["episodes"] == 2 and len(report["variants"]) == 2
+    # the settings reach the environment the episodes are flown in
+    assert report["env_kwargs"] == {"n_uavs": 3, "preset": "urban_nlos_3dma"}
+    assert report["n_uavs"] == 3 and report["nlos_exclusion"] == "map"
     assert not list(tmp_path.glob("*.tmp"))
     with pytest.raises(SystemExit, match="GAIN:THRESHOLD"):
         mod.main(["--steer", "fast"])
