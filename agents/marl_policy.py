@@ -118,14 +118,14 @@ class MARLPolicy:
             self._base = make_base(
                 self.settings.residual_base, env, **self.settings.residual_base_kwargs
             )
-        self._held = None  # the actor's output, held for action_repeat steps
+        self._held: np.ndarray | None = None  # the actor's output, held for action_repeat
         self._since = 0  # steps it has been held
 
     def reset(self, seed: int | None = None) -> None:
         """Reset the base heuristic and the held output (the network itself has no state)."""
         if self._base is not None:
             self._base.reset(seed)
-        self._held: np.ndarray | None = None
+        self._held = None
         self._since = 0
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
