@@ -179,8 +179,11 @@ class PrivilegedPlanner:
         does (``benchmarks/planner_headroom.py``): ``base_cost`` (the look-ahead cost of the
         base heuristic alone, offset zero), ``best_cost`` (of the plan applied; at most
         ``base_cost``), ``offsets`` (``(n_agents, 3)``, the per-UAV offset applied, in the
-        order of ``possible_agents``, before clipping) and ``base_command`` (the base
-        heuristic's command per agent).
+        order of ``possible_agents``, before clipping), ``base_command`` (the base
+        heuristic's command per agent), and ``candidates`` (``(n_samples * iterations,
+        n_agents, 3)``, every offset scored, round by round; the first is the base alone) with
+        their look-ahead ``costs`` (the data a learned model of the look-ahead would be
+        fitted to).
         """
         live = list(observations)
         if not live:
@@ -191,6 +194,7 @@ class PrivilegedPlanner:
         best_cost, best = np.inf, np.zeros((n, 3))
         base_cost = np.inf
         noise_seeds = self._rng.integers(0, 2**63 - 1, self.noise_samples)
+        scored, scores = [], []
         for it in range(self.iterations):
             cands = mean + std * self._rng.standard_normal((self.n_samples, n, 3))
             if it == 0:
@@ -203,6 +207,8 @@ class PrivilegedPlanner:
             )
             if it == 0:
                 base_cost = costs[0]
+            scored.append(cands.copy())
+            scores.append(costs)
             order = np.argsort(costs, kind="stable")
             if costs[order[0]] < best_cost:
                 best_cost, best = float(costs[order[0]]), cands[order[0]].copy()
@@ -214,6 +220,8 @@ class PrivilegedPlanner:
             "best_cost": best_cost,
             "offsets": best.copy(),
             "base_command": {a: np.asarray(cmd[a], dtype=np.float32).copy() for a in cmd},
+            "candidates": np.concatenate(scored),
+            "costs": np.concatenate(scores),
         }
         return {
             a: np.clip(cmd[a] + best[self._agents.index(a)], -1.0, 1.0).astype(np.float32)

@@ -61,6 +61,13 @@ def test_last_plan_describes_the_command_applied() -> None:
     for i, a in enumerate(env.possible_agents):
         expect = np.clip(plan["base_command"][a] + plan["offsets"][i], -1.0, 1.0)
         np.testing.assert_allclose(cmd[a], expect, rtol=0, atol=1e-6)
+    # every candidate scored, the base alone first, the plan applied the cheapest of them
+    assert plan["candidates"].shape == (4 * 2, len(env.possible_agents), 3)
+    assert plan["costs"].shape == (8,)
+    assert np.all(plan["candidates"][0] == 0.0) and plan["costs"][0] == plan["base_cost"]
+    best = int(np.argmin(plan["costs"]))
+    assert plan["costs"][best] == plan["best_cost"]
+    np.testing.assert_array_equal(plan["candidates"][best], plan["offsets"])
 
 
 def test_the_on_board_planner_looks_ahead_from_the_estimate() -> None:
