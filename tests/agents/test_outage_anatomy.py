@@ -2,20 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.benchmark_script import load_benchmark
+
 
 def _module():
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "outage_anatomy.py"
-    spec = importlib.util.spec_from_file_location("outage_anatomy", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("outage_anatomy")
 
 
 def test_auc_ranks_and_handles_ties_and_one_class() -> None:

@@ -2,20 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.benchmark_script import load_benchmark
+
 
 def _module():
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "planner_headroom.py"
-    spec = importlib.util.spec_from_file_location("planner_headroom", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("planner_headroom")
 
 
 def test_ridge_r2_finds_a_linear_rule_and_not_noise() -> None:

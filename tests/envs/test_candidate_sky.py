@@ -12,16 +12,7 @@ from coopnav_env.envs import make_config, obs_layout, preset_config
 from coopnav_env.sim.city import is_inside_building
 from coopnav_env.sim.map_aided import predicted_line_of_sight
 from tests.batched_alike import assert_batched_obs_equal_separate
-
-
-def _fly(env, seed, steps, act_seed=1):
-    obs, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(act_seed)
-    for _ in range(steps):
-        if not env.agents:
-            break
-        obs, *_ = env.step({a: rng.uniform(-1.0, 1.0, 3) for a in env.agents})
-    return obs
+from tests.env_flight import fly_random, point_inside_tallest_building
 
 
 def test_option_is_validated_off_by_default_and_named_in_the_layout() -> None:
@@ -48,7 +39,7 @@ def test_candidates_are_here_ahead_left_right_and_far() -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=4, obs_candidate_sky=True)
     kin = env.config.kinematics
     for seed, steps in ((3, 0), (3, 25), (8, 40)):
-        _fly(env, seed, steps)
+        fly_random(env, seed, steps)
         if not env.agents:
             continue
         est = env._epoch.nav_pos_enu_m
@@ -94,7 +85,7 @@ def test_entries_count_what_the_receiver_would_use_there() -> None:
     cfg = env.config
     checked = 0
     for steps in (0, 10, 30, 60):
-        obs = _fly(env, 11, steps)
+        obs = fly_random(env, 11, steps)
         if not env.agents:
             break
         pts = env._candidate_points()
@@ -123,7 +114,7 @@ def test_more_uncertainty_leaves_fewer_usable_satellites() -> None:
     env = urban_canyon_v0.parallel_env(
         config=preset_config("urban_nlos_3dma", n_uavs=3, obs_candidate_sky=True)
     )
-    _fly(env, 5, 20)
+    fly_random(env, 5, 20)
     sure = env._candidate_sky()
     env.world.nav_cov_enu_m2 = env.world.nav_cov_enu_m2 + np.eye(3) * 25.0  # +5 m sigma
     unsure = env._candidate_sky()
@@ -134,7 +125,7 @@ def test_more_uncertainty_leaves_fewer_usable_satellites() -> None:
 def test_without_map_exclusion_it_is_plain_line_of_sight() -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=3, obs_candidate_sky=True)
     assert env.config.nlos_exclusion == "off"
-    _fly(env, 4, 15)
+    fly_random(env, 4, 15)
     world, kin = env.world, env.config.kinematics
     pts = env._candidate_points().reshape(-1, 3)
     los = predicted_line_of_sight(
@@ -154,11 +145,7 @@ def test_without_map_exclusion_it_is_plain_line_of_sight() -> None:
 def test_a_candidate_inside_a_building_counts_none(monkeypatch) -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=3, obs_candidate_sky=True)
     env.reset(seed=2)
-    b = env.world.city.buildings
-    j = int(np.argmax(b.max_m[:, 2]))  # the tallest building
-    inside = np.array(
-        [(b.min_m[j, 0] + b.max_m[j, 0]) / 2, (b.min_m[j, 1] + b.max_m[j, 1]) / 2, 5.0]
-    )
+    inside = point_inside_tallest_building(env)
     pts = env._candidate_points()
     pts[2, 0] = inside  # UAV 0's left candidate
     monkeypatch.setattr(env, "_candidate_points", lambda: pts)

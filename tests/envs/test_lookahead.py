@@ -11,16 +11,7 @@ from coopnav_env.envs import make_config, obs_layout, preset_config
 from coopnav_env.sim.city import is_inside_building
 from coopnav_env.sim.map_aided import predicted_line_of_sight
 from tests.batched_alike import assert_batched_obs_equal_separate
-
-
-def _fly(env, seed, steps, act_seed=1):
-    obs, _ = env.reset(seed=seed)
-    rng = np.random.default_rng(act_seed)
-    for _ in range(steps):
-        if not env.agents:
-            break
-        obs, *_ = env.step({a: rng.uniform(-1.0, 1.0, 3) for a in env.agents})
-    return obs
+from tests.env_flight import fly_random, point_inside_tallest_building
 
 
 def test_option_is_validated_off_by_default_and_named_in_the_layout() -> None:
@@ -42,7 +33,7 @@ def test_option_is_validated_off_by_default_and_named_in_the_layout() -> None:
 def test_points_lie_along_the_route_from_the_estimate() -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=4, obs_lookahead=True)
     for seed, steps in ((3, 0), (3, 25), (8, 40)):
-        _fly(env, seed, steps)
+        fly_random(env, seed, steps)
         if not env.agents:
             continue
         ep, world = env._epoch, env.world
@@ -69,7 +60,7 @@ def test_entries_count_the_predicted_satellites_at_the_points() -> None:
         config=preset_config("urban_nlos_3dma", n_uavs=4, obs_lookahead=True)
     )
     for steps in (0, 10, 30):
-        obs = _fly(env, 11, steps)
+        obs = fly_random(env, 11, steps)
         if not env.agents:
             break
         world, kin = env.world, env.config.kinematics
@@ -98,12 +89,7 @@ def test_entries_count_the_predicted_satellites_at_the_points() -> None:
 def test_a_point_inside_a_building_counts_none(monkeypatch) -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=3, obs_lookahead=True)
     env.reset(seed=2)
-    b = env.world.city.buildings
-    j = int(np.argmax(b.max_m[:, 2]))  # the tallest building
-    inside = np.array(
-        [(b.min_m[j, 0] + b.max_m[j, 0]) / 2, (b.min_m[j, 1] + b.max_m[j, 1]) / 2, 5.0]
-    )
-    assert is_inside_building(b, inside[None])[0]
+    inside = point_inside_tallest_building(env)
     pts = env._lookahead_points()
     pts[:, 0] = inside
     monkeypatch.setattr(env, "_lookahead_points", lambda: pts)

@@ -137,13 +137,9 @@ def test_study_command_writes_its_report(tmp_path) -> None:
 
 def test_heuristic_search_script_prints_its_table(capsys) -> None:
     """benchmarks/search_heuristics.py: one row per variant, the scores of the study."""
-    import importlib.util
-    from pathlib import Path
+    from tests.benchmark_script import load_benchmark
 
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "search_heuristics.py"
-    spec = importlib.util.spec_from_file_location("search_heuristics", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_benchmark("search_heuristics")
     variants = ["--variants", "formation", "wide@spacing_m=30", "--episodes", "2"]
     assert mod.main([*variants, "--env-set", "n_uavs=3", "integrity_p_fa=1e-3"]) == 0
     out = capsys.readouterr().out
@@ -160,13 +156,9 @@ def test_heuristic_search_script_prints_its_table(capsys) -> None:
 def test_paired_variants_script_pairs_groups_by_episode(capsys) -> None:
     """benchmarks/paired_variants.py: a group against itself differs by exactly zero; a group
     of two policies averages them episode by episode."""
-    import importlib.util
-    from pathlib import Path
+    from tests.benchmark_script import load_benchmark
 
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "paired_variants.py"
-    spec = importlib.util.spec_from_file_location("paired_variants", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_benchmark("paired_variants")
     groups = ["--groups", "a=formation", "same=formation", "two=formation,wide"]
     args = [*groups, "--episodes", "2", "--jobs", "1", "--env-set", "n_uavs=3", "max_steps=20"]
     assert mod.main(args) == 0
