@@ -519,31 +519,18 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         other UAV at its own point ``CANDIDATE_AHEAD_M`` along its route. Each count is
         divided by 20 and clipped to [0, 1]; a candidate inside a building counts none.
         """
-        from coopnav_env.sim.map_aided import predicted_line_of_sight
-
-        world = self.world
         cfg = self.config
-        kin = cfg.kinematics
         pts = self._candidate_points()
         n_c, n = pts.shape[:2]
-        flat = pts.reshape(-1, 3)
         if cfg.nlos_exclusion == "map":
             dr_var = (cfg.dead_reckoning_sigma_mps * cfg.dt_s) ** 2
-            cov = np.asarray(world.nav_cov_enu_m2, dtype=float) + np.eye(3) * dr_var
+            cov = np.asarray(self.world.nav_cov_enu_m2, dtype=float) + np.eye(3) * dr_var
             margin, cap = cfg.nlos_exclusion_margin_sigma, cfg.nlos_exclusion_max_margin_m
         else:
             cov, margin, cap = np.zeros((n, 3, 3)), 0.0, 0.0
-        use = predicted_line_of_sight(
-            world.city.buildings,
-            world._sky(world.t_s).directions,
-            flat,
-            np.tile(cov, (n_c, 1, 1)),
-            margin_sigma=margin,
-            max_margin_m=cap,
-            altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
-        )
-        inside = _city.is_inside_building(world.city.buildings, flat)
-        use = (use & ~inside[:, None]).reshape(n_c, n, -1)
+        flat = pts.reshape(-1, 3)
+        use = self._map_line_of_sight(flat, np.tile(cov, (n_c, 1, 1)), margin, cap)
+        use = use.reshape(n_c, n, -1)
         own = use.sum(axis=2).T  # (N, 5)
         ahead = use[1]  # (N, S): every UAV at its near point ahead
         swarm = np.empty((n, n_c))
@@ -553,30 +540,39 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         cols = np.concatenate([own, swarm], axis=1) / 20.0
         return np.clip(cols, 0.0, 1.0).astype(np.float32)
 
+    def _map_line_of_sight(
+        self, points: np.ndarray, cov: np.ndarray, margin_sigma: float, max_margin_m: float
+    ) -> np.ndarray:
+        """``(P, S)`` bool: the satellites the city model puts in line of sight from each of
+        ``points`` ``(P, 3)`` by :func:`~coopnav_env.sim.map_aided.predicted_line_of_sight`
+        (covariances ``cov`` ``(P, 3, 3)``, the margin in sigma and its cap, the flight band),
+        none from a point inside a building. The look-ahead observations' common step."""
+        from coopnav_env.sim.map_aided import predicted_line_of_sight
+
+        world = self.world
+        kin = self.config.kinematics
+        los = predicted_line_of_sight(
+            world.city.buildings,
+            world._sky(world.t_s).directions,
+            points,
+            cov,
+            margin_sigma=margin_sigma,
+            max_margin_m=max_margin_m,
+            altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
+        )
+        return los & ~_city.is_inside_building(world.city.buildings, points)[:, None]
+
     def _lookahead(self) -> np.ndarray:
         """The ``obs_lookahead`` columns, ``(N, 4)`` float32 (see the config's docstring):
         satellites predicted in line of sight (no margin) at the points of
         :meth:`_lookahead_points`, for the UAV and distinct over the swarm (its UAVs all fly
         until the episode ends for all of them), per distance, each ``/ 20``; a point inside
         a building counts none."""
-        from coopnav_env.sim.map_aided import predicted_line_of_sight
-
-        world = self.world
-        kin = self.config.kinematics
         pts = self._lookahead_points()
         n_d, n = pts.shape[:2]
         flat = pts.reshape(-1, 3)
-        los = predicted_line_of_sight(
-            world.city.buildings,
-            world._sky(world.t_s).directions,
-            flat,
-            np.zeros((flat.shape[0], 3, 3)),
-            margin_sigma=0.0,
-            max_margin_m=0.0,
-            altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
-        )
-        inside = _city.is_inside_building(world.city.buildings, flat)
-        los = (los & ~inside[:, None]).reshape(n_d, n, -1)
+        los = self._map_line_of_sight(flat, np.zeros((flat.shape[0], 3, 3)), 0.0, 0.0)
+        los = los.reshape(n_d, n, -1)
         own = los.sum(axis=2).T / 20.0  # (N, D)
         swarm = los.any(axis=1).sum(axis=1) / 20.0  # (D,)
         cols = np.concatenate([own, np.broadcast_to(swarm, (n, n_d))], axis=1)
