@@ -263,7 +263,7 @@ class MARLTrainer:
                 )
                 td = self.actor(td)
             raw = td["agents", "action"].numpy()
-            n_c_in, acc, ended = self._act_held(raw, obs_d, base)
+            n_c_in, acc, ended, state = self._act_held(raw, obs_d, base)
             actor_in.append(a_in)
             critic_in.append(c_in)
             next_critic_in.append(n_c_in)
@@ -272,7 +272,6 @@ class MARLTrainer:
             rewards.append(acc)
             dones.append(ended)
             terms.append(ended)
-            state = self._states()
         self.agent_steps += k_ * t_ * n_ * s.action_repeat
 
         def stack(xs: list[np.ndarray], dtype: Any = torch.float32) -> Any:
@@ -297,12 +296,13 @@ class MARLTrainer:
 
     def _act_held(
         self, raw: np.ndarray, obs_d: list[dict[str, np.ndarray]], base: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Fly every copy ``action_repeat`` steps on the actor's output ``raw`` (K, N, 3).
 
         Returns the critic's input after the decision (at the episode's end for a copy that
         finished within it), the scaled rewards summed over the decision's steps up to that
-        end, and which copies finished. ``base``: the base commands before the first step
+        end, which copies finished, and the copies' states now (:meth:`_states`, for the
+        next decision's critic). ``base``: the base commands before the first step
         (velocity mode), recomputed before every later step.
         """
         s = self.settings
@@ -332,7 +332,8 @@ class MARLTrainer:
             done = terminated | truncated
             # the critic's input after the step; a finished copy has been reset already, so
             # its episode end is treated as terminal (no bootstrap, see _end_flags)
-            after = _critic_inputs(final_obs, self._states())
+            states = self._states()
+            after = _critic_inputs(final_obs, states)
             self._log_episodes(rew, done, infos)
             scaled = (
                 self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
@@ -351,7 +352,7 @@ class MARLTrainer:
                 if self._bases[kk] is not None:
                     self._bases[kk].reset()
         assert n_c_in is not None
-        return n_c_in, acc, ended
+        return n_c_in, acc, ended, states
 
     def _before(self, obs_d: list[dict[str, np.ndarray]]) -> np.ndarray | None:
         """Every copy's base command the actor reads (velocity mode), else None."""
