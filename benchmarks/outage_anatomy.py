@@ -196,8 +196,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument("--out", default=None, help="also write the figures to this JSON file")
     args = p.parse_args(argv)
-    if args.episodes < 1 or args.jobs < 1:
-        raise SystemExit("--episodes and --jobs must be >= 1")
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.jobs < 1:
+        raise SystemExit(f"--jobs must be >= 1, got {args.jobs}")
     try:
         env_kwargs = apply_overrides({}, list(args.env_set))
     except ValueError as e:

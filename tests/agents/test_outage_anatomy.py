@@ -115,5 +115,9 @@ def test_command_line_runs_and_writes_its_report(tmp_path, capsys) -> None:
     assert not list(tmp_path.glob("*.tmp"))
     with pytest.raises(SystemExit, match="GAIN:THRESHOLD"):
         mod.main(["--steer", "fast"])
+    with pytest.raises(SystemExit, match="--episodes must be >= 1, got 0"):
+        mod.main(["--episodes", "0"])
+    with pytest.raises(SystemExit, match="--jobs must be >= 1, got 0"):
+        mod.main(["--jobs", "0"])
     with pytest.raises(SystemExit, match="THRESHOLD in"):
         mod.main(["--steer", "0.2:99"])
