@@ -34,8 +34,6 @@ renamed into place).
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -182,6 +180,7 @@ def _parse_steer(item: str) -> tuple[float, float]:
 
 def main(argv: list[str] | None = None) -> int:
     from training.config import apply_overrides
+    from training.files import write_json
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--policy", default="ceiling", help="the heuristic (default: ceiling)")
@@ -251,11 +250,7 @@ def main(argv: list[str] | None = None) -> int:
         report["variants"].append(row)
         print(line)
     if args.out:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(out.name + ".tmp")
-        tmp.write_text(json.dumps(report, indent=2) + "\n")
-        os.replace(tmp, out)
+        write_json(args.out, report)
     return 0
 
 

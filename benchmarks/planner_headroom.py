@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -49,9 +48,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def _save_npz(path: Path, **arrays: Any) -> None:
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
-    os.replace(tmp, path)
+    from training.files import atomic_path
+
+    with atomic_path(path, suffix=".npz") as tmp:
+        np.savez(tmp, **arrays)
 
 
 def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
@@ -248,6 +248,7 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     from training.config import apply_overrides
+    from training.files import atomic_write_text
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", default="ceiling", help="base heuristic (default: ceiling)")
@@ -283,9 +284,7 @@ def main(argv: list[str] | None = None) -> int:
         if old != settings:
             raise SystemExit(f"{out} holds episodes of other settings ({old}); use another --out")
     else:
-        tmp = sfile.with_name("settings.json.tmp")
-        tmp.write_text(json.dumps(settings, indent=1, sort_keys=True))
-        os.replace(tmp, sfile)
+        atomic_write_text(sfile, json.dumps(settings, indent=1, sort_keys=True))
     seeds = list(range(args.first_seed, args.first_seed + args.episodes))
     chunks = [seeds[i :: args.jobs] for i in range(args.jobs)]
     try:
@@ -314,9 +313,7 @@ def main(argv: list[str] | None = None) -> int:
                 bar.close()
     r = analyse(out, seeds)
     r["command"] = "python benchmarks/planner_headroom.py " + " ".join(argv or sys.argv[1:])
-    tmp = out / "report.json.tmp"
-    tmp.write_text(json.dumps(r, indent=1))
-    os.replace(tmp, out / "report.json")
+    atomic_write_text(out / "report.json", json.dumps(r, indent=1))
     print("\n".join(report_lines(r, args.base)))
     return 0
 
