@@ -19,6 +19,10 @@ the 3-D error of the estimate it used) and reports:
    cross-validation by episode, ridge regression on standardised inputs), once unweighted and
    once weighted by the planner's gain at that step (base cost minus best cost), which is
    what a distillation that imitates the planner where its choice matters would fit.
+4. **around the outages**: per UAV, how many outages of the cooperative fix an episode has, how
+   long they last, and the mean error at the last fix before an outage, at its first and last
+   step, at the first fix after it, and over every step with a fix (:func:`outage_edges`):
+   whether the error of an outage is drift during it or a bad fix it starts from.
 
 The planner is slow (about 11-13 s per episode on one core with its defaults); episodes are
 written one file each into ``--out`` (a temporary name, then renamed), so an interrupted run
@@ -154,15 +158,63 @@ def _swarm_wide(fix: np.ndarray, alive: np.ndarray) -> np.ndarray:
     return np.broadcast_to(none[:, None], alive.shape)[alive]
 
 
+def outage_edges(episodes: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> dict[str, float]:
+    """The ``nav`` error around outages of the cooperative fix, per UAV.
+
+    ``episodes`` holds one ``(nav, fix, alive)`` triple per episode (``(steps, n_agents)``
+    each). An *outage* is a run of a UAV's steps without a cooperative fix that follows a step
+    with one (the start of an episode is not counted). Returned: outages per episode, their
+    mean length [steps], and the mean error at the last fix before an outage, at its first and
+    its last step, at the first fix after it (outages that end before the UAV stops flying),
+    and over every step with a fix, for comparison.
+    """
+    before, first, last, after, fixed, lengths = [], [], [], [], [], []
+    for nav, fix, alive in episodes:
+        for u in range(nav.shape[1]):
+            flying = np.flatnonzero(alive[:, u])
+            n = int(flying[-1]) + 1 if flying.size else 0
+            e, f = nav[:n, u], fix[:n, u].astype(bool)
+            fixed.extend(e[f].tolist())
+            t = 1
+            while t < n:
+                if f[t - 1] and not f[t]:
+                    start = t
+                    while t < n and not f[t]:
+                        t += 1
+                    before.append(e[start - 1])
+                    first.append(e[start])
+                    last.append(e[t - 1])
+                    lengths.append(t - start)
+                    if t < n:
+                        after.append(e[t])
+                t += 1
+
+    def mean(v: list[float]) -> float:
+        return float(np.nanmean(v)) if v else float("nan")
+
+    return {
+        "outages_per_episode": len(lengths) / max(len(episodes), 1),
+        "mean_length_steps": mean(lengths),
+        "last_fix_before_m": mean(before),
+        "first_outage_step_m": mean(first),
+        "last_outage_step_m": mean(last),
+        "first_fix_after_m": mean(after),
+        "all_fix_steps_m": mean(fixed),
+    }
+
+
 def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     """The report's numbers from the episode files of ``seeds`` in ``folder``."""
     folder = Path(folder)
     p_nav, b_nav, xs, ys, ws, gs = [], [], [], [], [], []
     p_err, p_fix, b_err, b_fix, p_all, b_all = [], [], [], [], [], []
+    p_eps, b_eps = [], []
     for i, seed in enumerate(seeds):
         p = np.load(folder / f"{seed}.npz")
         b = np.load(folder / f"{seed}_base.npz")
         alive = p["alive"]
+        p_eps.append((p["nav"], p["fix"], alive))
+        b_eps.append((b["nav"], b["fix"], b["alive"]))
         p_err.append(p["nav"][alive])
         p_fix.append(p["fix"][alive])
         b_err.append(b["nav"][b["alive"]])
@@ -208,6 +260,8 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
         "planner_better_share": float((d < 0).mean()),
         "planner": tails(p_err, p_fix, p_all),
         "base": tails(b_err, b_fix, b_all),
+        "planner_edges": outage_edges(p_eps),
+        "base_edges": outage_edges(b_eps),
         "offset_std": y.std(0).tolist(),
         "r2_unweighted": ridge_r2(x, y, g).tolist(),
         "r2_gain_weighted": ridge_r2(x, y, g, w).tolist(),
@@ -234,6 +288,16 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
             f"{t['above_10m_with_fix_m']:.3f} + {t['above_10m_no_fix_m']:.3f} m; "
             f"{t['no_fix_swarm_wide_share']:.0%} of the UAV-steps without a fix are steps "
             "when no UAV of the swarm has one"
+        )
+    lines.append("around outages of the cooperative fix (per UAV; mean nav error [m]):")
+    for name in ("planner", base):
+        o = r["planner_edges" if name == "planner" else "base_edges"]
+        lines.append(
+            f"  {name:10s} {o['outages_per_episode']:.2f} outages per episode, "
+            f"{o['mean_length_steps']:.1f} steps long; last fix before "
+            f"{o['last_fix_before_m']:.2f}, first / last step without "
+            f"{o['first_outage_step_m']:.2f} / {o['last_outage_step_m']:.2f}, first fix after "
+            f"{o['first_fix_after_m']:.2f}; every step with a fix {o['all_fix_steps_m']:.2f}"
         )
     fmt = lambda v: "[" + ", ".join(f"{a:+.3f}" for a in v) + "]"  # noqa: E731
     lines += [

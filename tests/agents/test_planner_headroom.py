@@ -34,6 +34,29 @@ def test_ridge_r2_finds_a_linear_rule_and_not_noise() -> None:
     assert np.all(mod.ridge_r2(x, y_half, groups) < 0.9)
 
 
+def test_outage_edges_counts_outages_and_the_errors_around_them() -> None:
+    mod = _module()
+    nan = np.nan
+    # UAV 0: fix, fix, [out, out], fix, [out] (still flying at the end: no fix after it);
+    # UAV 1: no fix at the start (not an outage), then fixes; stops flying after step 4.
+    nav = np.array([[1.0, 9.0], [2.0, 3.0], [5.0, 3.0], [7.0, 4.0], [4.0, nan], [8.0, nan]])
+    fix = np.array([[1, 0], [1, 1], [0, 1], [0, 1], [1, 0], [0, 0]], dtype=bool)
+    alive = np.array([[1, 1], [1, 1], [1, 1], [1, 1], [1, 0], [1, 0]], dtype=bool)
+    r = mod.outage_edges([(nav, fix, alive)])
+    assert r["outages_per_episode"] == 2.0
+    assert r["mean_length_steps"] == 1.5  # 2 steps and 1 step
+    assert r["last_fix_before_m"] == pytest.approx((2.0 + 4.0) / 2)
+    assert r["first_outage_step_m"] == pytest.approx((5.0 + 8.0) / 2)
+    assert r["last_outage_step_m"] == pytest.approx((7.0 + 8.0) / 2)
+    assert r["first_fix_after_m"] == pytest.approx(4.0)  # only the first outage ends
+    assert r["all_fix_steps_m"] == pytest.approx(np.mean([1.0, 2.0, 4.0, 3.0, 3.0, 4.0]))
+    # two episodes: outages are counted per episode
+    assert mod.outage_edges([(nav, fix, alive)] * 2)["outages_per_episode"] == 2.0
+    # no outage at all: NaN figures, not an error
+    r0 = mod.outage_edges([(nav[:2, :1], np.ones((2, 1), bool), np.ones((2, 1), bool))])
+    assert r0["outages_per_episode"] == 0.0 and np.isnan(r0["last_fix_before_m"])
+
+
 def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_path, capsys) -> None:
     mod = _module()
     out = tmp_path / "h"
