@@ -15,6 +15,18 @@ variants before a confirmatory study; docs/marl/README.md (Part 2) uses it::
 
 A group is ``NAME=POLICY[,POLICY...]`` with :func:`agents.make_policy` names, e.g.
 ``mappo=torchrl:runs/x/mappo_s0,torchrl:runs/x/mappo_s1``.
+
+``--group-env NAME:KEY=VALUE ...`` flies group ``NAME`` in an environment with ``KEY=VALUE``
+on top of ``--env-set`` (repeat for several keys), so that a *world or receiver* setting can be
+paired too: the same policy, the same reset seeds (the same city, route, satellites and start),
+another setting. For example, the fix gate of the receiver (docs/marl/README.md, Part 2)::
+
+    python benchmarks/paired_variants.py --episodes 1000 --first-seed 1000000 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true \\
+        --groups ceiling=ceiling gate10=ceiling --group-env gate10:max_fix_sigma_m=10
+
+Only a setting that leaves the observation and action spaces alike can be paired with a
+learned policy (the spaces are checked when the policy is loaded).
 """
 
 from __future__ import annotations
@@ -51,6 +63,32 @@ def _parse_groups(items: list[str]) -> dict[str, list[str]]:
         return parse_named_lists(items, "--groups", "NAME=POLICY[,POLICY...]")
     except ValueError as e:
         raise SystemExit(str(e)) from None
+
+
+def _parse_group_env(
+    items: list[str], groups: dict[str, list[str]], env_kwargs: dict[str, Any]
+) -> dict[str, dict[str, Any]]:
+    """Each group's environment: ``env_kwargs`` plus its ``--group-env`` overrides."""
+    from training.config import apply_overrides
+
+    per: dict[str, list[str]] = {g: [] for g in groups}
+    for item in items:
+        name, sep, kv = item.partition(":")
+        if not sep or "=" not in kv:
+            raise SystemExit(f"--group-env entries are NAME:KEY=VALUE, got {item!r}")
+        if name not in groups:
+            raise SystemExit(f"--group-env: no group {name!r} (the groups are {', '.join(groups)})")
+        per[name].append(kv)
+    from coopnav_env.envs.config import make_config
+
+    out = {}
+    for g, kvs in per.items():
+        try:
+            out[g] = apply_overrides(dict(env_kwargs), kvs)
+            make_config(**out[g])  # an unknown key or a bad value fails here, not in a worker
+        except ValueError as e:
+            raise SystemExit(f"group {g!r}: {e}") from None
+    return out
 
 
 def paired_table(
@@ -93,19 +131,27 @@ def main(argv: list[str] | None = None) -> int:
         "--first-seed", type=int, default=1_000_000, help="first reset seed (default: 1000000)"
     )
     p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument(
+        "--group-env",
+        nargs="*",
+        default=[],
+        metavar="NAME:KEY=VALUE",
+        help="an environment override for one group only, on top of --env-set",
+    )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     args = p.parse_args(argv)
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
     groups = _parse_groups(args.groups)
     env_kwargs = apply_overrides({}, args.env_set)
+    group_env = _parse_group_env(args.group_env, groups, env_kwargs)
     seeds = list(range(args.first_seed, args.first_seed + args.episodes))
     units = [(g, pol) for g, pols in groups.items() for pol in pols]
     if args.jobs <= 1:
-        flown = [_fly(pol, dict(env_kwargs), seeds) for _, pol in units]
+        flown = [_fly(pol, dict(group_env[g]), seeds) for g, pol in units]
     else:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            futures = [pool.submit(_fly, pol, dict(env_kwargs), seeds) for _, pol in units]
+            futures = [pool.submit(_fly, pol, dict(group_env[g]), seeds) for g, pol in units]
             flown = [f.result() for f in futures]
     results: dict[str, list[dict[str, np.ndarray]]] = {g: [] for g in groups}
     for (g, _), r in zip(units, flown):

@@ -178,6 +178,30 @@ def test_paired_variants_script_pairs_groups_by_episode(capsys) -> None:
         mod.main(["--groups", "a=formation", "--episodes", "0"])
 
 
+def test_paired_variants_group_env_pairs_a_setting(capsys) -> None:
+    """``--group-env``: a group flown with a setting equal to the default differs by exactly
+    zero; one with another setting differs; bad entries are errors that name the problem."""
+    from tests.benchmark_script import load_benchmark
+
+    mod = load_benchmark("paired_variants")
+    common = ["--episodes", "2", "--jobs", "1", "--env-set", "n_uavs=3", "max_steps=20"]
+    groups = ["--groups", "a=formation", "same=formation", "other=formation"]
+    genv = ["--group-env", "same:max_fix_sigma_m=30", "other:n_uavs=2"]
+    assert mod.main([*groups, *common, *genv]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "  same - a nav: +0.000 [+0.000,+0.000]" in lines
+    other = next(ln for ln in lines if ln.startswith("  other - a nav:"))
+    assert "+0.000 [+0.000,+0.000]" not in other
+    with pytest.raises(SystemExit, match="NAME:KEY=VALUE"):
+        mod.main([*groups, *common, "--group-env", "same=1"])
+    with pytest.raises(SystemExit, match="no group 'x'"):
+        mod.main([*groups, *common, "--group-env", "x:n_uavs=2"])
+    with pytest.raises(SystemExit, match=r"group 'same'.*max_fix_sigma_m"):
+        mod.main([*groups, *common, "--group-env", "same:max_fix_sigma_m=-1"])
+    with pytest.raises(SystemExit, match=r"group 'same'.*unknown"):
+        mod.main([*groups, *common, "--group-env", "same:not_a_field=1"])
+
+
 def test_runs_entries_are_checked(tmp_path) -> None:
     """``coopnav study --runs``: malformed entries, a name given twice and a folder without a
     model are errors that name the problem, raised before anything is flown."""
