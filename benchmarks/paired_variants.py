@@ -14,7 +14,8 @@ variants before a confirmatory study; docs/marl/README.md (Part 2) uses it::
         --groups base=guarded ceiling=ceiling
 
 A group is ``NAME=POLICY[,POLICY...]`` with :func:`agents.make_policy` names, e.g.
-``mappo=torchrl:runs/x/mappo_s0,torchrl:runs/x/mappo_s1``.
+``mappo=torchrl:runs/x/mappo_s0,torchrl:runs/x/mappo_s1``; a policy's own options stay with it
+(``tuned=ceiling@gain_per_s=0.3,cruise_speed_mps=10`` is one policy).
 
 ``--group-env NAME:KEY=VALUE ...`` flies group ``NAME`` in an environment with ``KEY=VALUE``
 on top of ``--env-set`` (repeat for several keys), so that a *world or receiver* setting can be

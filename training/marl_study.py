@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from collections.abc import Mapping, Sequence
@@ -561,6 +562,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str, list[str]]:
     """``NAME=A[,B...]`` items (``--runs``, ``paired_variants.py --groups``) as a mapping.
 
+    A policy's own options stay with it: in ``b=ceiling@gain_per_s=0.3,cruise_speed_mps=10``
+    the piece after the comma is a ``key=value`` option of the ``@`` policy before it, not a
+    second entry, so that group is one policy.
+
     Raises ``ValueError`` naming ``option`` and the expected ``form`` for a malformed item,
     and for a name given twice (which would otherwise drop the first silently).
     """
@@ -571,7 +576,13 @@ def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str,
             raise ValueError(f"{option} entries are {form}, got {item!r}")
         if name in out:
             raise ValueError(f"{option}: the name {name!r} is given twice")
-        out[name] = [v for v in values.split(",") if v]
+        entries: list[str] = []
+        for v in values.split(","):
+            if entries and "@" in entries[-1] and re.match(r"[A-Za-z_]\w*=", v):
+                entries[-1] += "," + v  # an option of the policy before it
+            elif v:
+                entries.append(v)
+        out[name] = entries
     return out
 
 

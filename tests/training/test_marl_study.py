@@ -209,6 +209,13 @@ def test_runs_entries_are_checked(tmp_path) -> None:
     from training.marl_study import parse_named_lists
 
     assert parse_named_lists(["m=a,b", "n=c"], "--x", "F") == {"m": ["a", "b"], "n": ["c"]}
+    # a policy's own options stay with it; a bare name after them is the next entry
+    assert parse_named_lists(
+        ["g=ceiling@gain_per_s=0.3,cruise_speed_mps=10,wide", "h=torchrl:a,torchrl:b"], "--x", "F"
+    ) == {
+        "g": ["ceiling@gain_per_s=0.3,cruise_speed_mps=10", "wide"],
+        "h": ["torchrl:a", "torchrl:b"],
+    }
     run = tmp_path / "r0"
     run.mkdir()
     (run / "final_model.pt").write_bytes(b"")
