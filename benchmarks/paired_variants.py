@@ -70,6 +70,7 @@ def _parse_group_env(
     items: list[str], groups: dict[str, list[str]], env_kwargs: dict[str, Any]
 ) -> dict[str, dict[str, Any]]:
     """Each group's environment: ``env_kwargs`` plus its ``--group-env`` overrides."""
+    from coopnav_env.envs.config import make_config
     from training.config import apply_overrides
 
     per: dict[str, list[str]] = {g: [] for g in groups}
@@ -80,8 +81,6 @@ def _parse_group_env(
         if name not in groups:
             raise SystemExit(f"--group-env: no group {name!r} (the groups are {', '.join(groups)})")
         per[name].append(kv)
-    from coopnav_env.envs.config import make_config
-
     out = {}
     for g, kvs in per.items():
         try:
