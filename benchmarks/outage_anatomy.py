@@ -160,12 +160,10 @@ def anatomy(steps: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _paired(base: list[float], other: list[float], reps: int = 2000) -> tuple[float, ...]:
+    from training.stats import bootstrap_mean_interval
+
     d = np.asarray(other, dtype=float) - np.asarray(base, dtype=float)
-    d = d[np.isfinite(d)]
-    rng = np.random.default_rng(0)
-    boot = [rng.choice(d, d.size).mean() for _ in range(reps)]
-    lo, hi = np.percentile(boot, [2.5, 97.5])
-    return float(d.mean()), float(lo), float(hi)
+    return bootstrap_mean_interval(d[np.isfinite(d)], reps, np.random.default_rng(0))
 
 
 def _parse_steer(item: str) -> tuple[float, float]:

@@ -95,6 +95,8 @@ def paired_table(
     results: dict[str, list[dict[str, np.ndarray]]], reps: int = 2000, seed: int = 0
 ) -> list[str]:
     """The printed lines: one per group, then each group minus the first (nav, coop)."""
+    from training.stats import bootstrap_mean_interval
+
     rng = np.random.default_rng(seed)
     stats = {}
     lines = []
@@ -114,10 +116,8 @@ def paired_table(
             continue
         for j, label in ((0, "nav"), (1, "coop")):
             d = stats[name][j] - stats[base][j]
-            d = d[np.isfinite(d)]
-            boot = [rng.choice(d, d.size).mean() for _ in range(reps)]
-            lo, hi = np.percentile(boot, [2.5, 97.5])
-            lines.append(f"  {name} - {base} {label}: {d.mean():+.3f} [{lo:+.3f},{hi:+.3f}]")
+            mean, lo, hi = bootstrap_mean_interval(d[np.isfinite(d)], reps, rng)
+            lines.append(f"  {name} - {base} {label}: {mean:+.3f} [{lo:+.3f},{hi:+.3f}]")
     return lines
 
 

@@ -205,6 +205,8 @@ def outage_edges(episodes: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> d
 
 def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     """The report's numbers from the episode files of ``seeds`` in ``folder``."""
+    from training.stats import bootstrap_mean_interval
+
     folder = Path(folder)
     p_nav, b_nav, xs, ys, ws, gs = [], [], [], [], [], []
     p_err, p_fix, b_err, b_fix, p_all, b_all = [], [], [], [], [], []
@@ -229,8 +231,7 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
         ws.append(np.broadcast_to(gain[:, None], alive.shape)[alive])
         gs.append(np.full(int(alive.sum()), i))
     d = np.asarray(p_nav) - np.asarray(b_nav)
-    rng = np.random.default_rng(0)
-    boot = [rng.choice(d, d.size).mean() for _ in range(4000)]
+    paired = bootstrap_mean_interval(d, 4000, np.random.default_rng(0))
 
     def tails(
         err: list[np.ndarray], fix: list[np.ndarray], wide: list[np.ndarray]
@@ -256,7 +257,7 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
         "episodes": len(seeds),
         "planner_nav_m": float(np.mean(p_nav)),
         "base_nav_m": float(np.mean(b_nav)),
-        "paired_m": [float(d.mean()), *np.percentile(boot, [2.5, 97.5]).tolist()],
+        "paired_m": list(paired),
         "planner_better_share": float((d < 0).mean()),
         "planner": tails(p_err, p_fix, p_all),
         "base": tails(b_err, b_fix, b_all),
@@ -279,8 +280,9 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
         f"(planner lower in {r['planner_better_share']:.0%} of episodes)",
         "where the error comes from (metres of the mean error; UAV-steps above the threshold):",
     ]
-    for name in ("planner", base):
-        t = r["planner" if name == "planner" else "base"]
+    sides = (("planner", "planner"), (base, "base"))  # printed name, key in the report
+    for name, key in sides:
+        t = r[key]
         lines.append(
             f"  {name:10s} fix share {t['fix_share']:.3f}; above 5 m: "
             f"{t['above_5m_share']:.3f} of steps, {t['above_5m_with_fix_m']:.3f} m with a fix "
@@ -290,8 +292,8 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
             "when no UAV of the swarm has one"
         )
     lines.append("around outages of the cooperative fix (per UAV; mean nav error [m]):")
-    for name in ("planner", base):
-        o = r["planner_edges" if name == "planner" else "base_edges"]
+    for name, key in sides:
+        o = r[f"{key}_edges"]
         lines.append(
             f"  {name:10s} {o['outages_per_episode']:.2f} outages per episode, "
             f"{o['mean_length_steps']:.1f} steps long; last fix before "

@@ -24,6 +24,7 @@ import numpy as np
 
 __all__ = [
     "Interval",
+    "bootstrap_mean_interval",
     "interquartile_mean",
     "paired_difference",
     "stratified_bootstrap_ci",
@@ -140,3 +141,20 @@ def paired_difference(
     lo, hi = np.quantile(diffs, [alpha, 1.0 - alpha])
     per_ep = a.mean(axis=0) - b.mean(axis=0)
     return Interval(float(per_ep.mean()), float(lo), float(hi)), float(np.mean(per_ep < 0.0))
+
+
+def bootstrap_mean_interval(
+    d: np.ndarray, reps: int, rng: np.random.Generator
+) -> tuple[float, float, float]:
+    """Mean of the 1-D sample ``d`` and the 95 % percentile interval of its bootstrap means.
+
+    The one-level bootstrap of the benchmark scripts' paired screening: ``d`` is already one
+    difference per episode (a method's runs averaged), and each of the ``reps`` replicates is
+    ``rng.choice(d, d.size).mean()``. ``rng`` is passed in so that a script drawing several
+    intervals from one generator keeps its sequence. Unlike :func:`paired_difference` it does
+    not resample training runs; ``d`` must be what the caller wants averaged (filter
+    non-finite entries first).
+    """
+    boot = [rng.choice(d, d.size).mean() for _ in range(reps)]
+    lo, hi = np.percentile(boot, [2.5, 97.5])
+    return float(np.mean(d)), float(lo), float(hi)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from training.stats import (
+    bootstrap_mean_interval,
     interquartile_mean,
     paired_difference,
     stratified_bootstrap_ci,
@@ -65,3 +66,26 @@ def test_paired_difference_detects_a_small_shift_that_unpaired_noise_hides() -> 
     assert unpaired["low"] < other["high"]  # the unpaired intervals overlap
     with pytest.raises(ValueError, match="same episodes"):
         paired_difference(a, b[:, :50])
+
+
+def test_bootstrap_mean_interval_is_the_percentile_bootstrap_of_the_mean() -> None:
+    d = np.random.default_rng(5).normal(0.3, 1.0, 400)
+    mean, lo, hi = bootstrap_mean_interval(d, 1000, np.random.default_rng(0))
+    rng = np.random.default_rng(0)  # the direct formulation, the same generator sequence
+    direct = np.percentile(
+        [d[rng.integers(0, d.size, d.size)].mean() for _ in range(1000)], [2.5, 97.5]
+    )
+    assert (lo, hi) == pytest.approx(tuple(direct), abs=1e-12)
+    assert mean == pytest.approx(d.mean())
+    # 400 draws of sd 1: the interval is about +/-1.96/20 = +/-0.098 wide around the mean
+    assert lo < mean < hi and (hi - lo) == pytest.approx(2 * 1.96 / 20, rel=0.15)
+    # a generator passed on keeps its sequence: two draws differ, a fresh seed repeats
+    g = np.random.default_rng(1)
+    first, second = bootstrap_mean_interval(d, 200, g), bootstrap_mean_interval(d, 200, g)
+    assert first != second
+    assert bootstrap_mean_interval(d, 200, np.random.default_rng(1)) == first
+    assert bootstrap_mean_interval(np.full(50, 2.0), 100, np.random.default_rng(0)) == (
+        2.0,
+        2.0,
+        2.0,
+    )
