@@ -74,6 +74,16 @@ class PrivilegedPlanner:
         needs the truth (``benchmarks/planner_headroom.py --planner-set from_estimate=True``).
         The belief is taken as it is, even where it lies inside a building (the look-ahead
         then starts there).
+    sample_belief : bool
+        With ``from_estimate``: start each look-ahead not at the estimate itself but at a
+        draw from the receiver's own belief, the estimate plus ``N(0, P)`` with ``P`` the
+        predicted covariance of the estimate each UAV uses (drawn from the look-ahead's noise
+        generator, so the candidates of a step share the draws; ``noise_samples`` draws are
+        averaged). Still on-board (it uses only what the receiver believes, its estimate and
+        covariance), but it knows that a UAV that has dead-reckoned for a while is far off
+        in an unknown direction, which the plain look-ahead from the estimate, whose errors
+        start at zero, does not; a draw that falls inside a building is replaced by the
+        estimate.
     """
 
     name = "planner"
@@ -92,6 +102,7 @@ class PrivilegedPlanner:
         noise_samples: int = 1,
         seed: int = 0,
         from_estimate: bool = False,
+        sample_belief: bool = False,
     ) -> None:
         for name, v, lo in (
             ("horizon", horizon, 1),
@@ -120,6 +131,11 @@ class PrivilegedPlanner:
         if not isinstance(from_estimate, bool):
             raise ValueError(f"planner from_estimate must be True or False, got {from_estimate!r}")
         self.from_estimate = from_estimate
+        if not isinstance(sample_belief, bool):
+            raise ValueError(f"planner sample_belief must be True or False, got {sample_belief!r}")
+        if sample_belief and not from_estimate:
+            raise ValueError("planner sample_belief=True needs from_estimate=True")
+        self.sample_belief = sample_belief
         self._rng = np.random.default_rng(seed)
         base_env = getattr(env, "unwrapped", env)
         self._agents = list(base_env.possible_agents)
@@ -145,7 +161,10 @@ class PrivilegedPlanner:
         inner._rng = np.random.default_rng(noise_seed)
         if self.from_estimate:
             world = inner.world
-            world.pos_enu_m = np.array(world.nav_pos_enu_m, dtype=float, copy=True)
+            start = np.array(world.nav_pos_enu_m, dtype=float, copy=True)
+            if self.sample_belief:
+                start = self._belief_draw(start, world, inner._rng)
+            world.pos_enu_m = start
         obs = dict(first_obs)
         cost = 0.0
         for _ in range(self.horizon):
@@ -171,6 +190,21 @@ class PrivilegedPlanner:
             if all(i["in_goal"] for i in infos.values()):
                 break
         return cost
+
+    @staticmethod
+    def _belief_draw(est: np.ndarray, world: Any, rng: np.random.Generator) -> np.ndarray:
+        """``est + N(0, P)`` per UAV (``P`` the covariance of the estimate it uses); a draw
+        inside a building falls back to the estimate itself."""
+        from coopnav_env.sim.city import is_inside_building
+
+        cov = np.asarray(world.nav_cov_enu_m2, dtype=float)
+        z = rng.standard_normal(est.shape)
+        # eigen-decomposition: a covariance that is only semi-definite still has a square root
+        w, v = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+        draw = est + np.einsum("nij,nj->ni", v, np.sqrt(np.clip(w, 0.0, None)) * z)
+        inside = is_inside_building(world.city.buildings, draw)
+        draw[inside] = est[inside]
+        return draw
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The first command of the best plan found (see the module docstring).

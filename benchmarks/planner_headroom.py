@@ -23,12 +23,18 @@ the 3-D error of the estimate it used) and reports:
    long they last, and the mean error at the last fix before an outage, at its first and last
    step, at the first fix after it, and over every step with a fix (:func:`outage_edges`):
    whether the error of an outage is drift during it or a bad fix it starts from.
+5. **the goal rate** of planner and base (episodes that end with every UAV in the goal area
+   and no crash, as ``coopnav evaluate`` counts them), so that errors are compared at the
+   same goal rate; episode files written before this was recorded lack it, and a report
+   from them leaves it out.
 
 The planner is slow (about 11-13 s per episode on one core with its defaults); episodes are
 written one file each into ``--out`` (a temporary name, then renamed), so an interrupted run
 continues where it stopped, and a folder holds one setting only. docs/marl/README.md (Part 2,
 "What the planner does, and what that means for learning") uses, once as below and once
-with ``--planner-set from_estimate=True --out runs/planner_headroom_onboard``::
+with ``--planner-set from_estimate=True --out runs/planner_headroom_onboard`` (the on-board
+look-ahead from the estimates; add ``sample_belief=True`` to start it from draws of the
+receiver's belief instead, the estimate plus its own covariance)::
 
     python benchmarks/planner_headroom.py --episodes 200 --first-seed 5000000 \\
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true nav_reward=error \\
@@ -66,6 +72,7 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
     planner.reset(seed)
     rows: dict[str, list[Any]] = {k: [] for k in ("obs", "base", "offset", "fix", "nav", "alive")}
     costs: list[tuple[float, float]] = []
+    at_goal, collided = np.zeros(len(agents), dtype=bool), False
     while env.agents:
         live = list(env.agents)
         cmd = planner.act(obs)
@@ -81,7 +88,12 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
             [float(infos[a]["nav_error_m"]) if a in infos else np.nan for a in agents]
         )
         rows["alive"].append([a in live for a in agents])
+        at_goal = np.array([bool(infos.get(a, {}).get("in_goal", False)) for a in agents])
+        collided = collided or any(bool(i.get("collided", False)) for i in infos.values())
     out = {k: np.asarray(v) for k, v in rows.items()}
+    # reached the goal: every UAV in the goal area at the last step and no crash (the
+    # definition of training.evaluate's goal rate)
+    out["success"] = np.asarray(bool(rows["alive"]) and bool(at_goal.all()) and not collided)
     c = np.asarray(costs, dtype=float).reshape(-1, 2)
     out["cost_base"], out["cost_best"] = c[:, 0], c[:, 1]
     return out
@@ -95,7 +107,12 @@ def fly_base(env: Any, policy: Any, seed: int) -> dict[str, np.ndarray]:
     rec = run_episode(env, policy, int(seed))
     nav = np.asarray(rec.nav_error_m, dtype=float)
     coop = np.asarray(rec.coop_error_m, dtype=float)
-    return {"nav": nav, "fix": np.isfinite(coop), "alive": np.isfinite(nav)}
+    return {
+        "nav": nav,
+        "fix": np.isfinite(coop),
+        "alive": np.isfinite(nav),
+        "success": np.asarray(bool(rec.success)),
+    }
 
 
 def _worker(
@@ -211,9 +228,14 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     p_nav, b_nav, xs, ys, ws, gs = [], [], [], [], [], []
     p_err, p_fix, b_err, b_fix, p_all, b_all = [], [], [], [], [], []
     p_eps, b_eps = [], []
+    p_ok: list[bool] = []
+    b_ok: list[bool] = []
     for i, seed in enumerate(seeds):
         p = np.load(folder / f"{seed}.npz")
         b = np.load(folder / f"{seed}_base.npz")
+        if "success" in p.files and "success" in b.files:  # older episode files lack it
+            p_ok.append(bool(p["success"]))
+            b_ok.append(bool(b["success"]))
         alive = p["alive"]
         p_eps.append((p["nav"], p["fix"], alive))
         b_eps.append((b["nav"], b["fix"], b["alive"]))
@@ -253,7 +275,11 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
         return out
 
     x, y, w, g = (np.concatenate(v) for v in (xs, ys, ws, gs))
+    goals: dict[str, float] = {}
+    if len(p_ok) == len(seeds):  # every episode file records it (this code wrote them all)
+        goals = {"planner_goal_rate": float(np.mean(p_ok)), "base_goal_rate": float(np.mean(b_ok))}
     return {
+        **goals,
         "episodes": len(seeds),
         "planner_nav_m": float(np.mean(p_nav)),
         "base_nav_m": float(np.mean(b_nav)),
@@ -278,8 +304,14 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
         f"episodes {r['episodes']}: nav error planner {r['planner_nav_m']:.3f} m, {base} "
         f"{r['base_nav_m']:.3f} m, paired {pm:+.3f} m [{lo:+.3f}, {hi:+.3f}] "
         f"(planner lower in {r['planner_better_share']:.0%} of episodes)",
-        "where the error comes from (metres of the mean error; UAV-steps above the threshold):",
     ]
+    if "planner_goal_rate" in r:
+        lines.append(
+            f"goal rate: planner {r['planner_goal_rate']:.3f}, {base} {r['base_goal_rate']:.3f}"
+        )
+    lines.append(
+        "where the error comes from (metres of the mean error; UAV-steps above the threshold):"
+    )
     sides = (("planner", "planner"), (base, "base"))  # printed name, key in the report
     for name, key in sides:
         t = r[key]

@@ -146,6 +146,12 @@ the swarm with the UAV at that candidate and every other UAV 10 m along its own 
 / 20, clipped to [0, 1]; a candidate inside a building counts none. What a move would change,
 in the satellites the receiver keeps (fewer as its uncertainty grows).
 
+With `obs_true_error=True` (**privileged: a diagnostic, not an on-board observation**), 3
+entries follow last: `true_error`, the true error of the estimate the UAV uses (East, North,
+Up) / `obs_sigma_max_m`, clipped to [-1, 1]. No receiver knows it; it exists to tell whether
+a learned policy falls short of the privileged planner for want of information or of
+learning (`docs/marl`), and a policy trained with it must not be reported as an on-board one.
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -340,11 +346,11 @@ excludes the measurement the test identifies and re-solves until the test passes
 residual (NLOS delays are positive). `alert_limit_m` (30):
 horizontal alert limit [m] (availability, the reward term and the observation scale).
 `integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False),
-`obs_lookahead` (False) and `obs_candidate_sky` (False): above. With `"off"` every episode
-is exactly as before. The preset `coopnav_env.envs.preset_config("urban_nlos", **fields)`
-turns on realistic urban reception: half of the blocked satellites received through
-reflections with a bias of 3 m + Exp(30 m), and `integrity="fde"` with
-`integrity_fault_sign="positive"`.
+`obs_lookahead` (False), `obs_candidate_sky` (False) and `obs_true_error` (False): above.
+With `"off"` every episode is exactly as before. The preset
+`coopnav_env.envs.preset_config("urban_nlos", **fields)` turns on realistic urban reception:
+half of the blocked satellites received through reflections with a bias of 3 m + Exp(30 m),
+and `integrity="fde"` with `integrity_fault_sign="positive"`.
 
 `nlos_exclusion` (`"off"`): `"map"` is 3D-mapping-aided NLOS exclusion
 (`coopnav_env.sim.map_aided`): a UAV does not use the satellites that the city model predicts
@@ -422,8 +428,9 @@ world state): a restored copy continues exactly like the original.
   `infos[agent]["initial"]` or `infos[agent]["reward_terms"]` must read the flat keys.
   Optional integrity monitoring (`integrity`, off by default: episodes unchanged) was added
   with them. Also off by default, with the defaults' episodes unchanged: the observation
-  options `obs_protection_level`, `obs_satellite_sectors`, `obs_lookahead` and
-  `obs_candidate_sky`, and the world options `dead_reckoning_noise` and `preset`.
+  options `obs_protection_level`, `obs_satellite_sectors`, `obs_lookahead`,
+  `obs_candidate_sky` and `obs_true_error` (privileged, a diagnostic), and the world options
+  `dead_reckoning_noise` and `preset`.
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env

@@ -123,6 +123,14 @@ class UrbanCanyonConfig(ScenarioConfig):
         clipped to [0, 1]; a candidate inside a building counts none. Unlike
         ``obs_lookahead`` these say what a move would change, and they count what the
         receiver keeps after the exclusion, which shrinks as its uncertainty grows.
+    obs_true_error : bool, default False
+        **Privileged: a diagnostic, not an on-board observation.** Append three entries last
+        (after every other optional block): the UAV's true position error, East, North, Up,
+        of the estimate it uses (``nav_error``), each divided by ``obs_sigma_max_m`` and
+        clipped to [-1, 1]. No receiver knows this; the privileged planner does (it knows
+        where the UAVs are). It tells whether a learned policy falls short of the planner
+        for want of information or for want of learning (``docs/marl``, "An oracle
+        observation"); a policy trained with it must never be reported as an on-board one.
     """
 
     max_steps: int = 200
@@ -150,6 +158,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     obs_satellite_sectors: bool = False
     obs_lookahead: bool = False
     obs_candidate_sky: bool = False
+    obs_true_error: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -179,6 +188,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_bool(o, "obs_satellite_sectors", self.obs_satellite_sectors)
         _check_bool(o, "obs_lookahead", self.obs_lookahead)
         _check_bool(o, "obs_candidate_sky", self.obs_candidate_sky)
+        _check_bool(o, "obs_true_error", self.obs_true_error)
         if self.integrity == "off":
             for name, on in (
                 ("integrity_penalty", self.integrity_penalty > 0.0),
@@ -195,7 +205,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
         with ``obs_protection_level``, plus ``2 obs_sky_azimuths`` with
         ``obs_satellite_sectors``, plus 4 with ``obs_lookahead``, plus 10 with
-        ``obs_candidate_sky``."""
+        ``obs_candidate_sky``, plus 3 with ``obs_true_error``."""
         return self.obs_base_dim + self.obs_extra_dim
 
     @property
@@ -207,11 +217,12 @@ class UrbanCanyonConfig(ScenarioConfig):
     def obs_extra_dim(self) -> int:
         """Entries of the optional blocks appended after the base ones: 2 with
         ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``, 4
-        with ``obs_lookahead``."""
+        with ``obs_lookahead``, 10 with ``obs_candidate_sky``, 3 with ``obs_true_error``."""
         pl = 2 if self.obs_protection_level else 0
         sectors = 2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0
         ahead = 4 if self.obs_lookahead else 0
-        return pl + sectors + ahead + (10 if self.obs_candidate_sky else 0)
+        cand = 10 if self.obs_candidate_sky else 0
+        return pl + sectors + ahead + cand + (3 if self.obs_true_error else 0)
 
     @property
     def max_cycles(self) -> int:

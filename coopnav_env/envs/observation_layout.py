@@ -56,6 +56,9 @@ sector``                                      per azimuth sector); only with
 ``candidate_swarm_         5      1           20 (distinct over the swarm, the UAV at the
 satellites``                                  candidate, the others ahead); only with
                                               ``obs_candidate_sky``
+``true_error``             3      m           ``obs_sigma_max_m`` (the true error of the
+                                              estimate used, E, N, U; privileged, a
+                                              diagnostic); only with ``obs_true_error``
 =========================  =====  ==========  ==============================================
 
 The sector of skyline azimuth ``360 a / A`` is centred on it and ``360 / A`` degrees wide
@@ -438,6 +441,17 @@ def obs_layout(config: Any = None, **overrides: Any) -> ObsLayout:
             "distinct satellites over the swarm with the UAV at the candidate, others ahead",
             "20",
             cands,
+        )
+    if cfg.obs_true_error:
+        add(
+            "true_error",
+            3,
+            "m",
+            cfg.obs_sigma_max_m,
+            -1,
+            "true position error of the estimate used (privileged: a diagnostic)",
+            "obs_sigma_max_m",
+            _ENU,
         )
     if fields[-1].stop != cfg.obs_dim:  # pragma: no cover - guarded by the tests
         raise AssertionError(f"layout covers {fields[-1].stop} entries, obs_dim {cfg.obs_dim}")

@@ -419,7 +419,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         protection-level columns follow, then with ``obs_satellite_sectors`` the ``2 A``
         satellite-sector columns (:meth:`_satellite_sectors`), then with ``obs_lookahead`` the
         4 look-ahead columns (:meth:`_lookahead`), then with ``obs_candidate_sky`` the 10
-        candidate columns (:meth:`_candidate_sky`).
+        candidate columns (:meth:`_candidate_sky`), then with ``obs_true_error``
+        (privileged) the 3 columns of the true position error.
         """
         obs = self._observation_rows()
         cfg = self.config
@@ -428,6 +429,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             or cfg.obs_satellite_sectors
             or cfg.obs_lookahead
             or cfg.obs_candidate_sky
+            or cfg.obs_true_error
         ):
             return obs
         ep = self._epoch
@@ -442,6 +444,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             blocks.append(self._lookahead())
         if cfg.obs_candidate_sky:
             blocks.append(self._candidate_sky())
+        if cfg.obs_true_error:  # privileged (a diagnostic): the truth no receiver knows
+            err = (ep.nav_pos_enu_m - ep.pos_enu_m) / cfg.obs_sigma_max_m
+            blocks.append(np.clip(err, -1.0, 1.0).astype(np.float32))
         return np.concatenate(blocks, axis=1)
 
     #: Distances along the route of the ``obs_lookahead`` points [m].
@@ -952,6 +957,7 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(2 * a if cfg.obs_satellite_sectors else 0),  # satellites per sector / 4
             np.zeros(4 if cfg.obs_lookahead else 0),  # satellites predicted ahead
             np.zeros(10 if cfg.obs_candidate_sky else 0),  # satellites usable at candidates
+            -np.ones(3 if cfg.obs_true_error else 0),  # true position error (privileged)
         ]
     )
     hi = np.ones(cfg.obs_dim)

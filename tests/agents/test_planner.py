@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -70,6 +72,16 @@ def test_last_plan_describes_the_command_applied() -> None:
     np.testing.assert_array_equal(plan["candidates"][best], plan["offsets"])
 
 
+def _flown_off_the_truth() -> tuple[Any, dict[str, np.ndarray]]:
+    """A default environment flown 5 steps (from reset seed 1,000,004): the estimates are off
+    the truth; the environment and its last observations."""
+    env = urban_canyon_v0.parallel_env()
+    obs, _ = env.reset(seed=1_000_004)
+    for _ in range(5):
+        obs, *_ = env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+    return env, obs
+
+
 def test_the_on_board_planner_looks_ahead_from_the_estimate() -> None:
     # with the base as its only candidate it flies the base, like the privileged one
     assert_fly_alike(
@@ -78,10 +90,7 @@ def test_the_on_board_planner_looks_ahead_from_the_estimate() -> None:
         seed=1_000_001,
         steps=10,
     )
-    env = urban_canyon_v0.parallel_env()
-    obs, _ = env.reset(seed=1_000_004)
-    for _ in range(5):  # fly a little so that the estimates are off the truth
-        obs, *_ = env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+    env, obs = _flown_off_the_truth()
     world = env.unwrapped.world
     truth = world.pos_enu_m.copy()
     assert np.abs(world.nav_pos_enu_m - truth).max() > 0.0
@@ -93,3 +102,32 @@ def test_the_on_board_planner_looks_ahead_from_the_estimate() -> None:
     np.testing.assert_array_equal(world.pos_enu_m, truth)  # the real world is untouched
     with pytest.raises(ValueError, match="from_estimate must be True or False"):
         make_policy("planner@from_estimate=1", env)
+
+
+def test_the_belief_sampling_planner_starts_from_draws_of_the_receivers_belief() -> None:
+    env, obs = _flown_off_the_truth()
+    world = env.unwrapped.world
+    truth = world.pos_enu_m.copy()
+    belief = make_policy("planner@from_estimate=True,sample_belief=True,horizon=2", env)
+    onboard = make_policy("planner@from_estimate=True,horizon=2", env)
+    zero = np.zeros((len(env.possible_agents), 3))
+    # reproducible for a noise seed, and not the look-ahead from the estimate itself
+    assert belief._rollout(zero, obs, 7) == belief._rollout(zero, obs, 7)
+    assert belief._rollout(zero, obs, 7) != onboard._rollout(zero, obs, 7)
+    np.testing.assert_array_equal(world.pos_enu_m, truth)  # the real world is untouched
+    # the draws follow N(estimate, P): mean and per-axis variance within 5 standard errors
+    est = np.asarray(world.nav_pos_enu_m, dtype=float)
+    rng = np.random.default_rng(3)
+    n = 4000
+    draws = np.stack([belief._belief_draw(est, world, rng) for _ in range(n)])
+    var = np.einsum("nii->ni", np.asarray(world.nav_cov_enu_m2))
+    inside = np.all(draws == est, axis=2).mean()
+    assert inside < 0.01  # few draws fall back to the estimate (inside a building)
+    dev = draws - est
+    assert np.all(np.abs(dev.mean(axis=0)) <= 5.0 * np.sqrt(var / n))
+    # the variance of n normal draws has a standard error of var * sqrt(2 / n)
+    np.testing.assert_allclose(dev.var(axis=0), var, rtol=5.0 * np.sqrt(2.0 / n) + inside)
+    with pytest.raises(ValueError, match="sample_belief=True needs from_estimate=True"):
+        make_policy("planner@sample_belief=True", env)
+    with pytest.raises(ValueError, match="sample_belief must be True or False"):
+        make_policy("planner@from_estimate=True,sample_belief=1", env)

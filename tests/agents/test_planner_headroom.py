@@ -64,12 +64,13 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
     args = ["--episodes", "2", "--first-seed", "1000000", "--jobs", "1", "--base", "wide"]
     assert mod.main([*args, *env, "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "nav error planner" in text and "R^2" in text
+    assert "nav error planner" in text and "R^2" in text and "goal rate: planner" in text
     r = json.loads((out / "report.json").read_text())
     assert r["episodes"] == 2
     pm, lo, hi = r["paired_m"]
     assert lo <= pm <= hi
     assert pm == pytest.approx(r["planner_nav_m"] - r["base_nav_m"], abs=1e-9)
+    assert 0.0 <= r["planner_goal_rate"] <= 1.0 and 0.0 <= r["base_goal_rate"] <= 1.0
     ep = np.load(out / "1000000.npz")
     steps, n = ep["alive"].shape
     assert 1 <= steps <= 4 and n == 3
@@ -99,7 +100,7 @@ def test_a_planner_that_only_has_its_base_is_recorded_as_its_base(tmp_path) -> N
     mod = _module()
     out = tmp_path / "same"
     args = ["--episodes", "2", "--first-seed", "1000010", "--jobs", "1", "--base", "wide"]
-    env = ["--env-set", "n_uavs=3", "max_steps=12"]
+    env = ["--env-set", "n_uavs=3"]  # whole episodes: both reach the goal
     one = ["--planner-set", "n_samples=1", "n_elite=1", "iterations=1", "horizon=1"]
     assert mod.main([*args, *env, *one, "--out", str(out)]) == 0
     for seed in (1000010, 1000011):
@@ -108,7 +109,10 @@ def test_a_planner_that_only_has_its_base_is_recorded_as_its_base(tmp_path) -> N
         np.testing.assert_array_equal(p["fix"][p["alive"]], b["fix"][b["alive"]])
         np.testing.assert_array_equal(p["nav"][p["alive"]], b["nav"][b["alive"]])
         assert not p["offset"].any()
+        assert p["success"].shape == b["success"].shape == ()
+        assert bool(p["success"]) == bool(b["success"])  # the same goal, the same way
     r = json.loads((out / "report.json").read_text())
     assert r["paired_m"] == [0.0, 0.0, 0.0]
+    assert r["planner_goal_rate"] == r["base_goal_rate"] == 1.0
     # no offsets, so nothing to explain: R^2 is undefined (NaN), not a number made up
     assert np.all(np.isnan(r["r2_unweighted"])) and np.all(np.isnan(r["r2_gain_weighted"]))
