@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pettingzoo.test import parallel_api_test
 
 from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import make_config, obs_layout, preset_config
+from tests.batched_alike import assert_batched_obs_equal_separate
 from tests.env_flight import fly_random
 
 
@@ -52,3 +54,10 @@ def test_entries_are_the_true_error_of_the_estimate_used_and_nothing_else_change
             np.testing.assert_allclose(got / scale, want[i], atol=1e-6)
             checked += 1
     assert checked > 0
+
+
+def test_batched_equals_separate_environments_and_the_api_holds() -> None:
+    kwargs = {"n_uavs": 3, "max_steps": 12, "obs_true_error": True}
+    batch = assert_batched_obs_equal_separate(kwargs, seed=21)
+    assert batch.obs_dim == 55
+    parallel_api_test(urban_canyon_v0.parallel_env(n_uavs=3, obs_true_error=True), num_cycles=50)
