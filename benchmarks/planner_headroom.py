@@ -25,8 +25,9 @@ the 3-D error of the estimate it used) and reports:
    whether the error of an outage is drift during it or a bad fix it starts from.
 5. **the goal rate** of planner and base (episodes that end with every UAV in the goal area
    and no crash, as ``coopnav evaluate`` counts them), so that errors are compared at the
-   same goal rate; episode files written before this was recorded lack it, and a report
-   from them leaves it out.
+   same goal rate, and the paired difference on the episodes both finish (conditioned on the
+   outcome, so only a pointer where the goal rates differ); episode files written before
+   this was recorded lack it, and a report from them leaves it out.
 
 The planner is slow (about 11-13 s per episode on one core with its defaults); episodes are
 written one file each into ``--out`` (a temporary name, then renamed), so an interrupted run
@@ -275,9 +276,18 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
         return out
 
     x, y, w, g = (np.concatenate(v) for v in (xs, ys, ws, gs))
-    goals: dict[str, float] = {}
+    goals: dict[str, Any] = {}
     if len(p_ok) == len(seeds):  # every episode file records it (this code wrote them all)
         goals = {"planner_goal_rate": float(np.mean(p_ok)), "base_goal_rate": float(np.mean(b_ok))}
+        # the paired difference on the episodes both finish: conditioned on the outcome, so a
+        # pointer only, for when the goal rates differ (a crash ends an episode before its
+        # dead reckoning drifts further)
+        both = np.asarray(p_ok) & np.asarray(b_ok)
+        goals["both_finished_episodes"] = int(both.sum())
+        if both.sum() >= 2:
+            goals["paired_both_finished_m"] = list(
+                bootstrap_mean_interval(d[both], 4000, np.random.default_rng(0))
+            )
     return {
         **goals,
         "episodes": len(seeds),
@@ -306,9 +316,14 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
         f"(planner lower in {r['planner_better_share']:.0%} of episodes)",
     ]
     if "planner_goal_rate" in r:
-        lines.append(
-            f"goal rate: planner {r['planner_goal_rate']:.3f}, {base} {r['base_goal_rate']:.3f}"
-        )
+        line = f"goal rate: planner {r['planner_goal_rate']:.3f}, {base} {r['base_goal_rate']:.3f}"
+        if "paired_both_finished_m" in r:
+            bm, blo, bhi = r["paired_both_finished_m"]
+            line += (
+                f"; on the {r['both_finished_episodes']} episodes both finish, paired "
+                f"{bm:+.3f} m [{blo:+.3f}, {bhi:+.3f}] (conditioned on the outcome: a pointer)"
+            )
+        lines.append(line)
     lines.append(
         "where the error comes from (metres of the mean error; UAV-steps above the threshold):"
     )

@@ -114,5 +114,46 @@ def test_a_planner_that_only_has_its_base_is_recorded_as_its_base(tmp_path) -> N
     r = json.loads((out / "report.json").read_text())
     assert r["paired_m"] == [0.0, 0.0, 0.0]
     assert r["planner_goal_rate"] == r["base_goal_rate"] == 1.0
+    assert r["both_finished_episodes"] == 2 and r["paired_both_finished_m"] == [0.0, 0.0, 0.0]
     # no offsets, so nothing to explain: R^2 is undefined (NaN), not a number made up
     assert np.all(np.isnan(r["r2_unweighted"])) and np.all(np.isnan(r["r2_gain_weighted"]))
+
+
+def test_goal_rates_and_the_comparison_on_the_episodes_both_finish(tmp_path) -> None:
+    mod = _module()
+    rng = np.random.default_rng(0)
+    steps, n = 6, 2
+    # planner error 1 m lower everywhere, but it fails episode 2; the base fails episode 3
+    outcomes = {10: (True, True), 11: (True, True), 12: (False, True), 13: (True, False)}
+    for seed, (p_ok, b_ok) in outcomes.items():
+        nav_b = np.full((steps, n), 3.0 + seed % 10)
+        alive = np.ones((steps, n), dtype=bool)
+        fix = np.ones((steps, n), dtype=bool)
+        np.savez(
+            tmp_path / f"{seed}.npz",
+            obs=rng.standard_normal((steps, n, 4)),
+            base=rng.standard_normal((steps, n, 3)),
+            offset=rng.standard_normal((steps, n, 3)),
+            fix=fix,
+            nav=nav_b - 1.0,
+            alive=alive,
+            cost_base=np.ones(steps),
+            cost_best=np.zeros(steps),
+            success=np.asarray(p_ok),
+        )
+        np.savez(
+            tmp_path / f"{seed}_base.npz", nav=nav_b, fix=fix, alive=alive, success=np.asarray(b_ok)
+        )
+    r = mod.analyse(tmp_path, list(outcomes))
+    assert r["planner_goal_rate"] == 0.75 and r["base_goal_rate"] == 0.75
+    assert r["both_finished_episodes"] == 2
+    assert r["paired_both_finished_m"] == pytest.approx([-1.0, -1.0, -1.0])
+    assert "goal rate: planner 0.750" in "\n".join(mod.report_lines(r, "wide"))
+    # episode files without the flag (older runs): no goal rates, rather than made-up ones
+    np.savez(
+        tmp_path / "14.npz",
+        **{k: v for k, v in np.load(tmp_path / "10.npz").items() if k != "success"},
+    )
+    np.savez(tmp_path / "14_base.npz", **dict(np.load(tmp_path / "10_base.npz")))
+    r_old = mod.analyse(tmp_path, [*outcomes, 14])
+    assert "planner_goal_rate" not in r_old and "paired_both_finished_m" not in r_old
