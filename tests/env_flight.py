@@ -1,4 +1,5 @@
-"""Test helpers: fly an environment on random commands; a point inside a building."""
+"""Test helpers: fly an environment on random commands; a point inside a building; the
+layout's bounds against the observation space."""
 
 from __future__ import annotations
 
@@ -32,3 +33,16 @@ def point_inside_tallest_building(env: Any) -> np.ndarray:
     )
     assert is_inside_building(b, inside[None])[0]
     return inside
+
+
+def assert_layout_bounds_are_the_space(cfg: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Assert that the named layout's bounds for ``cfg`` are the environment's observation
+    space (per agent, ``uav_0``), index by index; returns them (low, high)."""
+    from coopnav_env import urban_canyon_v0
+    from coopnav_env.envs import obs_layout
+
+    low, high = obs_layout(cfg).bounds()
+    space = urban_canyon_v0.parallel_env(config=cfg).observation_space("uav_0")
+    np.testing.assert_array_equal(low, space.low)
+    np.testing.assert_array_equal(high, space.high)
+    return low, high

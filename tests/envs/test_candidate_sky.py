@@ -12,7 +12,11 @@ from coopnav_env.envs import make_config, obs_layout, preset_config
 from coopnav_env.sim.city import is_inside_building
 from coopnav_env.sim.map_aided import predicted_line_of_sight
 from tests.batched_alike import assert_batched_obs_equal_separate
-from tests.env_flight import fly_random, point_inside_tallest_building
+from tests.env_flight import (
+    assert_layout_bounds_are_the_space,
+    fly_random,
+    point_inside_tallest_building,
+)
 
 
 def test_option_is_validated_off_by_default_and_named_in_the_layout() -> None:
@@ -29,10 +33,7 @@ def test_option_is_validated_off_by_default_and_named_in_the_layout() -> None:
         "candidate_swarm_satellites",
     ]
     assert layout["candidate_satellites"].stop == cfg.obs_dim - 5
-    low, high = layout.bounds()
-    space = urban_canyon_v0.parallel_env(config=cfg).observation_space("uav_0")
-    np.testing.assert_array_equal(low, space.low)
-    np.testing.assert_array_equal(high, space.high)
+    assert_layout_bounds_are_the_space(cfg)
 
 
 def test_candidates_are_here_ahead_left_right_and_far() -> None:

@@ -10,6 +10,7 @@ from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import make_config, obs_layout, preset_config
 from coopnav_env.envs import urban_canyon as uc
 from tests.batched_alike import assert_batched_obs_equal_separate
+from tests.env_flight import assert_layout_bounds_are_the_space
 
 CASES = [
     {"n_uavs": 5},
@@ -156,10 +157,7 @@ def test_layout_names_the_optional_blocks() -> None:
     assert names == ["protection_level", "satellites_received_sector", "satellites_blocked_sector"]
     assert layout["protection_level"].scale == 2 * cfg.alert_limit_m
     assert layout["satellites_blocked_sector"].components[2] == "90 deg"
-    low, high = layout.bounds()
-    space = urban_canyon_v0.parallel_env(config=cfg).observation_space("uav_0")
-    np.testing.assert_array_equal(low, space.low)
-    np.testing.assert_array_equal(high, space.high)
+    assert_layout_bounds_are_the_space(cfg)
 
 
 def test_parallel_api_with_the_option() -> None:
