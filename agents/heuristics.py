@@ -198,6 +198,49 @@ class _ColumnFollower:
     def _contact_factor(self, obs: np.ndarray) -> float:
         return 1.0
 
+    def guard_delta(self, obs: np.ndarray, delta: np.ndarray, time_s: float = 2.0) -> np.ndarray:
+        """``delta`` (N, 3), a change to the column's commands, limited so that it does not
+        close on any wall the range sensor sees faster than the wall guard allows.
+
+        ``obs`` (N, obs_dim) holds the observations of the same UAVs, row for row. The wall
+        guard of :meth:`act` pushes a UAV away from walls closer than ``wall_margin_m``; a
+        residual or a planner's offset added to the command afterwards can cancel that push
+        or, at several metres per second, carry a UAV from beyond the margin into the wall
+        within a step, and under degraded navigation that is what flies UAVs into walls.
+        Here the horizontal part of ``delta`` toward the wall of each range-sensor sector
+        (its azimuth; distance ``d``) is cut to at most ``(d - wall_margin_m) / time_s``
+        [m/s] (in command units, divided by the maximum speed): nothing toward a wall inside
+        the margin, and toward a wall beyond it no faster than reaches the margin in
+        ``time_s`` seconds (a sector that sees no wall within the sensor's range limits
+        nothing). Two passes, so that a corner's two walls are both respected;
+        the vertical part and every part along or away from walls are kept. Uses only
+        on-board data (the range sensor, true distances). Without a wall margin
+        (``wall_margin_m=None``) ``delta`` is returned unchanged.
+        """
+        delta = np.array(delta, dtype=np.float64, copy=True)
+        obs = np.asarray(obs, dtype=np.float64)
+        if delta.ndim != 2 or delta.shape[1] != 3 or obs.shape[0] != delta.shape[0]:
+            raise ValueError(
+                f"guard_delta needs delta (N, 3) and obs (N, obs_dim) with the same N, got "
+                f"{delta.shape} and {obs.shape}"
+            )
+        if not (float(time_s) > 0.0):
+            raise ValueError(f"guard_delta time_s must be > 0 [s], got {time_s!r}")
+        if self.wall_margin_m is None:
+            return delta
+        vmax = float(self.cfg.kinematics.max_speed_mps)
+        dist = self._walls.decode(obs)
+        allowed = np.maximum(dist - self.wall_margin_m, 0.0) / (float(time_s) * vmax)
+        # command units toward each sector's wall; none where the sensor sees no wall
+        allowed[dist >= self._walls.scale] = np.inf
+        for _ in range(2):
+            for k in range(self._wall_dirs.shape[0]):
+                d = self._wall_dirs[k]
+                excess = delta[:, :2] @ d - allowed[:, k]
+                hit = excess > 0.0
+                delta[hit, :2] -= excess[hit, None] * d
+        return delta
+
     def set_slot_shifts(self, shifts_m: np.ndarray | None) -> None:
         """Move every UAV's slot by ``shifts_m`` (N, 3) [m] (along the route, to the left of
         travel, up) from the next :meth:`act` on; None removes the shifts.

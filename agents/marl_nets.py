@@ -20,6 +20,7 @@ __all__ = [
     "MARLSettings",
     "base_command_before",
     "build_modules",
+    "check_residual_base",
     "load_marl_checkpoint",
     "swarm_command",
 ]
@@ -66,14 +67,27 @@ class MARLSettings:
     residual_scale : float
         ``residual_mode: velocity``: the network's output (in ``[-1, 1]`` after clipping)
         times this is added to the base command.
-    residual_mode : {"velocity", "offset"}
+    residual_mode : {"velocity", "offset", "options"}
         ``velocity``: the learned action is a velocity residual added to the base command (the
         base command is part of the actor's input). ``offset``: the learned action moves each
         UAV's slot of the base column (along the route, to the left, up) by the action times
         ``offset_scale_m`` (the base must be a column follower: ``formation``, ``sky``,
-        ``spread``, ``wide``), so the policy shapes the formation while the base flies the route.
+        ``spread``, ``wide``, ``guarded``, ``ceiling``), so the policy shapes the formation
+        while the base flies the route. ``options``: each UAV chooses one of a few discrete
+        slot shifts (``option_shifts_m``) from a categorical distribution (per-UAV logits,
+        shared parameters), usually held for several steps with ``action_repeat``: exploration
+        then tries whole manoeuvres (drop back 10 m, move 5 m to the left, ...) rather than
+        Gaussian noise around the base, and a policy that keeps choosing the first option
+        (no shift) flies exactly like its base. Evaluation takes the most probable option.
     offset_scale_m : list of 3 floats
         Largest slot shift along the route, to the left and up [m] (``offset`` mode).
+    option_shifts_m : list of [along, left, up] lists
+        The slot shifts [m] the ``options`` mode chooses among (at least 2, each in
+        ``[-100, 100]``); by convention the first is no shift.
+    option_init_prob : float
+        ``options`` mode: the probability of the first option at the start of training (the
+        output layer starts at zero weights and a bias that gives it this probability, the
+        others sharing the rest), in ``(0, 1)``.
     action_repeat : int
         Swarm steps per decision of the actor, >= 1 (default 1: a decision every step). The
         network's output is held for ``action_repeat`` steps while the base heuristic keeps
@@ -85,6 +99,15 @@ class MARLSettings:
         the per-step discount). A copy whose episode ends within a decision ends that
         transition there; the copy's next episode starts with the rest of the held output
         (at most ``action_repeat - 1`` steps), which no transition is credited with.
+    residual_wall_guard : bool
+        Velocity mode: remove from the residual its horizontal part toward any wall that the
+        range sensor puts within the base column's wall margin
+        (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`), so that neither the
+        learned residual nor exploration noise around it can cancel the base's wall guard
+        (default False, which trains bit for bit as before). The base must be a column
+        follower with a wall margin (``guarded``, ``ceiling``). What the policy's
+        log-probability is computed on is the network's raw output; the guard acts on the
+        command, like the clipping, and is part of the environment as the actor sees it.
     """
 
     algorithm: str = "mappo"
@@ -108,7 +131,18 @@ class MARLSettings:
     residual_scale: float = 0.5
     residual_mode: str = "velocity"
     offset_scale_m: list[float] = field(default_factory=lambda: [15.0, 8.0, 8.0])
+    option_shifts_m: list[list[float]] = field(
+        default_factory=lambda: [
+            [0.0, 0.0, 0.0],
+            [10.0, 0.0, 0.0],
+            [-10.0, 0.0, 0.0],
+            [0.0, 5.0, 0.0],
+            [0.0, -5.0, 0.0],
+        ]
+    )
+    option_init_prob: float = 0.8
     action_repeat: int = 1
+    residual_wall_guard: bool = False
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -156,9 +190,9 @@ class MARLSettings:
         self.residual_base_kwargs = dict(self.residual_base_kwargs)
         if self.lr_schedule not in ("constant", "linear"):
             raise bad("lr_schedule", "'constant' or 'linear'")
-        if self.residual_mode not in ("velocity", "offset"):
-            raise bad("residual_mode", "'velocity' or 'offset'")
-        if self.residual_mode == "offset" and self.residual_base is None:
+        if self.residual_mode not in ("velocity", "offset", "options"):
+            raise bad("residual_mode", "'velocity', 'offset' or 'options'")
+        if self.residual_mode in ("offset", "options") and self.residual_base is None:
             raise bad("residual_mode", "'velocity' when residual_base is null")
         if (
             not isinstance(self.offset_scale_m, list | tuple)
@@ -169,6 +203,37 @@ class MARLSettings:
         ):
             raise bad("offset_scale_m", "three numbers in [0, 100] (along, left, up) [m]")
         self.offset_scale_m = [float(v) for v in self.offset_scale_m]
+        rows = self.option_shifts_m
+        if (
+            not isinstance(rows, list | tuple)
+            or len(rows) < 2
+            or any(
+                not isinstance(r, list | tuple)
+                or len(r) != 3
+                or any(
+                    isinstance(v, bool) or not isinstance(v, int | float) or not -100 <= v <= 100
+                    for v in r
+                )
+                for r in rows
+            )
+        ):
+            raise bad(
+                "option_shifts_m", "a list of at least 2 [along, left, up] shifts in [-100, 100] m"
+            )
+        self.option_shifts_m = [[float(v) for v in r] for r in rows]
+        if not isinstance(self.option_init_prob, int | float) or not (
+            0.0 < float(self.option_init_prob) < 1.0
+        ):
+            raise bad("option_init_prob", "a number in (0, 1)")
+        if not isinstance(self.residual_wall_guard, bool):
+            raise bad("residual_wall_guard", "true or false")
+        if self.residual_wall_guard and (
+            self.residual_base is None or self.residual_mode != "velocity"
+        ):
+            raise bad(
+                "residual_wall_guard",
+                "false unless residual_base is set and residual_mode is 'velocity'",
+            )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any] | None) -> MARLSettings:
@@ -221,6 +286,34 @@ def build_modules(
             activation_class=nn.Tanh,
         )
 
+    if settings.residual_mode == "options":
+        from torchrl.modules import OneHotCategorical
+
+        n_opt = len(settings.option_shifts_m)
+        logit_net = mlp(actor_dim, n_opt)
+        p0 = float(settings.option_init_prob)
+        with torch.no_grad():
+            last = logit_net[-1]
+            last.weight.zero_()
+            last.bias.fill_(float(np.log((1.0 - p0) / (n_opt - 1))))
+            last.bias[0] = float(np.log(p0))
+        actor = ProbabilisticActor(
+            module=TensorDictModule(
+                logit_net, in_keys=[("agents", "observation")], out_keys=[("agents", "logits")]
+            ),
+            in_keys=[("agents", "logits")],
+            out_keys=[("agents", "action")],
+            distribution_class=OneHotCategorical,
+            return_log_prob=True,
+            log_prob_key=("agents", "action_log_prob"),
+        )
+        critic = TensorDictModule(
+            mlp(critic_dim, 1),
+            in_keys=[("agents", "critic_input")],
+            out_keys=[("agents", "state_value")],
+        )
+        return actor, critic
+
     loc_net = mlp(actor_dim, 3)
     if settings.residual_base is not None:
         # start exactly at the base policy: the output layer is zero (its weight still gets
@@ -267,6 +360,17 @@ def base_command_before(
     return np.stack([acts[a] for a in agents]).astype(np.float32)
 
 
+def check_residual_base(settings: MARLSettings, base: Any) -> None:
+    """``ValueError`` if ``base`` cannot serve ``settings`` (``residual_wall_guard`` needs a
+    column follower with a wall margin, e.g. ``guarded`` or ``ceiling``)."""
+    if settings.residual_wall_guard and getattr(base, "wall_margin_m", None) is None:
+        raise ValueError(
+            "torchrl.residual_wall_guard needs a residual_base with a wall guard "
+            f"(guarded, ceiling, or a column with wall_margin_m set), got "
+            f"{settings.residual_base!r}"
+        )
+
+
 def swarm_command(
     settings: MARLSettings,
     raw: np.ndarray,
@@ -277,16 +381,25 @@ def swarm_command(
 ) -> np.ndarray:
     """The velocity command ``(N, 3)`` in ``[-1, 1]`` of the network's output ``raw (N, 3)``.
 
-    No base: ``clip(raw)``. Velocity mode: ``clip(base_cmd + residual_scale * clip(raw))``.
-    Offset mode: the base column with every slot moved by ``clip(raw) * offset_scale_m``.
+    No base: ``clip(raw)``. Velocity mode: ``clip(base_cmd + residual_scale * clip(raw))``,
+    the residual first guarded against walls with ``residual_wall_guard``. Offset mode: the
+    base column with every slot moved by ``clip(raw) * offset_scale_m``. Options mode: ``raw``
+    is one-hot (N, n_options); every slot moved by its chosen row of ``option_shifts_m``.
     """
     a = np.clip(raw, -1.0, 1.0)
     if settings.residual_base is None:
         return a
     if settings.residual_mode == "velocity":
         assert base_cmd is not None
-        return np.clip(base_cmd + settings.residual_scale * a, -1.0, 1.0)
-    base.set_slot_shifts(a * np.asarray(settings.offset_scale_m))
+        delta = settings.residual_scale * a
+        if settings.residual_wall_guard:
+            obs = np.stack([np.asarray(observations[x], dtype=np.float64) for x in agents])
+            delta = base.guard_delta(obs, delta)
+        return np.clip(base_cmd + delta, -1.0, 1.0)
+    if settings.residual_mode == "options":
+        base.set_slot_shifts(raw @ np.asarray(settings.option_shifts_m))  # raw is one-hot
+    else:
+        base.set_slot_shifts(a * np.asarray(settings.offset_scale_m))
     acts = base.act(observations)
     return np.stack([acts[x] for x in agents]).astype(np.float32)
 

@@ -20,6 +20,7 @@ from agents.marl_nets import (
     MARLSettings,
     base_command_before,
     build_modules,
+    check_residual_base,
     load_marl_checkpoint,
     swarm_command,
 )
@@ -118,6 +119,7 @@ class MARLPolicy:
             self._base = make_base(
                 self.settings.residual_base, env, **self.settings.residual_base_kwargs
             )
+            check_residual_base(self.settings, self._base)
         self._held: np.ndarray | None = None  # the actor's output, held for action_repeat
         self._since = 0  # steps it has been held
 
@@ -129,8 +131,9 @@ class MARLPolicy:
         self._since = 0
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The mean action of every UAV, combined with the base policy as in training (a new
-        decision every ``action_repeat`` steps after :meth:`reset`, held in between)."""
+        """The mean action of every UAV (``options`` mode: the most probable option), combined
+        with the base policy as in training (a new decision every ``action_repeat`` steps
+        after :meth:`reset`, held in between)."""
         from tensordict import TensorDict
 
         live = list(observations)
@@ -147,8 +150,14 @@ class MARLPolicy:
             inp = obs if base_cmd is None else np.concatenate([obs, base_cmd], axis=1)
             td = TensorDict({("agents", "observation"): self._torch.from_numpy(inp[None])}, [1])
             with self._torch.no_grad():
-                td = self._actor.module[0](td)  # the loc/scale module: the mean is "loc"
-            self._held, self._since = td["agents", "loc"][0].numpy(), 0
+                td = self._actor.module[0](td)  # the loc/scale (or logits) module
+            if self.settings.residual_mode == "options":  # the most probable option, one-hot
+                logits = td["agents", "logits"][0].numpy()
+                held = np.zeros_like(logits)
+                held[np.arange(len(held)), np.argmax(logits, axis=1)] = 1.0
+                self._held, self._since = held, 0
+            else:  # the mean
+                self._held, self._since = td["agents", "loc"][0].numpy(), 0
         self._since += 1
         mean = self._held
         cmd = swarm_command(self.settings, mean, self._base, base_cmd, observations, self.agents)

@@ -84,6 +84,15 @@ class PrivilegedPlanner:
         in an unknown direction, which the plain look-ahead from the estimate, whose errors
         start at zero, does not; a draw that falls inside a building is replaced by the
         estimate.
+    guard_offsets : bool
+        Remove from every offset, in the look-ahead and in the command applied, its
+        horizontal part toward any wall the range sensor puts within the base column's wall
+        margin (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`; the base must have a
+        wall guard, e.g. ``ceiling``). Without it an offset can cancel the base's wall
+        guard, which is how the on-board look-ahead, whose belief of where the UAVs are is
+        metres off, flies them into walls. On-board (the range sensor measures true
+        distances). In the look-ahead the copy's range sensor is read from where the copy's
+        UAVs are (with ``from_estimate``, where they are believed to be).
     """
 
     name = "planner"
@@ -103,6 +112,7 @@ class PrivilegedPlanner:
         seed: int = 0,
         from_estimate: bool = False,
         sample_belief: bool = False,
+        guard_offsets: bool = False,
     ) -> None:
         for name, v, lo in (
             ("horizon", horizon, 1),
@@ -136,6 +146,14 @@ class PrivilegedPlanner:
         if sample_belief and not from_estimate:
             raise ValueError("planner sample_belief=True needs from_estimate=True")
         self.sample_belief = sample_belief
+        if not isinstance(guard_offsets, bool):
+            raise ValueError(f"planner guard_offsets must be True or False, got {guard_offsets!r}")
+        if guard_offsets and getattr(base, "wall_margin_m", None) is None:
+            raise ValueError(
+                "planner guard_offsets=True needs a base with a wall guard (guarded, ceiling, "
+                f"or a column with wall_margin_m set), got {getattr(base, 'name', base)!r}"
+            )
+        self.guard_offsets = guard_offsets
         self._rng = np.random.default_rng(seed)
         base_env = getattr(env, "unwrapped", env)
         self._agents = list(base_env.possible_agents)
@@ -170,11 +188,12 @@ class PrivilegedPlanner:
         for _ in range(self.horizon):
             if not env.agents:
                 break
-            cmd = base.act({a: obs[a] for a in env.agents})
+            live = [a for a in self._agents if a in env.agents]
+            cmd = base.act({a: obs[a] for a in live})
+            off = self._applied(base, offsets, obs, live)
             acts = {
-                a: np.clip(cmd[a] + offsets[i], -1.0, 1.0).astype(np.float32)
-                for i, a in enumerate(self._agents)
-                if a in cmd
+                a: np.clip(cmd[a] + off[j], -1.0, 1.0).astype(np.float32)
+                for j, a in enumerate(live)
             }
             obs, _r, _te, _tr, infos = env.step(acts)
             errs = [
@@ -190,6 +209,16 @@ class PrivilegedPlanner:
             if all(i["in_goal"] for i in infos.values()):
                 break
         return cost
+
+    def _applied(
+        self, base: Any, offsets: np.ndarray, obs: Mapping[str, np.ndarray], live: list[str]
+    ) -> np.ndarray:
+        """The offsets of the ``live`` agents (rows in their order), wall-guarded with
+        ``guard_offsets``."""
+        rows = offsets[[self._agents.index(a) for a in live]]
+        if not self.guard_offsets or not live:
+            return rows
+        return base.guard_delta(np.stack([np.asarray(obs[a]) for a in live]), rows)
 
     @staticmethod
     def _belief_draw(est: np.ndarray, world: Any, rng: np.random.Generator) -> np.ndarray:
@@ -213,8 +242,8 @@ class PrivilegedPlanner:
         does (``benchmarks/planner_headroom.py``): ``base_cost`` (the look-ahead cost of the
         base heuristic alone, offset zero), ``best_cost`` (of the plan applied; at most
         ``base_cost``), ``offsets`` (``(n_agents, 3)``, the per-UAV offset applied, in the
-        order of ``possible_agents``, before clipping), ``base_command`` (the base
-        heuristic's command per agent), and ``candidates`` (``(n_samples * iterations,
+        order of ``possible_agents``, before the wall guard and clipping), ``base_command``
+        (the base heuristic's command per agent), and ``candidates`` (``(n_samples * iterations,
         n_agents, 3)``, every offset scored, round by round; the first is the base alone) with
         their look-ahead ``costs`` (the data a learned model of the look-ahead would be
         fitted to).
@@ -248,7 +277,9 @@ class PrivilegedPlanner:
                 best_cost, best = float(costs[order[0]]), cands[order[0]].copy()
             elite = cands[order[: self.n_elite]]
             mean, std = elite.mean(axis=0), elite.std(axis=0) + 1e-3
-        cmd = self.base.act(observations)  # advances the real base heuristic by one step
+        live_order = [a for a in self._agents if a in observations]
+        cmd = self.base.act({a: observations[a] for a in live_order})  # advances the base
+        applied = self._applied(self.base, best, observations, live_order)
         self.last_plan = {
             "base_cost": float(base_cost),
             "best_cost": best_cost,
@@ -258,6 +289,6 @@ class PrivilegedPlanner:
             "costs": np.concatenate(scores),
         }
         return {
-            a: np.clip(cmd[a] + best[self._agents.index(a)], -1.0, 1.0).astype(np.float32)
-            for a in live
+            a: np.clip(cmd[a] + applied[j], -1.0, 1.0).astype(np.float32)
+            for j, a in enumerate(live_order)
         }

@@ -70,6 +70,7 @@ from agents.marl_nets import (
     MARLSettings,
     base_command_before,
     build_modules,
+    check_residual_base,
     load_marl_checkpoint,
     swarm_command,
 )
@@ -231,7 +232,9 @@ class MARLTrainer:
             return [None] * s.n_copies
         from agents import make_policy
 
-        return [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
+        bases = [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
+        check_residual_base(s, bases[0])
+        return bases
 
     def _states(self) -> np.ndarray | None:
         if not self.settings.centralised_critic:

@@ -261,6 +261,46 @@ def test_wall_guard_pushes_away_from_a_near_wall():
         make_policy("wide@wall_margin_m=5,wall_gain_per_s=-1", env)
 
 
+def test_guard_delta_removes_only_the_part_toward_a_near_wall():
+    """``guard_delta`` drops the horizontal part of a change that points at a wall inside the
+    margin (two near walls at a corner: both), cuts it toward a wall beyond the margin to the
+    speed that reaches the margin in ``time_s``, keeps every other part, and is the identity
+    without a wall margin or a wall in the sensor's range."""
+    from coopnav_env.envs import obs_layout
+
+    env = urban(n_uavs=3)
+    obs, _ = env.reset(seed=1_000_002)
+    walls = obs_layout(env.unwrapped.config)["wall_distance"]
+    n_az = walls.size
+    east, north = n_az // 4, 0  # sector azimuths 90 and 0 deg
+    o = np.stack([obs[a] for a in env.possible_agents]).astype(np.float64)
+    o[:, walls.slice] = 1.0  # every wall at the sensor's range
+    o[0, walls.start + east] = 2.0 / walls.scale  # UAV 0: a wall 2 m to the East
+    o[1, walls.start + east] = 2.0 / walls.scale  # UAV 1: walls East and North (a corner)
+    o[1, walls.start + north] = 3.0 / walls.scale
+    o[2, walls.start + east] = 12.0 / walls.scale  # UAV 2: a wall 12 m East, 4 m beyond
+    delta = np.array([[0.4, 0.3, 0.2], [0.4, 0.3, -0.1], [0.4, 0.3, 0.2]])
+    pol = make_policy("ceiling", env)  # wall margin 8 m
+    vmax = env.unwrapped.config.kinematics.max_speed_mps
+    out = pol.guard_delta(o, delta)
+    np.testing.assert_allclose(out[0], [0.0, 0.3, 0.2], atol=1e-12)  # East part gone
+    np.testing.assert_allclose(out[1], [0.0, 0.0, -0.1], atol=1e-12)  # both parts gone
+    # toward the wall 4 m beyond the margin: at most the speed that reaches it in 2 s
+    np.testing.assert_allclose(out[2], [(12.0 - 8.0) / 2.0 / vmax, 0.3, 0.2], atol=1e-12)
+    slow = pol.guard_delta(o, delta, time_s=40.0)
+    np.testing.assert_allclose(slow[2], [(12.0 - 8.0) / 40.0 / vmax, 0.3, 0.2], atol=1e-12)
+    o[2, walls.start + east] = 1.0
+    np.testing.assert_array_equal(pol.guard_delta(o, delta)[2], delta[2])  # no near wall
+    away = pol.guard_delta(o, -delta)  # pointing away from the walls: unchanged
+    np.testing.assert_array_equal(away, -delta)
+    # without a wall margin the change is returned as it is
+    np.testing.assert_array_equal(make_policy("wide", env).guard_delta(o, delta), delta)
+    with pytest.raises(ValueError, match="guard_delta needs delta"):
+        pol.guard_delta(o, delta[:2])
+    with pytest.raises(ValueError, match="time_s must be > 0"):
+        pol.guard_delta(o, delta, time_s=0.0)
+
+
 @needs_env
 def test_ceiling_climbs_to_and_holds_the_top_of_the_band():
     """``ceiling`` = ``guarded`` with its altitude target 10 m above the band: it climbs

@@ -131,3 +131,35 @@ def test_the_belief_sampling_planner_starts_from_draws_of_the_receivers_belief()
         make_policy("planner@sample_belief=True", env)
     with pytest.raises(ValueError, match="sample_belief must be True or False"):
         make_policy("planner@from_estimate=True,sample_belief=1", env)
+
+
+def test_guarded_offsets_never_point_at_a_near_wall() -> None:
+    env, obs = _flown_off_the_truth()
+    from coopnav_env.envs import obs_layout
+
+    walls = obs_layout(env.unwrapped.config)["wall_distance"]
+    guarded = make_policy(
+        "planner@from_estimate=True,guard_offsets=True,base='ceiling',n_samples=3,iterations=1,"
+        "horizon=2",
+        env,
+    )
+    base = guarded.base
+    n = len(env.possible_agents)
+    live = list(obs)
+    o = np.stack([obs[a] for a in live]).astype(np.float64)
+    o[:, walls.slice] = 1.0
+    o[0, walls.start + walls.size // 4] = 2.0 / walls.scale  # a wall 2 m East of UAV 0
+    fake = {a: o[i].astype(np.float32) for i, a in enumerate(live)}
+    offsets = np.tile([0.5, 0.0, 0.0], (n, 1))  # everyone pushed East
+    applied = guarded._applied(base, offsets, fake, live)
+    assert applied[0, 0] == pytest.approx(0.0, abs=1e-12)  # not toward the near wall
+    np.testing.assert_array_equal(applied[1:], offsets[1:])  # the others keep theirs
+    # the guarded look-ahead is a different plan from the unguarded one only where it acts
+    plain = make_policy("planner@from_estimate=True,base='ceiling',n_samples=3,horizon=2", env)
+    np.testing.assert_array_equal(plain._applied(base, offsets, fake, live), offsets)
+    cmd = guarded.act(obs)
+    assert set(cmd) == set(obs)
+    with pytest.raises(ValueError, match="guard_offsets must be True or False"):
+        make_policy("planner@guard_offsets=1", env)
+    with pytest.raises(ValueError, match="needs a base with a wall guard"):
+        make_policy("planner@guard_offsets=True,base='wide'", env)

@@ -41,6 +41,11 @@ def _one_thread():
         ("offset_scale_m", [1.0, 2.0]),
         ("lr_schedule", "cosine"),
         ("action_repeat", 0),
+        ("residual_wall_guard", True),  # needs a residual base in velocity mode
+        ("residual_mode", "options"),  # needs a residual base
+        ("option_shifts_m", [[0.0, 0.0, 0.0]]),
+        ("option_shifts_m", [[0.0, 0.0], [1.0, 0.0]]),
+        ("option_init_prob", 1.0),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -113,6 +118,78 @@ def test_an_untrained_offset_policy_flies_exactly_like_its_base(tmp_path) -> Non
     tr = MARLTrainer(s, {}, seed=0)
     tr.save(tmp_path / "final_model.pt")
     assert_fly_alike(f"mappo:{tmp_path}", "spread", seed=1_000_003, steps=40)
+
+
+def test_the_residual_wall_guard_keeps_the_residual_off_near_walls(tmp_path) -> None:
+    from agents.marl_nets import swarm_command
+    from coopnav_env.envs import obs_layout
+
+    env = urban_canyon_v0.parallel_env(n_uavs=3)
+    obs, _ = env.reset(seed=1_000_002)
+    agents = env.possible_agents
+    walls = obs_layout(env.unwrapped.config)["wall_distance"]
+    for o in obs.values():
+        o[walls.slice] = 1.0
+    obs[agents[0]][walls.start + walls.size // 4] = 2.0 / walls.scale  # a wall 2 m East
+    guarded = MARLSettings(residual_base="ceiling", residual_wall_guard=True)
+    plain = MARLSettings(residual_base="ceiling")
+    base = make_policy("ceiling", env)
+    base_cmd = np.zeros((3, 3), dtype=np.float32)
+    raw = np.tile([1.0, 0.5, 0.2], (3, 1))  # every residual pushes East (and North, up)
+    g = swarm_command(guarded, raw, base, base_cmd, obs, agents)
+    p = swarm_command(plain, raw, base, base_cmd, obs, agents)
+    np.testing.assert_allclose(g[0], [0.0, 0.25, 0.1], atol=1e-7)  # East part removed
+    np.testing.assert_allclose(g[1:], p[1:])  # UAVs far from walls: as without the guard
+    np.testing.assert_allclose(p[0], [0.5, 0.25, 0.1], atol=1e-7)
+    # a base without a wall guard is refused when the trainer builds it, naming the setting
+    with pytest.raises(ValueError, match="residual_wall_guard needs a residual_base"):
+        MARLTrainer(
+            MARLSettings(
+                n_copies=1, rollout_steps=2, residual_base="wide", residual_wall_guard=True
+            ),
+            {},
+            seed=0,
+        )
+    # an untrained guarded residual (zero output) still flies exactly like its base
+    s = MARLSettings(n_copies=1, rollout_steps=2, residual_base="ceiling", residual_wall_guard=True)
+    MARLTrainer(s, {}, seed=0).save(tmp_path / "final_model.pt")
+    assert_fly_alike(f"mappo:{tmp_path}", "ceiling", seed=1_000_003, steps=20)
+
+
+def test_options_mode_samples_one_hot_choices_and_starts_at_its_base(tmp_path) -> None:
+    s = MARLSettings(
+        n_copies=2,
+        rollout_steps=8,
+        residual_base="ceiling",
+        residual_mode="options",
+        action_repeat=2,
+        option_init_prob=0.7,
+    )
+    tr = MARLTrainer(s, {}, seed=0)
+    data = tr.collect()
+    act = data["agents", "action"].numpy()
+    assert act.shape == (2, 8, 5, len(s.option_shifts_m))
+    np.testing.assert_array_equal(act.sum(axis=-1), 1.0)  # one option per UAV and decision
+    # the first option has the start probability; 80 draws: 5 standard errors
+    share = act[..., 0].mean()
+    assert abs(share - 0.7) <= 5.0 * np.sqrt(0.7 * 0.3 / act[..., 0].size)
+    logp = data["agents", "action_log_prob"].numpy()
+    expected = np.where(act[..., 0] == 1.0, np.log(0.7), np.log(0.3 / 4))
+    np.testing.assert_allclose(logp, expected, rtol=1e-5)
+    # a chosen option moves the UAV's slot by its row of option_shifts_m
+    from agents.marl_nets import swarm_command
+
+    env = urban_canyon_v0.parallel_env()
+    obs, _ = env.reset(seed=1_000_003)
+    base = make_policy("ceiling", env)
+    seen: list[np.ndarray] = []
+    base.set_slot_shifts = lambda shifts: seen.append(np.asarray(shifts))  # type: ignore[method-assign]
+    onehot = np.eye(5, dtype=np.float32)[[0, 1, 2, 3, 4]]
+    swarm_command(s, onehot, base, None, obs, env.possible_agents)
+    np.testing.assert_array_equal(seen[0], np.asarray(s.option_shifts_m))
+    # untrained, the most probable option is no shift: it flies exactly like its base
+    tr.save(tmp_path / "final_model.pt")
+    assert_fly_alike(f"mappo:{tmp_path}", "ceiling", seed=1_000_003, steps=30)
 
 
 def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch) -> None:
