@@ -361,8 +361,15 @@ def base_command_before(
 
 
 def check_residual_base(settings: MARLSettings, base: Any) -> None:
-    """``ValueError`` if ``base`` cannot serve ``settings`` (``residual_wall_guard`` needs a
-    column follower with a wall margin, e.g. ``guarded`` or ``ceiling``)."""
+    """``ValueError`` if ``base`` cannot serve ``settings``: the ``offset`` and ``options``
+    modes need a column follower (it has slots to shift), ``residual_wall_guard`` one with a
+    wall margin (e.g. ``guarded`` or ``ceiling``)."""
+    if settings.residual_mode in ("offset", "options") and not hasattr(base, "set_slot_shifts"):
+        raise ValueError(
+            f"torchrl.residual_mode={settings.residual_mode!r} needs a column follower as "
+            f"residual_base (formation, sky, spread, wide, guarded, ceiling), got "
+            f"{settings.residual_base!r}"
+        )
     if settings.residual_wall_guard and getattr(base, "wall_margin_m", None) is None:
         raise ValueError(
             "torchrl.residual_wall_guard needs a residual_base with a wall guard "

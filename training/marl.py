@@ -48,7 +48,11 @@ hand-written base policy (:func:`agents.make_policy`), clipped to ``[-1, 1]``: r
 learning (Silver et al. 2018; Johannink et al. 2019). The network's output is scaled by
 ``residual_scale`` and its last layer starts at zero, so training starts from the base
 policy's behaviour and RL only has to find what to change. The base command is part of the
-actor's input. With ``residual_base: null`` the policy flies on its own.
+actor's input. With ``residual_base: null`` the policy flies on its own. The residual can be
+guarded against walls (``residual_wall_guard``), and two other modes replace the velocity
+residual: ``offset`` (learned slot shifts of a column base) and ``options`` (a categorical
+choice per UAV among a few slot shifts, :class:`agents.marl_nets.MARLSettings` describes
+every setting).
 """
 
 from __future__ import annotations

@@ -187,6 +187,15 @@ def test_options_mode_samples_one_hot_choices_and_starts_at_its_base(tmp_path) -
     onehot = np.eye(5, dtype=np.float32)[[0, 1, 2, 3, 4]]
     swarm_command(s, onehot, base, None, obs, env.possible_agents)
     np.testing.assert_array_equal(seen[0], np.asarray(s.option_shifts_m))
+    # a base without slots to shift is refused, naming the setting
+    with pytest.raises(ValueError, match="needs a column follower"):
+        MARLTrainer(
+            MARLSettings(
+                n_copies=1, rollout_steps=2, residual_base="waypoint", residual_mode="options"
+            ),
+            {},
+            seed=0,
+        )
     # untrained, the most probable option is no shift: it flies exactly like its base
     tr.save(tmp_path / "final_model.pt")
     assert_fly_alike(f"mappo:{tmp_path}", "ceiling", seed=1_000_003, steps=30)
