@@ -100,9 +100,10 @@ class MARLSettings:
         transition there; the copy's next episode starts with the rest of the held output
         (at most ``action_repeat - 1`` steps), which no transition is credited with.
     residual_wall_guard : bool
-        Velocity mode: remove from the residual its horizontal part toward any wall that the
-        range sensor puts within the base column's wall margin
-        (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`), so that neither the
+        Velocity mode: limit the residual's horizontal part toward walls the range sensor
+        sees (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`: nothing toward a wall
+        inside the base column's wall margin, toward one beyond it no faster than reaches
+        the margin in 2 s), so that neither the
         learned residual nor exploration noise around it can cancel the base's wall guard
         (default False, which trains bit for bit as before). The base must be a column
         follower with a wall margin (``guarded``, ``ceiling``). What the policy's

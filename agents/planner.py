@@ -85,12 +85,14 @@ class PrivilegedPlanner:
         start at zero, does not; a draw that falls inside a building is replaced by the
         estimate.
     guard_offsets : bool
-        Remove from every offset, in the look-ahead and in the command applied, its
-        horizontal part toward any wall the range sensor puts within the base column's wall
-        margin (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`; the base must have a
-        wall guard, e.g. ``ceiling``). Without it an offset can cancel the base's wall
-        guard, which is how the on-board look-ahead, whose belief of where the UAVs are is
-        metres off, flies them into walls. On-board (the range sensor measures true
+        Limit every offset, in the look-ahead and in the command applied, toward walls the
+        range sensor sees (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`: nothing
+        toward a wall inside the base column's wall margin, toward one beyond it no faster
+        than reaches the margin in 2 s; the base must have a wall guard, e.g. ``ceiling``).
+        Without it an offset can cancel the base's wall guard or outrun it, which is how the
+        on-board look-ahead, whose belief of where the UAVs are is metres off, flies them
+        into walls (with it they still crash in about 1 episode in 10 against ``ceiling``'s
+        1 in 50: docs/marl/README.md). On-board (the range sensor measures true
         distances). In the look-ahead the copy's range sensor is read from where the copy's
         UAVs are (with ``from_estimate``, where they are believed to be).
     """
