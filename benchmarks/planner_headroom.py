@@ -3,8 +3,8 @@
 Flies the privileged planner over a base heuristic (``planner@base='BASE'``) and the base
 heuristic alone through the same episodes, keeps every step (the actor's inputs of a residual
 policy over the base: observation and base command; the planner's offset to the base
-command; the look-ahead cost of the base alone and of the plan applied; each UAV's fix and
-the 3-D error of the estimate it used) and reports:
+command; the look-ahead cost of the base alone and of the plan applied, and every candidate
+scored with its cost; each UAV's fix and the 3-D error of the estimate it used) and reports:
 
 1. **the headroom**: mean ``nav`` error (every UAV-step, as ``coopnav study --score nav``)
    of planner and base, and their paired difference by episode with a 95 % bootstrap interval
@@ -67,12 +67,20 @@ def _save_npz(path: Path, **arrays: Any) -> None:
 
 def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
     """One episode of ``planner`` from ``reset(seed)``, every step kept (agents in
-    ``possible_agents`` order; ``alive`` marks the UAVs still flying at that step)."""
+    ``possible_agents`` order; ``alive`` marks the UAVs still flying at that step).
+
+    Besides the observations, base commands, offsets applied, fixes and errors, every
+    candidate the planner scored is kept with its look-ahead cost (``candidates``: ``(steps,
+    n_samples * iterations, n_agents, 3)``, the first of each step the base alone;
+    ``candidate_costs``: ``(steps, n_samples * iterations)``): the data a learned model of
+    the look-ahead would be fitted to."""
     agents = list(env.possible_agents)
     obs, _ = env.reset(seed=seed)
     planner.reset(seed)
     rows: dict[str, list[Any]] = {k: [] for k in ("obs", "base", "offset", "fix", "nav", "alive")}
     costs: list[tuple[float, float]] = []
+    cands: list[np.ndarray] = []
+    cand_costs: list[np.ndarray] = []
     at_goal, collided = np.zeros(len(agents), dtype=bool), False
     while env.agents:
         live = list(env.agents)
@@ -83,6 +91,8 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
         rows["base"].append(np.stack([plan["base_command"].get(a, zero3) for a in agents]))
         rows["offset"].append(plan["offsets"].astype(np.float32))
         costs.append((plan["base_cost"], plan["best_cost"]))
+        cands.append(np.asarray(plan["candidates"], dtype=np.float32))
+        cand_costs.append(np.asarray(plan["costs"], dtype=np.float64))
         obs, _r, _te, _tr, infos = env.step(cmd)
         rows["fix"].append([bool(infos[a]["coop_fix"]) if a in infos else False for a in agents])
         rows["nav"].append(
@@ -97,6 +107,8 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
     out["success"] = np.asarray(bool(rows["alive"]) and bool(at_goal.all()) and not collided)
     c = np.asarray(costs, dtype=float).reshape(-1, 2)
     out["cost_base"], out["cost_best"] = c[:, 0], c[:, 1]
+    out["candidates"] = np.asarray(cands, dtype=np.float32)
+    out["candidate_costs"] = np.asarray(cand_costs, dtype=np.float64)
     return out
 
 

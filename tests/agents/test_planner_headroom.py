@@ -76,6 +76,13 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
     assert 1 <= steps <= 4 and n == 3
     assert ep["obs"].shape[:2] == (steps, 3) and ep["offset"].shape == (steps, 3, 3)
     assert np.all(ep["cost_best"] <= ep["cost_base"])
+    # every candidate scored, with its cost: the default planner scores 8 x 2 per step, the
+    # first the base alone (offset zero, cost_base), the cheapest the plan applied
+    cands, costs = ep["candidates"], ep["candidate_costs"]
+    assert cands.shape == (steps, 16, 3, 3) and costs.shape == (steps, 16)
+    assert not cands[:, 0].any()
+    np.testing.assert_array_equal(costs[:, 0], ep["cost_base"])
+    np.testing.assert_array_equal(costs.min(axis=1), ep["cost_best"])
     base = np.load(out / "1000000_base.npz")
     assert base["fix"].shape == base["alive"].shape == base["nav"].shape
     assert base["alive"].shape[1] == 3
