@@ -28,6 +28,13 @@ scored with its cost; each UAV's fix and the 3-D error of the estimate it used) 
    same goal rate, and the paired difference on the episodes both finish (conditioned on the
    outcome, so only a pointer where the goal rates differ); episode files written before
    this was recorded lack it, and a report from them leaves it out.
+6. **whether a learned model could stand in for the look-ahead** (:func:`lookahead_model`):
+   how much of the difference between each candidate's look-ahead cost and the base's a
+   regression on the actor's inputs and the candidate's offsets explains on held-out
+   episodes, and what choosing the candidate it predicts cheapest would cost against the
+   base (the look-ahead's own, in-sample choice and a random candidate beside it); episode
+   files written before the candidates were recorded lack them, and a report from them
+   leaves it out.
 
 The planner is slow (about 11-13 s per episode on one core with its defaults); episodes are
 written one file each into ``--out`` (a temporary name, then renamed), so an interrupted run
@@ -161,10 +168,33 @@ def ridge_r2(
     ``groups``, the episode; inputs standardised on the training folds; weighted by ``w``).
     NaN for a column with nothing to explain (no variance, or every weight zero)."""
     w = np.ones(len(x)) if w is None else np.asarray(w, dtype=float)
+    pred = ridge_cv_predict(x, y, groups, w, folds, lam)
+    if not w.sum() > 0.0:  # nothing to weigh (e.g. a planner that never left its base)
+        return np.full(y.shape[1], np.nan)
+    mean = (w[:, None] * y).sum(0) / w.sum()
+    ss_res = (w[:, None] * (y - pred) ** 2).sum(0)
+    ss_tot = (w[:, None] * (y - mean) ** 2).sum(0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ss_tot > 0.0, 1.0 - ss_res / ss_tot, np.nan)
+
+
+def ridge_cv_predict(
+    x: np.ndarray,
+    y: np.ndarray,
+    groups: np.ndarray,
+    w: np.ndarray | None = None,
+    folds: int = 5,
+    lam: float = 10.0,
+) -> np.ndarray:
+    """Held-out predictions of ``y`` (2-D) by the ridge regression of :func:`ridge_r2`: each
+    fold (``groups % folds``, the episode) predicted by the fit on the others."""
+    w = np.ones(len(x)) if w is None else np.asarray(w, dtype=float)
     pred = np.zeros_like(y, dtype=float)
     for k in range(folds):
         te = groups % folds == k
         tr = ~te
+        if not te.any() or not tr.any():
+            continue
         mu, sd = x[tr].mean(0), x[tr].std(0) + 1e-6
         a_tr = np.c_[(x[tr] - mu) / sd, np.ones(tr.sum())]
         a_te = np.c_[(x[te] - mu) / sd, np.ones(te.sum())]
@@ -173,13 +203,64 @@ def ridge_r2(
             a_tr.T @ (sw * a_tr) + lam * np.eye(a_tr.shape[1]), a_tr.T @ (sw * y[tr])
         )
         pred[te] = a_te @ coef
-    if not w.sum() > 0.0:  # nothing to weigh (e.g. a planner that never left its base)
-        return np.full(y.shape[1], np.nan)
-    mean = (w[:, None] * y).sum(0) / w.sum()
-    ss_res = (w[:, None] * (y - pred) ** 2).sum(0)
-    ss_tot = (w[:, None] * (y - mean) ** 2).sum(0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(ss_tot > 0.0, 1.0 - ss_res / ss_tot, np.nan)
+    return pred
+
+
+LOOKAHEAD_CLIP_M = 20.0
+"""Cost differences of the look-ahead model are clipped to +/- this [m of look-ahead cost],
+so that the rare look-ahead crashes (``crash_cost_m``, 1000) do not dominate the fit."""
+
+
+def lookahead_model(
+    episodes: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+) -> dict[str, float]:
+    """Could a model on the actor's inputs stand in for the look-ahead's simulation?
+
+    ``episodes``: per episode ``(obs, base, candidates, candidate_costs)`` as
+    :func:`fly_planner` records them. For every step and every candidate but the first (the
+    base alone), the difference of its look-ahead cost to the base's (clipped to
+    +/-``LOOKAHEAD_CLIP_M``) is regressed on the swarm's observations, base commands and the
+    candidate's offsets (ridge, 5-fold cross-validation by episode). Returns the held-out
+    R^2, and the mean look-ahead cost against the base per step (clipped) of choosing, at
+    every step, the candidate the model predicts cheapest (the base where none is predicted
+    below it), of the look-ahead's own choice (the cheapest as simulated: in-sample, so
+    optimistic), and of a random candidate other than the base.
+    """
+    xs, ys, gs, keys = [], [], [], []
+    for i, (obs, base, cands, costs) in enumerate(episodes):
+        steps, n_c = costs.shape
+        for t in range(steps):
+            ctx = np.concatenate([obs[t].reshape(-1), base[t].reshape(-1)])
+            for c in range(1, n_c):
+                xs.append(np.concatenate([ctx, cands[t, c].reshape(-1)]))
+                ys.append(costs[t, c] - costs[t, 0])
+                gs.append(i)
+                keys.append((i, t))
+    if len(set(gs)) < 2:
+        return {}
+    x = np.asarray(xs, dtype=float)
+    y = np.clip(np.asarray(ys, dtype=float), -LOOKAHEAD_CLIP_M, LOOKAHEAD_CLIP_M)[:, None]
+    g = np.asarray(gs)
+    pred = ridge_cv_predict(x, y, g)[:, 0]
+    ss_tot = float(((y[:, 0] - y.mean()) ** 2).sum())
+    r2 = 1.0 - float(((y[:, 0] - pred) ** 2).sum()) / ss_tot if ss_tot > 0.0 else float("nan")
+    by_step: dict[tuple[int, int], list[tuple[float, float]]] = {}
+    for k, p_, y_ in zip(keys, pred, y[:, 0], strict=True):
+        by_step.setdefault(k, []).append((float(p_), float(y_)))
+    chosen, best, rand = [], [], []
+    for v in by_step.values():
+        p_ = np.array([0.0] + [a for a, _ in v])
+        y_ = np.array([0.0] + [b for _, b in v])
+        chosen.append(y_[int(np.argmin(p_))])
+        best.append(y_.min())
+        rand.append(y_[1:].mean())
+    return {
+        "lookahead_model_samples": len(y),
+        "lookahead_model_r2": r2,
+        "lookahead_model_choice_cost_m": float(np.mean(chosen)),
+        "lookahead_own_choice_cost_m": float(np.mean(best)),
+        "lookahead_random_choice_cost_m": float(np.mean(rand)),
+    }
 
 
 def _swarm_wide(fix: np.ndarray, alive: np.ndarray) -> np.ndarray:
@@ -243,12 +324,15 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     p_eps, b_eps = [], []
     p_ok: list[bool] = []
     b_ok: list[bool] = []
+    looks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     for i, seed in enumerate(seeds):
         p = np.load(folder / f"{seed}.npz")
         b = np.load(folder / f"{seed}_base.npz")
         if "success" in p.files and "success" in b.files:  # older episode files lack it
             p_ok.append(bool(p["success"]))
             b_ok.append(bool(b["success"]))
+        if "candidates" in p.files:  # older episode files lack them
+            looks.append((p["obs"], p["base"], p["candidates"], p["candidate_costs"]))
         alive = p["alive"]
         p_eps.append((p["nav"], p["fix"], alive))
         b_eps.append((b["nav"], b["fix"], b["alive"]))
@@ -300,8 +384,10 @@ def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
             goals["paired_both_finished_m"] = list(
                 bootstrap_mean_interval(d[both], 4000, np.random.default_rng(0))
             )
+    model = lookahead_model(looks) if len(looks) == len(seeds) else {}
     return {
         **goals,
+        **model,
         "episodes": len(seeds),
         "planner_nav_m": float(np.mean(p_nav)),
         "base_nav_m": float(np.mean(b_nav)),
@@ -368,6 +454,15 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
         f"weighted by the planner's gain {fmt(r['r2_gain_weighted'])}; "
         f"the top 10 % of UAV-steps carry {r['gain_share_top10pct']:.0%} of the gain",
     ]
+    if "lookahead_model_r2" in r:
+        lines.append(
+            "a model of the look-ahead from the actor's inputs and the candidate (ridge, 5-fold "
+            f"CV by episode, {r['lookahead_model_samples']} candidates): R^2 of the cost "
+            f"difference to the base {r['lookahead_model_r2']:+.3f}; look-ahead cost against "
+            f"the base per step, choosing by it {r['lookahead_model_choice_cost_m']:+.3f}, "
+            f"the look-ahead's own choice {r['lookahead_own_choice_cost_m']:+.3f} (in-sample),"
+            f" a random candidate {r['lookahead_random_choice_cost_m']:+.3f}"
+        )
     return lines
 
 

@@ -34,6 +34,42 @@ def test_ridge_r2_finds_a_linear_rule_and_not_noise() -> None:
     assert np.all(mod.ridge_r2(x, y_half, groups) < 0.9)
 
 
+def test_the_lookahead_model_learns_a_rule_of_the_candidates_and_not_noise() -> None:
+    mod = _module()
+    rng = np.random.default_rng(1)
+
+    def episodes(rule: bool, count: int = 20) -> list:
+        out = []
+        for _ in range(count):
+            steps, n_c, n = 30, 4, 3
+            obs = rng.standard_normal((steps, n, 5))
+            base = rng.standard_normal((steps, n, 3))
+            cands = 0.3 * rng.standard_normal((steps, n_c, n, 3))
+            cands[:, 0] = 0.0
+            if rule:  # a look-ahead that pays 5 m per unit of East offset of UAV 0
+                costs = 5.0 * cands[:, :, 0, 0] + 0.01 * rng.standard_normal((steps, n_c))
+            else:  # costs that no input predicts
+                costs = rng.standard_normal((steps, n_c))
+            costs[:, 0] = 0.0 if rule else costs[:, 0]
+            out.append((obs, base, cands, costs))
+        return out
+
+    r = mod.lookahead_model(episodes(True))
+    assert r["lookahead_model_samples"] == 20 * 30 * 3
+    assert r["lookahead_model_r2"] > 0.99
+    # choosing by the model is (nearly) the look-ahead's own choice, well below a random one
+    assert r["lookahead_model_choice_cost_m"] == pytest.approx(
+        r["lookahead_own_choice_cost_m"], abs=0.05
+    )
+    assert r["lookahead_model_choice_cost_m"] < r["lookahead_random_choice_cost_m"] - 0.5
+    noise = mod.lookahead_model(episodes(False, 60))
+    # out of sample, noise is not explained: R^2 near 0, below it by overfitting, which for
+    # p = 34 coefficients and n = 5400 samples is of the order of 2 p / n (0.013); allow 4 p / n
+    n_s, p_c = noise["lookahead_model_samples"], 5 * 3 + 3 * 3 + 3 * 3 + 1
+    assert n_s == 60 * 30 * 3 and abs(noise["lookahead_model_r2"]) < 4 * p_c / n_s
+    assert mod.lookahead_model(episodes(True)[:1]) == {}  # one episode: nothing to hold out
+
+
 def test_outage_edges_counts_outages_and_the_errors_around_them() -> None:
     mod = _module()
     nan = np.nan
@@ -83,6 +119,10 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
     assert not cands[:, 0].any()
     np.testing.assert_array_equal(costs[:, 0], ep["cost_base"])
     np.testing.assert_array_equal(costs.min(axis=1), ep["cost_best"])
+    assert r["lookahead_model_samples"] == 15 * sum(
+        np.load(out / f"{s}.npz")["candidate_costs"].shape[0] for s in (1000000, 1000001)
+    )
+    assert "a model of the look-ahead" in text
     base = np.load(out / "1000000_base.npz")
     assert base["fix"].shape == base["alive"].shape == base["nav"].shape
     assert base["alive"].shape[1] == 3
