@@ -168,7 +168,13 @@ def ridge_r2(
     ``groups``, the episode; inputs standardised on the training folds; weighted by ``w``).
     NaN for a column with nothing to explain (no variance, or every weight zero)."""
     w = np.ones(len(x)) if w is None else np.asarray(w, dtype=float)
-    pred = ridge_cv_predict(x, y, groups, w, folds, lam)
+    return _r2(y, ridge_cv_predict(x, y, groups, w, folds, lam), w)
+
+
+def _r2(y: np.ndarray, pred: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """R^2 per column of ``pred`` against ``y`` (2-D), weighted by ``w``; NaN for a column
+    with nothing to explain (no variance, or every weight zero)."""
+    w = np.ones(len(y)) if w is None else np.asarray(w, dtype=float)
     if not w.sum() > 0.0:  # nothing to weigh (e.g. a planner that never left its base)
         return np.full(y.shape[1], np.nan)
     mean = (w[:, None] * y).sum(0) / w.sum()
@@ -241,9 +247,9 @@ def lookahead_model(
     x = np.asarray(xs, dtype=float)
     y = np.clip(np.asarray(ys, dtype=float), -LOOKAHEAD_CLIP_M, LOOKAHEAD_CLIP_M)[:, None]
     g = np.asarray(gs)
-    pred = ridge_cv_predict(x, y, g)[:, 0]
-    ss_tot = float(((y[:, 0] - y.mean()) ** 2).sum())
-    r2 = 1.0 - float(((y[:, 0] - pred) ** 2).sum()) / ss_tot if ss_tot > 0.0 else float("nan")
+    pred2 = ridge_cv_predict(x, y, g)
+    r2 = float(_r2(y, pred2)[0])
+    pred = pred2[:, 0]
     by_step: dict[tuple[int, int], list[tuple[float, float]]] = {}
     for k, p_, y_ in zip(keys, pred, y[:, 0], strict=True):
         by_step.setdefault(k, []).append((float(p_), float(y_)))
