@@ -19,8 +19,14 @@ name                      policy
                           band: what the learned swarm does under realistic urban
                           reception, by hand, and the best policy of the study there
                           (:mod:`agents.heuristics`)
+``skyroute``              ``ceiling`` on the street route with the best sky: of the equally
+                          short routes, the one with the fewest points of poor satellite
+                          geometry predicted by the city map (:mod:`agents.routes`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`agents.heuristics`)
+``route:<path>``          a column heuristic that flies the route a learned route model
+                          predicts best (:mod:`agents.routes`; ``coopnav train-routes``);
+                          ``route:pretrained`` (``.../s1``) the shipped study models
 ``planner``               privileged MPC that looks ahead in copies of the environment with
                           the true errors: the headroom reference (:mod:`agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
@@ -64,12 +70,14 @@ POLICY_NAMES: tuple[str, ...] = (
     "wide",
     "guarded",
     "ceiling",
+    "skyroute",
     "waypoint",
     "planner",
     "ppo:<path>",
     "rllib:<path>",
     "mappo:<path>",
     "ippo:<path>",
+    "route:<path>",
 )
 """Names :func:`make_policy` accepts (plus those given to :func:`register_policy`)."""
 
@@ -147,6 +155,10 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.heuristics import CeilingColumnPolicy
 
         return CeilingColumnPolicy(env, **kwargs)
+    if name == "skyroute":
+        from agents.heuristics import SkyRoutePolicy
+
+        return SkyRoutePolicy(env, **kwargs)
     if name == "planner":
         from agents.planner import PrivilegedPlanner
 
@@ -170,6 +182,14 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from agents.rllib_policy import RLlibPolicy
 
         return RLlibPolicy(env, path, **kwargs)
+    if name.startswith("route:"):
+        path = name[len("route:") :]
+        if not path:
+            raise ValueError("policy 'route:<path>' needs the path of a route model")
+        from agents.routes import RouteModel, resolve_route_model
+
+        model = RouteModel.load(resolve_route_model(path))
+        return make_policy(model.base, env, route_model=model, **kwargs)
     for prefix in ("mappo:", "ippo:", "torchrl:"):
         if name.startswith(prefix):
             path = name[len(prefix) :]

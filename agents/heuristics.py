@@ -26,18 +26,20 @@ intersection, and stops centred on the goal.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from coopnav_env.envs.observation_layout import obs_layout
-from coopnav_env.sim.route import Polyline, extend_route, street_route
+from coopnav_env.sim.route import Polyline, extend_route, street_route, street_routes
 
 __all__ = [
     "CeilingColumnPolicy",
     "FormationPolicy",
     "GuardedColumnPolicy",
     "Polyline",
+    "SkyRoutePolicy",
     "SkySeekingPolicy",
     "SpreadColumnPolicy",
     "WaypointPolicy",
@@ -82,6 +84,10 @@ class _ColumnFollower:
         open_distance_m: float | None = None,
         wall_margin_m: float | None = None,
         wall_gain_per_s: float = 1.0,
+        route_index: int = 0,
+        route_max_turns: int = 3,
+        route_choice: str = "first",
+        route_model: Any = None,
     ):
         self.env = env
         self.base = _world_of(env)
@@ -109,6 +115,40 @@ class _ColumnFollower:
             raise ValueError(f"wall_gain_per_s must be in [0, 100], got {wall_gain_per_s!r}")
         self.wall_margin_m = None if wall_margin_m is None else float(wall_margin_m)
         self.wall_gain_per_s = float(wall_gain_per_s)
+        if isinstance(route_index, bool) or not isinstance(route_index, (int, np.integer)):
+            raise ValueError(f"route_index must be an int >= 0, got {route_index!r}")
+        if route_index < 0:
+            raise ValueError(f"route_index must be >= 0, got {route_index}")
+        self.route_index = int(route_index)
+        if isinstance(route_max_turns, bool) or not isinstance(route_max_turns, (int, np.integer)):
+            raise ValueError(f"route_max_turns must be an int in [0, 8], got {route_max_turns!r}")
+        if not 0 <= route_max_turns <= 8:
+            raise ValueError(f"route_max_turns must be in [0, 8], got {route_max_turns}")
+        self.route_max_turns = int(route_max_turns)
+        from agents.routes import ROUTE_FEATURES
+
+        if route_choice != "first" and route_choice not in ROUTE_FEATURES:
+            raise ValueError(
+                f"route_choice must be 'first' or a route feature {list(ROUTE_FEATURES)}, got "
+                f"{route_choice!r}"
+            )
+        if sum([route_choice != "first", bool(route_index), route_model is not None]) > 1:
+            raise ValueError(
+                "route_choice, route_index and route_model exclude each other, got "
+                f"route_choice={route_choice!r}, route_index={route_index}, "
+                f"route_model={route_model!r}"
+            )
+        self.route_choice = route_choice
+        if isinstance(route_model, (str, Path)):
+            from agents.routes import RouteModel, resolve_route_model
+
+            route_model = RouteModel.load(resolve_route_model(str(route_model)))
+        if route_model is not None and not hasattr(route_model, "predict"):
+            raise ValueError(f"route_model must be a RouteModel or a path, got {route_model!r}")
+        self.route_model = route_model
+        self.route_candidates: list[np.ndarray] = []  # the routes of the last plan
+        self.route_chosen = 0  # index of the flown one among them
+        self.route_feature_table: np.ndarray | None = None  # their features, when scored
         self._index = {a: i for i, a in enumerate(self.base.possible_agents)}
         self.layout = obs_layout(cfg)
         self._walls = self.layout["wall_distance"]
@@ -276,11 +316,47 @@ class _ColumnFollower:
             w = min(w, max((self._head - self._head0) / self.open_distance_m, 0.0))
         return self.goal_spacing_m + (self.spacing_m - self.goal_spacing_m) * w
 
+    def _choose_route(self, city: Any, centre: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The route of the episode: :func:`street_route` unless ``route_index`` picks another
+        of the shortest routes (:func:`~coopnav_env.sim.route.street_routes`, modulo their
+        number)."""
+        if self.route_index == 0 and self.route_choice == "first" and self.route_model is None:
+            self.route_candidates, self.route_chosen = [], 0
+            return street_route(city, centre, goal[:2])
+        routes = street_routes(city, centre, goal[:2], self.route_max_turns)
+        if self.route_choice == "first" and self.route_model is None:
+            k = self.route_index % len(routes)
+        elif len(routes) == 1:
+            k = 0
+        else:
+            from agents.routes import FEATURE_SENSE, ROUTE_FEATURES, route_features
+
+            feats = np.stack(
+                [
+                    route_features(
+                        self.base.world,
+                        r,
+                        self._altitude_m(),
+                        spacing_m=self.spacing_m,
+                        n_uavs=len(self._index),
+                    )
+                    for r in routes
+                ]
+            )
+            self.route_feature_table = feats
+            if self.route_model is not None:
+                k = int(np.argmin(self.route_model.predict(feats)))
+            else:
+                j = ROUTE_FEATURES.index(self.route_choice)
+                k = int(np.argmax(FEATURE_SENSE[self.route_choice] * feats[:, j]))
+        self.route_candidates, self.route_chosen = routes, k
+        return routes[k]
+
     def _plan(self, est: np.ndarray, idx: np.ndarray, city: Any, goal: np.ndarray) -> None:
         n = len(self._index)
         self._n = n
         centre = est[:, :2].mean(axis=0)
-        route = street_route(city, centre, goal[:2])
+        route = self._choose_route(city, centre, goal)
         wide = max(self.spacing_m, self.goal_spacing_m)
         back = (n + 1) * wide + 10.0
         fwd = (n - 1) * self.goal_spacing_m / 2.0 + 5.0
@@ -357,6 +433,22 @@ class FormationPolicy(_ColumnFollower):
         what keeps it off. None (default): no guard.
     wall_gain_per_s : float, default 1.0
         Gain of the wall guard, in [0, 100] [1/s].
+    route_choice : str, default "first"
+        Which of the equally short street routes to fly (:func:`street_routes`, planned at
+        the first step from the estimated centre of the swarm): ``"first"`` the one of
+        :func:`street_route`; a feature name of :data:`agents.routes.ROUTE_FEATURES` (e.g.
+        ``"swarm_mean"``) the route with the best value of that feature, i.e. the most
+        satellites predicted in line of sight along it by the city map at the column's
+        altitude (docs/marl/README.md, "Route choice"). On board: the map, the satellites'
+        directions and the estimated positions only.
+    route_max_turns : int, default 3
+        Most turns of a candidate route, in [0, 8].
+    route_index : int, default 0
+        Fly the candidate route of this index (modulo their number) instead; 0 is
+        :func:`street_route`'s. For studies that fly every route of an episode.
+    route_model : agents.routes.RouteModel or str, optional
+        A learned route model (or the path of one): fly the route it predicts the lowest
+        error for (the ``route:<path>`` policies of :func:`agents.make_policy`).
     """
 
     name = "formation"
@@ -574,6 +666,35 @@ class CeilingColumnPolicy(GuardedColumnPolicy):
 
     def __init__(self, env: Any, **kwargs: Any) -> None:
         super().__init__(env, **{"ceiling_margin_m": -10.0, **kwargs})
+
+
+class SkyRoutePolicy(CeilingColumnPolicy):
+    """:class:`CeilingColumnPolicy` on the equally short street route with the best sky.
+
+    On the street grid many routes to the goal are equally short
+    (:func:`~coopnav_env.sim.route.street_routes`); they pass different buildings. At the
+    first step this heuristic predicts, with the city map, the satellites in line of sight
+    every 5 m along each candidate at the column's altitude and flies the route with the
+    smallest share of points whose line-of-sight satellites give a PDOP above 3
+    (``route_choice="pdop_gt3"``, :data:`agents.routes.ROUTE_FEATURES`). That rule was the
+    best of the 13 one-feature rules on the learning study's 1000 exploratory episodes
+    (docs/marl/README.md, "Route choice"). It uses the map, the satellites' directions and
+    the swarm's estimated centre: on board.
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+    **kwargs
+        As :class:`CeilingColumnPolicy`; the default here is ``route_choice="pdop_gt3"``
+        (a learned ``route_model`` replaces it).
+    """
+
+    name = "skyroute"
+
+    def __init__(self, env: Any, **kwargs: Any) -> None:
+        if kwargs.get("route_model") is None and not kwargs.get("route_index"):
+            kwargs.setdefault("route_choice", "pdop_gt3")
+        super().__init__(env, **kwargs)
 
 
 class WaypointPolicy:

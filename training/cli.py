@@ -29,6 +29,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "training.train",
         "train a shared policy on urban_canyon_v0 (SB3 PPO, Ray RLlib, or TorchRL MAPPO/IPPO)",
     ),
+    "train-routes": (
+        "training.route_learning",
+        "learn which street route to fly from flown episodes (a learned route model)",
+    ),
     "evaluate": ("training.evaluate", "evaluate policies: navigation error, goal rate, plots"),
     "study": (
         "training.marl_study",

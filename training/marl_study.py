@@ -593,14 +593,20 @@ def _parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
     }
     for paths in out.values():
         for p in paths:
-            if not (p / "final_model.pt").is_file() and not (p / "final_model.zip").is_file():
-                raise ValueError(f"run folder {p} has no final_model.pt or final_model.zip")
+            if not any((p / f).is_file() for f in _MODEL_FILES):
+                raise ValueError(f"run folder {p} has none of {', '.join(_MODEL_FILES)}")
     return out
+
+
+_MODEL_FILES = ("final_model.pt", "final_model.zip", "route_model.json")
+"""What makes a folder a training run: TorchRL, SB3, or ``coopnav train-routes``."""
 
 
 def _policy_name(run: Path) -> str:
     if (run / "final_model.pt").is_file():
         return f"torchrl:{run}"
+    if (run / "route_model.json").is_file():
+        return f"route:{run}"
     return f"ppo:{run / 'final_model.zip'}"
 
 
@@ -609,6 +615,8 @@ def _env_of(run: Path) -> dict[str, Any]:
         d = json.loads((run / "run.json").read_text())
         if "env" in d:
             return dict(d["env"])
+        if "env" in d.get("settings", {}):  # a train-routes run
+            return dict(d["settings"]["env"])
     import yaml
 
     cfg = yaml.safe_load((run / "config.yaml").read_text())

@@ -14,6 +14,7 @@ Frames and units: the city's local East-North-Up frame, metres; routes are horiz
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -32,6 +33,7 @@ __all__ = [
     "remaining_route_m",
     "route_tail_lengths_m",
     "street_route",
+    "street_routes",
 ]
 
 
@@ -47,6 +49,23 @@ def _street_of(xy: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> tuple[str, flo
     if dx.min() <= dy.min():
         return "ns", float(cx[int(np.argmin(dx))])
     return "ew", float(cy[int(np.argmin(dy))])
+
+
+def _snapped_ends(
+    city: Any, start_xy: ArrayLike, goal_xy: ArrayLike
+) -> tuple[np.ndarray, np.ndarray, tuple[str, float, float], tuple[str, float, float]]:
+    """The street centre lines (x of the north-south ones, y of the east-west ones) and both
+    ends snapped to their nearest street: ``(kind, East, North)`` each."""
+    cx = np.asarray(city.street_centres_x_m, dtype=float).reshape(-1)
+    cy = np.asarray(city.street_centres_y_m, dtype=float).reshape(-1)
+    if cx.size + cy.size == 0:
+        raise ValueError("street_route needs a city with at least one street")
+    ends = []
+    for xy in (start_xy, goal_xy):
+        p = np.asarray(xy, dtype=float).reshape(2)
+        kind, c = _street_of(p, cx, cy)
+        ends.append((kind, c, float(p[1])) if kind == "ns" else (kind, float(p[0]), c))
+    return cx, cy, ends[0], ends[1]
 
 
 def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarray:
@@ -72,16 +91,7 @@ def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarr
         Waypoints [m], ``1 <= k <= 4``: the snapped start, the corners, the snapped goal,
         without repeated points (``k = 1`` when both ends snap to the same point).
     """
-    cx = np.asarray(city.street_centres_x_m, dtype=float).reshape(-1)
-    cy = np.asarray(city.street_centres_y_m, dtype=float).reshape(-1)
-    if cx.size + cy.size == 0:
-        raise ValueError("street_route needs a city with at least one street")
-    start = np.asarray(start_xy, dtype=float).reshape(2)
-    goal = np.asarray(goal_xy, dtype=float).reshape(2)
-    s_kind, s_c = _street_of(start, cx, cy)
-    g_kind, g_c = _street_of(goal, cx, cy)
-    sx, sy = (s_c, float(start[1])) if s_kind == "ns" else (float(start[0]), s_c)
-    gx, gy = (g_c, float(goal[1])) if g_kind == "ns" else (float(goal[0]), g_c)
+    cx, cy, (s_kind, sx, sy), (g_kind, gx, gy) = _snapped_ends(city, start_xy, goal_xy)
     pts: list[tuple[float, float]] = [(sx, sy)]
     if s_kind == g_kind == "ns":
         if not math.isclose(sx, gx) and cy.size:
@@ -101,6 +111,97 @@ def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarr
         if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
             out.append(p)
     return np.array(out, dtype=float).reshape(-1, 2)
+
+
+def _clean_route(pts: list[tuple[float, float]]) -> tuple[tuple[float, float], ...]:
+    """Drop repeated points and straight-through (collinear) corners of a waypoint list."""
+    out: list[tuple[float, float]] = [pts[0]]
+    for p in pts[1:]:
+        if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
+            out.append(p)
+    k = 1
+    while k < len(out) - 1:
+        a, b, c = out[k - 1], out[k], out[k + 1]
+        cross = (b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0])
+        if abs(cross) < 1e-6:
+            del out[k]
+        else:
+            k += 1
+    return tuple(out)
+
+
+def street_routes(
+    city: Any, start_xy: ArrayLike, goal_xy: ArrayLike, max_turns: int = 3
+) -> list[np.ndarray]:
+    """Every shortest route along street centre lines with at most ``max_turns`` turns.
+
+    On a Manhattan grid many routes share the shortest length: any staircase that never
+    moves away from the goal. They differ in the streets they fly through, and so in the
+    buildings that shade the sky along them (the route choice of
+    :class:`agents.heuristics.RouteChoice`). Each end is snapped to its nearest street centre
+    line as in :func:`street_route`; the routes alternate between north-south and east-west
+    legs, starting on the start's street and ending on the goal's, and turn only at street
+    intersections.
+
+    Parameters
+    ----------
+    city : coopnav_env.sim.city.City
+        As for :func:`street_route`.
+    start_xy, goal_xy : array_like, shape (2,)
+        East/North of the start and the goal [m].
+    max_turns : int, default 3
+        Most turns of a route, in [0, 8]. Each turn makes a column brake to its turn speed,
+        so routes with more turns take longer although they are as long.
+
+    Returns
+    -------
+    list of ndarray, each shape (k, 2)
+        The routes [m], first the one :func:`street_route` returns (always included, even
+        when it has more turns than ``max_turns`` or the grid leaves no route of its length
+        with fewer turns), then the others of the same length (within 1 mm) by number of
+        turns and then waypoints, without duplicates.
+    """
+    if isinstance(max_turns, bool) or not isinstance(max_turns, (int, np.integer)):
+        raise ValueError(f"max_turns must be an int in [0, 8], got {max_turns!r}")
+    if not 0 <= int(max_turns) <= 8:
+        raise ValueError(f"max_turns must be in [0, 8], got {max_turns}")
+    first = street_route(city, start_xy, goal_xy)
+    cx, cy, (s_kind, sx, sy), (g_kind, gx, gy) = _snapped_ends(city, start_xy, goal_xy)
+    s_c = sx if s_kind == "ns" else sy
+    g_c = gx if g_kind == "ns" else gy
+
+    def between(vals: np.ndarray, a: float, b: float) -> list[float]:
+        lo, hi = min(a, b) - 1e-6, max(a, b) + 1e-6
+        return [float(v) for v in vals if lo <= v <= hi]
+
+    # only streets between the ends can lie on a shortest (monotone) route
+    xs, ys = between(cx, sx, gx), between(cy, sy, gy)
+    found: dict[tuple[tuple[float, float], ...], None] = {}
+    for legs in range(1, int(max_turns) + 2):
+        kinds = [("ns", "ew")[(k + (s_kind == "ew")) % 2] for k in range(legs)]
+        if kinds[-1] != g_kind:
+            continue
+        inner = [xs if k == "ns" else ys for k in kinds[1:-1]]
+        for choice in itertools.product(*inner):
+            coords = [s_c, *choice, g_c] if legs > 1 else [s_c]
+            if legs == 1 and not math.isclose(s_c, g_c):
+                continue
+            pts = [(sx, sy)]
+            for k in range(legs - 1):
+                a, b = coords[k], coords[k + 1]
+                pts.append((a, b) if kinds[k] == "ns" else (b, a))
+            pts.append((gx, gy))
+            found.setdefault(_clean_route(pts), None)
+    first_key = _clean_route([tuple(p) for p in first])
+    shortest = _route_length(first)
+    others = [r for r in found if r != first_key and _route_length(np.array(r)) <= shortest + 1e-3]
+    others.sort(key=lambda r: (len(r), r))
+    return [first] + [np.array(r, dtype=float).reshape(-1, 2) for r in others]
+
+
+def _route_length(route: np.ndarray) -> float:
+    seg = np.diff(np.asarray(route, dtype=float).reshape(-1, 2), axis=0)
+    return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
 
 
 def extend_route(points: ArrayLike, back_m: float, fwd_m: float, extent: tuple) -> np.ndarray:

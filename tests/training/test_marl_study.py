@@ -224,6 +224,6 @@ def test_runs_entries_are_checked(tmp_path) -> None:
         study_main(["--runs", "m", *out])
     with pytest.raises(ValueError, match="--runs: the name 'm' is given twice"):
         study_main(["--runs", f"m={run}", f"m={run}", *out])
-    with pytest.raises(ValueError, match=r"has no final_model\.pt or final_model\.zip"):
+    with pytest.raises(ValueError, match=r"has none of final_model\.pt, final_model\.zip, route"):
         study_main(["--runs", f"m={tmp_path / 'missing'}", *out])
     assert not (tmp_path / "out").exists()

@@ -1,0 +1,392 @@
+"""Route choice: which of the equally short street routes to fly, from the map and the sky.
+
+On the Manhattan street grid of ``urban_canyon_v0`` many routes from the start to the goal
+share the shortest length (:func:`coopnav_env.sim.route.street_routes`). The column
+heuristics fly the first of them (:func:`~coopnav_env.sim.route.street_route`) unless told
+otherwise; the routes differ in the buildings along them, and so in the satellites a receiver
+keeps, and that changes the swarm's navigation error by more than any change to the
+formation found so far (docs/marl/README.md, "Route choice").
+
+Everything here is *on board*: the city map (the same 3-D model the receiver's
+mapping-aided NLOS exclusion uses), the satellites' directions at the time of planning (from
+the broadcast ephemerides any receiver has) and the swarm's estimated centre. Nothing reads
+the UAVs' true positions or errors.
+
+* :func:`route_features` describes a route by the satellites predicted in line of sight along
+  it (:data:`ROUTE_FEATURES`).
+* A *hand-written* choice takes the route with the best value of one feature
+  (:data:`FEATURE_SENSE`), e.g. ``ceiling@route_choice='los_mean'``.
+* A *learned* choice (:class:`RouteModel`) predicts each route's error from all features
+  with a model fitted to flown episodes (``training/route_learning.py``) and takes the lowest.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from coopnav_env.sim import city as _city
+from coopnav_env.sim.map_aided import predicted_line_of_sight
+from coopnav_env.sim.route import Polyline
+
+__all__ = [
+    "FEATURE_SENSE",
+    "PRETRAINED_ROUTE_DIR",
+    "ROUTE_FEATURES",
+    "RouteModel",
+    "fit_route_model",
+    "resolve_route_model",
+    "route_features",
+]
+
+PRETRAINED_ROUTE_DIR = Path(__file__).resolve().parent / "pretrained"
+"""Where the shipped route models live (``route_s<k>`` folders)."""
+
+
+def resolve_route_model(text: str) -> Path:
+    """The file behind a ``route:<text>`` policy name: ``pretrained`` is the shipped model
+    of training seed 0 (``agents/pretrained/route_s0``), ``pretrained/s<k>`` that of seed
+    ``k``; anything else a path (a ``route_model.json`` file or a run folder holding one)."""
+    if text == "pretrained" or text.startswith("pretrained/"):
+        tail = text[len("pretrained") :].lstrip("/") or "s0"
+        if not (tail.startswith("s") and tail[1:].isdigit()):
+            raise ValueError(f"route:pretrained takes a seed as pretrained/s<k>, got {text!r}")
+        return PRETRAINED_ROUTE_DIR / f"route_{tail}"
+    return Path(text)
+
+
+#: Features of a route (:func:`route_features`), in this order. ``los``: satellites predicted
+#: in line of sight at points every ``step_m`` along the route at the flight altitude;
+#: ``swarm``: distinct satellites over a column of ``n_uavs`` points ``spacing_m`` apart
+#: ending at that point (what the swarm's cooperative fix pools); ``pdop``: the position
+#: dilution of precision of the line-of-sight satellites at the point (one receiver clock per
+#: constellation; 30 where fewer satellites than unknowns).
+ROUTE_FEATURES: tuple[str, ...] = (
+    "los_mean",
+    "los_min",
+    "los_lt5",
+    "los_lt6",
+    "los_lt7",
+    "los_lt8",
+    "swarm_mean",
+    "swarm_lt8",
+    "swarm_lt10",
+    "swarm_lt12",
+    "pdop_mean",
+    "pdop_gt3",
+    "pdop_gt6",
+    "turns",
+)
+
+#: +1 where a larger value of the feature means a better sky (counts), -1 where a smaller one
+#: does (shares of points below a count, dilution of precision, turns): the hand-written
+#: choice by one feature takes the route with the largest ``sense * value``.
+FEATURE_SENSE: dict[str, int] = {
+    name: (1 if name in ("los_mean", "los_min", "swarm_mean") else -1) for name in ROUTE_FEATURES
+}
+
+PDOP_CAP = 30.0
+"""PDOP reported where the line-of-sight satellites cannot fix a position."""
+
+
+def _pdop(unit_enu: np.ndarray, system: np.ndarray, los: np.ndarray) -> np.ndarray:
+    """PDOP of the line-of-sight satellites at every point, ``(P,)``, capped at PDOP_CAP."""
+    systems = np.unique(system)
+    out = np.full(los.shape[0], PDOP_CAP)
+    for p in range(los.shape[0]):
+        use = los[p]
+        sys_used = [s for s in systems if np.any(use & (system == s))]
+        if use.sum() < 3 + len(sys_used):
+            continue
+        h = np.zeros((int(use.sum()), 3 + len(sys_used)))
+        h[:, :3] = -unit_enu[use]
+        for k, s in enumerate(sys_used):
+            h[:, 3 + k] = system[use] == s
+        try:
+            q = np.linalg.inv(h.T @ h)
+        except np.linalg.LinAlgError:
+            continue
+        out[p] = min(math.sqrt(max(float(np.trace(q[:3, :3])), 0.0)), PDOP_CAP)
+    return out
+
+
+def route_features(
+    world: Any,
+    route_xy_m: np.ndarray,
+    altitude_m: float,
+    *,
+    spacing_m: float = 45.0,
+    n_uavs: int | None = None,
+    step_m: float = 5.0,
+) -> np.ndarray:
+    """The :data:`ROUTE_FEATURES` of one route, ``(len(ROUTE_FEATURES),)``.
+
+    Parameters
+    ----------
+    world : coopnav_env.sim.scenario.UrbanWorld
+        The world at planning time: its city map, its satellites at ``world.t_s`` and its
+        flight band. Only on-board knowledge is read (no true position).
+    route_xy_m : ndarray, shape (k, 2)
+        The route's waypoints, East/North [m].
+    altitude_m : float
+        Flight altitude the satellites are predicted at [m] (clamped to the flight band).
+    spacing_m : float, default 45.0
+        Spacing of the column the ``swarm`` features pool over [m], > 0.
+    n_uavs : int, optional
+        UAVs of that column; default the world's.
+    step_m : float, default 5.0
+        Distance between the points sampled along the route [m], > 0.
+    """
+    if not (math.isfinite(step_m) and step_m > 0.0):
+        raise ValueError(f"step_m must be finite and > 0 [m], got {step_m!r}")
+    if not (math.isfinite(spacing_m) and spacing_m > 0.0):
+        raise ValueError(f"spacing_m must be finite and > 0 [m], got {spacing_m!r}")
+    kin = world.config.kinematics
+    band = (float(kin.altitude_min_m), float(kin.altitude_max_m))
+    z = float(np.clip(altitude_m, *band))
+    n = int(world.config.n_uavs if n_uavs is None else n_uavs)
+    route = np.asarray(route_xy_m, dtype=float).reshape(-1, 2)
+    if route.shape[0] < 2:
+        route = np.vstack([route, route + np.array([0.0, 1e-3])])
+    path = Polyline(route)
+    s = np.arange(0.0, path.length + 1e-9, step_m)
+    # points behind the start count for the column's tail: extend the route backwards
+    tail = (n - 1) * spacing_m
+    d0 = route[1] - route[0]
+    d0 = d0 / max(float(np.hypot(*d0)), 1e-12)
+    s_all = np.arange(-tail, path.length + 1e-9, step_m)
+    xy = np.where(
+        (s_all < 0.0)[:, None], route[0] + d0 * s_all[:, None], path.point(np.maximum(s_all, 0.0))
+    )
+    pts = np.column_stack([xy, np.full(len(s_all), z)])
+    sky = world._sky(world.t_s)
+    los = predicted_line_of_sight(
+        world.city.buildings,
+        sky.directions,
+        pts,
+        np.zeros((len(pts), 3, 3)),
+        margin_sigma=0.0,
+        max_margin_m=0.0,
+        altitude_band_m=band,
+    )
+    los &= ~_city.is_inside_building(world.city.buildings, pts)[:, None]
+    on = s_all >= -1e-9
+    counts = los[on].sum(axis=1).astype(float)
+    lag = max(round(spacing_m / step_m), 1)
+    first = int(np.flatnonzero(on)[0])
+    swarm = np.empty(len(s))
+    for i in range(len(s)):
+        j = first + i
+        idx = [j - k * lag for k in range(n) if j - k * lag >= 0]
+        swarm[i] = los[idx].any(axis=0).sum()
+    az, el = np.radians(sky.az), np.radians(sky.el)
+    unit = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
+    pdop = _pdop(unit, np.asarray(sky.system), los[on])
+    turns = max(route.shape[0] - 2, 0)
+    return np.array(
+        [
+            counts.mean(),
+            counts.min(),
+            (counts < 5).mean(),
+            (counts < 6).mean(),
+            (counts < 7).mean(),
+            (counts < 8).mean(),
+            swarm.mean(),
+            (swarm < 8).mean(),
+            (swarm < 10).mean(),
+            (swarm < 12).mean(),
+            pdop.mean(),
+            (pdop > 3.0).mean(),
+            (pdop > 6.0).mean(),
+            float(turns),
+        ]
+    )
+
+
+@dataclass
+class RouteModel:
+    """A learned route scorer: predicts a route's mean navigation error from its features.
+
+    Linear in the standardised :data:`ROUTE_FEATURES`, fitted by ridge regression on the
+    error each route was flown at, relative to the mean over its episode's routes
+    (:func:`fit_route_model`); only the differences between the routes of one episode matter,
+    so there is no intercept. The route with the lowest prediction is flown.
+
+    Attributes
+    ----------
+    features : list of str
+        Feature names, a subset of :data:`ROUTE_FEATURES` in its order.
+    mean, scale : list of float
+        Standardisation of each feature.
+    weights : list of float
+        Ridge weights on the standardised features [m of error per standard deviation].
+    alpha : float
+        The ridge penalty chosen by cross-validation.
+    base : str
+        The column heuristic (a :func:`agents.make_policy` name) that flies the chosen route,
+        and that flew the training episodes.
+    info : dict
+        What the model was fitted on (environment settings, seeds, sizes, CV scores).
+    """
+
+    features: list[str]
+    mean: list[float]
+    scale: list[float]
+    weights: list[float]
+    alpha: float
+    base: str
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        unknown = [f for f in self.features if f not in ROUTE_FEATURES]
+        if unknown:
+            raise ValueError(f"unknown route features {unknown}; known: {list(ROUTE_FEATURES)}")
+        k = len(self.features)
+        if not (len(self.mean) == len(self.scale) == len(self.weights) == k):
+            raise ValueError("RouteModel needs one mean, scale and weight per feature")
+        self._cols = np.array([ROUTE_FEATURES.index(f) for f in self.features], dtype=int)
+
+    def predict(self, feats: np.ndarray) -> np.ndarray:
+        """Predicted relative error [m] of routes with features ``feats`` ``(R, F)``."""
+        x = np.asarray(feats, dtype=float).reshape(-1, len(ROUTE_FEATURES))[:, self._cols]
+        z = (x - np.asarray(self.mean)) / np.asarray(self.scale)
+        return z @ np.asarray(self.weights)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": "coopnav-route-model/1",
+            "features": list(self.features),
+            "mean": [float(v) for v in self.mean],
+            "scale": [float(v) for v in self.scale],
+            "weights": [float(v) for v in self.weights],
+            "alpha": float(self.alpha),
+            "base": self.base,
+            "info": self.info,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the model as JSON (temporary name, then renamed into place)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_json(), indent=1) + "\n")
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> RouteModel:
+        """Read a model written by :meth:`save` (a ``.json`` file, or a folder holding
+        ``route_model.json``)."""
+        p = Path(path)
+        if p.is_dir():
+            p = p / "route_model.json"
+        if not p.is_file():
+            raise FileNotFoundError(f"no route model at {str(path)!r} (looked for {p})")
+        d = json.loads(p.read_text())
+        if d.get("format") != "coopnav-route-model/1":
+            raise ValueError(f"{p} is not a coopnav route model (format {d.get('format')!r})")
+        return cls(
+            features=list(d["features"]),
+            mean=list(d["mean"]),
+            scale=list(d["scale"]),
+            weights=list(d["weights"]),
+            alpha=float(d["alpha"]),
+            base=str(d["base"]),
+            info=dict(d.get("info", {})),
+        )
+
+
+def _centred(x: np.ndarray, y: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    xc, yc = x.copy(), y.copy()
+    for g in np.unique(groups):
+        m = groups == g
+        xc[m] -= x[m].mean(axis=0)
+        yc[m] -= y[m].mean()
+    return xc, yc
+
+
+def fit_route_model(
+    feats: Sequence[np.ndarray],
+    errors: Sequence[np.ndarray],
+    base: str,
+    *,
+    features: Sequence[str] = ROUTE_FEATURES,
+    alphas: Sequence[float] = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5, 1e6),
+    folds: int = 5,
+    info: dict[str, Any] | None = None,
+) -> RouteModel:
+    """Fit a :class:`RouteModel` to flown episodes.
+
+    Parameters
+    ----------
+    feats : sequence of ndarray, each (R_e, len(ROUTE_FEATURES))
+        Per training episode, the features of its routes.
+    errors : sequence of ndarray, each (R_e,)
+        The mean navigation error each route was flown at [m] (the same episode seed).
+    base : str
+        The heuristic that flew them.
+    features : sequence of str
+        The features to use.
+    alphas : sequence of float
+        Ridge penalties to choose from, by ``folds``-fold cross-validation over episodes of
+        the error of the route each would choose.
+    folds : int
+        Cross-validation folds, >= 2.
+
+    Episodes with a single route carry no information about the choice and are skipped.
+    """
+    if len(feats) != len(errors):
+        raise ValueError(f"feats and errors differ in length: {len(feats)} and {len(errors)}")
+    if folds < 2:
+        raise ValueError(f"folds must be >= 2, got {folds}")
+    cols = np.array([ROUTE_FEATURES.index(f) for f in features], dtype=int)
+    keep = [i for i in range(len(feats)) if len(errors[i]) > 1]
+    if len(keep) < folds:
+        raise ValueError(
+            f"fit_route_model needs at least {folds} episodes with more than one route, got "
+            f"{len(keep)}"
+        )
+    x = np.concatenate([np.asarray(feats[i], dtype=float)[:, cols] for i in keep])
+    y = np.concatenate([np.asarray(errors[i], dtype=float) for i in keep])
+    g = np.concatenate([np.full(len(errors[i]), k) for k, i in enumerate(keep)])
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError("route features and errors must be finite")
+    mean = x.mean(axis=0)
+    scale = x.std(axis=0)
+    scale[scale < 1e-12] = 1.0
+    z = (x - mean) / scale
+    zc, yc = _centred(z, y, g)
+    fold_of = np.arange(len(keep)) % folds
+
+    def ridge(a: float, m: np.ndarray) -> np.ndarray:
+        return np.linalg.solve(zc[m].T @ zc[m] + a * np.eye(zc.shape[1]), zc[m].T @ yc[m])
+
+    cv: dict[str, float] = {}
+    for a in alphas:
+        chosen = []
+        for f in range(folds):
+            test = fold_of[g] == f
+            w = ridge(float(a), ~test)
+            for e in np.unique(g[test]):
+                m = g == e
+                chosen.append(y[m][int(np.argmin(z[m] @ w))] - y[m].mean())
+        cv[str(a)] = float(np.mean(chosen))
+    best = min(alphas, key=lambda a: cv[str(a)])
+    w = ridge(float(best), np.ones(len(y), dtype=bool))
+    meta = dict(info or {})
+    meta.update({"episodes": len(keep), "routes": len(y), "cv_chosen_minus_mean_m": cv})
+    return RouteModel(
+        features=list(features),
+        mean=mean.tolist(),
+        scale=scale.tolist(),
+        weights=w.tolist(),
+        alpha=float(best),
+        base=base,
+        info=meta,
+    )

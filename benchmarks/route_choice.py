@@ -1,0 +1,163 @@
+"""Route choice on held-out episodes: every route flown, every one-feature rule and model priced.
+
+Flies *every* equally short street route of each episode with a column heuristic (``ceiling``
+by default; :func:`training.route_learning.collect`, the same collection ``coopnav
+train-routes`` uses, here on held-out reset seeds), then prices choosing by each one-feature
+rule of :data:`agents.routes.ROUTE_FEATURES` (the route with the best value of the feature)
+and by each learned route model given with ``--models``: per choice, the mean ``nav`` error,
+the goal rate, and the paired difference to the first route (what the heuristic flies
+without a choice) and to the best rule, with 95 % bootstrap intervals over episodes (2000
+resamples, generator seed 0). A choice's flight is the flight of the route it picks, so one
+collection prices every rule and model exactly as if each had flown (the heuristics are
+deterministic given the reset seed). Also printed: the *noise-selected* oracle, the lowest
+of each episode's flown routes, an optimistic bound (it picks on the noise too).
+
+docs/marl/README.md ("Route choice") runs::
+
+    python benchmarks/route_choice.py --episodes 1000 --first-seed 1000000 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
+        --models runs/routes/g8_s0 runs/routes/g8_s1 runs/routes/g8_s2 \\
+        --out runs/routes/explore
+
+``--out`` keeps the collection (``episodes.npz``, as ``coopnav train-routes`` writes it) and
+the printed report (``report.json``); with an existing ``episodes.npz`` of the same settings
+the routes are not flown again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def price_choices(
+    eps: list[dict[str, np.ndarray]], models: dict[str, Any], reps: int = 2000
+) -> dict[str, Any]:
+    """Mean error, goal rate and paired differences of every rule and model on ``eps``."""
+    from agents.routes import FEATURE_SENSE, ROUTE_FEATURES
+    from training.stats import bootstrap_mean_interval
+
+    first = np.array([e["nav"][0] for e in eps])
+    picks: dict[str, list[int]] = {}
+    for j, f in enumerate(ROUTE_FEATURES):
+        picks[f"rule {f}"] = [
+            0 if len(e["nav"]) < 2 else int(np.argmax(FEATURE_SENSE[f] * e["features"][:, j]))
+            for e in eps
+        ]
+    for name, m in models.items():
+        picks[f"model {name}"] = [
+            0 if len(e["nav"]) < 2 else int(np.argmin(m.predict(e["features"]))) for e in eps
+        ]
+    nav = {k: np.array([e["nav"][i] for e, i in zip(eps, p)]) for k, p in picks.items()}
+    goal = {k: np.array([e["goal"][i] for e, i in zip(eps, p)]) for k, p in picks.items()}
+    rules = [k for k in nav if k.startswith("rule ")]
+    best = min(rules, key=lambda k: float(nav[k].mean()))
+    out: dict[str, Any] = {"episodes": len(eps), "best_rule": best, "choices": {}}
+    out["first_route"] = {
+        "nav_m": float(first.mean()),
+        "goal_rate": float(np.mean([e["goal"][0] for e in eps])),
+    }
+    out["episodes_with_a_choice"] = int(sum(len(e["nav"]) > 1 for e in eps))
+    out["oracle_noise_selected_nav_m"] = float(np.mean([np.nanmin(e["nav"]) for e in eps]))
+    for k in nav:
+        rng = np.random.default_rng(0)
+        d0 = bootstrap_mean_interval(nav[k] - first, reps, rng)
+        rng = np.random.default_rng(0)
+        d1 = bootstrap_mean_interval(nav[k] - nav[best], reps, rng)
+        out["choices"][k] = {
+            "nav_m": float(nav[k].mean()),
+            "goal_rate": float(goal[k].mean()),
+            "vs_first_route_m": [float(v) for v in d0],
+            "vs_best_rule_m": [float(v) for v in d1],
+            "differs_from_first": float(np.mean(np.array(picks[k]) != 0)),
+        }
+    return out
+
+
+def report_lines(rep: dict[str, Any]) -> list[str]:
+    """The printed table of :func:`price_choices`."""
+    fr = rep["first_route"]
+    lines = [
+        f"{rep['episodes']} episodes, {rep['episodes_with_a_choice']} with more than one route; "
+        f"first route: nav {fr['nav_m']:.3f} m, goal rate {fr['goal_rate']:.3f}; "
+        f"noise-selected oracle {rep['oracle_noise_selected_nav_m']:.3f} m",
+        f"{'choice':24s} {'nav [m]':>8s} {'goal':>6s}  {'vs first route [m]':24s} "
+        f"{'vs best rule [m]':24s} changed",
+    ]
+    for k, c in rep["choices"].items():
+        a, b = c["vs_first_route_m"], c["vs_best_rule_m"]
+        lines.append(
+            f"{k:24s} {c['nav_m']:8.3f} {c['goal_rate']:6.3f}  "
+            f"{a[0]:+.3f} [{a[1]:+.3f}, {a[2]:+.3f}]      {b[0]:+.3f} [{b[1]:+.3f}, {b[2]:+.3f}]"
+            f"      {c['differs_from_first']:.2f}"
+        )
+    lines.append(f"best rule: {rep['best_rule']}")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    from agents.routes import RouteModel
+    from training.files import atomic_path, atomic_write_text
+    from training.route_learning import (
+        _env_kwargs,
+        arrays_to_episodes,
+        collect,
+        episodes_to_arrays,
+    )
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--episodes", type=int, default=300, help="episodes (default: %(default)s)")
+    p.add_argument(
+        "--first-seed", type=int, default=1_000_000, help="first reset seed (default: %(default)s)"
+    )
+    p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument("--base", default="ceiling", help="column heuristic (default: %(default)s)")
+    p.add_argument("--max-turns", type=int, default=3, help="most turns (default: %(default)s)")
+    p.add_argument("--models", nargs="*", default=[], help="route models (run folders or files)")
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
+    args = p.parse_args(argv)
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    env_kwargs = _env_kwargs(args.env_set)
+    settings = {
+        "env": env_kwargs,
+        "base": args.base,
+        "first_seed": args.first_seed,
+        "episodes": args.episodes,
+        "max_turns": args.max_turns,
+    }
+    out = Path(args.out) if args.out else None
+    eps = None
+    if out is not None and (out / "episodes.npz").is_file() and (out / "settings.json").is_file():
+        if json.loads((out / "settings.json").read_text()) == json.loads(json.dumps(settings)):
+            with np.load(out / "episodes.npz") as d:
+                _, eps = arrays_to_episodes(dict(d))
+            print(f"using the routes flown before in {out}", file=sys.stderr)
+    seeds = list(range(args.first_seed, args.first_seed + args.episodes))
+    if eps is None:
+        eps = collect(env_kwargs, args.base, seeds, max_turns=args.max_turns, jobs=args.jobs)
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            with atomic_path(out / "episodes.npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, **episodes_to_arrays(seeds, eps))
+            atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
+    models = {str(m): RouteModel.load(m) for m in args.models}
+    rep = price_choices(eps, models)
+    rep["settings"] = settings
+    print("\n".join(report_lines(rep)))
+    if out is not None:
+        atomic_write_text(out / "report.json", json.dumps(rep, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,287 @@
+"""Route choice: candidate routes, their sky features, the hand-written and learned choice."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from agents import make_policy
+from agents.routes import (
+    FEATURE_SENSE,
+    ROUTE_FEATURES,
+    RouteModel,
+    fit_route_model,
+    resolve_route_model,
+    route_features,
+)
+from coopnav_env.sim.route import street_route, street_routes
+
+
+class _Grid:
+    street_centres_x_m = np.array([-200.0, -100.0, 0.0, 100.0, 200.0])
+    street_centres_y_m = np.array([-200.0, -100.0, 0.0, 100.0, 200.0])
+
+
+def _length(r: np.ndarray) -> float:
+    return float(np.abs(np.diff(r, axis=0)).sum())
+
+
+def _legs_on_streets(r: np.ndarray) -> bool:
+    for p, q in itertools.pairwise(r):
+        if np.isclose(p[0], q[0]):
+            if not np.isclose(np.abs(_Grid.street_centres_x_m - p[0]).min(), 0.0):
+                return False
+        elif np.isclose(p[1], q[1]):
+            if not np.isclose(np.abs(_Grid.street_centres_y_m - p[1]).min(), 0.0):
+                return False
+        else:
+            return False
+    return True
+
+
+@pytest.mark.parametrize(
+    ("start", "goal", "count"),
+    [
+        # NS -> EW: the L, and three-turn staircases via y = -100, 0, 100 and x = 100
+        ((0.0, -150.0), (150.0, 200.0), 4),
+        ((0.0, -150.0), (200.0, 150.0), 3),  # NS -> NS via the cross streets y = -100, 0, 100
+        ((0.0, -150.0), (0.0, 150.0), 1),  # one street: one route
+        ((-150.0, 0.0), (150.0, 100.0), 3),  # EW -> EW via x = -100, 0, 100
+    ],
+)
+def test_street_routes_are_all_shortest_distinct_and_on_streets(start, goal, count):
+    routes = street_routes(_Grid, np.array(start), np.array(goal), max_turns=3)
+    first = street_route(_Grid, np.array(start), np.array(goal))
+    assert np.array_equal(routes[0], first)
+    assert len(routes) == count
+    keys = {tuple(map(tuple, np.round(r, 6))) for r in routes}
+    assert len(keys) == len(routes)
+    for r in routes:
+        assert _length(r) == pytest.approx(_length(first))
+        assert _legs_on_streets(r)
+        assert len(r) - 2 <= 3
+        assert np.allclose(r[0], first[0]) and np.allclose(r[-1], first[-1])
+
+
+def test_street_routes_turn_limit_and_bad_values():
+    start, goal = np.array([0.0, -150.0]), np.array([150.0, 200.0])
+    assert len(street_routes(_Grid, start, goal, max_turns=1)) == 1  # only the L
+    assert len(street_routes(_Grid, start, goal, max_turns=5)) > 5  # five-turn staircases too
+    for bad in (-1, 9, 2.5, True):
+        with pytest.raises(ValueError, match="max_turns"):
+            street_routes(_Grid, start, goal, max_turns=bad)
+
+
+def _env(**kw):
+    from coopnav_env import urban_canyon_v0
+
+    return urban_canyon_v0.parallel_env(**kw)
+
+
+def _multi_route_seed(env, first: int = 0) -> int:
+    for seed in range(first, first + 50):
+        env.reset(seed=seed)
+        w = env.unwrapped.world
+        if len(street_routes(w.city, np.asarray(w.route_xy_m)[0], w.goal_enu_m[:2])) >= 3:
+            return seed
+    raise AssertionError("no episode with three routes in 50 seeds")
+
+
+def test_route_features_are_bounded_deterministic_and_see_open_sky():
+    env = _env()
+    seed = _multi_route_seed(env)
+    env.reset(seed=seed)
+    w = env.unwrapped.world
+    routes = street_routes(w.city, np.asarray(w.route_xy_m)[0], w.goal_enu_m[:2])
+    f = np.stack([route_features(w, r, 30.0) for r in routes])
+    assert f.shape == (len(routes), len(ROUTE_FEATURES))
+    assert np.all(np.isfinite(f))
+    n_sky = len(w._sky(w.t_s).az)
+    col = {n: f[:, i] for i, n in enumerate(ROUTE_FEATURES)}
+    assert np.all((col["los_min"] >= 0) & (col["los_min"] <= col["los_mean"]))
+    assert np.all(col["los_mean"] <= n_sky) and np.all(col["swarm_mean"] >= col["los_mean"])
+    for n in ("los_lt5", "los_lt8", "swarm_lt10", "pdop_gt3", "pdop_gt6"):
+        assert np.all((col[n] >= 0.0) & (col[n] <= 1.0))
+    assert np.all(col["los_lt5"] <= col["los_lt8"])  # shares below a count grow with it
+    assert np.all(col["pdop_gt6"] <= col["pdop_gt3"])
+    assert np.array_equal(f[0], route_features(w, routes[0], 30.0))
+    # higher is more open: the same route sees at least as many satellites from higher up
+    low = route_features(w, routes[0], 10.0)
+    assert low[0] <= f[0, 0]
+    with pytest.raises(ValueError, match="step_m"):
+        route_features(w, routes[0], 30.0, step_m=0.0)
+
+
+def test_route_model_round_trip_and_errors(tmp_path):
+    m = RouteModel(
+        features=["los_mean", "turns"],
+        mean=[10.0, 1.0],
+        scale=[2.0, 1.0],
+        weights=[-0.5, 0.1],
+        alpha=1.0,
+        base="ceiling",
+        info={"episodes": 3},
+    )
+    x = np.zeros((2, len(ROUTE_FEATURES)))
+    x[:, 0] = [12.0, 8.0]
+    x[:, ROUTE_FEATURES.index("turns")] = [1.0, 3.0]
+    assert np.allclose(m.predict(x), [-0.5, 0.5 + 0.2])
+    path = m.save(tmp_path / "run" / "route_model.json")
+    again = RouteModel.load(tmp_path / "run")  # a run folder works too
+    assert np.allclose(again.predict(x), m.predict(x)) and again.base == "ceiling"
+    with pytest.raises(ValueError, match="unknown route features"):
+        RouteModel(["sunshine"], [0.0], [1.0], [1.0], 1.0, "ceiling")
+    with pytest.raises(ValueError, match="one mean"):
+        RouteModel(["los_mean"], [0.0, 1.0], [1.0], [1.0], 1.0, "ceiling")
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**json.loads(path.read_text()), "format": "other"}))
+    with pytest.raises(ValueError, match="not a coopnav route model"):
+        RouteModel.load(bad)
+    with pytest.raises(FileNotFoundError, match="no route model"):
+        RouteModel.load(tmp_path / "missing")
+    assert resolve_route_model("pretrained").name == "route_s0"
+    assert resolve_route_model("pretrained/s2").name == "route_s2"
+    with pytest.raises(ValueError, match="pretrained/s<k>"):
+        resolve_route_model("pretrained/best")
+
+
+def test_fit_route_model_finds_a_planted_rule_and_chooses_by_it():
+    rng = np.random.default_rng(0)
+    feats, errs = [], []
+    j = ROUTE_FEATURES.index("swarm_mean")
+    for _ in range(300):
+        r = int(rng.integers(1, 5))
+        f = rng.normal(10.0, 2.0, (r, len(ROUTE_FEATURES)))
+        feats.append(f)
+        errs.append(3.0 - 0.3 * f[:, j] + rng.normal(0.0, 0.1, r))  # more sky, lower error
+    m = fit_route_model(feats, errs, "ceiling")
+    assert m.info["episodes"] == sum(len(e) > 1 for e in errs)
+    chosen = [int(np.argmin(m.predict(f))) for f in feats]
+    truth = [int(np.argmax(f[:, j])) for f in feats]
+    # the noise (0.1 m) against the planted spread (0.3 m per unit, sd 2) flips hardly any
+    assert np.mean(np.array(chosen) == np.array(truth)) > 0.95
+    assert m.weights[j] == min(m.weights)  # the planted feature carries the most weight
+    cv = m.info["cv_chosen_minus_mean_m"][str(m.alpha)]
+    assert cv < -0.3  # the chosen route beats the mean route on held-out episodes
+    with pytest.raises(ValueError, match="at least 5 episodes"):
+        fit_route_model(feats[:3], errs[:3], "ceiling")
+    with pytest.raises(ValueError, match="differ in length"):
+        fit_route_model(feats, errs[:-1], "ceiling")
+
+
+def test_column_heuristics_choose_routes_by_a_feature_or_a_model(tmp_path):
+    env = _env()
+    seed = _multi_route_seed(env)
+    obs, _ = env.reset(seed=seed)
+    p = make_policy("ceiling@route_choice='swarm_mean'", env)
+    p.reset(seed)
+    p.act(obs)
+    table = p.route_feature_table
+    assert table is not None and len(p.route_candidates) == table.shape[0] >= 3
+    j = ROUTE_FEATURES.index("swarm_mean")
+    assert p.route_chosen == int(np.argmax(FEATURE_SENSE["swarm_mean"] * table[:, j]))
+    # route_index flies a given candidate; 0 is street_route's
+    for k in (0, 2):
+        q = make_policy(f"ceiling@route_index={k}", env)
+        env.reset(seed=seed)
+        q.reset(seed)
+        q.act(obs)
+        assert np.allclose(q._path.point(np.array([q._path.length * 0.5])), p_path_mid(p, k))
+    # a learned model that wants the route with the fewest turns
+    m = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling")
+    m.save(tmp_path / "m" / "route_model.json")
+    r = make_policy(f"route:{tmp_path / 'm'}", env)
+    env.reset(seed=seed)
+    r.reset(seed)
+    r.act(obs)
+    turns = [len(c) - 2 for c in r.route_candidates]
+    assert r.route_chosen == int(np.argmin(turns)) and r.route_model is not None
+    with pytest.raises(ValueError, match="route_choice must be"):
+        make_policy("ceiling@route_choice='shade'", env)
+    with pytest.raises(ValueError, match="exclude each other"):
+        make_policy("ceiling@route_choice='los_mean',route_index=2", env)
+    with pytest.raises(ValueError, match="needs the path"):
+        make_policy("route:", env)
+
+
+def p_path_mid(p, k: int) -> np.ndarray:
+    """Mid-point of candidate ``k`` of ``p``'s plan, on the extended path a column flies."""
+    from coopnav_env.sim.route import Polyline, extend_route
+
+    n = len(p._index)
+    wide = max(p.spacing_m, p.goal_spacing_m)
+    pts = extend_route(
+        p.route_candidates[k],
+        (n + 1) * wide + 10.0,
+        (n - 1) * p.goal_spacing_m / 2.0 + 5.0,
+        p.base.world.city.extent_m,
+    )
+    path = Polyline(pts)
+    return path.point(np.array([path.length * 0.5]))
+
+
+def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_path):
+    from training.cli import main
+    from training.route_learning import arrays_to_episodes, episodes_to_arrays
+
+    out = tmp_path / "run"
+    argv = ["train-routes", "--episodes", "8", "--block", "4", "--jobs", "1"]
+    argv += ["--first-seed", "0", "--out", str(out)]
+    assert main(argv) == 0
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["status"] == "finished" and summary["settings"]["episodes"] == 8
+    with np.load(out / "episodes.npz") as d:
+        arrays = dict(d)
+    seeds, eps = arrays_to_episodes(arrays)
+    assert seeds == list(range(8))
+    again = episodes_to_arrays(seeds, eps)
+    assert all(np.array_equal(again[k], arrays[k], equal_nan=True) for k in arrays)
+    assert main(argv) == 2  # finished: never overwritten
+    model = RouteModel.load(out)
+    assert model.base == "ceiling" and model.info["first_seed"] == 0
+    # resume: a run folder with half the episodes continues and flies the same episodes
+    part = tmp_path / "part"
+    part.mkdir()
+    settings = summary["settings"]
+    (part / "run.json").write_text(json.dumps({"settings": settings, "status": "collecting"}))
+    half = episodes_to_arrays(seeds[:4], eps[:4])
+    with open(part / "episodes.npz", "wb") as fh:
+        np.savez(fh, **half)
+    assert main([*argv[:-1], str(part)]) == 0
+    with np.load(part / "episodes.npz") as d:
+        assert all(np.array_equal(d[k], arrays[k], equal_nan=True) for k in arrays)
+    # another run's folder is refused
+    assert main([*argv[:5], "--first-seed", "10", "--out", str(part)]) == 2
+    assert main([*argv[:5], "--first-seed", "999999", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_skyroute_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points():
+    env = _env()
+    seed = _multi_route_seed(env)
+    obs, _ = env.reset(seed=seed)
+    p = make_policy("skyroute", env)
+    assert p.name == "skyroute" and p.route_choice == "pdop_gt3"
+    p.reset(seed)
+    p.act(obs)
+    j = ROUTE_FEATURES.index("pdop_gt3")
+    assert p.route_chosen == int(np.argmin(p.route_feature_table[:, j]))
+    c = make_policy("ceiling", env)
+    assert p.cfg is c.cfg and p._altitude_m() == c._altitude_m()  # ceiling's flight
+    assert make_policy("skyroute@route_index=1", env).route_choice == "first"
+
+
+def test_study_accepts_train_routes_runs(tmp_path):
+    from training.marl_study import _env_of, _parse_runs, _policy_name
+
+    run = tmp_path / "r"
+    run.mkdir()
+    RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(run / "route_model.json")
+    (run / "run.json").write_text(json.dumps({"settings": {"env": {"max_fix_sigma_m": 8}}}))
+    assert _parse_runs([f"route={run}"]) == {"route": [run]}
+    assert _policy_name(run) == f"route:{run}"
+    assert _env_of(run) == {"max_fix_sigma_m": 8}
+    with pytest.raises(ValueError, match=r"route_model\.json"):
+        _parse_runs([f"x={tmp_path}"])

@@ -1,0 +1,317 @@
+"""``coopnav train-routes``: learn which route to fly from flown episodes.
+
+A learned *route model* (:class:`agents.routes.RouteModel`) scores the equally short street
+routes of an episode by the satellites the city map predicts along them and picks the one it
+predicts the lowest navigation error for; a column heuristic (``ceiling`` by default) flies
+it. This command teaches it by experience:
+
+1. **Collect.** For every training episode (reset seeds below the held-out range, see
+   ``--first-seed``) the heuristic flies *every* candidate route (the same reset seed, so the
+   same city, satellites and start), and each flight's mean ``nav`` error is recorded beside
+   the route's features, as planned on board at the first step. This is a contextual bandit
+   with full feedback: the outcome of every arm is observed.
+2. **Fit.** Ridge regression of each route's error, relative to the mean of its episode's
+   routes, on the standardised features; the penalty is chosen by 5-fold cross-validation
+   over episodes of the error of the route each penalty's model would choose.
+
+The run folder holds ``run.json`` (settings, sizes, timings, cross-validation),
+``episodes.npz`` (every flown route: seed, index, features, errors, goal) and
+``route_model.json``; fly the model with ``coopnav evaluate --policies route:RUN_DIR``.
+Collection is saved every ``--block`` episodes, and a run started again with the same
+``--out`` and settings continues where it stopped; a finished run (``route_model.json``
+present) is never overwritten.
+
+Example (the study's training set of seed 0, about 6 minutes on 2 cores)::
+
+    coopnav train-routes --seed 0 --episodes 1000 --env-set preset=urban_nlos_3dma \\
+        dead_reckoning_noise=true max_fix_sigma_m=8 --out runs/routes/s0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+TRAIN_SEED_BASE = 500_000
+"""Reset seed of the first training episode of ``--seed 0``; seed ``k`` starts
+``TRAIN_SEED_STRIDE * k`` later. Below the held-out range (``coopnav study``'s 1,000,000)."""
+TRAIN_SEED_STRIDE = 100_000
+
+
+def _with_option(base: str, option: str) -> str:
+    return f"{base}{',' if '@' in base else '@'}{option}"
+
+
+def collect_episode(env: Any, base: str, seed: int, max_turns: int = 3) -> dict[str, np.ndarray]:
+    """Fly every shortest route of episode ``seed`` with heuristic ``base``.
+
+    Returns ``features`` ``(R, F)`` (:func:`agents.routes.route_features`, as the heuristic
+    plans them at the first step) and, per route, ``nav`` (mean error of the estimate each
+    UAV used [m]), ``coop`` (mean cooperative-fix error [m], NaN without a fix) and ``goal``.
+    An episode with one route is flown once (its features are NaN: nothing to choose).
+    """
+    from agents import make_policy
+    from training.evaluate import run_episode
+
+    planner = make_policy(
+        _with_option(base, f"route_choice='los_mean',route_max_turns={int(max_turns)}"), env
+    )
+    obs, _ = env.reset(seed=int(seed))
+    planner.reset(int(seed))
+    planner.act(obs)  # plans the route: candidates and their features
+    feats = planner.route_feature_table
+    n_routes = len(planner.route_candidates)
+    if feats is None or n_routes < 2:
+        from agents.routes import ROUTE_FEATURES
+
+        n_routes = 1
+        feats = np.full((1, len(ROUTE_FEATURES)), np.nan)
+    nav, coop, goal = [], [], []
+    for k in range(n_routes):
+        opt = f"route_max_turns={int(max_turns)}" + (f",route_index={k}" if k else "")
+        rec = run_episode(env, make_policy(_with_option(base, opt), env), int(seed))
+        err = np.asarray(rec.nav_error_m, dtype=float)
+        c = np.asarray(rec.coop_error_m, dtype=float)
+        nav.append(float(np.nanmean(err)) if np.isfinite(err).any() else math.nan)
+        coop.append(float(np.nanmean(c)) if np.isfinite(c).any() else math.nan)
+        goal.append(bool(rec.success))
+    return {
+        "features": np.asarray(feats, dtype=float),
+        "nav": np.array(nav),
+        "coop": np.array(coop),
+        "goal": np.array(goal),
+    }
+
+
+def _collect_chunk(args: tuple[Mapping[str, Any], str, list[int], int]) -> list[dict]:
+    import torch
+
+    from coopnav_env import urban_canyon_v0
+
+    torch.set_num_threads(1)
+    env_kwargs, base, seeds, max_turns = args
+    env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
+    return [collect_episode(env, base, s, max_turns) for s in seeds]
+
+
+def collect(
+    env_kwargs: Mapping[str, Any],
+    base: str,
+    seeds: Sequence[int],
+    *,
+    max_turns: int = 3,
+    jobs: int = 2,
+) -> list[dict[str, np.ndarray]]:
+    """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
+    seeds = [int(s) for s in seeds]
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs}")
+    if jobs == 1 or len(seeds) < 2:
+        return _collect_chunk((dict(env_kwargs), base, seeds, max_turns))
+    chunks = [seeds[i::jobs] for i in range(jobs)]
+    with ProcessPoolExecutor(jobs) as ex:
+        parts = list(
+            ex.map(_collect_chunk, [(dict(env_kwargs), base, c, max_turns) for c in chunks])
+        )
+    out: list[dict[str, np.ndarray]] = [{}] * len(seeds)
+    for i, c in enumerate(chunks):
+        for j in range(len(c)):
+            out[i + j * jobs] = parts[i][j]
+    return out
+
+
+def episodes_to_arrays(seeds: Sequence[int], eps: Sequence[Mapping[str, np.ndarray]]) -> dict:
+    """Flatten collected episodes to one row per flown route (what ``episodes.npz`` holds)."""
+    rows: dict[str, list[Any]] = {k: [] for k in ("seed", "route", "nav", "coop", "goal")}
+    feats = []
+    for s, e in zip(seeds, eps):
+        r = len(e["nav"])
+        rows["seed"] += [int(s)] * r
+        rows["route"] += list(range(r))
+        rows["nav"] += list(e["nav"])
+        rows["coop"] += list(e["coop"])
+        rows["goal"] += list(e["goal"])
+        feats.append(np.asarray(e["features"], dtype=float).reshape(r, -1))
+    out = {k: np.asarray(v) for k, v in rows.items()}
+    out["features"] = np.concatenate(feats) if feats else np.zeros((0, 0))
+    return out
+
+
+def arrays_to_episodes(d: Mapping[str, np.ndarray]) -> tuple[list[int], list[dict]]:
+    """The inverse of :func:`episodes_to_arrays`: seeds in order, and per episode its routes."""
+    seeds: list[int] = []
+    eps: list[dict] = []
+    seed_col = np.asarray(d["seed"])
+    for s in dict.fromkeys(seed_col.tolist()):
+        m = seed_col == s
+        seeds.append(int(s))
+        eps.append({k: np.asarray(d[k])[m] for k in ("features", "nav", "coop", "goal")})
+    return seeds, eps
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav train-routes``."""
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = __doc__.split("\n\n", 1)[1] if __doc__ else None
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="training seed: picks the training episodes (reset seeds from "
+        f"{TRAIN_SEED_BASE:,} + {TRAIN_SEED_STRIDE:,} x SEED) (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--episodes", type=int, default=1000, help="training episodes (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--first-seed",
+        type=int,
+        default=None,
+        help="reset seed of the first training episode, below 1,000,000 (the held-out "
+        "range); default from --seed",
+    )
+    parser.add_argument(
+        "--env-set",
+        nargs="*",
+        action="extend",
+        default=[],
+        metavar="KEY=VALUE",
+        help="environment settings (as coopnav train), e.g. preset=urban_nlos_3dma (default: none)",
+    )
+    parser.add_argument(
+        "--base",
+        default="ceiling",
+        help="the column heuristic that flies the routes (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--max-turns", type=int, default=3, help="most turns of a route (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--block", type=int, default=100, help="episodes per saved block (default: %(default)s)"
+    )
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
+    parser.add_argument("--out", required=True, help="run folder (one run per folder)")
+
+
+def _env_kwargs(items: Sequence[str]) -> dict[str, Any]:
+    from coopnav_env.envs.config import make_config
+    from training.config import apply_overrides
+
+    kwargs = apply_overrides({}, list(items))
+    make_config(**kwargs)  # fails early, naming the bad setting
+    return kwargs
+
+
+def run(args: argparse.Namespace) -> int:
+    """Collect (resumably), fit and save; prints the cross-validated choice."""
+    from agents import make_policy
+    from agents.routes import ROUTE_FEATURES, fit_route_model
+    from coopnav_env import urban_canyon_v0
+    from training.files import atomic_path, write_json
+
+    if args.episodes < 5:
+        raise ValueError(f"--episodes must be >= 5 (5-fold cross-validation), got {args.episodes}")
+    if args.block < 1 or args.jobs < 1:
+        raise ValueError(f"--block and --jobs must be >= 1, got {args.block} and {args.jobs}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    first = (
+        TRAIN_SEED_BASE + TRAIN_SEED_STRIDE * args.seed
+        if args.first_seed is None
+        else args.first_seed
+    )
+    if not 0 <= first or first + args.episodes > 1_000_000:
+        raise ValueError(
+            f"training episodes must have reset seeds in [0, 1000000) (the held-out range starts "
+            f"there), got {first}..{first + args.episodes - 1}"
+        )
+    env_kwargs = _env_kwargs(args.env_set)
+    make_policy(args.base, urban_canyon_v0.parallel_env(**env_kwargs))  # a usable base
+    out = Path(args.out)
+    settings = {
+        "env": env_kwargs,
+        "base": args.base,
+        "first_seed": first,
+        "episodes": args.episodes,
+        "max_turns": args.max_turns,
+        "features": list(ROUTE_FEATURES),
+    }
+    model_path = out / "route_model.json"
+    if model_path.exists():
+        raise ValueError(f"{out} holds a finished run (route_model.json); use another --out")
+    run_json = out / "run.json"
+    data_path = out / "episodes.npz"
+    seeds: list[int] = []
+    eps: list[dict] = []
+    if run_json.exists():
+        old = json.loads(run_json.read_text())
+        if old.get("settings") != json.loads(json.dumps(settings)):
+            raise ValueError(
+                f"{out} belongs to a run with other settings ({old.get('settings')}); use "
+                "another --out"
+            )
+        if data_path.exists():
+            with np.load(data_path) as d:
+                seeds, eps = arrays_to_episodes(dict(d))
+            print(f"resuming {out}: {len(seeds)} of {args.episodes} episodes collected")
+    elif out.exists() and any(out.iterdir()):
+        raise ValueError(f"--out {out} exists and is not a train-routes run folder")
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.time()
+    write_json(run_json, {"settings": settings, "status": "collecting"})
+    all_seeds = list(range(first, first + args.episodes))
+    todo = all_seeds[len(seeds) :]
+    bar = None
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(total=args.episodes, initial=len(seeds), unit="episode", desc="routes")
+    except ImportError:  # pragma: no cover - tqdm comes with the train extra
+        pass
+    for i in range(0, len(todo), args.block):
+        block = todo[i : i + args.block]
+        eps += collect(env_kwargs, args.base, block, max_turns=args.max_turns, jobs=args.jobs)
+        seeds += block
+        arrays = episodes_to_arrays(seeds, eps)
+        with atomic_path(data_path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+        if bar is not None:
+            bar.update(len(block))
+    if bar is not None:
+        bar.close()
+    collect_s = time.time() - started
+    feats = [e["features"] for e in eps]
+    errors = [e["nav"] for e in eps]
+    model = fit_route_model(
+        feats,
+        errors,
+        args.base,
+        info={"env": env_kwargs, "first_seed": first, "training_seed": args.seed},
+    )
+    model.save(model_path)
+    n_multi = sum(len(e) > 1 for e in errors)
+    summary = {
+        "settings": settings,
+        "status": "finished",
+        "episodes_with_a_choice": n_multi,
+        "routes_flown": int(sum(len(e) for e in errors)),
+        "collect_s": round(collect_s, 1),
+        "alpha": model.alpha,
+        "cv_chosen_minus_mean_m": model.info["cv_chosen_minus_mean_m"],
+    }
+    write_json(run_json, summary)
+    cv = model.info["cv_chosen_minus_mean_m"][str(model.alpha)]
+    print(
+        f"route model: {n_multi} of {len(errors)} episodes with a choice, alpha {model.alpha}, "
+        f"cross-validated choice {cv:+.3f} m against the mean route; saved {model_path}"
+    )
+    return 0
