@@ -285,3 +285,45 @@ def test_study_accepts_train_routes_runs(tmp_path):
     assert _env_of(run) == {"max_fix_sigma_m": 8}
     with pytest.raises(ValueError, match=r"route_model\.json"):
         _parse_runs([f"x={tmp_path}"])
+
+
+def test_route_choice_benchmark_prices_rules_and_models_from_one_collection(tmp_path):
+    from tests.benchmark_script import load_benchmark
+
+    bench = load_benchmark("route_choice")
+    j = ROUTE_FEATURES.index("los_mean")
+    k = ROUTE_FEATURES.index("turns")
+    eps = []
+    for i in range(40):
+        f = np.zeros((3, len(ROUTE_FEATURES)))
+        f[:, j] = [8.0, 10.0 + (i % 2), 9.0]  # route 1 has the most sky
+        f[:, k] = [1.0, 3.0, 2.0]
+        eps.append(
+            {
+                "features": f,
+                "nav": np.array([3.0, 2.0, 2.5]) + 0.01 * i,
+                "goal": np.array([True, True, i % 4 != 0]),
+            }
+        )
+    eps.append(
+        {
+            "features": np.full((1, len(ROUTE_FEATURES)), np.nan),
+            "nav": np.array([4.0]),
+            "goal": np.array([False]),
+        }
+    )  # one route: nothing to choose
+    m = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling")  # fewest turns: route 0
+    rep = bench.price_choices(eps, {"fewest": m}, reps=200)
+    assert rep["episodes"] == 41 and rep["episodes_with_a_choice"] == 40
+    assert rep["best_rule"] == "rule los_mean"
+    best = rep["choices"]["rule los_mean"]
+    assert best["nav_m"] == pytest.approx(np.mean([2.0 + 0.01 * i for i in range(40)] + [4.0]))
+    assert best["vs_first_route_m"][0] == pytest.approx(-40 / 41)
+    assert best["vs_best_rule_m"] == [0.0, 0.0, 0.0]
+    assert best["differs_from_first"] == pytest.approx(40 / 41)
+    model = rep["choices"]["model fewest"]
+    assert model["vs_first_route_m"] == [0.0, 0.0, 0.0]  # it picks the first route
+    assert rep["choices"]["rule turns"]["goal_rate"] == pytest.approx(40 / 41)
+    assert rep["oracle_noise_selected_nav_m"] == pytest.approx(best["nav_m"])
+    lines = bench.report_lines(rep)
+    assert lines[-1] == "best rule: rule los_mean" and any("model fewest" in x for x in lines)
