@@ -106,9 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     from agents.routes import RouteModel
     from training.files import atomic_path, atomic_write_text
     from training.route_learning import (
-        _env_kwargs,
         arrays_to_episodes,
         collect,
+        env_kwargs_from_overrides,
         episodes_to_arrays,
     )
 
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
-    env_kwargs = _env_kwargs(args.env_set)
+    env_kwargs = env_kwargs_from_overrides(args.env_set)
     settings = {
         "env": env_kwargs,
         "base": args.base,

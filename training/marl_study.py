@@ -586,7 +586,9 @@ def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str,
     return out
 
 
-def _parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
+def parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
+    """``--runs NAME=DIR[,DIR...]`` as a mapping of names to run folders; each folder must
+    hold a trained model (one of :data:`_MODEL_FILES`), else ``ValueError`` names it."""
     out = {
         name: [Path(d) for d in dirs]
         for name, dirs in parse_named_lists(items, "--runs", "NAME=DIR[,DIR...]").items()
@@ -602,7 +604,8 @@ _MODEL_FILES = ("final_model.pt", "final_model.zip", "route_model.json")
 """What makes a folder a training run: TorchRL, SB3, or ``coopnav train-routes``."""
 
 
-def _policy_name(run: Path) -> str:
+def run_policy_name(run: Path) -> str:
+    """The :func:`agents.make_policy` name of a run folder's model (TorchRL, route or SB3)."""
     if (run / "final_model.pt").is_file():
         return f"torchrl:{run}"
     if (run / "route_model.json").is_file():
@@ -610,7 +613,9 @@ def _policy_name(run: Path) -> str:
     return f"ppo:{run / 'final_model.zip'}"
 
 
-def _env_of(run: Path) -> dict[str, Any]:
+def run_env(run: Path) -> dict[str, Any]:
+    """The environment settings a run was trained in (its ``run.json``, else its
+    ``config.yaml``)."""
     if (run / "run.json").is_file():
         d = json.loads((run / "run.json").read_text())
         if "env" in d:
@@ -626,16 +631,16 @@ def _env_of(run: Path) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """``coopnav study``: fly, summarise, write ``report.md``, ``report.json`` and figures."""
     t0 = time.perf_counter()
-    groups = _parse_runs(args.runs)
+    groups = parse_runs(args.runs)
     env_kwargs: dict[str, Any] = {}
     first = next(iter(groups.values()), [])
     if first:
-        env_kwargs = _env_of(first[0])
+        env_kwargs = run_env(first[0])
     env_kwargs = apply_overrides(env_kwargs, args.env_set)
     seeds = heldout_seeds(args.episodes, args.first_seed)
     units: list[tuple[str, str, list[int]]] = [(h, h, seeds) for h in args.heuristics]
     for name, dirs in groups.items():
-        units += [(name, _policy_name(d), seeds) for d in dirs]
+        units += [(name, run_policy_name(d), seeds) for d in dirs]
     if args.planner_episodes > 0:
         if args.planner.split("@")[0] != "planner":
             raise ValueError(f"--planner must name the planner (planner@...), got {args.planner!r}")

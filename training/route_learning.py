@@ -201,7 +201,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="run folder (one run per folder)")
 
 
-def _env_kwargs(items: Sequence[str]) -> dict[str, Any]:
+def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """Environment keyword arguments from ``KEY=VALUE`` items (values parsed as YAML),
+    checked by building the config, so that a bad setting fails before anything is flown."""
     from coopnav_env.envs.config import make_config
     from training.config import apply_overrides
 
@@ -233,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
             f"training episodes must have reset seeds in [0, 1000000) (the held-out range starts "
             f"there), got {first}..{first + args.episodes - 1}"
         )
-    env_kwargs = _env_kwargs(args.env_set)
+    env_kwargs = env_kwargs_from_overrides(args.env_set)
     make_policy(args.base, urban_canyon_v0.parallel_env(**env_kwargs))  # a usable base
     out = Path(args.out)
     settings = {

@@ -274,17 +274,17 @@ def test_skyroute_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points()
 
 
 def test_study_accepts_train_routes_runs(tmp_path):
-    from training.marl_study import _env_of, _parse_runs, _policy_name
+    from training.marl_study import parse_runs, run_env, run_policy_name
 
     run = tmp_path / "r"
     run.mkdir()
     RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(run / "route_model.json")
     (run / "run.json").write_text(json.dumps({"settings": {"env": {"max_fix_sigma_m": 8}}}))
-    assert _parse_runs([f"route={run}"]) == {"route": [run]}
-    assert _policy_name(run) == f"route:{run}"
-    assert _env_of(run) == {"max_fix_sigma_m": 8}
+    assert parse_runs([f"route={run}"]) == {"route": [run]}
+    assert run_policy_name(run) == f"route:{run}"
+    assert run_env(run) == {"max_fix_sigma_m": 8}
     with pytest.raises(ValueError, match=r"route_model\.json"):
-        _parse_runs([f"x={tmp_path}"])
+        parse_runs([f"x={tmp_path}"])
 
 
 def test_route_choice_benchmark_prices_rules_and_models_from_one_collection(tmp_path):
