@@ -317,9 +317,12 @@ class _ColumnFollower:
         return self.goal_spacing_m + (self.spacing_m - self.goal_spacing_m) * w
 
     def _choose_route(self, city: Any, centre: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """The route of the episode: :func:`street_route` unless ``route_index`` picks another
-        of the shortest routes (:func:`~coopnav_env.sim.route.street_routes`, modulo their
-        number)."""
+        """The route of the episode: :func:`street_route`'s, or another of the equally short
+        routes (:func:`~coopnav_env.sim.route.street_routes`): candidate ``route_index``
+        (modulo their number), the best by the feature ``route_choice``, or the one
+        ``route_model`` predicts lowest. Records the candidates, the index flown and (when
+        they were scored) their features."""
+        self.route_feature_table = None
         if self.route_index == 0 and self.route_choice == "first" and self.route_model is None:
             self.route_candidates, self.route_chosen = [], 0
             return street_route(city, centre, goal[:2])
