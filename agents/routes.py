@@ -156,11 +156,13 @@ def route_features(
         route = np.vstack([route, route + np.array([0.0, 1e-3])])
     path = Polyline(route)
     s = np.arange(0.0, path.length + 1e-9, step_m)
-    # points behind the start count for the column's tail: extend the route backwards
+    # points behind the start count for the column's tail: extend the route backwards, on
+    # the same step so that the points on the route are exactly those of ``s``
     tail = (n - 1) * spacing_m
     d0 = route[1] - route[0]
     d0 = d0 / max(float(np.hypot(*d0)), 1e-12)
-    s_all = np.arange(-tail, path.length + 1e-9, step_m)
+    back = -np.arange(step_m, tail + step_m - 1e-9, step_m)[::-1] if tail > 0.0 else []
+    s_all = np.concatenate([back, s])
     xy = np.where(
         (s_all < 0.0)[:, None], route[0] + d0 * s_all[:, None], path.point(np.maximum(s_all, 0.0))
     )
@@ -176,10 +178,10 @@ def route_features(
         altitude_band_m=band,
     )
     los &= ~_city.is_inside_building(world.city.buildings, pts)[:, None]
-    on = s_all >= -1e-9
+    first = len(s_all) - len(s)
+    on = np.arange(len(s_all)) >= first
     counts = los[on].sum(axis=1).astype(float)
     lag = max(round(spacing_m / step_m), 1)
-    first = int(np.flatnonzero(on)[0])
     swarm = np.empty(len(s))
     for i in range(len(s)):
         j = first + i

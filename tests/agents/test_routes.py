@@ -327,3 +327,24 @@ def test_route_choice_benchmark_prices_rules_and_models_from_one_collection(tmp_
     assert rep["oracle_noise_selected_nav_m"] == pytest.approx(best["nav_m"])
     lines = bench.report_lines(rep)
     assert lines[-1] == "best rule: rule los_mean" and any("model fewest" in x for x in lines)
+
+
+@pytest.mark.parametrize("spacing", [7.0, 45.0, 12.5])
+def test_route_features_for_any_column_spacing(spacing):
+    env = _env()
+    seed = _multi_route_seed(env)
+    env.reset(seed=seed)
+    w = env.unwrapped.world
+    routes = street_routes(w.city, np.asarray(w.route_xy_m)[0], w.goal_enu_m[:2])
+    f = route_features(w, routes[1], 30.0, spacing_m=spacing)
+    assert f.shape == (len(ROUTE_FEATURES),) and np.all(np.isfinite(f))
+    # the features of the route itself do not depend on the column, only the pooled ones
+    ref = route_features(w, routes[1], 30.0, spacing_m=45.0)
+    own = [ROUTE_FEATURES.index(n) for n in ("los_mean", "los_min", "los_lt6", "pdop_gt3")]
+    assert np.array_equal(f[own], ref[own])
+    # a 7 m column (formation's) chooses and flies a route too
+    p = make_policy("formation@route_choice='swarm_mean'", env)
+    obs, _ = env.reset(seed=seed)
+    p.reset(seed)
+    p.act(obs)
+    assert len(p.route_candidates) >= 3
