@@ -236,7 +236,9 @@ def run(args: argparse.Namespace) -> int:
             f"there), got {first}..{first + args.episodes - 1}"
         )
     env_kwargs = env_kwargs_from_overrides(args.env_set)
-    make_policy(args.base, urban_canyon_v0.parallel_env(**env_kwargs))  # a usable base
+    # a column heuristic that can choose routes, with a valid --max-turns (fails early)
+    probe = _with_option(args.base, f"route_choice='los_mean',route_max_turns={args.max_turns}")
+    make_policy(probe, urban_canyon_v0.parallel_env(**env_kwargs))
     out = Path(args.out)
     settings = {
         "env": env_kwargs,

@@ -256,6 +256,10 @@ def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_p
     # another run's folder is refused
     assert main([*argv[:5], "--first-seed", "10", "--out", str(part)]) == 2
     assert main([*argv[:5], "--first-seed", "999999", "--out", str(tmp_path / "x")]) == 2
+    # a base that cannot choose routes, or a bad turn limit, fails before anything is written
+    for bad in (["--base", "random"], ["--max-turns", "12"]):
+        assert main([*argv[:5], *bad, "--out", str(tmp_path / "y")]) == 2
+        assert not (tmp_path / "y").exists()
 
 
 def test_skyroute_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points():
