@@ -31,8 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from coopnav_env.sim import city as _city
-from coopnav_env.sim.map_aided import predicted_line_of_sight
+from coopnav_env.nav import pdop
 from coopnav_env.sim.route import Polyline
 
 __all__ = [
@@ -96,24 +95,9 @@ PDOP_CAP = 30.0
 
 
 def _pdop(unit_enu: np.ndarray, system: np.ndarray, los: np.ndarray) -> np.ndarray:
-    """PDOP of the line-of-sight satellites at every point, ``(P,)``, capped at PDOP_CAP."""
-    systems = np.unique(system)
-    out = np.full(los.shape[0], PDOP_CAP)
-    for p in range(los.shape[0]):
-        use = los[p]
-        sys_used = [s for s in systems if np.any(use & (system == s))]
-        if use.sum() < 3 + len(sys_used):
-            continue
-        h = np.zeros((int(use.sum()), 3 + len(sys_used)))
-        h[:, :3] = -unit_enu[use]
-        for k, s in enumerate(sys_used):
-            h[:, 3 + k] = system[use] == s
-        try:
-            q = np.linalg.inv(h.T @ h)
-        except np.linalg.LinAlgError:
-            continue
-        out[p] = min(math.sqrt(max(float(np.trace(q[:3, :3])), 0.0)), PDOP_CAP)
-    return out
+    """PDOP (:func:`coopnav_env.nav.pdop`) of the line-of-sight satellites at every point,
+    ``(P,)``, capped at PDOP_CAP."""
+    return np.array([min(pdop(unit_enu[use], system[use]), PDOP_CAP) for use in los])
 
 
 def route_features(
@@ -167,17 +151,7 @@ def route_features(
         (s_all < 0.0)[:, None], route[0] + d0 * s_all[:, None], path.point(np.maximum(s_all, 0.0))
     )
     pts = np.column_stack([xy, np.full(len(s_all), z)])
-    sky = world._sky(world.t_s)
-    los = predicted_line_of_sight(
-        world.city.buildings,
-        sky.directions,
-        pts,
-        np.zeros((len(pts), 3, 3)),
-        margin_sigma=0.0,
-        max_margin_m=0.0,
-        altitude_band_m=band,
-    )
-    los &= ~_city.is_inside_building(world.city.buildings, pts)[:, None]
+    los = world.map_line_of_sight(pts)
     first = len(s_all) - len(s)
     on = np.arange(len(s_all)) >= first
     counts = los[on].sum(axis=1).astype(float)
@@ -187,9 +161,10 @@ def route_features(
         j = first + i
         idx = [j - k * lag for k in range(n) if j - k * lag >= 0]
         swarm[i] = los[idx].any(axis=0).sum()
+    sky = world._sky(world.t_s)
     az, el = np.radians(sky.az), np.radians(sky.el)
     unit = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
-    pdop = _pdop(unit, np.asarray(sky.system), los[on])
+    dop = _pdop(unit, np.asarray(sky.system), los[on])
     turns = max(route.shape[0] - 2, 0)
     return np.array(
         [
@@ -203,9 +178,9 @@ def route_features(
             (swarm < 8).mean(),
             (swarm < 10).mean(),
             (swarm < 12).mean(),
-            pdop.mean(),
-            (pdop > 3.0).mean(),
-            (pdop > 6.0).mean(),
+            dop.mean(),
+            (dop > 3.0).mean(),
+            (dop > 6.0).mean(),
             float(turns),
         ]
     )

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
 import sys
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -24,6 +23,7 @@ from numpy.typing import NDArray
 from coopnav_env.nav import (
     GnssObservations,
     NavStatus,
+    pdop,
     solve_cooperative_samples,
     solve_master_slave,
     solve_standalone,
@@ -96,14 +96,7 @@ def standalone_pdop(ep: PaperEpoch, uav: int) -> float:
     vis = ep.visible[uav]
     los = ep.sv_ecef_m[vis] - ep.pos_ecef_m[uav]
     los /= np.linalg.norm(los, axis=1, keepdims=True)
-    systems = np.unique(ep.system[vis])
-    g = np.concatenate([-los, (ep.system[vis][:, None] == systems[None]).astype(float)], axis=1)
-    if g.shape[0] < g.shape[1]:
-        return math.inf
-    info = g.T @ g
-    if np.linalg.cond(info) > 1e12:
-        return math.inf
-    return float(np.sqrt(np.trace(np.linalg.inv(info)[:3, :3])))
+    return pdop(los, ep.system[vis])
 
 
 def _standalone_rows(ep: PaperEpoch, pr_m: FloatArray, rows: list[int]) -> GnssObservations:

@@ -551,21 +551,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         """``(P, S)`` bool: the satellites the city model puts in line of sight from each of
         ``points`` ``(P, 3)`` by :func:`~coopnav_env.sim.map_aided.predicted_line_of_sight`
         (covariances ``cov`` ``(P, 3, 3)``, the margin in sigma and its cap, the flight band),
-        none from a point inside a building. The look-ahead observations' common step."""
-        from coopnav_env.sim.map_aided import predicted_line_of_sight
-
-        world = self.world
-        kin = self.config.kinematics
-        los = predicted_line_of_sight(
-            world.city.buildings,
-            world._sky(world.t_s).directions,
-            points,
-            cov,
-            margin_sigma=margin_sigma,
-            max_margin_m=max_margin_m,
-            altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
+        none from a point inside a building (:meth:`UrbanWorld.map_line_of_sight`). The
+        look-ahead observations' common step."""
+        return self.world.map_line_of_sight(
+            points, cov, margin_sigma=margin_sigma, max_margin_m=max_margin_m
         )
-        return los & ~_city.is_inside_building(world.city.buildings, points)[:, None]
 
     def _lookahead(self) -> np.ndarray:
         """The ``obs_lookahead`` columns, ``(N, 4)`` float32 (see the config's docstring):

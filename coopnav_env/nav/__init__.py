@@ -23,7 +23,7 @@ from coopnav_env.nav.types import (
     RelativePositions,
     VirtualPoint,
 )
-from coopnav_env.nav.wls import StandaloneSolution, solve_standalone
+from coopnav_env.nav.wls import StandaloneSolution, pdop, solve_standalone
 
 __all__ = [
     "PLAUSIBLE_RADIUS_M",
@@ -40,6 +40,7 @@ __all__ = [
     "fde_cooperative",
     "fde_standalone",
     "integrity_rates",
+    "pdop",
     "solve_cooperative",
     "solve_cooperative_samples",
     "solve_master_slave",

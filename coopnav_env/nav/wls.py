@@ -7,6 +7,7 @@ diagonal covariance of Eq. 3 (``sigma_URE^2 + sigma_tropo^2 + sigma_user^2``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +23,7 @@ from coopnav_env.nav.types import (
     initial_positions,
 )
 
-__all__ = ["StandaloneSolution", "solve_standalone"]
+__all__ = ["StandaloneSolution", "pdop", "solve_standalone"]
 
 #: A normal matrix whose diagonally scaled condition number exceeds this is reported singular
 #: (the numpy formulation and the compiled kernels share the value).
@@ -30,6 +31,37 @@ COND_LIMIT = _kernels.COND_LIMIT
 
 _USE_KERNEL = True
 """Run the Gauss-Newton loop in the compiled kernel (False: the numpy formulation)."""
+
+
+def pdop(los_unit: np.ndarray, system: np.ndarray) -> float:
+    """Position dilution of precision of a standalone fix with unit weights.
+
+    State: the position and one receiver clock per constellation among ``system`` (Eq. 14).
+
+    Parameters
+    ----------
+    los_unit : ndarray, shape (S, 3)
+        Unit vectors from the receiver to the satellites, in any Cartesian frame (PDOP does
+        not depend on its orientation).
+    system : ndarray, shape (S,)
+        Constellation of each satellite.
+
+    Returns
+    -------
+    float
+        ``sqrt(trace((G^T G)^-1)[:3, :3])``; ``inf`` when there are fewer satellites than
+        unknowns or the normal matrix is singular (condition number above 1e12).
+    """
+    los = np.asarray(los_unit, dtype=float).reshape(-1, 3)
+    sys_ = np.asarray(system).reshape(-1)
+    systems = np.unique(sys_)
+    g = np.concatenate([-los, (sys_[:, None] == systems[None]).astype(float)], axis=1)
+    if g.shape[0] < g.shape[1]:
+        return math.inf
+    info = g.T @ g
+    if np.linalg.cond(info) > 1e12:
+        return math.inf
+    return float(np.sqrt(np.trace(np.linalg.inv(info)[:3, :3])))
 
 
 @dataclass(frozen=True)

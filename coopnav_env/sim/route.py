@@ -106,19 +106,21 @@ def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarr
     else:
         pts.append((gx, sy))
     pts.append((gx, gy))
+    return np.array(_without_repeats(pts), dtype=float).reshape(-1, 2)
+
+
+def _without_repeats(pts: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """``pts`` without points within 1 um of the one kept before them."""
     out = [pts[0]]
     for p in pts[1:]:
         if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
             out.append(p)
-    return np.array(out, dtype=float).reshape(-1, 2)
+    return out
 
 
 def _clean_route(pts: list[tuple[float, float]]) -> tuple[tuple[float, float], ...]:
     """Drop repeated points and straight-through (collinear) corners of a waypoint list."""
-    out: list[tuple[float, float]] = [pts[0]]
-    for p in pts[1:]:
-        if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
-            out.append(p)
+    out = _without_repeats(pts)
     k = 1
     while k < len(out) - 1:
         a, b, c = out[k - 1], out[k], out[k + 1]

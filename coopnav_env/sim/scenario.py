@@ -152,6 +152,7 @@ from coopnav_env.sim.city import (
     canyon_city,
     draw_nlos,
     generate_city,
+    is_inside_building,
     sky_directions,
 )
 from coopnav_env.sim.map_aided import predicted_line_of_sight
@@ -862,6 +863,35 @@ class UrbanWorld:
             return _sky_epoch(self.constellation, self.origin_ecef_m, cfg.elevation_mask_deg, t_s)
         key = (cfg.systems, cfg.lat_deg, cfg.lon_deg, cfg.alt_m, cfg.elevation_mask_deg, t_s)
         return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m)
+
+    def map_line_of_sight(
+        self,
+        points: np.ndarray,
+        cov: np.ndarray | None = None,
+        *,
+        margin_sigma: float = 0.0,
+        max_margin_m: float = 0.0,
+    ) -> BoolArray:
+        """``(P, S)`` bool: the satellites above the mask at ``t_s`` that the city model puts
+        in line of sight from each of ``points`` ``(P, 3)`` [m] by
+        :func:`~coopnav_env.sim.map_aided.predicted_line_of_sight` (covariances ``cov``
+        ``(P, 3, 3)``, default none; the margin in sigma and its cap; the flight band), none
+        from a point inside a building. What a receiver that has the city map can predict:
+        the environment's look-ahead observations and the route features of
+        :mod:`agents.routes` use it."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        cov = np.zeros((pts.shape[0], 3, 3)) if cov is None else cov
+        kin = self.config.kinematics
+        los = predicted_line_of_sight(
+            self.city.buildings,
+            self._sky(self.t_s).directions,
+            pts,
+            cov,
+            margin_sigma=margin_sigma,
+            max_margin_m=max_margin_m,
+            altitude_band_m=(kin.altitude_min_m, kin.altitude_max_m),
+        )
+        return los & ~is_inside_building(self.city.buildings, pts)[:, None]
 
     # ---- frames -----------------------------------------------------------------------------
 
