@@ -88,6 +88,8 @@ class _ColumnFollower:
         route_max_turns: int = 3,
         route_choice: str = "first",
         route_model: Any = None,
+        route_split: str = "none",
+        route_split_index: int = 0,
     ):
         self.env = env
         self.base = _world_of(env)
@@ -139,6 +141,24 @@ class _ColumnFollower:
                 f"route_model={route_model!r}"
             )
         self.route_choice = route_choice
+        if route_split != "none" and route_split not in ROUTE_FEATURES:
+            raise ValueError(
+                f"route_split must be 'none' or a route feature {list(ROUTE_FEATURES)}, got "
+                f"{route_split!r}"
+            )
+        if isinstance(route_split_index, bool) or not isinstance(
+            route_split_index, (int, np.integer)
+        ):
+            raise ValueError(f"route_split_index must be an int >= 0, got {route_split_index!r}")
+        if route_split_index < 0:
+            raise ValueError(f"route_split_index must be >= 0, got {route_split_index}")
+        if route_split != "none" and route_split_index:
+            raise ValueError(
+                "route_split and route_split_index exclude each other, got "
+                f"route_split={route_split!r}, route_split_index={route_split_index}"
+            )
+        self.route_split = route_split
+        self.route_split_index = int(route_split_index)
         if isinstance(route_model, (str, Path)):
             from agents.routes import RouteModel, resolve_route_model
 
@@ -158,6 +178,8 @@ class _ColumnFollower:
         self._sky = self.layout["skyline"].slice
         self._present = self.layout.neighbour_present_indices()
         self._path: Polyline | None = None
+        self._paths: list[Polyline] = []  # one per sub-column (one without a split)
+        self.route_split_chosen: int | None = None  # the second route, when split
         self._shifts: np.ndarray | None = None  # learned slot shifts (set_slot_shifts)
 
     # -- to be specialised ----------------------------------------------------------------
@@ -189,23 +211,23 @@ class _ColumnFollower:
         est = goal + self._position.decode(obs)  # estimated positions, never the truth
         if self._path is None or self._n != len(self._index):
             self._plan(est, idx, city, goal)
-        path = self._path
-        assert path is not None
         slot = self._slot[idx]
         self._cur_idx = idx
+        groups = self._groups_of(idx)
 
-        # progress of every UAV along the route (window around its last value)
+        # progress of every UAV along its route (window around its last value)
         s_prev = self._s[idx]
-        s = path.project(est[:, :2], s_prev - 20.0, s_prev + 40.0)
+        s = self._on_paths(groups, "project", est[:, :2], s_prev - 20.0, s_prev + 40.0)
         self._s[idx] = s
 
         # advance the head of the column: cruise, brake before corners, wait for laggards
         spacing = self._spacing_now()
         shift = self._slot_shift(idx)  # (along, lateral, up) per live UAV; zeros by default
-        slot_s = self._head - slot * spacing + shift[:, 0]
+        off = self._s_offset[groups]  # the sub-columns' arc lengths relative to the first's
+        slot_s = self._head - slot * spacing + shift[:, 0] + off
         ref = np.minimum(np.maximum(slot_s, 0.0), s)
-        v_corner = v_corner_at(
-            path, ref, self.turn_speed_mps, self.brake_mps2, self.cruise_speed_mps
+        v_corner = self._on_paths(
+            groups, "corner", ref, self.turn_speed_mps, self.brake_mps2, self.cruise_speed_mps
         )
         speed = float(np.min(v_corner))
         lag = float(np.max(slot_s - s))
@@ -216,16 +238,16 @@ class _ColumnFollower:
         if self._head >= self._head_end:
             speed = 0.0
 
-        slot_s = self._head - slot * self._spacing_now() + shift[:, 0]
-        tangent = path.tangent(slot_s)
+        slot_s = self._head - slot * self._spacing_now() + shift[:, 0] + off
+        tangent = self._on_paths(groups, "tangent", slot_s)
         normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)  # left of travel
         lateral = self._lateral_offsets_m(obs, tangent) + shift[:, 1]
-        target_xy = path.point(slot_s) + normal * lateral[:, None]
+        target_xy = self._on_paths(groups, "point", slot_s) + normal * lateral[:, None]
         v = np.zeros((len(agents), 3))
         v[:, :2] = tangent * speed + self.gain_per_s * (target_xy - est[:, :2])
         v[:, 2] = self.gain_per_s * (self._altitude_m() + shift[:, 2] - est[:, 2])
         h = np.linalg.norm(v[:, :2], axis=1)
-        cap = v_corner_at(path, s, self.turn_speed_mps, self.brake_mps2, vmax)
+        cap = self._on_paths(groups, "corner", s, self.turn_speed_mps, self.brake_mps2, vmax)
         v[:, :2] *= np.minimum(1.0, cap / np.maximum(h, 1e-9))[:, None]
         if self.wall_margin_m is not None:
             # wall guard, from the range sensor (true distances, unlike the estimated position
@@ -323,11 +345,16 @@ class _ColumnFollower:
         ``route_model`` predicts lowest. Records the candidates, the index flown and (when
         they were scored) their features."""
         self.route_feature_table = None
-        if self.route_index == 0 and self.route_choice == "first" and self.route_model is None:
+        plain = self.route_index == 0 and self.route_choice == "first" and self.route_model is None
+        if plain and self.route_split == "none" and not self.route_split_index:
             self.route_candidates, self.route_chosen = [], 0
             return street_route(city, centre, goal[:2])
         routes = street_routes(city, centre, goal[:2], self.route_max_turns)
-        if self.route_choice == "first" and self.route_model is None:
+        if (
+            self.route_choice == "first"
+            and self.route_model is None
+            and (self.route_split == "none" or len(routes) == 1)
+        ):
             k = self.route_index % len(routes)
         elif len(routes) == 1:
             k = 0
@@ -349,32 +376,110 @@ class _ColumnFollower:
             self.route_feature_table = feats
             if self.route_model is not None:
                 k = int(np.argmin(self.route_model.predict(feats)))
+            elif self.route_choice == "first":
+                k = self.route_index % len(routes)
             else:
                 j = ROUTE_FEATURES.index(self.route_choice)
                 k = int(np.argmax(FEATURE_SENSE[self.route_choice] * feats[:, j]))
         self.route_candidates, self.route_chosen = routes, k
         return routes[k]
 
+    def _split_route(self, routes: list[np.ndarray], k: int) -> int | None:
+        """Index of the second route of a split swarm among ``routes`` (``k`` is the first),
+        or None to fly one column: candidate ``route_split_index`` counted among the others
+        (modulo their number), or the best other one by the feature ``route_split``."""
+        others = [j for j in range(len(routes)) if j != k]
+        if self.route_split_index:
+            return others[(self.route_split_index - 1) % len(others)]
+        if self.route_split == "none":
+            return None
+        from agents.routes import FEATURE_SENSE, ROUTE_FEATURES
+
+        feats = self.route_feature_table
+        assert feats is not None
+        j = ROUTE_FEATURES.index(self.route_split)
+        return others[int(np.argmax(FEATURE_SENSE[self.route_split] * feats[others, j]))]
+
+    def _groups_of(self, idx: np.ndarray) -> np.ndarray:
+        return self._group[idx]
+
+    def _on_paths(self, groups: np.ndarray, op: str, *args: Any) -> np.ndarray:
+        """Apply a path operation per UAV on its own sub-column's path.
+
+        ``op``: ``project`` (xy, lo, hi), ``tangent`` (s), ``point`` (s) or ``corner`` (s,
+        v_turn, brake, vmax: :func:`v_corner_at`); array arguments are per UAV, row for row
+        with ``groups``. One path (no split): one call on the whole arrays."""
+
+        def call(path: Polyline, *a: Any) -> np.ndarray:
+            if op == "corner":
+                return v_corner_at(path, *a)
+            return getattr(path, op)(*a)
+
+        if len(self._paths) == 1:
+            return call(self._paths[0], *args)
+        n = groups.size
+        out: np.ndarray | None = None
+        for g, path in enumerate(self._paths):
+            m = groups == g
+            if not m.any():
+                continue
+            sub = [x[m] if isinstance(x, np.ndarray) and x.shape[:1] == (n,) else x for x in args]
+            r = call(path, *sub)
+            if out is None:
+                out = np.zeros((n, *r.shape[1:]))
+            out[m] = r
+        assert out is not None
+        return out
+
     def _plan(self, est: np.ndarray, idx: np.ndarray, city: Any, goal: np.ndarray) -> None:
         n = len(self._index)
         self._n = n
         centre = est[:, :2].mean(axis=0)
         route = self._choose_route(city, centre, goal)
+        routes = [route]
+        k2 = (
+            self._split_route(self.route_candidates, self.route_chosen)
+            if len(self.route_candidates) > 1
+            else None
+        )
+        if k2 is not None:
+            routes.append(self.route_candidates[k2])
+        self.route_split_chosen = k2
         wide = max(self.spacing_m, self.goal_spacing_m)
         back = (n + 1) * wide + 10.0
         fwd = (n - 1) * self.goal_spacing_m / 2.0 + 5.0
-        pts = extend_route(route, back, fwd, city.extent_m)
-        path = Polyline(pts)
-        # arc length of the (snapped) goal on the extended path
-        s_goal = float(path.project(route[-1:], np.zeros(1), np.full(1, path.length))[0])
+        self._paths = []
+        s_goals = []
+        for r in routes:
+            path = Polyline(extend_route(r, back, fwd, city.extent_m))
+            # arc length of the (snapped) goal on the extended path
+            s_goals.append(float(path.project(r[-1:], np.zeros(1), np.full(1, path.length))[0]))
+            self._paths.append(path)
+        path = self._paths[0]
+        s_goal = s_goals[0]
+        self._s_offset = np.asarray(s_goals) - s_goal
         s0 = path.project(est[:, :2], np.zeros(len(idx)), np.full(len(idx), s_goal))
         order = np.argsort(-s0, kind="stable")  # the UAV farthest along leads
         slot = np.zeros(n)
         self._s = np.zeros(n)
         slot[idx[order]] = np.arange(len(idx))
-        self._s[idx] = s0
+        # sub-columns: slots alternate between the routes (the leader on the first)
+        self._group = (slot.astype(np.int64) % len(routes)).astype(np.int64)
+        if len(routes) > 1:
+            g = self._group[idx]
+            s0 = self._on_paths(
+                g, "project", est[:, :2], np.zeros(len(idx)), np.full(len(idx), 1e9)
+            )
+            s0 = np.minimum(s0, np.asarray(s_goals)[g]) - self._s_offset[g]
+        self._s[idx] = s0 + (self._s_offset[self._group[idx]] if len(routes) > 1 else 0.0)
         self._slot = slot
         self._head_end = min(s_goal + (n - 1) * self.goal_spacing_m / 2.0, path.length)
+        for g in range(1, len(routes)):
+            self._head_end = min(
+                self._head_end,
+                s_goals[g] + (n - 1) * self.goal_spacing_m / 2.0 - self._s_offset[g],
+                self._paths[g].length - self._s_offset[g],
+            )
         start = self.spacing_m if self.open_distance_m is None else self.goal_spacing_m
         self._head = float(np.mean(s0 + slot[idx] * start))  # spacing at the start
         self._head0 = self._head
@@ -452,6 +557,18 @@ class FormationPolicy(_ColumnFollower):
     route_model : agents.routes.RouteModel or str, optional
         A learned route model (or the path of one): fly the route it predicts the lowest
         error for (the ``route:<path>`` policies of :func:`agents.make_policy`).
+    route_split : str, default "none"
+        Split the column over two equally short routes: a feature name of
+        :data:`agents.routes.ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the leader's) on
+        the chosen route and the slots 1, 3, ... on the best *other* candidate by that
+        feature, at the same arc length, so that the two sub-columns fly abreast through
+        different streets and the cooperative fix pools the sky of both (relative sensing
+        reaches 200 m; :func:`agents.routes.split_features` predicts what they pool). An
+        episode with one candidate flies one column. ``"none"``: no split.
+    route_split_index : int, default 0
+        Split onto this candidate (counted among the candidates other than the chosen
+        route, from 1, modulo their number) instead; 0: no split. For studies that fly every
+        split of an episode. Excludes ``route_split``.
     """
 
     name = "formation"

@@ -38,10 +38,13 @@ __all__ = [
     "FEATURE_SENSE",
     "PRETRAINED_ROUTE_DIR",
     "ROUTE_FEATURES",
+    "SPLIT_FEATURES",
+    "SPLIT_FEATURE_SENSE",
     "RouteModel",
     "fit_route_model",
     "resolve_route_model",
     "route_features",
+    "split_features",
 ]
 
 PRETRAINED_ROUTE_DIR = Path(__file__).resolve().parent / "pretrained"
@@ -100,6 +103,47 @@ def _pdop(unit_enu: np.ndarray, system: np.ndarray, los: np.ndarray) -> np.ndarr
     return np.array([min(pdop(unit_enu[use], system[use]), PDOP_CAP) for use in los])
 
 
+def _band_altitude(world: Any, altitude_m: float) -> float:
+    kin = world.config.kinematics
+    return float(np.clip(altitude_m, float(kin.altitude_min_m), float(kin.altitude_max_m)))
+
+
+def _as_route(route_xy_m: np.ndarray) -> np.ndarray:
+    route = np.asarray(route_xy_m, dtype=float).reshape(-1, 2)
+    if route.shape[0] < 2:
+        route = np.vstack([route, route + np.array([0.0, 1e-3])])
+    return route
+
+
+def _column_points(
+    route: np.ndarray, n: int, spacing_m: float, step_m: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Arc lengths ``s`` every ``step_m`` along ``route``, and the points ``xy`` at them
+    preceded by the points behind the start that a column of ``n`` UAVs ``spacing_m`` apart
+    trails over (the route extended backwards on the same step, so that the points on the
+    route are exactly those of ``s``); ``first`` is the index of ``s = 0`` in ``xy``."""
+    path = Polyline(route)
+    s = np.arange(0.0, path.length + 1e-9, step_m)
+    tail = (n - 1) * spacing_m
+    d0 = route[1] - route[0]
+    d0 = d0 / max(float(np.hypot(*d0)), 1e-12)
+    back = -np.arange(step_m, tail + step_m - 1e-9, step_m)[::-1] if tail > 0.0 else []
+    s_all = np.concatenate([back, s])
+    xy = np.where(
+        (s_all < 0.0)[:, None], route[0] + d0 * s_all[:, None], path.point(np.maximum(s_all, 0.0))
+    )
+    return s, xy, len(s_all) - len(s)
+
+
+def _sky_units(world: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Unit line-of-sight vectors (East, North, Up) of the world's satellites at its current
+    time, and their constellation indices."""
+    sky = world._sky(world.t_s)
+    az, el = np.radians(sky.az), np.radians(sky.el)
+    unit = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
+    return unit, np.asarray(sky.system)
+
+
 def route_features(
     world: Any,
     route_xy_m: np.ndarray,
@@ -131,29 +175,13 @@ def route_features(
         raise ValueError(f"step_m must be finite and > 0 [m], got {step_m!r}")
     if not (math.isfinite(spacing_m) and spacing_m > 0.0):
         raise ValueError(f"spacing_m must be finite and > 0 [m], got {spacing_m!r}")
-    kin = world.config.kinematics
-    band = (float(kin.altitude_min_m), float(kin.altitude_max_m))
-    z = float(np.clip(altitude_m, *band))
+    z = _band_altitude(world, altitude_m)
     n = int(world.config.n_uavs if n_uavs is None else n_uavs)
-    route = np.asarray(route_xy_m, dtype=float).reshape(-1, 2)
-    if route.shape[0] < 2:
-        route = np.vstack([route, route + np.array([0.0, 1e-3])])
-    path = Polyline(route)
-    s = np.arange(0.0, path.length + 1e-9, step_m)
-    # points behind the start count for the column's tail: extend the route backwards, on
-    # the same step so that the points on the route are exactly those of ``s``
-    tail = (n - 1) * spacing_m
-    d0 = route[1] - route[0]
-    d0 = d0 / max(float(np.hypot(*d0)), 1e-12)
-    back = -np.arange(step_m, tail + step_m - 1e-9, step_m)[::-1] if tail > 0.0 else []
-    s_all = np.concatenate([back, s])
-    xy = np.where(
-        (s_all < 0.0)[:, None], route[0] + d0 * s_all[:, None], path.point(np.maximum(s_all, 0.0))
-    )
-    pts = np.column_stack([xy, np.full(len(s_all), z)])
+    route = _as_route(route_xy_m)
+    s, xy, first = _column_points(route, n, spacing_m, step_m)
+    pts = np.column_stack([xy, np.full(len(xy), z)])
     los = world.map_line_of_sight(pts)
-    first = len(s_all) - len(s)
-    on = np.arange(len(s_all)) >= first
+    on = np.arange(len(xy)) >= first
     counts = los[on].sum(axis=1).astype(float)
     lag = max(round(spacing_m / step_m), 1)
     swarm = np.empty(len(s))
@@ -161,10 +189,8 @@ def route_features(
         j = first + i
         idx = [j - k * lag for k in range(n) if j - k * lag >= 0]
         swarm[i] = los[idx].any(axis=0).sum()
-    sky = world._sky(world.t_s)
-    az, el = np.radians(sky.az), np.radians(sky.el)
-    unit = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
-    dop = _pdop(unit, np.asarray(sky.system), los[on])
+    unit, system = _sky_units(world)
+    dop = _pdop(unit, system, los[on])
     turns = max(route.shape[0] - 2, 0)
     return np.array(
         [
@@ -182,6 +208,117 @@ def route_features(
             (dop > 3.0).mean(),
             (dop > 6.0).mean(),
             float(turns),
+        ]
+    )
+
+
+#: Features of a *split* swarm (:func:`split_features`): its column's slots alternate
+#: between two equally short routes (the leader on the first), or all fly one route.
+#: ``swarm``: distinct satellites predicted in line of sight over the column's slots (what
+#: the cooperative fix pools), with its minimum and the shares of points below 8, 10 and 12;
+#: ``spdop``: the PDOP of those pooled satellites (mean, shares above 2 and 3); ``los_mean``
+#: and ``pdop_gt3``: as :data:`ROUTE_FEATURES`, averaged over the routes; ``sep``: the
+#: distance between the two routes at the same arc length [m] (mean, max; 0 unsplit);
+#: ``turns``: the most turns of a route; ``split``: 1 for two routes, 0 for one.
+SPLIT_FEATURES: tuple[str, ...] = (
+    "swarm_mean",
+    "swarm_min",
+    "swarm_lt8",
+    "swarm_lt10",
+    "swarm_lt12",
+    "spdop_mean",
+    "spdop_gt2",
+    "spdop_gt3",
+    "los_mean",
+    "pdop_gt3",
+    "sep_mean",
+    "sep_max",
+    "turns",
+    "split",
+)
+
+#: As :data:`FEATURE_SENSE`, for :data:`SPLIT_FEATURES` (``sep`` and ``split`` count as
+#: "larger is better": a rule on them spreads the swarm as far as it can).
+SPLIT_FEATURE_SENSE: dict[str, int] = {
+    name: (
+        1 if name in ("swarm_mean", "swarm_min", "los_mean", "sep_mean", "sep_max", "split") else -1
+    )
+    for name in SPLIT_FEATURES
+}
+
+
+def split_features(
+    world: Any,
+    routes: Sequence[np.ndarray],
+    altitude_m: float,
+    *,
+    spacing_m: float = 45.0,
+    n_uavs: int | None = None,
+    step_m: float = 5.0,
+) -> np.ndarray:
+    """The :data:`SPLIT_FEATURES` of a column flown on one route or split over two.
+
+    Slot ``k`` of the column (``k = 0`` leads) flies ``routes[k % len(routes)]`` at the
+    same arc length as it would on one route, as the column heuristics fly a split
+    (``route_split``); the routes must be equally short (within one ``step_m``). Parameters
+    as :func:`route_features`; ``routes`` holds one or two routes.
+    """
+    if not (math.isfinite(step_m) and step_m > 0.0):
+        raise ValueError(f"step_m must be finite and > 0 [m], got {step_m!r}")
+    if not (math.isfinite(spacing_m) and spacing_m > 0.0):
+        raise ValueError(f"spacing_m must be finite and > 0 [m], got {spacing_m!r}")
+    if len(routes) not in (1, 2):
+        raise ValueError(f"split_features takes one or two routes, got {len(routes)}")
+    z = _band_altitude(world, altitude_m)
+    n = int(world.config.n_uavs if n_uavs is None else n_uavs)
+    sampled = [_column_points(_as_route(r), n, spacing_m, step_m) for r in routes]
+    lengths = [len(p[0]) for p in sampled]
+    if max(lengths) - min(lengths) > 1:
+        raise ValueError(
+            f"split_features needs equally short routes, got {len(routes)} routes of "
+            f"{[float(p[0][-1]) for p in sampled]} m"
+        )
+    m = min(lengths)
+    first = sampled[0][2]
+    los = [
+        world.map_line_of_sight(np.column_stack([xy, np.full(len(xy), z)])) for _, xy, _ in sampled
+    ]
+    lag = max(round(spacing_m / step_m), 1)
+    n_routes = len(routes)
+    pooled = np.zeros((m, los[0].shape[1]), dtype=bool)
+    for k in range(n):
+        j = first + np.arange(m) - k * lag
+        ok = j >= 0
+        pooled[ok] |= los[k % n_routes][j[ok]]
+    swarm = pooled.sum(axis=1).astype(float)
+    unit, system = _sky_units(world)
+    sdop = _pdop(unit, system, pooled)
+    on = [lo[first : first + m] for lo in los]
+    counts = np.mean([o.sum(axis=1) for o in on], axis=0)
+    dop_gt3 = float(np.mean([(_pdop(unit, system, o) > 3.0).mean() for o in on]))
+    if n_routes == 2:
+        sep = np.linalg.norm(
+            sampled[0][1][first : first + m] - sampled[1][1][first : first + m], axis=1
+        )
+    else:
+        sep = np.zeros(m)
+    turns = max(max(_as_route(r).shape[0] - 2, 0) for r in routes)
+    return np.array(
+        [
+            swarm.mean(),
+            swarm.min(),
+            (swarm < 8).mean(),
+            (swarm < 10).mean(),
+            (swarm < 12).mean(),
+            sdop.mean(),
+            (sdop > 2.0).mean(),
+            (sdop > 3.0).mean(),
+            counts.mean(),
+            dop_gt3,
+            sep.mean(),
+            sep.max(),
+            float(turns),
+            float(n_routes - 1),
         ]
     )
 

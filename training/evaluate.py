@@ -464,7 +464,13 @@ def _info_float(info: Mapping[str, Any], key: str) -> float:
         return math.nan
 
 
-def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) -> EpisodeRecord:
+def run_episode(
+    env: Any,
+    policy: Any,
+    seed: int,
+    max_steps: int | None = None,
+    options: dict[str, Any] | None = None,
+) -> EpisodeRecord:
     """Fly one episode of ``policy`` in ``env`` from ``reset(seed=seed)``.
 
     Parameters
@@ -475,6 +481,9 @@ def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) 
         Reset seed of the env and of the policy.
     max_steps : int or None
         Safety limit on the number of steps (the env's own ``max_steps`` truncates first).
+    options : dict, optional
+        Reset options (e.g. ``{"noise_stream": 1}``: the same episode under another noise
+        realisation, see ``urban_canyon_v0``'s ``reset``); default none.
 
     Returns
     -------
@@ -482,7 +491,7 @@ def run_episode(env: Any, policy: Any, seed: int, max_steps: int | None = None) 
     """
     agents = list(env.possible_agents)
     n = len(agents)
-    obs, infos = env.reset(seed=int(seed))
+    obs, infos = env.reset(seed=int(seed), options=options)
     policy.reset(seed=int(seed))
     rows: dict[str, list[np.ndarray]] = {
         k: []

@@ -50,14 +50,27 @@ def _with_option(base: str, option: str) -> str:
     return f"{base}{',' if '@' in base else '@'}{option}"
 
 
-def collect_episode(env: Any, base: str, seed: int, max_turns: int = 3) -> dict[str, np.ndarray]:
+def collect_episode(
+    env: Any, base: str, seed: int, max_turns: int = 3, replicates: int = 1
+) -> dict[str, np.ndarray]:
     """Fly every shortest route of episode ``seed`` with heuristic ``base``.
 
     Returns ``features`` ``(R, F)`` (:func:`agents.routes.route_features`, as the heuristic
     plans them at the first step) and, per route, ``nav`` (mean error of the estimate each
     UAV used [m]), ``coop`` (mean cooperative-fix error [m], NaN without a fix) and ``goal``.
     An episode with one route is flown once (its features are NaN: nothing to choose).
+
+    With ``replicates`` > 1 every route is flown that many times, under independent noise
+    realisations of the same episode (the ``noise_stream`` reset option; the first is the
+    plain episode): ``nav`` and ``coop`` are then the means over the flights, ``goal`` whether
+    every flight reached the goal, and ``nav_reps`` ``(R, replicates)`` keeps each flight's
+    error. The route's *expected* error is what the choice is about; the noise of one flight
+    is most of a single flight's difference between two routes.
     """
+    if isinstance(replicates, bool) or not isinstance(replicates, (int, np.integer)):
+        raise ValueError(f"replicates must be an int >= 1, got {replicates!r}")
+    if replicates < 1:
+        raise ValueError(f"replicates must be >= 1, got {replicates}")
     from agents import make_policy
     from training.evaluate import run_episode
 
@@ -74,32 +87,41 @@ def collect_episode(env: Any, base: str, seed: int, max_turns: int = 3) -> dict[
 
         n_routes = 1
         feats = np.full((1, len(ROUTE_FEATURES)), np.nan)
-    nav, coop, goal = [], [], []
+    nav = np.full((n_routes, replicates), math.nan)
+    coop = np.full((n_routes, replicates), math.nan)
+    goal = np.zeros((n_routes, replicates), dtype=bool)
     for k in range(n_routes):
         opt = f"route_max_turns={int(max_turns)}" + (f",route_index={k}" if k else "")
-        rec = run_episode(env, make_policy(_with_option(base, opt), env), int(seed))
-        err = np.asarray(rec.nav_error_m, dtype=float)
-        c = np.asarray(rec.coop_error_m, dtype=float)
-        nav.append(float(np.nanmean(err)) if np.isfinite(err).any() else math.nan)
-        coop.append(float(np.nanmean(c)) if np.isfinite(c).any() else math.nan)
-        goal.append(bool(rec.success))
-    return {
+        for r in range(replicates):
+            options = {"noise_stream": r} if r else None
+            rec = run_episode(
+                env, make_policy(_with_option(base, opt), env), int(seed), options=options
+            )
+            err = np.asarray(rec.nav_error_m, dtype=float)
+            c = np.asarray(rec.coop_error_m, dtype=float)
+            nav[k, r] = float(np.nanmean(err)) if np.isfinite(err).any() else math.nan
+            coop[k, r] = float(np.nanmean(c)) if np.isfinite(c).any() else math.nan
+            goal[k, r] = bool(rec.success)
+    out = {
         "features": np.asarray(feats, dtype=float),
-        "nav": np.array(nav),
-        "coop": np.array(coop),
-        "goal": np.array(goal),
+        "nav": nav.mean(axis=1),
+        "coop": coop.mean(axis=1),
+        "goal": goal.all(axis=1),
     }
+    if replicates > 1:
+        out["nav_reps"] = nav
+    return out
 
 
-def _collect_chunk(args: tuple[Mapping[str, Any], str, list[int], int]) -> list[dict]:
+def _collect_chunk(args: tuple[Mapping[str, Any], str, list[int], int, int]) -> list[dict]:
     import torch
 
     from coopnav_env import urban_canyon_v0
 
     torch.set_num_threads(1)
-    env_kwargs, base, seeds, max_turns = args
+    env_kwargs, base, seeds, max_turns, replicates = args
     env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
-    return [collect_episode(env, base, s, max_turns) for s in seeds]
+    return [collect_episode(env, base, s, max_turns, replicates) for s in seeds]
 
 
 def collect(
@@ -109,17 +131,21 @@ def collect(
     *,
     max_turns: int = 3,
     jobs: int = 2,
+    replicates: int = 1,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
     seeds = [int(s) for s in seeds]
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     if jobs == 1 or len(seeds) < 2:
-        return _collect_chunk((dict(env_kwargs), base, seeds, max_turns))
+        return _collect_chunk((dict(env_kwargs), base, seeds, max_turns, replicates))
     chunks = [seeds[i::jobs] for i in range(jobs)]
     with ProcessPoolExecutor(jobs) as ex:
         parts = list(
-            ex.map(_collect_chunk, [(dict(env_kwargs), base, c, max_turns) for c in chunks])
+            ex.map(
+                _collect_chunk,
+                [(dict(env_kwargs), base, c, max_turns, replicates) for c in chunks],
+            )
         )
     out: list[dict[str, np.ndarray]] = [{}] * len(seeds)
     for i, c in enumerate(chunks):
@@ -132,6 +158,7 @@ def episodes_to_arrays(seeds: Sequence[int], eps: Sequence[Mapping[str, np.ndarr
     """Flatten collected episodes to one row per flown route (what ``episodes.npz`` holds)."""
     rows: dict[str, list[Any]] = {k: [] for k in ("seed", "route", "nav", "coop", "goal")}
     feats = []
+    reps = []
     for s, e in zip(seeds, eps):
         r = len(e["nav"])
         rows["seed"] += [int(s)] * r
@@ -140,8 +167,12 @@ def episodes_to_arrays(seeds: Sequence[int], eps: Sequence[Mapping[str, np.ndarr
         rows["coop"] += list(e["coop"])
         rows["goal"] += list(e["goal"])
         feats.append(np.asarray(e["features"], dtype=float).reshape(r, -1))
+        if "nav_reps" in e:
+            reps.append(np.asarray(e["nav_reps"], dtype=float).reshape(r, -1))
     out = {k: np.asarray(v) for k, v in rows.items()}
     out["features"] = np.concatenate(feats) if feats else np.zeros((0, 0))
+    if reps:
+        out["nav_reps"] = np.concatenate(reps)
     return out
 
 
@@ -153,7 +184,8 @@ def arrays_to_episodes(d: Mapping[str, np.ndarray]) -> tuple[list[int], list[dic
     for s in dict.fromkeys(seed_col.tolist()):
         m = seed_col == s
         seeds.append(int(s))
-        eps.append({k: np.asarray(d[k])[m] for k in ("features", "nav", "coop", "goal")})
+        keys = ("features", "nav", "coop", "goal") + (("nav_reps",) if "nav_reps" in d else ())
+        eps.append({k: np.asarray(d[k])[m] for k in keys})
     return seeds, eps
 
 
@@ -195,6 +227,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-turns", type=int, default=3, help="most turns of a route (default: %(default)s)"
     )
     parser.add_argument(
+        "--noise-replicates",
+        type=int,
+        default=1,
+        help="flights of every route under independent noise realisations of the same "
+        "episode; the model learns from their mean error (default: %(default)s)",
+    )
+    parser.add_argument(
         "--block", type=int, default=100, help="episodes per saved block (default: %(default)s)"
     )
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
@@ -225,6 +264,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--block and --jobs must be >= 1, got {args.block} and {args.jobs}")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if args.noise_replicates < 1:
+        raise ValueError(f"--noise-replicates must be >= 1, got {args.noise_replicates}")
     first = (
         TRAIN_SEED_BASE + TRAIN_SEED_STRIDE * args.seed
         if args.first_seed is None
@@ -248,6 +289,8 @@ def run(args: argparse.Namespace) -> int:
         "max_turns": args.max_turns,
         "features": list(ROUTE_FEATURES),
     }
+    if args.noise_replicates != 1:  # (absent from the settings of earlier runs)
+        settings["noise_replicates"] = args.noise_replicates
     model_path = out / "route_model.json"
     if model_path.exists():
         raise ValueError(f"{out} holds a finished run (route_model.json); use another --out")
@@ -282,7 +325,14 @@ def run(args: argparse.Namespace) -> int:
         pass
     for i in range(0, len(todo), args.block):
         block = todo[i : i + args.block]
-        eps += collect(env_kwargs, args.base, block, max_turns=args.max_turns, jobs=args.jobs)
+        eps += collect(
+            env_kwargs,
+            args.base,
+            block,
+            max_turns=args.max_turns,
+            jobs=args.jobs,
+            replicates=args.noise_replicates,
+        )
         seeds += block
         arrays = episodes_to_arrays(seeds, eps)
         with atomic_path(data_path) as tmp:
@@ -299,7 +349,12 @@ def run(args: argparse.Namespace) -> int:
         feats,
         errors,
         args.base,
-        info={"env": env_kwargs, "first_seed": first, "training_seed": args.seed},
+        info={
+            "env": env_kwargs,
+            "first_seed": first,
+            "training_seed": args.seed,
+            "noise_replicates": args.noise_replicates,
+        },
     )
     model.save(model_path)
     n_multi = sum(len(e) > 1 for e in errors)

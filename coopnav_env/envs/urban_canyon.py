@@ -191,13 +191,37 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         (a new city, start and goal); the very first reset without a seed draws the generator
         from OS entropy, so that copies of a fresh environment (e.g. made by a vector wrapper)
         do not share a stream.
-        ``options`` is accepted for API compatibility and ignored.
+
+        ``options`` may hold ``noise_stream``, an integer >= 1 (it needs a ``seed``): the
+        episode's scenario (city, satellites, start, goal) and its first epoch are those of
+        ``seed``, and every later random draw (pseudorange and relative-sensing noise, NLOS
+        and the dead reckoning) comes from a generator seeded with ``(seed, noise_stream)``:
+        the same episode under an independent noise realisation, for variance reduction
+        (e.g. ``coopnav train-routes --noise-replicates``). ``0`` or no option: the usual
+        single stream. Other keys are refused with a ``ValueError``.
         """
+        stream = self._noise_stream(seed, options)
         obs = dict(zip(self.possible_agents, self._reset_arrays(seed)))
+        if stream:
+            self._rng = np.random.default_rng([int(seed), stream])  # type: ignore[arg-type]
         infos = self._reset_infos()
         if self.render_mode == "human":
             self.render()
         return obs, infos
+
+    def _noise_stream(self, seed: int | None, options: dict[str, Any] | None) -> int:
+        """The ``noise_stream`` reset option (see :meth:`reset`), checked; 0 without it."""
+        if not options:
+            return 0
+        unknown = sorted(set(options) - {"noise_stream"})
+        if unknown:
+            raise ValueError(f"unknown reset options {unknown}; known: ['noise_stream']")
+        k = options["noise_stream"]
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 0:
+            raise ValueError(f"options['noise_stream'] must be an integer >= 0, got {k!r}")
+        if k and seed is None:
+            raise ValueError("options['noise_stream'] needs a reset seed")
+        return int(k)
 
     @staticmethod
     def check_seed(seed: Any) -> int:

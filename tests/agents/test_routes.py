@@ -207,6 +207,72 @@ def test_column_heuristics_choose_routes_by_a_feature_or_a_model(tmp_path):
         make_policy("route:", env)
 
 
+def test_a_split_column_flies_two_routes_abreast_and_reaches_the_goal():
+    env = _env()
+    seed = _multi_route_seed(env)
+    obs, _ = env.reset(seed=seed)
+    p = make_policy("ceiling@route_choice='pdop_gt3',route_split='los_mean'", env)
+    p.reset(seed)
+    p.act(obs)
+    k, k2 = p.route_chosen, p.route_split_chosen
+    assert k2 is not None and k2 != k and len(p._paths) == 2
+    # the second route is the best other candidate by the split feature
+    j = ROUTE_FEATURES.index("los_mean")
+    others = [i for i in range(len(p.route_candidates)) if i != k]
+    assert k2 == others[int(np.argmax(p.route_feature_table[others, j]))]
+    # slots alternate between the routes, the leader on the first
+    order = np.argsort(p._slot)
+    assert list(p._group[order]) == [i % 2 for i in range(len(order))]
+    # route_split_index walks the other candidates
+    q = make_policy("ceiling@route_choice='pdop_gt3',route_split_index=1", env)
+    env.reset(seed=seed)
+    q.reset(seed)
+    q.act(obs)
+    assert q.route_split_chosen == others[0]
+    # flown to the end: the two sub-columns are apart somewhere and both reach the goal
+    from training.evaluate import run_episode
+
+    rec = run_episode(env, make_policy("ceiling@route_split_index=1", env), seed)
+    assert rec.success
+    # unsplit policies keep one path
+    u = make_policy("ceiling@route_choice='pdop_gt3'", env)
+    env.reset(seed=seed)
+    u.reset(seed)
+    u.act(obs)
+    assert len(u._paths) == 1 and u.route_split_chosen is None
+    with pytest.raises(ValueError, match="route_split must be"):
+        make_policy("ceiling@route_split='wide'", env)
+    with pytest.raises(ValueError, match="route_split_index must be >= 0"):
+        make_policy("ceiling@route_split_index=-1", env)
+    with pytest.raises(ValueError, match="exclude each other"):
+        make_policy("ceiling@route_split='los_mean',route_split_index=1", env)
+
+
+def test_split_features_of_one_route_match_the_route_features():
+    from agents.routes import SPLIT_FEATURES, split_features
+
+    env = _env()
+    seed = _multi_route_seed(env)
+    obs, _ = env.reset(seed=seed)
+    p = make_policy("ceiling@route_choice='swarm_mean'", env)
+    p.reset(seed)
+    p.act(obs)
+    world = env.unwrapped.world
+    r0, r1 = p.route_candidates[0], p.route_candidates[1]
+    one = dict(zip(SPLIT_FEATURES, split_features(world, [r0], 30.0)))
+    ref = dict(zip(ROUTE_FEATURES, route_features(world, r0, 30.0)))
+    for name in ("swarm_mean", "swarm_lt8", "swarm_lt10", "swarm_lt12", "los_mean", "pdop_gt3"):
+        assert one[name] == pytest.approx(ref[name])
+    assert one["sep_max"] == 0.0 and one["split"] == 0.0
+    two = dict(zip(SPLIT_FEATURES, split_features(world, [r0, r1], 30.0)))
+    assert two["split"] == 1.0 and two["sep_max"] > 0.0 and two["sep_mean"] <= two["sep_max"]
+    assert 0.0 <= two["spdop_gt3"] <= two["spdop_gt2"] <= 1.0
+    with pytest.raises(ValueError, match="equally short"):
+        split_features(world, [r0, r0[:2]], 30.0)
+    with pytest.raises(ValueError, match="one or two routes"):
+        split_features(world, [r0, r1, r0], 30.0)
+
+
 def p_path_mid(p, k: int) -> np.ndarray:
     """Mid-point of candidate ``k`` of ``p``'s plan, on the extended path a column flies."""
     from coopnav_env.sim.route import Polyline, extend_route
@@ -352,3 +418,22 @@ def test_route_features_for_any_column_spacing(spacing):
     p.reset(seed)
     p.act(obs)
     assert len(p.route_candidates) >= 3
+
+
+def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean():
+    from training.route_learning import arrays_to_episodes, collect_episode, episodes_to_arrays
+
+    env = _env()
+    seed = _multi_route_seed(env)
+    one = collect_episode(env, "ceiling", seed)
+    two = collect_episode(env, "ceiling", seed, replicates=2)
+    reps = two["nav_reps"]
+    assert reps.shape == (len(one["nav"]), 2)
+    # the first flight is the plain episode; the second another noise realisation of it
+    assert np.array_equal(reps[:, 0], one["nav"]) and not np.array_equal(reps[:, 0], reps[:, 1])
+    assert np.allclose(two["nav"], reps.mean(axis=1))
+    assert np.array_equal(two["features"], one["features"])
+    seeds, eps = arrays_to_episodes(episodes_to_arrays([seed], [two]))
+    assert seeds == [seed] and np.array_equal(eps[0]["nav_reps"], reps)
+    with pytest.raises(ValueError, match="replicates must be >= 1"):
+        collect_episode(env, "ceiling", seed, replicates=0)

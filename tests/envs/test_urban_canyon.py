@@ -520,3 +520,46 @@ def test_human_render_mode_headless(monkeypatch) -> None:
         env.step(_zeros(env))
     env.close()
     assert env.unwrapped._window is None
+
+
+def test_noise_stream_reset_option_keeps_the_scenario_and_redraws_the_noise():
+    from coopnav_env import urban_canyon_v0
+
+    def episode(options):
+        env = urban_canyon_v0.parallel_env()
+        obs, _ = env.reset(seed=11, options=options)
+        w = env.unwrapped.world
+        scen = (np.array(w.goal_enu_m), np.array(w.route_xy_m), w.t_s)
+        first = np.stack([obs[a] for a in env.possible_agents])
+        act = {a: np.zeros(3, dtype=np.float32) for a in env.agents}
+        errs = []
+        for _ in range(5):
+            _, _, _, _, infos = env.step(act)
+            errs.append([infos[a]["nav_error_m"] for a in env.possible_agents])
+        return scen, first, np.array(errs)
+
+    plain, zero, one, one_again, two = (
+        episode(o)
+        for o in (
+            None,
+            {"noise_stream": 0},
+            {"noise_stream": 1},
+            {"noise_stream": 1},
+            {"noise_stream": 2},
+        )
+    )
+    # stream 0 is the plain episode, bit for bit; a stream is reproducible
+    assert np.array_equal(plain[2], zero[2]) and np.array_equal(one[2], one_again[2])
+    # the same scenario and first epoch, other noise afterwards
+    for other in (one, two):
+        assert all(np.array_equal(a, b) for a, b in zip(plain[0][:2], other[0][:2]))
+        assert np.array_equal(plain[1], other[1])
+        assert not np.array_equal(plain[2], other[2])
+    assert not np.array_equal(one[2], two[2])
+    env = urban_canyon_v0.parallel_env()
+    with pytest.raises(ValueError, match="needs a reset seed"):
+        env.reset(options={"noise_stream": 1})
+    with pytest.raises(ValueError, match="noise_stream'\\] must be an integer >= 0"):
+        env.reset(seed=1, options={"noise_stream": -1})
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(seed=1, options={"noise": 1})
