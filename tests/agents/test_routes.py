@@ -437,3 +437,26 @@ def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean(
     assert seeds == [seed] and np.array_equal(eps[0]["nav_reps"], reps)
     with pytest.raises(ValueError, match="replicates must be >= 1"):
         collect_episode(env, "ceiling", seed, replicates=0)
+
+
+def test_route_choice_benchmark_expected_error_oracle_holds_out_the_noise_it_is_priced_on():
+    from tests.benchmark_script import load_benchmark
+
+    bench = load_benchmark("route_choice")
+    j = ROUTE_FEATURES.index("los_mean")
+    eps = []
+    for i in range(30):
+        f = np.zeros((2, len(ROUTE_FEATURES)))
+        f[:, j] = [10.0, 8.0]  # every rule on los_mean picks route 0
+        # route 1 is better by 0.2 m in expectation; replicate 0 flatters route 0 by 0.5 m
+        reps = np.array([[2.0, 2.5, 2.5], [2.3, 2.3, 2.3]])
+        eps.append(
+            {"features": f, "nav": reps.mean(axis=1), "goal": np.ones(2, bool), "nav_reps": reps}
+        )
+    rep = bench.price_choices(eps, {}, reps=100)
+    assert rep["best_rule"] == "rule los_mean"
+    # held out replicate 0: the others pick route 1 (2.3 vs 2.5) -> 2.3 - 2.0 = +0.3;
+    # held out 1 or 2: the others' means are 2.25 vs 2.3 -> route 0, difference 0
+    assert rep["oracle_expected_vs_best_rule_m"][0] == pytest.approx(0.1)
+    assert rep["oracle_expected_nav_m"] == pytest.approx((2.3 + 2.5 + 2.5) / 3)
+    assert any("expected-error oracle" in x for x in bench.report_lines(rep))
