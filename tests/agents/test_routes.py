@@ -460,3 +460,58 @@ def test_route_choice_benchmark_expected_error_oracle_holds_out_the_noise_it_is_
     assert rep["oracle_expected_vs_best_rule_m"][0] == pytest.approx(0.1)
     assert rep["oracle_expected_nav_m"] == pytest.approx((2.3 + 2.5 + 2.5) / 3)
     assert any("expected-error oracle" in x for x in bench.report_lines(rep))
+
+
+def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
+    from agents.routes import SPLIT_FEATURES
+    from tests.benchmark_script import load_benchmark
+
+    bench = load_benchmark("split_choice")
+    j = SPLIT_FEATURES.index("swarm_mean")
+    eps = []
+    for i in range(20):
+        f = np.zeros((3, len(SPLIT_FEATURES)))
+        f[:, j] = [10.0, 12.0, 11.0]  # the rule on swarm_mean picks split 1
+        nav = np.array([[2.0, 2.0], [1.8, 1.8], [2.4, 1.6]]) + 0.01 * i
+        eps.append({"features": f, "nav": nav, "goal": np.ones((3, 2), bool)})
+    eps.append(
+        {
+            "features": np.full((1, len(SPLIT_FEATURES)), np.nan),
+            "nav": np.full((1, 2), 3.0),
+            "goal": np.zeros((1, 2), bool),
+        }
+    )
+    rep = bench.price(eps, reps=100)
+    assert rep["episodes_with_a_split"] == 20
+    r = rep["rules"]["swarm_mean (any arm)"]
+    assert r["vs_unsplit_m"][0] == pytest.approx(-0.2 * 20 / 21) and r[
+        "split_share"
+    ] == pytest.approx(20 / 21)
+    # held out replicate 0: arm 2's other flight (1.6) wins -> 2.4 - 2.0; held out 1: arm 1 -> 1.8 - 2.0
+    assert rep["oracle_expected_vs_unsplit_m"][0] == pytest.approx((0.4 - 0.2) / 2 * 20 / 21)
+    assert any("expected-error oracle" in x for x in bench.report_lines(rep))
+    # a real, tiny run: flights, files and a report
+    env = _env()
+    seed = _multi_route_seed(env)
+    out = tmp_path / "split"
+    assert (
+        bench.main(
+            [
+                "--episodes",
+                "1",
+                "--first-seed",
+                str(seed),
+                "--noise-replicates",
+                "2",
+                "--jobs",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["episodes_with_a_split"] == 1 and (out / "episodes.npz").is_file()
+    with pytest.raises(SystemExit, match="noise-replicates must be >= 2"):
+        bench.main(["--noise-replicates", "1"])

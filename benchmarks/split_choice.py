@@ -1,0 +1,277 @@
+"""Splitting the column over two routes: every split flown, every one-feature rule priced.
+
+The column heuristics can split the swarm over two equally short street routes
+(``route_split``, ``route_split_index``: slots 0, 2, 4, ... on the first route, 1, 3, ... on
+the second, abreast), so that the cooperative fix pools the sky of two streets. This
+benchmark flies, for each held-out episode, the unsplit heuristic (``skyroute`` by default,
+on its chosen route) and every split of it (its route and each other candidate), each under
+``--noise-replicates`` independent noise realisations of the same episode (the environment's
+``noise_stream`` reset option). It prices
+
+* every one-feature rule of :data:`agents.routes.SPLIT_FEATURES` choosing among *all* arms
+  (no split, or a split with any other candidate) and among the splits only, as the paired
+  difference of the mean error over the replicates to the unsplit heuristic;
+* the *expected-error oracle*: per episode, the arm with the lowest mean over R - 1 of the
+  replicates, priced on the remaining one (each held out in turn) against the unsplit
+  heuristic on that replicate. It does not pick on the noise it is priced on, so it bounds
+  what any choice of split, learned or written, could gain (up to the noise of R - 1 flights).
+
+95 % bootstrap intervals over episodes (2000 resamples, generator seed 0). docs/marl/README.md
+("Splitting the swarm over two streets") runs::
+
+    python benchmarks/split_choice.py --episodes 1000 --first-seed 1000000 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
+        --noise-replicates 3 --out runs/split/explore
+
+about 12 minutes on 2 cores. ``--out`` keeps the flights (``episodes.npz``) and the report
+(``report.json``); with an ``episodes.npz`` of the same settings there, nothing is flown again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def _with_option(base: str, option: str) -> str:
+    return f"{base}{',' if '@' in base else '@'}{option}"
+
+
+def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str, np.ndarray]:
+    """Fly ``base`` unsplit and split with every other candidate route, ``replicates`` times.
+
+    Returns ``features`` ``(A, len(SPLIT_FEATURES))`` (arm 0 unsplit; NaN for an episode with
+    one route, which is flown unsplit once), ``nav`` ``(A, replicates)`` (mean error of the
+    estimate each UAV used [m]) and ``goal`` ``(A, replicates)``.
+    """
+    from agents import make_policy
+    from agents.routes import SPLIT_FEATURES, split_features
+    from training.evaluate import run_episode
+
+    planner = make_policy(_with_option(base, "route_split='los_mean'"), env)
+    obs, _ = env.reset(seed=int(seed))
+    planner.reset(int(seed))
+    planner.act(obs)
+    cands, k = planner.route_candidates, planner.route_chosen
+    if len(cands) < 2:
+        arms = [base]
+        feats = np.full((1, len(SPLIT_FEATURES)), np.nan)
+        reps = 1
+    else:
+        others = [j for j in range(len(cands)) if j != k]
+        arms = [base] + [
+            _with_option(base, f"route_split_index={i + 1}") for i in range(len(others))
+        ]
+        world = planner.base.world
+        alt = planner._altitude_m()
+        feats = np.stack(
+            [split_features(world, [cands[k]], alt, spacing_m=planner.spacing_m)]
+            + [
+                split_features(world, [cands[k], cands[j]], alt, spacing_m=planner.spacing_m)
+                for j in others
+            ]
+        )
+        reps = replicates
+    nav = np.full((len(arms), replicates), math.nan)
+    goal = np.zeros((len(arms), replicates), dtype=bool)
+    for a, name in enumerate(arms):
+        for r in range(reps):
+            options = {"noise_stream": r} if r else None
+            rec = run_episode(env, make_policy(name, env), int(seed), options=options)
+            err = np.asarray(rec.nav_error_m, dtype=float)
+            nav[a, r] = float(np.nanmean(err)) if np.isfinite(err).any() else math.nan
+            goal[a, r] = bool(rec.success)
+    if reps == 1:  # one route: every replicate is the one flight (nothing to choose)
+        nav[:, 1:] = nav[:, :1]
+        goal[:, 1:] = goal[:, :1]
+    return {"features": feats, "nav": nav, "goal": goal}
+
+
+def _chunk(args: tuple[dict[str, Any], str, list[int], int]) -> list[dict[str, np.ndarray]]:
+    import torch
+
+    from coopnav_env import urban_canyon_v0
+
+    torch.set_num_threads(1)
+    env_kwargs, base, seeds, replicates = args
+    env = urban_canyon_v0.parallel_env(**env_kwargs)
+    return [collect_episode(env, base, s, replicates) for s in seeds]
+
+
+def collect(
+    env_kwargs: dict[str, Any], base: str, seeds: list[int], replicates: int, jobs: int
+) -> list[dict[str, np.ndarray]]:
+    """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
+    if jobs == 1 or len(seeds) < 2:
+        return _chunk((env_kwargs, base, seeds, replicates))
+    chunks = [seeds[i::jobs] for i in range(jobs)]
+    with ProcessPoolExecutor(jobs) as ex:
+        parts = list(ex.map(_chunk, [(env_kwargs, base, c, replicates) for c in chunks]))
+    out: list[dict[str, np.ndarray]] = [{}] * len(seeds)
+    for i, c in enumerate(chunks):
+        for j in range(len(c)):
+            out[i + j * jobs] = parts[i][j]
+    return out
+
+
+def price(eps: list[dict[str, np.ndarray]], reps: int = 2000) -> dict[str, Any]:
+    """Rules and the expected-error oracle against the unsplit arm (see the module doc)."""
+    from agents.routes import SPLIT_FEATURE_SENSE, SPLIT_FEATURES
+    from training.stats import bootstrap_mean_interval
+
+    def interval(d: np.ndarray) -> list[float]:
+        return [float(v) for v in bootstrap_mean_interval(d, reps, np.random.default_rng(0))]
+
+    mean = [np.nanmean(e["nav"], axis=1) for e in eps]
+    unsplit = np.array([m[0] for m in mean])
+    multi = [len(m) > 1 for m in mean]
+    out: dict[str, Any] = {
+        "episodes": len(eps),
+        "episodes_with_a_split": int(sum(multi)),
+        "unsplit_nav_m": float(unsplit.mean()),
+        "unsplit_goal_rate": float(np.mean([e["goal"][0].mean() for e in eps])),
+        "rules": {},
+    }
+    for j, f in enumerate(SPLIT_FEATURES):
+        sense = SPLIT_FEATURE_SENSE[f]
+        for scope in ("any arm", "splits only"):
+            picks = []
+            for e, m in zip(eps, mean):
+                if len(m) < 2:
+                    picks.append(0)
+                elif scope == "any arm":
+                    picks.append(int(np.argmax(sense * e["features"][:, j])))
+                else:
+                    picks.append(1 + int(np.argmax(sense * e["features"][1:, j])))
+            nav = np.array([m[k] for m, k in zip(mean, picks)])
+            goal = np.array([e["goal"][k].mean() for e, k in zip(eps, picks)])
+            out["rules"][f"{f} ({scope})"] = {
+                "nav_m": float(nav.mean()),
+                "goal_rate": float(goal.mean()),
+                "vs_unsplit_m": interval(nav - unsplit),
+                "split_share": float(np.mean(np.array(picks) > 0)),
+            }
+    held, diff = [], []
+    for e in eps:
+        nav = np.asarray(e["nav"], dtype=float)
+        n_r = nav.shape[1]
+        if nav.shape[0] < 2 or n_r < 2:
+            held.append(float(nav[0, 0]))
+            diff.append(0.0)
+            continue
+        v, dv = [], []
+        for r in range(n_r):
+            k = int(np.nanargmin(np.nanmean(np.delete(nav, r, axis=1), axis=1)))
+            v.append(nav[k, r])
+            dv.append(nav[k, r] - nav[0, r])
+        held.append(float(np.mean(v)))
+        diff.append(float(np.mean(dv)))
+    out["oracle_expected_nav_m"] = float(np.mean(held))
+    out["oracle_expected_vs_unsplit_m"] = interval(np.array(diff))
+    return out
+
+
+def report_lines(rep: dict[str, Any]) -> list[str]:
+    """The printed table of :func:`price`."""
+    lines = [
+        f"{rep['episodes']} episodes, {rep['episodes_with_a_split']} with a split to choose; "
+        f"unsplit: nav {rep['unsplit_nav_m']:.3f} m, goal rate {rep['unsplit_goal_rate']:.3f}",
+        f"{'rule':28s} {'nav [m]':>8s} {'goal':>6s}  {'vs unsplit [m]':24s} split",
+    ]
+    for k, c in rep["rules"].items():
+        a = c["vs_unsplit_m"]
+        lines.append(
+            f"{k:28s} {c['nav_m']:8.3f} {c['goal_rate']:6.3f}  "
+            f"{a[0]:+.3f} [{a[1]:+.3f}, {a[2]:+.3f}]      {c['split_share']:.2f}"
+        )
+    o = rep["oracle_expected_vs_unsplit_m"]
+    lines.append(
+        f"expected-error oracle (chosen on the other noise replicates): nav "
+        f"{rep['oracle_expected_nav_m']:.3f} m, vs unsplit {o[0]:+.3f} [{o[1]:+.3f}, {o[2]:+.3f}]"
+    )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    from training.files import atomic_path, atomic_write_text
+    from training.route_learning import env_kwargs_from_overrides
+
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--episodes", type=int, default=300, help="episodes (default: %(default)s)")
+    p.add_argument(
+        "--first-seed", type=int, default=1_000_000, help="first reset seed (default: %(default)s)"
+    )
+    p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument(
+        "--base", default="skyroute", help="column heuristic, unsplit (default: %(default)s)"
+    )
+    p.add_argument(
+        "--noise-replicates",
+        type=int,
+        default=3,
+        help="flights of every arm under independent noise realisations, >= 2 "
+        "(default: %(default)s)",
+    )
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
+    args = p.parse_args(argv)
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.noise_replicates < 2:
+        raise SystemExit(f"--noise-replicates must be >= 2, got {args.noise_replicates}")
+    if args.jobs < 1:
+        raise SystemExit(f"--jobs must be >= 1, got {args.jobs}")
+    env_kwargs = env_kwargs_from_overrides(args.env_set)
+    settings = {
+        "env": env_kwargs,
+        "base": args.base,
+        "first_seed": args.first_seed,
+        "episodes": args.episodes,
+        "noise_replicates": args.noise_replicates,
+    }
+    out = Path(args.out) if args.out else None
+    eps = None
+    if out is not None and (out / "episodes.npz").is_file() and (out / "settings.json").is_file():
+        if json.loads((out / "settings.json").read_text()) == json.loads(json.dumps(settings)):
+            with np.load(out / "episodes.npz") as d:
+                eps = [
+                    {k: d[f"{k}_{i}"] for k in ("features", "nav", "goal")}
+                    for i in range(int(d["count"]))
+                ]
+            print(f"using the flights of {out}", file=sys.stderr)
+    if eps is None:
+        seeds = list(range(args.first_seed, args.first_seed + args.episodes))
+        eps = collect(env_kwargs, args.base, seeds, args.noise_replicates, args.jobs)
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            arrays: dict[str, np.ndarray] = {"count": np.array(len(eps)), "seed": np.array(seeds)}
+            for i, e in enumerate(eps):
+                for k, v in e.items():
+                    arrays[f"{k}_{i}"] = v
+            with atomic_path(out / "episodes.npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, **arrays)
+            atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
+    rep = price(eps)
+    rep["settings"] = settings
+    print("\n".join(report_lines(rep)))
+    if out is not None:
+        atomic_write_text(out / "report.json", json.dumps(rep, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
