@@ -406,7 +406,11 @@ matplotlib window. matplotlib is imported only when rendering (about 1 s per fra
 
 The environment owns one `numpy.random.Generator`, reseeded only by `reset(seed=...)`; the same
 seed gives the same episode bit for bit. `reset()` without a seed continues the stream (a new
-episode). The environment pickles (EzPickle with every argument, plus the generator and the
+episode). `reset(seed=s, options={"noise_stream": k})` (k >= 1) gives the episode of seed `s`
+(city, satellites, start, goal, first epoch) under another noise realisation: every later draw
+comes from a generator seeded with `(s, k)`, so the same episode can be flown several times with
+independent noise (variance reduction, e.g. `coopnav train-routes --noise-replicates`); `k = 0`
+is the plain episode, and other option keys raise a `ValueError`. The environment pickles (EzPickle with every argument, plus the generator and the
 world state): a restored copy continues exactly like the original.
 
 ## Version History
@@ -430,7 +434,8 @@ world state): a restored copy continues exactly like the original.
   with them. Also off by default, with the defaults' episodes unchanged: the observation
   options `obs_protection_level`, `obs_satellite_sectors`, `obs_lookahead`,
   `obs_candidate_sky` and `obs_true_error` (privileged, a diagnostic), and the world options
-  `dead_reckoning_noise` and `preset`.
+  `dead_reckoning_noise` and `preset`; and the reset option `noise_stream` (without it, reset
+  is as before; unknown option keys, formerly ignored, now raise a `ValueError`).
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env
