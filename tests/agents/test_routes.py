@@ -515,3 +515,33 @@ def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
     assert rep["episodes_with_a_split"] == 1 and (out / "episodes.npz").is_file()
     with pytest.raises(SystemExit, match="noise-replicates must be >= 2"):
         bench.main(["--noise-replicates", "1"])
+
+
+def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path):
+    from tests.benchmark_script import load_benchmark
+
+    bench = load_benchmark("arm_choice")
+    # 10 episodes, 2 arms, 2 replicates: arm 0 is better on average; in odd episodes arm 1
+    # is better in expectation (both of its flights lower)
+    flights = np.zeros((10, 2, 2, 2))
+    flights[..., 1] = 1.0
+    for e in range(10):
+        flights[e, 0, :, 0] = [2.0, 2.0]
+        flights[e, 1, :, 0] = [1.5, 1.5] if e % 2 else [3.0, 3.0]
+    rep = bench.price(flights, ["a", "b"], reps=100)
+    assert rep["best_fixed"] == "a" and rep["arms"]["b"]["vs_best_fixed_m"][0] == pytest.approx(
+        0.25
+    )
+    # the oracle takes arm 1 in the odd episodes: -0.5 m in half of them
+    assert rep["oracle_expected_vs_best_fixed_m"][0] == pytest.approx(-0.25)
+    assert rep["oracle_expected_goal_rate"] == 1.0
+    assert any("expected-error oracle" in x for x in bench.report_lines(rep))
+    out = tmp_path / "arms"
+    args = ["--episodes", "2", "--noise-replicates", "2", "--jobs", "1", "--out", str(out)]
+    assert bench.main(["--arms", "formation", "formation@spacing_m=12", *args]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["episodes"] == 2 and set(rep["arms"]) == {"formation", "formation@spacing_m=12"}
+    with pytest.raises(SystemExit, match="at least 2 policies"):
+        bench.main(["--arms", "formation"])
+    with pytest.raises(ValueError):
+        bench.main(["--arms", "formation", "nosuchpolicy"])

@@ -1,0 +1,211 @@
+"""What a per-episode choice among policies could gain: every arm flown under noise replicates.
+
+Flies every policy given with ``--arms`` (:func:`agents.make_policy` names, e.g.
+``skyroute skyroute@spacing_m=30``) through every held-out episode, ``--noise-replicates``
+times under independent noise realisations of the same episode (the environment's
+``noise_stream`` reset option), and prints each arm's mean ``nav`` error (the 3-D error of the
+estimate each UAV used, averaged over UAV-steps, episodes and replicates) and goal rate, the
+best *fixed* arm, and the *expected-error oracle*: per episode, the arm with the lowest mean
+over R - 1 of the replicates, priced on the remaining one (each held out in turn), as a paired
+difference to the best fixed arm on that replicate. The oracle does not pick on the noise it
+is priced on, so it bounds what any per-episode choice among the arms, learned (a contextual
+bandit) or written, could gain over always flying the best one, up to the noise of R - 1
+flights. 95 % bootstrap intervals over episodes (2000 resamples, generator seed 0).
+
+docs/marl/README.md ("How much is left to choose") runs::
+
+    python benchmarks/arm_choice.py --episodes 500 --first-seed 1000000 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
+        --noise-replicates 3 --arms skyroute skyroute@spacing_m=30 skyroute@spacing_m=60 \\
+        skyroute@cruise_speed_mps=10 --out runs/arms/spacing
+
+about 6 minutes on 2 cores. ``--out`` keeps the flights (``episodes.npz``) and the report
+(``report.json``); with an ``episodes.npz`` of the same settings there, nothing is flown again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def _chunk(args: tuple[dict[str, Any], list[str], list[int], int]) -> list[np.ndarray]:
+    import torch
+
+    from agents import make_policy
+    from coopnav_env import urban_canyon_v0
+    from training.evaluate import run_episode
+
+    torch.set_num_threads(1)
+    env_kwargs, arms, seeds, replicates = args
+    env = urban_canyon_v0.parallel_env(**env_kwargs)
+    out = []
+    for seed in seeds:
+        rows = np.full((len(arms), replicates, 2), math.nan)  # nav, goal
+        for a, name in enumerate(arms):
+            for r in range(replicates):
+                options = {"noise_stream": r} if r else None
+                rec = run_episode(env, make_policy(name, env), int(seed), options=options)
+                err = np.asarray(rec.nav_error_m, dtype=float)
+                rows[a, r, 0] = float(np.nanmean(err)) if np.isfinite(err).any() else math.nan
+                rows[a, r, 1] = float(rec.success)
+        out.append(rows)
+    return out
+
+
+def collect(
+    env_kwargs: dict[str, Any], arms: list[str], seeds: list[int], replicates: int, jobs: int
+) -> np.ndarray:
+    """``(episodes, arms, replicates, 2)``: each flight's mean ``nav`` error and goal (0/1)."""
+    if jobs == 1 or len(seeds) < 2:
+        return np.stack(_chunk((env_kwargs, arms, seeds, replicates)))
+    chunks = [seeds[i::jobs] for i in range(jobs)]
+    with ProcessPoolExecutor(jobs) as ex:
+        parts = list(ex.map(_chunk, [(env_kwargs, arms, c, replicates) for c in chunks]))
+    out: list[np.ndarray] = [np.zeros(0)] * len(seeds)
+    for i, c in enumerate(chunks):
+        for j in range(len(c)):
+            out[i + j * jobs] = parts[i][j]
+    return np.stack(out)
+
+
+def price(flights: np.ndarray, arms: list[str], reps: int = 2000) -> dict[str, Any]:
+    """Each arm's mean, the best fixed arm and the expected-error oracle (see the module doc)."""
+    from training.stats import bootstrap_mean_interval
+
+    nav, goal = flights[..., 0], flights[..., 1]
+    n_ep, _, n_r = nav.shape
+    mean = np.nanmean(nav, axis=(0, 2))
+    best = int(np.nanargmin(mean))
+    out: dict[str, Any] = {"episodes": n_ep, "replicates": n_r, "arms": {}}
+    for a, name in enumerate(arms):
+        d = np.nanmean(nav[:, a] - nav[:, best], axis=1)
+        out["arms"][name] = {
+            "nav_m": float(mean[a]),
+            "goal_rate": float(goal[:, a].mean()),
+            "vs_best_fixed_m": [
+                float(v) for v in bootstrap_mean_interval(d, reps, np.random.default_rng(0))
+            ],
+        }
+    out["best_fixed"] = arms[best]
+    diff, held, goals = [], [], []
+    for e in range(n_ep):
+        dv, v, g = [], [], []
+        for r in range(n_r):
+            k = int(np.nanargmin(np.nanmean(np.delete(nav[e], r, axis=1), axis=1)))
+            dv.append(nav[e, k, r] - nav[e, best, r])
+            v.append(nav[e, k, r])
+            g.append(goal[e, k, r])
+        diff.append(float(np.mean(dv)))
+        held.append(float(np.mean(v)))
+        goals.append(float(np.mean(g)))
+    out["oracle_expected_nav_m"] = float(np.mean(held))
+    out["oracle_expected_goal_rate"] = float(np.mean(goals))
+    out["oracle_expected_vs_best_fixed_m"] = [
+        float(v) for v in bootstrap_mean_interval(np.array(diff), reps, np.random.default_rng(0))
+    ]
+    return out
+
+
+def report_lines(rep: dict[str, Any]) -> list[str]:
+    """The printed table of :func:`price`."""
+    lines = [
+        f"{rep['episodes']} episodes x {rep['replicates']} noise replicates",
+        f"{'arm':40s} {'nav [m]':>8s} {'goal':>6s}  vs best fixed [m]",
+    ]
+    for k, c in rep["arms"].items():
+        a = c["vs_best_fixed_m"]
+        lines.append(
+            f"{k:40s} {c['nav_m']:8.3f} {c['goal_rate']:6.3f}  "
+            f"{a[0]:+.3f} [{a[1]:+.3f}, {a[2]:+.3f}]"
+        )
+    o = rep["oracle_expected_vs_best_fixed_m"]
+    lines.append(
+        f"expected-error oracle (chosen on the other noise replicates): nav "
+        f"{rep['oracle_expected_nav_m']:.3f} m, goal rate {rep['oracle_expected_goal_rate']:.3f}, "
+        f"vs the best fixed arm ({rep['best_fixed']}) {o[0]:+.3f} [{o[1]:+.3f}, {o[2]:+.3f}]"
+    )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    from agents import make_policy
+    from coopnav_env import urban_canyon_v0
+    from training.files import atomic_path, atomic_write_text
+    from training.route_learning import env_kwargs_from_overrides
+
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--arms", nargs="+", required=True, help="policies to choose among (>= 2)")
+    p.add_argument("--episodes", type=int, default=300, help="episodes (default: %(default)s)")
+    p.add_argument(
+        "--first-seed", type=int, default=1_000_000, help="first reset seed (default: %(default)s)"
+    )
+    p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
+    p.add_argument(
+        "--noise-replicates",
+        type=int,
+        default=3,
+        help="flights of every arm under independent noise realisations, >= 2 "
+        "(default: %(default)s)",
+    )
+    p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
+    p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
+    args = p.parse_args(argv)
+    if len(args.arms) < 2:
+        raise SystemExit(f"--arms needs at least 2 policies, got {args.arms}")
+    if args.episodes < 1:
+        raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
+    if args.noise_replicates < 2:
+        raise SystemExit(f"--noise-replicates must be >= 2, got {args.noise_replicates}")
+    if args.jobs < 1:
+        raise SystemExit(f"--jobs must be >= 1, got {args.jobs}")
+    env_kwargs = env_kwargs_from_overrides(args.env_set)
+    probe = urban_canyon_v0.parallel_env(**env_kwargs)
+    for name in args.arms:  # a bad policy name fails before anything is flown
+        make_policy(name, probe)
+    settings = {
+        "env": env_kwargs,
+        "arms": list(args.arms),
+        "first_seed": args.first_seed,
+        "episodes": args.episodes,
+        "noise_replicates": args.noise_replicates,
+    }
+    out = Path(args.out) if args.out else None
+    flights = None
+    if out is not None and (out / "episodes.npz").is_file() and (out / "settings.json").is_file():
+        if json.loads((out / "settings.json").read_text()) == json.loads(json.dumps(settings)):
+            with np.load(out / "episodes.npz") as d:
+                flights = np.asarray(d["flights"])
+            print(f"using the flights of {out}", file=sys.stderr)
+    if flights is None:
+        seeds = list(range(args.first_seed, args.first_seed + args.episodes))
+        flights = collect(env_kwargs, list(args.arms), seeds, args.noise_replicates, args.jobs)
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            with atomic_path(out / "episodes.npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, seed=np.array(seeds), flights=flights)
+            atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
+    rep = price(flights, list(args.arms))
+    rep["settings"] = settings
+    print("\n".join(report_lines(rep)))
+    if out is not None:
+        atomic_write_text(out / "report.json", json.dumps(rep, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
