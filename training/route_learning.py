@@ -9,7 +9,10 @@ it. This command teaches it by experience:
    ``--first-seed``) the heuristic flies *every* candidate route (the same reset seed, so the
    same city, satellites and start), and each flight's mean ``nav`` error is recorded beside
    the route's features, as planned on board at the first step. This is a contextual bandit
-   with full feedback: the outcome of every arm is observed.
+   with full feedback: the outcome of every arm is observed. With ``--noise-replicates R``
+   every route is flown R times under independent noise realisations of the same episode
+   (the environment's ``noise_stream`` reset option) and the model learns from their mean,
+   the route's expected error with less of one flight's noise.
 2. **Fit.** Ridge regression of each route's error, relative to the mean of its episode's
    routes, on the standardised features; the penalty is chosen by 5-fold cross-validation
    over episodes of the error of the route each penalty's model would choose.

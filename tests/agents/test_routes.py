@@ -545,3 +545,19 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
         bench.main(["--arms", "formation"])
     with pytest.raises(ValueError):
         bench.main(["--arms", "formation", "nosuchpolicy"])
+
+
+def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(tmp_path):
+    from training.cli import main
+
+    out = tmp_path / "run"
+    argv = ["train-routes", "--episodes", "8", "--jobs", "1", "--first-seed", "0"]
+    assert main([*argv, "--noise-replicates", "2", "--out", str(out)]) == 0
+    summary = json.loads((out / "run.json").read_text())
+    assert summary["settings"]["noise_replicates"] == 2
+    with np.load(out / "episodes.npz") as d:
+        reps, nav = d["nav_reps"], d["nav"]
+    assert reps.shape == (nav.size, 2) and np.allclose(nav, reps.mean(axis=1))
+    assert RouteModel.load(out).info["noise_replicates"] == 2
+    assert main([*argv, "--noise-replicates", "0", "--out", str(tmp_path / "bad")]) == 2
+    assert not (tmp_path / "bad").exists()
