@@ -410,8 +410,9 @@ episode). `reset(seed=s, options={"noise_stream": k})` (k >= 1) gives the episod
 (city, satellites, start, goal, first epoch) under another noise realisation: every later draw
 comes from a generator seeded with `(s, k)`, so the same episode can be flown several times with
 independent noise (variance reduction, e.g. `coopnav train-routes --noise-replicates`); `k = 0`
-is the plain episode, and other option keys raise a `ValueError`. The environment pickles (EzPickle with every argument, plus the generator and the
-world state): a restored copy continues exactly like the original.
+is the plain episode, and other option keys raise a `ValueError`. The environment pickles
+(EzPickle with every argument, plus the generator and the world state): a restored copy
+continues exactly like the original.
 
 ## Version History
 

@@ -445,7 +445,7 @@ def test_route_choice_benchmark_expected_error_oracle_holds_out_the_noise_it_is_
     bench = load_benchmark("route_choice")
     j = ROUTE_FEATURES.index("los_mean")
     eps = []
-    for i in range(30):
+    for _ in range(30):
         f = np.zeros((2, len(ROUTE_FEATURES)))
         f[:, j] = [10.0, 8.0]  # every rule on los_mean picks route 0
         # route 1 is better by 0.2 m in expectation; replicate 0 flatters route 0 by 0.5 m
@@ -487,7 +487,8 @@ def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
     assert r["vs_unsplit_m"][0] == pytest.approx(-0.2 * 20 / 21) and r[
         "split_share"
     ] == pytest.approx(20 / 21)
-    # held out replicate 0: arm 2's other flight (1.6) wins -> 2.4 - 2.0; held out 1: arm 1 -> 1.8 - 2.0
+    # held out replicate 0: arm 2's other flight (1.6) wins -> 2.4 - 2.0;
+    # held out replicate 1: arm 1 -> 1.8 - 2.0
     assert rep["oracle_expected_vs_unsplit_m"][0] == pytest.approx((0.4 - 0.2) / 2 * 20 / 21)
     assert any("expected-error oracle" in x for x in bench.report_lines(rep))
     # a real, tiny run: flights, files and a report
