@@ -410,7 +410,7 @@ episode). `reset(seed=s, options={"noise_stream": k})` (k >= 1) gives the episod
 (city, satellites, start, goal, first epoch) under another noise realisation: every later draw
 comes from a generator seeded with `(s, k)`, so the same episode can be flown several times with
 independent noise (variance reduction, e.g. `coopnav train-routes --noise-replicates`); `k = 0`
-is the plain episode, and other option keys raise a `ValueError`. The environment pickles
+is the plain episode; other option keys are ignored. The environment pickles
 (EzPickle with every argument, plus the generator and the world state): a restored copy
 continues exactly like the original.
 
@@ -436,7 +436,7 @@ continues exactly like the original.
   options `obs_protection_level`, `obs_satellite_sectors`, `obs_lookahead`,
   `obs_candidate_sky` and `obs_true_error` (privileged, a diagnostic), and the world options
   `dead_reckoning_noise` and `preset`; and the reset option `noise_stream` (without it, reset
-  is as before; unknown option keys, formerly ignored, now raise a `ValueError`).
+  is as before).
 """
 
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env
