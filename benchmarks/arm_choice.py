@@ -19,8 +19,12 @@ docs/marl/README.md ("How much is left to choose") runs::
         --noise-replicates 3 --arms skyroute skyroute@spacing_m=30 skyroute@spacing_m=60 \\
         skyroute@cruise_speed_mps=10 --out runs/arms/spacing
 
-about 6 minutes on 2 cores. ``--out`` keeps the flights (``episodes.npz``) and the report
-(``report.json``); with an ``episodes.npz`` of the same settings there, nothing is flown again.
+about 6 minutes on 2 cores. ``--compare REF GROUP`` also prints the paired difference of a
+group of arms (comma-separated, e.g. the training seeds of one learned method; their mean per
+episode) to the arm ``REF``, with its 95 % interval over episodes: with replicates, a
+comparison with less of one flight's noise. ``--out`` keeps the flights (``episodes.npz``)
+and the report (``report.json``); with an ``episodes.npz`` of the same settings there,
+nothing is flown again.
 """
 
 from __future__ import annotations
@@ -116,6 +120,33 @@ def price(flights: np.ndarray, arms: list[str], reps: int = 2000) -> dict[str, A
     return out
 
 
+def compare(
+    flights: np.ndarray, arms: list[str], ref: str, group: list[str], reps: int = 2000
+) -> dict[str, Any]:
+    """Paired difference of the mean of ``group``'s arms to arm ``ref`` per episode (means
+    over the replicates), with a 95 % bootstrap interval over episodes, and goal rates."""
+    from training.stats import bootstrap_mean_interval
+
+    missing = [a for a in [ref, *group] if a not in arms]
+    if missing:
+        raise ValueError(f"--compare names arms that were not flown: {missing}; arms: {arms}")
+    nav, goal = flights[..., 0], flights[..., 1]
+    r = arms.index(ref)
+    g = [arms.index(a) for a in group]
+    d = np.nanmean(nav[:, g], axis=(1, 2)) - np.nanmean(nav[:, r], axis=1)
+    return {
+        "ref": ref,
+        "group": list(group),
+        "group_nav_m": float(np.nanmean(nav[:, g])),
+        "ref_nav_m": float(np.nanmean(nav[:, r])),
+        "group_goal_rate": float(goal[:, g].mean()),
+        "ref_goal_rate": float(goal[:, r].mean()),
+        "difference_m": [
+            float(v) for v in bootstrap_mean_interval(d, reps, np.random.default_rng(0))
+        ],
+    }
+
+
 def report_lines(rep: dict[str, Any]) -> list[str]:
     """The printed table of :func:`price`."""
     lines = [
@@ -134,6 +165,14 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
         f"{rep['oracle_expected_nav_m']:.3f} m, goal rate {rep['oracle_expected_goal_rate']:.3f}, "
         f"vs the best fixed arm ({rep['best_fixed']}) {o[0]:+.3f} [{o[1]:+.3f}, {o[2]:+.3f}]"
     )
+    if "compare" in rep:
+        c = rep["compare"]
+        d = c["difference_m"]
+        lines.append(
+            f"{' + '.join(c['group'])} (mean, nav {c['group_nav_m']:.3f} m, goal rate "
+            f"{c['group_goal_rate']:.3f}) - {c['ref']} (nav {c['ref_nav_m']:.3f} m, goal rate "
+            f"{c['ref_goal_rate']:.3f}): {d[0]:+.3f} [{d[1]:+.3f}, {d[2]:+.3f}]"
+        )
     return lines
 
 
@@ -161,6 +200,14 @@ def main(argv: list[str] | None = None) -> int:
         help="flights of every arm under independent noise realisations, >= 2 "
         "(default: %(default)s)",
     )
+    p.add_argument(
+        "--compare",
+        nargs=2,
+        metavar=("REF", "GROUP"),
+        default=None,
+        help="also print the paired difference of the arms GROUP (comma-separated, their "
+        "mean) to the arm REF",
+    )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
     args = p.parse_args(argv)
@@ -172,6 +219,11 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--noise-replicates must be >= 2, got {args.noise_replicates}")
     if args.jobs < 1:
         raise SystemExit(f"--jobs must be >= 1, got {args.jobs}")
+    group = args.compare[1].split(",") if args.compare else []
+    if args.compare:
+        missing = [a for a in [args.compare[0], *group] if a not in args.arms]
+        if missing:
+            raise SystemExit(f"--compare names arms not in --arms: {missing}")
     env_kwargs = env_kwargs_from_overrides(args.env_set)
     probe = urban_canyon_v0.parallel_env(**env_kwargs)
     for name in args.arms:  # a bad policy name fails before anything is flown
@@ -200,6 +252,8 @@ def main(argv: list[str] | None = None) -> int:
                     np.savez(fh, seed=np.array(seeds), flights=flights)
             atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
     rep = price(flights, list(args.arms))
+    if args.compare:
+        rep["compare"] = compare(flights, list(args.arms), args.compare[0], group)
     rep["settings"] = settings
     print("\n".join(report_lines(rep)))
     if out is not None:

@@ -537,6 +537,12 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
     assert rep["oracle_expected_vs_best_fixed_m"][0] == pytest.approx(-0.25)
     assert rep["oracle_expected_goal_rate"] == 1.0
     assert any("expected-error oracle" in x for x in bench.report_lines(rep))
+    c = bench.compare(flights, ["a", "b"], "a", ["b"], reps=100)
+    assert c["difference_m"][0] == pytest.approx(0.25) and c["group_goal_rate"] == 1.0
+    with pytest.raises(ValueError, match="not flown"):
+        bench.compare(flights, ["a", "b"], "a", ["c"])
+    rep["compare"] = c
+    assert "b (mean" in bench.report_lines(rep)[-1]
     out = tmp_path / "arms"
     args = ["--episodes", "2", "--noise-replicates", "2", "--jobs", "1", "--out", str(out)]
     assert bench.main(["--arms", "formation", "formation@spacing_m=12", *args]) == 0
@@ -544,6 +550,8 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
     assert rep["episodes"] == 2 and set(rep["arms"]) == {"formation", "formation@spacing_m=12"}
     with pytest.raises(SystemExit, match="at least 2 policies"):
         bench.main(["--arms", "formation"])
+    with pytest.raises(SystemExit, match="not in --arms"):
+        bench.main(["--arms", "formation", "sky", "--compare", "formation", "ceiling"])
     with pytest.raises(ValueError):
         bench.main(["--arms", "formation", "nosuchpolicy"])
 
