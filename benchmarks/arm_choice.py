@@ -24,7 +24,8 @@ group of arms (comma-separated, e.g. the training seeds of one learned method; t
 episode) to the arm ``REF``, with its 95 % interval over episodes: with replicates, a
 comparison with less of one flight's noise. ``--out`` keeps the flights (``episodes.npz``)
 and the report (``report.json``); with an ``episodes.npz`` of the same settings there,
-nothing is flown again.
+nothing is flown again, and a folder of a run with other settings is refused (it is never
+overwritten).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ import argparse
 import json
 import math
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +42,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def _chunk(args: tuple[dict[str, Any], list[str], list[int], int]) -> list[np.ndarray]:
+def _chunk(common: tuple[dict[str, Any], list[str], int], seeds: list[int]) -> list[np.ndarray]:
     import torch
 
     from agents import make_policy
@@ -50,7 +50,7 @@ def _chunk(args: tuple[dict[str, Any], list[str], list[int], int]) -> list[np.nd
     from training.evaluate import run_episode
 
     torch.set_num_threads(1)
-    env_kwargs, arms, seeds, replicates = args
+    env_kwargs, arms, replicates = common
     env = urban_canyon_v0.parallel_env(**env_kwargs)
     out = []
     for seed in seeds:
@@ -67,19 +67,21 @@ def _chunk(args: tuple[dict[str, Any], list[str], list[int], int]) -> list[np.nd
 
 
 def collect(
-    env_kwargs: dict[str, Any], arms: list[str], seeds: list[int], replicates: int, jobs: int
+    env_kwargs: dict[str, Any],
+    arms: list[str],
+    seeds: list[int],
+    replicates: int,
+    jobs: int,
+    progress: bool = False,
 ) -> np.ndarray:
     """``(episodes, arms, replicates, 2)``: each flight's mean ``nav`` error and goal (0/1)."""
-    if jobs == 1 or len(seeds) < 2:
-        return np.stack(_chunk((env_kwargs, arms, seeds, replicates)))
-    chunks = [seeds[i::jobs] for i in range(jobs)]
-    with ProcessPoolExecutor(jobs) as ex:
-        parts = list(ex.map(_chunk, [(env_kwargs, arms, c, replicates) for c in chunks]))
-    out: list[np.ndarray] = [np.zeros(0)] * len(seeds)
-    for i, c in enumerate(chunks):
-        for j in range(len(c)):
-            out[i + j * jobs] = parts[i][j]
-    return np.stack(out)
+    from training.parallel import map_seeds
+
+    return np.stack(
+        map_seeds(
+            _chunk, (env_kwargs, arms, replicates), seeds, jobs=jobs, desc="arms", progress=progress
+        )
+    )
 
 
 def price(flights: np.ndarray, arms: list[str], reps: int = 2000) -> dict[str, Any]:
@@ -179,7 +181,7 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     from agents import make_policy
     from coopnav_env import urban_canyon_v0
-    from training.files import atomic_path, atomic_write_text
+    from training.files import atomic_path, atomic_write_text, claim_run_folder
     from training.route_learning import env_kwargs_from_overrides
 
     p = argparse.ArgumentParser(
@@ -209,7 +211,9 @@ def main(argv: list[str] | None = None) -> int:
         "mean) to the arm REF",
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
-    p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
+    p.add_argument(
+        "--out", default=None, help="folder of this run: episodes.npz, settings.json, report.json"
+    )
     args = p.parse_args(argv)
     if len(args.arms) < 2:
         raise SystemExit(f"--arms needs at least 2 policies, got {args.arms}")
@@ -237,20 +241,24 @@ def main(argv: list[str] | None = None) -> int:
     }
     out = Path(args.out) if args.out else None
     flights = None
-    if out is not None and (out / "episodes.npz").is_file() and (out / "settings.json").is_file():
-        if json.loads((out / "settings.json").read_text()) == json.loads(json.dumps(settings)):
+    if out is not None:
+        try:
+            reuse = claim_run_folder(out, settings)
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
+        if reuse:
             with np.load(out / "episodes.npz") as d:
                 flights = np.asarray(d["flights"])
             print(f"using the flights of {out}", file=sys.stderr)
     if flights is None:
         seeds = list(range(args.first_seed, args.first_seed + args.episodes))
-        flights = collect(env_kwargs, list(args.arms), seeds, args.noise_replicates, args.jobs)
+        flights = collect(
+            env_kwargs, list(args.arms), seeds, args.noise_replicates, args.jobs, progress=True
+        )
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
             with atomic_path(out / "episodes.npz") as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez(fh, seed=np.array(seeds), flights=flights)
-            atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
     rep = price(flights, list(args.arms))
     if args.compare:
         rep["compare"] = compare(flights, list(args.arms), args.compare[0], group)

@@ -30,7 +30,8 @@ docs/marl/README.md ("Route choice") runs::
 
 ``--out`` keeps the collection (``episodes.npz``, as ``coopnav train-routes`` writes it) and
 the printed report (``report.json``); with an existing ``episodes.npz`` of the same settings
-the routes are not flown again.
+the routes are not flown again, and a folder of a run with other settings is refused (it is
+never overwritten).
 """
 
 from __future__ import annotations
@@ -142,7 +143,7 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     from agents.routes import RouteModel
-    from training.files import atomic_path, atomic_write_text
+    from training.files import atomic_path, atomic_write_text, claim_run_folder
     from training.route_learning import (
         arrays_to_episodes,
         collect,
@@ -166,7 +167,9 @@ def main(argv: list[str] | None = None) -> int:
         help="flights of every route under independent noise realisations (default: %(default)s)",
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
-    p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
+    p.add_argument(
+        "--out", default=None, help="folder of this run: episodes.npz, settings.json, report.json"
+    )
     args = p.parse_args(argv)
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
@@ -184,8 +187,12 @@ def main(argv: list[str] | None = None) -> int:
         settings["noise_replicates"] = args.noise_replicates
     out = Path(args.out) if args.out else None
     eps = None
-    if out is not None and (out / "episodes.npz").is_file() and (out / "settings.json").is_file():
-        if json.loads((out / "settings.json").read_text()) == json.loads(json.dumps(settings)):
+    if out is not None:
+        try:
+            reuse = claim_run_folder(out, settings)
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
+        if reuse:
             with np.load(out / "episodes.npz") as d:
                 _, eps = arrays_to_episodes(dict(d))
             print(f"using the routes flown before in {out}", file=sys.stderr)
@@ -198,13 +205,12 @@ def main(argv: list[str] | None = None) -> int:
             max_turns=args.max_turns,
             jobs=args.jobs,
             replicates=args.noise_replicates,
+            progress=True,
         )
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
             with atomic_path(out / "episodes.npz") as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez(fh, **episodes_to_arrays(seeds, eps))
-            atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
     models = {str(m): RouteModel.load(m) for m in args.models}
     rep = price_choices(eps, models)
     rep["settings"] = settings

@@ -24,7 +24,8 @@ on its chosen route) and every split of it (its route and each other candidate),
         --noise-replicates 3 --out runs/split/explore
 
 about 12 minutes on 2 cores. ``--out`` keeps the flights (``episodes.npz``) and the report
-(``report.json``); with an ``episodes.npz`` of the same settings there, nothing is flown again.
+(``report.json``); with an ``episodes.npz`` of the same settings there, nothing is flown again,
+and a folder of a run with other settings is refused (it is never overwritten).
 """
 
 from __future__ import annotations
@@ -33,7 +34,6 @@ import argparse
 import json
 import math
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -96,31 +96,33 @@ def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str
     return {"features": feats, "nav": nav, "goal": goal}
 
 
-def _chunk(args: tuple[dict[str, Any], str, list[int], int]) -> list[dict[str, np.ndarray]]:
+def _chunk(
+    common: tuple[dict[str, Any], str, int], seeds: list[int]
+) -> list[dict[str, np.ndarray]]:
     import torch
 
     from coopnav_env import urban_canyon_v0
 
     torch.set_num_threads(1)
-    env_kwargs, base, seeds, replicates = args
+    env_kwargs, base, replicates = common
     env = urban_canyon_v0.parallel_env(**env_kwargs)
     return [collect_episode(env, base, s, replicates) for s in seeds]
 
 
 def collect(
-    env_kwargs: dict[str, Any], base: str, seeds: list[int], replicates: int, jobs: int
+    env_kwargs: dict[str, Any],
+    base: str,
+    seeds: list[int],
+    replicates: int,
+    jobs: int,
+    progress: bool = False,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
-    if jobs == 1 or len(seeds) < 2:
-        return _chunk((env_kwargs, base, seeds, replicates))
-    chunks = [seeds[i::jobs] for i in range(jobs)]
-    with ProcessPoolExecutor(jobs) as ex:
-        parts = list(ex.map(_chunk, [(env_kwargs, base, c, replicates) for c in chunks]))
-    out: list[dict[str, np.ndarray]] = [{}] * len(seeds)
-    for i, c in enumerate(chunks):
-        for j in range(len(c)):
-            out[i + j * jobs] = parts[i][j]
-    return out
+    from training.parallel import map_seeds
+
+    return map_seeds(
+        _chunk, (env_kwargs, base, replicates), seeds, jobs=jobs, desc="splits", progress=progress
+    )
 
 
 def price(eps: list[dict[str, np.ndarray]], reps: int = 2000) -> dict[str, Any]:
@@ -202,7 +204,7 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.files import atomic_path, atomic_write_text
+    from training.files import atomic_path, atomic_write_text, claim_run_folder
     from training.route_learning import env_kwargs_from_overrides
 
     p = argparse.ArgumentParser(
@@ -226,7 +228,9 @@ def main(argv: list[str] | None = None) -> int:
         "(default: %(default)s)",
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
-    p.add_argument("--out", default=None, help="folder for episodes.npz and report.json")
+    p.add_argument(
+        "--out", default=None, help="folder of this run: episodes.npz, settings.json, report.json"
+    )
     args = p.parse_args(argv)
     if args.episodes < 1:
         raise SystemExit(f"--episodes must be >= 1, got {args.episodes}")
@@ -244,8 +248,12 @@ def main(argv: list[str] | None = None) -> int:
     }
     out = Path(args.out) if args.out else None
     eps = None
-    if out is not None and (out / "episodes.npz").is_file() and (out / "settings.json").is_file():
-        if json.loads((out / "settings.json").read_text()) == json.loads(json.dumps(settings)):
+    if out is not None:
+        try:
+            reuse = claim_run_folder(out, settings)
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
+        if reuse:
             with np.load(out / "episodes.npz") as d:
                 eps = [
                     {k: d[f"{k}_{i}"] for k in ("features", "nav", "goal")}
@@ -254,9 +262,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"using the flights of {out}", file=sys.stderr)
     if eps is None:
         seeds = list(range(args.first_seed, args.first_seed + args.episodes))
-        eps = collect(env_kwargs, args.base, seeds, args.noise_replicates, args.jobs)
+        eps = collect(env_kwargs, args.base, seeds, args.noise_replicates, args.jobs, progress=True)
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
             arrays: dict[str, np.ndarray] = {"count": np.array(len(eps)), "seed": np.array(seeds)}
             for i, e in enumerate(eps):
                 for k, v in e.items():
@@ -264,7 +271,6 @@ def main(argv: list[str] | None = None) -> int:
             with atomic_path(out / "episodes.npz") as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez(fh, **arrays)
-            atomic_write_text(out / "settings.json", json.dumps(settings, indent=1) + "\n")
     rep = price(eps)
     rep["settings"] = settings
     print("\n".join(report_lines(rep)))

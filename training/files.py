@@ -26,6 +26,7 @@ __all__ = [
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_text",
+    "claim_run_folder",
     "ensure_folder",
     "jsonable",
     "write_json",
@@ -152,3 +153,32 @@ def jsonable(obj: Any) -> Any:
     if isinstance(obj, Path):
         return str(obj)
     return obj
+
+
+def claim_run_folder(out: str | Path, settings: Any, data_name: str = "episodes.npz") -> bool:
+    """Make ``out`` the folder of the run with these ``settings``, or find that it is.
+
+    The data-collection benchmarks keep their flights (``data_name``) and a ``settings.json``
+    in ``--out`` and reuse the flights when run again with the same settings (to price them
+    anew, e.g. with another ``--compare``). A folder belongs to one run: ``out`` holding the
+    ``settings.json`` of *other* settings, or files without a ``settings.json``, is refused
+    with a :class:`ValueError` that names it, so that no earlier run's flights are ever
+    overwritten. Otherwise the folder is created, ``settings.json`` written (atomically) if it
+    is not there, and the return value says whether ``data_name`` is there to reuse.
+    """
+    out = Path(out)
+    sfile = out / "settings.json"
+    wanted = json.loads(json.dumps(settings))
+    if sfile.is_file():
+        old = json.loads(sfile.read_text())
+        if old != wanted:
+            raise ValueError(
+                f"{out} belongs to a run with other settings ({old}), not {wanted}; use "
+                "another --out"
+            )
+        return (out / data_name).is_file()
+    if out.is_dir() and any(p for p in out.iterdir() if not p.name.startswith(".")):
+        raise ValueError(f"--out {out} exists and holds files of no run of this command")
+    ensure_folder(out)
+    atomic_write_text(sfile, json.dumps(wanted, indent=1) + "\n")
+    return False

@@ -37,7 +37,6 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -116,13 +115,13 @@ def collect_episode(
     return out
 
 
-def _collect_chunk(args: tuple[Mapping[str, Any], str, list[int], int, int]) -> list[dict]:
+def _collect_chunk(common: tuple[dict[str, Any], str, int, int], seeds: list[int]) -> list[dict]:
     import torch
 
     from coopnav_env import urban_canyon_v0
 
     torch.set_num_threads(1)
-    env_kwargs, base, seeds, max_turns, replicates = args
+    env_kwargs, base, max_turns, replicates = common
     env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
     return [collect_episode(env, base, s, max_turns, replicates) for s in seeds]
 
@@ -135,26 +134,22 @@ def collect(
     max_turns: int = 3,
     jobs: int = 2,
     replicates: int = 1,
+    progress: bool = False,
 ) -> list[dict[str, np.ndarray]]:
-    """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
-    seeds = [int(s) for s in seeds]
-    if jobs < 1:
+    """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order;
+    :func:`training.parallel.map_seeds`, with a progress bar when ``progress``)."""
+    from training.parallel import map_seeds
+
+    if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
-    if jobs == 1 or len(seeds) < 2:
-        return _collect_chunk((dict(env_kwargs), base, seeds, max_turns, replicates))
-    chunks = [seeds[i::jobs] for i in range(jobs)]
-    with ProcessPoolExecutor(jobs) as ex:
-        parts = list(
-            ex.map(
-                _collect_chunk,
-                [(dict(env_kwargs), base, c, max_turns, replicates) for c in chunks],
-            )
-        )
-    out: list[dict[str, np.ndarray]] = [{}] * len(seeds)
-    for i, c in enumerate(chunks):
-        for j in range(len(c)):
-            out[i + j * jobs] = parts[i][j]
-    return out
+    return map_seeds(
+        _collect_chunk,
+        (dict(env_kwargs), base, int(max_turns), replicates),
+        [int(s) for s in seeds],
+        jobs=int(jobs),
+        desc="routes",
+        progress=progress,
+    )
 
 
 def episodes_to_arrays(seeds: Sequence[int], eps: Sequence[Mapping[str, np.ndarray]]) -> dict:

@@ -548,6 +548,14 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
     assert bench.main(["--arms", "formation", "formation@spacing_m=12", *args]) == 0
     rep = json.loads((out / "report.json").read_text())
     assert rep["episodes"] == 2 and set(rep["arms"]) == {"formation", "formation@spacing_m=12"}
+    # the same settings again: the flights are reused, not flown again
+    stamp = (out / "episodes.npz").stat().st_mtime_ns
+    assert bench.main(["--arms", "formation", "formation@spacing_m=12", *args]) == 0
+    assert (out / "episodes.npz").stat().st_mtime_ns == stamp
+    # other settings into the same folder: refused, the first run's flights kept
+    with pytest.raises(SystemExit, match="belongs to a run with other settings"):
+        bench.main(["--arms", "formation", "sky", *args])
+    assert (out / "episodes.npz").stat().st_mtime_ns == stamp
     with pytest.raises(SystemExit, match="at least 2 policies"):
         bench.main(["--arms", "formation"])
     with pytest.raises(SystemExit, match="not in --arms"):
