@@ -462,6 +462,50 @@ def test_route_choice_benchmark_expected_error_oracle_holds_out_the_noise_it_is_
     assert any("expected-error oracle" in x for x in bench.report_lines(rep))
 
 
+def test_route_choice_within_turns_prices_what_routes_with_more_turns_add():
+    from tests.benchmark_script import load_benchmark
+
+    bench = load_benchmark("route_choice")
+    jp = ROUTE_FEATURES.index("pdop_gt3")
+    jt = ROUTE_FEATURES.index("turns")
+    eps = []
+    for _ in range(20):
+        f = np.zeros((3, len(ROUTE_FEATURES)))
+        f[:, jt] = [1.0, 2.0, 5.0]
+        f[:, jp] = [0.2, 0.3, 0.1]  # the rule takes route 0 within 2 turns, route 2 on all
+        reps = np.array([[3.0, 3.0], [2.5, 2.5], [2.8, 2.8]])
+        eps.append(
+            {"features": f, "nav": reps.mean(axis=1), "goal": np.ones(3, bool), "nav_reps": reps}
+        )
+    eps.append(
+        {
+            "features": np.full((1, len(ROUTE_FEATURES)), np.nan),
+            "nav": np.array([4.0]),
+            "goal": np.array([True]),
+            "nav_reps": np.array([[4.0, 4.0]]),
+        }
+    )
+    sub = bench.within_turns(eps, 2)
+    assert [len(e["nav"]) for e in sub] == [2] * 20 + [1]
+    w = bench.compare_within_turns(eps, "pdop_gt3", 2, reps=100)
+    assert w["routes_per_episode_within"] == 2.0 and w["routes_per_episode_all"] == 3.0
+    assert w["rule_within_nav_m"] == pytest.approx((3.0 * 20 + 4.0) / 21)
+    assert w["rule_all_vs_rule_within_m"][0] == pytest.approx(-0.2 * 20 / 21)
+    # both oracles find route 1 (2.5 m): 0.5 m below the rule within 2 turns
+    assert w["oracle_within_vs_rule_within_m"][0] == pytest.approx(-0.5 * 20 / 21)
+    assert w["oracle_all_vs_oracle_within_m"] == [0.0, 0.0, 0.0]
+    rep = bench.price_choices(eps, {}, reps=100)
+    rep["within_turns"] = w
+    assert any("oracle on all routes - oracle within 2 turns" in x for x in bench.report_lines(rep))
+    no_reps = [{k: v for k, v in e.items() if k != "nav_reps"} for e in eps]
+    with pytest.raises(ValueError, match="needs noise replicates"):
+        bench.compare_within_turns(no_reps, "pdop_gt3", 2)
+    with pytest.raises(SystemExit, match="within-turns must be in"):
+        bench.main(["--within-turns", "3", "--max-turns", "3", "--noise-replicates", "2"])
+    with pytest.raises(SystemExit, match="needs --noise-replicates"):
+        bench.main(["--within-turns", "1"])
+
+
 def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
     from agents.routes import SPLIT_FEATURES
     from tests.benchmark_script import load_benchmark
