@@ -27,6 +27,10 @@ name                      policy
 ``route:<path>``          a column heuristic that flies the route a learned route model
                           predicts best (:mod:`agents.routes`; ``coopnav train-routes``);
                           ``route:pretrained`` (``.../s1``) the shipped study models
+``split:<path>``          a column heuristic that splits over two streets where a learned
+                          split model predicts it best (:mod:`agents.routes`;
+                          ``benchmarks/split_choice.py --fit-model``); ``split:pretrained``
+                          (``.../s1``, ``.../s2``) the shipped models
 ``planner``               privileged MPC that looks ahead in copies of the environment with
                           the true errors: the headroom reference (:mod:`agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
@@ -78,6 +82,7 @@ POLICY_NAMES: tuple[str, ...] = (
     "mappo:<path>",
     "ippo:<path>",
     "route:<path>",
+    "split:<path>",
 )
 """Names :func:`make_policy` accepts (plus those given to :func:`register_policy`)."""
 
@@ -190,6 +195,16 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
 
         model = RouteModel.load(resolve_route_model(path))
         return make_policy(model.base, env, route_model=model, **kwargs)
+    if name.startswith("split:"):
+        path = name[len("split:") :]
+        if not path:
+            raise ValueError("policy 'split:<path>' needs the path of a split model")
+        from agents.routes import RouteModel, resolve_route_model
+
+        model = RouteModel.load(resolve_route_model(path, kind="split"))
+        if model.kind != "split":
+            raise ValueError(f"policy 'split:{path}' needs a split model, got a {model.kind} model")
+        return make_policy(model.base, env, route_split_model=model, **kwargs)
     for prefix in ("mappo:", "ippo:", "torchrl:"):
         if name.startswith(prefix):
             path = name[len(prefix) :]

@@ -90,6 +90,7 @@ class _ColumnFollower:
         route_model: Any = None,
         route_split: str = "none",
         route_split_index: int = 0,
+        route_split_model: Any = None,
     ):
         self.env = env
         self.base = _world_of(env)
@@ -159,6 +160,27 @@ class _ColumnFollower:
             )
         self.route_split = route_split
         self.route_split_index = int(route_split_index)
+        if isinstance(route_split_model, (str, Path)):
+            from agents.routes import RouteModel, resolve_route_model
+
+            route_split_model = RouteModel.load(
+                resolve_route_model(str(route_split_model), kind="split")
+            )
+        if route_split_model is not None and (
+            not hasattr(route_split_model, "predict")
+            or getattr(route_split_model, "kind", None) != "split"
+        ):
+            raise ValueError(
+                f"route_split_model must be a split model (RouteModel of kind 'split') or a "
+                f"path to one, got {route_split_model!r}"
+            )
+        if route_split_model is not None and (route_split != "none" or route_split_index):
+            raise ValueError(
+                "route_split_model excludes route_split and route_split_index, got "
+                f"route_split={route_split!r}, route_split_index={route_split_index}"
+            )
+        self.route_split_model = route_split_model
+        self.split_feature_table: np.ndarray | None = None  # no split, then each split
         if isinstance(route_model, (str, Path)):
             from agents.routes import RouteModel, resolve_route_model
 
@@ -346,14 +368,21 @@ class _ColumnFollower:
         they were scored) their features."""
         self.route_feature_table = None
         plain = self.route_index == 0 and self.route_choice == "first" and self.route_model is None
-        if plain and self.route_split == "none" and not self.route_split_index:
+        if (
+            plain
+            and self.route_split == "none"
+            and not self.route_split_index
+            and self.route_split_model is None
+        ):
             self.route_candidates, self.route_chosen = [], 0
             return street_route(city, centre, goal[:2])
         routes = street_routes(city, centre, goal[:2], self.route_max_turns)
         if (
             self.route_choice == "first"
             and self.route_model is None
-            and (self.route_split == "none" or len(routes) == 1)
+            and (
+                (self.route_split == "none" and self.route_split_model is None) or len(routes) == 1
+            )
         ):
             k = self.route_index % len(routes)
         elif len(routes) == 1:
@@ -384,6 +413,25 @@ class _ColumnFollower:
         self.route_candidates, self.route_chosen = routes, k
         return routes[k]
 
+    def split_table(self, routes: list[np.ndarray], k: int) -> tuple[list[int], np.ndarray]:
+        """The options of splitting the column flown on ``routes[k]``: the indices of the
+        other routes, and the :data:`~agents.routes.SPLIT_FEATURES` ``(1 + others, F)`` of
+        flying unsplit (row 0) and of splitting onto each other route (row ``1 + i``), at the
+        column's altitude and spacing; kept as :attr:`split_feature_table`."""
+        from agents.routes import split_features
+
+        others = [j for j in range(len(routes)) if j != k]
+        world, alt = self.base.world, self._altitude_m()
+        feats = np.stack(
+            [split_features(world, [routes[k]], alt, spacing_m=self.spacing_m)]
+            + [
+                split_features(world, [routes[k], routes[j]], alt, spacing_m=self.spacing_m)
+                for j in others
+            ]
+        )
+        self.split_feature_table = feats
+        return others, feats
+
     def _split_route(self, routes: list[np.ndarray], k: int) -> int | None:
         """Index of the second route of a split swarm among ``routes`` (``k`` is the first),
         or None to fly one column: candidate ``route_split_index`` counted among the others
@@ -391,6 +439,10 @@ class _ColumnFollower:
         others = [j for j in range(len(routes)) if j != k]
         if self.route_split_index:
             return others[(self.route_split_index - 1) % len(others)]
+        if self.route_split_model is not None:
+            _, feats = self.split_table(routes, k)
+            c = int(np.argmin(self.route_split_model.predict(feats)))
+            return None if c == 0 else others[c - 1]
         if self.route_split == "none":
             return None
         from agents.routes import FEATURE_SENSE, ROUTE_FEATURES
@@ -569,6 +621,12 @@ class FormationPolicy(_ColumnFollower):
         Split onto this candidate (counted among the candidates other than the chosen
         route, from 1, modulo their number) instead; 0: no split. For studies that fly every
         split of an episode. Excludes ``route_split``.
+    route_split_model : RouteModel or str, optional
+        A learned split model (:class:`agents.routes.RouteModel` of kind ``"split"``, or a
+        path; ``pretrained`` and ``pretrained/s<k>`` are the shipped ones): the column
+        splits onto the other candidate route the model predicts lowest, or flies unsplit
+        where it predicts that lowest (:meth:`split_table` gives what it scores). Excludes
+        ``route_split`` and ``route_split_index``. Policy name ``split:<path>``.
     """
 
     name = "formation"

@@ -36,6 +36,7 @@ from coopnav_env.sim.route import Polyline
 
 __all__ = [
     "FEATURE_SENSE",
+    "MODEL_KINDS",
     "PRETRAINED_ROUTE_DIR",
     "ROUTE_FEATURES",
     "SPLIT_FEATURES",
@@ -51,15 +52,18 @@ PRETRAINED_ROUTE_DIR = Path(__file__).resolve().parent / "pretrained"
 """Where the shipped route models live (``route_s<k>`` folders)."""
 
 
-def resolve_route_model(text: str) -> Path:
-    """The file behind a ``route:<text>`` policy name: ``pretrained`` is the shipped model
-    of training seed 0 (``agents/pretrained/route_s0``), ``pretrained/s<k>`` that of seed
-    ``k``; anything else a path (a ``route_model.json`` file or a run folder holding one)."""
+def resolve_route_model(text: str, kind: str = "route") -> Path:
+    """The file behind a ``route:<text>`` (``split:<text>``) policy name: ``pretrained`` is
+    the shipped model of training seed 0 (``agents/pretrained/route_s0``, ``split_s0``),
+    ``pretrained/s<k>`` that of seed ``k``; anything else a path (a ``route_model.json`` or
+    ``split_model.json`` file, or a folder holding one)."""
+    if kind not in ("route", "split"):
+        raise ValueError(f"kind must be 'route' or 'split', got {kind!r}")
     if text == "pretrained" or text.startswith("pretrained/"):
         tail = text[len("pretrained") :].lstrip("/") or "s0"
         if not (tail.startswith("s") and tail[1:].isdigit()):
-            raise ValueError(f"route:pretrained takes a seed as pretrained/s<k>, got {text!r}")
-        return PRETRAINED_ROUTE_DIR / f"route_{tail}"
+            raise ValueError(f"{kind}:pretrained takes a seed as pretrained/s<k>, got {text!r}")
+        return PRETRAINED_ROUTE_DIR / f"{kind}_{tail}"
     return Path(text)
 
 
@@ -246,6 +250,9 @@ SPLIT_FEATURE_SENSE: dict[str, int] = {
     for name in SPLIT_FEATURES
 }
 
+#: The kinds of :class:`RouteModel` and the feature table each reads.
+MODEL_KINDS: dict[str, tuple[str, ...]] = {"route": ROUTE_FEATURES, "split": SPLIT_FEATURES}
+
 
 def split_features(
     world: Any,
@@ -347,6 +354,11 @@ class RouteModel:
         and that flew the training episodes.
     info : dict
         What the model was fitted on (environment settings, seeds, sizes, CV scores).
+    kind : str
+        ``"route"``: scores routes by their :data:`ROUTE_FEATURES` (the ``route_model``
+        option of the column heuristics); ``"split"``: scores flying one column against
+        splitting it onto each other candidate route, by their :data:`SPLIT_FEATURES` (the
+        ``route_split_model`` option; the first row of what it scores is the unsplit column).
     """
 
     features: list[str]
@@ -356,24 +368,34 @@ class RouteModel:
     alpha: float
     base: str
     info: dict[str, Any] = field(default_factory=dict)
+    kind: str = "route"
 
     def __post_init__(self) -> None:
-        unknown = [f for f in self.features if f not in ROUTE_FEATURES]
+        if self.kind not in MODEL_KINDS:
+            raise ValueError(f"model kind must be one of {list(MODEL_KINDS)}, got {self.kind!r}")
+        table = self.table
+        unknown = [f for f in self.features if f not in table]
         if unknown:
-            raise ValueError(f"unknown route features {unknown}; known: {list(ROUTE_FEATURES)}")
+            raise ValueError(f"unknown {self.kind} features {unknown}; known: {list(table)}")
         k = len(self.features)
         if not (len(self.mean) == len(self.scale) == len(self.weights) == k):
             raise ValueError("RouteModel needs one mean, scale and weight per feature")
-        self._cols = np.array([ROUTE_FEATURES.index(f) for f in self.features], dtype=int)
+        self._cols = np.array([table.index(f) for f in self.features], dtype=int)
+
+    @property
+    def table(self) -> tuple[str, ...]:
+        """The feature table the model reads: :data:`ROUTE_FEATURES` or :data:`SPLIT_FEATURES`."""
+        return MODEL_KINDS[self.kind]
 
     def predict(self, feats: np.ndarray) -> np.ndarray:
-        """Predicted relative error [m] of routes with features ``feats`` ``(R, F)``."""
-        x = np.asarray(feats, dtype=float).reshape(-1, len(ROUTE_FEATURES))[:, self._cols]
+        """Predicted relative error [m] of the options (routes, or no split and the splits)
+        with features ``feats`` ``(R, F)`` of the model's table."""
+        x = np.asarray(feats, dtype=float).reshape(-1, len(self.table))[:, self._cols]
         z = (x - np.asarray(self.mean)) / np.asarray(self.scale)
         return z @ np.asarray(self.weights)
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out = {
             "format": "coopnav-route-model/1",
             "features": list(self.features),
             "mean": [float(v) for v in self.mean],
@@ -383,6 +405,9 @@ class RouteModel:
             "base": self.base,
             "info": self.info,
         }
+        if self.kind != "route":  # (route models are written as before)
+            out["kind"] = self.kind
+        return out
 
     def save(self, path: str | Path) -> Path:
         """Write the model as JSON (temporary name, then renamed into place)."""
@@ -399,7 +424,9 @@ class RouteModel:
         ``route_model.json``)."""
         p = Path(path)
         if p.is_dir():
-            p = p / "route_model.json"
+            p = p / (
+                "split_model.json" if (p / "split_model.json").is_file() else "route_model.json"
+            )
         if not p.is_file():
             raise FileNotFoundError(f"no route model at {str(path)!r} (looked for {p})")
         d = json.loads(p.read_text())
@@ -413,6 +440,7 @@ class RouteModel:
             alpha=float(d["alpha"]),
             base=str(d["base"]),
             info=dict(d.get("info", {})),
+            kind=str(d.get("kind", "route")),
         )
 
 
@@ -430,23 +458,28 @@ def fit_route_model(
     errors: Sequence[np.ndarray],
     base: str,
     *,
-    features: Sequence[str] = ROUTE_FEATURES,
+    features: Sequence[str] | None = None,
     alphas: Sequence[float] = (1.0, 10.0, 100.0, 1e3, 1e4, 1e5, 1e6),
     folds: int = 5,
     info: dict[str, Any] | None = None,
+    kind: str = "route",
 ) -> RouteModel:
     """Fit a :class:`RouteModel` to flown episodes.
 
     Parameters
     ----------
-    feats : sequence of ndarray, each (R_e, len(ROUTE_FEATURES))
-        Per training episode, the features of its routes.
+    feats : sequence of ndarray, each (R_e, len(table))
+        Per training episode, the features of its options: its routes (``kind="route"``,
+        :data:`ROUTE_FEATURES`), or the unsplit column and each split (``kind="split"``,
+        :data:`SPLIT_FEATURES`).
     errors : sequence of ndarray, each (R_e,)
-        The mean navigation error each route was flown at [m] (the same episode seed).
+        The mean navigation error each option was flown at [m] (the same episode seed).
     base : str
         The heuristic that flew them.
-    features : sequence of str
-        The features to use.
+    features : sequence of str, optional
+        The features to use; default: all of the kind's table.
+    kind : str
+        ``"route"`` or ``"split"`` (see :class:`RouteModel`).
     alphas : sequence of float
         Ridge penalties to choose from, by ``folds``-fold cross-validation over episodes of
         the error of the route each would choose.
@@ -459,7 +492,14 @@ def fit_route_model(
         raise ValueError(f"feats and errors differ in length: {len(feats)} and {len(errors)}")
     if folds < 2:
         raise ValueError(f"folds must be >= 2, got {folds}")
-    cols = np.array([ROUTE_FEATURES.index(f) for f in features], dtype=int)
+    if kind not in MODEL_KINDS:
+        raise ValueError(f"model kind must be one of {list(MODEL_KINDS)}, got {kind!r}")
+    table = MODEL_KINDS[kind]
+    features = list(table if features is None else features)
+    unknown = [f for f in features if f not in table]
+    if unknown:
+        raise ValueError(f"unknown {kind} features {unknown}; known: {list(table)}")
+    cols = np.array([table.index(f) for f in features], dtype=int)
     keep = [i for i in range(len(feats)) if len(errors[i]) > 1]
     if len(keep) < folds:
         raise ValueError(
@@ -503,4 +543,5 @@ def fit_route_model(
         alpha=float(best),
         base=base,
         info=meta,
+        kind=kind,
     )

@@ -17,7 +17,7 @@ on its chosen route) and every split of it (its route and each other candidate),
   what any choice of split, learned or written, could gain (up to the noise of R - 1 flights).
 
 95 % bootstrap intervals over episodes (2000 resamples, generator seed 0). docs/marl/README.md
-("Splitting the swarm over two streets") runs::
+("How much is left to choose") runs::
 
     python benchmarks/split_choice.py --episodes 1000 --first-seed 1000000 \\
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
@@ -26,6 +26,17 @@ on its chosen route) and every split of it (its route and each other candidate),
 about 12 minutes on 2 cores. ``--out`` keeps the flights (``episodes.npz``) and the report
 (``report.json``); with an ``episodes.npz`` of the same settings there, nothing is flown again,
 and a folder of a run with other settings is refused (it is never overwritten).
+
+``--fit-model PATH`` fits a learned split chooser on the flights (training episodes only:
+reset seeds below 1,000,000; :func:`fit_split_model`), the model a ``split:PATH`` policy
+flies; ``--models`` prices such models on the flights like the rules. The shipped models
+(``split:pretrained``, ``.../s1``, ``.../s2``) were fitted with::
+
+    python benchmarks/split_choice.py --episodes 1000 --first-seed 0 \\
+        --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
+        --noise-replicates 2 --out runs/splits/train1k_s0 --fit-model agents/pretrained/split_s0
+
+and ``--first-seed 1000`` (``s1``), ``2000`` (``s2``), about 8 minutes each on 2 cores.
 """
 
 from __future__ import annotations
@@ -54,7 +65,7 @@ def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str
     estimate each UAV used [m]) and ``goal`` ``(A, replicates)``.
     """
     from agents import make_policy
-    from agents.routes import SPLIT_FEATURES, split_features
+    from agents.routes import SPLIT_FEATURES
     from training.evaluate import run_episode
 
     planner = make_policy(_with_option(base, "route_split='los_mean'"), env)
@@ -67,19 +78,10 @@ def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str
         feats = np.full((1, len(SPLIT_FEATURES)), np.nan)
         reps = 1
     else:
-        others = [j for j in range(len(cands)) if j != k]
+        others, feats = planner.split_table(cands, k)
         arms = [base] + [
             _with_option(base, f"route_split_index={i + 1}") for i in range(len(others))
         ]
-        world = planner.base.world
-        alt = planner._altitude_m()
-        feats = np.stack(
-            [split_features(world, [cands[k]], alt, spacing_m=planner.spacing_m)]
-            + [
-                split_features(world, [cands[k], cands[j]], alt, spacing_m=planner.spacing_m)
-                for j in others
-            ]
-        )
         reps = replicates
     nav = np.full((len(arms), replicates), math.nan)
     goal = np.zeros((len(arms), replicates), dtype=bool)
@@ -125,8 +127,11 @@ def collect(
     )
 
 
-def price(eps: list[dict[str, np.ndarray]], reps: int = 2000) -> dict[str, Any]:
-    """Rules and the expected-error oracle against the unsplit arm (see the module doc)."""
+def price(
+    eps: list[dict[str, np.ndarray]], reps: int = 2000, models: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Rules, learned split ``models`` (name: :class:`agents.routes.RouteModel` of kind
+    ``"split"``) and the expected-error oracle against the unsplit arm (see the module doc)."""
     from agents.routes import SPLIT_FEATURE_SENSE, SPLIT_FEATURES
     from training.stats import bootstrap_mean_interval
 
@@ -162,6 +167,19 @@ def price(eps: list[dict[str, np.ndarray]], reps: int = 2000) -> dict[str, Any]:
                 "vs_unsplit_m": interval(nav - unsplit),
                 "split_share": float(np.mean(np.array(picks) > 0)),
             }
+    for name, model in (models or {}).items():
+        picks = [
+            0 if len(m) < 2 else int(np.argmin(model.predict(e["features"])))
+            for e, m in zip(eps, mean)
+        ]
+        nav = np.array([m[k] for m, k in zip(mean, picks)])
+        goal = np.array([e["goal"][k].mean() for e, k in zip(eps, picks)])
+        out.setdefault("models", {})[name] = {
+            "nav_m": float(nav.mean()),
+            "goal_rate": float(goal.mean()),
+            "vs_unsplit_m": interval(nav - unsplit),
+            "split_share": float(np.mean(np.array(picks) > 0)),
+        }
     held, diff = [], []
     for e in eps:
         nav = np.asarray(e["nav"], dtype=float)
@@ -182,6 +200,20 @@ def price(eps: list[dict[str, np.ndarray]], reps: int = 2000) -> dict[str, Any]:
     return out
 
 
+def fit_split_model(
+    eps: list[dict[str, np.ndarray]], base: str, info: dict[str, Any] | None = None
+) -> Any:
+    """A learned split chooser: :func:`agents.routes.fit_route_model` of kind ``"split"`` on
+    the flights ``eps`` (each option's mean error over its replicates; ridge penalty by
+    5-fold cross-validation over episodes). Fit it on training episodes (reset seeds below
+    1,000,000), never on the episodes it is to be judged on."""
+    from agents.routes import fit_route_model
+
+    feats = [np.asarray(e["features"], dtype=float) for e in eps]
+    errors = [np.nanmean(np.asarray(e["nav"], dtype=float), axis=1) for e in eps]
+    return fit_route_model(feats, errors, base, kind="split", info=info)
+
+
 def report_lines(rep: dict[str, Any]) -> list[str]:
     """The printed table of :func:`price`."""
     lines = [
@@ -189,7 +221,10 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
         f"unsplit: nav {rep['unsplit_nav_m']:.3f} m, goal rate {rep['unsplit_goal_rate']:.3f}",
         f"{'rule':28s} {'nav [m]':>8s} {'goal':>6s}  {'vs unsplit [m]':24s} split",
     ]
-    for k, c in rep["rules"].items():
+    for k, c in [
+        *rep["rules"].items(),
+        *[(f"model {n}", c) for n, c in rep.get("models", {}).items()],
+    ]:
         a = c["vs_unsplit_m"]
         lines.append(
             f"{k:28s} {c['nav_m']:8.3f} {c['goal_rate']:6.3f}  "
@@ -229,6 +264,21 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument(
+        "--models",
+        nargs="*",
+        default=[],
+        metavar="PATH",
+        help="learned split models to price (split_model.json files or folders)",
+    )
+    p.add_argument(
+        "--fit-model",
+        default=None,
+        metavar="PATH",
+        help="fit a split model on these flights and write it to PATH (a .json file, or a "
+        "folder for split_model.json); only on training episodes (reset seeds below "
+        "1,000,000), and never over an existing model",
+    )
+    p.add_argument(
         "--out", default=None, help="folder of this run: episodes.npz, settings.json, report.json"
     )
     args = p.parse_args(argv)
@@ -238,6 +288,27 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--noise-replicates must be >= 2, got {args.noise_replicates}")
     if args.jobs < 1:
         raise SystemExit(f"--jobs must be >= 1, got {args.jobs}")
+    fit_path = None
+    if args.fit_model is not None:
+        if args.first_seed < 0 or args.first_seed + args.episodes > 1_000_000:
+            raise SystemExit(
+                "--fit-model fits on training episodes: reset seeds in [0, 1000000) (the "
+                f"held-out range starts there), got {args.first_seed}.."
+                f"{args.first_seed + args.episodes - 1}"
+            )
+        fit_path = Path(args.fit_model)
+        if fit_path.suffix != ".json":
+            fit_path = fit_path / "split_model.json"
+        if fit_path.exists():
+            raise SystemExit(f"--fit-model: {fit_path} exists; a model is never overwritten")
+    from agents.routes import RouteModel, resolve_route_model
+
+    models = {
+        str(m): RouteModel.load(resolve_route_model(str(m), kind="split")) for m in args.models
+    }
+    bad = [n for n, m in models.items() if m.kind != "split"]
+    if bad:
+        raise SystemExit(f"--models takes split models, got route models: {bad}")
     env_kwargs = env_kwargs_from_overrides(args.env_set)
     settings = {
         "env": env_kwargs,
@@ -271,11 +342,25 @@ def main(argv: list[str] | None = None) -> int:
             with atomic_path(out / "episodes.npz") as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez(fh, **arrays)
-    rep = price(eps)
+    rep = price(eps, models=models)
     rep["settings"] = settings
     print("\n".join(report_lines(rep)))
     if out is not None:
         atomic_write_text(out / "report.json", json.dumps(rep, indent=1) + "\n")
+    if fit_path is not None:
+        info = {
+            "env": env_kwargs,
+            "first_seed": args.first_seed,
+            "episodes": args.episodes,
+            "noise_replicates": args.noise_replicates,
+        }
+        model = fit_split_model(eps, args.base, info=info)
+        model.save(fit_path)
+        cv = model.info["cv_chosen_minus_mean_m"][str(model.alpha)]
+        print(
+            f"split model: alpha {model.alpha}, cross-validated choice {cv:+.3f} m against the "
+            f"mean option; saved {fit_path}"
+        )
     return 0
 
 

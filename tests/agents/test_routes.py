@@ -622,3 +622,107 @@ def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(
     assert RouteModel.load(out).info["noise_replicates"] == 2
     assert main([*argv, "--noise-replicates", "0", "--out", str(tmp_path / "bad")]) == 2
     assert not (tmp_path / "bad").exists()
+
+
+def _split_model(weight_on_split: float, base: str = "ceiling@route_choice='pdop_gt3'"):
+    from agents.routes import SPLIT_FEATURES
+
+    k = len(SPLIT_FEATURES)
+    w = [0.0] * k
+    w[SPLIT_FEATURES.index("split")] = weight_on_split
+    return RouteModel(list(SPLIT_FEATURES), [0.0] * k, [1.0] * k, w, 10.0, base, kind="split")
+
+
+def test_split_models_save_load_and_check_their_kind(tmp_path):
+    from agents.routes import SPLIT_FEATURES, resolve_route_model
+
+    m = _split_model(-1.0)
+    path = m.save(tmp_path / "run" / "split_model.json")
+    back = RouteModel.load(tmp_path / "run")  # a folder holding split_model.json
+    assert back.kind == "split" and back.weights == m.weights and back.base == m.base
+    feats = np.zeros((3, len(SPLIT_FEATURES)))
+    feats[1:, SPLIT_FEATURES.index("split")] = 1.0
+    assert np.array_equal(back.predict(feats), [0.0, -1.0, -1.0])
+    assert json.loads(path.read_text())["kind"] == "split"
+    # route models are written as before: no kind key
+    r = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling")
+    assert (
+        "kind" not in r.to_json() and RouteModel.load(r.save(tmp_path / "r.json")).kind == "route"
+    )
+    with pytest.raises(ValueError, match="model kind must be one of"):
+        RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling", kind="speed")
+    with pytest.raises(ValueError, match="unknown split features"):
+        RouteModel(["pdop_mean"], [0.0], [1.0], [1.0], 1.0, "ceiling", kind="split")
+    assert resolve_route_model("pretrained/s2", kind="split").name == "split_s2"
+    with pytest.raises(ValueError, match="split:pretrained takes a seed"):
+        resolve_route_model("pretrained/x", kind="split")
+
+
+def test_a_split_model_chooses_whether_and_where_the_column_splits(tmp_path):
+    env = _env()
+    seed = _multi_route_seed(env)
+    obs, _ = env.reset(seed=seed)
+    # a model that predicts every split lower than flying unsplit: it splits onto the other
+    # route whose split features it scores lowest (all equal here: the first other one)
+    p = make_policy("ceiling@route_choice='pdop_gt3'", env, route_split_model=_split_model(-1.0))
+    p.reset(seed)
+    p.act(obs)
+    others = [i for i in range(len(p.route_candidates)) if i != p.route_chosen]
+    assert p.route_split_chosen == others[0] and len(p._paths) == 2
+    table = p.split_feature_table
+    assert table.shape == (1 + len(others), 14) and table[0, -1] == 0 and np.all(table[1:, -1] == 1)
+    # the features it scored are the ones split_choice.py flies and learns from
+    o2, t2 = p.split_table(p.route_candidates, p.route_chosen)
+    assert o2 == others and np.array_equal(t2, table)
+    # a model that predicts flying unsplit lower: one column
+    q = make_policy("ceiling@route_choice='pdop_gt3'", env, route_split_model=_split_model(1.0))
+    q.reset(seed)
+    q.act(obs)
+    assert q.route_split_chosen is None and len(q._paths) == 1
+    # the split:<path> policy name flies a saved model on its base heuristic
+    _split_model(-1.0).save(tmp_path / "m" / "split_model.json")
+    r = make_policy(f"split:{tmp_path / 'm'}", env)
+    r.reset(seed)
+    r.act(obs)
+    assert r.route_split_chosen == others[0]
+    with pytest.raises(ValueError, match="excludes route_split"):
+        make_policy("ceiling@route_split='los_mean'", env, route_split_model=_split_model(1.0))
+    with pytest.raises(ValueError, match="must be a split model"):
+        make_policy(
+            "ceiling", env, route_split_model=RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "c")
+        )
+    with pytest.raises(ValueError, match="needs the path of a split model"):
+        make_policy("split:", env)
+
+
+def test_split_choice_fits_and_prices_a_split_model(tmp_path):
+    from agents.routes import SPLIT_FEATURES
+    from tests.benchmark_script import load_benchmark
+
+    bench = load_benchmark("split_choice")
+    j = SPLIT_FEATURES.index("swarm_mean")
+    rng = np.random.default_rng(0)
+    eps = []
+    for _ in range(40):
+        f = np.zeros((3, len(SPLIT_FEATURES)))
+        f[:, j] = rng.normal(10.0, 1.0, 3)
+        f[1:, SPLIT_FEATURES.index("split")] = 1.0
+        # more pooled satellites, lower error: 0.1 m per satellite
+        nav = (3.0 - 0.1 * f[:, j])[:, None] + np.zeros((3, 2))
+        eps.append({"features": f, "nav": nav, "goal": np.ones((3, 2), bool)})
+    model = bench.fit_split_model(eps, "skyroute", info={"note": "test"})
+    assert model.kind == "split" and model.info["note"] == "test"
+    picks = [int(np.argmin(model.predict(e["features"]))) for e in eps]
+    assert picks == [int(np.argmax(e["features"][:, j])) for e in eps]  # it learned the sense
+    rep = bench.price(eps, reps=100, models={"m": model})
+    best = np.mean([e["nav"][:, 0].min() - e["nav"][0, 0] for e in eps])
+    assert rep["models"]["m"]["vs_unsplit_m"][0] == pytest.approx(best)
+    assert any(x.startswith("model m") for x in bench.report_lines(rep))
+    with pytest.raises(SystemExit, match="fits on training episodes"):
+        bench.main(["--first-seed", "1000000", "--fit-model", str(tmp_path / "m")])
+    model.save(tmp_path / "m" / "split_model.json")
+    with pytest.raises(SystemExit, match="never overwritten"):
+        bench.main(["--first-seed", "0", "--fit-model", str(tmp_path / "m")])
+    with pytest.raises(SystemExit, match="takes split models"):
+        r = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(tmp_path / "r.json")
+        bench.main(["--models", str(r)])
