@@ -25,7 +25,10 @@ episode) to the arm ``REF``, with its 95 % interval over episodes: with replicat
 comparison with less of one flight's noise. ``--out`` keeps the flights (``episodes.npz``)
 and the report (``report.json``); with an ``episodes.npz`` of the same settings there,
 nothing is flown again, and a folder of a run with other settings is refused (it is never
-overwritten).
+overwritten). ``--reuse FOLDER ...`` takes the flights of arms already flown by other runs of
+this benchmark on the same episodes (same environment, seeds and replicates; their flights are
+the same bit for bit) and flies only the arms none of them holds, e.g. to add a rule to a
+finished comparison without flying its arms again.
 """
 
 from __future__ import annotations
@@ -122,6 +125,32 @@ def price(flights: np.ndarray, arms: list[str], reps: int = 2000) -> dict[str, A
     return out
 
 
+def reused_flights(folders: list[str], settings: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The flights ``(episodes, replicates, 2)`` of every arm in the ``--out`` folders of
+    earlier runs with the same environment, seeds and replicates as ``settings`` (the first
+    folder holding an arm wins). A folder of other episodes, or without finished flights, is
+    refused with a :class:`ValueError` that names it."""
+    same = ("env", "first_seed", "episodes", "noise_replicates")
+    wanted = json.loads(json.dumps({k: settings[k] for k in same}))
+    out: dict[str, np.ndarray] = {}
+    for folder in folders:
+        f = Path(folder)
+        sfile, data = f / "settings.json", f / "episodes.npz"
+        if not (sfile.is_file() and data.is_file()):
+            raise ValueError(f"--reuse {f}: no finished run of this benchmark there")
+        old = json.loads(sfile.read_text())
+        if {k: old.get(k) for k in same} != wanted:
+            raise ValueError(
+                f"--reuse {f}: flown on other episodes ({ {k: old.get(k) for k in same} }), "
+                f"not {wanted}"
+            )
+        with np.load(data) as d:
+            flights = np.asarray(d["flights"])
+        for a, name in enumerate(old["arms"]):
+            out.setdefault(name, flights[:, a])
+    return out
+
+
 def compare(
     flights: np.ndarray, arms: list[str], ref: str, group: list[str], reps: int = 2000
 ) -> dict[str, Any]:
@@ -210,6 +239,14 @@ def main(argv: list[str] | None = None) -> int:
         help="also print the paired difference of the arms GROUP (comma-separated, their "
         "mean) to the arm REF",
     )
+    p.add_argument(
+        "--reuse",
+        nargs="+",
+        default=[],
+        metavar="FOLDER",
+        help="--out folders of earlier runs on the same episodes: their arms' flights are "
+        "taken, not flown again",
+    )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument(
         "--out", default=None, help="folder of this run: episodes.npz, settings.json, report.json"
@@ -252,8 +289,20 @@ def main(argv: list[str] | None = None) -> int:
             print(f"using the flights of {out}", file=sys.stderr)
     if flights is None:
         seeds = list(range(args.first_seed, args.first_seed + args.episodes))
-        flights = collect(
-            env_kwargs, list(args.arms), seeds, args.noise_replicates, args.jobs, progress=True
+        try:
+            known = reused_flights(args.reuse, settings)
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
+        todo = [a for a in args.arms if a not in known]
+        flown = (
+            collect(env_kwargs, todo, seeds, args.noise_replicates, args.jobs, progress=True)
+            if todo
+            else None
+        )
+        if known:
+            print(f"reused the flights of {sorted(set(args.arms) - set(todo))}", file=sys.stderr)
+        flights = np.stack(
+            [known[a] if a in known else flown[:, todo.index(a)] for a in args.arms], axis=1
         )
         if out is not None:
             with atomic_path(out / "episodes.npz") as tmp:

@@ -600,28 +600,36 @@ def parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
     return out
 
 
-_MODEL_FILES = ("final_model.pt", "final_model.zip", "route_model.json")
-"""What makes a folder a training run: TorchRL, SB3, or ``coopnav train-routes``."""
+_MODEL_FILES = ("final_model.pt", "final_model.zip", "route_model.json", "split_model.json")
+"""What makes a folder a training run: TorchRL, SB3, ``coopnav train-routes``, or a split
+chooser fitted by ``benchmarks/split_choice.py --fit-model``."""
 
 
 def run_policy_name(run: Path) -> str:
-    """The :func:`agents.make_policy` name of a run folder's model (TorchRL, route or SB3)."""
+    """The :func:`agents.make_policy` name of a run folder's model (TorchRL, route, split or
+    SB3)."""
     if (run / "final_model.pt").is_file():
         return f"torchrl:{run}"
     if (run / "route_model.json").is_file():
         return f"route:{run}"
+    if (run / "split_model.json").is_file():
+        return f"split:{run}"
     return f"ppo:{run / 'final_model.zip'}"
 
 
 def run_env(run: Path) -> dict[str, Any]:
-    """The environment settings a run was trained in (its ``run.json``, else its
-    ``config.yaml``)."""
+    """The environment settings a run was trained in (its ``run.json``, a split model's
+    own record of them, else its ``config.yaml``)."""
     if (run / "run.json").is_file():
         d = json.loads((run / "run.json").read_text())
         if "env" in d:
             return dict(d["env"])
         if "env" in d.get("settings", {}):  # a train-routes run
             return dict(d["settings"]["env"])
+    if (run / "split_model.json").is_file():  # split_choice.py --fit-model records them
+        info = json.loads((run / "split_model.json").read_text()).get("info", {})
+        if "env" in info:
+            return dict(info["env"])
     import yaml
 
     cfg = yaml.safe_load((run / "config.yaml").read_text())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -355,6 +356,18 @@ def test_study_accepts_train_routes_runs(tmp_path):
     assert run_env(run) == {"max_fix_sigma_m": 8}
     with pytest.raises(ValueError, match=r"route_model\.json"):
         parse_runs([f"x={tmp_path}"])
+    # a split chooser's folder (split_choice.py --fit-model): its model records the env
+    split = tmp_path / "s"
+    m = RouteModel(["split"], [0.0], [1.0], [-1.0], 10.0, "skyroute", kind="split")
+    m.info = {"env": {"preset": "urban_nlos_3dma", "max_fix_sigma_m": 8}}
+    m.save(split / "split_model.json")
+    assert parse_runs([f"split={split}"]) == {"split": [split]}
+    assert run_policy_name(split) == f"split:{split}"
+    assert run_env(split) == {"preset": "urban_nlos_3dma", "max_fix_sigma_m": 8}
+    shipped = Path(__file__).resolve().parents[2] / "agents" / "pretrained" / "split_s1"
+    assert run_env(shipped)["max_fix_sigma_m"] == 8 and run_policy_name(shipped).startswith(
+        "split:"
+    )
 
 
 def test_route_choice_benchmark_prices_rules_and_models_from_one_collection(tmp_path):
@@ -600,6 +613,35 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
     with pytest.raises(SystemExit, match="belongs to a run with other settings"):
         bench.main(["--arms", "formation", "sky", *args])
     assert (out / "episodes.npz").stat().st_mtime_ns == stamp
+    # --reuse: a new run on the same episodes takes the flown arms and flies only the new one
+    both = tmp_path / "both"
+    argv2 = [*args[:-1], str(both), "--reuse", str(out)]
+    assert bench.main(["--arms", "formation@spacing_m=12", "sky", "formation", *argv2]) == 0
+    with np.load(out / "episodes.npz") as d0, np.load(both / "episodes.npz") as d1:
+        first, second = d0["flights"], d1["flights"]
+    assert second.shape == (2, 3, 2, 2)
+    assert np.array_equal(second[:, 0], first[:, 1]) and np.array_equal(second[:, 2], first[:, 0])
+    # the reused flights are what flying them gives, bit for bit
+    fresh = tmp_path / "fresh"
+    assert bench.main(["--arms", "formation", "sky", *args[:-1], str(fresh)]) == 0
+    with np.load(fresh / "episodes.npz") as d2:
+        assert np.array_equal(d2["flights"], second[:, [2, 1]])
+    with pytest.raises(SystemExit, match="flown on other episodes"):
+        bench.main(
+            [
+                "--arms",
+                "formation",
+                "sky",
+                "--episodes",
+                "3",
+                "--noise-replicates",
+                "2",
+                "--reuse",
+                str(out),
+            ]
+        )
+    with pytest.raises(SystemExit, match="no finished run"):
+        bench.main(["--arms", "formation", "sky", "--reuse", str(tmp_path / "nothing")])
     with pytest.raises(SystemExit, match="at least 2 policies"):
         bench.main(["--arms", "formation"])
     with pytest.raises(SystemExit, match="not in --arms"):
