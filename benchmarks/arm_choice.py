@@ -26,9 +26,9 @@ comparison with less of one flight's noise. ``--out`` keeps the flights (``episo
 and the report (``report.json``); with an ``episodes.npz`` of the same settings there,
 nothing is flown again, and a folder of a run with other settings is refused (it is never
 overwritten). ``--reuse FOLDER ...`` takes the flights of arms already flown by other runs of
-this benchmark on the same episodes (same environment, seeds and replicates; their flights are
-the same bit for bit) and flies only the arms none of them holds, e.g. to add a rule to a
-finished comparison without flying its arms again.
+this benchmark on the same episodes (same environment, seeds and replicates; on the same code
+their flights are what flying them again gives, bit for bit) and flies only the arms none of
+them holds, e.g. to add a rule to a finished comparison without flying its arms again.
 """
 
 from __future__ import annotations
