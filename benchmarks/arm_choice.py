@@ -139,11 +139,9 @@ def reused_flights(folders: list[str], settings: dict[str, Any]) -> dict[str, np
         if not (sfile.is_file() and data.is_file()):
             raise ValueError(f"--reuse {f}: no finished run of this benchmark there")
         old = json.loads(sfile.read_text())
-        if {k: old.get(k) for k in same} != wanted:
-            raise ValueError(
-                f"--reuse {f}: flown on other episodes ({ {k: old.get(k) for k in same} }), "
-                f"not {wanted}"
-            )
+        theirs = {k: old.get(k) for k in same}
+        if theirs != wanted:
+            raise ValueError(f"--reuse {f}: flown on other episodes ({theirs}), not {wanted}")
         with np.load(data) as d:
             flights = np.asarray(d["flights"])
         for a, name in enumerate(old["arms"]):
@@ -276,6 +274,10 @@ def main(argv: list[str] | None = None) -> int:
         "episodes": args.episodes,
         "noise_replicates": args.noise_replicates,
     }
+    try:  # a bad --reuse folder is refused before --out is claimed
+        known = reused_flights(args.reuse, settings)
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     out = Path(args.out) if args.out else None
     flights = None
     if out is not None:
@@ -289,10 +291,6 @@ def main(argv: list[str] | None = None) -> int:
             print(f"using the flights of {out}", file=sys.stderr)
     if flights is None:
         seeds = list(range(args.first_seed, args.first_seed + args.episodes))
-        try:
-            known = reused_flights(args.reuse, settings)
-        except ValueError as exc:
-            raise SystemExit(str(exc)) from None
         todo = [a for a in args.arms if a not in known]
         flown = (
             collect(env_kwargs, todo, seeds, args.noise_replicates, args.jobs, progress=True)

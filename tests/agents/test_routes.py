@@ -641,7 +641,18 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
             ]
         )
     with pytest.raises(SystemExit, match="no finished run"):
-        bench.main(["--arms", "formation", "sky", "--reuse", str(tmp_path / "nothing")])
+        bench.main(
+            [
+                "--arms",
+                "formation",
+                "sky",
+                "--reuse",
+                str(tmp_path / "nothing"),
+                "--out",
+                str(tmp_path / "unclaimed"),
+            ]
+        )
+    assert not (tmp_path / "unclaimed").exists()  # refused before --out is claimed
     with pytest.raises(SystemExit, match="at least 2 policies"):
         bench.main(["--arms", "formation"])
     with pytest.raises(SystemExit, match="not in --arms"):
