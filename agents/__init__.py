@@ -1,43 +1,43 @@
-"""Policies for ``urban_canyon_v0`` behind one small protocol (:class:`agents.base.Policy`).
+"""Policies for ``urban_canyon_v0`` behind one small protocol (:class:`coopnav_env.agents.base.Policy`).
 
 ========================  ==================================================================
 name                      policy
 ========================  ==================================================================
-``random``                uniform random velocity commands (:mod:`agents.random_policy`)
+``random``                uniform random velocity commands (:mod:`coopnav_env.agents.random_policy`)
 ``formation``             the swarm flies the street network to the goal in a rigid
-                          formation, ignoring navigation quality (:mod:`agents.heuristics`)
+                          formation, ignoring navigation quality (:mod:`coopnav_env.agents.heuristics`)
 ``sky``                   like ``formation``, but each UAV steers toward open sky while
-                          keeping contact with its neighbours (:mod:`agents.heuristics`)
+                          keeping contact with its neighbours (:mod:`coopnav_env.agents.heuristics`)
 ``spread``                ``sky`` as a stretched column (20 m spacing) that closes up at the
-                          goal (:mod:`agents.heuristics`)
+                          goal (:mod:`coopnav_env.agents.heuristics`)
 ``wide``                  ``spread`` as a 45 m column that opens ahead of the start and
                           closes at the goal: the best heuristic of the learning study
-                          (:mod:`agents.heuristics`)
+                          (:mod:`coopnav_env.agents.heuristics`)
 ``guarded``               ``wide`` with a wall guard (range sensor) and soft slot tracking,
-                          for degraded navigation (:mod:`agents.heuristics`)
+                          for degraded navigation (:mod:`coopnav_env.agents.heuristics`)
 ``ceiling``               ``guarded`` that climbs hard and holds the top of the altitude
                           band: what the learned swarm does under realistic urban
                           reception, by hand, and the best policy of the study there
-                          (:mod:`agents.heuristics`)
+                          (:mod:`coopnav_env.agents.heuristics`)
 ``skyroute``              ``ceiling`` on the street route with the best sky: of the equally
                           short routes, the one with the fewest points of poor satellite
-                          geometry predicted by the city map (:mod:`agents.routes`)
+                          geometry predicted by the city map (:mod:`coopnav_env.agents.routes`)
 ``waypoint``              each UAV flies toward its next route waypoint from its own
-                          observation only (:mod:`agents.heuristics`)
+                          observation only (:mod:`coopnav_env.agents.heuristics`)
 ``route:<path>``          a column heuristic that flies the route a learned route model
-                          predicts best (:mod:`agents.routes`; ``coopnav train-routes``);
+                          predicts best (:mod:`coopnav_env.agents.routes`; ``coopnav train-routes``);
                           ``route:pretrained`` (``.../s1``) the shipped study models
 ``split:<path>``          a column heuristic that splits over two streets where a learned
-                          split model predicts it best (:mod:`agents.routes`;
+                          split model predicts it best (:mod:`coopnav_env.agents.routes`;
                           ``benchmarks/split_choice.py --fit-model``); ``split:pretrained``
                           (``.../s1``, ``.../s2``) the shipped models
 ``planner``               privileged MPC that looks ahead in copies of the environment with
-                          the true errors: the headroom reference (:mod:`agents.planner`)
-``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`agents.ppo`)
+                          the true errors: the headroom reference (:mod:`coopnav_env.agents.planner`)
+``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`coopnav_env.agents.ppo`)
 ``rllib:<path>``          an RLlib checkpoint of ``coopnav train --backend rllib``
-                          (:mod:`agents.rllib_policy`; needs the ``ray`` extra)
+                          (:mod:`coopnav_env.agents.rllib_policy`; needs the ``ray`` extra)
 ``mappo:<path>``          a TorchRL MAPPO or IPPO checkpoint of ``coopnav train --backend
-``ippo:<path>``           torchrl`` (:mod:`agents.marl_policy`; needs the ``marl`` extra);
+``ippo:<path>``           torchrl`` (:mod:`coopnav_env.agents.marl_policy`; needs the ``marl`` extra);
                           ``<path>`` a ``.pt`` file or a run folder; ``mappo:pretrained``
                           (``ippo:pretrained``, ``.../s1``) the shipped study policies
 ========================  ==================================================================
@@ -52,17 +52,21 @@ read as Python literals (numbers, strings, ``True``/``False``).
 >>> obs, infos = env.reset(seed=1); policy.reset(seed=1)  # doctest: +SKIP
 >>> obs, rewards, terms, truncs, infos = env.step(policy.act(obs))  # doctest: +SKIP
 
-Your own policy (any class with the :class:`~agents.base.Policy` protocol) gets a name with
-:func:`register_policy`; :func:`make_policy`, and with it ``training.evaluate.evaluate``, then
+Your own policy (any class with the :class:`~coopnav_env.agents.base.Policy` protocol) gets a name with
+:func:`register_policy`; :func:`make_policy`, and with it ``coopnav_env.training.evaluate.evaluate``, then
 make it like a built-in one (``examples/evaluate_own_policy.py``).
 """
 
 from __future__ import annotations
 
+from coopnav_env.old_names import redirect as _redirect_old_name
+
+_redirect_old_name(__name__)  # imported as 'agents' (a source checkout): becomes 'coopnav_env.agents'
+
 from collections.abc import Callable
 from typing import Any
 
-from agents.base import Policy, clip_actions
+from coopnav_env.agents.base import Policy, clip_actions
 
 __all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy", "register_policy"]
 
@@ -133,65 +137,65 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
             )
         return policy
     if name == "random":
-        from agents.random_policy import RandomPolicy
+        from coopnav_env.agents.random_policy import RandomPolicy
 
         return RandomPolicy(env, **kwargs)
     if name == "formation":
-        from agents.heuristics import FormationPolicy
+        from coopnav_env.agents.heuristics import FormationPolicy
 
         return FormationPolicy(env, **kwargs)
     if name == "sky":
-        from agents.heuristics import SkySeekingPolicy
+        from coopnav_env.agents.heuristics import SkySeekingPolicy
 
         return SkySeekingPolicy(env, **kwargs)
     if name == "spread":
-        from agents.heuristics import SpreadColumnPolicy
+        from coopnav_env.agents.heuristics import SpreadColumnPolicy
 
         return SpreadColumnPolicy(env, **kwargs)
     if name == "wide":
-        from agents.heuristics import WideColumnPolicy
+        from coopnav_env.agents.heuristics import WideColumnPolicy
 
         return WideColumnPolicy(env, **kwargs)
     if name == "guarded":
-        from agents.heuristics import GuardedColumnPolicy
+        from coopnav_env.agents.heuristics import GuardedColumnPolicy
 
         return GuardedColumnPolicy(env, **kwargs)
     if name == "ceiling":
-        from agents.heuristics import CeilingColumnPolicy
+        from coopnav_env.agents.heuristics import CeilingColumnPolicy
 
         return CeilingColumnPolicy(env, **kwargs)
     if name == "skyroute":
-        from agents.heuristics import SkyRoutePolicy
+        from coopnav_env.agents.heuristics import SkyRoutePolicy
 
         return SkyRoutePolicy(env, **kwargs)
     if name == "planner":
-        from agents.planner import PrivilegedPlanner
+        from coopnav_env.agents.planner import PrivilegedPlanner
 
         base = kwargs.pop("base", "wide")
         return PrivilegedPlanner(env, make_policy(base, env), **kwargs)
     if name == "waypoint":
-        from agents.heuristics import WaypointPolicy
+        from coopnav_env.agents.heuristics import WaypointPolicy
 
         return WaypointPolicy(env, **kwargs)
     if name.startswith("ppo:"):
         path = name[len("ppo:") :]
         if not path:
             raise ValueError("policy 'ppo:<path>' needs the path of a saved model")
-        from agents.ppo import PPOPolicy
+        from coopnav_env.agents.ppo import PPOPolicy
 
         return PPOPolicy(env, path, **kwargs)
     if name.startswith("rllib:"):
         path = name[len("rllib:") :]
         if not path:
             raise ValueError("policy 'rllib:<path>' needs the path of an RLlib checkpoint")
-        from agents.rllib_policy import RLlibPolicy
+        from coopnav_env.agents.rllib_policy import RLlibPolicy
 
         return RLlibPolicy(env, path, **kwargs)
     if name.startswith("route:"):
         path = name[len("route:") :]
         if not path:
             raise ValueError("policy 'route:<path>' needs the path of a route model")
-        from agents.routes import RouteModel, resolve_route_model
+        from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
         model = RouteModel.load(resolve_route_model(path))
         return make_policy(model.base, env, route_model=model, **kwargs)
@@ -199,7 +203,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         path = name[len("split:") :]
         if not path:
             raise ValueError("policy 'split:<path>' needs the path of a split model")
-        from agents.routes import RouteModel, resolve_route_model
+        from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
         model = RouteModel.load(resolve_route_model(path, kind="split"))
         if model.kind != "split":
@@ -210,7 +214,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
             path = name[len(prefix) :]
             if not path:
                 raise ValueError(f"policy '{prefix}<path>' needs the path of a TorchRL checkpoint")
-            from agents.marl_policy import MARLPolicy
+            from coopnav_env.agents.marl_policy import MARLPolicy
 
             algorithm = "ippo" if prefix == "ippo:" else "mappo"
             return MARLPolicy(env, path, make_base=make_policy, algorithm=algorithm, **kwargs)
@@ -223,7 +227,7 @@ def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: boo
 
     After ``register_policy("mine", MyPolicy)``, ``make_policy("mine", env, **kwargs)`` returns
     ``MyPolicy(env, **kwargs)``, ``"mine@key=value"`` passes options as for the heuristics, and
-    ``training.evaluate.evaluate(["formation", "mine"], seeds)`` flies it on the same held-out
+    ``coopnav_env.training.evaluate.evaluate(["formation", "mine"], seeds)`` flies it on the same held-out
     episodes as the built-in policies. The registry lives in this process only.
 
     Parameters
@@ -233,7 +237,7 @@ def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: boo
         ``waypoint``, ``ppo``, ``rllib``).
     factory : callable
         ``factory(env, **kwargs)`` returns an object with the
-        :class:`~agents.base.Policy` protocol (``env``: the PettingZoo parallel environment
+        :class:`~coopnav_env.agents.base.Policy` protocol (``env``: the PettingZoo parallel environment
         of the evaluation).
     overwrite : bool, default False
         Replace an earlier registration of ``name`` instead of raising.

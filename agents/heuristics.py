@@ -128,7 +128,7 @@ class _ColumnFollower:
         if not 0 <= route_max_turns <= 8:
             raise ValueError(f"route_max_turns must be in [0, 8], got {route_max_turns}")
         self.route_max_turns = int(route_max_turns)
-        from agents.routes import ROUTE_FEATURES
+        from coopnav_env.agents.routes import ROUTE_FEATURES
 
         if route_choice != "first" and route_choice not in ROUTE_FEATURES:
             raise ValueError(
@@ -161,7 +161,7 @@ class _ColumnFollower:
         self.route_split = route_split
         self.route_split_index = int(route_split_index)
         if isinstance(route_split_model, (str, Path)):
-            from agents.routes import RouteModel, resolve_route_model
+            from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
             route_split_model = RouteModel.load(
                 resolve_route_model(str(route_split_model), kind="split")
@@ -182,7 +182,7 @@ class _ColumnFollower:
         self.route_split_model = route_split_model
         self.split_feature_table: np.ndarray | None = None  # no split, then each split
         if isinstance(route_model, (str, Path)):
-            from agents.routes import RouteModel, resolve_route_model
+            from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
             route_model = RouteModel.load(resolve_route_model(str(route_model)))
         if route_model is not None and not hasattr(route_model, "predict"):
@@ -388,7 +388,7 @@ class _ColumnFollower:
         elif len(routes) == 1:
             k = 0
         else:
-            from agents.routes import FEATURE_SENSE, ROUTE_FEATURES, route_features
+            from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES, route_features
 
             feats = np.stack(
                 [
@@ -415,10 +415,10 @@ class _ColumnFollower:
 
     def split_table(self, routes: list[np.ndarray], k: int) -> tuple[list[int], np.ndarray]:
         """The options of splitting the column flown on ``routes[k]``: the indices of the
-        other routes, and the :data:`~agents.routes.SPLIT_FEATURES` ``(1 + others, F)`` of
+        other routes, and the :data:`~coopnav_env.agents.routes.SPLIT_FEATURES` ``(1 + others, F)`` of
         flying unsplit (row 0) and of splitting onto each other route (row ``1 + i``), at the
         column's altitude and spacing; kept as :attr:`split_feature_table`."""
-        from agents.routes import split_features
+        from coopnav_env.agents.routes import split_features
 
         others = [j for j in range(len(routes)) if j != k]
         world, alt = self.base.world, self._altitude_m()
@@ -445,7 +445,7 @@ class _ColumnFollower:
             return None if c == 0 else others[c - 1]
         if self.route_split == "none":
             return None
-        from agents.routes import FEATURE_SENSE, ROUTE_FEATURES
+        from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES
 
         feats = self.route_feature_table
         assert feats is not None
@@ -596,7 +596,7 @@ class FormationPolicy(_ColumnFollower):
     route_choice : str, default "first"
         Which of the equally short street routes to fly (:func:`street_routes`, planned at
         the first step from the estimated centre of the swarm): ``"first"`` the one of
-        :func:`street_route`; a feature name of :data:`agents.routes.ROUTE_FEATURES` (e.g.
+        :func:`street_route`; a feature name of :data:`coopnav_env.agents.routes.ROUTE_FEATURES` (e.g.
         ``"swarm_mean"``) the route with the best value of that feature, i.e. the most
         satellites predicted in line of sight along it by the city map at the column's
         altitude (docs/marl/README.md, "Route choice"). On board: the map, the satellites'
@@ -606,23 +606,23 @@ class FormationPolicy(_ColumnFollower):
     route_index : int, default 0
         Fly the candidate route of this index (modulo their number) instead; 0 is
         :func:`street_route`'s. For studies that fly every route of an episode.
-    route_model : agents.routes.RouteModel or str, optional
+    route_model : coopnav_env.agents.routes.RouteModel or str, optional
         A learned route model (or the path of one): fly the route it predicts the lowest
-        error for (the ``route:<path>`` policies of :func:`agents.make_policy`).
+        error for (the ``route:<path>`` policies of :func:`coopnav_env.agents.make_policy`).
     route_split : str, default "none"
         Split the column over two equally short routes: a feature name of
-        :data:`agents.routes.ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the leader's) on
+        :data:`coopnav_env.agents.routes.ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the leader's) on
         the chosen route and the slots 1, 3, ... on the best *other* candidate by that
         feature, at the same arc length, so that the two sub-columns fly abreast through
         different streets and the cooperative fix pools the sky of both (relative sensing
-        reaches 200 m; :func:`agents.routes.split_features` predicts what they pool). An
+        reaches 200 m; :func:`coopnav_env.agents.routes.split_features` predicts what they pool). An
         episode with one candidate flies one column. ``"none"``: no split.
     route_split_index : int, default 0
         Split onto this candidate (counted among the candidates other than the chosen
         route, from 1, modulo their number) instead; 0: no split. For studies that fly every
         split of an episode. Excludes ``route_split``.
     route_split_model : RouteModel or str, optional
-        A learned split model (:class:`agents.routes.RouteModel` of kind ``"split"``, or a
+        A learned split model (:class:`coopnav_env.agents.routes.RouteModel` of kind ``"split"``, or a
         path; ``pretrained`` and ``pretrained/s<k>`` are the shipped ones): the column
         splits onto the other candidate route the model predicts lowest, or flies unsplit
         where it predicts that lowest (:meth:`split_table` gives what it scores). Excludes
@@ -854,7 +854,7 @@ class SkyRoutePolicy(CeilingColumnPolicy):
     first step this heuristic predicts, with the city map, the satellites in line of sight
     every 5 m along each candidate at the column's altitude and flies the route with the
     smallest share of points whose line-of-sight satellites give a PDOP above 3
-    (``route_choice="pdop_gt3"``, :data:`agents.routes.ROUTE_FEATURES`). That rule was the
+    (``route_choice="pdop_gt3"``, :data:`coopnav_env.agents.routes.ROUTE_FEATURES`). That rule was the
     best of the 13 one-feature rules on the learning study's 1000 exploratory episodes
     (docs/marl/README.md, "Route choice"). It uses the map, the satellites' directions and
     the swarm's estimated centre: on board.

@@ -1,7 +1,7 @@
 """The networks and checkpoints of the TorchRL MAPPO/IPPO backend (shared by training and
 evaluation): :class:`MARLSettings`, :func:`build_modules`, :func:`load_marl_checkpoint`.
 
-The training loop is :mod:`training.marl`; the evaluation policy :mod:`agents.marl_policy`.
+The training loop is :mod:`coopnav_env.training.marl`; the evaluation policy :mod:`coopnav_env.agents.marl_policy`.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ __all__ = [
 ]
 
 CHECKPOINT_FORMAT = "coopnav-marl-1"
-"""The ``format`` entry of a checkpoint of :meth:`training.marl.MARLTrainer.save`."""
+"""The ``format`` entry of a checkpoint of :meth:`coopnav_env.training.marl.MARLTrainer.save`."""
 
 ALGORITHMS: tuple[str, ...] = ("mappo", "ippo")
 """Algorithms of the TorchRL backend."""
@@ -61,7 +61,7 @@ class MARLSettings:
     normalize_reward : bool
         Divide rewards by a running estimate of the discounted return's standard deviation.
     residual_base : str or None
-        A :func:`agents.make_policy` name whose command the learned action is added to.
+        A :func:`coopnav_env.agents.make_policy` name whose command the learned action is added to.
     residual_base_kwargs : dict
         Options of the base policy.
     residual_scale : float
@@ -101,7 +101,7 @@ class MARLSettings:
         (at most ``action_repeat - 1`` steps), which no transition is credited with.
     residual_wall_guard : bool
         Velocity mode: limit the residual's horizontal part toward walls the range sensor
-        sees (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`: nothing toward a wall
+        sees (:meth:`coopnav_env.agents.heuristics.WideColumnPolicy.guard_delta`: nothing toward a wall
         inside the base column's wall margin, toward one beyond it no faster than reaches
         the margin in 2 s), so that neither the
         learned residual nor exploration noise around it can cancel the base's wall guard

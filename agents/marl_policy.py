@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.marl_nets import (
+from coopnav_env.agents.marl_nets import (
     MARLSettings,
     base_command_before,
     build_modules,
@@ -74,7 +74,7 @@ class MARLPolicy:
         ``mappo`` or ``ippo``: which shipped policies ``pretrained`` names.
     make_base : callable, optional
         ``make_base(name, env, **options)`` builds the base heuristic of a residual policy
-        (:func:`agents.make_policy`, which passes itself).
+        (:func:`coopnav_env.agents.make_policy`, which passes itself).
     """
 
     name = "mappo"
@@ -114,7 +114,7 @@ class MARLPolicy:
         if self.settings.residual_base is not None:
             if make_base is None:
                 raise ValueError(
-                    "this checkpoint is a residual policy: pass make_base (agents.make_policy)"
+                    "this checkpoint is a residual policy: pass make_base (coopnav_env.agents.make_policy)"
                 )
             self._base = make_base(
                 self.settings.residual_base, env, **self.settings.residual_base_kwargs

@@ -8,7 +8,7 @@ future exactly but not its noise: it cannot pick a path for a lucky noise draw. 
 swarm's velocity commands by sampling-based model-predictive control: at every step it
 
 1. proposes ``n_samples`` candidate plans: the command of a base heuristic (default
-   :class:`~agents.heuristics.WideColumnPolicy`, copied with the environment so that it
+   :class:`~coopnav_env.agents.heuristics.WideColumnPolicy`, copied with the environment so that it
    keeps planning the route) plus a per-UAV velocity offset held for the horizon (one
    candidate is always the base alone, offset zero);
 2. flies each candidate ``horizon`` steps in a deep copy of the environment (with fresh noise) and
@@ -48,7 +48,7 @@ class PrivilegedPlanner:
     env : urban_canyon_v0 ParallelEnv
         The environment itself (the planner copies it; it must be the object being stepped).
     base : Policy
-        The base heuristic, acting in ``env`` (:func:`agents.make_policy` builds ``wide``,
+        The base heuristic, acting in ``env`` (:func:`coopnav_env.agents.make_policy` builds ``wide``,
         the best heuristic, unless told otherwise, e.g. ``planner@base='spread'``).
     horizon : int
         Look-ahead steps, >= 1.
@@ -86,7 +86,7 @@ class PrivilegedPlanner:
         estimate.
     guard_offsets : bool
         Limit every offset, in the look-ahead and in the command applied, toward walls the
-        range sensor sees (:meth:`agents.heuristics.WideColumnPolicy.guard_delta`: nothing
+        range sensor sees (:meth:`coopnav_env.agents.heuristics.WideColumnPolicy.guard_delta`: nothing
         toward a wall inside the base column's wall margin, toward one beyond it no faster
         than reaches the margin in 2 s; the base must have a wall guard, e.g. ``ceiling``).
         Without it an offset can cancel the base's wall guard or outrun it, which is how the

@@ -350,7 +350,7 @@ class RouteModel:
     alpha : float
         The ridge penalty chosen by cross-validation.
     base : str
-        The column heuristic (a :func:`agents.make_policy` name) that flies the chosen route,
+        The column heuristic (a :func:`coopnav_env.agents.make_policy` name) that flies the chosen route,
         and that flew the training episodes.
     info : dict
         What the model was fitted on (environment settings, seeds, sizes, CV scores).

@@ -1,6 +1,6 @@
 """What a per-episode choice among policies could gain: every arm flown under noise replicates.
 
-Flies every policy given with ``--arms`` (:func:`agents.make_policy` names, e.g.
+Flies every policy given with ``--arms`` (:func:`coopnav_env.agents.make_policy` names, e.g.
 ``skyroute skyroute@spacing_m=30``) through every held-out episode, ``--noise-replicates``
 times under independent noise realisations of the same episode (the environment's
 ``noise_stream`` reset option), and prints each arm's mean ``nav`` error (the 3-D error of the
@@ -48,9 +48,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 def _chunk(common: tuple[dict[str, Any], list[str], int], seeds: list[int]) -> list[np.ndarray]:
     import torch
 
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
-    from training.evaluate import run_episode
+    from coopnav_env.training.evaluate import run_episode
 
     torch.set_num_threads(1)
     env_kwargs, arms, replicates = common
@@ -78,7 +78,7 @@ def collect(
     progress: bool = False,
 ) -> np.ndarray:
     """``(episodes, arms, replicates, 2)``: each flight's mean ``nav`` error and goal (0/1)."""
-    from training.parallel import map_seeds
+    from coopnav_env.training.parallel import map_seeds
 
     return np.stack(
         map_seeds(
@@ -89,7 +89,7 @@ def collect(
 
 def price(flights: np.ndarray, arms: list[str], reps: int = 2000) -> dict[str, Any]:
     """Each arm's mean, the best fixed arm and the expected-error oracle (see the module doc)."""
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     nav, goal = flights[..., 0], flights[..., 1]
     n_ep, _, n_r = nav.shape
@@ -154,7 +154,7 @@ def compare(
 ) -> dict[str, Any]:
     """Paired difference of the mean of ``group``'s arms to arm ``ref`` per episode (means
     over the replicates), with a 95 % bootstrap interval over episodes, and goal rates."""
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     missing = [a for a in [ref, *group] if a not in arms]
     if missing:
@@ -206,10 +206,10 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
-    from training.files import atomic_path, atomic_write_text, claim_run_folder
-    from training.route_learning import env_kwargs_from_overrides
+    from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
+    from coopnav_env.training.route_learning import env_kwargs_from_overrides
 
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],

@@ -21,7 +21,7 @@ machines):
    size of the grid city (blocks per side), with the growth explained.
 5. **Batched**: env-steps/s (swarm steps) of K copies at N = 5 stepped as one SB3 vector
    environment, SuperSuit's adapters vs the batched vector environment
-   (``training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched environments; and
+   (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched environments; and
    the time inside the compiled kernels per swarm step (:func:`kernel_timers`), whose inverse
    times two cores is a ceiling for any batching of this simulation.
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
@@ -507,7 +507,7 @@ def section_scaling(args, out: dict) -> None:
 
 
 def vec_stepper(kind: str, n: int, k: int) -> tuple[Callable[[int], None], Any]:
-    from training.vec_env import make_vec_env
+    from coopnav_env.training.vec_env import make_vec_env
 
     venv = make_vec_env(functools.partial(make_urban, n), k, 1, kind=kind)
     venv.seed(0)
@@ -588,8 +588,8 @@ def ppo_update_timer() -> contextlib.AbstractContextManager[dict[str, float]]:
 
 def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> tuple[float, float]:
     """(agent-steps/s of ``train()``, share of its learning time in PPO's gradient updates)."""
-    from training.config import TrainConfig, load_config
-    from training.sb3_backend import train
+    from coopnav_env.training.config import TrainConfig, load_config
+    from coopnav_env.training.sb3_backend import train
 
     base = load_config()
     with tempfile.TemporaryDirectory() as tmp:

@@ -33,7 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from training.config import load_config
+from coopnav_env.training.config import load_config
 
 
 def _one_run(runners: int, iterations: int, overrides: list[str], out: Path) -> dict:
@@ -49,7 +49,7 @@ def _one_run(runners: int, iterations: int, overrides: list[str], out: Path) -> 
     # stop after `iterations` iterations: timesteps are agent-steps
     timesteps = iterations * batch * n_uavs
     cmd = [
-        sys.executable, "-m", "training.cli", "train", "--backend", "rllib",
+        sys.executable, "-m", "coopnav_env.training.cli", "train", "--backend", "rllib",
         "--out", str(out), "--num-env-runners", str(runners), "--timesteps", str(timesteps),
         "--checkpoint-freq", "0", "--no-progress",
     ]  # fmt: skip

@@ -72,7 +72,7 @@ def fly(
     policy: str, env_kwargs: dict[str, Any], seeds: list[int], steer: tuple[float, float] | None
 ) -> dict[str, Any]:
     """Per-episode errors and goals, and (unsteered) the per-step records of item 1-2."""
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
 
     env = urban_canyon_v0.parallel_env(**{**env_kwargs, "obs_candidate_sky": True})
@@ -160,7 +160,7 @@ def anatomy(steps: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _paired(base: list[float], other: list[float], reps: int = 2000) -> tuple[float, ...]:
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     d = np.asarray(other, dtype=float) - np.asarray(base, dtype=float)
     return bootstrap_mean_interval(d[np.isfinite(d)], reps, np.random.default_rng(0))
@@ -177,8 +177,8 @@ def _parse_steer(item: str) -> tuple[float, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.config import apply_overrides
-    from training.files import write_json
+    from coopnav_env.training.config import apply_overrides
+    from coopnav_env.training.files import write_json
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--policy", default="ceiling", help="the heuristic (default: ceiling)")

@@ -13,7 +13,7 @@ variants before a confirmatory study; docs/marl/README.md (Part 2) uses it::
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true \\
         --groups base=guarded ceiling=ceiling
 
-A group is ``NAME=POLICY[,POLICY...]`` with :func:`agents.make_policy` names, e.g.
+A group is ``NAME=POLICY[,POLICY...]`` with :func:`coopnav_env.agents.make_policy` names, e.g.
 ``mappo=torchrl:runs/x/mappo_s0,torchrl:runs/x/mappo_s1``; a policy's own options stay with it
 (``tuned=ceiling@gain_per_s=0.3,cruise_speed_mps=10`` is one policy).
 
@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, np.ndarray]:
     import torch
 
-    from training.marl_study import fly_episodes
+    from coopnav_env.training.marl_study import fly_episodes
 
     torch.set_num_threads(1)
     eps = fly_episodes(policy, env_kwargs, seeds, keep_positions=False)
@@ -58,7 +58,7 @@ def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str,
 
 
 def _parse_groups(items: list[str]) -> dict[str, list[str]]:
-    from training.marl_study import parse_named_lists
+    from coopnav_env.training.marl_study import parse_named_lists
 
     try:
         return parse_named_lists(items, "--groups", "NAME=POLICY[,POLICY...]")
@@ -71,7 +71,7 @@ def _parse_group_env(
 ) -> dict[str, dict[str, Any]]:
     """Each group's environment: ``env_kwargs`` plus its ``--group-env`` overrides."""
     from coopnav_env.envs.config import make_config
-    from training.config import apply_overrides
+    from coopnav_env.training.config import apply_overrides
 
     per: dict[str, list[str]] = {g: [] for g in groups}
     for item in items:
@@ -95,7 +95,7 @@ def paired_table(
     results: dict[str, list[dict[str, np.ndarray]]], reps: int = 2000, seed: int = 0
 ) -> list[str]:
     """The printed lines: one per group, then each group minus the first (nav, coop)."""
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     rng = np.random.default_rng(seed)
     stats = {}
@@ -122,7 +122,7 @@ def paired_table(
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.config import apply_overrides
+    from coopnav_env.training.config import apply_overrides
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--groups", nargs="+", required=True, help="NAME=POLICY[,POLICY...]")

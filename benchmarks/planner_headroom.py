@@ -66,7 +66,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def _save_npz(path: Path, **arrays: Any) -> None:
-    from training.files import atomic_path
+    from coopnav_env.training.files import atomic_path
 
     with atomic_path(path, suffix=".npz") as tmp:
         np.savez(tmp, **arrays)
@@ -110,7 +110,7 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
         collided = collided or any(bool(i.get("collided", False)) for i in infos.values())
     out = {k: np.asarray(v) for k, v in rows.items()}
     # reached the goal: every UAV in the goal area at the last step and no crash (the
-    # definition of training.evaluate's goal rate)
+    # definition of coopnav_env.training.evaluate's goal rate)
     out["success"] = np.asarray(bool(rows["alive"]) and bool(at_goal.all()) and not collided)
     c = np.asarray(costs, dtype=float).reshape(-1, 2)
     out["cost_base"], out["cost_best"] = c[:, 0], c[:, 1]
@@ -122,7 +122,7 @@ def fly_planner(env: Any, planner: Any, seed: int) -> dict[str, np.ndarray]:
 def fly_base(env: Any, policy: Any, seed: int) -> dict[str, np.ndarray]:
     """One episode of the base heuristic: per step and UAV the ``nav`` error, the fix flag and
     whether the UAV was still flying (``(steps, n_agents)`` each)."""
-    from training.evaluate import run_episode
+    from coopnav_env.training.evaluate import run_episode
 
     rec = run_episode(env, policy, int(seed))
     nav = np.asarray(rec.nav_error_m, dtype=float)
@@ -140,7 +140,7 @@ def _worker(
 ) -> int:
     import torch
 
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
 
     torch.set_num_threads(1)
@@ -322,7 +322,7 @@ def outage_edges(episodes: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> d
 
 def analyse(folder: str | Path, seeds: list[int]) -> dict[str, Any]:
     """The report's numbers from the episode files of ``seeds`` in ``folder``."""
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     folder = Path(folder)
     p_nav, b_nav, xs, ys, ws, gs = [], [], [], [], [], []
@@ -473,8 +473,8 @@ def report_lines(r: dict[str, Any], base: str) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.config import apply_overrides
-    from training.files import atomic_write_text
+    from coopnav_env.training.config import apply_overrides
+    from coopnav_env.training.files import atomic_write_text
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", default="ceiling", help="base heuristic (default: ceiling)")
@@ -488,7 +488,7 @@ def main(argv: list[str] | None = None) -> int:
         nargs="*",
         default=[],
         metavar="KEY=VALUE",
-        help="planner options (agents.planner.PrivilegedPlanner), e.g. from_estimate=True",
+        help="planner options (coopnav_env.agents.planner.PrivilegedPlanner), e.g. from_estimate=True",
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")
     p.add_argument("--out", required=True, help="folder of the episode files and report.json")

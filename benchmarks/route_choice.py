@@ -1,9 +1,9 @@
 """Route choice on held-out episodes: every route flown, every one-feature rule and model priced.
 
 Flies *every* equally short street route of each episode with a column heuristic (``ceiling``
-by default; :func:`training.route_learning.collect`, the same collection ``coopnav
+by default; :func:`coopnav_env.training.route_learning.collect`, the same collection ``coopnav
 train-routes`` uses, here on held-out reset seeds), then prices choosing by each one-feature
-rule of :data:`agents.routes.ROUTE_FEATURES` (the route with the best value of the feature)
+rule of :data:`coopnav_env.agents.routes.ROUTE_FEATURES` (the route with the best value of the feature)
 and by each learned route model given with ``--models``: per choice, the mean ``nav`` error,
 the goal rate, and the paired difference to the first route (what the heuristic flies
 without a choice) and to the best rule, with 95 % bootstrap intervals over episodes (2000
@@ -82,7 +82,7 @@ def _oracle_expected(
 
 
 def _rule_picks(eps: list[dict[str, np.ndarray]], feature: str) -> list[int]:
-    from agents.routes import FEATURE_SENSE, ROUTE_FEATURES
+    from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES
 
     j = ROUTE_FEATURES.index(feature)
     return [
@@ -94,7 +94,7 @@ def _rule_picks(eps: list[dict[str, np.ndarray]], feature: str) -> list[int]:
 def within_turns(eps: list[dict[str, np.ndarray]], max_turns: int) -> list[dict[str, np.ndarray]]:
     """``eps`` with only the routes of at most ``max_turns`` turns (the ``turns`` feature),
     in their order; an episode with one route keeps it."""
-    from agents.routes import ROUTE_FEATURES
+    from coopnav_env.agents.routes import ROUTE_FEATURES
 
     j = ROUTE_FEATURES.index("turns")
     out = []
@@ -112,12 +112,12 @@ def within_turns(eps: list[dict[str, np.ndarray]], max_turns: int) -> list[dict[
 def compare_within_turns(
     eps: list[dict[str, np.ndarray]], rule: str, max_turns: int, reps: int = 2000
 ) -> dict[str, Any]:
-    """The rule ``rule`` (a :data:`~agents.routes.ROUTE_FEATURES` name) and the expected-error
+    """The rule ``rule`` (a :data:`~coopnav_env.agents.routes.ROUTE_FEATURES` name) and the expected-error
     oracle choosing among all the routes of ``eps``, against the same rule choosing among
     the routes of at most ``max_turns`` turns only, paired by episode (means over the noise
     replicates; 95 % bootstrap intervals): what routes with more turns, such as a swarm that
     re-plans at intersections could fly, add to a choice."""
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     if not all("nav_reps" in e for e in eps):
         raise ValueError("compare_within_turns needs noise replicates (--noise-replicates >= 2)")
@@ -157,8 +157,8 @@ def price_choices(
     eps: list[dict[str, np.ndarray]], models: dict[str, Any], reps: int = 2000
 ) -> dict[str, Any]:
     """Mean error, goal rate and paired differences of every rule and model on ``eps``."""
-    from agents.routes import FEATURE_SENSE, ROUTE_FEATURES
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     first = np.array([e["nav"][0] for e in eps])
     picks: dict[str, list[int]] = {}
@@ -252,9 +252,9 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from agents.routes import RouteModel
-    from training.files import atomic_path, atomic_write_text, claim_run_folder
-    from training.route_learning import (
+    from coopnav_env.agents.routes import RouteModel
+    from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
+    from coopnav_env.training.route_learning import (
         arrays_to_episodes,
         collect,
         env_kwargs_from_overrides,

@@ -53,9 +53,9 @@ def _row(name: str, episodes: list, seconds: float) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Fly every variant and print the table (``--help`` for the options)."""
-    from training.config import apply_overrides
-    from training.envs import heldout_seeds
-    from training.marl_study import fly_episodes
+    from coopnav_env.training.config import apply_overrides
+    from coopnav_env.training.envs import heldout_seeds
+    from coopnav_env.training.marl_study import fly_episodes
 
     parser = argparse.ArgumentParser(
         prog="python benchmarks/search_heuristics.py", description=__doc__.split("\n")[0]

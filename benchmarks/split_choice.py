@@ -8,7 +8,7 @@ on its chosen route) and every split of it (its route and each other candidate),
 ``--noise-replicates`` independent noise realisations of the same episode (the environment's
 ``noise_stream`` reset option). It prices
 
-* every one-feature rule of :data:`agents.routes.SPLIT_FEATURES` choosing among *all* arms
+* every one-feature rule of :data:`coopnav_env.agents.routes.SPLIT_FEATURES` choosing among *all* arms
   (no split, or a split with any other candidate) and among the splits only, as the paired
   difference of the mean error over the replicates to the unsplit heuristic;
 * the *expected-error oracle*: per episode, the arm with the lowest mean over R - 1 of the
@@ -64,9 +64,9 @@ def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str
     one route, which is flown unsplit once), ``nav`` ``(A, replicates)`` (mean error of the
     estimate each UAV used [m]) and ``goal`` ``(A, replicates)``.
     """
-    from agents import make_policy
-    from agents.routes import SPLIT_FEATURES
-    from training.evaluate import run_episode
+    from coopnav_env.agents import make_policy
+    from coopnav_env.agents.routes import SPLIT_FEATURES
+    from coopnav_env.training.evaluate import run_episode
 
     planner = make_policy(_with_option(base, "route_split='los_mean'"), env)
     obs, _ = env.reset(seed=int(seed))
@@ -120,7 +120,7 @@ def collect(
     progress: bool = False,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
-    from training.parallel import map_seeds
+    from coopnav_env.training.parallel import map_seeds
 
     return map_seeds(
         _chunk, (env_kwargs, base, replicates), seeds, jobs=jobs, desc="splits", progress=progress
@@ -130,10 +130,10 @@ def collect(
 def price(
     eps: list[dict[str, np.ndarray]], reps: int = 2000, models: dict[str, Any] | None = None
 ) -> dict[str, Any]:
-    """Rules, learned split ``models`` (name: :class:`agents.routes.RouteModel` of kind
+    """Rules, learned split ``models`` (name: :class:`coopnav_env.agents.routes.RouteModel` of kind
     ``"split"``) and the expected-error oracle against the unsplit arm (see the module doc)."""
-    from agents.routes import SPLIT_FEATURE_SENSE, SPLIT_FEATURES
-    from training.stats import bootstrap_mean_interval
+    from coopnav_env.agents.routes import SPLIT_FEATURE_SENSE, SPLIT_FEATURES
+    from coopnav_env.training.stats import bootstrap_mean_interval
 
     def interval(d: np.ndarray) -> list[float]:
         return [float(v) for v in bootstrap_mean_interval(d, reps, np.random.default_rng(0))]
@@ -203,11 +203,11 @@ def price(
 def fit_split_model(
     eps: list[dict[str, np.ndarray]], base: str, info: dict[str, Any] | None = None
 ) -> Any:
-    """A learned split chooser: :func:`agents.routes.fit_route_model` of kind ``"split"`` on
+    """A learned split chooser: :func:`coopnav_env.agents.routes.fit_route_model` of kind ``"split"`` on
     the flights ``eps`` (each option's mean error over its replicates; ridge penalty by
     5-fold cross-validation over episodes). Fit it on training episodes (reset seeds below
     1,000,000), never on the episodes it is to be judged on."""
-    from agents.routes import fit_route_model
+    from coopnav_env.agents.routes import fit_route_model
 
     feats = [np.asarray(e["features"], dtype=float) for e in eps]
     errors = [np.nanmean(np.asarray(e["nav"], dtype=float), axis=1) for e in eps]
@@ -239,8 +239,8 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.files import atomic_path, atomic_write_text, claim_run_folder
-    from training.route_learning import env_kwargs_from_overrides
+    from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
+    from coopnav_env.training.route_learning import env_kwargs_from_overrides
 
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
             fit_path = fit_path / "split_model.json"
         if fit_path.exists():
             raise SystemExit(f"--fit-model: {fit_path} exists; a model is never overwritten")
-    from agents.routes import RouteModel, resolve_route_model
+    from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
     models = {
         str(m): RouteModel.load(resolve_route_model(str(m), kind="split")) for m in args.models

@@ -3,7 +3,7 @@
 The reception of the ``urban_nlos`` preset (``coopnav_env.envs.PRESETS``: half of the
 satellites a building blocks are received through a reflection, with a delay of
 3 m + Exp(30 m)) in the default grid city with 5 UAVs, flown by the ``formation`` and ``sky``
-heuristics (``agents.make_policy``), in three variants:
+heuristics (``coopnav_env.agents.make_policy``), in three variants:
 
 * ``off``: the navigation as it is (``integrity="off"``);
 * ``fde``: the ``urban_nlos`` preset's fault detection and exclusion (``integrity="fde"``,
@@ -56,7 +56,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_integrity import write_json
 
-from agents import make_policy
+from coopnav_env.agents import make_policy
 from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import PRESETS
 from coopnav_env.nav import integrity_rates

@@ -30,3 +30,13 @@ def _register_gymnasium_envs() -> None:
 
 
 _register_gymnasium_envs()
+
+
+def _install_old_names() -> None:
+    """Keep ``import agents`` / ``training`` / ``reproduction`` working for one release."""
+    from coopnav_env.old_names import install
+
+    install()
+
+
+_install_old_names()

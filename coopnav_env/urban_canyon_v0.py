@@ -231,7 +231,7 @@ levels into availability and misleading-information rates.
 The reset infos describe the first epoch of the new episode. SuperSuit's own automatic reset
 (`pettingzoo_env_to_vec_env_v1`) merges them over the terminal step's infos
 (`{**step_info, **reset_info}`), so with that recipe the terminal step's figures are lost;
-coopnav's vector environments (`training.vec_env.make_vec_env`, the batched
+coopnav's vector environments (`coopnav_env.training.vec_env.make_vec_env`, the batched
 `BatchedUrbanCanyonEnv`) keep the terminal step's infos and drop the reset's.
 
 ## Starting State

@@ -1,8 +1,8 @@
 """Evaluate your own policy object next to the built-in heuristics.
 
-A policy is any class with the ``agents.base.Policy`` protocol: a ``name``,
+A policy is any class with the ``coopnav_env.agents.base.Policy`` protocol: a ``name``,
 ``reset(seed)`` and ``act(observations) -> actions`` over the PettingZoo dicts of the UAVs
-still flying. ``agents.register_policy`` gives it a name, and ``training.evaluate.evaluate``
+still flying. ``coopnav_env.agents.register_policy`` gives it a name, and ``coopnav_env.training.evaluate.evaluate``
 flies it on the same held-out episodes as ``formation`` (same cities, satellites and noise),
 with the same statistics as ``coopnav evaluate``. Run it::
 
@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from agents import register_policy
+from coopnav_env.agents import register_policy
 from coopnav_env.envs import obs_layout
-from training.evaluate import evaluate
+from coopnav_env.training.evaluate import evaluate
 
 
 class WallShyWaypointPolicy:

@@ -1,7 +1,7 @@
 r"""Reproduce the simulation results of the paper's Section 4 with one command.
 
 ``coopnav reproduce --out DIR`` (or :func:`reproduce`) simulates the scenario of Section 4.1
-(:mod:`reproduction.scenario`), runs the navigation core of :mod:`coopnav_env.nav` on it and
+(:mod:`coopnav_env.reproduction.scenario`), runs the navigation core of :mod:`coopnav_env.nav` on it and
 writes to ``DIR``:
 
 * ``results.json`` - every reproduced number, the published one beside it, the qualitative
@@ -63,10 +63,14 @@ Modules, one job each
 ``cli``         :func:`reproduce` (writes everything) and the ``coopnav reproduce`` command
 """
 
-from reproduction.cli import build_config, reproduce
-from reproduction.config import PUBLISHED, ReproduceConfig
-from reproduction.scenario import PaperEpoch, PaperScenario
-from reproduction.simulation import run_studies, simulate_epoch
+from coopnav_env.old_names import redirect as _redirect_old_name
+
+_redirect_old_name(__name__)  # imported as 'reproduction' (a source checkout): becomes 'coopnav_env.reproduction'
+
+from coopnav_env.reproduction.cli import build_config, reproduce
+from coopnav_env.reproduction.config import PUBLISHED, ReproduceConfig
+from coopnav_env.reproduction.scenario import PaperEpoch, PaperScenario
+from coopnav_env.reproduction.simulation import run_studies, simulate_epoch
 
 __all__ = [
     "PUBLISHED",

@@ -16,15 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from reproduction.config import ReproduceConfig
-from reproduction.figures import write_figures
-from reproduction.report import report_markdown
-from reproduction.scenario import (
+from coopnav_env.reproduction.config import ReproduceConfig
+from coopnav_env.reproduction.figures import write_figures
+from coopnav_env.reproduction.report import report_markdown
+from coopnav_env.reproduction.scenario import (
     PaperScenario,
 )
-from reproduction.simulation import json_float, run_studies
-from reproduction.tables import summarize
-from training.files import atomic_write_text, ensure_folder, write_json
+from coopnav_env.reproduction.simulation import json_float, run_studies
+from coopnav_env.reproduction.tables import summarize
+from coopnav_env.training.files import atomic_write_text, ensure_folder, write_json
 
 __all__ = [
     "add_arguments",
@@ -203,7 +203,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """``coopnav reproduce``: returns the process exit status (errors: one line and exit 2
-    for a bad configuration, see :mod:`training.cli`)."""
+    for a bad configuration, see :mod:`coopnav_env.training.cli`)."""
     cfg = build_config(args)
     out = reproduce(cfg, args.out)
     extra = " and the figures" if cfg.figures else ""

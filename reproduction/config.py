@@ -1,7 +1,7 @@
 """The configuration of the paper reproduction and the published values it is compared with.
 
 :class:`ReproduceConfig` (frozen, validated on construction) holds the seed, the scenario
-(:class:`reproduction.scenario.PaperScenario`) and the sizes of every study;
+(:class:`coopnav_env.reproduction.scenario.PaperScenario`) and the sizes of every study;
 :data:`PUBLISHED` the numbers of the paper's Section 4.2.
 """
 
@@ -18,7 +18,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from reproduction.scenario import (
+from coopnav_env.reproduction.scenario import (
     PaperScenario,
     check_choice,
     check_int,

@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from reproduction.config import AXES, PUBLISHED, ReproduceConfig
-from reproduction.simulation import variant_setting
+from coopnav_env.reproduction.config import AXES, PUBLISHED, ReproduceConfig
+from coopnav_env.reproduction.simulation import variant_setting
 
 # --------------------------------------------------------------------------------------------
 # Report

@@ -1,6 +1,6 @@
 """The reproduced numbers beside the published ones, and the paper's claims checked.
 
-:func:`summarize` turns the pooled studies of :func:`reproduction.simulation.run_studies`
+:func:`summarize` turns the pooled studies of :func:`coopnav_env.reproduction.simulation.run_studies`
 into the content of ``results.json``: Table 1, P(3-D error < 3 m), Table 2, the LOS and
 relative-error studies, the sensitivity table, the comparison with :data:`PUBLISHED` and the
 paper's qualitative claims, each marked as holding or not.
@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from reproduction.config import AXES, PUBLISHED, BoolArray, ReproduceConfig
-from reproduction.simulation import (
+from coopnav_env.reproduction.config import AXES, PUBLISHED, BoolArray, ReproduceConfig
+from coopnav_env.reproduction.simulation import (
     SENSITIVITY,
     Pooled,
     axis_stats,

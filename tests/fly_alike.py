@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from agents import make_policy
+from coopnav_env.agents import make_policy
 from coopnav_env import urban_canyon_v0
 
 

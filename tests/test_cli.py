@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from training.cli import build_parser, main
-from training.demo import run_demo
+from coopnav_env.training.cli import build_parser, main
+from coopnav_env.training.demo import run_demo
 
 
 def test_help_lists_commands(capsys):
@@ -52,8 +52,8 @@ def test_demo_bar_starts_after_the_first_epoch(monkeypatch, capsys):
     import numpy as np
     import tqdm
 
-    import training.demo as demo
-    from training.compile_notice import KERNEL_MODULES
+    import coopnav_env.training.demo as demo
+    from coopnav_env.training.compile_notice import KERNEL_MODULES
 
     made = []
 

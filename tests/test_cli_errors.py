@@ -3,7 +3,7 @@
 Each row is one bad invocation: the exit status it must give (2: a usage error; argparse's
 own errors are 2 as well), a fragment of the message that names the setting or the file, and
 no ``Traceback`` on stderr. ``--debug`` (or ``COOPNAV_DEBUG=1``) shows the traceback.
-Invocations are run in this process (``training.cli.main``); none of them starts training.
+Invocations are run in this process (``coopnav_env.training.cli.main``); none of them starts training.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
-from training.cli import main
+from coopnav_env.training.cli import main
 
 TOY = TOY_ENV_ID
 TOY_SECTION = TOY_TRAINING

@@ -21,8 +21,8 @@ def test_py_typed_markers_are_package_data() -> None:
     tomllib = pytest.importorskip("tomllib")  # Python 3.11+
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())
     package_data = data["tool"]["setuptools"]["package-data"]
-    for package in ("coopnav_env", "agents"):
-        assert (ROOT / package / "py.typed").is_file()
+    for package, folder in (("coopnav_env", "coopnav_env"), ("coopnav_env.agents", "agents")):
+        assert (ROOT / folder / "py.typed").is_file()
         assert "py.typed" in package_data[package]
 
 

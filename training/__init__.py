@@ -1,0 +1,5 @@
+"""Training, evaluation and the command line of coopnav (installed as ``coopnav_env.training``)."""
+
+from coopnav_env.old_names import redirect as _redirect_old_name
+
+_redirect_old_name(__name__)  # imported as 'training' (a source checkout): becomes 'coopnav_env.training'

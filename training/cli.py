@@ -23,22 +23,21 @@ import traceback
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("training.demo", "navigation demo: standalone vs cooperative error of a canyon UAV"),
-    "reproduce": ("reproduction.cli", "regenerate the paper's tables and figures (Section 4)"),
+    "demo": ("coopnav_env.training.demo", "navigation demo: standalone vs cooperative error of a canyon UAV"),
+    "reproduce": ("coopnav_env.reproduction.cli", "regenerate the paper's tables and figures (Section 4)"),
     "train": (
-        "training.train",
+        "coopnav_env.training.train",
         "train a shared policy on urban_canyon_v0 (SB3 PPO, Ray RLlib, or TorchRL MAPPO/IPPO)",
     ),
     "train-routes": (
-        "training.route_learning",
+        "coopnav_env.training.route_learning",
         "learn which street route to fly from flown episodes (a learned route model)",
     ),
-    "evaluate": ("training.evaluate", "evaluate policies: navigation error, goal rate, plots"),
+    "evaluate": ("coopnav_env.training.evaluate", "evaluate policies: navigation error, goal rate, plots"),
     "study": (
-        "training.marl_study",
+        "coopnav_env.training.marl_study",
         "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",
     ),
-    "render": ("training.render", "render one episode of urban_canyon_v0 to PNG frames"),
 }
 
 DEBUG_ENV: str = "COOPNAV_DEBUG"

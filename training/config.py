@@ -12,7 +12,7 @@ that implements it; adding a backend is one line there. A backend module defines
 
 ``train(cfg: TrainConfig) -> pathlib.Path``
     Train and return the final model (written into ``cfg.out``), following the run-folder
-    rules of :mod:`training.runs` (lock, fresh / ``--overwrite`` / ``--resume``, atomic
+    rules of :mod:`coopnav_env.training.runs` (lock, fresh / ``--overwrite`` / ``--resume``, atomic
     writes, a checkpoint on SIGINT/SIGTERM).
 ``check(cfg: TrainConfig) -> None`` (optional)
     Validate the backend's own settings without starting any work (``ValueError`` naming
@@ -34,7 +34,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
+from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
 
 __all__ = [
     "BACKENDS",
@@ -55,16 +55,16 @@ DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.y
 """The packaged hyperparameter file (one section per environment id)."""
 
 BACKENDS: dict[str, str] = {
-    "sb3": "training.sb3_backend",
-    "rllib": "training.rllib_backend",
-    "torchrl": "training.marl",
+    "sb3": "coopnav_env.training.sb3_backend",
+    "rllib": "coopnav_env.training.rllib_backend",
+    "torchrl": "coopnav_env.training.marl",
 }
 """Training backends: name -> module (see the module docstring for what a module defines).
 ``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib; ``torchrl``:
-MAPPO or IPPO on TorchRL (:mod:`training.marl`)."""
+MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.marl`)."""
 
 VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
-"""Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of ``training.vec_env.VEC_ENV_KINDS``
+"""Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of ``coopnav_env.training.vec_env.VEC_ENV_KINDS``
 (listed here without importing SB3)."""
 
 PRETRAIN_DEFAULTS: dict[str, Any] = {
@@ -192,7 +192,7 @@ class TrainConfig:
         Worker processes for the swarm copies, >= 0 (0 and 1: all in this process).
     vec_env : {"auto", "supersuit", "batched"}, default "auto"
         How the swarm copies become one SB3 vector environment
-        (:func:`~training.vec_env.make_vec_env`): SuperSuit's per-agent adapters (any
+        (:func:`~coopnav_env.training.vec_env.make_vec_env`): SuperSuit's per-agent adapters (any
         environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
         environment (one process; the same observations, rewards and seeding bit for bit, so
         the same training). ``"auto"`` takes the batched one where it applies
@@ -214,7 +214,7 @@ class TrainConfig:
     resume : str or None, default None
         Checkpoint to continue from, or ``"latest"`` for the newest one in ``out`` that loads
         (a finished run: its final model, when ``timesteps`` asks for more; see
-        :mod:`training.runs`).
+        :mod:`coopnav_env.training.runs`).
     overwrite : bool, default False
         Start a fresh run in an ``out`` that holds an earlier run, removing that run's
         outputs first (without it, or ``resume``, such a start is refused).
@@ -225,8 +225,8 @@ class TrainConfig:
         else at inference; episode returns in the logs and ``monitor.csv`` stay unscaled. A
         resumed run restarts the running estimate.
     pretrain : dict or None, default None
-        Behaviour cloning before PPO (:func:`training.sb3_backend.behaviour_clone`): ``policy`` (a
-        :func:`agents.make_policy` name, e.g. ``"waypoint"``) and its ``policy_kwargs``,
+        Behaviour cloning before PPO (:func:`coopnav_env.training.sb3_backend.behaviour_clone`): ``policy`` (a
+        :func:`coopnav_env.agents.make_policy` name, e.g. ``"waypoint"``) and its ``policy_kwargs``,
         ``episodes`` (teacher episodes on training seeds), ``epochs`` and ``learning_rate``.
         The policy's mean action is fitted to the teacher's actions (its log-std keeps
         ``log_std_init``) and the value network to the teacher's discounted returns, so that
@@ -236,14 +236,14 @@ class TrainConfig:
     verbose : int, default 0
         SB3 verbosity (1 prints the training table).
     backend : {"sb3", "rllib"}, default "sb3"
-        Stable-Baselines3 in this process (:func:`training.sb3_backend.train`), or Ray RLlib
-        with env runners on a Ray cluster (:func:`training.rllib_backend.train`, needs the
+        Stable-Baselines3 in this process (:func:`coopnav_env.training.sb3_backend.train`), or Ray RLlib
+        with env runners on a Ray cluster (:func:`coopnav_env.training.rllib_backend.train`, needs the
         ``ray`` extra); the keys of :data:`BACKENDS`.
     rllib : dict
-        Settings of the RLlib backend (:class:`training.rllib_backend.RLlibSettings`: env
+        Settings of the RLlib backend (:class:`coopnav_env.training.rllib_backend.RLlibSettings`: env
         runners, Ray address, ``ppo`` and ``model``); the SB3 backend ignores them.
     torchrl : dict
-        Settings of the TorchRL MAPPO/IPPO backend (:class:`agents.marl_nets.MARLSettings`
+        Settings of the TorchRL MAPPO/IPPO backend (:class:`coopnav_env.agents.marl_nets.MARLSettings`
         fields, plus ``env``: environment settings that override ``env`` for this backend).
     """
 

@@ -25,7 +25,7 @@ DEMO_KERNEL_MODULES: tuple[str, ...] = (
     "coopnav_env.nav._kernels",
     "coopnav_env.sim._kernels",
 )
-"""The kernel modules the demo compiles (see :mod:`training.compile_notice`)."""
+"""The kernel modules the demo compiles (see :mod:`coopnav_env.training.compile_notice`)."""
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ def run_demo(
     progress : bool
         Show a progress bar (tqdm, if installed), started after the first epoch (which
         compiles or loads the numba kernels; when that takes a while a line on stderr says
-        so: :func:`training.compile_notice.compile_notice`).
+        so: :func:`coopnav_env.training.compile_notice.compile_notice`).
     """
     from coopnav_env.gnss import (
         ErrorModel,
@@ -125,7 +125,7 @@ def run_demo(
     # the first epoch compiles (or loads) the numba kernels: run it before the progress bar
     # starts, so that the bar's rate and ETA measure the epochs, not the compilation
     if progress:
-        from training.compile_notice import compile_notice
+        from coopnav_env.training.compile_notice import compile_notice
 
         with compile_notice("about 20 s", modules=DEMO_KERNEL_MODULES, prefix="coopnav demo"):
             one_epoch(0)

@@ -13,7 +13,7 @@
 
 Policy names are shortened for the plots by :func:`short_labels`: ``waypoint@altitude_m=28``
 becomes ``waypoint (tuned)``, ``ppo:runs/quick/final_model.zip`` becomes ``ppo (quick)``.
-Every file is written atomically (:func:`training.files.atomic_path`).
+Every file is written atomically (:func:`coopnav_env.training.files.atomic_path`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from training.files import atomic_path
+from coopnav_env.training.files import atomic_path
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
@@ -156,8 +156,8 @@ def error_cdf_figure(
 
 
 def plot_error_cdf(report: Any, path: str | Path, threshold_m: float = 3.0) -> Path:
-    """Write the error CDF of a :class:`training.evaluate.Report` to ``path`` (PNG), with a
-    labelled line at ``threshold_m`` (``training.evaluate.ERROR_THRESHOLD_M``)."""
+    """Write the error CDF of a :class:`coopnav_env.training.evaluate.Report` to ``path`` (PNG), with a
+    labelled line at ``threshold_m`` (``coopnav_env.training.evaluate.ERROR_THRESHOLD_M``)."""
     return save_figure(error_cdf_figure(report.episodes, threshold_m), path, dpi=120)
 
 

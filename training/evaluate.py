@@ -2,7 +2,7 @@
 
 Each policy flies the same held-out episodes (reset seeds ``EVAL_SEED_START + i``, never used
 in training: ``coopnav train`` keeps its reset seeds below
-:data:`training.envs.EVAL_SEED_START`) and is scored on every UAV at every step:
+:data:`coopnav_env.training.envs.EVAL_SEED_START`) and is scored on every UAV at every step:
 
 * cooperative and standalone 3-D position error (true minus estimated): mean, median, 95th
   percentile over the agent-steps that have a fix, and P(error < 3 m) over all agent-steps
@@ -20,10 +20,10 @@ Outputs in ``--out DIR``: ``report.json``, ``report.csv``, ``report.md`` (the ta
 the terminal, under a header naming the environment settings and where they came from),
 ``errors.npz`` (every error sample), ``error_cdf.png`` (empirical CDF of the error per policy)
 and ``trajectories_<policy>.png`` (top view and altitude along the route of the first
-episode), drawn by :mod:`training.eval_plots`. A trained policy (``ppo:`` ...) is flown
+episode), drawn by :mod:`coopnav_env.training.eval_plots`. A trained policy (``ppo:`` ...) is flown
 in the environment its run's ``config.yaml`` records; without one, a warning on stderr names
 the settings used instead.
-Every file is written atomically (:mod:`training.files`): a failed write leaves the earlier
+Every file is written atomically (:mod:`coopnav_env.training.files`): a failed write leaves the earlier
 version. Results are deterministic for fixed seeds: the env and every stochastic policy are
 reseeded with the episode seed.
 """
@@ -46,10 +46,10 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
-from training.compile_notice import compile_notice, warm_up_env
-from training.config import apply_overrides, parse_yaml
-from training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
-from training.files import atomic_path, atomic_write_text, ensure_folder, jsonable, write_json
+from coopnav_env.training.compile_notice import compile_notice, warm_up_env
+from coopnav_env.training.config import apply_overrides, parse_yaml
+from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
+from coopnav_env.training.files import atomic_path, atomic_write_text, ensure_folder, jsonable, write_json
 
 __all__ = [
     "DEFAULT_EPISODES",
@@ -566,7 +566,7 @@ def evaluate(
     Parameters
     ----------
     policies : sequence of str
-        Registry names (:data:`agents.POLICY_NAMES`), e.g. ``["random", "formation", "sky",
+        Registry names (:data:`coopnav_env.agents.POLICY_NAMES`), e.g. ``["random", "formation", "sky",
         "ppo:runs/quick/final_model.zip"]``; all are made (and checkpoints checked) before any
         episode runs.
     seeds : sequence of int
@@ -576,7 +576,7 @@ def evaluate(
     out : path or None
         Directory for the report files and plots; None writes nothing.
     env_id : str, default "urban_canyon_v0"
-        As in :class:`training.config.TrainConfig`.
+        As in :class:`coopnav_env.training.config.TrainConfig`.
     plots : bool, default True
         Write the CDF and trajectory plots (needs matplotlib).
     verbose : bool, default False
@@ -596,7 +596,7 @@ def evaluate(
     FileNotFoundError
         A ``ppo:<path>`` checkpoint does not exist.
     """
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
 
     policies = list(policies)
     seeds = [int(s) for s in seeds]
@@ -671,7 +671,7 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
     with atomic_path(files["npz"], suffix=".npz") as tmp:
         np.savez_compressed(tmp, **arrays)
     if plots:
-        from training.eval_plots import plot_error_cdf, plot_trajectories, short_labels
+        from coopnav_env.training.eval_plots import plot_error_cdf, plot_trajectories, short_labels
 
         files["cdf"] = plot_error_cdf(report, out / "error_cdf.png", ERROR_THRESHOLD_M)
         labels = short_labels(list(report.episodes))
@@ -926,7 +926,7 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``coopnav evaluate``; returns the exit status (errors: see :mod:`training.cli`)."""
+    """Run ``coopnav evaluate``; returns the exit status (errors: see :mod:`coopnav_env.training.cli`)."""
     seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
     if min(seeds) < 0:
         raise ValueError(f"--seeds must be >= 0, got {min(seeds)}")

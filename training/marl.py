@@ -44,14 +44,14 @@ before the default 200 steps in almost every training episode, so the bias is sm
 Residual policies
 -----------------
 With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the command of a
-hand-written base policy (:func:`agents.make_policy`), clipped to ``[-1, 1]``: residual policy
+hand-written base policy (:func:`coopnav_env.agents.make_policy`), clipped to ``[-1, 1]``: residual policy
 learning (Silver et al. 2018; Johannink et al. 2019). The network's output is scaled by
 ``residual_scale`` and its last layer starts at zero, so training starts from the base
 policy's behaviour and RL only has to find what to change. The base command is part of the
 actor's input. With ``residual_base: null`` the policy flies on its own. The residual can be
 guarded against walls (``residual_wall_guard``), and two other modes replace the velocity
 residual: ``offset`` (learned slot shifts of a column base) and ``options`` (a categorical
-choice per UAV among a few slot shifts, :class:`agents.marl_nets.MARLSettings` describes
+choice per UAV among a few slot shifts, :class:`coopnav_env.agents.marl_nets.MARLSettings` describes
 every setting).
 """
 
@@ -69,7 +69,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from agents.marl_nets import (
+from coopnav_env.agents.marl_nets import (
     CHECKPOINT_FORMAT,
     MARLSettings,
     base_command_before,
@@ -78,9 +78,9 @@ from agents.marl_nets import (
     load_marl_checkpoint,
     swarm_command,
 )
-from training.envs import EVAL_SEED_START
-from training.files import atomic_path, atomic_write_text, write_json, write_yaml
-from training.runs import (
+from coopnav_env.training.envs import EVAL_SEED_START
+from coopnav_env.training.files import atomic_path, atomic_write_text, write_json, write_yaml
+from coopnav_env.training.runs import (
     checkpoint_candidates,
     first_loadable,
     open_run,
@@ -88,7 +88,7 @@ from training.runs import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from training.config import TrainConfig
+    from coopnav_env.training.config import TrainConfig
 
 __all__ = [
     "MARLSettings",
@@ -234,7 +234,7 @@ class MARLTrainer:
         s = self.settings
         if s.residual_base is None:
             return [None] * s.n_copies
-        from agents import make_policy
+        from coopnav_env.agents import make_policy
 
         bases = [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
         check_residual_base(s, bases[0])
@@ -549,7 +549,7 @@ def check(cfg: TrainConfig) -> None:
 
     make_config(**env_kwargs)  # environment settings
     if settings.residual_base is not None:
-        from agents import POLICY_NAMES
+        from coopnav_env.agents import POLICY_NAMES
 
         if settings.residual_base.split("@")[0] not in POLICY_NAMES:
             raise ValueError(

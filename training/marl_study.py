@@ -8,7 +8,7 @@
    about 0.3 s per step);
 2. per method: the mean and the interquartile mean of the episode's mean cooperative 3-D
    error and the goal rate, each with a 95 % stratified-bootstrap interval
-   (:mod:`training.stats`, over training seeds within episodes and over episodes); paired
+   (:mod:`coopnav_env.training.stats`, over training seeds within episodes and over episodes); paired
    differences against every heuristic by episode seed;
 3. behaviour descriptors per method (what was learned): spacing to the nearest neighbour,
    altitude, the swarm's extent across its direction of travel, the share of UAV-steps
@@ -33,11 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from training.config import apply_overrides
-from training.envs import EVAL_SEED_START, heldout_seeds
-from training.eval_plots import distance_along_route, save_figure, short_label
-from training.files import atomic_write_text, jsonable
-from training.stats import (
+from coopnav_env.training.config import apply_overrides
+from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
+from coopnav_env.training.eval_plots import distance_along_route, save_figure, short_label
+from coopnav_env.training.files import atomic_write_text, jsonable
+from coopnav_env.training.stats import (
     interquartile_mean,
     paired_difference,
     stratified_bootstrap_ci,
@@ -126,9 +126,9 @@ def fly_episodes(
     policy_name: str, env_kwargs: Mapping[str, Any], seeds: Sequence[int], keep_positions: bool
 ) -> list[EpisodeResult]:
     """Fly ``policy_name`` through ``reset(seed)`` for every seed; one env for all episodes."""
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
-    from training.evaluate import run_episode
+    from coopnav_env.training.evaluate import run_episode
 
     env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
     policy = make_policy(policy_name, env)
@@ -606,7 +606,7 @@ chooser fitted by ``benchmarks/split_choice.py --fit-model``."""
 
 
 def run_policy_name(run: Path) -> str:
-    """The :func:`agents.make_policy` name of a run folder's model (TorchRL, route, split or
+    """The :func:`coopnav_env.agents.make_policy` name of a run folder's model (TorchRL, route, split or
     SB3)."""
     if (run / "final_model.pt").is_file():
         return f"torchrl:{run}"
@@ -857,7 +857,7 @@ def report_markdown(data: Mapping[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``coopnav study`` from the command line (``python -m training.marl_study``)."""
+    """Run ``coopnav study`` from the command line (``python -m coopnav_env.training.marl_study``)."""
     parser = argparse.ArgumentParser(prog="coopnav study", description=__doc__.split("\n")[0])
     add_arguments(parser)
     return run(parser.parse_args(argv))

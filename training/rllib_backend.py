@@ -1,6 +1,6 @@
 """``coopnav train --backend rllib``: PPO with one shared policy on Ray RLlib.
 
-The same swarm task as :mod:`training.sb3_backend` (the SB3 backend), distributed with Ray: every
+The same swarm task as :mod:`coopnav_env.training.sb3_backend` (the SB3 backend), distributed with Ray: every
 UAV of ``urban_canyon_v0`` is mapped to one policy (``"shared"``: parameter sharing), the
 PettingZoo env is wrapped by RLlib's
 :class:`~ray.rllib.env.wrappers.pettingzoo_env.ParallelPettingZooEnv`, ``num_env_runners``
@@ -42,7 +42,7 @@ cluster, whose files are where its ``ray start --temp-dir`` put them.
 Seeds: copy ``j`` of env runner ``i`` first resets with ``seed + i E + j`` (``E`` =
 ``num_envs_per_env_runner``; runner 0 is this process; see :func:`make_rllib_env`), a resumed
 run with ``seed + N`` (``N`` agent-steps done, modulo the training seed range), all below
-:data:`training.envs.EVAL_SEED_START`.
+:data:`coopnav_env.training.envs.EVAL_SEED_START`.
 """
 
 from __future__ import annotations
@@ -65,10 +65,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from training.config import TrainConfig
-from training.envs import EVAL_SEED_START, make_env_fn
-from training.files import atomic_path, write_json, write_yaml
-from training.runs import (
+from coopnav_env.training.config import TrainConfig
+from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
+from coopnav_env.training.files import atomic_path, write_json, write_yaml
+from coopnav_env.training.runs import (
     check_same_environment,
     checkpoint_candidates,
     first_loadable,
@@ -110,7 +110,7 @@ SB3_ONLY_KEYS: tuple[str, ...] = (
     "verbose",
     "vec_env",
 )
-"""Settings of :class:`training.config.TrainConfig` that only the SB3 backend reads."""
+"""Settings of :class:`coopnav_env.training.config.TrainConfig` that only the SB3 backend reads."""
 
 _CHECKPOINT_RE = re.compile(r"^rllib_(\d+)_steps$")
 _MAX_TEMP_DIR_LEN = 40  # Ray adds ~65 characters of session/socket path; AF_UNIX allows 107
@@ -703,7 +703,7 @@ def train(cfg: TrainConfig) -> Path:
 
     Parameters
     ----------
-    cfg : training.config.TrainConfig
+    cfg : coopnav_env.training.config.TrainConfig
         ``backend`` is not read; ``cfg.rllib`` holds the :class:`RLlibSettings`.
 
     Returns

@@ -1,6 +1,6 @@
 """``coopnav train-routes``: learn which route to fly from flown episodes.
 
-A learned *route model* (:class:`agents.routes.RouteModel`) scores the equally short street
+A learned *route model* (:class:`coopnav_env.agents.routes.RouteModel`) scores the equally short street
 routes of an episode by the satellites the city map predicts along them and picks the one it
 predicts the lowest navigation error for; a column heuristic (``ceiling`` by default) flies
 it. This command teaches it by experience:
@@ -57,7 +57,7 @@ def collect_episode(
 ) -> dict[str, np.ndarray]:
     """Fly every shortest route of episode ``seed`` with heuristic ``base``.
 
-    Returns ``features`` ``(R, F)`` (:func:`agents.routes.route_features`, as the heuristic
+    Returns ``features`` ``(R, F)`` (:func:`coopnav_env.agents.routes.route_features`, as the heuristic
     plans them at the first step) and, per route, ``nav`` (mean error of the estimate each
     UAV used [m]), ``coop`` (mean cooperative-fix error [m], NaN without a fix) and ``goal``.
     An episode with one route is flown once (its features are NaN: nothing to choose).
@@ -73,8 +73,8 @@ def collect_episode(
         raise ValueError(f"replicates must be an int >= 1, got {replicates!r}")
     if replicates < 1:
         raise ValueError(f"replicates must be >= 1, got {replicates}")
-    from agents import make_policy
-    from training.evaluate import run_episode
+    from coopnav_env.agents import make_policy
+    from coopnav_env.training.evaluate import run_episode
 
     planner = make_policy(
         _with_option(base, f"route_choice='los_mean',route_max_turns={int(max_turns)}"), env
@@ -85,7 +85,7 @@ def collect_episode(
     feats = planner.route_feature_table
     n_routes = len(planner.route_candidates)
     if feats is None or n_routes < 2:
-        from agents.routes import ROUTE_FEATURES
+        from coopnav_env.agents.routes import ROUTE_FEATURES
 
         n_routes = 1
         feats = np.full((1, len(ROUTE_FEATURES)), np.nan)
@@ -137,8 +137,8 @@ def collect(
     progress: bool = False,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order;
-    :func:`training.parallel.map_seeds`, with a progress bar when ``progress``)."""
-    from training.parallel import map_seeds
+    :func:`coopnav_env.training.parallel.map_seeds`, with a progress bar when ``progress``)."""
+    from coopnav_env.training.parallel import map_seeds
 
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
@@ -242,7 +242,7 @@ def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
     """Environment keyword arguments from ``KEY=VALUE`` items (values parsed as YAML),
     checked by building the config, so that a bad setting fails before anything is flown."""
     from coopnav_env.envs.config import make_config
-    from training.config import apply_overrides
+    from coopnav_env.training.config import apply_overrides
 
     kwargs = apply_overrides({}, list(items))
     make_config(**kwargs)  # fails early, naming the bad setting
@@ -251,10 +251,10 @@ def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """Collect (resumably), fit and save; prints the cross-validated choice."""
-    from agents import make_policy
-    from agents.routes import ROUTE_FEATURES, fit_route_model
+    from coopnav_env.agents import make_policy
+    from coopnav_env.agents.routes import ROUTE_FEATURES, fit_route_model
     from coopnav_env import urban_canyon_v0
-    from training.files import atomic_path, write_json
+    from coopnav_env.training.files import atomic_path, write_json
 
     if args.episodes < 5:
         raise ValueError(f"--episodes must be >= 5 (5-fold cross-validation), got {args.episodes}")

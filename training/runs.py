@@ -24,7 +24,7 @@ finished). :func:`open_run` applies these rules before a backend does any work:
 Checkpoints: :func:`checkpoint_candidates` lists a folder's ``<prefix>_<N>_steps`` entries
 (and a finished run's final model), :func:`first_loadable` takes the newest one that loads
 and names every newer one it had to skip. Every file is written atomically
-(:mod:`training.files`).
+(:mod:`coopnav_env.training.files`).
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from training.config import parse_yaml
-from training.files import (
+from coopnav_env.training.config import parse_yaml
+from coopnav_env.training.files import (
     atomic_path,
     atomic_write_text,
     ensure_folder,
@@ -52,9 +52,9 @@ from training.files import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from training.config import TrainConfig
+    from coopnav_env.training.config import TrainConfig
 
-__all__ = [  # atomic_path ... write_yaml: training.files, also importable from here
+__all__ = [  # atomic_path ... write_yaml: coopnav_env.training.files, also importable from here
     "LOCK_NAME",
     "RUN_OUTPUTS",
     "Interrupted",

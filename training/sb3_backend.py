@@ -2,18 +2,18 @@
 
 One Stable-Baselines3 PPO policy drives every UAV: SuperSuit turns the PettingZoo swarm into
 a vector env with one slot per UAV and concatenates ``n_envs`` swarms
-(:mod:`training.vec_env`, which also makes ``PPO(seed=...)`` work and repeat exactly).
-``--backend rllib`` trains on Ray RLlib instead (:mod:`training.rllib_backend`, same
+(:mod:`coopnav_env.training.vec_env`, which also makes ``PPO(seed=...)`` work and repeat exactly).
+``--backend rllib`` trains on Ray RLlib instead (:mod:`coopnav_env.training.rllib_backend`, same
 configuration file and output layout).
 
-Hyperparameters (:class:`training.config.TrainConfig`) come from
+Hyperparameters (:class:`coopnav_env.training.config.TrainConfig`) come from
 ``training/configs/ppo.yaml`` (section ``urban_canyon_v0``) and
 can be overridden from the command line. Everything a run produces goes to ``--out DIR``::
 
     DIR/config.yaml              the resolved configuration, seed included
                                  (a resumed session adds config_resumed_at_<N>.yaml)
     DIR/run.json                 versions, wall time, agent-steps per second
-    DIR/final_model.zip          the trained policy (``agents.ppo`` / ``ppo:DIR/final_model.zip``)
+    DIR/final_model.zip          the trained policy (``coopnav_env.agents.ppo`` / ``ppo:DIR/final_model.zip``)
     DIR/checkpoints/ppo_<N>_steps.zip   periodic checkpoints (N agent-steps)
     DIR/logs/                    TensorBoard events and progress*.csv (learning curve)
     DIR/*monitor.csv             one line per finished UAV-episode (return, length, final infos)
@@ -27,7 +27,7 @@ writes one, at the step count of the last completed update.
 Seeds: training resets its swarm copies with ``seed + k`` (``k < n_envs``), then each copy
 continues its own generator; a resumed run reseeds with ``seed + num_timesteps`` (modulo the
 training seed range) so it does not replay its first episodes. Training seeds are kept below
-:data:`training.envs.EVAL_SEED_START`, where the held-out evaluation seeds begin.
+:data:`coopnav_env.training.envs.EVAL_SEED_START`, where the held-out evaluation seeds begin.
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from training.config import TrainConfig, check_bool, check_number
-from training.envs import EVAL_SEED_START, make_env_fn
-from training.files import atomic_path, write_json, write_yaml
-from training.runs import (
+from coopnav_env.training.config import TrainConfig, check_bool, check_number
+from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
+from coopnav_env.training.files import atomic_path, write_json, write_yaml
+from coopnav_env.training.runs import (
     check_same_environment,
     checkpoint_candidates,
     first_loadable,
@@ -153,7 +153,7 @@ def _callbacks() -> tuple[Any, Any, Any]:
         satellites received; and, over the swarm episodes that ended in the rollout, the
         goal rate (every UAV in the goal area: ``in_goal``) and the collision rate (some UAV
         ``collided``). Vector slots ``k * n_agents .. (k + 1) * n_agents - 1`` are the UAVs
-        of swarm copy ``k`` (see :mod:`training.vec_env`); they finish together.
+        of swarm copy ``k`` (see :mod:`coopnav_env.training.vec_env`); they finish together.
         """
 
         def __init__(self, n_agents: int):
@@ -316,7 +316,7 @@ def behaviour_clone(
     import numpy as np
     import torch
 
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
 
     env = env_fn()
     teacher = make_policy(str(spec["policy"]), env, **dict(spec.get("policy_kwargs") or {}))
@@ -405,7 +405,7 @@ def train(cfg: TrainConfig) -> Path:
     """Train a parameter-sharing PPO policy and return the path of the final model.
 
     Every setting is checked (:func:`check`) and the environment built once before anything
-    is written; then the run folder is opened (:func:`training.runs.open_run`: lock,
+    is written; then the run folder is opened (:func:`coopnav_env.training.runs.open_run`: lock,
     fresh / overwrite / resume rules, SIGINT and SIGTERM handled from there on).
 
     Parameters
@@ -424,9 +424,9 @@ def train(cfg: TrainConfig) -> Path:
         ``cfg.resume`` names a checkpoint that does not exist, or none loads.
     ValueError
         Bad settings, a checkpoint that does not load, an unusable run folder
-        (:class:`training.runs.RunFolderError`).
+        (:class:`coopnav_env.training.runs.RunFolderError`).
     KeyboardInterrupt
-        (:class:`training.runs.Interrupted` for SIGINT/SIGTERM) re-raised after writing a
+        (:class:`coopnav_env.training.runs.Interrupted` for SIGINT/SIGTERM) re-raised after writing a
         checkpoint (``checkpoints/ppo_<N>_steps.zip``) and saying what was saved.
     """
     check(cfg)
@@ -622,7 +622,7 @@ def _train_in_folder(
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from training.vec_env import make_vec_env
+    from coopnav_env.training.vec_env import make_vec_env
 
     out = Path(cfg.out)
     ppo_kwargs = dict(cfg.ppo)

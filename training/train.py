@@ -1,9 +1,9 @@
 """``coopnav train``: train one PPO policy shared by every UAV, with the backend of choice.
 
 This module is the command line: it merges the YAML section, ``--set``/``--env-set`` and the
-explicit flags into a :class:`training.config.TrainConfig` (validated before any work starts)
-and hands it to the backend's module (:data:`training.config.BACKENDS`):
-:mod:`training.sb3_backend` (Stable-Baselines3, default) or :mod:`training.rllib_backend`
+explicit flags into a :class:`coopnav_env.training.config.TrainConfig` (validated before any work starts)
+and hands it to the backend's module (:data:`coopnav_env.training.config.BACKENDS`):
+:mod:`coopnav_env.training.sb3_backend` (Stable-Baselines3, default) or :mod:`coopnav_env.training.rllib_backend`
 (Ray RLlib). The run folder (``--out``) is laid out alike for every backend; see the backend
 modules for what goes in it.
 """
@@ -16,8 +16,8 @@ import json
 from collections.abc import Mapping
 from pathlib import Path
 
-from training.compile_notice import compile_notice, warm_up_env
-from training.config import (
+from coopnav_env.training.compile_notice import compile_notice, warm_up_env
+from coopnav_env.training.config import (
     BACKENDS,
     DEFAULT_CONFIG_PATH,
     VEC_ENVS,
@@ -26,8 +26,8 @@ from training.config import (
     backend_module,
     load_config,
 )
-from training.envs import DEFAULT_ENV_ID, make_env_fn
-from training.runs import recorded_config
+from coopnav_env.training.envs import DEFAULT_ENV_ID, make_env_fn
+from coopnav_env.training.runs import recorded_config
 
 __all__ = ["add_arguments", "config_from_args", "run"]
 
@@ -171,7 +171,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 
     The settings are the YAML section of ``--config`` (default: the packaged file), or, with
     ``--resume`` in a folder that holds a run, the settings that run recorded
-    (:func:`training.runs.recorded_config`), so that a resumed run continues under its own
+    (:func:`coopnav_env.training.runs.recorded_config`), so that a resumed run continues under its own
     settings and its own ``timesteps`` unless a flag or ``--set`` changes one.
     """
     recorded = recorded_config(args.out) if args.resume is not None else None
@@ -236,7 +236,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 def run(args: argparse.Namespace) -> int:
     """Run ``coopnav train``; returns the exit status.
 
-    Errors propagate to :func:`training.cli.main`, which turns them into one-line messages
+    Errors propagate to :func:`coopnav_env.training.cli.main`, which turns them into one-line messages
     and exit statuses (2 for a usage error, 130/143 after an interrupt).
     """
     cfg = config_from_args(args)

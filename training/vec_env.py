@@ -34,7 +34,7 @@ that ``coopnav train`` itself uses, with both fixed::
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from training.vec_env import urban_canyon_vec_env
+    from coopnav_env.training.vec_env import urban_canyon_vec_env
 
     torch.set_num_threads(1)  # one torch thread per process: much faster on small machines
     venv = VecMonitor(urban_canyon_vec_env(n_copies=2, n_uavs=3, max_steps=100))
@@ -405,6 +405,6 @@ def urban_canyon_vec_env(
     -------
     SeededVecEnv or BatchedVecEnv
     """
-    from training.envs import make_env_fn
+    from coopnav_env.training.envs import make_env_fn
 
     return make_vec_env(make_env_fn("urban_canyon_v0", env_kwargs), n_copies, num_cpus, kind=kind)

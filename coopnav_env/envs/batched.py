@@ -4,7 +4,7 @@
 random generator) and steps them with one ``(K, N, 3)`` action array, returning
 ``(K, N, obs_dim)`` observations, ``(K, N)`` rewards and ``(K,)`` episode-end flags; a
 finished copy is reset at once (automatic reset), as vector environments do. It is the engine
-of the batched Stable-Baselines3 vector environment (:func:`training.vec_env.make_vec_env`
+of the batched Stable-Baselines3 vector environment (:func:`coopnav_env.training.vec_env.make_vec_env`
 with ``kind="batched"``, the ``vec_env: batched`` setting of ``coopnav train``).
 
 Equivalence with K separate environments

@@ -878,7 +878,7 @@ class UrbanWorld:
         ``(P, 3, 3)``, default none; the margin in sigma and its cap; the flight band), none
         from a point inside a building. What a receiver that has the city map can predict:
         the environment's look-ahead observations and the route features of
-        :mod:`agents.routes` use it."""
+        :mod:`coopnav_env.agents.routes` use it."""
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         cov = np.zeros((pts.shape[0], 3, 3)) if cov is None else cov
         kin = self.config.kinematics

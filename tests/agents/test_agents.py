@@ -7,8 +7,8 @@ import importlib.util
 import numpy as np
 import pytest
 
-from agents import POLICY_NAMES, Policy, make_policy
-from agents.heuristics import Polyline, street_route
+from coopnav_env.agents import POLICY_NAMES, Policy, make_policy
+from coopnav_env.agents.heuristics import Polyline, street_route
 from tests.training.toy_env import ToyParallelEnv
 
 HAS_ENV = importlib.util.find_spec("coopnav_env.urban_canyon_v0") is not None

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from agents import make_policy
+from coopnav_env.agents import make_policy
 from coopnav_env import urban_canyon_v0
 from tests.fly_alike import assert_fly_alike
 

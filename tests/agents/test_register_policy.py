@@ -1,12 +1,12 @@
-"""Your own policy under a name: agents.register_policy, make_policy and evaluation."""
+"""Your own policy under a name: coopnav_env.agents.register_policy, make_policy and evaluation."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-import agents
-from agents import make_policy, register_policy
+import coopnav_env.agents
+from coopnav_env.agents import make_policy, register_policy
 from coopnav_env import urban_canyon_v0
 
 
@@ -61,7 +61,7 @@ def test_factory_must_return_a_policy() -> None:
 
 
 def test_evaluate_flies_a_registered_policy() -> None:
-    from training.evaluate import evaluate
+    from coopnav_env.training.evaluate import evaluate
 
     register_policy("hover", _Hover)
     report = evaluate(["hover", "formation"], [1_000_000], {"max_steps": 5}, plots=False)

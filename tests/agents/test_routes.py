@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents import make_policy
-from agents.routes import (
+from coopnav_env.agents import make_policy
+from coopnav_env.agents.routes import (
     FEATURE_SENSE,
     ROUTE_FEATURES,
     RouteModel,
@@ -231,7 +231,7 @@ def test_a_split_column_flies_two_routes_abreast_and_reaches_the_goal():
     q.act(obs)
     assert q.route_split_chosen == others[0]
     # flown to the end: the two sub-columns are apart somewhere and both reach the goal
-    from training.evaluate import run_episode
+    from coopnav_env.training.evaluate import run_episode
 
     rec = run_episode(env, make_policy("ceiling@route_split_index=1", env), seed)
     assert rec.success
@@ -250,7 +250,7 @@ def test_a_split_column_flies_two_routes_abreast_and_reaches_the_goal():
 
 
 def test_split_features_of_one_route_match_the_route_features():
-    from agents.routes import SPLIT_FEATURES, split_features
+    from coopnav_env.agents.routes import SPLIT_FEATURES, split_features
 
     env = _env()
     seed = _multi_route_seed(env)
@@ -291,8 +291,8 @@ def p_path_mid(p, k: int) -> np.ndarray:
 
 
 def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_path):
-    from training.cli import main
-    from training.route_learning import arrays_to_episodes, episodes_to_arrays
+    from coopnav_env.training.cli import main
+    from coopnav_env.training.route_learning import arrays_to_episodes, episodes_to_arrays
 
     out = tmp_path / "run"
     argv = ["train-routes", "--episodes", "8", "--block", "4", "--jobs", "1"]
@@ -345,7 +345,7 @@ def test_skyroute_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points()
 
 
 def test_study_accepts_train_routes_runs(tmp_path):
-    from training.marl_study import parse_runs, run_env, run_policy_name
+    from coopnav_env.training.marl_study import parse_runs, run_env, run_policy_name
 
     run = tmp_path / "r"
     run.mkdir()
@@ -434,7 +434,7 @@ def test_route_features_for_any_column_spacing(spacing):
 
 
 def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean():
-    from training.route_learning import arrays_to_episodes, collect_episode, episodes_to_arrays
+    from coopnav_env.training.route_learning import arrays_to_episodes, collect_episode, episodes_to_arrays
 
     env = _env()
     seed = _multi_route_seed(env)
@@ -520,7 +520,7 @@ def test_route_choice_within_turns_prices_what_routes_with_more_turns_add():
 
 
 def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
-    from agents.routes import SPLIT_FEATURES
+    from coopnav_env.agents.routes import SPLIT_FEATURES
     from tests.benchmark_script import load_benchmark
 
     bench = load_benchmark("split_choice")
@@ -662,7 +662,7 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
 
 
 def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(tmp_path):
-    from training.cli import main
+    from coopnav_env.training.cli import main
 
     out = tmp_path / "run"
     argv = ["train-routes", "--episodes", "8", "--jobs", "1", "--first-seed", "0"]
@@ -678,7 +678,7 @@ def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(
 
 
 def _split_model(weight_on_split: float, base: str = "ceiling@route_choice='pdop_gt3'"):
-    from agents.routes import SPLIT_FEATURES
+    from coopnav_env.agents.routes import SPLIT_FEATURES
 
     k = len(SPLIT_FEATURES)
     w = [0.0] * k
@@ -687,7 +687,7 @@ def _split_model(weight_on_split: float, base: str = "ceiling@route_choice='pdop
 
 
 def test_split_models_save_load_and_check_their_kind(tmp_path):
-    from agents.routes import SPLIT_FEATURES, resolve_route_model
+    from coopnav_env.agents.routes import SPLIT_FEATURES, resolve_route_model
 
     m = _split_model(-1.0)
     path = m.save(tmp_path / "run" / "split_model.json")
@@ -749,7 +749,7 @@ def test_a_split_model_chooses_whether_and_where_the_column_splits(tmp_path):
 
 
 def test_split_choice_fits_and_prices_a_split_model(tmp_path):
-    from agents.routes import SPLIT_FEATURES
+    from coopnav_env.agents.routes import SPLIT_FEATURES
     from tests.benchmark_script import load_benchmark
 
     bench = load_benchmark("split_choice")

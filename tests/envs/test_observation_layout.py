@@ -86,7 +86,7 @@ def test_decoded_fields_are_the_physical_quantities(kwargs) -> None:
     decoded value is off by at most 6e-8 * scale (plus float64 rounding); atol = 1e-7 * scale.
     Values outside the entry's bounds decode to the clipped bound.
     """
-    from agents.heuristics import WaypointPolicy
+    from coopnav_env.agents.heuristics import WaypointPolicy
 
     env = urban_canyon_v0.parallel_env(max_steps=40, **kwargs)
     layout = obs_layout(env)

@@ -173,7 +173,7 @@ def test_observation_contents() -> None:
 
 
 def test_waypoints_advance_along_the_route_to_the_goal() -> None:
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
 
     env = urban_canyon_v0.parallel_env()
     for seed in range(20):  # an episode whose route turns at least once
@@ -312,7 +312,7 @@ def test_supersuit_sb3_vec_env_with_crashes() -> None:
             crashes += bool(np.any(rewards[dones.astype(bool)] < -30.0))  # the -40 crash penalty
             # SuperSuit's own auto-reset merges the next episode's reset infos over the
             # terminal step's ({**step, **reset}: the keys are the same): the documented
-            # reason to use training.vec_env.make_vec_env, which keeps the terminal infos
+            # reason to use coopnav_env.training.vec_env.make_vec_env, which keeps the terminal infos
             assert all(i["step"] == 0 for i in done_infos)
     assert crashes >= 2  # crashed, reset automatically, and crashed again
     vec.close()

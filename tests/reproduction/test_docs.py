@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from reproduction import ReproduceConfig
+from coopnav_env.reproduction import ReproduceConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs" / "reproduction"

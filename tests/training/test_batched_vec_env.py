@@ -15,10 +15,10 @@ pytest.importorskip("supersuit")
 from coopnav_env import urban_canyon_v0
 from tests.training.test_train_eval import params, toy_cfg, urban_cfg
 from tests.training.toy_env import ToyParallelEnv
-from training.config import TrainConfig, load_config
-from training.sb3_backend import train
-from training.train import add_arguments, config_from_args
-from training.vec_env import BatchedVecEnv, SeededVecEnv, make_vec_env
+from coopnav_env.training.config import TrainConfig, load_config
+from coopnav_env.training.sb3_backend import train
+from coopnav_env.training.train import add_arguments, config_from_args
+from coopnav_env.training.vec_env import BatchedVecEnv, SeededVecEnv, make_vec_env
 
 
 def _same(a, b) -> bool:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from coopnav_env.nav import integrity_rates
-from training.evaluate import EVAL_SEED_START, evaluate
+from coopnav_env.training.evaluate import EVAL_SEED_START, evaluate
 
 
 def test_integrity_columns_only_with_integrity_and_equal_to_integrity_rates() -> None:

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
-from training.envs import heldout_seeds
-from training.eval_plots import (
+from coopnav_env.training.envs import heldout_seeds
+from coopnav_env.training.eval_plots import (
     CDF_CAPTION,
     distance_along_route,
     error_cdf_figure,
@@ -19,7 +19,7 @@ from training.eval_plots import (
     short_labels,
     trajectory_figure,
 )
-from training.evaluate import EpisodeRecord, evaluate
+from coopnav_env.training.evaluate import EpisodeRecord, evaluate
 
 pytest.importorskip("matplotlib")
 HAS_ENV = importlib.util.find_spec("coopnav_env.urban_canyon_v0") is not None
@@ -134,8 +134,8 @@ def test_cdf_says_why_curves_stop_below_one_and_labels_3_m() -> None:
 @pytest.fixture(scope="module")
 def toy_run(tmp_path_factory):
     pytest.importorskip("stable_baselines3")
-    from training.config import TrainConfig, load_config
-    from training.sb3_backend import train
+    from coopnav_env.training.config import TrainConfig, load_config
+    from coopnav_env.training.sb3_backend import train
 
     out = tmp_path_factory.mktemp("toy") / "run"
     data = {**load_config(), "env_id": TOY_ENV_ID, "out": str(out), **TOY_TRAINING}
@@ -144,7 +144,7 @@ def toy_run(tmp_path_factory):
 
 
 def _evaluate_cli(*argv: str) -> int:
-    from training import evaluate as ev
+    from coopnav_env.training import evaluate as ev
 
     parser = argparse.ArgumentParser()
     ev.add_arguments(parser)
@@ -187,7 +187,7 @@ def test_the_run_settings_are_named_in_the_header(toy_run, tmp_path, capsys) -> 
 
 @pytest.mark.skipif(not HAS_ENV, reason="urban_canyon_v0 not available")
 def test_the_warning_names_thereward_settings() -> None:
-    from training.evaluate import reward_settings
+    from coopnav_env.training.evaluate import reward_settings
 
     text = reward_settings("urban_canyon_v0", {"n_uavs": 3, "collision_penalty": 7.0})
     assert "n_uavs=3" in text and "collision_penalty=7.0" in text

@@ -11,12 +11,12 @@ import pytest
 pytest.importorskip("torchrl")
 torch = pytest.importorskip("torch")
 
-from agents import make_policy  # noqa: E402
-from agents.marl_nets import MARLSettings  # noqa: E402
+from coopnav_env.agents import make_policy  # noqa: E402
+from coopnav_env.agents.marl_nets import MARLSettings  # noqa: E402
 from coopnav_env import urban_canyon_v0  # noqa: E402
 from tests.fly_alike import assert_fly_alike  # noqa: E402
-from training.cli import main  # noqa: E402
-from training.marl import MARLTrainer  # noqa: E402
+from coopnav_env.training.cli import main  # noqa: E402
+from coopnav_env.training.marl import MARLTrainer  # noqa: E402
 
 SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--no-progress"]
 
@@ -121,7 +121,7 @@ def test_an_untrained_offset_policy_flies_exactly_like_its_base(tmp_path) -> Non
 
 
 def test_the_residual_wall_guard_keeps_the_residual_off_near_walls(tmp_path) -> None:
-    from agents.marl_nets import swarm_command
+    from coopnav_env.agents.marl_nets import swarm_command
     from coopnav_env.envs import obs_layout
 
     env = urban_canyon_v0.parallel_env(n_uavs=3)
@@ -177,7 +177,7 @@ def test_options_mode_samples_one_hot_choices_and_starts_at_its_base(tmp_path) -
     expected = np.where(act[..., 0] == 1.0, np.log(0.7), np.log(0.3 / 4))
     np.testing.assert_allclose(logp, expected, rtol=1e-5)
     # a chosen option moves the UAV's slot by its row of option_shifts_m
-    from agents.marl_nets import swarm_command
+    from coopnav_env.agents.marl_nets import swarm_command
 
     env = urban_canyon_v0.parallel_env()
     obs, _ = env.reset(seed=1_000_003)
@@ -202,7 +202,7 @@ def test_options_mode_samples_one_hot_choices_and_starts_at_its_base(tmp_path) -
 
 
 def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch) -> None:
-    import training.marl as marl
+    import coopnav_env.training.marl as marl
 
     s = MARLSettings(
         algorithm="mappo",
@@ -344,7 +344,7 @@ def test_torchrl_wrapper_accepts_the_environment() -> None:
 
 
 def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
-    from training.marl import export_policy
+    from coopnav_env.training.marl import export_policy
 
     s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
     tr = MARLTrainer(s, {}, seed=0)
@@ -418,8 +418,8 @@ def test_command_line_env_settings_win_over_the_backends_env_block(tmp_path) -> 
     too, although its ``torchrl.env`` block of the config file overrides ``env``."""
     import argparse
 
-    from training.marl import settings_of
-    from training.train import add_arguments, config_from_args
+    from coopnav_env.training.marl import settings_of
+    from coopnav_env.training.train import add_arguments, config_from_args
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)

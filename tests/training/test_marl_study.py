@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
-from training.marl_study import EpisodeResult, behaviour_descriptors, summarise
+from coopnav_env.training.marl_study import EpisodeResult, behaviour_descriptors, summarise
 
 
 def test_descriptors_of_a_known_formation() -> None:
@@ -94,7 +94,7 @@ def test_summary_ranks_by_the_chosen_score() -> None:
 
 
 def test_study_command_writes_its_report(tmp_path) -> None:
-    from training.marl_study import main
+    from coopnav_env.training.marl_study import main
 
     out = tmp_path / "study"
     rc = main(
@@ -205,8 +205,8 @@ def test_paired_variants_group_env_pairs_a_setting(capsys) -> None:
 def test_runs_entries_are_checked(tmp_path) -> None:
     """``coopnav study --runs``: malformed entries, a name given twice and a folder without a
     model are errors that name the problem, raised before anything is flown."""
-    from training.marl_study import main as study_main
-    from training.marl_study import parse_named_lists
+    from coopnav_env.training.marl_study import main as study_main
+    from coopnav_env.training.marl_study import parse_named_lists
 
     assert parse_named_lists(["m=a,b", "n=c"], "--x", "F") == {"m": ["a", "b"], "n": ["c"]}
     # a policy's own options stay with it; a bare name after them is the next entry

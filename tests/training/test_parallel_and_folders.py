@@ -1,4 +1,4 @@
-"""training.parallel.map_seeds and training.files.claim_run_folder."""
+"""coopnav_env.training.parallel.map_seeds and coopnav_env.training.files.claim_run_folder."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from training.files import claim_run_folder
-from training.parallel import map_seeds
+from coopnav_env.training.files import claim_run_folder
+from coopnav_env.training.parallel import map_seeds
 
 
 def _square_block(common: int, seeds: list[int]) -> list[tuple[int, int]]:

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING, ToyParallelEnv
-from training import compile_notice as cn
+from coopnav_env.training import compile_notice as cn
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -133,8 +133,8 @@ def test_warm_up_env_resets_and_steps_once() -> None:
 
 def test_train_cli_warms_the_kernels_inside_the_notice(tmp_path, monkeypatch, capsys) -> None:
     pytest.importorskip("stable_baselines3")
-    import training.train as tr
-    from training.cli import main
+    import coopnav_env.training.train as tr
+    from coopnav_env.training.cli import main
 
     events = []
 
@@ -162,8 +162,8 @@ def test_behaviour_cloning_shows_its_progress(capsys) -> None:
     pytest.importorskip("stable_baselines3")
     from stable_baselines3 import PPO
 
-    from training.sb3_backend import behaviour_clone
-    from training.vec_env import make_vec_env
+    from coopnav_env.training.sb3_backend import behaviour_clone
+    from coopnav_env.training.vec_env import make_vec_env
 
     def env_fn():
         return ToyParallelEnv(n_uavs=2, max_steps=6)

@@ -22,17 +22,17 @@ from coopnav_env.nav import (
     solve_master_slave,
     solve_standalone,
 )
-from reproduction import ReproduceConfig, build_config, reproduce, simulate_epoch
-from reproduction.report import report_markdown
-from reproduction.scenario import (
+from coopnav_env.reproduction import ReproduceConfig, build_config, reproduce, simulate_epoch
+from coopnav_env.reproduction.report import report_markdown
+from coopnav_env.reproduction.scenario import (
     PaperScenario,
     canyon_mask_elevation_deg,
     formation_enu,
     in_azimuth_intervals,
 )
-from reproduction.simulation import sensitivity_variants, variant_setting
-from training.cli import build_parser
-from training.cli import main as cli_main
+from coopnav_env.reproduction.simulation import sensitivity_variants, variant_setting
+from coopnav_env.training.cli import build_parser
+from coopnav_env.training.cli import main as cli_main
 
 FIGURES = (
     "fig6_skyplot.png",

@@ -23,15 +23,15 @@ from pathlib import Path
 import pytest
 import yaml
 
-from training.config import TrainConfig, load_config
-from training.rllib_backend import (
+from coopnav_env.training.config import TrainConfig, load_config
+from coopnav_env.training.rllib_backend import (
     INSTALL_HINT,
     RLlibSettings,
     check_address,
     find_latest_rllib_checkpoint,
     import_rllib,
 )
-from training.train import add_arguments, config_from_args
+from coopnav_env.training.train import add_arguments, config_from_args
 
 ROOT = Path(__file__).resolve().parents[2]
 HAS_RAY = importlib.util.find_spec("ray") is not None
@@ -107,7 +107,7 @@ def test_bad_rllib_settings(change, match):
 
 
 def test_cli_negative_runners_is_a_clear_error(tmp_path, capsys):
-    from training.cli import main
+    from coopnav_env.training.cli import main
 
     out = tmp_path / "run"
     assert main(["train", "--backend", "rllib", "--out", str(out), "--num-env-runners", "-2"]) == 2
@@ -133,7 +133,7 @@ def test_missing_ray_is_a_clear_error(monkeypatch, tmp_path, capsys):
         monkeypatch.setitem(sys.modules, name, None)  # `import ray...` raises ImportError
     with pytest.raises(ImportError, match=r"install the extra with: pip install -e \"\.\[ray\]\""):
         import_rllib()
-    from training.cli import main
+    from coopnav_env.training.cli import main
 
     out = tmp_path / "run"
     assert main(["train", "--backend", "rllib", "--out", str(out), "--timesteps", "10"]) == 2
@@ -144,7 +144,7 @@ def test_missing_ray_is_a_clear_error(monkeypatch, tmp_path, capsys):
     module = tmp_path / "ckpt" / "learner_group" / "learner" / "rl_module" / "shared"
     module.mkdir(parents=True)
     (module / "module_state.pkl").write_bytes(b"")
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
 
     with pytest.raises(ImportError, match=r"pip install -e \"\.\[ray\]\""):
@@ -152,10 +152,10 @@ def test_missing_ray_is_a_clear_error(monkeypatch, tmp_path, capsys):
 
 
 def test_rllib_policy_and_resume_errors(tmp_path, capsys):
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
-    from training.cli import main
-    from training.rllib_backend import resolve_resume
+    from coopnav_env.training.cli import main
+    from coopnav_env.training.rllib_backend import resolve_resume
 
     env = urban_canyon_v0.parallel_env(n_uavs=2)
     with pytest.raises(ValueError, match="needs the path of an RLlib checkpoint"):
@@ -176,7 +176,7 @@ def test_rllib_policy_and_resume_errors(tmp_path, capsys):
 
 
 def test_evaluate_reads_the_environment_of_an_rllib_run(tmp_path):
-    from training.evaluate import train_config_of_policies
+    from coopnav_env.training.evaluate import train_config_of_policies
 
     run = tmp_path / "run"
     (run / "final_model").mkdir(parents=True)
@@ -190,7 +190,7 @@ def test_evaluate_reads_the_environment_of_an_rllib_run(tmp_path):
 
 @pytest.mark.skipif(not HAS_RAY, reason="ray[rllib] not installed")
 def test_env_creator_wraps_the_swarm_for_rllib():
-    from training.rllib_backend import make_rllib_env, map_to_shared_policy
+    from coopnav_env.training.rllib_backend import make_rllib_env, map_to_shared_policy
 
     env = make_rllib_env({"env_id": "urban_canyon_v0", "env_kwargs": {"n_uavs": 3}})
     obs, _ = env.reset(seed=4)
@@ -204,7 +204,7 @@ def test_env_creator_wraps_the_swarm_for_rllib():
 @pytest.mark.skipif(not HAS_RAY, reason="ray[rllib] not installed")
 def test_env_copies_of_different_runners_get_distinct_seeds():
     """RLlib + gymnasium seed copy j of runner i with seed + i + j; we shift to seed + i E + j."""
-    from training.rllib_backend import make_rllib_env
+    from coopnav_env.training.rllib_backend import make_rllib_env
 
     class Context(dict):  # RLlib's EnvContext: a dict with the runner's index
         def __init__(self, worker_index: int, copies: int):
@@ -245,7 +245,7 @@ RLLIB_SMALL = [
 
 def _coopnav(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
     proc = subprocess.run(
-        [sys.executable, "-m", "training.cli", *args],
+        [sys.executable, "-m", "coopnav_env.training.cli", *args],
         cwd=ROOT,
         env=env,
         capture_output=True,
@@ -320,7 +320,7 @@ def test_rllib_train_resume_and_evaluate_beside_sb3(tmp_path):
     assert row["iteration"] == "3" and float(row["rllib_env_steps_lifetime"]) == 192
 
     # an SB3 policy in the same environment, then one evaluation table for all
-    from training.cli import main
+    from coopnav_env.training.cli import main
 
     sb3 = tmp_path / "sb3"
     assert main(

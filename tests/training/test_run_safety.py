@@ -26,10 +26,10 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
-from training.cli import main
-from training.config import TrainConfig, load_config
-from training.runs import LOCK_NAME
-from training.sb3_backend import find_latest_checkpoint, train
+from coopnav_env.training.cli import main
+from coopnav_env.training.config import TrainConfig, load_config
+from coopnav_env.training.runs import LOCK_NAME
+from coopnav_env.training.sb3_backend import find_latest_checkpoint, train
 
 ROOT = Path(__file__).resolve().parents[2]
 TOY = TOY_ENV_ID
@@ -70,7 +70,7 @@ def loads(path: Path) -> bool:
 
 def popen_train(tmp_path: Path, *args: str, **kw) -> subprocess.Popen:
     """``coopnav train`` on the toy env in a subprocess (stderr piped, text)."""
-    cmd = [sys.executable, "-m", "training.cli", "train", "--env-id", TOY, *args]
+    cmd = [sys.executable, "-m", "coopnav_env.training.cli", "train", "--env-id", TOY, *args]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     return subprocess.Popen(cmd, cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True, **kw)
 
@@ -327,7 +327,7 @@ def _limited(limit_bytes: int):
 
 def _coopnav(args: list[str], limit_bytes: int | None = None) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "training.cli", *args],
+        [sys.executable, "-m", "coopnav_env.training.cli", *args],
         env={**os.environ, "PYTHONPATH": str(ROOT)},
         capture_output=True,
         text=True,

@@ -1,11 +1,11 @@
-"""training.stats: IQM and bootstrap intervals against direct formulations."""
+"""coopnav_env.training.stats: IQM and bootstrap intervals against direct formulations."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from training.stats import (
+from coopnav_env.training.stats import (
     bootstrap_mean_interval,
     interquartile_mean,
     paired_difference,

@@ -19,12 +19,12 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
 from tests.training.toy_env import ToyParallelEnv
-from training.config import TrainConfig, apply_overrides, load_config
-from training.envs import EVAL_SEED_START, heldout_seeds
-from training.evaluate import evaluate
-from training.sb3_backend import find_latest_checkpoint, train
-from training.train import config_from_args
-from training.vec_env import make_vec_env
+from coopnav_env.training.config import TrainConfig, apply_overrides, load_config
+from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
+from coopnav_env.training.evaluate import evaluate
+from coopnav_env.training.sb3_backend import find_latest_checkpoint, train
+from coopnav_env.training.train import config_from_args
+from coopnav_env.training.vec_env import make_vec_env
 
 TOY = "tests.training.toy_env:ToyParallelEnv"
 TOY_ENV = {"n_uavs": 3, "max_steps": 12}
@@ -145,7 +145,7 @@ def test_packaged_config_is_valid():
 
 
 def test_cli_flags_override_yaml(tmp_path):
-    from training.train import add_arguments
+    from coopnav_env.training.train import add_arguments
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
@@ -198,7 +198,7 @@ def test_unknown_ppo_setting_and_missing_resume(tmp_path):
 
 
 def test_cli_negative_timesteps_is_a_clear_error(tmp_path, capsys):
-    from training.cli import main
+    from coopnav_env.training.cli import main
 
     rc = main(["train", "--out", str(tmp_path), "--timesteps", "-1"])
     assert rc == 2
@@ -284,7 +284,7 @@ def test_evaluate_is_deterministic_and_writes_reports(tmp_path):
 
 
 def test_paired_difference_by_episode():
-    from training.evaluate import EpisodeRecord, Report
+    from coopnav_env.training.evaluate import EpisodeRecord, Report
 
     def record(seed, errors):
         e = np.asarray(errors, dtype=float)
@@ -311,7 +311,7 @@ def test_evaluate_bad_policies(tmp_path):
 
 
 def test_evaluate_cli_reports_unknown_policy(capsys):
-    from training.cli import main
+    from coopnav_env.training.cli import main
 
     rc = main(["evaluate", "--policies", "nope", "--env-id", TOY, "--episodes", "1"])
     assert rc == 2 and "unknown policy 'nope'" in capsys.readouterr().err
@@ -376,7 +376,7 @@ def test_urban_behaviour_cloning_warm_start(tmp_path):
     import torch
     from stable_baselines3 import PPO
 
-    from agents import make_policy
+    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
 
     out = tmp_path / "bc"
@@ -430,7 +430,7 @@ def test_urban_bad_env_setting_is_a_clear_error(tmp_path):
 
 def test_evaluate_cli_uses_the_training_environment(tmp_path, capsys):
     """``coopnav evaluate ppo:RUN/final_model.zip`` runs in the env RUN was trained in."""
-    from training import evaluate as ev
+    from coopnav_env.training import evaluate as ev
 
     final = train(toy_cfg(tmp_path / "run", timesteps=200, env={"n_uavs": 2, "max_steps": 5}))
     parser = argparse.ArgumentParser()
@@ -448,7 +448,7 @@ def test_evaluate_cli_uses_the_training_environment(tmp_path, capsys):
 
 def test_clustered_standard_error_of_the_pooled_mean():
     """Episodes as clusters: equals the textbook formula, and ignores NaN (no-fix) samples."""
-    from training.evaluate import clustered_se
+    from coopnav_env.training.evaluate import clustered_se
 
     rng = np.random.default_rng(0)
     eps = [rng.normal(3.0 + rng.normal(), 0.5, size=rng.integers(20, 60)) for _ in range(12)]

@@ -1,4 +1,4 @@
-"""``training.vec_env.urban_canyon_vec_env``: SB3 from your own script (issue 16)."""
+"""``coopnav_env.training.vec_env.urban_canyon_vec_env``: SB3 from your own script (issue 16)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
-from training.vec_env import BatchedVecEnv, SeededVecEnv, urban_canyon_vec_env
+from coopnav_env.training.vec_env import BatchedVecEnv, SeededVecEnv, urban_canyon_vec_env
 
 ENV = {"n_uavs": 2, "max_steps": 5}
 
