@@ -4,8 +4,9 @@
 random generator) and steps them with one ``(K, N, 3)`` action array, returning
 ``(K, N, obs_dim)`` observations, ``(K, N)`` rewards and ``(K,)`` episode-end flags; a
 finished copy is reset at once (automatic reset), as vector environments do. It is the engine
-of the batched Stable-Baselines3 vector environment (:func:`coopnav_env.training.vec_env.make_vec_env`
-with ``kind="batched"``, the ``vec_env: batched`` setting of ``coopnav train``).
+of the batched Stable-Baselines3 vector environment
+(:func:`coopnav_env.training.vec_env.make_vec_env` with ``kind="batched"``, the
+``vec_env: batched`` setting of ``coopnav train``).
 
 Equivalence with K separate environments
 ----------------------------------------
@@ -162,11 +163,13 @@ class BatchedUrbanCanyonEnv:
                 f"actions must be a real numeric array of shape {shape}, got dtype {cmd.dtype}"
             )
         cmd = cmd.astype(np.float64, copy=False)
-        if cmd.shape != shape:
-            if cmd.size == np.prod(shape):
-                cmd = cmd.reshape(shape)
-            else:
-                raise ValueError(f"actions must have shape {shape}, got {cmd.shape}")
+        flat = (self.n_copies * self.n_agents, 3)
+        if cmd.shape == flat:  # copy-major: row k * N + i is UAV i of copy k
+            cmd = cmd.reshape(shape)
+        elif cmd.shape != shape:
+            # the shape is checked exactly: a transposed (N, K, 3) array has as many entries
+            # but would drive the wrong UAVs
+            raise ValueError(f"actions must have shape {shape} or {flat}, got {cmd.shape}")
         if not np.all(np.isfinite(cmd)):
             bad = sorted({int(k) for k in np.nonzero(~np.isfinite(cmd))[0]})
             raise ValueError(f"actions contain NaN or inf (copies {bad})")
@@ -175,9 +178,10 @@ class BatchedUrbanCanyonEnv:
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[dict[str, dict]], np.ndarray]:
-        """Step every copy with ``actions`` of shape ``(K, N, 3)`` (or ``(K * N, 3)``).
+        """Step every copy with ``actions`` of shape ``(K, N, 3)`` (or ``(K * N, 3)``, copy-major).
 
-        Actions are clipped to ``[-1, 1]``; NaN or inf raises ``ValueError``.
+        Actions are clipped to ``[-1, 1]``; NaN or inf, or any other shape (a transposed
+        ``(N, K, 3)`` array included), raises ``ValueError``.
 
         Returns
         -------

@@ -23,6 +23,7 @@ candidate positions, for the UAV and for the swarm, 10 entries (``obs_candidate_
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -211,6 +212,13 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
     def _noise_stream(self, seed: int | None, options: dict[str, Any] | None) -> int:
         """The ``noise_stream`` reset option (see :meth:`reset`), checked; 0 without it."""
+        if options is None:
+            return 0
+        if not isinstance(options, Mapping):
+            raise ValueError(
+                "reset options must be a dict (allowed keys: 'noise_stream'; others are "
+                f"ignored), got {options!r} ({type(options).__name__})"
+            )
         if not options:
             return 0
         if "noise_stream" not in options:  # other keys are ignored (PettingZoo's API test

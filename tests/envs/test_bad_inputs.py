@@ -90,3 +90,29 @@ def test_numpy_integer_seeds_are_accepted():
     ob, _ = b.reset(seed=7)
     for k in oa:
         np.testing.assert_array_equal(oa[k], ob[k])
+
+
+@pytest.mark.parametrize("options", [5, "noise_stream", ["noise_stream"], 1.5])
+def test_reset_options_that_are_not_a_mapping_are_refused(options):
+    """``reset(options=...)`` takes a mapping (issue 35, finding 10): anything else is a
+    ValueError naming ``options`` and the key it may hold, not a raw TypeError."""
+    env = urban_canyon_v0.parallel_env(n_uavs=2)
+    with pytest.raises(ValueError, match=r"reset options must be a dict.*'noise_stream'.*got"):
+        env.reset(seed=0, options=options)
+    env.reset(seed=0, options={})  # empty and None stay fine
+    env.reset(seed=0, options=None)
+
+
+def test_batched_step_refuses_a_transposed_action_array():
+    """A ``(N, K, 3)`` array has the K * N * 3 entries of ``(K, N, 3)`` but drives the wrong
+    UAVs when reshaped (issue 35, finding 11): only ``(K, N, 3)`` and ``(K * N, 3)`` pass."""
+    batched = BatchedUrbanCanyonEnv(2, n_uavs=3)
+    batched.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(2, 3, 3\) or \(6, 3\), got \(3, 2, 3\)"):
+        batched.step(np.zeros((3, 2, 3)))
+    with pytest.raises(ValueError, match=r"got \(18,\)"):
+        batched.step(np.zeros(18))
+    with pytest.raises(ValueError, match=r"got \(2, 9\)"):
+        batched.step(np.zeros((2, 9)))
+    batched.step(np.zeros((2, 3, 3)))
+    batched.step(np.zeros((6, 3)))  # the documented flat form (copy-major)
