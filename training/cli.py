@@ -33,7 +33,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "coopnav_env.training.route_learning",
         "learn which street route to fly from flown episodes (a learned route model)",
     ),
-    "evaluate": ("coopnav_env.training.evaluate", "evaluate policies: navigation error, goal rate, plots"),
+    "evaluate": (
+        "coopnav_env.training.evaluate_cli",
+        "evaluate policies: navigation error, goal rate, plots",
+    ),
     "study": (
         "coopnav_env.training.marl_study",
         "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",

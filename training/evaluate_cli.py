@@ -1,0 +1,287 @@
+"""``coopnav evaluate``: the command line of :mod:`coopnav_env.training.evaluate`.
+
+Parses the flags, finds the environment to evaluate in and calls
+:func:`coopnav_env.training.evaluate.evaluate`. The environment is, in order: the
+``config.yaml`` named by ``--train-config``; else the one of the run a trained policy
+(``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/``torchrl:`` ...) came from, found beside the
+model or one or two folders up (:func:`train_config_of_policies`); else the environment's
+defaults; ``--env-set``, ``--n-uavs`` and ``--city`` then change it. A trained policy flown
+without its run's settings gets a warning on stderr naming the settings used instead.
+The library API (:func:`~coopnav_env.training.evaluate.evaluate`,
+:func:`~coopnav_env.training.evaluate.run_episode`, the report) stays in
+:mod:`coopnav_env.training.evaluate`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from coopnav_env.training.compile_notice import compile_notice, warm_up_env
+from coopnav_env.training.config import apply_overrides, parse_yaml
+from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
+from coopnav_env.training.evaluate import DEFAULT_EPISODES, _make_env, evaluate
+from coopnav_env.training.files import jsonable
+
+__all__ = [
+    "TRAINED_KINDS",
+    "add_arguments",
+    "reward_settings",
+    "run",
+    "train_config_of_policies",
+]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``coopnav evaluate``."""
+    parser.add_argument(
+        "--policies",
+        nargs="+",
+        default=["random", "formation", "sky"],
+        help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
+        "ppo:<path> (SB3 .zip), mappo:<path> / ippo:<path> (TorchRL run or .pt), rllib:<path> "
+        "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
+        "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="directory for report.* and plots (default: none, only the table is printed)",
+    )
+    parser.add_argument(
+        "--episodes",
+        type=int,
+        default=DEFAULT_EPISODES,
+        help="held-out episodes per policy (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--seed-start",
+        type=int,
+        default=EVAL_SEED_START,
+        help=f"first held-out reset seed (>= {EVAL_SEED_START}; training uses seeds below) "
+        "(default: %(default)s)",
+    )
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=None,
+        help="explicit reset seeds, instead of --episodes seeds from --seed-start (default: none)",
+    )
+    parser.add_argument(
+        "--env-id",
+        default=None,
+        help="environment (default: the one a trained policy's run was trained in, else "
+        "urban_canyon_v0)",
+    )
+    parser.add_argument(
+        "--train-config",
+        default=None,
+        help="config.yaml of a training run: evaluate in its environment (default: the one "
+        "in the run folder of the first trained policy; without one, a warning)",
+    )
+    parser.add_argument(
+        "--n-uavs",
+        type=int,
+        default=None,
+        help="UAVs per swarm, env setting n_uavs (default: the training run's, else the "
+        "environment's)",
+    )
+    parser.add_argument(
+        "--city",
+        default=None,
+        help="city layout, env setting 'city' (default: the training run's, else the "
+        "environment's)",
+    )
+    parser.add_argument(
+        "--env-set",
+        dest="env_overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override an environment setting (repeatable; default: none)",
+    )
+    parser.add_argument(
+        "--no-plots", action="store_true", help="skip the PNG plots (default: plots are made)"
+    )
+
+
+def _read_train_config(path: Path) -> dict[str, Any]:
+    data = parse_yaml(path.read_text(), f"training config {path}") or {}
+    if not isinstance(data, Mapping):
+        raise ValueError(f"training config {path} must be a mapping of settings")
+    return dict(data)
+
+
+TRAINED_KINDS: tuple[str, ...] = ("ppo", "rllib", "mappo", "ippo", "torchrl")
+"""Policy prefixes of trained policies, whose run folder records their environment."""
+
+
+def _is_trained(name: str) -> bool:
+    """Whether a policy name is a trained policy, ``KIND:PATH`` (KIND in TRAINED_KINDS)."""
+    kind, sep, _ = name.partition(":")
+    return bool(sep) and kind in TRAINED_KINDS
+
+
+def _config_of_policy(name: str) -> Path | None:
+    """The ``config.yaml`` of the run a trained policy came from (None: not found, or the
+    policy is not a trained one): beside the model, or one or two folders up."""
+    if not _is_trained(name):
+        return None
+    model = Path(name.partition(":")[2])
+    for folder in (model, model.parent, model.parent.parent):
+        cfg = folder / "config.yaml"
+        if cfg.is_file():
+            return cfg
+    return None
+
+
+def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
+    """(env id, env kwargs, where they came from): ``--train-config``, else the run of a
+    trained policy, then flags; warns on stderr about a trained policy without its run's
+    settings (see :func:`_warn_untracked`)."""
+    trained: dict[str, Any] = {}
+    if args.train_config:
+        p = Path(args.train_config)
+        if not p.is_file():
+            raise FileNotFoundError(f"training config not found: {p}")
+        trained = _read_train_config(p)
+        source = f"from --train-config {p}"
+    else:
+        trained = train_config_of_policies(args.policies)
+        found = [c for c in map(_config_of_policy, args.policies) if c is not None]
+        if found:
+            source = f"from {found[0]}"
+        elif any(map(_is_trained, args.policies)):
+            source = "NO config.yaml of the trained policy's run: maybe not its training settings"
+        else:
+            source = ""
+    env_id = args.env_id or trained.get("env_id") or "urban_canyon_v0"
+    env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
+    if args.n_uavs is not None:
+        env["n_uavs"] = args.n_uavs
+    if args.city is not None:
+        env["city"] = args.city
+    flags = bool(args.env_overrides) or args.n_uavs is not None or args.city is not None
+    if flags:
+        source = "; ".join(x for x in (source, "changed by --env-set/--n-uavs/--city") if x)
+    if not args.train_config:
+        _warn_untracked(args.policies, env_id, env, bool(trained))
+    return env_id, env, source
+
+
+def _warn_untracked(
+    policies: Sequence[str], env_id: str, env_kwargs: Mapping[str, Any], have_config: bool
+) -> None:
+    """Say loudly on stderr when a trained policy is flown without its run's settings.
+
+    A policy trained with other rewards (``nav_reward``, weights, collision penalty), another
+    number of UAVs or episode length is not comparable with the others in an environment it
+    was not trained in: its return, goal rate and crashes mean something else. Names the
+    settings used, and the reward settings they resolve to where the environment has a
+    ``config`` (``urban_canyon_v0``).
+    """
+    missing = [n for n in policies if _is_trained(n) and _config_of_policy(n) is None]
+    if not missing:
+        return
+    where = "the other policy's run settings" if have_config else "the environment's defaults"
+    resolved = reward_settings(env_id, env_kwargs)
+    print(
+        f"coopnav evaluate: warning: no config.yaml of a training run beside (or one or two "
+        f"folders above) {', '.join(missing)}: evaluating in {env_id} with {where}, settings "
+        f"{json.dumps(jsonable(dict(env_kwargs)))}"
+        + (f" (resolved: {resolved})" if resolved else "")
+        + ". If it was trained with other settings (rewards, n_uavs, max_steps, ...), its "
+        "returns and goal rate are not comparable; pass --train-config RUN/config.yaml or the "
+        "settings with --env-set KEY=VALUE.",
+        file=sys.stderr,
+    )
+
+
+#: settings of ``urban_canyon_v0`` named in the warning of :func:`_warn_untracked`
+_NAMED_SETTINGS: tuple[str, ...] = (
+    "n_uavs",
+    "max_steps",
+    "nav_reward",
+    "nav_reward_weight",
+    "nav_team_weight",
+    "progress_reward_weight",
+    "collision_penalty",
+    "goal_bonus",
+)
+
+
+def reward_settings(env_id: str, env_kwargs: Mapping[str, Any]) -> str:
+    """``key=value`` of the main reward and episode settings the env resolves, or ""."""
+    try:
+        env = _make_env(env_id, env_kwargs)
+    except Exception:  # the evaluation itself reports bad settings, with its own message
+        return ""
+    config = getattr(getattr(env, "unwrapped", env), "config", None)
+    env.close()
+    values = [(k, getattr(config, k)) for k in _NAMED_SETTINGS if hasattr(config, k)]
+    return ", ".join(f"{k}={v!r}" for k, v in values)
+
+
+def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
+    """The training configuration a trained policy (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/
+    ``torchrl:``) came from.
+
+    ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
+    ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
+    in the environment it was trained in unless told otherwise (empty if none is found; then
+    ``coopnav evaluate`` warns on stderr).
+    Trained policies from runs with different environment settings raise ``ValueError``.
+    """
+    found: dict[str, Any] | None = None
+    for name in policies:
+        cfg = _config_of_policy(name)
+        if cfg is None:
+            continue
+        data = _read_train_config(cfg)
+        key = (data.get("env_id"), data.get("env") or {})
+        if found is not None and key != (found.get("env_id"), found.get("env") or {}):
+            raise ValueError(
+                "the PPO policies were trained in different environments "
+                f"({found.get('env')} vs {data.get('env')}); pass --train-config or "
+                "--env-set explicitly"
+            )
+        found = data
+    return found or {}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``coopnav evaluate``; returns the exit status (errors: see
+    :mod:`coopnav_env.training.cli`)."""
+    seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
+    if min(seeds) < 0:
+        raise ValueError(f"--seeds must be >= 0, got {min(seeds)}")
+    if min(seeds) < EVAL_SEED_START:
+        print(
+            f"coopnav evaluate: warning: seeds below {EVAL_SEED_START} may have been seen "
+            "in training",
+            file=sys.stderr,
+        )
+    env_id, env_kwargs, source = _env_from_args(args)
+    with compile_notice("about a minute", prefix="coopnav evaluate"):
+        warm_up_env(make_env_fn(env_id, env_kwargs))
+    report = evaluate(
+        args.policies,
+        seeds,
+        env_kwargs,
+        args.out,
+        env_id=env_id,
+        plots=not args.no_plots,
+        verbose=True,
+        env_source=source,
+    )
+    print(report.header())
+    print()
+    print(report.to_markdown())
+    if report.files:
+        print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))
+    return 0
