@@ -3,21 +3,28 @@
 Each row is one bad invocation: the exit status it must give (2: a usage error; argparse's
 own errors are 2 as well), a fragment of the message that names the setting or the file, and
 no ``Traceback`` on stderr. ``--debug`` (or ``COOPNAV_DEBUG=1``) shows the traceback.
-Invocations are run in this process (``coopnav_env.training.cli.main``); none of them starts training.
+Invocations are run in this process (``coopnav_env.training.cli.main``); none of them starts
+training.
 """
 
 from __future__ import annotations
 
+import json
 import zipfile
 
+import numpy as np
 import pytest
 import yaml
+from coopnav_env.training.cli import main
 
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
-from coopnav_env.training.cli import main
 
 TOY = TOY_ENV_ID
 TOY_SECTION = TOY_TRAINING
+
+#: a study that, should a row pass validation after all, flies one episode of one heuristic
+_STUDY = ["--out", "{tmp}/study", "--heuristics", "formation", "--episodes", "1"]
+_STUDY += ["--planner-episodes", "0"]
 
 #: (id, argv with {tmp} placeholders, exit status, message fragment)
 CASES: list[tuple[str, list[str], int, str]] = [
@@ -137,6 +144,33 @@ CASES: list[tuple[str, list[str], int, str]] = [
     ("demo-seed-neg", ["demo", "--seed", "-1"], 2, "--seed"),
     ("demo-epochs-abc", ["demo", "--epochs", "abc"], 2, "invalid int value"),
     ("study-planner-not", ["study", "--episodes", "1", "--planner", "spread"], 2, "--planner must"),
+    # issue 35, finding 10: these ended in an internal error (after flying every episode)
+    ("study-runs-empty", ["study", *_STUDY, "--runs", "a=,"], 2, "--runs a=, names nothing after"),
+    ("study-reps-0", ["study", *_STUDY, "--reps", "0"], 2, "--reps must be >= 1, got 0"),
+    (
+        "study-run-json-list",
+        ["study", *_STUDY, "--runs", "a={tmp}/listrun"],
+        2,
+        "listrun/run.json must hold a JSON object, got a list",
+    ),
+    (
+        "routes-run-json-list",
+        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_list"],
+        2,
+        "routes_list/run.json must hold a JSON object, got a list",
+    ),
+    (
+        "routes-npz-corrupt",
+        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_npz_bad"],
+        2,
+        "routes_npz_bad/episodes.npz does not load",
+    ),
+    (
+        "routes-npz-keys",
+        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_npz_keys"],
+        2,
+        "routes_npz_keys/episodes.npz lacks 'route', 'features'",
+    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -156,6 +190,23 @@ def files(tmp_path):
         z.writestr("policy.pth", b"not torch")
         z.writestr("pytorch_variables.pth", b"")
     (tmp_path / "toy.yaml").write_text(yaml.safe_dump({TOY: TOY_SECTION}))
+    # run folders with a damaged record: run.json a JSON list; a train-routes run's episodes
+    (tmp_path / "listrun").mkdir()
+    (tmp_path / "listrun" / "final_model.zip").write_bytes(b"PK")
+    (tmp_path / "listrun" / "run.json").write_text("[1, 2]\n")
+    (tmp_path / "routes_list").mkdir()
+    (tmp_path / "routes_list" / "run.json").write_text("[1, 2]\n")
+    from coopnav_env.agents.routes import ROUTE_FEATURES
+
+    settings = {"env": {}, "base": "ceiling", "first_seed": 500_000, "episodes": 5}
+    settings |= {"max_turns": 3, "features": list(ROUTE_FEATURES)}
+    for name in ("routes_npz_bad", "routes_npz_keys"):
+        (tmp_path / name).mkdir()
+        record = {"settings": settings, "status": "collecting"}
+        (tmp_path / name / "run.json").write_text(json.dumps(record))
+    (tmp_path / "routes_npz_bad" / "episodes.npz").write_bytes(b"PK\x03\x04 truncated")
+    with open(tmp_path / "routes_npz_keys" / "episodes.npz", "wb") as fh:
+        np.savez(fh, seed=np.arange(3))
     return tmp_path
 
 

@@ -1,6 +1,7 @@
 """The learning study: learned swarms against every heuristic and a privileged planner.
 
-``coopnav study`` regenerates ``docs/marl/`` (report, JSON, figures) from training runs:
+``coopnav study`` writes a study's report (Markdown, JSON, figures) from training runs into
+``--out`` (default ``runs/study``; the committed ones are under ``studies/``):
 
 1. every policy flies the same held-out episodes (reset seeds from 1,000,000; training uses
    seeds below) in the study's environment; a learned method contributes one row per
@@ -8,8 +9,8 @@
    about 0.3 s per step);
 2. per method: the mean and the interquartile mean of the episode's mean cooperative 3-D
    error and the goal rate, each with a 95 % stratified-bootstrap interval
-   (:mod:`coopnav_env.training.stats`, over training seeds within episodes and over episodes); paired
-   differences against every heuristic by episode seed;
+   (:mod:`coopnav_env.training.stats`, over training seeds within episodes and over episodes);
+   paired differences against every heuristic by episode seed;
 3. behaviour descriptors per method (what was learned): spacing to the nearest neighbour,
    altitude, the swarm's extent across its direction of travel, the share of UAV-steps
    near an intersection or an open square, the swarm's distinct satellites, the time to the
@@ -32,7 +33,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from coopnav_env.training.config import apply_overrides
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
 from coopnav_env.training.eval_plots import distance_along_route, save_figure, short_label
@@ -127,8 +127,9 @@ def fly_episodes(
 ) -> list[EpisodeResult]:
     """Fly ``policy_name`` through ``reset(seed)`` for every seed; one env for all episodes."""
     from coopnav_env.agents import make_policy
-    from coopnav_env import urban_canyon_v0
     from coopnav_env.training.evaluate import run_episode
+
+    from coopnav_env import urban_canyon_v0
 
     env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
     policy = make_policy(policy_name, env)
@@ -547,7 +548,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         + " (use nav where policies differ in how often they have a cooperative fix, e.g. "
         "with fault exclusion); the other is reported beside it (default: %(default)s)",
     )
-    parser.add_argument("--out", default="docs/marl", help="output folder (default: %(default)s)")
+    parser.add_argument("--out", default="runs/study", help="output folder (default: %(default)s)")
     parser.add_argument(
         "--reps", type=int, default=2000, help="bootstrap replicates (default: %(default)s)"
     )
@@ -566,8 +567,9 @@ def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str,
     the piece after the comma is a ``key=value`` option of the ``@`` policy before it, not a
     second entry, so that group is one policy.
 
-    Raises ``ValueError`` naming ``option`` and the expected ``form`` for a malformed item,
-    and for a name given twice (which would otherwise drop the first silently).
+    Raises ``ValueError`` naming ``option`` and the expected ``form`` for a malformed item
+    (an empty list such as ``a=,`` included), and for a name given twice (which would
+    otherwise drop the first silently).
     """
     out: dict[str, list[str]] = {}
     for item in items:
@@ -582,6 +584,8 @@ def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str,
                 entries[-1] += "," + v  # an option of the policy before it
             elif v:
                 entries.append(v)
+        if not entries:
+            raise ValueError(f"{option} {item} names nothing after '='; entries are {form}")
         out[name] = entries
     return out
 
@@ -597,17 +601,18 @@ def parse_runs(items: Sequence[str]) -> dict[str, list[Path]]:
         for p in paths:
             if not any((p / f).is_file() for f in _MODEL_FILES):
                 raise ValueError(f"run folder {p} has none of {', '.join(_MODEL_FILES)}")
+            run_record(p)  # a damaged run.json fails here, before anything is flown
     return out
 
 
 _MODEL_FILES = ("final_model.pt", "final_model.zip", "route_model.json", "split_model.json")
 """What makes a folder a training run: TorchRL, SB3, ``coopnav train-routes``, or a split
-chooser fitted by ``benchmarks/split_choice.py --fit-model``."""
+chooser fitted by ``studies/split_choice/split_choice.py --fit-model``."""
 
 
 def run_policy_name(run: Path) -> str:
-    """The :func:`coopnav_env.agents.make_policy` name of a run folder's model (TorchRL, route, split or
-    SB3)."""
+    """The :func:`coopnav_env.agents.make_policy` name of a run folder's model (TorchRL, route,
+    split or SB3)."""
     if (run / "final_model.pt").is_file():
         return f"torchrl:{run}"
     if (run / "route_model.json").is_file():
@@ -617,28 +622,69 @@ def run_policy_name(run: Path) -> str:
     return f"ppo:{run / 'final_model.zip'}"
 
 
+def _read_record(path: Path) -> dict[str, Any]:
+    """The JSON object in ``path`` (a run's ``run.json``, a model file); ``ValueError`` naming
+    the file when it is not valid JSON or not an object."""
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise ValueError(f"{path} must hold a JSON object, got a {type(data).__name__}")
+    return data
+
+
+def _env_record(value: Any, where: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise ValueError(f"{where} must be a mapping of environment settings, got {value!r}")
+    return dict(value)
+
+
+def run_record(run: Path) -> dict[str, Any] | None:
+    """A run folder's ``run.json`` (None without one); ``ValueError`` naming it when it is
+    not a JSON object."""
+    path = run / "run.json"
+    return _read_record(path) if path.is_file() else None
+
+
 def run_env(run: Path) -> dict[str, Any]:
     """The environment settings a run was trained in (its ``run.json``, a split model's
     own record of them, else its ``config.yaml``)."""
-    if (run / "run.json").is_file():
-        d = json.loads((run / "run.json").read_text())
+    d = run_record(run)
+    if d is not None:
         if "env" in d:
-            return dict(d["env"])
-        if "env" in d.get("settings", {}):  # a train-routes run
-            return dict(d["settings"]["env"])
+            return _env_record(d["env"], f"{run / 'run.json'}: env")
+        settings = d.get("settings")
+        if isinstance(settings, dict) and "env" in settings:  # a train-routes run
+            return _env_record(settings["env"], f"{run / 'run.json'}: settings.env")
     if (run / "split_model.json").is_file():  # split_choice.py --fit-model records them
-        info = json.loads((run / "split_model.json").read_text()).get("info", {})
-        if "env" in info:
-            return dict(info["env"])
+        info = _read_record(run / "split_model.json").get("info", {})
+        if isinstance(info, dict) and "env" in info:
+            return _env_record(info["env"], f"{run / 'split_model.json'}: info.env")
     import yaml
 
-    cfg = yaml.safe_load((run / "config.yaml").read_text())
-    return dict(cfg.get("env") or {})
+    path = run / "config.yaml"
+    try:
+        cfg = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(
+            f"run folder {run} records no environment (no env in run.json, no config.yaml)"
+        ) from None
+    if not isinstance(cfg, dict):
+        raise ValueError(f"{path} must be a YAML mapping, got {type(cfg).__name__}")
+    return _env_record(cfg.get("env") or {}, f"{path}: env")
 
 
 def run(args: argparse.Namespace) -> int:
     """``coopnav study``: fly, summarise, write ``report.md``, ``report.json`` and figures."""
     t0 = time.perf_counter()
+    for option, value, least in (
+        ("--reps", args.reps, 1),
+        ("--jobs", args.jobs, 1),
+        ("--planner-episodes", args.planner_episodes, 0),
+    ):
+        if value < least:
+            raise ValueError(f"{option} must be >= {least}, got {value}")
     groups = parse_runs(args.runs)
     env_kwargs: dict[str, Any] = {}
     first = next(iter(groups.values()), [])
@@ -694,13 +740,9 @@ def run(args: argparse.Namespace) -> int:
         figs["trajectories"] = plot_trajectories(
             env_kwargs, seeds[0], flights, out / "trajectories.png"
         ).name
-    runs_info = {}
-    for name, dirs in groups.items():
-        infos = []
-        for d in dirs:
-            rj = d / "run.json"
-            infos.append(json.loads(rj.read_text()) if rj.is_file() else {"dir": str(d)})
-        runs_info[name] = infos
+    runs_info = {
+        name: [run_record(d) or {"dir": str(d)} for d in dirs] for name, dirs in groups.items()
+    }
     data = {
         "env": env_kwargs,
         "episodes": len(seeds),
@@ -857,7 +899,8 @@ def report_markdown(data: Mapping[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``coopnav study`` from the command line (``python -m coopnav_env.training.marl_study``)."""
+    """Run ``coopnav study`` from the command line
+    (``python -m coopnav_env.training.marl_study``)."""
     parser = argparse.ArgumentParser(prog="coopnav study", description=__doc__.split("\n")[0])
     add_arguments(parser)
     return run(parser.parse_args(argv))

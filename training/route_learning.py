@@ -1,7 +1,7 @@
 """``coopnav train-routes``: learn which route to fly from flown episodes.
 
-A learned *route model* (:class:`coopnav_env.agents.routes.RouteModel`) scores the equally short street
-routes of an episode by the satellites the city map predicts along them and picks the one it
+A learned *route model* (:class:`coopnav_env.agents.routes.RouteModel`) scores the equally short
+street routes of an episode by the satellites the city map predicts along them and picks the one it
 predicts the lowest navigation error for; a column heuristic (``ceiling`` by default) flies
 it. This command teaches it by experience:
 
@@ -57,8 +57,8 @@ def collect_episode(
 ) -> dict[str, np.ndarray]:
     """Fly every shortest route of episode ``seed`` with heuristic ``base``.
 
-    Returns ``features`` ``(R, F)`` (:func:`coopnav_env.agents.routes.route_features`, as the heuristic
-    plans them at the first step) and, per route, ``nav`` (mean error of the estimate each
+    Returns ``features`` ``(R, F)`` (:func:`coopnav_env.agents.routes.route_features`, as the
+    heuristic plans them at the first step) and, per route, ``nav`` (mean error of the estimate each
     UAV used [m]), ``coop`` (mean cooperative-fix error [m], NaN without a fix) and ``goal``.
     An episode with one route is flown once (its features are NaN: nothing to choose).
 
@@ -187,6 +187,48 @@ def arrays_to_episodes(d: Mapping[str, np.ndarray]) -> tuple[list[int], list[dic
     return seeds, eps
 
 
+_EPISODE_KEYS = ("seed", "route", "features", "nav", "coop", "goal")
+"""The arrays every ``episodes.npz`` holds (``nav_reps`` too with ``--noise-replicates``)."""
+
+
+def load_episodes(path: Path) -> tuple[list[int], list[dict]]:
+    """The episodes collected in ``path`` (an ``episodes.npz``), by
+    :func:`arrays_to_episodes`; ``ValueError`` naming the file when it does not load, lacks
+    an array, or its arrays do not have one row per flown route."""
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            arrays = dict(d)
+    except Exception as exc:  # a damaged zip, a truncated array: numpy's own errors vary
+        raise ValueError(
+            f"{path} does not load ({type(exc).__name__}: {exc}); remove it to collect "
+            "again, or use another --out"
+        ) from exc
+    missing = [k for k in _EPISODE_KEYS if k not in arrays]
+    if missing:
+        raise ValueError(
+            f"{path} lacks {', '.join(map(repr, missing))} (it holds {sorted(arrays)}); remove "
+            "it to collect again, or use another --out"
+        )
+    rows = {k: len(np.asarray(v)) for k, v in arrays.items()}
+    if len(set(rows.values())) != 1 or np.ndim(arrays["features"]) != 2:
+        raise ValueError(f"{path} has arrays of different lengths ({rows}); it is damaged")
+    return arrays_to_episodes(arrays)
+
+
+def _read_run_json(path: Path) -> dict[str, Any]:
+    """A ``run.json`` as a dict; ``ValueError`` naming it when it is no JSON object."""
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc}); use another --out") from exc
+    if not isinstance(data, dict):
+        raise ValueError(
+            f"{path} must hold a JSON object, got a {type(data).__name__}; this is not a "
+            "train-routes run folder: use another --out"
+        )
+    return data
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``coopnav train-routes``."""
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -241,8 +283,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
     """Environment keyword arguments from ``KEY=VALUE`` items (values parsed as YAML),
     checked by building the config, so that a bad setting fails before anything is flown."""
-    from coopnav_env.envs.config import make_config
     from coopnav_env.training.config import apply_overrides
+
+    from coopnav_env.envs.config import make_config
 
     kwargs = apply_overrides({}, list(items))
     make_config(**kwargs)  # fails early, naming the bad setting
@@ -253,8 +296,9 @@ def run(args: argparse.Namespace) -> int:
     """Collect (resumably), fit and save; prints the cross-validated choice."""
     from coopnav_env.agents import make_policy
     from coopnav_env.agents.routes import ROUTE_FEATURES, fit_route_model
-    from coopnav_env import urban_canyon_v0
     from coopnav_env.training.files import atomic_path, write_json
+
+    from coopnav_env import urban_canyon_v0
 
     if args.episodes < 5:
         raise ValueError(f"--episodes must be >= 5 (5-fold cross-validation), got {args.episodes}")
@@ -297,15 +341,20 @@ def run(args: argparse.Namespace) -> int:
     seeds: list[int] = []
     eps: list[dict] = []
     if run_json.exists():
-        old = json.loads(run_json.read_text())
+        old = _read_run_json(run_json)
         if old.get("settings") != json.loads(json.dumps(settings)):
             raise ValueError(
                 f"{out} belongs to a run with other settings ({old.get('settings')}); use "
                 "another --out"
             )
         if data_path.exists():
-            with np.load(data_path) as d:
-                seeds, eps = arrays_to_episodes(dict(d))
+            seeds, eps = load_episodes(data_path)
+            if seeds != list(range(first, first + len(seeds))) or len(seeds) > args.episodes:
+                raise ValueError(
+                    f"{data_path} holds episodes of other reset seeds than this run's "
+                    f"({first}..{first + args.episodes - 1}); remove it to collect again, or "
+                    "use another --out"
+                )
             print(f"resuming {out}: {len(seeds)} of {args.episodes} episodes collected")
     elif out.exists() and any(out.iterdir()):
         raise ValueError(f"--out {out} exists and is not a train-routes run folder")
