@@ -1,0 +1,206 @@
+"""Golden episodes of the hand-written policies: every step's actions, bit for bit.
+
+Each case flies a policy name accepted by :func:`coopnav_env.agents.make_policy` (the
+heuristics, some with ``@`` options, the route and split models built on them, the planner
+and a residual MARL policy over a column) for a few short episodes in the default
+environment and under realistic urban reception, and compares a hash of every step's actions
+(agent names and float32 commands) with the ones stored in ``heuristic_golden.npz``.
+
+The stored hashes are what the policies did when the file was written; a change to a policy,
+to the environment or to the numerical libraries that changes any action by one bit fails
+here, naming the case, the seed and the first step that differs. After an intended change,
+regenerate the file with::
+
+    python -m tests.agents.test_heuristic_golden
+
+(:func:`write_golden`) and commit it with the change that explains it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+HAS_ENV = importlib.util.find_spec("coopnav_env.urban_canyon_v0") is not None
+HAS_TORCH = importlib.util.find_spec("torch") is not None
+
+GOLDEN_PATH: Path = Path(__file__).with_name("heuristic_golden.npz")
+"""The stored step hashes, one array per case and seed (see :func:`case_key`)."""
+
+#: environment settings the cases fly in: the defaults, and realistic urban reception with a
+#: drifting dead reckoning (where the wall guard and the ceiling matter)
+ENVIRONMENTS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "urban_nlos_3dma": {"preset": "urban_nlos_3dma", "dead_reckoning_noise": True},
+}
+
+_DEFAULT_SEEDS = (1001, 1002, 1003)
+_NLOS_SEEDS = (2001, 2002)
+_STEPS = 60
+
+#: (policy name, environment, reset seeds, most steps per episode)
+CASES: tuple[tuple[str, str, tuple[int, ...], int], ...] = (
+    *(
+        (name, env, seeds, _STEPS)
+        for name in (
+            "formation",
+            "sky",
+            "spread",
+            "wide",
+            "guarded",
+            "ceiling",
+            "skyroute",
+            "waypoint",
+        )
+        for env, seeds in (("default", _DEFAULT_SEEDS), ("urban_nlos_3dma", _NLOS_SEEDS))
+    ),
+    ("formation@cruise_speed_mps=5,spacing_m=10", "default", _DEFAULT_SEEDS, _STEPS),
+    ("waypoint@altitude_m=28,cruise_speed_mps=5", "default", _DEFAULT_SEEDS, _STEPS),
+    ("sky@max_offset_m=2,smoothing=0.5,ceiling_margin_m=-3", "default", _DEFAULT_SEEDS, _STEPS),
+    ("spread@route_index=1", "default", _DEFAULT_SEEDS, _STEPS),
+    ("wide@spacing_m=30", "default", _DEFAULT_SEEDS, _STEPS),
+    ("wide@spacing_m=30,goal_spacing_m=8,open_distance_m=50", "default", _DEFAULT_SEEDS, _STEPS),
+    ("wide@route_split_index=1", "default", _DEFAULT_SEEDS, _STEPS),
+    ("guarded@ceiling_margin_m=-10", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
+    ("ceiling@route_choice='swarm_mean'", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
+    ("skyroute@route_split='pdop_gt3'", "default", _DEFAULT_SEEDS, _STEPS),
+    ("route:pretrained", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
+    ("split:pretrained", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
+    (
+        "planner@base='ceiling',guard_offsets=True,horizon=2,n_samples=3,n_elite=1,iterations=1",
+        "urban_nlos_3dma",
+        (2001,),
+        6,
+    ),
+    ("mappo:pretrained", "default", _DEFAULT_SEEDS[:2], _STEPS),
+    ("mappo:{pretrained}/mappo_nlos_ceiling_s0", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
+)
+"""The golden cases; ``{pretrained}`` in a name stands for the folder of the shipped models."""
+
+
+def case_key(policy: str, env_name: str, seed: int) -> str:
+    """The name of a case's array in the golden file."""
+    return f"{env_name}|{policy}|{seed}"
+
+
+def step_hash(actions: dict[str, np.ndarray]) -> np.uint64:
+    """First 8 bytes of the SHA-256 of a step's agent names and float32 actions."""
+    h = hashlib.sha256()
+    for agent, action in actions.items():
+        h.update(agent.encode())
+        h.update(np.ascontiguousarray(action, dtype=np.float32).tobytes())
+    return np.frombuffer(h.digest()[:8], dtype=np.uint64)[0]
+
+
+def fly(policy_name: str, env_name: str, seed: int, steps: int) -> np.ndarray:
+    """Fly ``policy_name`` for at most ``steps`` steps from reset seed ``seed``; the hash of
+    every step's actions (uint64, one per step flown)."""
+    from coopnav_env.agents import make_policy
+    from coopnav_env.agents.marl_policy import PRETRAINED_DIR
+
+    from coopnav_env import urban_canyon_v0
+
+    env = urban_canyon_v0.parallel_env(**ENVIRONMENTS[env_name])
+    try:
+        policy = make_policy(policy_name.replace("{pretrained}", str(PRETRAINED_DIR)), env)
+        obs, _ = env.reset(seed=seed)
+        policy.reset(seed=seed)
+        hashes = []
+        for _ in range(steps):
+            if not env.agents:
+                break
+            actions = policy.act(obs)
+            hashes.append(step_hash(actions))
+            obs, *_ = env.step(actions)
+    finally:
+        env.close()
+    return np.asarray(hashes, dtype=np.uint64)
+
+
+def golden_arrays() -> dict[str, np.ndarray]:
+    """Fly every case of :data:`CASES`: the arrays :func:`write_golden` stores."""
+    return {
+        case_key(policy, env_name, seed): fly(policy, env_name, seed, steps)
+        for policy, env_name, seeds, steps in CASES
+        for seed in seeds
+    }
+
+
+def write_golden(path: Path = GOLDEN_PATH) -> Path:
+    """Fly every case and write the step hashes to ``path`` (through a temporary file)."""
+    arrays = golden_arrays()
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, **arrays)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _stored() -> dict[str, np.ndarray]:
+    with np.load(GOLDEN_PATH) as data:
+        return {k: data[k] for k in data.files}
+
+
+#: slow cases (the look-ahead planner, torch): with ``-m slow`` only
+_SLOW_PREFIXES = ("planner", "mappo:")
+
+
+def _params() -> list[Any]:
+    return [
+        pytest.param(
+            case,
+            id=f"{case[1]}-{case[0]}",
+            marks=[pytest.mark.slow] if case[0].startswith(_SLOW_PREFIXES) else [],
+        )
+        for case in CASES
+    ]
+
+
+@pytest.mark.skipif(not HAS_ENV, reason="coopnav_env.urban_canyon_v0 not available")
+@pytest.mark.parametrize("case", _params())
+def test_actions_are_bit_identical_to_the_golden_episodes(case) -> None:
+    policy, env_name, seeds, steps = case
+    if policy.startswith("mappo:") and not HAS_TORCH:
+        pytest.skip("the residual MARL policy needs torch")
+    stored = _stored()
+    for seed in seeds:
+        want = stored[case_key(policy, env_name, seed)]
+        got = fly(policy, env_name, seed, steps)
+        assert want.size > 0
+        if got.shape != want.shape or not np.array_equal(got, want):
+            n = min(got.size, want.size)
+            diff = np.flatnonzero(got[:n] != want[:n])
+            first = int(diff[0]) if diff.size else n
+            pytest.fail(
+                f"{policy!r} in {env_name}, seed {seed}: actions differ from the golden "
+                f"episode from step {first} (flew {got.size} steps, stored {want.size})"
+            )
+
+
+def test_the_golden_file_holds_every_case_and_nothing_else() -> None:
+    want = {case_key(p, e, s) for p, e, seeds, _ in CASES for s in seeds}
+    assert set(_stored()) == want
+
+
+def test_the_step_hash_sees_one_bit() -> None:
+    a = {"uav_0": np.array([0.5, -0.25, 0.0], np.float32)}
+    b = {"uav_0": np.nextafter(a["uav_0"], np.float32(1.0))}
+    assert step_hash(a) == step_hash({"uav_0": a["uav_0"].copy()})
+    assert step_hash(a) != step_hash(b)
+    assert step_hash(a) != step_hash({"uav_1": a["uav_0"]})
+
+
+if __name__ == "__main__":
+    print(f"written {write_golden()}")
