@@ -1,17 +1,34 @@
-"""The README's commands and the CI script stay in sync."""
+"""The README is a front page: its commands and the CI script stay in sync, its quick starts run,
+and every figure it keeps names the command that gives it."""
 
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+README_MAX_CHARS = 12_000
+
+
+def _readme() -> str:
+    return (ROOT / "README.md").read_text()
 
 
 def _readme_commands() -> list[str]:
-    text = (ROOT / "README.md").read_text()
-    block = re.search(r"```bash\n(.*?)```", text, re.S).group(1)
+    block = re.search(r"```bash\n(.*?)```", _readme(), re.S).group(1)
     return [line for line in block.splitlines() if line and not line.startswith("#")]
+
+
+def _section(title: str) -> str:
+    """The README's ``## title`` section, up to the next ``## `` heading."""
+    text = _readme()
+    assert f"\n## {title}\n" in text, f"README has no section {title!r}"
+    return text.split(f"\n## {title}\n", 1)[1].split("\n## ", 1)[0]
+
+
+def _python_blocks(text: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", text, re.S)
 
 
 def test_readme_starts_with_two_commands():
@@ -19,6 +36,12 @@ def test_readme_starts_with_two_commands():
     assert len(cmds) == 2
     assert all(c.startswith("python3 -m venv .venv") for c in cmds)
     assert "pip install torch==2.13.0" in cmds[0] and "pip install torch==2.13.0" in cmds[1]
+
+
+def test_the_two_commands_come_first():
+    text = _readme()
+    first_block = text.index("```bash\n")
+    assert text.index("\n## ") > first_block, "a section comes before the two commands"
 
 
 def test_ci_runs_the_readme_test_command():
@@ -33,3 +56,48 @@ def test_torch_requirement_admits_the_cpu_build():
     lo = tuple(int(x) for x in spec.group(1)[2:].split("."))
     hi = tuple(int(x) for x in spec.group(2)[1:].split("."))
     assert lo <= (2, 13, 0) < hi
+
+
+def test_readme_is_a_front_page_of_at_most_12000_characters():
+    assert len(_readme()) <= README_MAX_CHARS, len(_readme())
+
+
+def test_train_and_evaluate_quick_start_is_the_main_job():
+    """The quick start's two commands are the ones the first README command runs."""
+    main_job = _readme_commands()[0].split(" && ")
+    block = re.search(r"```text\n(.*?)```", _section("Quick start: train and evaluate"), re.S)
+    shown = block.group(1).strip().splitlines()
+    assert [c for c in main_job if c.startswith("coopnav ")] == shown
+
+
+def test_results_name_the_command_that_gives_them():
+    """Every number of the results table comes from a command the section names: the
+    evaluation of the first README command."""
+    section = _section("Results")
+    evaluate = next(c for c in _readme_commands()[0].split(" && ") if c.startswith("coopnav eval"))
+    assert evaluate in section
+    rows = [r for r in section.splitlines() if r.startswith("| ") and not r.startswith("| policy")]
+    assert len(rows) >= 4
+    for row in rows:
+        assert re.search(r"\| \d+\.\d\d \|$", row), row
+
+
+def test_readme_names_the_installed_namespace_only():
+    """Imports in README code use the installed names, never the deprecated top-level ones."""
+    code = "\n".join(_python_blocks(_readme()))
+    assert not re.search(r"^\s*(from|import) (agents|training|reproduction)\b", code, re.M)
+    for old in ("agents", "training", "reproduction"):
+        assert f"`coopnav_env.{old}`" in _readme(), old
+
+
+def test_readme_python_quick_starts_run():
+    """The PettingZoo and Gymnasium quick starts run as printed, without warnings from this
+    package."""
+    blocks = _python_blocks(_readme())
+    assert len(blocks) == 2
+    for block in blocks:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("error", module=r"coopnav_env(\..*)?$")
+            namespace: dict = {}
+            exec(compile(block, "README.md", "exec"), namespace)
+    assert namespace["obs"].shape == (3 * 52,)

@@ -24,3 +24,20 @@ def test_page_names_every_observation_field() -> None:
     for name in obs_layout():
         assert f"`{re.sub(r'_[0-9]+', '_k', name)}`" in doc, name
     assert "`max_cycles`" in doc and "coopnav/UrbanCanyonSwarm-v0" in doc
+
+
+def test_environment_docs_point_to_this_page_and_show_its_example() -> None:
+    """docs/environment.md and the README's PettingZoo quick start show the page's own example
+    (every line of their first code block is a line of it) and name the page."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    doc_lines = {line.strip() for line in urban_canyon_v0.__doc__.splitlines()}
+    for name in ("docs/environment.md", "README.md"):
+        text = (root / name).read_text()
+        assert "coopnav_env/urban_canyon_v0.py" in text, name
+        block = re.search(r"```python\n(.*?)```", text, re.S).group(1)
+        lines = [line.strip() for line in block.splitlines() if line.strip()]
+        assert "from coopnav_env import urban_canyon_v0" in lines, name
+        missing = [line for line in lines if line not in doc_lines]
+        assert not missing, (name, missing)

@@ -1,5 +1,5 @@
-"""The committed reproduction (``docs/reproduction``) is the default run, and README's
-reproduction tables show its numbers (issue 16)."""
+"""The committed reproduction (``docs/reproduction``) is the default run, and the tables of
+its page (``docs/reproduction/README.md``) show its numbers."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import re
 from pathlib import Path
 
 import pytest
-
 from coopnav_env.reproduction import ReproduceConfig
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -22,17 +21,18 @@ def results() -> dict:
 
 
 def _section() -> str:
-    text = (ROOT / "README.md").read_text()
-    return text.split("## Reproducing the paper (Section 4)", 1)[1].split("\n## ", 1)[0]
+    text = (DOCS / "README.md").read_text()
+    assert text.startswith("# Reproducing the paper (Section 4)\n")
+    return text
 
 
 def _row(label: str) -> list[str]:
-    """The cells after the first of the README row that starts with ``| label |``."""
+    """The cells after the first of the page's row that starts with ``| label |``."""
     for line in _section().splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if cells[0] == label:
             return cells[1:]
-    raise AssertionError(f"no README row {label!r}")
+    raise AssertionError(f"no row {label!r} in docs/reproduction/README.md")
 
 
 def _numbers(cell: str) -> list[float]:
@@ -52,7 +52,7 @@ def test_committed_run_is_the_default_configuration(results):
     assert "coopnav reproduce --out DIR --seed 0\n" in report
 
 
-def test_readme_headline_table_is_the_committed_run(results):
+def test_page_headline_table_is_the_committed_run(results):
     m = results["main"]
     p3, t1 = m["p3m"], m["table1"]
     assert _numbers(_row("P(3-D error < 3 m), standalone")[1]) == [
@@ -89,7 +89,7 @@ def test_readme_headline_table_is_the_committed_run(results):
         ("`previous-default`: the factor and no PDOP mask", "previous-default"),
     ],
 )
-def test_readme_table2_rows_are_the_committed_run(results, label, variant):
+def test_page_table2_rows_are_the_committed_run(results, label, variant):
     if variant is None:
         tab = {
             k: {n: {"sig": v} for n, v in d.items()}
@@ -105,7 +105,7 @@ def test_readme_table2_rows_are_the_committed_run(results, label, variant):
         assert _numbers(cell) == want, (label, key)
 
 
-def test_readme_prose_numbers_are_the_committed_run(results):
+def test_page_prose_numbers_are_the_committed_run(results):
     text = " ".join(_section().split())
     dist = results["table2_distance"]["default"]
     assert (
