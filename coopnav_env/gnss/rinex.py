@@ -1,0 +1,928 @@
+"""Satellite orbits and clocks from a RINEX 3 navigation file (GPS LNAV, BeiDou D1/D2).
+
+Reading
+-------
+:func:`read_rinex_nav` parses a RINEX 3.00-3.05 navigation file (``N`` type, system ``G``,
+``C`` or ``M`` for mixed) with numpy only: the header (version, file type, satellite system,
+``END OF HEADER``), then each record's epoch line and its broadcast-orbit lines. Fields are
+fixed-width (19 characters each, four per orbit line after four blanks, three after the epoch
+of the first line), so numbers that run together (``1.0D-05-2.0D-07``) are read correctly;
+``D``, ``d`` and ``E`` exponents are accepted. GPS (``G``) and BeiDou (``C``) records are kept
+(8 lines each); GLONASS (``R``) and SBAS (``S``) records (4 lines) and Galileo (``E``), QZSS
+(``J``) and NavIC (``I``) records (8 lines) are skipped and counted
+(:attr:`NavigationFile.skipped`). Any other system letter, a record cut short, or a field that
+is not a number raises ``ValueError`` naming the file, the line number and what is wrong.
+Unhealthy ephemerides (GPS SV health or BeiDou SatH1 not 0) are dropped and counted.
+
+Propagation
+-----------
+:class:`BroadcastConstellation` evaluates the broadcast Keplerian elements as the interface
+specifications do:
+
+* GPS: IS-GPS-200, Table 20-IV (user algorithm for ephemeris determination), ``mu =
+  3.986005e14 m^3/s^2``, ``OmegaE = 7.2921151467e-5 rad/s``; ``tk = t - toe`` in seconds of
+  the GPS week, brought into [-302400, 302400] s (week crossovers); satellite clock (20.3.3.3.3)
+  ``af0 + af1 (t - toc) + af2 (t - toc)^2 + F e sqrt(A) sin(Ek)``, ``F = -2 sqrt(mu) / c^2``,
+  without the group delay ``TGD`` (a single-frequency L1 user subtracts it).
+* BeiDou: BDS-SIS-ICD-B1I 3.0, 5.2.4.12, ``mu = 3.986004418e14``, ``OmegaE = 7.292115e-5``;
+  times in BDT (``BDT = GPST - 14 s``; BDT week 0 began on 2006-01-01 00:00:00 UTC). MEO and
+  IGSO satellites as GPS. GEO satellites (PRN C01-C05 and C59-C63) are computed in the
+  inertial frame of the ``toe`` (``Omega_k = Omega_0 + OmegaDot tk - OmegaE toe``), rotated by
+  -5 deg about X and then by ``OmegaE tk`` about Z into BDCS. BDCS (CGCS2000) and WGS 84 are
+  treated as the same frame (they agree to a few centimetres).
+
+The week of each ``toe`` is resolved against the record's ``toc`` (its calendar epoch), so
+10-bit GPS week numbers and records near a week boundary are placed correctly; a week field
+that disagrees with the epoch by more than a week (modulo 1024) is an error.
+
+Time and validity
+-----------------
+A :class:`BroadcastConstellation` measures time ``t_s`` in seconds after its
+``reference_gps_s`` (GPS seconds, since 1980-01-06 00:00:00 GPST), the start of the file's
+coverage rounded down to a whole second. For each satellite it uses the ephemeris with the
+``toe`` closest to ``t`` among those valid at ``t`` (``|t - toe| <= validity``: half the GPS
+fit interval, at least 2 h; 1 h for BeiDou, whose ephemerides are refreshed hourly); of two
+equally close, the later ``toe``. A satellite with no valid ephemeris at ``t`` (a gap in the
+file) has NaN position and clock: it is not broadcasting. The file's coverage is the span in
+which every included system has at least one valid ephemeris; a time outside it raises
+``ValueError`` naming the time and the coverage.
+
+References
+----------
+IS-GPS-200N, Navstar GPS Space Segment / Navigation User Interfaces, 2022, 20.3.3.3.3 and
+Table 20-IV. BeiDou Navigation Satellite System Signal In Space Interface Control Document,
+Open Service Signal B1I (Version 3.0), 2019, 5.2.4.12. RINEX, The Receiver Independent
+Exchange Format, Version 3.05, 2020, Tables A8 (GPS) and A14 (BDS).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from coopnav_env.constants import SPEED_OF_LIGHT_MPS, SYSTEMS
+from coopnav_env.gnss._validate import as_float_array, as_index_array, readonly
+
+__all__ = [
+    "BDS_GEO_PRNS",
+    "BDS_MU_M3PS2",
+    "BDS_OMEGA_E_RADPS",
+    "BDS_VALIDITY_S",
+    "BDT_MINUS_GPST_S",
+    "GPS_MU_M3PS2",
+    "GPS_OMEGA_E_RADPS",
+    "GPS_VALIDITY_S",
+    "SAMPLE_NAV_PATH",
+    "BroadcastConstellation",
+    "NavigationFile",
+    "gps_seconds",
+    "load_broadcast_constellation",
+    "read_rinex_nav",
+]
+
+GPS_MU_M3PS2: float = 3.986005e14
+"""GPS value of the Earth's gravitational constant (IS-GPS-200 Table 20-IV) [m^3/s^2]."""
+
+GPS_OMEGA_E_RADPS: float = 7.2921151467e-5
+"""GPS value of the Earth's rotation rate (IS-GPS-200 Table 20-IV) [rad/s]."""
+
+BDS_MU_M3PS2: float = 3.986004418e14
+"""BeiDou (CGCS2000) gravitational constant (BDS-SIS-ICD-B1I 5.2.4.12) [m^3/s^2]."""
+
+BDS_OMEGA_E_RADPS: float = 7.292115e-5
+"""BeiDou (CGCS2000) Earth rotation rate (BDS-SIS-ICD-B1I 5.2.4.12) [rad/s]."""
+
+BDT_MINUS_GPST_S: float = -14.0
+"""BDT - GPST [s]: BeiDou time runs 14 s behind GPS time."""
+
+GPS_VALIDITY_S: float = 7200.0
+"""Least validity of a GPS ephemeris, ``|t - toe|`` [s] (a 4-hour fit interval)."""
+
+BDS_VALIDITY_S: float = 3600.0
+"""Validity of a BeiDou ephemeris, ``|t - toe|`` [s] (refreshed every hour)."""
+
+BDS_GEO_PRNS: frozenset[int] = frozenset((1, 2, 3, 4, 5, 59, 60, 61, 62, 63))
+"""BeiDou PRNs of geostationary satellites (C01-C05, C59-C63), propagated as GEO."""
+
+SAMPLE_NAV_PATH: Path = Path(__file__).resolve().parent.parent / "data" / "sample_nav.rnx"
+"""The sample mixed GPS + BeiDou navigation file shipped with the package (one day, made by
+``coopnav_env/data/make_sample_nav.py`` from the nominal constellations)."""
+
+SECONDS_PER_WEEK: float = 604_800.0
+_HALF_WEEK_S = 302_400.0
+_BDT_EPOCH_GPS_S = 1356 * 604_800.0 + 14.0  # BDT week 0, second 0, in GPS seconds
+_GPS_EPOCH = _dt.datetime(1980, 1, 6, tzinfo=_dt.timezone.utc)
+_BDS_GEO_INCLINATION_RAD = np.radians(-5.0)
+_KEPLER_ITERATIONS = 12  # Newton steps: e < 0.1 converges to machine precision in <= 6
+
+# GPS - UTC [s] from each date on (leap seconds since the GPS epoch).
+_LEAP_SECONDS: tuple[tuple[_dt.date, int], ...] = tuple(
+    (_dt.date(y, m, 1), k + 1)
+    for k, (y, m) in enumerate(
+        (
+            (1981, 7),
+            (1982, 7),
+            (1983, 7),
+            (1985, 7),
+            (1988, 1),
+            (1990, 1),
+            (1991, 1),
+            (1992, 7),
+            (1993, 7),
+            (1994, 7),
+            (1996, 1),
+            (1997, 7),
+            (1999, 1),
+            (2006, 1),
+            (2009, 1),
+            (2012, 7),
+            (2015, 7),
+            (2017, 1),
+        )
+    )
+)
+
+_KEPT_SYSTEMS = {"G": "GPS", "C": "BDS"}
+_SKIPPED_LINES = {"R": 4, "S": 4, "E": 8, "J": 8, "I": 8}
+_HEADER_SYSTEMS = {"G", "C", "R", "E", "J", "I", "S", "M"}
+
+# Columns of the element table (one row per ephemeris) in RINEX order after the epoch line.
+_FIELDS: tuple[str, ...] = (
+    "af0_s",
+    "af1_sps",
+    "af2_sps2",
+    "iode",
+    "crs_m",
+    "delta_n_radps",
+    "m0_rad",
+    "cuc_rad",
+    "ecc",
+    "cus_rad",
+    "sqrt_a_sqrtm",
+    "toe_sow",
+    "cic_rad",
+    "omega0_rad",
+    "cis_rad",
+    "i0_rad",
+    "crc_m",
+    "omega_rad",
+    "omega_dot_radps",
+    "idot_radps",
+    "spare_5_2",
+    "week",
+    "spare_5_4",
+    "accuracy_m",
+    "health",
+    "tgd_s",
+    "spare_6_4",
+    "transmit_sow",
+    "fit_or_aodc",
+)
+_REQUIRED = frozenset(
+    (
+        "af0_s",
+        "af1_sps",
+        "af2_sps2",
+        "crs_m",
+        "delta_n_radps",
+        "m0_rad",
+        "cuc_rad",
+        "ecc",
+        "cus_rad",
+        "sqrt_a_sqrtm",
+        "toe_sow",
+        "cic_rad",
+        "omega0_rad",
+        "cis_rad",
+        "i0_rad",
+        "crc_m",
+        "omega_rad",
+        "omega_dot_radps",
+        "idot_radps",
+        "week",
+    )
+)
+
+
+def gps_seconds(when: Any) -> float:
+    """GPS seconds (since 1980-01-06 00:00:00 GPST) of a time given in UTC or GPS seconds.
+
+    Parameters
+    ----------
+    when : float, int, str or datetime.datetime
+        A number (or a string of one): GPS seconds, >= 0. A string in ISO 8601 form
+        (``"2026-12-03T06:00:00Z"``, ``"2026-12-03 06:00:00"``) or a ``datetime``: a UTC time
+        (a naive one is taken as UTC); GPS - UTC leap seconds are added (18 s from 2017 on).
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        For a time before the GPS epoch, or a string that is neither a number nor an ISO time.
+    """
+    if isinstance(when, bool):
+        raise ValueError(f"a time must be GPS seconds or a UTC ISO string, got {when!r}")
+    if isinstance(when, (int, float, np.integer, np.floating)):
+        value = float(when)
+        if not np.isfinite(value) or value < 0.0:
+            raise ValueError(f"GPS seconds must be finite and >= 0, got {when!r}")
+        return value
+    if isinstance(when, str):
+        text = when.strip()
+        try:
+            return gps_seconds(float(text))
+        except ValueError as exc:
+            if "GPS seconds must" in str(exc):
+                raise
+        try:
+            when = _dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+        except ValueError:
+            raise ValueError(
+                f"a time must be GPS seconds or a UTC ISO 8601 string such as "
+                f"'2026-12-03T06:00:00Z', got {text!r}"
+            ) from None
+    if isinstance(when, _dt.date) and not isinstance(when, _dt.datetime):
+        when = _dt.datetime(when.year, when.month, when.day)
+    if not isinstance(when, _dt.datetime):
+        raise ValueError(f"a time must be GPS seconds or a UTC ISO string, got {when!r}")
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=_dt.timezone.utc)
+    utc = when.astimezone(_dt.timezone.utc)
+    if utc < _GPS_EPOCH:
+        raise ValueError(f"time {when.isoformat()} is before the GPS epoch 1980-01-06")
+    leap = 0
+    for day, n in _LEAP_SECONDS:
+        if utc.date() >= day:
+            leap = n
+    return (utc - _GPS_EPOCH).total_seconds() + leap
+
+
+def _gps_iso(t_gps_s: float) -> str:
+    """A GPS time as an ISO string in GPST (for messages)."""
+    t = _GPS_EPOCH.replace(tzinfo=None) + _dt.timedelta(seconds=float(t_gps_s))
+    return t.isoformat(timespec="seconds") + " GPST"
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class NavigationFile:
+    """The GPS and BeiDou broadcast ephemerides of one RINEX 3 navigation file.
+
+    Attributes
+    ----------
+    path : str
+        The file read.
+    version : float
+        RINEX version (3.00-3.05).
+    file_system : str
+        Satellite system of the header (``G``, ``C`` or ``M``; others are accepted but give
+        no ephemerides).
+    system : ndarray of intp, shape (n_eph,)
+        Index into ``SYSTEMS`` of each ephemeris (0 = GPS, 1 = BDS).
+    prn : tuple of str, length n_eph
+        Satellite of each ephemeris (``"G05"``, ``"C01"``).
+    toc_gps_s : ndarray, shape (n_eph,)
+        Clock reference time in GPS seconds (a BeiDou ``toc`` is in BDT in the file).
+    toe_gps_s : ndarray, shape (n_eph,)
+        Ephemeris reference time in GPS seconds, its week resolved against ``toc``.
+    elements : dict of str to ndarray, shape (n_eph,)
+        The broadcast fields in RINEX order (``af0_s``, ..., ``sqrt_a_sqrtm``, ``toe_sow``,
+        ..., ``week``, ``health``, ``tgd_s``, ``fit_or_aodc``; unread spare fields are NaN),
+        plus ``toc_sow``. ``toe_sow`` and ``toc_sow`` are seconds of the GPS week (GPS) or of
+        the BDT week (BeiDou).
+    skipped : dict of str to int
+        Records of other systems skipped, by system letter.
+    unhealthy : int
+        GPS or BeiDou ephemerides dropped because the satellite flagged itself unhealthy.
+    digest : str
+        SHA-256 of the file's bytes (identifies the sky in caches).
+    """
+
+    path: str
+    version: float
+    file_system: str
+    system: NDArray[np.intp]
+    prn: tuple[str, ...]
+    toc_gps_s: NDArray[np.float64]
+    toe_gps_s: NDArray[np.float64]
+    elements: dict[str, NDArray[np.float64]]
+    skipped: dict[str, int]
+    unhealthy: int
+    digest: str
+
+    @property
+    def n_eph(self) -> int:
+        """Number of ephemerides kept."""
+        return len(self.prn)
+
+
+def _field(text: str, start: int, where: str, name: str, required: bool) -> float:
+    raw = text[start : start + 19].strip()
+    if not raw:
+        if required:
+            raise ValueError(f"{where}: field {name!r} (columns {start + 1}-{start + 19}) is blank")
+        return float("nan")
+    try:
+        value = float(raw.replace("D", "E").replace("d", "e"))
+    except ValueError:
+        raise ValueError(
+            f"{where}: field {name!r} (columns {start + 1}-{start + 19}) is not a number: {raw!r}"
+        ) from None
+    if not np.isfinite(value):
+        raise ValueError(f"{where}: field {name!r} is not finite: {raw!r}")
+    return value
+
+
+def _epoch_gps_s(line: str, where: str, system: str) -> float:
+    """``toc`` of an epoch line (``A1,I2.2,1X,I4,5(1X,I2.2)``) in GPS seconds."""
+    try:
+        year = int(line[4:8])
+        month, day, hour, minute, sec = (int(line[k : k + 2]) for k in (9, 12, 15, 18, 21))
+        when = _dt.datetime(year, month, day, hour, minute, sec)
+    except ValueError:
+        raise ValueError(
+            f"{where}: epoch (columns 5-23) is not 'YYYY MM DD hh mm ss': {line[4:23]!r}"
+        ) from None
+    seconds = (when - _GPS_EPOCH.replace(tzinfo=None)).total_seconds()
+    if system == "C":  # the epoch of a BeiDou record is in BDT
+        seconds -= BDT_MINUS_GPST_S
+    return seconds
+
+
+def _read_header(lines: list[str], name: str) -> tuple[float, str, int]:
+    if not lines:
+        raise ValueError(f"{name}: empty file, expected a RINEX 3 navigation header")
+    first = lines[0]
+    if first[60:80].strip() != "RINEX VERSION / TYPE":
+        raise ValueError(
+            f"{name}, line 1: expected 'RINEX VERSION / TYPE' in columns 61-80, got "
+            f"{first[60:80].strip()!r}"
+        )
+    try:
+        version = float(first[0:9])
+    except ValueError:
+        raise ValueError(f"{name}, line 1: RINEX version {first[0:9]!r} is not a number") from None
+    if not 3.0 <= version < 3.06:
+        raise ValueError(
+            f"{name}, line 1: RINEX version {version} is not supported (3.00-3.05 are)"
+        )
+    if first[20:21] != "N":
+        raise ValueError(
+            f"{name}, line 1: file type {first[20:21]!r} is not 'N' (a navigation file)"
+        )
+    file_system = first[40:41]
+    if file_system not in _HEADER_SYSTEMS:
+        raise ValueError(
+            f"{name}, line 1: unknown satellite system {file_system!r} (expected one of "
+            f"{sorted(_HEADER_SYSTEMS)})"
+        )
+    for k, line in enumerate(lines[1:], start=1):
+        if line[60:80].strip() == "END OF HEADER":
+            return version, file_system, k + 1
+    raise ValueError(f"{name}: no 'END OF HEADER' line")
+
+
+def read_rinex_nav(path: str | os.PathLike[str]) -> NavigationFile:
+    """Read the GPS and BeiDou ephemerides of a RINEX 3 navigation file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A RINEX 3.00-3.05 navigation file (``N``), uncompressed.
+
+    Returns
+    -------
+    NavigationFile
+
+    Raises
+    ------
+    ValueError
+        The file is missing or unreadable, the header is not a RINEX 3 navigation header, a
+        record has an unknown system letter, is cut short or has a bad field (the message
+        names the file, the line number and the problem), a week field disagrees with its
+        epoch, or the file holds no healthy GPS or BeiDou ephemeris.
+    """
+    p = Path(path)
+    name = str(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"cannot read RINEX navigation file {name}: {exc.strerror}") from None
+    try:
+        text = raw.decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise ValueError(
+            f"{name}: not an ASCII text file (byte {exc.start}); compressed files must be "
+            "uncompressed first"
+        ) from None
+    lines = text.splitlines()
+    version, file_system, body = _read_header(lines, name)
+    rows: list[list[float]] = []
+    prns: list[str] = []
+    systems: list[int] = []
+    tocs: list[float] = []
+    skipped: dict[str, int] = {}
+    unhealthy = 0
+    k = body
+    n_lines = len(lines)
+    while k < n_lines:
+        line = lines[k]
+        if not line.strip():
+            k += 1
+            continue
+        where = f"{name}, line {k + 1}"
+        letter = line[0]
+        if letter in _SKIPPED_LINES:
+            skipped[letter] = skipped.get(letter, 0) + 1
+            k += _SKIPPED_LINES[letter]
+            continue
+        if letter not in _KEPT_SYSTEMS:
+            raise ValueError(
+                f"{where}: unknown satellite system {letter!r} at the start of a record "
+                f"(expected G, C, R, E, J, I or S): {line.rstrip()!r}"
+            )
+        try:
+            number = int(line[1:3])
+        except ValueError:
+            raise ValueError(f"{where}: satellite number {line[1:3]!r} is not an integer") from None
+        if not 1 <= number <= 63:
+            raise ValueError(f"{where}: satellite number {number} outside 1-63")
+        if k + 7 >= n_lines:
+            raise ValueError(
+                f"{where}: record of {letter}{number:02d} cut short: expected 7 broadcast "
+                f"orbit lines, the file has {n_lines - k - 1}"
+            )
+        toc = _epoch_gps_s(line, where, letter)
+        values = [
+            _field(line, 23 + 19 * j, where, _FIELDS[j], _FIELDS[j] in _REQUIRED) for j in range(3)
+        ]
+        for m in range(1, 8):
+            orbit = lines[k + m]
+            owhere = f"{name}, line {k + m + 1}"
+            if orbit[:4].strip():
+                raise ValueError(
+                    f"{owhere}: broadcast orbit line {m} of {letter}{number:02d} must start "
+                    f"with 4 blanks, got {orbit[:4]!r} (record cut short?)"
+                )
+            n_here = 2 if m == 7 else 4
+            for j in range(n_here):
+                fname = _FIELDS[3 + 4 * (m - 1) + j]
+                values.append(_field(orbit, 4 + 19 * j, owhere, fname, fname in _REQUIRED))
+        values.extend([float("nan")] * (len(_FIELDS) - len(values)))
+        el = dict(zip(_FIELDS, values, strict=True))
+        _check_elements(el, f"{where}: record of {letter}{number:02d}")
+        k += 8
+        if el["health"] != 0.0 and np.isfinite(el["health"]):
+            unhealthy += 1
+            continue
+        rows.append(values)
+        prns.append(f"{letter}{number:02d}")
+        systems.append(SYSTEMS.index(_KEPT_SYSTEMS[letter]))
+        tocs.append(toc)
+    if not rows:
+        raise ValueError(
+            f"{name}: no healthy GPS or BeiDou ephemeris (skipped records by system: {skipped}, "
+            f"unhealthy: {unhealthy})"
+        )
+    table = np.asarray(rows, dtype=np.float64)
+    elements = {f: readonly(table[:, j].copy()) for j, f in enumerate(_FIELDS)}
+    system = np.asarray(systems, dtype=np.intp)
+    toc_gps = np.asarray(tocs, dtype=np.float64)
+    toe_gps = _resolve_toe(elements, system, toc_gps, prns, name)
+    toc_scale = toc_gps - np.where(system == SYSTEMS.index("BDS"), _BDT_EPOCH_GPS_S, 0.0)
+    elements["toc_sow"] = readonly(np.mod(toc_scale, SECONDS_PER_WEEK))
+    # drop repeated broadcasts of one ephemeris (same satellite and toe): keep the first
+    keys: dict[tuple[str, float], int] = {}
+    keep = []
+    for j, (prn, toe) in enumerate(zip(prns, toe_gps.tolist(), strict=True)):
+        if (prn, toe) not in keys:
+            keys[(prn, toe)] = j
+            keep.append(j)
+    sel = np.asarray(keep, dtype=np.intp)
+    return NavigationFile(
+        path=name,
+        version=version,
+        file_system=file_system,
+        system=readonly(system[sel]),
+        prn=tuple(prns[j] for j in keep),
+        toc_gps_s=readonly(toc_gps[sel]),
+        toe_gps_s=readonly(toe_gps[sel]),
+        elements={f: readonly(v[sel]) for f, v in elements.items()},
+        skipped=skipped,
+        unhealthy=unhealthy,
+        digest=hashlib.sha256(raw).hexdigest(),
+    )
+
+
+def _check_elements(el: dict[str, float], where: str) -> None:
+    if not el["sqrt_a_sqrtm"] > 2000.0:  # sqrt of 4,000 km: below any orbit
+        raise ValueError(f"{where}: sqrt(A) = {el['sqrt_a_sqrtm']} m^0.5 is not a plausible orbit")
+    if not 0.0 <= el["ecc"] < 0.5:
+        raise ValueError(f"{where}: eccentricity {el['ecc']} outside [0, 0.5)")
+    if not 0.0 <= el["toe_sow"] < SECONDS_PER_WEEK:
+        raise ValueError(f"{where}: toe {el['toe_sow']} s outside the week [0, 604800)")
+    if not (el["week"] >= 0.0 and float(el["week"]).is_integer()):
+        raise ValueError(f"{where}: week {el['week']} is not a non-negative integer")
+
+
+def _resolve_toe(
+    elements: dict[str, NDArray[np.float64]],
+    system: NDArray[np.intp],
+    toc_gps: NDArray[np.float64],
+    prns: list[str],
+    name: str,
+) -> NDArray[np.float64]:
+    """``toe`` in GPS seconds: the week that puts it nearest its ``toc``, checked against the
+    week field (continuous, or modulo 1024 as some writers give GPS weeks)."""
+    is_bds = system == SYSTEMS.index("BDS")
+    week_start = np.where(is_bds, _BDT_EPOCH_GPS_S, 0.0)  # week 0 of the record's time scale
+    toc_scale = toc_gps - week_start  # toc in the record's own time scale
+    toe_sow = elements["toe_sow"]
+    week = np.round((toc_scale - toe_sow) / SECONDS_PER_WEEK)
+    field_week = elements["week"]
+    diff = (week - field_week) % 1024.0
+    bad = ~((diff <= 1.0) | (diff >= 1023.0))
+    if np.any(bad):
+        j = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"{name}: ephemeris {j + 1} of {prns[j]}: week {int(field_week[j])} disagrees with "
+            f"its epoch (week {int(week[j])} of its time scale)"
+        )
+    return week_start + week * SECONDS_PER_WEEK + toe_sow
+
+
+# --------------------------------------------------------------------------------------------
+# propagation
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class BroadcastConstellation:
+    """Satellites propagated from broadcast ephemerides, with the interface of
+    :class:`~coopnav_env.gnss.constellation.Constellation` (``system``, ``prn``, ``n_sv``,
+    ``positions_ecef(t_s)``, ``subset``).
+
+    Build it with :func:`load_broadcast_constellation` (or :meth:`from_navigation`). Time
+    ``t_s`` is in seconds after ``reference_gps_s`` (see the module docstring).
+
+    Attributes
+    ----------
+    system : ndarray of intp, shape (n_sv,)
+        Index into ``SYSTEMS`` per satellite, satellites grouped by system in the order asked.
+    prn : tuple of str
+        Satellite labels from the file (``"G05"``, ``"C01"``), sorted within a system.
+    reference_gps_s : float
+        GPS seconds of ``t_s = 0``: the start of the coverage, a whole second.
+    coverage_gps_s : tuple of float
+        ``(start, end)`` in GPS seconds: the span in which every included system has a
+        valid ephemeris.
+    toe_gps_s : ndarray, shape (n_sv, n_max)
+        ``toe`` of each satellite's ephemerides in GPS seconds, latest first, NaN padded.
+    validity_s : ndarray, shape (n_sv, n_max)
+        Half-width of each ephemeris' validity [s].
+    elements : dict of str to ndarray, shape (n_sv, n_max)
+        The broadcast fields of each ephemeris (:attr:`NavigationFile.elements`).
+    is_geo : ndarray of bool, shape (n_sv,)
+        BeiDou GEO satellites.
+    source : str
+        The file (for messages).
+    digest : str
+        SHA-256 of the file plus the systems kept (identifies the sky in caches).
+    """
+
+    system: NDArray[np.intp]
+    prn: tuple[str, ...]
+    reference_gps_s: float
+    coverage_gps_s: tuple[float, float]
+    toe_gps_s: NDArray[np.float64]
+    validity_s: NDArray[np.float64]
+    elements: dict[str, NDArray[np.float64]]
+    is_geo: NDArray[np.bool_]
+    source: str
+    digest: str
+
+    @classmethod
+    def from_navigation(
+        cls, nav: NavigationFile, systems: tuple[str, ...] = SYSTEMS
+    ) -> BroadcastConstellation:
+        """The satellites of ``systems`` (in that order) in a :class:`NavigationFile`.
+
+        Raises
+        ------
+        ValueError
+            For an unknown system name, or a system with no ephemeris in the file.
+        """
+        if isinstance(systems, str):
+            systems = (systems,)
+        systems = tuple(systems)
+        for s in systems:
+            if s not in SYSTEMS:
+                raise ValueError(f"unknown system {s!r}; allowed: {SYSTEMS}")
+        if not systems or len(set(systems)) != len(systems):
+            raise ValueError(f"systems must name distinct systems of {SYSTEMS}, got {systems!r}")
+        sat_rows: list[tuple[int, str, NDArray[np.intp]]] = []
+        spans = []
+        fit_h = nav.elements["fit_or_aodc"]
+        validity = np.where(
+            nav.system == SYSTEMS.index("GPS"),
+            np.maximum(GPS_VALIDITY_S, np.nan_to_num(fit_h, nan=0.0) * 1800.0),
+            BDS_VALIDITY_S,
+        )
+        for s in systems:
+            idx = SYSTEMS.index(s)
+            rows = np.flatnonzero(nav.system == idx)
+            if rows.size == 0:
+                raise ValueError(f"{nav.path}: no healthy {s} ephemeris in the file")
+            spans.append(
+                (
+                    float(np.min(nav.toe_gps_s[rows] - validity[rows])),
+                    float(np.max(nav.toe_gps_s[rows] + validity[rows])),
+                )
+            )
+            prns = sorted({nav.prn[j] for j in rows})
+            for prn in prns:
+                mine = np.asarray([j for j in rows if nav.prn[j] == prn], dtype=np.intp)
+                mine = mine[np.argsort(-nav.toe_gps_s[mine], kind="stable")]  # latest first
+                sat_rows.append((idx, prn, mine))
+        n_sv = len(sat_rows)
+        n_max = max(len(r) for _, _, r in sat_rows)
+        toe = np.full((n_sv, n_max), np.nan)
+        valid = np.zeros((n_sv, n_max))
+        els = {f: np.full((n_sv, n_max), np.nan) for f in nav.elements}
+        for i, (_, _, rows) in enumerate(sat_rows):
+            toe[i, : rows.size] = nav.toe_gps_s[rows]
+            valid[i, : rows.size] = validity[rows]
+            for f, v in nav.elements.items():
+                els[f][i, : rows.size] = v[rows]
+        start = max(a for a, _ in spans)
+        end = min(b for _, b in spans)
+        if not end > start:
+            raise ValueError(
+                f"{nav.path}: the ephemerides of {systems} do not overlap in time "
+                f"(spans {[(_gps_iso(a), _gps_iso(b)) for a, b in spans]})"
+            )
+        prn = tuple(p for _, p, _ in sat_rows)
+        is_geo = np.asarray([p[0] == "C" and int(p[1:]) in BDS_GEO_PRNS for p in prn])
+        digest = hashlib.sha256((nav.digest + ",".join(systems)).encode()).hexdigest()
+        return cls(
+            system=readonly(np.asarray([s for s, _, _ in sat_rows], dtype=np.intp)),
+            prn=prn,
+            reference_gps_s=float(np.floor(start)),
+            coverage_gps_s=(start, end),
+            toe_gps_s=readonly(toe),
+            validity_s=readonly(valid),
+            elements={f: readonly(v) for f, v in els.items()},
+            is_geo=readonly(is_geo),
+            source=nav.path,
+            digest=digest,
+        )
+
+    @property
+    def n_sv(self) -> int:
+        """Number of satellites."""
+        return len(self.prn)
+
+    @property
+    def coverage_s(self) -> tuple[float, float]:
+        """The coverage as ``t_s`` (seconds after ``reference_gps_s``)."""
+        a, b = self.coverage_gps_s
+        return a - self.reference_gps_s, b - self.reference_gps_s
+
+    def t_s_of(self, when: Any) -> float:
+        """``t_s`` of a time given as GPS seconds or a UTC ISO string (:func:`gps_seconds`)."""
+        return gps_seconds(when) - self.reference_gps_s
+
+    def coverage_text(self) -> str:
+        """The coverage for messages: GPST times and ``t_s``."""
+        a, b = self.coverage_gps_s
+        ta, tb = self.coverage_s
+        return f"{_gps_iso(a)} to {_gps_iso(b)} (t_s {ta:g} to {tb:g} s)"
+
+    def check_covered(self, t_s: ArrayLike) -> None:
+        """Raise ``ValueError`` naming the time and the coverage if any ``t_s`` is outside it."""
+        t = np.asarray(t_s, dtype=np.float64)
+        lo, hi = self.coverage_s
+        bad = ~((t >= lo) & (t <= hi))
+        if np.any(bad):
+            first = float(t[bad].flat[0])
+            raise ValueError(
+                f"time t_s = {first:g} s ({_gps_iso(first + self.reference_gps_s)}) is outside "
+                f"the validity of every ephemeris in {self.source}: its coverage is "
+                f"{self.coverage_text()}"
+            )
+
+    def _select(self, t: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+        """Per time and satellite, the column of the ephemeris used and whether one is valid.
+
+        ``t``: shape (n_t,) [s after reference]; returns shapes (n_t, n_sv)."""
+        dt = np.abs((self.reference_gps_s - self.toe_gps_s)[None] + t[:, None, None])
+        ok = dt <= self.validity_s[None]  # NaN toe compares False
+        key = np.where(ok, dt, np.inf)
+        col = np.argmin(key, axis=2)  # first minimum: the later toe on a tie
+        has = np.take_along_axis(ok, col[..., None], axis=2)[..., 0]
+        return col, has
+
+    def _state(self, t_s: ArrayLike, what: str) -> NDArray[np.float64]:
+        t = as_float_array(t_s, "t_s")
+        if t.ndim > 1:
+            raise ValueError(f"t_s must be a scalar or 1-D array, got shape {t.shape}")
+        self.check_covered(t)
+        tt = np.atleast_1d(t)
+        col, has = self._select(tt)
+        rows = np.arange(self.n_sv)[None, :]
+
+        def pick(name: str) -> NDArray[np.float64]:
+            return self.elements[name][rows, col]
+
+        out = _propagate(
+            pick,
+            self.system[None, :],
+            self.is_geo[None, :],
+            self.reference_gps_s,
+            tt[:, None],
+            what,
+        )
+        out = np.where(has[..., None] if out.ndim == 3 else has, out, np.nan)
+        return out[0] if t.ndim == 0 else out
+
+    def positions_ecef(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """Satellite positions in ECEF (WGS 84; BeiDou's CGCS2000 taken as the same).
+
+        Parameters
+        ----------
+        t_s : float or array_like, shape () or (n_t,)
+            Seconds after ``reference_gps_s`` (GPS time; a BeiDou satellite is evaluated at
+            the same instant in BDT).
+
+        Returns
+        -------
+        ndarray, shape (n_sv, 3) for scalar ``t_s``, (n_t, n_sv, 3) for 1-D ``t_s``
+            ECEF positions [m]; NaN rows for satellites with no valid ephemeris at that time.
+
+        Raises
+        ------
+        ValueError
+            For a time outside the coverage (the message names the file and its coverage).
+        """
+        return self._state(t_s, "position")
+
+    def clock_offsets_s(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """Satellite clock offsets ``af0 + af1 dt + af2 dt^2 + dtr`` (no ``TGD``) [s].
+
+        Same time argument as :meth:`positions_ecef`; shape (n_sv,) or (n_t, n_sv).
+        """
+        return self._state(t_s, "clock")
+
+    def subset(self, mask_or_indices: ArrayLike) -> BroadcastConstellation:
+        """The same sky restricted to a selection of satellites (order kept, no repeats).
+
+        The coverage is kept (it is the file's, not the selection's).
+        """
+        sel = np.asarray(mask_or_indices)
+        if sel.dtype == np.bool_:
+            if sel.shape != (self.n_sv,):
+                raise ValueError(f"mask must have shape ({self.n_sv},), got {sel.shape}")
+            idx = np.flatnonzero(sel)
+        else:
+            idx = as_index_array(sel, "mask_or_indices", self.n_sv)
+            if len(set(idx.tolist())) != idx.size:
+                raise ValueError("mask_or_indices must not repeat a satellite")
+        return BroadcastConstellation(
+            system=readonly(self.system[idx]),
+            prn=tuple(self.prn[j] for j in idx),
+            reference_gps_s=self.reference_gps_s,
+            coverage_gps_s=self.coverage_gps_s,
+            toe_gps_s=readonly(self.toe_gps_s[idx]),
+            validity_s=readonly(self.validity_s[idx]),
+            elements={f: readonly(v[idx]) for f, v in self.elements.items()},
+            is_geo=readonly(self.is_geo[idx]),
+            source=self.source,
+            digest=hashlib.sha256(
+                (self.digest + ",".join(map(str, idx.tolist()))).encode()
+            ).hexdigest(),
+        )
+
+
+def _wrap_half_week(dt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Seconds-of-week difference brought into [-302400, 302400] (IS-GPS-200 20.3.3.4.3)."""
+    dt = np.where(dt > _HALF_WEEK_S, dt - SECONDS_PER_WEEK, dt)
+    return np.where(dt < -_HALF_WEEK_S, dt + SECONDS_PER_WEEK, dt)
+
+
+def _propagate(pick, system, is_geo, ref_gps, t_rel, what: str) -> NDArray[np.float64]:
+    """Positions (..., 3) or clock offsets (...) from broadcast elements, vectorised.
+
+    ``pick(name)`` gives an element per (time, satellite); the time is ``ref_gps + t_rel`` in
+    GPS seconds (``ref_gps`` a whole second, kept apart so that seconds of the week stay
+    exact)."""
+    bds = system == SYSTEMS.index("BDS")
+    mu = np.where(bds, BDS_MU_M3PS2, GPS_MU_M3PS2)
+    omega_e = np.where(bds, BDS_OMEGA_E_RADPS, GPS_OMEGA_E_RADPS)
+    # t in the satellite's own time scale, as seconds of its week (IS-GPS-200 / BDS ICD t - toe)
+    ref_sow = np.mod(ref_gps - np.where(bds, _BDT_EPOCH_GPS_S, 0.0), SECONDS_PER_WEEK)
+    t_sow = np.mod(ref_sow + t_rel, SECONDS_PER_WEEK)
+    toe = pick("toe_sow")
+    tk = _wrap_half_week(t_sow - toe)
+    sqrt_a = pick("sqrt_a_sqrtm")
+    a = sqrt_a * sqrt_a
+    ecc = pick("ecc")
+    n = np.sqrt(mu / a**3) + pick("delta_n_radps")
+    mk = pick("m0_rad") + n * tk
+    ek = mk.copy()
+    for _ in range(_KEPLER_ITERATIONS):  # Newton on E - e sin E = M
+        ek = ek - (ek - ecc * np.sin(ek) - mk) / (1.0 - ecc * np.cos(ek))
+    if what == "clock":
+        dt_clock = _wrap_half_week(t_sow - pick("toc_sow"))
+        rel = -2.0 * np.sqrt(mu) / SPEED_OF_LIGHT_MPS**2 * ecc * sqrt_a * np.sin(ek)
+        return pick("af0_s") + pick("af1_sps") * dt_clock + pick("af2_sps2") * dt_clock**2 + rel
+    sin_e, cos_e = np.sin(ek), np.cos(ek)
+    vk = np.arctan2(np.sqrt(1.0 - ecc * ecc) * sin_e, cos_e - ecc)
+    phi = vk + pick("omega_rad")
+    s2, c2 = np.sin(2.0 * phi), np.cos(2.0 * phi)
+    uk = phi + pick("cus_rad") * s2 + pick("cuc_rad") * c2
+    rk = a * (1.0 - ecc * cos_e) + pick("crs_m") * s2 + pick("crc_m") * c2
+    ik = pick("i0_rad") + pick("cis_rad") * s2 + pick("cic_rad") * c2 + pick("idot_radps") * tk
+    xp, yp = rk * np.cos(uk), rk * np.sin(uk)
+    omega_dot = pick("omega_dot_radps")
+    # MEO/IGSO (and GPS): node longitude in the Earth-fixed frame; GEO: in the toe's inertial frame
+    node = np.where(
+        is_geo,
+        pick("omega0_rad") + omega_dot * tk - omega_e * toe,
+        pick("omega0_rad") + (omega_dot - omega_e) * tk - omega_e * toe,
+    )
+    cos_n, sin_n = np.cos(node), np.sin(node)
+    cos_i, sin_i = np.cos(ik), np.sin(ik)
+    x = xp * cos_n - yp * cos_i * sin_n
+    y = xp * sin_n + yp * cos_i * cos_n
+    z = yp * sin_i
+    # GEO: R_Z(OmegaE tk) R_X(-5 deg) (BDS-SIS-ICD-B1I 5.2.4.12)
+    cf, sf = np.cos(_BDS_GEO_INCLINATION_RAD), np.sin(_BDS_GEO_INCLINATION_RAD)
+    y5 = cf * y + sf * z
+    z5 = -sf * y + cf * z
+    ang = omega_e * tk
+    ca, sa = np.cos(ang), np.sin(ang)
+    xg = ca * x + sa * y5
+    yg = -sa * x + ca * y5
+    return np.stack(
+        [np.where(is_geo, xg, x), np.where(is_geo, yg, y), np.where(is_geo, z5, z)], axis=-1
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_sky(
+    path: str, mtime_ns: int, size: int, systems: tuple[str, ...]
+) -> BroadcastConstellation:
+    return BroadcastConstellation.from_navigation(read_rinex_nav(path), systems)
+
+
+def resolve_nav_path(spec: str) -> Path:
+    """The file a ``rinex:`` setting names: ``"sample"`` is :data:`SAMPLE_NAV_PATH`."""
+    return SAMPLE_NAV_PATH if spec == "sample" else Path(spec).expanduser()
+
+
+def load_broadcast_constellation(
+    path: str | os.PathLike[str], systems: tuple[str, ...] = SYSTEMS
+) -> BroadcastConstellation:
+    """The sky of a RINEX 3 navigation file (cached per file content and ``systems``).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The navigation file; ``"sample"``: the one shipped with the package.
+    systems : tuple of str, optional
+        Systems to keep, in this order (names from ``SYSTEMS``).
+
+    Returns
+    -------
+    BroadcastConstellation
+
+    Raises
+    ------
+    ValueError
+        A missing or bad file (:func:`read_rinex_nav`), or a system with no ephemeris.
+    """
+    p = resolve_nav_path(str(path)) if isinstance(path, str) else Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        raise ValueError(f"RINEX navigation file {str(path)!r} does not exist") from None
+    if not p.is_file():
+        raise ValueError(f"RINEX navigation file {str(path)!r} is not a file")
+    if isinstance(systems, str):
+        systems = (systems,)
+    return _cached_sky(str(p.resolve()), st.st_mtime_ns, st.st_size, tuple(systems))
