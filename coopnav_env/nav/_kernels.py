@@ -26,8 +26,8 @@ formulation in :mod:`.wls` / :mod:`.cooperative` (``_USE_KERNEL = False``), comp
 ``tests/nav/test_kernels.py``.
 
 The kernels are compiled on first use and cached on disk beside this file (numba
-``cache=True``); the first call of a fresh installation compiles them (see the README for
-the time this takes for all kernels of the package on a 2-core machine).
+``cache=True``); the first call of a fresh installation compiles them (``docs/performance.md``
+says how long this takes for all kernels of the package on a 2-core machine).
 """
 
 from __future__ import annotations
