@@ -11,14 +11,13 @@ name                      policy
 ``spread``                ``sky`` as a stretched column (20 m spacing) that closes up at the
                           goal (:mod:`coopnav_env.agents.heuristics`)
 ``wide``                  ``spread`` as a 45 m column that opens ahead of the start and
-                          closes at the goal: the best heuristic of the learning study
-                          (:mod:`coopnav_env.agents.heuristics`)
+                          closes at the goal (:mod:`coopnav_env.agents.heuristics`; chosen in
+                          ``studies/learning_in_default_setting``)
 ``guarded``               ``wide`` with a wall guard (range sensor) and soft slot tracking,
                           for degraded navigation (:mod:`coopnav_env.agents.heuristics`)
 ``ceiling``               ``guarded`` that climbs hard and holds the top of the altitude
-                          band: what the learned swarm does under realistic urban
-                          reception, by hand, and the best policy of the study there
-                          (:mod:`coopnav_env.agents.heuristics`)
+                          band, for degraded navigation (:mod:`coopnav_env.agents.heuristics`;
+                          ``studies/learning_under_degraded_navigation``)
 ``skyroute``              ``ceiling`` on the street route with the best sky: of the equally
                           short routes, the one with the fewest points of poor satellite
                           geometry predicted by the city map (:mod:`coopnav_env.agents.routes`)
@@ -29,8 +28,8 @@ name                      policy
                           ``route:pretrained`` (``.../s1``) the shipped study models
 ``split:<path>``          a column heuristic that splits over two streets where a learned
                           split model predicts it best (:mod:`coopnav_env.agents.routes`;
-                          ``benchmarks/split_choice.py --fit-model``); ``split:pretrained``
-                          (``.../s1``, ``.../s2``) the shipped models
+                          ``studies/split_choice/split_choice.py --fit-model``);
+                          ``split:pretrained`` (``.../s1``, ``.../s2``) the shipped models
 ``planner``               privileged MPC that looks ahead in copies of the environment with
                           the true errors: the headroom reference (:mod:`coopnav_env.agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`coopnav_env.agents.ppo`)

@@ -29,7 +29,9 @@ __all__ = ["PRETRAINED_DIR", "MARLPolicy", "resolve_marl_checkpoint"]
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
-"""The policies of the documented learning study (``docs/marl/report.md``), actor only."""
+"""The shipped TorchRL actors (``<algorithm>_<seed>`` folders, ``final_model.pt`` holds the actor
+only), trained for ``studies/learning_in_default_setting`` and
+``studies/learning_under_degraded_navigation``."""
 
 
 def resolve_marl_checkpoint(path: str | Path, algorithm: str = "mappo") -> Path:

@@ -48,8 +48,8 @@ class PrivilegedPlanner:
     env : urban_canyon_v0 ParallelEnv
         The environment itself (the planner copies it; it must be the object being stepped).
     base : Policy
-        The base heuristic, acting in ``env`` (:func:`coopnav_env.agents.make_policy` builds ``wide``,
-        the best heuristic, unless told otherwise, e.g. ``planner@base='spread'``).
+        The base heuristic, acting in ``env`` (:func:`coopnav_env.agents.make_policy` builds ``wide``
+        unless told otherwise, e.g. ``planner@base='spread'``).
     horizon : int
         Look-ahead steps, >= 1.
     n_samples, n_elite, iterations : int
@@ -71,7 +71,7 @@ class PrivilegedPlanner:
         belief, so its errors start at zero). The planner then no longer knows where the UAVs
         truly are, nor their current errors; it still knows the map, the satellites and the
         simulator's error model. An on-board look-ahead, to tell how much of the headroom
-        needs the truth (``benchmarks/planner_headroom.py --planner-set from_estimate=True``).
+        needs the truth (``studies/planner_headroom``).
         The belief is taken as it is, even where it lies inside a building (the look-ahead
         then starts there).
     sample_belief : bool
@@ -91,8 +91,8 @@ class PrivilegedPlanner:
         than reaches the margin in 2 s; the base must have a wall guard, e.g. ``ceiling``).
         Without it an offset can cancel the base's wall guard or outrun it, which is how the
         on-board look-ahead, whose belief of where the UAVs are is metres off, flies them
-        into walls (with it they still crash in about 1 episode in 10 against ``ceiling``'s
-        1 in 50: docs/marl/README.md). On-board (the range sensor measures true
+        into walls (``studies/planner_headroom`` measures how often, with and without it).
+        On-board (the range sensor measures true
         distances). In the look-ahead the copy's range sensor is read from where the copy's
         UAVs are (with ``from_estimate``, where they are believed to be).
     """
@@ -241,7 +241,7 @@ class PrivilegedPlanner:
         """The first command of the best plan found (see the module docstring).
 
         Afterwards :attr:`last_plan` describes the choice, for analyses of what the planner
-        does (``benchmarks/planner_headroom.py``): ``base_cost`` (the look-ahead cost of the
+        does (``studies/planner_headroom/planner_headroom.py``): ``base_cost`` (the look-ahead cost of the
         base heuristic alone, offset zero), ``best_cost`` (of the plan applied; at most
         ``base_cost``), ``offsets`` (``(n_agents, 3)``, the per-UAV offset applied, in the
         order of ``possible_agents``, before the wall guard and clipping), ``base_command``

@@ -4,8 +4,8 @@ On the Manhattan street grid of ``urban_canyon_v0`` many routes from the start t
 share the shortest length (:func:`coopnav_env.sim.route.street_routes`). The column
 heuristics fly the first of them (:func:`~coopnav_env.sim.route.street_route`) unless told
 otherwise; the routes differ in the buildings along them, and so in the satellites a receiver
-keeps, and that changes the swarm's navigation error by more than any change to the
-formation found so far (docs/marl/README.md, "Route choice").
+keeps, and so in the swarm's navigation error (``studies/route_choice`` measures by how
+much).
 
 Everything here is *on board*: the city map (the same 3-D model the receiver's
 mapping-aided NLOS exclusion uses), the satellites' directions at the time of planning (from

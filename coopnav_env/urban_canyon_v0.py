@@ -150,7 +150,8 @@ With `obs_true_error=True` (**privileged: a diagnostic, not an on-board observat
 entries follow last: `true_error`, the true error of the estimate the UAV uses (East, North,
 Up) / `obs_sigma_max_m`, clipped to [-1, 1]. No receiver knows it; it exists to tell whether
 a learned policy falls short of the privileged planner for want of information or of
-learning (`docs/marl`), and a policy trained with it must not be reported as an on-board one.
+learning (`studies/planner_headroom`), and a policy trained with it must not be reported as an
+on-board one.
 
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`

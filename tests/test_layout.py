@@ -19,8 +19,16 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PROJECT = ("coopnav_env", "agents", "training", "reproduction", "tests", "benchmarks")
-CHECKED = ("training", "reproduction", "agents", "benchmarks", "tests/training", "tests/agents")
+PROJECT = ("coopnav_env", "agents", "training", "reproduction", "tests", "benchmarks", "studies")
+CHECKED = (
+    "training",
+    "reproduction",
+    "agents",
+    "benchmarks",
+    "studies",
+    "tests/training",
+    "tests/agents",
+)
 ACYCLIC = ("training", "reproduction", "agents")
 
 

@@ -109,7 +109,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         altitude), for the UAV and for the swarm (distinct satellites over every UAV's
         point), each divided by 20 and clipped to [0, 1]; a point inside a building
         counts none. What a receiver with the map and the almanac can predict of the sky
-        ahead (the kind of look-ahead the remaining headroom seems to need, ``docs/marl``).
+        ahead (``studies/planner_headroom`` trains with it).
     obs_candidate_sky : bool, default False
         Append ten entries after everything else (after ``obs_lookahead``'s when those are
         on): for five candidate positions of the UAV (where it believes it is; 10 m further
@@ -129,8 +129,8 @@ class UrbanCanyonConfig(ScenarioConfig):
         of the estimate it uses (``nav_error``), each divided by ``obs_sigma_max_m`` and
         clipped to [-1, 1]. No receiver knows this; the privileged planner does (it knows
         where the UAVs are). It tells whether a learned policy falls short of the planner
-        for want of information or for want of learning (``docs/marl``, "An oracle
-        observation"); a policy trained with it must never be reported as an on-board one.
+        for want of information or for want of learning (``studies/planner_headroom``); a
+        policy trained with it must never be reported as an on-board one.
     """
 
     max_steps: int = 200
@@ -347,8 +347,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 #: (default 30) rejects fixes whose own predicted 3-D sigma exceeds 15 m. Such a fix is honest
 #: (its covariance says how imprecise it is) but often tens of metres off, and once used it
 #: moves the position the next epoch's prediction is made at. Far fewer wrong fixes for fewer
-#: valid ones (``benchmarks/study_urban_nlos.py`` measures both presets side by side, and the
-#: gate's share of the effect). The infos add ``n_map_excluded``.
+#: valid ones (``studies/nlos_defences`` measures both presets side by side, and the gate's
+#: share of the effect). The infos add ``n_map_excluded``.
 PRESETS["urban_nlos_3dma"] = {
     **PRESETS["urban_nlos"],
     "nlos_exclusion": "map",

@@ -62,7 +62,7 @@ moves the position the next prediction is made at.
 
 What it costs: fewer satellites per fix, so fewer valid cooperative fixes and a lower
 availability of protection levels within the alert limit (the UAVs dead-reckon more), for
-far fewer wrong ones; ``benchmarks/study_urban_nlos.py`` measures both sides, and
+far fewer wrong ones; ``studies/nlos_defences/nlos_defences.py`` measures both sides, and
 ``benchmarks/bench_integrity.py`` the step time (the prediction traces seven candidates per
 UAV). Dead reckoning is cheap in this simulation by default (it moves the estimate by the
 true velocity, so its error does not grow), which flatters any design that rejects fixes;

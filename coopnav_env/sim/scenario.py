@@ -319,8 +319,7 @@ class ScenarioConfig:
         covariance already assumes. Off (the default, unchanged episodes): the prediction
         moves by the *true* velocity, so dead reckoning never drifts, and a design that
         rejects fixes is flattered (it keeps the error of its last good fix for ever). Turn it
-        on wherever fixes are often rejected (the ``urban_nlos_3dma`` study of
-        docs/marl/README.md).
+        on wherever fixes are often rejected (e.g. with the ``urban_nlos_3dma`` preset).
     start_prior_sigma_m : float, default 10.0
         Per-axis sigma of the known launch position, used only when a UAV has no fix at the
         first epoch, in (0, 1000] [m].

@@ -1,0 +1,1 @@
+"""Research studies of the project: one folder each (not installed; see README.md)."""
