@@ -15,6 +15,7 @@ The library API (:func:`~coopnav_env.training.evaluate.evaluate`,
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from collections.abc import Mapping, Sequence
@@ -25,7 +26,17 @@ from coopnav_env.training.compile_notice import compile_notice, warm_up_env
 from coopnav_env.training.config import apply_overrides, parse_yaml
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
 from coopnav_env.training.evaluate import DEFAULT_EPISODES, _make_env, evaluate
-from coopnav_env.training.files import jsonable
+from coopnav_env.training.files import claim_output_folder, jsonable
+
+EVALUATE_OUTPUTS = (
+    "report.json",
+    "report.csv",
+    "report.md",
+    "errors.npz",
+    "error_cdf.png",
+    "trajectories_*.png",
+)
+"""The files ``coopnav evaluate`` writes into its ``--out``."""
 
 __all__ = [
     "TRAINED_KINDS",
@@ -50,7 +61,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out",
         default=None,
-        help="directory for report.* and plots (default: none, only the table is printed)",
+        help="directory for report.* and plots, of this evaluation alone: a folder of another "
+        "command, of other settings, or holding this finished evaluation is refused "
+        "(default: none, only the table is printed)",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of the command (or the earlier evaluation) that --out holds; "
+        "a training run is never replaced (default: refuse)",
     )
     parser.add_argument(
         "--episodes",
@@ -267,18 +286,32 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     env_id, env_kwargs, source = _env_from_args(args)
-    with compile_notice("about a minute", prefix="coopnav evaluate"):
-        warm_up_env(make_env_fn(env_id, env_kwargs))
-    report = evaluate(
-        args.policies,
-        seeds,
-        env_kwargs,
-        args.out,
-        env_id=env_id,
-        plots=not args.no_plots,
-        verbose=True,
-        env_source=source,
-    )
+    claim = contextlib.nullcontext(None)
+    if args.out is not None:  # --out is claimed (locked, checked, recorded) before any work
+        settings = {"policies": args.policies, "seeds": seeds, "env_id": env_id}
+        settings |= {"env": env_kwargs, "plots": not args.no_plots}
+        claim = claim_output_folder(
+            args.out,
+            "coopnav evaluate",
+            settings,
+            outputs=EVALUATE_OUTPUTS,
+            overwrite=args.overwrite,
+        )
+    with claim as folder:
+        with compile_notice("about a minute", prefix="coopnav evaluate"):
+            warm_up_env(make_env_fn(env_id, env_kwargs))
+        report = evaluate(
+            args.policies,
+            seeds,
+            env_kwargs,
+            args.out,
+            env_id=env_id,
+            plots=not args.no_plots,
+            verbose=True,
+            env_source=source,
+        )
+        if folder is not None:
+            folder.finish(report.files.values())
     print(report.header())
     print()
     print(report.to_markdown())

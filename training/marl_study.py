@@ -1,7 +1,9 @@
 """The learning study: learned swarms against every heuristic and a privileged planner.
 
 ``coopnav study`` writes a study's report (Markdown, JSON, figures) from training runs into
-``--out`` (default ``runs/study``; the committed ones are under ``studies/``):
+``--out`` (default ``runs/study``; the committed ones are under ``studies/``), a folder of its
+own that it claims before flying anything
+(:func:`coopnav_env.training.files.claim_output_folder`):
 
 1. every policy flies the same held-out episodes (reset seeds from 1,000,000; training uses
    seeds below) in the study's environment; a learned method contributes one row per
@@ -36,7 +38,7 @@ import numpy as np
 from coopnav_env.training.config import apply_overrides
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
 from coopnav_env.training.eval_plots import distance_along_route, save_figure, short_label
-from coopnav_env.training.files import atomic_write_text, jsonable
+from coopnav_env.training.files import atomic_write_text, claim_output_folder, jsonable
 from coopnav_env.training.stats import (
     interquartile_mean,
     paired_difference,
@@ -496,7 +498,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="NAME=DIR[,DIR...]",
         help="learned methods: a name and its training run folders (one per seed), e.g. "
-        "mappo=runs/mappo_s0,runs/mappo_s1 (default: none)",
+        "mappo=runs/mappo_s0,runs/mappo_s1. A run folder's model file (final_model.pt, "
+        "final_model.zip) is a pickle: loading it runs code from it, so give only runs you "
+        "trust (default: none)",
     )
     parser.add_argument(
         "--heuristics",
@@ -548,7 +552,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         + " (use nav where policies differ in how often they have a cooperative fix, e.g. "
         "with fault exclusion); the other is reported beside it (default: %(default)s)",
     )
-    parser.add_argument("--out", default="runs/study", help="output folder (default: %(default)s)")
+    parser.add_argument(
+        "--out",
+        default="runs/study",
+        help="output folder, of this study alone: a folder of another command, a study of "
+        "other settings or a finished study is refused (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of the command (or the earlier study) that --out holds; a "
+        "training run is never replaced (default: refuse)",
+    )
     parser.add_argument(
         "--reps", type=int, default=2000, help="bootstrap replicates (default: %(default)s)"
     )
@@ -699,6 +714,51 @@ def run(args: argparse.Namespace) -> int:
         if args.planner.split("@")[0] != "planner":
             raise ValueError(f"--planner must name the planner (planner@...), got {args.planner!r}")
         units.append(("planner (privileged)", args.planner, seeds[: args.planner_episodes]))
+    settings = {k: getattr(args, k) for k in _SETTINGS}
+    settings["env"] = env_kwargs
+    out = Path(args.out)
+    # --out is claimed (locked, checked, recorded) before any episode is flown
+    with claim_output_folder(
+        out, "coopnav study", settings, outputs=STUDY_OUTPUTS, overwrite=args.overwrite
+    ) as claim:
+        claim.finish(_fly_and_report(args, groups, env_kwargs, seeds, units, out, t0))
+    print(f"wrote {out / 'report.md'}", file=sys.stderr)
+    return 0
+
+
+_SETTINGS = (
+    "runs",
+    "heuristics",
+    "episodes",
+    "first_seed",
+    "planner_episodes",
+    "planner",
+    "env_set",
+    "score",
+    "reps",
+)
+"""The options a study's result depends on (recorded in ``OUT/command.json``)."""
+
+STUDY_OUTPUTS = (
+    "report.json",
+    "report.md",
+    "learning_curves.png",
+    "errors.png",
+    "trajectories.png",
+)
+"""The files ``coopnav study`` writes into its ``--out``."""
+
+
+def _fly_and_report(
+    args: argparse.Namespace,
+    groups: Mapping[str, Sequence[Path]],
+    env_kwargs: dict[str, Any],
+    seeds: list[int],
+    units: list[tuple[str, str, list[int]]],
+    out: Path,
+    t0: float,
+) -> list[Path]:
+    """Fly every unit, summarise, write the report and figures into ``out``; the files."""
     flown = _fly_all(units, env_kwargs, args.jobs)
     results: dict[str, list[list[EpisodeResult]]] = {}
     for (name, _policy, _seeds), episodes in zip(units, flown):
@@ -718,8 +778,6 @@ def run(args: argparse.Namespace) -> int:
         headroom["episodes"] = len(sub)
         headroom["planner_s"] = _timings.get(args.planner, math.nan)
         headroom["planner"] = args.planner
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     figs = {}
     ref = {h: summary["methods"][h]["error_mean"]["value"] for h in args.heuristics}
     f = plot_learning_curves(groups, out / "learning_curves.png", ref)
@@ -756,8 +814,7 @@ def run(args: argparse.Namespace) -> int:
     }
     atomic_write_text(out / "report.json", json.dumps(jsonable(data), indent=1, sort_keys=True))
     atomic_write_text(out / "report.md", report_markdown(data))
-    print(f"wrote {out / 'report.md'}", file=sys.stderr)
-    return 0
+    return [out / "report.json", out / "report.md", *(out / f for f in figs.values())]
 
 
 _timings: dict[str, float] = {}

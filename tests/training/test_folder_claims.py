@@ -1,0 +1,186 @@
+"""An output folder belongs to one command (issue 35, finding 3).
+
+``coopnav study`` and ``coopnav evaluate`` claim their ``--out`` before any work, the way
+``coopnav train`` and ``train-routes`` do: another command's folder, a training run, a result
+of other settings and a finished result are refused with a message naming what the folder
+holds; ``--overwrite`` replaces a report (never a training run); a second command into a
+locked folder fails at once; a rerun after an interrupt is taken. The flights are replaced by
+a stub where only the claim is under test (a study that flies would take minutes).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from coopnav_env.training import marl_study
+from coopnav_env.training.cli import main
+from coopnav_env.training.files import CLAIM_NAME, claim_output_folder, folder_lock
+
+STUDY = ["study", "--heuristics", "formation", "--episodes", "1", "--planner-episodes", "0"]
+STUDY += ["--reps", "20"]
+EVALUATE = ["evaluate", "--policies", "formation", "--episodes", "1", "--no-plots"]
+EVALUATE += ["--env-set", "n_uavs=2"]
+
+
+@pytest.fixture
+def no_flights(monkeypatch):
+    """The study's flying and writing replaced: it records the call and writes a report."""
+    calls: list[Path] = []
+
+    def fake(args, groups, env_kwargs, seeds, units, out, t0):
+        calls.append(out)
+        (out / "report.json").write_text("{}")
+        (out / "report.md").write_text("# study\n")
+        (out / "errors.png").write_bytes(b"png")
+        return [out / "report.json", out / "report.md", out / "errors.png"]
+
+    monkeypatch.setattr(marl_study, "_fly_and_report", fake)
+    return calls
+
+
+def _never_fly(monkeypatch) -> None:
+    """Make any flight of the study fail the test (the claim must come first)."""
+
+    def fly(*a, **kw):
+        raise AssertionError("the study flew episodes before checking --out")
+
+    monkeypatch.setattr(marl_study, "_fly_all", fly)
+
+
+def test_study_refuses_an_evaluate_folder_before_flying(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "shared"
+    assert main([*EVALUATE, "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert "report.json" in before
+    _never_fly(monkeypatch)
+    capsys.readouterr()
+    assert main([*STUDY, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out} holds the outputs of `coopnav evaluate`" in err and "--overwrite" in err
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert after == before  # the evaluation's report untouched
+
+
+def test_evaluate_refuses_a_study_folder_and_overwrite_replaces_it(tmp_path, capsys, no_flights):
+    out = tmp_path / "shared"
+    assert main([*STUDY, "--out", str(out)]) == 0 and no_flights == [out]
+    claim = json.loads((out / CLAIM_NAME).read_text())
+    assert claim["command"] == "coopnav study" and claim["status"] == "finished"
+    assert claim["outputs"] == ["errors.png", "report.json", "report.md"]
+    capsys.readouterr()
+    assert main([*EVALUATE, "--out", str(out)]) == 2
+    assert "holds the outputs of `coopnav study`" in capsys.readouterr().err
+    assert (out / "report.md").read_text() == "# study\n"
+    # --overwrite: the study's outputs go, the evaluation's come, nothing mixed
+    assert main([*EVALUATE, "--out", str(out), "--overwrite"]) == 0
+    assert "# Policy evaluation" in (out / "report.md").read_text()
+    claim = json.loads((out / CLAIM_NAME).read_text())
+    assert claim["command"] == "coopnav evaluate" and claim["status"] == "finished"
+    assert "replacing coopnav study's outputs" in capsys.readouterr().err
+    names = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+    assert names == sorted([CLAIM_NAME, *claim["outputs"]]) and "errors.png" not in names
+
+
+def test_a_failed_overwrite_keeps_the_earlier_outputs(tmp_path, capsys, no_flights, monkeypatch):
+    """The outputs an --overwrite replaces stay until the new command finishes."""
+    out = tmp_path / "study"
+    assert main([*STUDY, "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.name != CLAIM_NAME}
+
+    def interrupted(*a, **kw):
+        raise KeyboardInterrupt
+
+    from coopnav_env.training import evaluate_cli
+
+    with monkeypatch.context() as patch:
+        patch.setattr(evaluate_cli, "evaluate", interrupted)  # Ctrl-C during the episodes
+        assert main([*EVALUATE, "--out", str(out), "--overwrite"]) == 130
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.name != CLAIM_NAME}
+    assert after == before  # the evaluation's warm-up ran; nothing of the study was removed
+    claim = json.loads((out / CLAIM_NAME).read_text())
+    assert claim["status"] == "running" and "errors.png" in claim["replacing"]
+    # the same evaluation again takes it (no --overwrite needed) and finishes the replacement
+    assert main([*EVALUATE, "--out", str(out)]) == 0
+    assert not (out / "errors.png").exists()
+
+
+@pytest.mark.parametrize("kind", ["file", "training run", "foreign files", "old report"])
+def test_study_checks_out_before_flying_any_episode(tmp_path, capsys, monkeypatch, kind):
+    out = tmp_path / "out"
+    if kind == "file":
+        out.write_text("x")
+        message = "is a file"
+    else:
+        out.mkdir()
+        name = {
+            "training run": "final_model.zip",
+            "foreign files": "notes.txt",
+            "old report": "report.json",  # a committed report of an older version
+        }[kind]
+        (out / name).write_text("x")
+        message = "holds a training run" if kind == "training run" else "already holds files"
+    _never_fly(monkeypatch)
+    assert main([*STUDY, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    if kind == "training run":  # never replaced, not even with --overwrite
+        assert main([*STUDY, "--out", str(out), "--overwrite"]) == 2
+        assert "--overwrite never removes a training run" in capsys.readouterr().err
+        assert (out / "final_model.zip").read_text() == "x"
+
+
+def test_study_rerun_rules(tmp_path, capsys, no_flights):
+    out = tmp_path / "study"
+    assert main([*STUDY, "--out", str(out)]) == 0
+    # a finished study with the same settings: a rerun could lose it
+    assert main([*STUDY, "--out", str(out)]) == 2
+    assert "holds the finished result of `coopnav study` with these settings" in (
+        capsys.readouterr().err
+    )
+    # other settings: refused, naming the setting that differs
+    assert main([*STUDY, "--score", "nav", "--out", str(out)]) == 2
+    assert "result of other settings (score)" in capsys.readouterr().err
+    assert len(no_flights) == 1
+    assert main([*STUDY, "--score", "nav", "--out", str(out), "--overwrite"]) == 0
+    assert json.loads((out / CLAIM_NAME).read_text())["settings"]["score"] == "nav"
+    # an interrupted study (claimed, not finished) is taken again by the same command
+    record = json.loads((out / CLAIM_NAME).read_text())
+    (out / CLAIM_NAME).write_text(json.dumps({**record, "status": "running", "outputs": []}))
+    assert main([*STUDY, "--score", "nav", "--out", str(out)]) == 0
+    assert len(no_flights) == 3
+
+
+def test_a_locked_folder_is_refused_at_once(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "busy"
+    out.mkdir()
+    _never_fly(monkeypatch)
+    with folder_lock(out):  # as a running study, evaluation or training holds it
+        assert main([*STUDY, "--out", str(out)]) == 2
+        assert "is in use by another coopnav command (pid" in capsys.readouterr().err
+        assert main([*EVALUATE, "--out", str(out)]) == 2
+        assert "is in use by another coopnav command" in capsys.readouterr().err
+
+
+def test_a_failed_command_leaves_its_claim_unfinished(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(RuntimeError, match="boom"):
+        with claim_output_folder(out, "coopnav study", {"a": 1}, outputs=["report.*"]):
+            raise RuntimeError("boom")
+    assert json.loads((out / CLAIM_NAME).read_text())["status"] == "running"
+    with claim_output_folder(out, "coopnav study", {"a": 1}, outputs=["report.*"]) as claim:
+        (out / "report.md").write_text("x")
+        claim.finish([out / "report.md"])
+    with pytest.raises(ValueError, match="finished result"):
+        with claim_output_folder(out, "coopnav study", {"a": 1}, outputs=["report.*"]):
+            pass
+
+
+def test_study_default_out_is_no_committed_folder_and_help_says_models_are_pickles(capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    marl_study.add_arguments(parser)
+    assert parser.get_default("out") == "runs/study"
+    help_text = " ".join(parser.format_help().split())
+    assert "is a pickle: loading it runs code from it" in help_text
