@@ -288,6 +288,9 @@ itself, `env(...)` is `pettingzoo.utils.parallel_to_aec(parallel_env(...))` (AEC
 
 `systems` (`("GPS", "BDS")`): constellations.
 
+`constellation`, `constellation_start` (`"nominal"`, None): where the satellites come from
+(section "A sky from a RINEX file").
+
 `elevation_mask_deg` (10): elevation cut-off [deg].
 
 `max_sats` (None): receiver channel limit (the highest satellites are kept).
@@ -381,6 +384,21 @@ observations [m].
 `render_sky_uav` (-1): the UAV of the sky plot; -1 picks the one with the fewest satellites.
 
 `render_width_px`, `render_height_px` (1280, 640): frame size [pixel].
+
+## A sky from a RINEX file
+
+`constellation="rinex:PATH"` flies the satellites of a RINEX 3 navigation file (GPS LNAV and
+BeiDou D1/D2, GEO and IGSO included; those of `systems`) instead of the nominal constellations,
+propagated as IS-GPS-200 and the BeiDou B1I ICD specify (`coopnav_env.gnss.rinex`);
+`"rinex:sample"` is a one-day GPS + BeiDou file shipped with the package (made from the
+nominal orbits). `constellation_start` sets the first epoch: a UTC ISO time
+(`"2026-12-03T06:00:00Z"`) or GPS seconds, plus `U(0, t0_random_s)`; None draws it per
+episode, from the episode's generator, anywhere in the file's coverage that leaves room for
+`max_steps` epochs. `t0_s` must be 0 (`t_s` counts from the start of the coverage). The file
+is read and checked when the environment is made: a missing or malformed file (the message
+names the file and line), or a start outside the ephemerides' validity, raises `ValueError`.
+On the command line: `coopnav evaluate ... --env-set constellation=rinex:my_nav.rnx
+--env-set constellation_start=2026-12-03T06:00:00Z`.
 
 ## Gymnasium (one agent commands the swarm)
 

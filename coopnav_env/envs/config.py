@@ -229,6 +229,14 @@ class UrbanCanyonConfig(ScenarioConfig):
         """``max_steps`` under its conventional PettingZoo name (read-only alias)."""
         return self.max_steps
 
+    def episode_horizon_s(self) -> float:
+        """GNSS time an episode spans after its start, ``max_steps * dt_s`` [s] (what a
+        RINEX sky, ``constellation="rinex:..."``, must cover)."""
+        try:
+            return float(int(self.max_steps) * self.dt_s)
+        except (TypeError, ValueError):  # a bad max_steps is reported by its own check
+            return 0.0
+
     @property
     def worst_episode_penalty(self) -> float:
         """The most a whole episode without a crash can lose to the per-step penalties.

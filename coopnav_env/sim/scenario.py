@@ -96,6 +96,7 @@ Frames: the city's local ENU frame at the geodetic origin ``(lat_deg, lon_deg, a
 
 from __future__ import annotations
 
+import datetime
 import functools
 import math
 from dataclasses import dataclass, field, fields
@@ -123,6 +124,7 @@ from coopnav_env.gnss.errors import (
     _range_azimuth_elevation,
     _simulate_pseudoranges,
 )
+from coopnav_env.gnss.rinex import load_broadcast_constellation
 from coopnav_env.nav import (
     CooperativeSolution,
     GnssObservations,
@@ -285,6 +287,23 @@ class ScenarioConfig:
         Each episode starts at ``t0_s + U(0, t0_random_s)`` (varies the sky), in [0, 1e7] [s].
     systems : tuple of str, default ("GPS", "BDS")
         Constellations, a non-empty subset of ``SYSTEMS``.
+    constellation : str, default "nominal"
+        Where the satellites come from. ``"nominal"``: the nominal circular-orbit
+        constellations (:func:`~coopnav_env.gnss.default_constellation`). ``"rinex:PATH"``:
+        the broadcast ephemerides of a RINEX 3 navigation file
+        (:class:`~coopnav_env.gnss.rinex.BroadcastConstellation`, the satellites of
+        ``systems`` in it; ``"rinex:sample"``: the one-day GPS + BeiDou file shipped with the
+        package). The file is read and checked here: a missing or bad file, or a time outside
+        its ephemerides' validity, raises ``ValueError`` naming the file. With a file, the
+        GNSS time ``t_s`` counts seconds from the start of the file's coverage, ``t0_s`` must
+        be 0, and the start of an episode is set by ``constellation_start``.
+    constellation_start : str, float or None, default None
+        Only with ``constellation="rinex:..."``. ``None``: each episode starts at a time drawn
+        uniformly from the episode generator inside the file's coverage (leaving room for the
+        whole episode); ``t0_random_s`` must then be 0. A UTC time as an ISO 8601 string
+        (``"2026-12-03T06:00:00Z"``) or GPS seconds (since 1980-01-06): every episode starts
+        there, plus ``U(0, t0_random_s)``; the start, spread and episode must lie inside the
+        coverage.
     elevation_mask_deg : float, default 10.0
         Elevation cut-off [deg], in [0, 60].
     max_sats : int or None, default None
@@ -393,6 +412,8 @@ class ScenarioConfig:
     t0_s: float = 0.0
     t0_random_s: float = 0.0
     systems: tuple[str, ...] = SYSTEMS
+    constellation: str = "nominal"
+    constellation_start: str | float | None = None
     elevation_mask_deg: float = 10.0
     max_sats: int | None = None
     error_model: ErrorModel = field(default_factory=ErrorModel)
@@ -504,11 +525,18 @@ class ScenarioConfig:
                 f"test's distribution is known only with the exact covariance), got "
                 f"covariance={self.covariance!r}"
             )
+        _check_sky_settings(self, o)  # last: it needs the kinematics' dt_s
 
     @property
     def dt_s(self) -> float:
         """Time step of the kinematics and of the GNSS epochs [s]."""
         return float(self.kinematics.dt_s)
+
+    def episode_horizon_s(self) -> float:
+        """GNSS time an episode may span after its start [s] (0 here: the world alone has no
+        episode length; the environment's config returns ``max_steps * dt_s``). A RINEX sky
+        must cover ``[start, start + t0_random_s + episode_horizon_s()]``."""
+        return 0.0
 
     @property
     def centroid_mode(self) -> Literal["self", "shared"]:
@@ -525,6 +553,90 @@ class ScenarioConfig:
 # --------------------------------------------------------------------------------------------
 # city, formation, start and goal
 # --------------------------------------------------------------------------------------------
+
+
+def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
+    """Validate ``constellation`` and ``constellation_start`` (reading a RINEX file)."""
+    spec, start = cfg.constellation, cfg.constellation_start
+    if spec == "nominal":
+        if start is not None:
+            raise ValueError(
+                f"{o}.constellation_start needs constellation='rinex:PATH', got "
+                f"constellation_start={start!r} with constellation='nominal'"
+            )
+        return
+    if not isinstance(spec, str) or not spec.startswith("rinex:") or not spec[6:].strip():
+        raise ValueError(
+            f"{o}.constellation must be 'nominal' or 'rinex:PATH' (a RINEX 3 navigation file; "
+            f"'rinex:sample' for the shipped one), got {spec!r}"
+        )
+    try:
+        sky = world_constellation(cfg)
+    except ValueError as exc:
+        raise ValueError(f"{o}.constellation={spec!r}: {exc}") from None
+    if isinstance(start, datetime.datetime):
+        start = start.isoformat()
+        object.__setattr__(cfg, "constellation_start", start)
+    if cfg.t0_s != 0.0:
+        raise ValueError(
+            f"{o}.t0_s must be 0 with constellation={spec!r} (t_s counts from the start of the "
+            f"file's coverage); give the start as constellation_start, got t0_s={cfg.t0_s!r}"
+        )
+    horizon = cfg.episode_horizon_s()
+    lo, hi = sky.coverage_s
+    if start is None:
+        if cfg.t0_random_s != 0.0:
+            raise ValueError(
+                f"{o}.t0_random_s must be 0 with constellation={spec!r} and no "
+                f"constellation_start (episodes then start anywhere in the file's coverage), "
+                f"got {cfg.t0_random_s!r}"
+            )
+        if hi - lo < horizon:
+            raise ValueError(
+                f"{o}.constellation={spec!r}: an episode spans {horizon:g} s but the file "
+                f"covers only {hi - lo:g} s ({sky.coverage_text()})"
+            )
+        return
+    try:
+        t_start = sky.t_s_of(start)
+    except ValueError as exc:
+        raise ValueError(f"{o}.constellation_start: {exc}") from None
+    t_end = t_start + cfg.t0_random_s + horizon
+    if not (lo <= t_start and t_end <= hi):
+        raise ValueError(
+            f"{o}.constellation_start={start!r} (t_s {t_start:g} s) plus t0_random_s "
+            f"({cfg.t0_random_s:g} s) and the episode ({horizon:g} s) reach t_s {t_end:g} s, "
+            f"outside the validity of the ephemerides in {sky.source}: its coverage is "
+            f"{sky.coverage_text()}"
+        )
+
+
+def world_constellation(cfg: ScenarioConfig) -> Any:
+    """The satellites a world of ``cfg`` flies under: the nominal constellations of
+    ``cfg.systems`` or, with ``constellation="rinex:PATH"``, the file's (cached per file).
+
+    Returns
+    -------
+    Constellation or BroadcastConstellation
+    """
+    if cfg.constellation == "nominal":
+        return default_constellation(cfg.systems)
+    return load_broadcast_constellation(cfg.constellation[6:].strip(), cfg.systems)
+
+
+def episode_start_s(cfg: ScenarioConfig, sky: Any, rng: np.random.Generator) -> float:
+    """GNSS time ``t_s`` of an episode's first epoch (draws from ``rng`` only when random).
+
+    Nominal sky: ``t0_s + U(0, t0_random_s)``. RINEX sky: ``constellation_start`` plus
+    ``U(0, t0_random_s)``, or without a start, uniform in the coverage less the episode.
+    """
+    if cfg.constellation == "nominal":
+        return cfg.t0_s + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
+    if cfg.constellation_start is None:
+        lo, hi = sky.coverage_s
+        return lo + rng.uniform(0.0, hi - lo - cfg.episode_horizon_s())
+    t = sky.t_s_of(cfg.constellation_start)
+    return t + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
 
 
 def make_city(config: ScenarioConfig, rng: np.random.Generator) -> City:
@@ -844,7 +956,7 @@ class UrbanWorld:
             raise ValueError(f"city must be a City or None, got {type(city).__name__}")
         self.config = config
         self.fixed_city = city
-        self.constellation = default_constellation(config.systems)
+        self.constellation = world_constellation(config)
         self._cached_constellation = self.constellation  # the one the sky cache keys stand for
         self.origin_ecef_m = geodetic_to_ecef(config.lat_deg, config.lon_deg, config.alt_m)
         self.rot_enu = enu_rotation(config.lat_deg, config.lon_deg)  # d_enu = R d_ecef
@@ -854,13 +966,16 @@ class UrbanWorld:
     def _sky(self, t_s: float) -> _SkyEpoch:
         """The satellites above the cut-off at ``t_s`` (:func:`_sky_epoch`, cached).
 
-        The cache key names the default constellation of ``config.systems``; a world whose
-        ``constellation`` was replaced computes its sky without the cache.
+        The cache key names the constellation of ``config.systems`` and ``config.constellation``
+        (a RINEX sky by its file's digest); a world whose ``constellation`` was replaced
+        computes its sky without the cache.
         """
         cfg = self.config
         if self.constellation is not self.__dict__.get("_cached_constellation"):
             return _sky_epoch(self.constellation, self.origin_ecef_m, cfg.elevation_mask_deg, t_s)
-        key = (cfg.systems, cfg.lat_deg, cfg.lon_deg, cfg.alt_m, cfg.elevation_mask_deg, t_s)
+        sky_id = getattr(self.constellation, "digest", "nominal")
+        origin = (cfg.lat_deg, cfg.lon_deg, cfg.alt_m)
+        key = (cfg.systems, sky_id, *origin, cfg.elevation_mask_deg, t_s)
         return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m)
 
     def map_line_of_sight(
@@ -1019,7 +1134,7 @@ class UrbanWorld:
         n = cfg.n_uavs
         self.city = self.fixed_city if self.fixed_city is not None else make_city(cfg, rng)
         city = self.city
-        self.t_s = cfg.t0_s + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
+        self.t_s = episode_start_s(cfg, self.constellation, rng)
         margin = cfg.kinematics.uav_radius_m + 1.0
         cand, ns = _street_frames(city, rng, 256, margin)
         if start_pos_enu_m is None:
@@ -1425,10 +1540,14 @@ class _SkyEpoch:
 
 
 def _sky_epoch(constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, t_s: float):
-    """Satellite positions and directions at the origin at ``t_s``, the ones above the mask."""
+    """Satellite positions and directions at the origin at ``t_s``, the ones above the mask
+    (a broadcast sky's satellites with no valid ephemeris at ``t_s``, NaN, are left out)."""
     sv_all = constellation.positions_ecef(t_s)
+    known = np.isfinite(sv_all).all(axis=1)
+    if not known.all():
+        sv_all = np.where(known[:, None], sv_all, 0.0)  # azimuth of the Earth's centre: dropped
     az_all, el_all = azimuth_elevation(origin_ecef_m[None], sv_all)
-    sv_index = np.flatnonzero(el_all[0] > mask_deg)
+    sv_index = np.flatnonzero((el_all[0] > mask_deg) & known)
     az, el = az_all[0, sv_index], el_all[0, sv_index]
     sky = _SkyEpoch(
         sv_index=sv_index,

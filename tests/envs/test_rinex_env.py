@@ -1,0 +1,180 @@
+"""The environment under a sky from a RINEX navigation file (``constellation="rinex:..."``)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import pickle
+import shutil
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+from coopnav_env import GYM_ENV_ID, urban_canyon_v0
+from coopnav_env.envs import make_config
+from coopnav_env.gnss.rinex import SAMPLE_NAV_PATH, BroadcastConstellation
+from coopnav_env.sim.scenario import ScenarioConfig, UrbanWorld
+
+SKY = {"constellation": "rinex:sample"}
+# 2026-12-03 06:00:00 UTC = 06:00:18 GPST, inside the sample's coverage
+START_UTC = "2026-12-03T06:00:00Z"
+START_GPS_S = (dt.date(2026, 12, 3) - dt.date(1980, 1, 6)).days * 86400 + 6 * 3600 + 18
+
+
+def _episode(env, seed: int, steps: int) -> list:
+    out = [env.reset(seed=seed)]
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        if not env.agents:
+            break
+        out.append(env.step({a: rng.uniform(-0.5, 0.5, 3) for a in env.agents}))
+    return out
+
+
+def test_parallel_api_and_seed_tests_pass() -> None:
+    parallel_api_test(urban_canyon_v0.parallel_env(**SKY), num_cycles=100)
+    parallel_seed_test(lambda: urban_canyon_v0.parallel_env(city="canyon", **SKY), num_cycles=30)
+
+
+def test_gymnasium_checker_passes() -> None:
+    env = gymnasium.make(GYM_ENV_ID, **SKY)
+    assert isinstance(env.unwrapped.par_env.world.constellation, BroadcastConstellation)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym_check_env(env.unwrapped)
+    assert not caught, [str(w.message) for w in caught]
+
+
+def test_same_seed_same_episode_bit_for_bit_and_starts_drawn_in_the_coverage() -> None:
+    env1 = urban_canyon_v0.parallel_env(**SKY)
+    env2 = urban_canyon_v0.parallel_env(**SKY)
+    a, b = _episode(env1, 11, 15), _episode(env2, 11, 15)
+    assert pickle.dumps(a) == pickle.dumps(b)  # bit for bit, infos included
+    sky = env1.world.constellation
+    lo, hi = sky.coverage_s
+    starts = []
+    for seed in range(6):
+        env1.reset(seed=seed)
+        starts.append(env1.world.t_s)
+    horizon = env1.config.max_steps * env1.config.dt_s
+    assert all(lo <= t <= hi - horizon for t in starts)
+    assert len(set(starts)) == len(starts)  # drawn per episode
+    # the satellites in view are the file's, and change with the start time
+    env1.reset(seed=0)
+    seen0 = {sky.prn[j] for j in env1.world.last.sv_index}
+    env1.reset(seed=1)
+    seen1 = {sky.prn[j] for j in env1.world.last.sv_index}
+    assert seen0 != seen1 and len(seen0) >= 8
+    assert seen0 <= set(sky.prn)
+
+
+def test_a_given_start_is_used_in_utc_or_gps_seconds() -> None:
+    sky = urban_canyon_v0.parallel_env(**SKY).world.constellation
+    want = START_GPS_S - sky.reference_gps_s
+    for start in (START_UTC, START_GPS_S, float(START_GPS_S), dt.datetime(2026, 12, 3, 6)):
+        env = urban_canyon_v0.parallel_env(constellation_start=start, **SKY)
+        env.reset(seed=5)
+        assert env.world.t_s == want, start
+        env.step({a: np.zeros(3) for a in env.agents})
+        assert env.world.t_s == want + env.config.dt_s
+    cfg = make_config(constellation_start=dt.datetime(2026, 12, 3, 6), **SKY)
+    assert cfg.constellation_start == "2026-12-03T06:00:00"  # a datetime is kept as ISO text
+    spread = urban_canyon_v0.parallel_env(constellation_start=START_UTC, t0_random_s=600.0, **SKY)
+    t = []
+    for seed in (1, 2):
+        spread.reset(seed=seed)
+        t.append(spread.world.t_s)
+    assert all(want <= x <= want + 600.0 for x in t) and t[0] != t[1]
+
+
+def test_the_world_flies_the_files_satellites_at_the_epoch_time() -> None:
+    cfg = ScenarioConfig(constellation="rinex:sample", constellation_start=START_UTC, n_uavs=2)
+    world = UrbanWorld(cfg)
+    epoch = world.reset(np.random.default_rng(0))
+    sky = world.constellation
+    pos = sky.positions_ecef(epoch.t_s)
+    np.testing.assert_array_equal(world._sky(epoch.t_s).sv_ecef, pos[epoch.sv_index])
+    # nominal skies are unchanged: the default world still flies the nominal constellations
+    assert type(UrbanWorld(ScenarioConfig()).constellation).__name__ == "Constellation"
+
+
+def test_systems_select_the_files_satellites() -> None:
+    env = urban_canyon_v0.parallel_env(systems=("BDS",), **SKY)
+    sky = env.world.constellation
+    assert sky.n_sv == 30 and all(p.startswith("C") for p in sky.prn)
+
+
+def test_satellites_without_an_ephemeris_are_not_in_view(tmp_path) -> None:
+    """A satellite whose ephemerides stop is not broadcasting: the world leaves it out."""
+    lines = SAMPLE_NAV_PATH.read_text().splitlines(keepends=True)
+    end = next(k for k, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    body = [lines[k : k + 8] for k in range(end, len(lines), 8)]
+    # drop every ephemeris of G01 after 02:00 GPST
+    kept = [r for r in body if not (r[0].startswith("G01") and r[0][15:17] not in ("00", "02"))]
+    path = tmp_path / "gap.rnx"
+    path.write_text("".join(lines[:end] + [x for r in kept for x in r]))
+    start = START_UTC  # 06:00 UTC: G01's last ephemeris (02:00) ended at 04:00
+    cfg = ScenarioConfig(constellation=f"rinex:{path}", constellation_start=start, n_uavs=2)
+    world = UrbanWorld(cfg)
+    g01 = world.constellation.prn.index("G01")
+    epoch = world.reset(np.random.default_rng(0))
+    assert np.all(np.isnan(world.constellation.positions_ecef(epoch.t_s)[g01]))
+    assert g01 not in epoch.sv_index.tolist()
+    assert len(epoch.sv_index) >= 8
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"constellation": "rinex:/nowhere/nav.rnx"}, r"constellation='rinex:/nowhere/nav.rnx'.*"),
+        ({"constellation": "rinex:"}, r"constellation must be 'nominal' or 'rinex:PATH'"),
+        ({"constellation": "yuma:x.alm"}, r"constellation must be 'nominal' or 'rinex:PATH'"),
+        ({"constellation_start": START_UTC}, r"constellation_start needs constellation='rinex"),
+        ({**SKY, "t0_s": 10.0}, r"t0_s must be 0 with constellation='rinex:sample'"),
+        ({**SKY, "t0_random_s": 10.0}, r"t0_random_s must be 0 with constellation="),
+        (
+            {**SKY, "constellation_start": "2026-12-05T00:00:00Z"},
+            r"constellation_start='2026-12-05T00:00:00Z' .* outside the validity of the "
+            r"ephemerides in .*sample_nav.rnx: its coverage is 2026-12-02T23:00:14 GPST to "
+            r"2026-12-04T00:00:00 GPST",
+        ),
+        (
+            {**SKY, "constellation_start": "2026-12-03T23:58:00Z", "max_steps": 200},
+            r"the episode \(200 s\) reach",
+        ),
+        ({**SKY, "constellation_start": "tomorrow"}, r"constellation_start: a time must be"),
+        ({**SKY, "max_steps": 100_000}, r"an episode spans 100000 s but the file covers only"),
+    ],
+)
+def test_bad_sky_settings_raise_at_construction(kwargs, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        urban_canyon_v0.parallel_env(**kwargs)
+
+
+def test_a_bad_file_is_reported_with_its_line(tmp_path) -> None:
+    bad = tmp_path / "bad.rnx"
+    text = SAMPLE_NAV_PATH.read_text().splitlines(keepends=True)
+    assert text[13].startswith("G02 ")  # line 14: the second record's epoch line
+    text[13] = "Z" + text[13][1:]
+    bad.write_text("".join(text))
+    with pytest.raises(ValueError, match=r"bad.rnx, line 14: unknown satellite system 'Z'"):
+        urban_canyon_v0.parallel_env(constellation=f"rinex:{bad}")
+
+
+def test_evaluate_command_line_flies_a_rinex_sky(tmp_path) -> None:
+    from coopnav_env.training.cli import main
+
+    nav = tmp_path / "my nav.rnx"
+    shutil.copyfile(SAMPLE_NAV_PATH, nav)
+    out = tmp_path / "eval"
+    args = ["evaluate", "--policies", "formation", "--episodes", "1", "--no-plots"]
+    args += ["--env-set", "n_uavs=2", "--env-set", "max_steps=20"]
+    args += ["--env-set", f"constellation=rinex:{nav}"]
+    args += ["--env-set", f"constellation_start={START_UTC}"]
+    args += ["--out", str(out)]
+    assert main(args) == 0
+    assert (out / "report.json").is_file()
+    assert "rinex:" in (out / "report.json").read_text()
