@@ -215,7 +215,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
                 raise ValueError(f"policy '{prefix}<path>' needs the path of a TorchRL checkpoint")
             from coopnav_env.agents.marl_policy import MARLPolicy
 
-            algorithm = "ippo" if prefix == "ippo:" else "mappo"
+            algorithm = {"mappo:": "mappo", "ippo:": "ippo"}.get(prefix)  # torchrl: either
             return MARLPolicy(env, path, make_base=make_policy, algorithm=algorithm, **kwargs)
     valid = ", ".join([*POLICY_NAMES, *_REGISTERED])
     raise ValueError(f"unknown policy {name!r}; valid policies: {valid}")

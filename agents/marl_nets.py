@@ -101,7 +101,7 @@ class MARLSettings:
         (at most ``action_repeat - 1`` steps), which no transition is credited with.
     residual_wall_guard : bool
         Velocity mode: limit the residual's horizontal part toward walls the range sensor
-        sees (:meth:`coopnav_env.agents.heuristics.WideColumnPolicy.guard_delta`: nothing toward a wall
+        sees (:meth:`coopnav_env.agents.heuristics.ColumnPolicy.guard_delta`: nothing toward a wall
         inside the base column's wall margin, toward one beyond it no faster than reaches
         the margin in 2 s), so that neither the
         learned residual nor exploration noise around it can cancel the base's wall guard
@@ -420,7 +420,7 @@ def load_marl_checkpoint(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise FileNotFoundError(f"no TorchRL checkpoint at {path}")
     try:
-        d = torch.load(path, map_location="cpu", weights_only=False)
+        d = torch.load(path, map_location="cpu", weights_only=True)  # no code from the file
     except Exception as exc:  # a truncated or foreign file
         raise ValueError(f"{path} is not a readable coopnav TorchRL checkpoint: {exc}") from exc
     if not isinstance(d, dict) or d.get("format") != CHECKPOINT_FORMAT:

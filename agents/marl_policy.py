@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from coopnav_env.agents.marl_nets import (
     MARLSettings,
     base_command_before,
@@ -25,7 +24,35 @@ from coopnav_env.agents.marl_nets import (
     swarm_command,
 )
 
-__all__ = ["PRETRAINED_DIR", "MARLPolicy", "resolve_marl_checkpoint"]
+__all__ = [
+    "ACT_KEYS",
+    "PRETRAINED_DIR",
+    "RESUME_KEYS",
+    "MARLPolicy",
+    "check_marl_checkpoint",
+    "load_checked_checkpoint",
+    "resolve_marl_checkpoint",
+]
+
+ACT_KEYS: tuple[str, ...] = (
+    "settings",
+    "env_kwargs",
+    "n_agents",
+    "actor_dim",
+    "critic_dim",
+    "actor",
+)
+"""Entries a checkpoint needs to be flown (an exported policy has these only)."""
+
+RESUME_KEYS: tuple[str, ...] = (
+    *ACT_KEYS,
+    "critic",
+    "optimizer",
+    "reward_std",
+    "agent_steps",
+    "iterations",
+)
+"""Entries a checkpoint needs to be resumed."""
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
@@ -63,6 +90,66 @@ def resolve_marl_checkpoint(path: str | Path, algorithm: str = "mappo") -> Path:
     return p
 
 
+def check_marl_checkpoint(d: Mapping[str, Any], path: str | Path, purpose: str = "fly") -> None:
+    """Refuse a checkpoint that lacks entries or holds non-finite weights.
+
+    Parameters
+    ----------
+    d : mapping
+        What :func:`coopnav_env.agents.marl_nets.load_marl_checkpoint` read from ``path``.
+    path : path
+        Named in the messages.
+    purpose : {"fly", "resume"}
+        ``resume`` needs the critic, the optimiser and the counters too (:data:`RESUME_KEYS`);
+        ``fly`` the actor and its settings (:data:`ACT_KEYS`).
+
+    Raises
+    ------
+    ValueError
+        Naming the file and the missing entries, or the weights that are NaN or infinite
+        (a diverged training).
+    """
+    import torch
+
+    if purpose not in ("fly", "resume"):
+        raise ValueError(f"purpose must be 'fly' or 'resume', got {purpose!r}")
+    if purpose == "resume" and d.get("policy_only"):
+        raise ValueError(
+            f"{path} is an exported policy (actor only, export_policy): it can be evaluated "
+            "but not resumed; resume from the run's own checkpoint"
+        )
+    keys = RESUME_KEYS if purpose == "resume" else ACT_KEYS
+    missing = [k for k in keys if k not in d]
+    if missing:
+        raise ValueError(
+            f"{path} is not a complete TorchRL checkpoint: it lacks {', '.join(missing)} "
+            f"(needed to {purpose} it)"
+        )
+    bad = []
+    for net in ("actor", "critic") if purpose == "resume" else ("actor",):
+        weights = d[net]
+        if not isinstance(weights, Mapping):
+            raise ValueError(f"{path} is not a TorchRL checkpoint: its {net} holds no weights")
+        for name, t in weights.items():
+            if torch.is_tensor(t) and t.is_floating_point() and not bool(torch.isfinite(t).all()):
+                bad.append(f"{net}.{name}")
+    if bad:
+        more = f" and {len(bad) - 3} more" if len(bad) > 3 else ""
+        done = {"fly": "flown", "resume": "resumed"}[purpose]
+        raise ValueError(
+            f"{path} holds non-finite weights (NaN or inf) in {', '.join(bad[:3])}{more}: the "
+            f"training that wrote it diverged, so it cannot be {done}; use an earlier checkpoint"
+        )
+
+
+def load_checked_checkpoint(path: str | Path, purpose: str = "fly") -> dict[str, Any]:
+    """:func:`~coopnav_env.agents.marl_nets.load_marl_checkpoint` followed by
+    :func:`check_marl_checkpoint` (``ValueError`` naming the file when it fails)."""
+    d = load_marl_checkpoint(path)
+    check_marl_checkpoint(d, path, purpose)
+    return d
+
+
 class MARLPolicy:
     """Deterministic shared actor of a TorchRL MAPPO/IPPO checkpoint.
 
@@ -72,8 +159,11 @@ class MARLPolicy:
         The environment to act in (its observation size must match the checkpoint's).
     path : str or Path
         Checkpoint file or run folder.
-    algorithm : str
-        ``mappo`` or ``ippo``: which shipped policies ``pretrained`` names.
+    algorithm : str, optional
+        ``mappo`` or ``ippo``: which shipped policies ``pretrained`` names, and the algorithm
+        the checkpoint must have been trained with (a MAPPO run given as ``ippo:`` is refused,
+        and the reverse, so that no policy is flown under another label). None: either
+        (``pretrained`` then names the MAPPO policy).
     make_base : callable, optional
         ``make_base(name, env, **options)`` builds the base heuristic of a residual policy
         (:func:`coopnav_env.agents.make_policy`, which passes itself).
@@ -82,12 +172,22 @@ class MARLPolicy:
     name = "mappo"
 
     def __init__(
-        self, env: Any, path: str | Path, make_base: Any = None, algorithm: str = "mappo"
+        self, env: Any, path: str | Path, make_base: Any = None, algorithm: str | None = None
     ) -> None:
         import torch
 
-        ckpt = load_marl_checkpoint(resolve_marl_checkpoint(path, algorithm))
+        if algorithm is not None and algorithm not in ("mappo", "ippo"):
+            raise ValueError(f"algorithm must be 'mappo', 'ippo' or None, got {algorithm!r}")
+        file = resolve_marl_checkpoint(path, algorithm or "mappo")
+        ckpt = load_checked_checkpoint(file, "fly")
         self.settings = MARLSettings.from_dict(ckpt["settings"])
+        if algorithm is not None and self.settings.algorithm != algorithm:
+            true = self.settings.algorithm
+            raise ValueError(
+                f"{algorithm}:{path} was trained with {true.upper()} (torchrl.algorithm {true} "
+                f"in {file}), not {algorithm.upper()}: refused, so that it is not flown under "
+                f"the wrong label; fly it as {true}:{path}"
+            )
         self.name = self.settings.algorithm
         self.env = env
         base_env = getattr(env, "unwrapped", env)
@@ -116,7 +216,8 @@ class MARLPolicy:
         if self.settings.residual_base is not None:
             if make_base is None:
                 raise ValueError(
-                    "this checkpoint is a residual policy: pass make_base (coopnav_env.agents.make_policy)"
+                    "this checkpoint is a residual policy: pass make_base "
+                    "(coopnav_env.agents.make_policy)"
                 )
             self._base = make_base(
                 self.settings.residual_base, env, **self.settings.residual_base_kwargs

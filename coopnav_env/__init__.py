@@ -8,7 +8,8 @@ Sub-packages
 ``coopnav_env.envs``   the PettingZoo parallel environment, its Gymnasium single-agent view and
                        the named observation layout.
 
-Importing the package registers the Gymnasium id :data:`GYM_ENV_ID`
+Importing the package registers the Gymnasium ids :data:`GYM_ENV_ID_V1`
+(``"coopnav/UrbanCanyonSwarm-v1"``, the view of ``urban_canyon_v1``) and :data:`GYM_ENV_ID`
 (``"coopnav/UrbanCanyonSwarm-v0"``, :class:`coopnav_env.envs.gym_wrapper.UrbanCanyonSwarmEnv`:
 one agent commands the whole swarm), so ``gymnasium.make(GYM_ENV_ID, **fields)`` works after
 ``import coopnav_env``. The registration names the entry point as a string: nothing but
@@ -20,6 +21,9 @@ __version__ = "0.1.0"
 GYM_ENV_ID = "coopnav/UrbanCanyonSwarm-v0"
 """Gymnasium id of the single-agent swarm environment (registered on import)."""
 
+GYM_ENV_ID_V1 = "coopnav/UrbanCanyonSwarm-v1"
+"""Gymnasium id of the single-agent view of ``urban_canyon_v1`` (registered on import)."""
+
 
 def _register_gymnasium_envs() -> None:
     """Register :data:`GYM_ENV_ID` with Gymnasium once (a re-import does not warn)."""
@@ -27,6 +31,8 @@ def _register_gymnasium_envs() -> None:
 
     if GYM_ENV_ID not in registry:
         register(id=GYM_ENV_ID, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv")
+    if GYM_ENV_ID_V1 not in registry:
+        register(id=GYM_ENV_ID_V1, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmV1Env")
 
 
 _register_gymnasium_envs()

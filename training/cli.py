@@ -37,6 +37,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "coopnav_env.training.evaluate_cli",
         "evaluate policies: navigation error, goal rate, plots",
     ),
+    "alignment": (
+        "coopnav_env.training.alignment",
+        "does a reward rank policies as the task's score does? (return, discounted return)",
+    ),
     "study": (
         "coopnav_env.training.marl_study",
         "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",
@@ -73,6 +77,20 @@ def _one_line(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.filename and str(exc.filename) not in text:
         text = f"{text}: {exc.filename}"
     return text
+
+
+def _interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The ``KeyboardInterrupt`` that caused ``exc``, if any: an interrupt that arrived inside
+    a compiled (numba) call surfaces as ``SystemError: CPUDispatcher(...) returned a result
+    with an exception set`` whose cause is the interrupt."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -128,6 +146,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{where}: error: {_one_line(exc)}", file=sys.stderr)
         return 1
     except Exception as exc:
+        interrupt = _interrupt_behind(exc)
+        if interrupt is not None:  # Ctrl-C inside a compiled (numba) call: SystemError
+            if debug:
+                traceback.print_exc()
+            print(f"\n{where}: interrupted", file=sys.stderr)
+            return 128 + int(getattr(interrupt, "signum", signal.SIGINT))
         if debug:
             raise
         print(

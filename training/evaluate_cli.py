@@ -56,7 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
         "ppo:<path> (SB3 .zip), mappo:<path> / ippo:<path> (TorchRL run or .pt), rllib:<path> "
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
-        "after @, e.g. waypoint@altitude_m=28 (default: random formation sky)",
+        "after @, e.g. waypoint@altitude_m=28. Model files are pickles: loading an SB3 .zip or "
+        "an RLlib checkpoint runs code stored in it, so load only files you trust (TorchRL .pt "
+        "files are read with torch's weights_only loader) (default: random formation sky)",
     )
     parser.add_argument(
         "--out",

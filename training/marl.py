@@ -44,10 +44,10 @@ before the default 200 steps in almost every training episode, so the bias is sm
 Residual policies
 -----------------
 With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the command of a
-hand-written base policy (:func:`coopnav_env.agents.make_policy`), clipped to ``[-1, 1]``: residual policy
-learning (Silver et al. 2018; Johannink et al. 2019). The network's output is scaled by
-``residual_scale`` and its last layer starts at zero, so training starts from the base
-policy's behaviour and RL only has to find what to change. The base command is part of the
+hand-written base policy (:func:`coopnav_env.agents.make_policy`), clipped to ``[-1, 1]``:
+residual policy learning (Silver et al. 2018; Johannink et al. 2019). The network's output
+is scaled by ``residual_scale`` and its last layer starts at zero, so training starts from
+the base policy's behaviour and RL only has to find what to change. The base command is part of the
 actor's input. With ``residual_base: null`` the policy flies on its own. The residual can be
 guarded against walls (``residual_wall_guard``), and two other modes replace the velocity
 residual: ``offset`` (learned slot shifts of a column base) and ``options`` (a categorical
@@ -60,7 +60,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import signal
+import shutil
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -68,32 +68,35 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-
 from coopnav_env.agents.marl_nets import (
     CHECKPOINT_FORMAT,
     MARLSettings,
     base_command_before,
     build_modules,
     check_residual_base,
-    load_marl_checkpoint,
     swarm_command,
 )
+from coopnav_env.agents.marl_policy import load_checked_checkpoint
 from coopnav_env.training.envs import EVAL_SEED_START
-from coopnav_env.training.files import atomic_path, atomic_write_text, write_json, write_yaml
+from coopnav_env.training.files import atomic_path, write_json, write_yaml
 from coopnav_env.training.runs import (
+    ProgressLog,
     checkpoint_candidates,
     first_loadable,
+    interrupts_deferred,
     open_run,
-    sigterm_as_interrupt,
+    raise_if_interrupted,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
     from coopnav_env.training.config import TrainConfig
 
 __all__ = [
+    "ARCHITECTURE_SETTINGS",
     "MARLSettings",
     "MARLTrainer",
     "check",
+    "check_resumable_settings",
     "export_policy",
     "find_latest_checkpoint",
     "settings_of",
@@ -259,6 +262,7 @@ class MARLTrainer:
         agents = self.venv.possible_agents
         state = self._states()
         for _ in range(t_):
+            raise_if_interrupted()  # between steps, never inside a compiled call
             obs_d = [dict(zip(agents, self._obs[k])) for k in range(k_)]
             base = self._before(obs_d)
             a_in = _actor_inputs(self._obs, base)
@@ -462,27 +466,25 @@ class MARLTrainer:
 
     def load_state_dict(self, d: Mapping[str, Any]) -> None:
         """Continue from :meth:`state_dict` (weights, optimiser, reward scale, counters)."""
-        if d.get("policy_only"):
+        from coopnav_env.agents.marl_policy import check_marl_checkpoint
+
+        check_marl_checkpoint(d, "this checkpoint", "resume")  # entries, finite weights
+        try:
+            self.actor.load_state_dict(d["actor"])
+            self.critic.load_state_dict(d["critic"])
+            self.optim.load_state_dict(d["optimizer"])
+            self.reward_std.load_state_dict(d["reward_std"])
+        except (RuntimeError, KeyError, TypeError, ValueError) as exc:
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
             raise ValueError(
-                "this is an exported policy (actor only, export_policy): it can be evaluated "
-                "but not resumed; resume from the run's own checkpoint"
-            )
-        self.actor.load_state_dict(d["actor"])
-        self.critic.load_state_dict(d["critic"])
-        self.optim.load_state_dict(d["optimizer"])
-        self.reward_std.load_state_dict(d["reward_std"])
+                f"the checkpoint does not fit the networks of these settings ({first})"
+            ) from exc
         self.agent_steps = int(d["agent_steps"])
         self.iterations = int(d["iterations"])
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`state_dict` to ``path`` atomically (temporary file, then rename)."""
-        import torch
-
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            torch.save(self.state_dict(), tmp)
-        return path
+        return _save_torch(self.state_dict(), path)
 
     def train(
         self,
@@ -496,6 +498,7 @@ class MARLTrainer:
         function of the step count only, so a resumed run continues the same schedule).
         """
         while self.agent_steps < total_agent_steps:
+            raise_if_interrupted()  # between iterations (see runs.interrupts_deferred)
             self.set_learning_rate(self.learning_rate_at(self.agent_steps, total_agent_steps))
             t0 = time.perf_counter()
             data = self.collect()
@@ -518,7 +521,68 @@ class MARLTrainer:
                 on_iteration(row)
 
 
+def _save_torch(obj: Any, path: str | Path) -> Path:
+    """``torch.save(obj)`` to ``path`` atomically; a failed write is an ``OSError``.
+
+    torch reports a failed write (a full disk, a file-size limit) as ``RuntimeError:
+    [enforce fail at inline_container.cc]``; it becomes an ``OSError`` naming the file (the
+    command line's exit status 1). The earlier file of that name is left as it was.
+    """
+    import torch
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic_path(path) as tmp:
+            torch.save(obj, tmp)
+    except RuntimeError as exc:
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
+        raise OSError(
+            f"cannot write {path} (a full disk or a file-size limit?): {first}; the earlier "
+            "file of that name, if any, is unchanged"
+        ) from exc
+    return path
+
+
 CHECKPOINT_RE = re.compile(r"^marl_(\d+)_steps\.pt$")
+
+ARCHITECTURE_SETTINGS: tuple[str, ...] = (
+    "algorithm",
+    "hidden",
+    "residual_base",
+    "residual_mode",
+    "option_shifts_m",
+)
+"""Settings that shape the networks: a run resumes only with the values it was trained with."""
+
+
+def check_resumable_settings(
+    checkpoint: Mapping[str, Any], settings: MARLSettings, path: str | Path
+) -> None:
+    """Refuse to resume ``checkpoint`` (read from ``path``) with other network settings.
+
+    Raises
+    ------
+    ValueError
+        Naming each of :data:`ARCHITECTURE_SETTINGS` that differs, with both values.
+    """
+    try:
+        old = MARLSettings.from_dict(checkpoint["settings"])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path} holds settings this version does not read: {exc}") from exc
+    diff = [
+        (name, getattr(old, name), getattr(settings, name))
+        for name in ARCHITECTURE_SETTINGS
+        if getattr(old, name) != getattr(settings, name)
+    ]
+    if diff:
+        now = ", ".join(f"torchrl.{n}={new!r}" for n, _, new in diff)
+        then = ", ".join(f"torchrl.{n}={was!r}" for n, was, _ in diff)
+        raise ValueError(
+            f"cannot resume from {path} with {now}: it was trained with {then}, and these "
+            "settings shape the networks; resume without changing them (e.g. no --algorithm), "
+            "or start a new run in another --out"
+        )
 
 
 def settings_of(cfg: TrainConfig) -> tuple[MARLSettings, dict[str, Any]]:
@@ -527,11 +591,15 @@ def settings_of(cfg: TrainConfig) -> tuple[MARLSettings, dict[str, Any]]:
     ``cfg.torchrl`` holds :class:`MARLSettings` fields plus an optional ``env`` mapping whose
     entries override ``cfg.env`` for this backend (the learning study's rewards).
     """
+    from coopnav_env.envs.config import V1_DEFAULTS
+
     d = dict(cfg.torchrl)
     env_over = d.pop("env", None) or {}
     if not isinstance(env_over, Mapping):
         raise ValueError(f"torchrl.env must be a mapping of environment settings, got {env_over!r}")
-    return MARLSettings.from_dict(d), {**cfg.env, **env_over}
+    # the batched environment is built from settings alone: name urban_canyon_v1's own
+    v1 = V1_DEFAULTS if cfg.env_id == "urban_canyon_v1" else {}
+    return MARLSettings.from_dict(d), {**v1, **cfg.env, **env_over}
 
 
 def check(cfg: TrainConfig) -> None:
@@ -573,7 +641,7 @@ def find_latest_checkpoint(out: str | Path) -> Path:
     )
     for _, p in reversed(found):
         try:
-            load_marl_checkpoint(p)
+            load_checked_checkpoint(p, "resume")
         except ValueError as exc:
             warnings.warn(f"skipping a checkpoint that does not load: {exc}", stacklevel=2)
             continue
@@ -590,15 +658,11 @@ def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
     a folder that ``coopnav evaluate --policies mappo:OUT_DIR`` and ``coopnav study --runs``
     read like a run; it cannot be resumed.
     """
-    import shutil
-
-    import torch
-
     src = Path(checkpoint)
     run_dir = src if src.is_dir() else src.parent
     if src.is_dir():
         src = src / "final_model.pt"
-    d = load_marl_checkpoint(src)
+    d = load_checked_checkpoint(src, "fly")
     small = {
         k: d[k]
         for k in (
@@ -616,8 +680,7 @@ def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
     small["policy_only"] = True
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out / "final_model.pt") as tmp:
-        torch.save(small, tmp)
+    _save_torch(small, out / "final_model.pt")
     for name in ("run.json", "logs/progress.csv"):
         f = run_dir / name
         if f.is_file():
@@ -631,50 +694,153 @@ def train(cfg: TrainConfig) -> Path:
     """``coopnav train --backend torchrl``: train and return the final model's path.
 
     Writes ``config.yaml`` (resolved settings; ``env`` is what the policy was trained in, read
-    by ``coopnav evaluate``), ``logs/progress.csv`` (one row per iteration: agent-steps,
-    losses, return, goal and collision rate and mean cooperative error of the latest training
-    episodes), ``checkpoints/marl_<N>_steps.pt`` every ``checkpoint_freq`` agent-steps and on
-    Ctrl-C / SIGTERM, ``final_model.pt`` and ``run.json`` (agent-steps per second).
+    by ``coopnav evaluate``; a resumed session that finds one adds
+    ``config_resumed_at_<N>.yaml``), ``logs/progress.csv`` (one row per iteration:
+    agent-steps, losses, return, goal and collision rate and mean cooperative error of the
+    latest training episodes; every iteration once over interrupted and resumed sessions),
+    ``checkpoints/marl_<N>_steps.pt`` every ``checkpoint_freq`` agent-steps and on Ctrl-C /
+    SIGTERM, ``final_model.pt`` and ``run.json`` (agent-steps per second).
+
+    Interrupts are taken between steps (:func:`coopnav_env.training.runs.interrupts_deferred`),
+    start-up included; one that arrives before the networks exist leaves the folder as it
+    was before the command (a fresh run's ``config.yaml`` is removed again), so that the same
+    command can simply be run again.
+
+    Raises
+    ------
+    ValueError
+        A checkpoint that does not load, lacks entries or holds NaN weights; one trained with
+        other environment or network settings (named); ``timesteps`` below the checkpoint's
+        agent-steps.
+    FileNotFoundError
+        ``--resume latest`` in a folder with no checkpoint (the message says whether nothing
+        was trained there yet).
     """
     import torch
 
     settings, env_kwargs = settings_of(cfg)
     out = Path(cfg.out)
-    with open_run(cfg) as run:  # lock, fresh/overwrite/resume rules, interrupts (issue 15)
+    with open_run(cfg) as run, interrupts_deferred():
         if cfg.resume == "latest" and run.nothing_to_do(cfg.timesteps):
             run.say_finished()
             return out / "final_model.pt"
-        resume = None
-        if cfg.resume == "latest":  # the newest that loads; a finished run: its final model
-            final = (
-                (run.finished["num_timesteps"], out / "final_model.pt") if run.finished else None
-            )
-            folder = out / "checkpoints"
-            candidates = checkpoint_candidates(folder, "marl_*_steps.pt", CHECKPOINT_RE, final)
-            resume = first_loadable(candidates, load_marl_checkpoint, folder, "TorchRL ")[1]
-        elif cfg.resume is not None:
-            resume = load_marl_checkpoint(Path(cfg.resume))
-        if resume is not None and resume["env_kwargs"] != env_kwargs:
-            raise ValueError(
-                f"cannot resume in {out}: the checkpoint was trained with {resume['env_kwargs']}, "
-                f"not {env_kwargs}"
-            )
+        resume_path, resume = _resume_point(cfg, run.finished)
+        if resume is not None:
+            if resume["env_kwargs"] != env_kwargs:
+                raise ValueError(
+                    f"cannot resume in {out}: the checkpoint {resume_path} was trained with "
+                    f"{resume['env_kwargs']}, not {env_kwargs}"
+                )
+            check_resumable_settings(resume, settings, resume_path)
+            steps = int(resume["agent_steps"])
+            if steps > cfg.timesteps:
+                raise ValueError(
+                    f"--timesteps {cfg.timesteps} is below the {steps} agent-steps of the "
+                    f"checkpoint {resume_path}: nothing would be trained; ask for more "
+                    f"(--timesteps M with M > {steps})"
+                )
+            if run.finished is not None and run.finished["num_timesteps"] >= cfg.timesteps:
+                run.say_finished()  # e.g. --resume RUN/final_model of a finished run
+                return out / "final_model.pt"
         torch.set_num_threads(cfg.torch_threads)
         resolved = cfg.to_dict()
         resolved["env"] = env_kwargs
         resolved["backend"] = "torchrl"
-        if resume is None:
-            write_yaml(out / "config.yaml", resolved)
-        return train_marl(
-            out,
-            settings,
-            env_kwargs,
-            cfg.seed,
-            cfg.timesteps,
-            checkpoint_freq=cfg.checkpoint_freq,
-            resume=resume,
-            progress=cfg.progress_bar,
-        )
+        wrote_config = None
+        if resume is None or not (out / "config.yaml").is_file():
+            # a run resumed from another folder's checkpoint, or whose config.yaml is gone,
+            # records its settings too: `coopnav evaluate` reads the environment from it
+            wrote_config = write_yaml(out / "config.yaml", resolved)
+        else:
+            resolved["resume"] = str(resume_path)
+            write_yaml(out / f"config_resumed_at_{int(resume['agent_steps'])}.yaml", resolved)
+        try:
+            return train_marl(
+                out,
+                settings,
+                env_kwargs,
+                cfg.seed,
+                cfg.timesteps,
+                checkpoint_freq=cfg.checkpoint_freq,
+                resume=resume,
+                progress=cfg.progress_bar,
+            )
+        except _NothingTrained:
+            if resume is None and wrote_config is not None:
+                _remove_start_of_run(out, wrote_config)
+                print(
+                    f"\ninterrupted before training started: nothing was trained, and {out} "
+                    "is as it was before this command; run the same command again to start",
+                    file=sys.stderr,
+                )
+            else:
+                print(
+                    f"\ninterrupted before training continued: nothing new was trained; "
+                    f"continue with --resume {cfg.resume}",
+                    file=sys.stderr,
+                )
+            raise
+
+
+class _NothingTrained(KeyboardInterrupt):
+    """An interrupt that arrived before the trainer existed (nothing to save)."""
+
+    def __init__(self, cause: KeyboardInterrupt) -> None:
+        super().__init__(*cause.args)
+        self.signum = int(getattr(cause, "signum", 2))
+
+
+def _remove_start_of_run(out: Path, config: Path) -> None:
+    """Remove what a fresh run wrote before it trained anything (its config.yaml and the
+    empty folders), so that the folder holds no run and the same command can start again."""
+    config.unlink(missing_ok=True)
+    for name in ("logs", "checkpoints"):
+        folder = out / name
+        if folder.is_dir() and not any(folder.iterdir()):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _resolve_checkpoint_path(text: str) -> Path:
+    """The file ``--resume`` names: a ``.pt`` file, the same without ``.pt``, or a run
+    folder (its ``final_model.pt``)."""
+    p = Path(text)
+    if p.is_dir():
+        p = p / "final_model.pt"
+    elif not p.is_file() and p.with_suffix(".pt").is_file():
+        p = p.with_suffix(".pt")
+    return p
+
+
+def _resume_point(
+    cfg: TrainConfig, finished: Mapping[str, Any] | None
+) -> tuple[Path | None, dict[str, Any] | None]:
+    """(checkpoint file, its contents) to resume from, or (None, None) for a fresh run.
+
+    ``latest``: the newest checkpoint that loads (or a finished run's final model); newer
+    ones that do not load, lack entries or hold NaN weights are skipped with a warning.
+    """
+    if cfg.resume is None:
+        return None, None
+    out = Path(cfg.out)
+    if cfg.resume != "latest":
+        path = _resolve_checkpoint_path(cfg.resume)
+        return path, load_checked_checkpoint(path, "resume")
+    final = None
+    if finished is not None and (out / "final_model.pt").is_file():
+        final = (int(finished["num_timesteps"]), out / "final_model.pt")
+    folder = out / "checkpoints"
+    candidates = checkpoint_candidates(folder, "marl_*_steps.pt", CHECKPOINT_RE, final)
+    if not candidates:
+        if (out / "config.yaml").is_file():
+            raise FileNotFoundError(
+                f"nothing was trained in {out} yet: it holds the settings of a run "
+                f"(config.yaml) but no TorchRL checkpoint in {folder} and no final model; "
+                "start it again with --overwrite"
+            )
+        raise FileNotFoundError(f"no TorchRL checkpoint to resume from in {folder}")
+    return first_loadable(
+        candidates, lambda p: load_checked_checkpoint(p, "resume"), folder, "TorchRL "
+    )
 
 
 def train_marl(
@@ -690,75 +856,90 @@ def train_marl(
     """Train and write ``out``: ``logs/progress.csv``, ``checkpoints/``, ``final_model.pt``.
 
     ``timesteps`` and ``checkpoint_freq`` count agent-steps. Returns the final model's path.
+    SIGINT and SIGTERM are taken between steps: the trainer's state is saved as
+    ``checkpoints/marl_<N>_steps.pt`` and the interrupt re-raised (an interrupt before the
+    trainer exists raises a ``KeyboardInterrupt`` with nothing saved).
     """
-    import csv
-    import io
     import warnings
 
     out = Path(out)
-    (out / "logs").mkdir(parents=True, exist_ok=True)
-    # a resumed run continues with new episodes (training seeds below the held-out ones)
-    env_seed = None
-    if resume is not None:
-        env_seed = (seed + int(resume["agent_steps"])) % (EVAL_SEED_START - settings.n_copies)
-    trainer = MARLTrainer(settings, env_kwargs, seed, env_seed=env_seed)
-    if resume is not None:
-        trainer.load_state_dict(resume)
-    rows: list[dict[str, float]] = []
-    next_ckpt = [
-        (trainer.agent_steps // checkpoint_freq + 1) * checkpoint_freq if checkpoint_freq else 0
-    ]
-    t_start = time.perf_counter()
-    steps_start = trainer.agent_steps
+    trainer = None
     bar = None
-    if progress:
-        try:
-            from tqdm import tqdm
-
-            bar = tqdm(total=timesteps, initial=trainer.agent_steps, unit="agent-step")
-        except ImportError:  # pragma: no cover
-            bar = None
-
-    def on_iteration(row: dict[str, float]) -> None:
-        row["wall_s"] = time.perf_counter() - t_start
-        rows.append(row)
-        keys: list[str] = []
-        for r in rows:
-            keys += [k for k in r if k not in keys]
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, fieldnames=keys)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.items()})
-        atomic_write_text(out / "logs" / "progress.csv", buf.getvalue())
-        if bar is not None:
-            bar.update(int(row["agent_steps"]) - bar.n)
-            bar.set_postfix(
-                ret=f"{row.get('ep_return', float('nan')):.1f}",
-                goal=f"{row.get('ep_goal', float('nan')):.2f}",
-                err=f"{row.get('ep_coop_error_m', float('nan')):.2f}",
-            )
-        if checkpoint_freq and trainer.agent_steps >= next_ckpt[0]:
-            trainer.save(out / "checkpoints" / f"marl_{trainer.agent_steps}_steps.pt")
-            next_ckpt[0] = (trainer.agent_steps // checkpoint_freq + 1) * checkpoint_freq
-
-    old_term = sigterm_as_interrupt()
+    t_start = time.perf_counter()
     try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message=".*advantage normalization.*")
-            warnings.filterwarnings("ignore", message=".*requires_grad.*")
-            trainer.train(timesteps, on_iteration)
-    except KeyboardInterrupt:
-        saved = trainer.save(out / "checkpoints" / f"marl_{trainer.agent_steps}_steps.pt")
-        print(f"interrupted: saved {saved}; continue with --resume latest", file=sys.stderr)
+        with interrupts_deferred():
+            (out / "logs").mkdir(parents=True, exist_ok=True)
+            # a resumed run continues with new episodes (training seeds below the held-out)
+            env_seed = None
+            if resume is not None:
+                env_seed = (seed + int(resume["agent_steps"])) % (
+                    EVAL_SEED_START - settings.n_copies
+                )
+            try:
+                built = MARLTrainer(settings, env_kwargs, seed, env_seed=env_seed)
+                if resume is not None:
+                    built.load_state_dict(resume)
+            except KeyboardInterrupt as exc:
+                raise _NothingTrained(exc) from None
+            trainer = built
+            log = ProgressLog(
+                out / "logs" / "progress.csv",
+                "agent_steps",
+                resumed_at=None if resume is None else trainer.agent_steps,
+                decimals=6,
+            )
+            next_ckpt = [
+                (trainer.agent_steps // checkpoint_freq + 1) * checkpoint_freq
+                if checkpoint_freq
+                else 0
+            ]
+            t_start = time.perf_counter()
+            steps_start = trainer.agent_steps
+            if progress:
+                try:
+                    from tqdm import tqdm
+
+                    bar = tqdm(total=timesteps, initial=trainer.agent_steps, unit="agent-step")
+                except ImportError:  # pragma: no cover
+                    bar = None
+
+            def on_iteration(row: dict[str, float]) -> None:
+                row["wall_s"] = time.perf_counter() - t_start
+                log.append(row)
+                if bar is not None:
+                    bar.update(int(row["agent_steps"]) - bar.n)
+                    bar.set_postfix(
+                        ret=f"{row.get('ep_return', float('nan')):.1f}",
+                        goal=f"{row.get('ep_goal', float('nan')):.2f}",
+                        err=f"{row.get('ep_coop_error_m', float('nan')):.2f}",
+                    )
+                if checkpoint_freq and trainer.agent_steps >= next_ckpt[0]:
+                    trainer.save(out / "checkpoints" / f"marl_{trainer.agent_steps}_steps.pt")
+                    next_ckpt[0] = (trainer.agent_steps // checkpoint_freq + 1) * checkpoint_freq
+
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=".*advantage normalization.*")
+                warnings.filterwarnings("ignore", message=".*requires_grad.*")
+                trainer.train(timesteps, on_iteration)
+    except _NothingTrained:
         raise
-    finally:
-        if old_term is not None:
-            signal.signal(signal.SIGTERM, old_term)
+    except KeyboardInterrupt as exc:
+        if bar is not None:
+            bar.close()
+        if trainer is None:
+            raise _NothingTrained(exc) from None
+        saved = trainer.save(out / "checkpoints" / f"marl_{trainer.agent_steps}_steps.pt")
+        print(
+            f"\ninterrupted: saved the policy after {trainer.agent_steps} agent-steps to "
+            f"{saved}; continue with --resume latest",
+            file=sys.stderr,
+        )
+        raise
     if bar is not None:
         bar.close()
     final = trainer.save(out / "final_model.pt")
     elapsed = time.perf_counter() - t_start
+    trained = trainer.agent_steps - steps_start
     run = {
         "backend": "torchrl",
         "algorithm": settings.algorithm,
@@ -766,8 +947,9 @@ def train_marl(
         "agent_steps": trainer.agent_steps,
         "num_timesteps": trainer.agent_steps,
         "iterations": trainer.iterations,
+        "session_agent_steps": trained,
         "train_s": elapsed,
-        "agent_steps_per_s": round((trainer.agent_steps - steps_start) / max(elapsed, 1e-9), 1),
+        "agent_steps_per_s": round(trained / max(elapsed, 1e-9), 1) if trained > 0 else None,
         "settings": dataclasses.asdict(settings),
         "env": dict(env_kwargs),
         "finished": True,

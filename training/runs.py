@@ -19,7 +19,16 @@ finished). :func:`open_run` applies these rules before a backend does any work:
 * **Interrupts**: SIGINT and SIGTERM raise :class:`Interrupted` (a ``KeyboardInterrupt``)
   from the moment the folder is opened, so a backend writes a checkpoint and says what it
   saved for both, in every phase (the behaviour-cloning warm start included); the command
-  exits with ``128 + signal number`` (130, 143).
+  exits with ``128 + signal number`` (130, 143). While a backend trains
+  (:func:`interrupts_deferred`), a signal only sets a flag that the backend checks between
+  steps (:func:`raise_if_interrupted`): an exception raised inside compiled (numba) code or
+  inside a destructor would otherwise end in a ``SystemError`` or be swallowed. A second
+  signal raises at once.
+* **A backend that matches**: resuming a folder with another ``--backend`` than its run was
+  trained with is refused, naming both.
+* **The learning curve**: ``logs/progress.csv`` holds every iteration once, in order, however
+  often the run was interrupted and resumed (:class:`ProgressLog`: a resumed session keeps
+  the rows up to its checkpoint and drops those after it, which it trains again).
 
 Checkpoints: :func:`checkpoint_candidates` lists a folder's ``<prefix>_<N>_steps`` entries
 (and a finished run's final model), :func:`first_loadable` takes the newest one that loads
@@ -58,6 +67,7 @@ __all__ = [  # atomic_path ... write_yaml: coopnav_env.training.files, also impo
     "LOCK_NAME",
     "RUN_OUTPUTS",
     "Interrupted",
+    "ProgressLog",
     "RunFolderError",
     "RunState",
     "atomic_path",
@@ -67,8 +77,11 @@ __all__ = [  # atomic_path ... write_yaml: coopnav_env.training.files, also impo
     "finished_run",
     "first_loadable",
     "install_interrupt_handlers",
+    "interrupts_deferred",
     "interrupts_raise",
     "open_run",
+    "raise_if_interrupted",
+    "recorded_backend",
     "recorded_config",
     "run_outputs",
     "sigterm_as_interrupt",
@@ -190,6 +203,115 @@ def check_same_environment(cfg: TrainConfig, saved: Path) -> None:
             f"cannot resume in {cfg.out} with --backend {cfg.backend}: the run there was "
             f"trained with --backend {backend}"
         )
+
+
+def recorded_backend(out: str | Path) -> str | None:
+    """The backend the run in ``out`` was trained with, or None (no run there).
+
+    Read from its ``config.yaml``; without one, from its final model (``final_model.zip``:
+    sb3, ``final_model.pt``: torchrl, a ``final_model`` folder: rllib).
+    """
+    out = Path(out)
+    try:
+        old = recorded_config(out)
+    except ValueError:
+        old = None
+    if old is not None:
+        return str(old.get("backend", "sb3"))
+    if (out / "final_model.zip").is_file():
+        return "sb3"
+    if (out / "final_model.pt").is_file():
+        return "torchrl"
+    if (out / "final_model").is_dir():
+        return "rllib"
+    return None
+
+
+# --------------------------------------------------------------------------------------------
+# the learning curve
+# --------------------------------------------------------------------------------------------
+
+
+class ProgressLog:
+    """``logs/progress.csv`` of a run: one row per iteration, every iteration once, in order.
+
+    A fresh run starts an empty log. A resumed run (``resumed_at``: the agent-steps of the
+    checkpoint it continues from) keeps the earlier sessions' rows up to that checkpoint
+    and drops the rows after it (their iterations are trained again), so that the file
+    holds one learning curve however often the run was interrupted and resumed. Every row
+    rewrites the whole file atomically (:func:`atomic_write_text`): an interrupt or a full
+    disk leaves the previous version, never a truncated one.
+
+    Parameters
+    ----------
+    path : Path
+        The CSV file (``OUT/logs/progress.csv``).
+    step_key : str
+        The column that counts agent-steps (``agent_steps``; SB3: ``time/total_timesteps``).
+    resumed_at : int, optional
+        None: a fresh run (any earlier file is replaced at the first row).
+    columns : sequence of str, optional
+        Columns in this order first (others follow in order of appearance).
+    decimals : int, optional
+        Round floats to this many decimals (None: written in full).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        step_key: str,
+        resumed_at: int | None = None,
+        columns: Sequence[str] = (),
+        decimals: int | None = None,
+    ) -> None:
+        import csv
+
+        self.path = Path(path)
+        self.step_key = step_key
+        self.decimals = decimals
+        self.columns: list[str] = list(columns)
+        self.rows: list[dict[str, Any]] = []
+        if resumed_at is not None and self.path.is_file():
+            with self.path.open(newline="") as fh:
+                reader = csv.DictReader(fh)
+                for name in reader.fieldnames or []:
+                    if name not in self.columns:
+                        self.columns.append(name)
+                for row in reader:
+                    try:
+                        step = float(row.get(step_key) or "nan")
+                    except ValueError:
+                        continue
+                    if step <= resumed_at:  # NaN (a row without a step count) is dropped
+                        self.rows.append(row)
+            self._write()
+
+    def append(self, row: dict[str, Any]) -> None:
+        """Add one iteration's row and rewrite the file."""
+        for key in row:
+            if key not in self.columns:
+                self.columns.append(key)
+        self.rows.append(dict(row))
+        self._write()
+
+    def _write(self) -> None:
+        import csv
+        import io
+
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=self.columns, extrasaction="ignore")
+        w.writeheader()
+        for r in self.rows:
+            w.writerow({k: _csv_value(v, self.decimals) for k, v in r.items()})
+        atomic_write_text(self.path, buf.getvalue())
+
+
+def _csv_value(value: Any, decimals: int | None) -> Any:
+    if hasattr(value, "item") and callable(value.item):  # a numpy scalar
+        value = value.item()
+    if isinstance(value, float) and decimals is not None:
+        return round(value, decimals)
+    return "" if value is None else value
 
 
 # --------------------------------------------------------------------------------------------
@@ -365,6 +487,61 @@ def _raise_interrupted(signum: int, frame: Any) -> None:
     raise Interrupted(signum)
 
 
+_pending_signals: list[int] = []
+"""Signals received inside :func:`interrupts_deferred` and not yet raised."""
+
+
+def _defer_interrupt(signum: int, frame: Any) -> None:
+    if _pending_signals:  # a second signal: stop at once
+        raise Interrupted(signum)
+    _pending_signals.append(int(signum))
+    print(
+        "\ncoopnav: interrupt received; stopping after the current step (again: at once)",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def raise_if_interrupted() -> None:
+    """Raise :class:`Interrupted` if SIGINT or SIGTERM arrived inside
+    :func:`interrupts_deferred` (call it where stopping is safe: between steps)."""
+    if _pending_signals:
+        signum = _pending_signals.pop()
+        _pending_signals.clear()
+        raise Interrupted(signum)
+
+
+@contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Inside the block, SIGINT and SIGTERM set a flag instead of raising.
+
+    The code in the block calls :func:`raise_if_interrupted` between steps, which raises
+    :class:`Interrupted` there; so an interrupt never lands inside a compiled (numba) call,
+    where it ends in ``SystemError: CPUDispatcher(...)``, nor in a destructor, where Python
+    ignores it. A second signal raises at once. A signal that comes after the block's last
+    check (its work is done) is reported and dropped. Blocks nest (the outermost rules);
+    outside the main thread nothing changes.
+    """
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is _defer_interrupt  # nested: the outer block rules
+    ):
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    _pending_signals.clear()
+    signal.signal(signal.SIGINT, _defer_interrupt)
+    signal.signal(signal.SIGTERM, _defer_interrupt)
+    try:
+        yield
+        if _pending_signals:  # it came after the last check: the work is done, nothing lost
+            print("coopnav: the interrupt came as the work finished", file=sys.stderr)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        _pending_signals.clear()
+
+
 def sigterm_as_interrupt() -> Any:
     """Make SIGTERM raise :class:`Interrupted` (as Ctrl-C does); return the old handler.
 
@@ -386,14 +563,23 @@ def open_run(cfg: TrainConfig) -> Iterator[RunState]:
     Raises
     ------
     RunFolderError
-        ``cfg.out`` is a file or not writable, another run holds it, or it holds a run and
-        neither ``cfg.overwrite`` nor ``cfg.resume`` is set.
+        ``cfg.out`` is a file or not writable, another run holds it, it holds a run and
+        neither ``cfg.overwrite`` nor ``cfg.resume`` is set, or ``cfg.resume`` asks to
+        continue a run of another backend.
     """
     out = Path(cfg.out)
     with interrupts_raise():
         ensure_folder(out)
         with _folder_lock(out):
             outputs = run_outputs(out)
+            if cfg.resume is not None:
+                backend = recorded_backend(out)
+                if backend is not None and backend != cfg.backend:
+                    raise RunFolderError(
+                        f"cannot resume {out} with --backend {cfg.backend}: the run there was "
+                        f"trained with --backend {backend}; resume it with --backend {backend}, "
+                        "or choose another --out"
+                    )
             if cfg.resume is None and outputs:
                 if not cfg.overwrite:
                     raise RunFolderError(

@@ -13,16 +13,20 @@ can be overridden from the command line. Everything a run produces goes to ``--o
     DIR/config.yaml              the resolved configuration, seed included
                                  (a resumed session adds config_resumed_at_<N>.yaml)
     DIR/run.json                 versions, wall time, agent-steps per second
-    DIR/final_model.zip          the trained policy (``coopnav_env.agents.ppo`` / ``ppo:DIR/final_model.zip``)
+    DIR/final_model.zip          the trained policy (``coopnav_env.agents.ppo`` /
+                                 ``ppo:DIR/final_model.zip``)
     DIR/checkpoints/ppo_<N>_steps.zip   periodic checkpoints (N agent-steps)
-    DIR/logs/                    TensorBoard events and progress*.csv (learning curve)
+    DIR/logs/                    TensorBoard events and progress.csv (learning curve)
     DIR/*monitor.csv             one line per finished UAV-episode (return, length, final infos)
 
 ``--resume CHECKPOINT`` (or ``--resume latest``) continues an interrupted run: the model, its
 optimizer state and its step count are loaded, and training runs until ``timesteps``
 agent-steps in total. Checkpoints are written at the start of a rollout, right after a
 policy update, so resuming from one loses no collected experience; Ctrl-C (or SIGTERM) also
-writes one, at the step count of the last completed update.
+writes one, at the step count of the last completed update. Interrupts are taken between
+environment steps (:func:`coopnav_env.training.runs.interrupts_deferred`), never inside one
+(a compiled call). ``logs/progress.csv`` holds every iteration once, in order, over
+interrupted and resumed sessions (:class:`coopnav_env.training.runs.ProgressLog`).
 
 Seeds: training resets its swarm copies with ``seed + k`` (``k < n_envs``), then each copy
 continues its own generator; a resumed run reseeds with ``seed + num_timesteps`` (modulo the
@@ -43,10 +47,13 @@ from coopnav_env.training.config import TrainConfig, check_bool, check_number
 from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
 from coopnav_env.training.files import atomic_path, write_json, write_yaml
 from coopnav_env.training.runs import (
+    ProgressLog,
     check_same_environment,
     checkpoint_candidates,
     first_loadable,
+    interrupts_deferred,
     open_run,
+    raise_if_interrupted,
 )
 
 __all__ = [
@@ -234,11 +241,13 @@ def _callbacks() -> tuple[Any, Any, Any]:
             if self.freq > 0 and n // self.freq > max(self._last, 0) // self.freq and n > 0:
                 self.save()
                 self._last = n
+            raise_if_interrupted()  # after an update (see runs.interrupts_deferred)
 
         def _on_rollout_end(self) -> None:
             self.collecting = False
 
         def _on_step(self) -> bool:
+            raise_if_interrupted()  # between environment steps, never inside one
             return True
 
     class ProgressCallback(BaseCallback):
@@ -315,7 +324,6 @@ def behaviour_clone(
     """
     import numpy as np
     import torch
-
     from coopnav_env.agents import make_policy
 
     env = env_fn()
@@ -332,6 +340,7 @@ def behaviour_clone(
         ep_obs, ep_act, ep_rew = [], [], []
         infos: dict[str, Any] = {}
         while env.agents:
+            raise_if_interrupted()  # between steps (see runs.interrupts_deferred)
             agents = list(env.agents)
             act = teacher.act(obs)
             ep_obs.append(np.stack([obs[a] for a in agents]))
@@ -361,6 +370,7 @@ def behaviour_clone(
     pi_loss = vf_loss = float("nan")
     policy.set_training_mode(True)
     for _ in _bar(range(int(spec["epochs"])), progress, "warm start: fitting", "epoch"):
+        raise_if_interrupted()
         perm = torch.randperm(x.shape[0], generator=gen)
         for k in range(0, x.shape[0], batch):
             idx = perm[k : k + batch]
@@ -426,8 +436,8 @@ def train(cfg: TrainConfig) -> Path:
         Bad settings, a checkpoint that does not load, an unusable run folder
         (:class:`coopnav_env.training.runs.RunFolderError`).
     KeyboardInterrupt
-        (:class:`coopnav_env.training.runs.Interrupted` for SIGINT/SIGTERM) re-raised after writing a
-        checkpoint (``checkpoints/ppo_<N>_steps.zip``) and saying what was saved.
+        (:class:`coopnav_env.training.runs.Interrupted` for SIGINT/SIGTERM) re-raised after
+        writing a checkpoint (``checkpoints/ppo_<N>_steps.zip``) and saying what was saved.
     """
     check(cfg)
     env_fn = make_env_fn(cfg.env_id, cfg.env)
@@ -445,6 +455,15 @@ def train(cfg: TrainConfig) -> Path:
         resume_path, start_steps = _resume_point(cfg, run.finished)
         if resume_path is not None:
             check_same_environment(cfg, Path(cfg.out) / "config.yaml")
+            if start_steps > cfg.timesteps:
+                raise ValueError(
+                    f"--timesteps {cfg.timesteps} is below the {start_steps} agent-steps of the "
+                    f"checkpoint {resume_path}: nothing would be trained; ask for more "
+                    f"(--timesteps M with M > {start_steps})"
+                )
+            if run.finished is not None and run.finished["num_timesteps"] >= cfg.timesteps:
+                run.say_finished()  # e.g. --resume RUN/final_model of a finished run
+                return Path(cfg.out) / "final_model.zip"
         return _train_in_folder(cfg, env_fn, n_agents, monitor_keys, resume_path, start_steps)
 
 
@@ -576,6 +595,29 @@ POLICY_KWARGS_RULES: dict[str, Callable[[str, Any], None]] = {
 """What each ``ppo.policy_kwargs`` setting accepts."""
 
 
+def _progress_csv(path: Path, resumed_at: int | None) -> Any:
+    """SB3's CSV log as a :class:`coopnav_env.training.runs.ProgressLog` (every iteration once,
+    in order, over resumed sessions; atomic rewrites) keyed by ``time/total_timesteps``."""
+    from numbers import Number
+
+    from stable_baselines3.common.logger import KVWriter, filter_excluded_keys
+
+    class ProgressCSV(KVWriter):
+        def __init__(self) -> None:
+            self.log = ProgressLog(path, "time/total_timesteps", resumed_at)
+
+        def write(
+            self, key_values: dict[str, Any], key_excluded: dict[str, Any], step: int = 0
+        ) -> None:
+            row = filter_excluded_keys(key_values, key_excluded, "csv")
+            self.log.append({k: v for k, v in row.items() if isinstance(v, Number | str)})
+
+        def close(self) -> None:
+            pass
+
+    return ProgressCSV()
+
+
 def _resume_point(cfg: TrainConfig, finished: Mapping[str, Any] | None) -> tuple[Path | None, int]:
     """(checkpoint to resume from, its agent-steps), or (None, 0) for a fresh run.
 
@@ -618,11 +660,10 @@ def _train_in_folder(
     import numpy as np
     import stable_baselines3
     import torch
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
-    from stable_baselines3.common.vec_env import VecMonitor
-
     from coopnav_env.training.vec_env import make_vec_env
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
+    from stable_baselines3.common.vec_env import VecMonitor
 
     out = Path(cfg.out)
     ppo_kwargs = dict(cfg.ppo)
@@ -633,8 +674,10 @@ def _train_in_folder(
     resolved["agent_steps_per_env_step"] = cfg.n_envs * n_agents
     vec_kind = cfg.vec_env_kind()
     resolved["vec_env_kind"] = vec_kind  # what "auto" became
-    # the original config.yaml stays: `coopnav evaluate` reads the environment from it
-    name = "config.yaml" if start_steps == 0 else f"config_resumed_at_{start_steps}.yaml"
+    # the original config.yaml stays: `coopnav evaluate` reads the environment from it (a run
+    # resumed from another folder's checkpoint, or whose config.yaml is gone, writes one)
+    fresh_config = start_steps == 0 or not (out / "config.yaml").is_file()
+    name = "config.yaml" if fresh_config else f"config_resumed_at_{start_steps}.yaml"
     write_yaml(out / name, resolved)
     checkpoints = out / "checkpoints"
 
@@ -643,73 +686,75 @@ def _train_in_folder(
     nav_cls, ckpt_cls, progress_cls = _callbacks()
     ckpt = ckpt_cls(cfg.checkpoint_freq, checkpoints)
     try:
-        venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=vec_kind)
-        suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
-        monitor = VecMonitor(
-            venv,
-            # SB3 appends ".monitor.csv" to any other name
-            filename=str(
-                out / ("monitor.csv" if not suffix else f"resumed_at_{start_steps}.monitor.csv")
-            ),
-            info_keywords=monitor_keys,
-        )
-        learn_env: Any = monitor
-        if cfg.normalize_reward:
-            from stable_baselines3.common.vec_env import VecNormalize
+        with interrupts_deferred():
+            venv = make_vec_env(env_fn, cfg.n_envs, cfg.num_cpus, kind=vec_kind)
+            suffix = "" if start_steps == 0 else f"_resumed_at_{start_steps}"
+            monitor = VecMonitor(
+                venv,
+                # SB3 appends ".monitor.csv" to any other name
+                filename=str(
+                    out / ("monitor.csv" if not suffix else f"resumed_at_{start_steps}.monitor.csv")
+                ),
+                info_keywords=monitor_keys,
+            )
+            learn_env: Any = monitor
+            if cfg.normalize_reward:
+                from stable_baselines3.common.vec_env import VecNormalize
 
-            learn_env = VecNormalize(
-                monitor,
-                norm_obs=False,
-                norm_reward=True,
-                gamma=float(ppo_kwargs.get("gamma", 0.99)),
-            )
-        if resume_path is not None:
-            model = PPO.load(resume_path, env=learn_env, device=cfg.device)
-            env_seed = (cfg.seed + start_steps) % (EVAL_SEED_START - cfg.n_envs)
-            model.set_random_seed(env_seed)
-        else:
-            model = PPO(
-                policy,
-                learn_env,
-                seed=cfg.seed,
-                device=cfg.device,
-                verbose=cfg.verbose,
-                **ppo_kwargs,
-            )
-            if cfg.pretrain:
-                phase = "the behaviour-cloning warm start"
-                print(
-                    f"behaviour-cloning warm start: {cfg.pretrain['episodes']} episodes of the "
-                    f"{cfg.pretrain['policy']} teacher, {cfg.pretrain['epochs']} epochs",
-                    file=sys.stderr,
-                    flush=True,
+                learn_env = VecNormalize(
+                    monitor,
+                    norm_obs=False,
+                    norm_reward=True,
+                    gamma=float(ppo_kwargs.get("gamma", 0.99)),
                 )
-                stats = behaviour_clone(
-                    model, env_fn, cfg.pretrain, seed=cfg.seed, progress=cfg.progress_bar
+            if resume_path is not None:
+                model = PPO.load(resume_path, env=learn_env, device=cfg.device)
+                env_seed = (cfg.seed + start_steps) % (EVAL_SEED_START - cfg.n_envs)
+                model.set_random_seed(env_seed)
+            else:
+                model = PPO(
+                    policy,
+                    learn_env,
+                    seed=cfg.seed,
+                    device=cfg.device,
+                    verbose=cfg.verbose,
+                    **ppo_kwargs,
                 )
-                write_json(out / "pretrain.json", stats)
-        phase = "PPO"
-        logs = out / "logs"
-        logs.mkdir(exist_ok=True)
-        formats = [
-            TensorBoardOutputFormat(str(logs)),
-            CSVOutputFormat(str(logs / f"progress{suffix}.csv")),
-        ]
-        if cfg.verbose:
-            from stable_baselines3.common.logger import HumanOutputFormat
+                if cfg.pretrain:
+                    phase = "the behaviour-cloning warm start"
+                    print(
+                        f"behaviour-cloning warm start: {cfg.pretrain['episodes']} episodes of the "
+                        f"{cfg.pretrain['policy']} teacher, {cfg.pretrain['epochs']} epochs",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                    stats = behaviour_clone(
+                        model, env_fn, cfg.pretrain, seed=cfg.seed, progress=cfg.progress_bar
+                    )
+                    write_json(out / "pretrain.json", stats)
+            phase = "PPO"
+            logs = out / "logs"
+            logs.mkdir(exist_ok=True)
+            formats = [
+                TensorBoardOutputFormat(str(logs)),
+                _progress_csv(logs / "progress.csv", start_steps if resume_path else None),
+            ]
+            if cfg.verbose:
+                from stable_baselines3.common.logger import HumanOutputFormat
 
-            formats.append(HumanOutputFormat(sys.stdout))
-        model.set_logger(Logger(str(logs), formats))
+                formats.append(HumanOutputFormat(sys.stdout))
+            model.set_logger(Logger(str(logs), formats))
 
-        remaining = cfg.timesteps - start_steps
-        t0 = time.perf_counter()
-        if remaining > 0:
-            model.learn(
-                total_timesteps=remaining,
-                callback=[nav_cls(n_agents), ckpt] + ([progress_cls()] if cfg.progress_bar else []),
-                reset_num_timesteps=resume_path is None,
-            )
-        wall_s = time.perf_counter() - t0
+            remaining = cfg.timesteps - start_steps
+            t0 = time.perf_counter()
+            if remaining > 0:
+                model.learn(
+                    total_timesteps=remaining,
+                    callback=[nav_cls(n_agents), ckpt]
+                    + ([progress_cls()] if cfg.progress_bar else []),
+                    reset_num_timesteps=resume_path is None,
+                )
+            wall_s = time.perf_counter() - t0
     except KeyboardInterrupt:
         if model is None:
             print(
@@ -743,7 +788,7 @@ def _train_in_folder(
         "num_timesteps": int(model.num_timesteps),
         "session_agent_steps": done_steps,
         "session_wall_s": round(wall_s, 3),
-        "agent_steps_per_s": round(done_steps / wall_s, 1) if wall_s > 0 else None,
+        "agent_steps_per_s": round(done_steps / wall_s, 1) if wall_s > 0 and done_steps else None,
         "vec_env": vec_kind,
         "resumed_from": str(resume_path) if resume_path else None,
         "versions": {

@@ -15,7 +15,45 @@ from typing import Any, Literal
 from coopnav_env.sim.city import _check_int, _check_real
 from coopnav_env.sim.scenario import ScenarioConfig, _check_bool, _check_choice
 
-__all__ = ["PRESETS", "UrbanCanyonConfig", "config_field_names", "make_config", "preset_config"]
+__all__ = [
+    "PER_STEP_REWARD_FIELDS",
+    "PRESETS",
+    "REWARD_SCHEMES",
+    "V1_DEFAULTS",
+    "UrbanCanyonConfig",
+    "config_field_names",
+    "make_config",
+    "preset_config",
+]
+
+REWARD_SCHEMES: tuple[str, ...] = ("per_step", "navigated_distance")
+"""The values of :attr:`UrbanCanyonConfig.reward_scheme`."""
+
+PER_STEP_REWARD_FIELDS: tuple[str, ...] = (
+    "nav_reward_weight",
+    "progress_reward_weight",
+    "separation_penalty",
+    "contact_penalty",
+    "integrity_penalty",
+)
+"""Weights of per-step reward terms: used by ``reward_scheme="per_step"`` only."""
+
+V1_DEFAULTS: dict[str, Any] = {
+    "reward_scheme": "navigated_distance",
+    "goal_bonus": 1.0,
+    "collision_penalty": 1.0,
+    "nav_reward_weight": 0.0,
+    "progress_reward_weight": 0.0,
+    "separation_penalty": 0.0,
+    "contact_penalty": 0.0,
+}
+"""The settings in which ``urban_canyon_v1`` differs from ``urban_canyon_v0``: its reward.
+
+``goal_bonus=1``: arriving is worth as much as the whole route flown at zero error, so a swarm
+that arrives scores above one that does not, except one that arrives with nearly no
+navigation (quality below the shortfall of the other). ``collision_penalty=1``: a crash
+forfeits the rest of the route and the bonus, and costs 1 more, so crashing never pays.
+"""
 
 
 @dataclass(frozen=True)
@@ -46,6 +84,21 @@ class UrbanCanyonConfig(ScenarioConfig):
         of this many metres reads 1, in (0, 1e4] [m].
     obs_wall_scale_m : float, default 50.0
         Wall distance at which the range observation saturates at 1, in (0, 1e4] [m].
+    reward_scheme : {"per_step", "navigated_distance"}, default "per_step"
+        How the reward is paid (``urban_canyon_v1`` sets ``"navigated_distance"``; the
+        environment's documentation page has the definitions and the reasons).
+        ``"navigated_distance"``: the undiscounted return is the task's score. Each UAV is paid
+        for the share of its street route it covers for the first time, weighted by the
+        quality of its navigation there, ``1 - min(nav_error, nav_reward_cap_m) /
+        nav_reward_cap_m``; the rest of the route is paid at arrival; ``goal_bonus`` when the
+        swarm arrives and ``-collision_penalty`` for a UAV that hits a building. The total does
+        not depend on how fast the route is flown. It has no per-step terms:
+        ``nav_reward_weight``, ``progress_reward_weight``, ``separation_penalty``,
+        ``contact_penalty`` and ``integrity_penalty`` must be 0 and ``nav_reward`` must be
+        ``"error"``.
+        ``"per_step"`` (``urban_canyon_v0``): a navigation cost and a progress payment every
+        step, per-step separation and contact penalties, a goal bonus and a collision
+        penalty. Its return pays for a short trip as well as for low error.
     nav_reward : {"error", "sigma"}, default "error"
         Navigation reward from the true 3-D error of the estimate a UAV uses, or from its
         predicted 3-D sigma ``sqrt(trace(H_p))``.
@@ -139,6 +192,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     obs_sigma_max_m: float = 20.0
     obs_route_scale_m: float = 50.0
     obs_wall_scale_m: float = 50.0
+    reward_scheme: Literal["per_step", "navigated_distance"] = "per_step"
     nav_reward: Literal["error", "sigma"] = "error"
     nav_reward_weight: float = 0.1
     nav_reward_scale_m: float = 10.0
@@ -169,6 +223,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_real(o, "obs_sigma_max_m", self.obs_sigma_max_m, 0.0, 1e4, lo_open=True)
         _check_real(o, "obs_route_scale_m", self.obs_route_scale_m, 0.0, 1e4, lo_open=True)
         _check_real(o, "obs_wall_scale_m", self.obs_wall_scale_m, 0.0, 1e4, lo_open=True)
+        _check_choice(o, "reward_scheme", self.reward_scheme, REWARD_SCHEMES)
         _check_choice(o, "nav_reward", self.nav_reward, ("error", "sigma"))
         _check_real(o, "nav_reward_weight", self.nav_reward_weight, 0.0, 1000.0)
         _check_real(o, "nav_reward_scale_m", self.nav_reward_scale_m, 0.0, 1e4, lo_open=True)
@@ -189,6 +244,8 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_bool(o, "obs_lookahead", self.obs_lookahead)
         _check_bool(o, "obs_candidate_sky", self.obs_candidate_sky)
         _check_bool(o, "obs_true_error", self.obs_true_error)
+        if self.reward_scheme == "navigated_distance":
+            self._check_navigated_distance(o)
         if self.integrity == "off":
             for name, on in (
                 ("integrity_penalty", self.integrity_penalty > 0.0),
@@ -199,6 +256,23 @@ class UrbanCanyonConfig(ScenarioConfig):
                         f"{o}.{name} needs integrity='raim' or 'fde' (protection levels), got "
                         f"integrity='off'"
                     )
+
+    def _check_navigated_distance(self, o: str) -> None:
+        """``reward_scheme="navigated_distance"`` has no per-step terms: refuse their weights."""
+        if self.nav_reward != "error":
+            raise ValueError(
+                f"{o}.nav_reward must be 'error' with reward_scheme='navigated_distance' (the "
+                f"score weights each metre by the true error), got {self.nav_reward!r}"
+            )
+        for name in PER_STEP_REWARD_FIELDS:
+            value = getattr(self, name)
+            if value != 0.0:
+                raise ValueError(
+                    f"{o}.{name} is a per-step reward weight of reward_scheme='per_step'; "
+                    f"reward_scheme='navigated_distance' has no per-step terms (a per-step "
+                    f"term pays for a short trip): set it to 0 (urban_canyon_v1 does), got "
+                    f"{value!r}"
+                )
 
     @property
     def obs_dim(self) -> int:

@@ -54,12 +54,18 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from coopnav_env import GYM_ENV_ID
+from coopnav_env import GYM_ENV_ID, GYM_ENV_ID_V1
 from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.observation_layout import ObsLayout, obs_layout
-from coopnav_env.envs.urban_canyon import UrbanCanyonEnv
+from coopnav_env.envs.urban_canyon import UrbanCanyonEnv, UrbanCanyonV1Env
 
-__all__ = ["GYM_ENV_ID", "REWARD_MODES", "UrbanCanyonSwarmEnv"]
+__all__ = [
+    "GYM_ENV_ID",
+    "GYM_ENV_ID_V1",
+    "REWARD_MODES",
+    "UrbanCanyonSwarmEnv",
+    "UrbanCanyonSwarmV1Env",
+]
 
 REWARD_MODES: tuple[str, ...] = ("mean", "sum")
 """Values of the ``reward`` argument: the swarm's mean or summed reward per step."""
@@ -92,6 +98,8 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
         "render_modes": list(UrbanCanyonEnv.metadata["render_modes"]),
         "render_fps": UrbanCanyonEnv.metadata["render_fps"],
     }
+    parallel_class: ClassVar[type[UrbanCanyonEnv]] = UrbanCanyonEnv
+    """The PettingZoo environment underneath (``urban_canyon_v0``'s)."""
 
     def __init__(
         self,
@@ -102,7 +110,7 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
     ) -> None:
         if reward not in REWARD_MODES:
             raise ValueError(f"reward must be one of {REWARD_MODES}, got {reward!r}")
-        self.par_env = UrbanCanyonEnv(config=config, render_mode=render_mode, **fields)
+        self.par_env = self.parallel_class(config=config, render_mode=render_mode, **fields)
         self.config: UrbanCanyonConfig = self.par_env.config
         self.render_mode = render_mode
         self.reward_mode = reward
@@ -183,3 +191,14 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
     def close(self) -> None:
         """Close the PettingZoo environment (its window, if any)."""
         self.par_env.close()
+
+
+class UrbanCanyonSwarmV1Env(UrbanCanyonSwarmEnv):
+    """``urban_canyon_v1`` as one Gymnasium agent (``coopnav/UrbanCanyonSwarm-v1``).
+
+    As :class:`UrbanCanyonSwarmEnv` over :class:`~coopnav_env.envs.urban_canyon.
+    UrbanCanyonV1Env`: with ``reward="mean"`` (the default) the undiscounted return of an
+    episode is its score.
+    """
+
+    parallel_class: ClassVar[type[UrbanCanyonEnv]] = UrbanCanyonV1Env

@@ -33,7 +33,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from coopnav_env.envs import _kernels
-from coopnav_env.envs.config import UrbanCanyonConfig, make_config
+from coopnav_env.envs.config import V1_DEFAULTS, UrbanCanyonConfig, make_config
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import city as _city
 from coopnav_env.sim.city import _ray_directions
@@ -45,9 +45,12 @@ __all__ = [
     "NO_FIX_ERROR_M",
     "REWARD_TERMS",
     "UrbanCanyonEnv",
+    "UrbanCanyonV1Env",
     "aec_env",
+    "aec_env_v1",
     "fix_error_m",
     "parallel_env",
+    "parallel_env_v1",
 ]
 
 _USE_KERNEL = True
@@ -264,6 +267,15 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             dtype=np.float64,
         )
         self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
+        # reward_scheme="navigated_distance": each UAV's route length and the part not yet paid
+        route_m = remaining_route_m(
+            self.world.route_xy_m,
+            self._epoch.pos_enu_m[:, :2],
+            self._epoch.next_waypoint,
+            self.world.route_tail_m,
+        )
+        self._route_m = np.maximum(route_m, 1e-9)
+        self._unpaid_m = route_m.copy()
         return self._observation_array()
 
     def _reset_infos(self) -> dict[str, dict[str, Any]]:
@@ -345,6 +357,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 cfg.nav_reward == "sigma",
                 self._reward_params,
             )
+            if cfg.reward_scheme == "navigated_distance":
+                stacked[0], stacked[1] = self._navigated_distance(ep, bool(reached))
             if cfg.nav_team_weight > 0.0:
                 stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
             terms = dict(zip(REWARD_TERMS, stacked))
@@ -374,11 +388,16 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             * np.minimum(nav_m, cfg.nav_reward_cap_m)
             / cfg.nav_reward_scale_m
         )
+        progress = (
+            cfg.progress_reward_weight
+            * (d_prev - d_now)
+            / (cfg.kinematics.max_speed_mps * cfg.dt_s)
+        )
+        if cfg.reward_scheme == "navigated_distance":
+            nav, progress = self._navigated_distance(ep, reached)
         terms = {
             "nav": _team_mix(nav, cfg.nav_team_weight) if cfg.nav_team_weight > 0.0 else nav,
-            "progress": cfg.progress_reward_weight
-            * (d_prev - d_now)
-            / (cfg.kinematics.max_speed_mps * cfg.dt_s),
+            "progress": progress,
             "collision": -cfg.collision_penalty * ep.collided,
             "separation": -cfg.separation_penalty * ep.separation_violation,
             "contact": -cfg.contact_penalty * ep.out_of_contact,
@@ -389,6 +408,27 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         terminated = crash or reached
         truncated = (self._steps >= cfg.max_steps) and not terminated
         return self._observation_array(), reward, terminated, truncated, terms, in_goal
+
+    def _navigated_distance(self, ep: Epoch, reached: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The terms ``nav`` and ``progress`` of ``reward_scheme="navigated_distance"`` for the
+        epoch ``ep``, each ``(N,)``; updates the part of each UAV's route not yet paid.
+
+        ``progress``: the share of its route a UAV covers for the first time this step (its
+        remaining route below its lowest one so far, divided by its route length at reset;
+        all that is left when the swarm arrives). ``nav``: minus that share times
+        ``min(nav_error_m, cap) / cap``. Their sum over an episode that arrives is the route's
+        distance-weighted navigation quality, whatever the speed: a metre is paid once, at
+        the error the UAV had when it first got there, so flying back and forth earns nothing.
+        """
+        cfg = self.config
+        now_m = remaining_route_m(
+            self.world.route_xy_m, ep.pos_enu_m[:, :2], ep.next_waypoint, self.world.route_tail_m
+        )
+        covered_m = self._unpaid_m if reached else np.clip(self._unpaid_m - now_m, 0.0, None)
+        self._unpaid_m = self._unpaid_m - covered_m
+        share = covered_m / self._route_m
+        shortfall = np.minimum(ep.nav_error_m, cfg.nav_reward_cap_m) / cfg.nav_reward_cap_m
+        return -share * shortfall, share
 
     def _integrity_term(self, terms: dict[str, np.ndarray], reward: np.ndarray) -> np.ndarray:
         """With ``integrity`` on, add the reward term ``integrity`` (``-integrity_penalty`` for
@@ -939,6 +979,47 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         EzPickle.__setstate__(self, state)
         self.__dict__.update(state["_runtime"])
         self._window = None
+
+
+class UrbanCanyonV1Env(UrbanCanyonEnv):
+    """``urban_canyon_v1``: :class:`UrbanCanyonEnv` whose defaults pay the task's score.
+
+    The defaults are those of ``urban_canyon_v0`` with :data:`~coopnav_env.envs.config.
+    V1_DEFAULTS` on top (``reward_scheme="navigated_distance"``): the undiscounted return of an
+    episode is its score. A given ``config`` is used as it is; keyword fields (and a
+    ``preset``) apply on top of the v1 defaults. See :mod:`coopnav_env.urban_canyon_v1`.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {**UrbanCanyonEnv.metadata, "name": "urban_canyon_v1"}
+
+    def __init__(
+        self,
+        config: UrbanCanyonConfig | None = None,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        if config is None:
+            config, overrides = _v1_config(overrides), {}
+        super().__init__(config=config, render_mode=render_mode, **overrides)
+
+
+def _v1_config(overrides: dict[str, Any]) -> UrbanCanyonConfig:
+    """The v1 defaults with ``overrides`` (fields, ``preset``, ``max_cycles``) on top."""
+    return make_config(make_config(**V1_DEFAULTS), **overrides)
+
+
+def parallel_env_v1(
+    render_mode: str | None = None, config: UrbanCanyonConfig | None = None, **fields: Any
+) -> UrbanCanyonV1Env:
+    """The parallel environment ``urban_canyon_v1``; keywords as :func:`parallel_env`."""
+    return UrbanCanyonV1Env(config=config, render_mode=render_mode, **fields)
+
+
+def aec_env_v1(
+    render_mode: str | None = None, config: UrbanCanyonConfig | None = None, **fields: Any
+) -> AECEnv:
+    """The AEC version of ``urban_canyon_v1`` (PettingZoo's conversion of the parallel one)."""
+    return parallel_to_aec(parallel_env_v1(render_mode=render_mode, config=config, **fields))
 
 
 def parallel_env(

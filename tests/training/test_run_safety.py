@@ -25,11 +25,12 @@ import yaml
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
-from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 from coopnav_env.training.cli import main
 from coopnav_env.training.config import TrainConfig, load_config
 from coopnav_env.training.runs import LOCK_NAME
 from coopnav_env.training.sb3_backend import find_latest_checkpoint, train
+
+from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 
 ROOT = Path(__file__).resolve().parents[2]
 TOY = TOY_ENV_ID
@@ -299,6 +300,87 @@ def test_interrupt_before_the_first_periodic_checkpoint_saves_one(tmp_path):
     assert proc.returncode == 130, err
     assert "saved the policy after" in err
     assert loads(find_latest_checkpoint(out))
+
+
+# --------------------------------------------------------------------------------------------
+# issue 35: one learning curve over interrupts and resumes; no interrupt inside a step
+# --------------------------------------------------------------------------------------------
+
+
+def _sigint_on_update(monkeypatch, *calls: int) -> None:
+    """Send SIGINT during PPO's update number ``calls`` (counted from 1) of this session."""
+    from stable_baselines3 import PPO
+
+    real = PPO.train
+    seen = [0]
+
+    def update(self):
+        seen[0] += 1
+        if seen[0] in calls:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(self)
+
+    monkeypatch.setattr(PPO, "train", update)
+
+
+def test_progress_csv_keeps_every_iteration_over_interrupts_and_resumes(tmp_path, monkeypatch):
+    """Interrupt, kill (the interrupt checkpoint removed), resume twice: logs/progress.csv
+    holds every iteration once, in order (today each resumed session wrote another file and
+    progress.csv kept the rows after the checkpoint that the resumed run trained again)."""
+    config = toy_yaml(tmp_path, timesteps=1920, checkpoint_freq=384)  # 192 agent-steps a rollout
+    out = tmp_path / "run"
+    args = ["train", "--config", str(config), "--env-id", TOY, "--out", str(out)]
+    _sigint_on_update(monkeypatch, 7)  # interrupted after 1344 agent-steps
+    assert main(args) == 130
+    (out / "checkpoints" / "ppo_1344_steps.zip").unlink()  # as if killed: resumes at 1152
+    monkeypatch.undo()
+    _sigint_on_update(monkeypatch, 2)  # interrupted after 1536
+    assert main([*args, "--resume", "latest"]) == 130
+    monkeypatch.undo()
+    assert main([*args, "--resume", "latest"]) == 0
+    text = (out / "logs" / "progress.csv").read_text().splitlines()
+    col = text[0].split(",").index("time/total_timesteps")
+    steps = [int(float(line.split(",")[col])) for line in text[1:]]
+    assert steps == list(range(192, 1921, 192))
+    assert not list((out / "logs").glob("progress_*.csv"))
+
+
+def _interrupt_inside_step(monkeypatch, at_call: int) -> dict[str, int]:
+    """SIGINT while the toy env's step runs (the stand-in for a compiled call): returns the
+    counts of steps started and finished."""
+    from tests.training.toy_env import ToyParallelEnv
+
+    real = ToyParallelEnv.step
+    calls = {"started": 0, "finished": 0}
+
+    def step(self, actions):
+        calls["started"] += 1
+        if calls["started"] == at_call:
+            os.kill(os.getpid(), signal.SIGINT)
+        result = real(self, actions)
+        calls["finished"] += 1
+        return result
+
+    monkeypatch.setattr(ToyParallelEnv, "step", step)
+    return calls
+
+
+@pytest.mark.parametrize("phase", ["warm start", "PPO"])
+def test_sigint_inside_a_step_is_taken_after_it(tmp_path, monkeypatch, capsys, phase):
+    """An interrupt that arrives inside an environment step (in the real env: a numba call,
+    where it ended in ``SystemError: CPUDispatcher(...)`` with no checkpoint) is taken after
+    the step: the step completes, a checkpoint is saved, exit 130."""
+    pretrain = {"policy": "random", "episodes": 3, "epochs": 2} if phase == "warm start" else None
+    config = toy_yaml(tmp_path, pretrain=pretrain)
+    out = tmp_path / "run"
+    calls = _interrupt_inside_step(monkeypatch, at_call=5 if phase == "warm start" else 100)
+    assert main(["train", "--config", str(config), "--env-id", TOY, "--out", str(out)]) == 130
+    assert calls["started"] >= 5 and calls["finished"] == calls["started"]
+    err = capsys.readouterr().err
+    assert "interrupted during" in err and "continue with --resume latest" in err
+    assert loads(find_latest_checkpoint(out))
+    if phase == "warm start":
+        assert "interrupted during the behaviour-cloning warm start" in err
 
 
 def test_training_refuses_render_modes(tmp_path, capsys):

@@ -246,7 +246,11 @@ def test_outputs_checkpoints_and_resume(tmp_path):
     model = PPO.load(final2, device="cpu")
     assert 1600 <= model.num_timesteps < 1600 + 192
     assert json.loads((out / "run.json").read_text())["resumed_from"] == str(final)
-    assert (out / "logs" / f"progress_resumed_at_{n_final}.csv").is_file()
+    # one learning curve over both sessions: every iteration once, in order (issue 35)
+    text = (out / "logs" / "progress.csv").read_text().splitlines()
+    col = text[0].split(",").index("time/total_timesteps")
+    steps = [int(float(line.split(",")[col])) for line in text[1:]]
+    assert steps == sorted(set(steps)) and steps[-1] >= 1600 and n_final in steps
     assert (out / f"config_resumed_at_{n_final}.yaml").is_file()
     assert (out / f"resumed_at_{n_final}.monitor.csv").is_file()
 
