@@ -1,49 +1,56 @@
-"""Policies for ``urban_canyon_v0`` behind one small protocol (:class:`coopnav_env.agents.base.Policy`).
+"""Policies for ``urban_canyon_v0`` behind one small protocol
+(:class:`coopnav_env.agents.base.Policy`).
 
 ========================  ==================================================================
 name                      policy
 ========================  ==================================================================
-``random``                uniform random velocity commands (:mod:`coopnav_env.agents.random_policy`)
-``formation``             the swarm flies the street network to the goal in a rigid
-                          formation, ignoring navigation quality (:mod:`coopnav_env.agents.heuristics`)
-``sky``                   like ``formation``, but each UAV steers toward open sky while
-                          keeping contact with its neighbours (:mod:`coopnav_env.agents.heuristics`)
-``spread``                ``sky`` as a stretched column (20 m spacing) that closes up at the
-                          goal (:mod:`coopnav_env.agents.heuristics`)
-``wide``                  ``spread`` as a 45 m column that opens ahead of the start and
-                          closes at the goal (:mod:`coopnav_env.agents.heuristics`; chosen in
-                          ``studies/learning_in_default_setting``)
-``guarded``               ``wide`` with a wall guard (range sensor) and soft slot tracking,
-                          for degraded navigation (:mod:`coopnav_env.agents.heuristics`)
-``ceiling``               ``guarded`` that climbs hard and holds the top of the altitude
-                          band, for degraded navigation (:mod:`coopnav_env.agents.heuristics`;
-                          ``studies/learning_under_degraded_navigation``)
-``skyroute``              ``ceiling`` on the street route with the best sky: of the equally
-                          short routes, the one with the fewest points of poor satellite
-                          geometry predicted by the city map (:mod:`coopnav_env.agents.routes`)
+``random``                uniform random velocity commands
+                          (:mod:`coopnav_env.agents.random_policy`)
+``column``                the swarm flies the street network to the goal as a rigid column
+                          at the start altitude, ignoring navigation quality; also
+                          ``formation`` (:mod:`coopnav_env.agents.heuristics`, as below)
+``sky_column``            ``column`` that climbs and shifts each UAV toward open sky while
+                          keeping contact with its neighbours; also ``sky``
+``stretched_column``      ``sky_column`` as a stretched column (20 m spacing) that closes up
+                          at the goal; also ``spread``
+``wide_column``           ``stretched_column`` 45 m apart, opening ahead of the start and
+                          closing at the goal; also ``wide``
+``guarded_column``        ``wide_column`` with a wall guard (range sensor) and soft slot
+                          tracking, for degraded navigation; also ``guarded``
+``ceiling_column``        ``guarded_column`` that climbs at once and holds the top of the
+                          altitude band; also ``ceiling``
+``best_sky_route``        ``ceiling_column`` on the street route with the best sky: of the
+                          equally short routes, the one with the fewest points of poor
+                          satellite geometry predicted by the city map; also ``skyroute``
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`coopnav_env.agents.heuristics`)
 ``route:<path>``          a column heuristic that flies the route a learned route model
-                          predicts best (:mod:`coopnav_env.agents.routes`; ``coopnav train-routes``);
+                          predicts best (:mod:`coopnav_env.agents.routes`;
+                          ``coopnav train-routes``);
                           ``route:pretrained`` (``.../s1``) the shipped study models
 ``split:<path>``          a column heuristic that splits over two streets where a learned
                           split model predicts it best (:mod:`coopnav_env.agents.routes`;
                           ``studies/split_choice/split_choice.py --fit-model``);
                           ``split:pretrained`` (``.../s1``, ``.../s2``) the shipped models
 ``planner``               privileged MPC that looks ahead in copies of the environment with
-                          the true errors: the headroom reference (:mod:`coopnav_env.agents.planner`)
+                          the true errors: the headroom reference
+                          (:mod:`coopnav_env.agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`coopnav_env.agents.ppo`)
 ``rllib:<path>``          an RLlib checkpoint of ``coopnav train --backend rllib``
                           (:mod:`coopnav_env.agents.rllib_policy`; needs the ``ray`` extra)
 ``mappo:<path>``          a TorchRL MAPPO or IPPO checkpoint of ``coopnav train --backend
-``ippo:<path>``           torchrl`` (:mod:`coopnav_env.agents.marl_policy`; needs the ``marl`` extra);
+``ippo:<path>``           torchrl`` (:mod:`coopnav_env.agents.marl_policy`; needs the ``marl``
+                          extra);
                           ``<path>`` a ``.pt`` file or a run folder; ``mappo:pretrained``
                           (``ippo:pretrained``, ``.../s1``) the shipped study policies
 ========================  ==================================================================
 
-A heuristic takes constructor options after ``@`` as ``key=value`` pairs separated by commas,
-e.g. ``waypoint@altitude_m=28`` or ``formation@cruise_speed_mps=5,spacing_m=10``; values are
-read as Python literals (numbers, strings, ``True``/``False``).
+The column heuristics are one policy, :class:`~coopnav_env.agents.heuristics.ColumnPolicy`,
+with named settings (:data:`~coopnav_env.agents.heuristics.COLUMN_PRESETS`);
+the table gives their earlier names, still accepted. A heuristic takes options after ``@`` as
+``key=value`` pairs separated by commas, e.g. ``waypoint@altitude_m=28`` or
+``column@cruise_speed_mps=5,spacing_m=10``; values are read as Python literals (numbers,
+strings, ``True``/``False``). An unknown option or a bad value raises ``ValueError`` naming it.
 
 >>> from coopnav_env import urban_canyon_v0  # doctest: +SKIP
 >>> env = urban_canyon_v0.parallel_env()  # doctest: +SKIP
@@ -51,26 +58,41 @@ read as Python literals (numbers, strings, ``True``/``False``).
 >>> obs, infos = env.reset(seed=1); policy.reset(seed=1)  # doctest: +SKIP
 >>> obs, rewards, terms, truncs, infos = env.step(policy.act(obs))  # doctest: +SKIP
 
-Your own policy (any class with the :class:`~coopnav_env.agents.base.Policy` protocol) gets a name with
-:func:`register_policy`; :func:`make_policy`, and with it ``coopnav_env.training.evaluate.evaluate``, then
-make it like a built-in one (``examples/evaluate_own_policy.py``).
+Your own policy (any class with the :class:`~coopnav_env.agents.base.Policy` protocol) gets a
+name with :func:`register_policy`; :func:`make_policy`, and with it
+``coopnav_env.training.evaluate.evaluate``, then make it like a built-in one
+(``examples/evaluate_own_policy.py``).
 """
 
 from __future__ import annotations
 
 from coopnav_env.old_names import redirect as _redirect_old_name
 
-_redirect_old_name(__name__)  # imported as 'agents' (a source checkout): becomes 'coopnav_env.agents'
+# imported as 'agents' (a source checkout): becomes 'coopnav_env.agents'
+_redirect_old_name(__name__)
 
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable  # noqa: E402
+from typing import Any  # noqa: E402
 
-from coopnav_env.agents.base import Policy, clip_actions
+from coopnav_env.agents.base import Policy, clip_actions  # noqa: E402
 
-__all__ = ["POLICY_NAMES", "Policy", "clip_actions", "make_policy", "register_policy"]
+__all__ = [
+    "COLUMN_PRESET_NAMES",
+    "POLICY_NAMES",
+    "Policy",
+    "clip_actions",
+    "make_policy",
+    "register_policy",
+]
 
-POLICY_NAMES: tuple[str, ...] = (
-    "random",
+COLUMN_PRESET_NAMES: tuple[str, ...] = (
+    "column",
+    "sky_column",
+    "stretched_column",
+    "wide_column",
+    "guarded_column",
+    "ceiling_column",
+    "best_sky_route",
     "formation",
     "sky",
     "spread",
@@ -78,6 +100,14 @@ POLICY_NAMES: tuple[str, ...] = (
     "guarded",
     "ceiling",
     "skyroute",
+)
+"""The column heuristics' names: the presets of
+:data:`coopnav_env.agents.heuristics.COLUMN_PRESETS`, then their earlier names
+(:data:`~coopnav_env.agents.heuristics.COLUMN_ALIASES`)."""
+
+POLICY_NAMES: tuple[str, ...] = (
+    "random",
+    *COLUMN_PRESET_NAMES,
     "waypoint",
     "planner",
     "ppo:<path>",
@@ -139,43 +169,19 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from coopnav_env.agents.random_policy import RandomPolicy
 
         return RandomPolicy(env, **kwargs)
-    if name == "formation":
-        from coopnav_env.agents.heuristics import FormationPolicy
+    if name in COLUMN_PRESET_NAMES:
+        from coopnav_env.agents.heuristics import column_policy
 
-        return FormationPolicy(env, **kwargs)
-    if name == "sky":
-        from coopnav_env.agents.heuristics import SkySeekingPolicy
-
-        return SkySeekingPolicy(env, **kwargs)
-    if name == "spread":
-        from coopnav_env.agents.heuristics import SpreadColumnPolicy
-
-        return SpreadColumnPolicy(env, **kwargs)
-    if name == "wide":
-        from coopnav_env.agents.heuristics import WideColumnPolicy
-
-        return WideColumnPolicy(env, **kwargs)
-    if name == "guarded":
-        from coopnav_env.agents.heuristics import GuardedColumnPolicy
-
-        return GuardedColumnPolicy(env, **kwargs)
-    if name == "ceiling":
-        from coopnav_env.agents.heuristics import CeilingColumnPolicy
-
-        return CeilingColumnPolicy(env, **kwargs)
-    if name == "skyroute":
-        from coopnav_env.agents.heuristics import SkyRoutePolicy
-
-        return SkyRoutePolicy(env, **kwargs)
+        return column_policy(name, env, **kwargs)
     if name == "planner":
         from coopnav_env.agents.planner import PrivilegedPlanner
 
         base = kwargs.pop("base", "wide")
         return PrivilegedPlanner(env, make_policy(base, env), **kwargs)
     if name == "waypoint":
-        from coopnav_env.agents.heuristics import WaypointPolicy
+        from coopnav_env.agents.heuristics import waypoint_policy
 
-        return WaypointPolicy(env, **kwargs)
+        return waypoint_policy(env, **kwargs)
     if name.startswith("ppo:"):
         path = name[len("ppo:") :]
         if not path:
@@ -226,8 +232,8 @@ def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: boo
 
     After ``register_policy("mine", MyPolicy)``, ``make_policy("mine", env, **kwargs)`` returns
     ``MyPolicy(env, **kwargs)``, ``"mine@key=value"`` passes options as for the heuristics, and
-    ``coopnav_env.training.evaluate.evaluate(["formation", "mine"], seeds)`` flies it on the same held-out
-    episodes as the built-in policies. The registry lives in this process only.
+    ``coopnav_env.training.evaluate.evaluate(["formation", "mine"], seeds)`` flies it on the
+    same held-out episodes as the built-in policies. The registry lives in this process only.
 
     Parameters
     ----------
@@ -236,8 +242,8 @@ def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: boo
         ``waypoint``, ``ppo``, ``rllib``).
     factory : callable
         ``factory(env, **kwargs)`` returns an object with the
-        :class:`~coopnav_env.agents.base.Policy` protocol (``env``: the PettingZoo parallel environment
-        of the evaluation).
+        :class:`~coopnav_env.agents.base.Policy` protocol (``env``: the PettingZoo parallel
+        environment of the evaluation).
     overwrite : bool, default False
         Replace an earlier registration of ``name`` instead of raising.
 

@@ -1,19 +1,49 @@
-"""Hand-written swarm policies for ``urban_canyon_v0``: a formation follower and a sky seeker.
+"""Hand-written swarm policies for ``urban_canyon_v0``: one column policy with named settings,
+and a waypoint follower.
 
-Both fly the street network to the goal as a *column* (a line formation along the street
-centre line, ``spacing_m`` between slots), which keeps every UAV far from the walls and in
-relative-sensing range of its neighbours. They use what a real swarm would have on board: the
-city map and the goal (from the environment's world, planned once per episode), and each UAV's
-own observation: its *estimated* position and velocity, its sky openness and its neighbours.
-They never read the true positions.
+:class:`ColumnPolicy` flies the street network to the goal as a *column* (a line formation
+along the street centre line, ``spacing_m`` between slots), which keeps every UAV far from
+the walls and in relative-sensing range of its neighbours. It uses what a real swarm would
+have on board: the city map and the goal (from the environment's world, planned once per
+episode), and each UAV's own observation: its *estimated* position and velocity, its sky
+openness, its range sensor and its neighbours. It never reads the true positions.
 
-* :class:`FormationPolicy` ignores navigation quality: fixed altitude (the start altitude),
-  centre line. It is the baseline a navigation-aware policy has to beat.
-* :class:`SkySeekingPolicy` flies the same route but steers toward open sky: it climbs to
-  near the ceiling of the altitude band (more of the sky clears the roofs) and shifts each UAV
-  across the street away from the side whose skyline is higher (the ``skyline`` field of
-  :func:`coopnav_env.envs.obs_layout`), while the column keeps every UAV in contact with its
-  neighbours and waits for a UAV that loses contact.
+Its settings say how the column flies: how far apart its UAVs are en route and at the goal,
+at what altitude (the start altitude, or near the top of the altitude band, where more of
+the sky clears the roofs), whether each UAV shifts across the street toward the open side of
+the sky, whether a wall guard keeps it off walls its range sensor sees, and which of the
+equally short street routes it takes (or splits over). :data:`COLUMN_PRESETS` names useful
+combinations, each by what it does; :func:`column_policy` makes one, with options on top,
+and :func:`coopnav_env.agents.make_policy` accepts the same names (and the older ones of
+:data:`COLUMN_ALIASES`):
+
+====================  ====================  =============================================
+preset                also called           the column
+====================  ====================  =============================================
+``column``            ``formation``         7 m apart, at the start altitude, on the street
+                                            centre line: ignores navigation quality
+``sky_column``        ``sky``               climbs to 2 m below the band's top, shifts each
+                                            UAV up to 4 m away from the higher skyline, and
+                                            waits for a UAV that loses contact
+``stretched_column``  ``spread``            ``sky_column`` 20 m apart en route, closing to
+                                            6 m over the last 80 m; 6 m shifts, 0.5 m below
+                                            the top
+``wide_column``       ``wide``              ``stretched_column`` 45 m apart, opening ahead of
+                                            the start (the tail holds) and closing over the
+                                            last 4 spacings
+``guarded_column``    ``guarded``           ``wide_column`` with a wall guard (8 m, 4/s) and
+                                            soft slot tracking (gain 0.2/s), for degraded
+                                            navigation
+``ceiling_column``    ``ceiling``           ``guarded_column`` whose altitude target lies
+                                            10 m above the band: it climbs at once and holds
+                                            the band's top whatever its estimate reads
+``best_sky_route``    ``skyroute``          ``ceiling_column`` on the equally short route
+                                            with the fewest points of poor predicted
+                                            satellite geometry (``route_choice="pdop_gt3"``)
+====================  ====================  =============================================
+
+:class:`WaypointPolicy` (``waypoint``) is simpler still: each UAV flies toward its next route
+waypoint from its own observation only.
 
 Route: the street grid is a Manhattan graph (every street spans the city), so the shortest
 route from one street point to another has at most two turns
@@ -21,11 +51,20 @@ route from one street point to another has at most two turns
 :class:`~coopnav_env.sim.route.Polyline`). The column advances along it at
 ``cruise_speed_mps``, slows down before corners so that the turn stays inside the
 intersection, and stops centred on the goal.
+
+The classes of the earlier names (:class:`FormationPolicy`, :class:`SkySeekingPolicy`,
+:class:`SpreadColumnPolicy`, :class:`WideColumnPolicy`, :class:`GuardedColumnPolicy`,
+:class:`CeilingColumnPolicy`, :class:`SkyRoutePolicy`) remain for one release: each makes a
+:class:`ColumnPolicy` with its preset and warns (``DeprecationWarning``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import inspect
+import math
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +74,13 @@ from coopnav_env.envs.observation_layout import obs_layout
 from coopnav_env.sim.route import Polyline, extend_route, street_route, street_routes
 
 __all__ = [
+    "COLUMN_ALIASES",
+    "COLUMN_OPTIONS",
+    "COLUMN_PRESETS",
+    "WAYPOINT_OPTIONS",
     "CeilingColumnPolicy",
+    "ColumnPolicy",
+    "Derived",
     "FormationPolicy",
     "GuardedColumnPolicy",
     "Polyline",
@@ -44,13 +89,10 @@ __all__ = [
     "SpreadColumnPolicy",
     "WaypointPolicy",
     "WideColumnPolicy",
+    "column_policy",
     "street_route",
+    "waypoint_policy",
 ]
-
-
-# --------------------------------------------------------------------------------------------
-# the column follower
-# --------------------------------------------------------------------------------------------
 
 
 def _world_of(env: Any) -> Any:
@@ -59,14 +101,149 @@ def _world_of(env: Any) -> Any:
     config = getattr(base, "config", None)
     if world is None or config is None or not hasattr(config, "obs_sky_azimuths"):
         raise ValueError(
-            "the formation and sky heuristics need an urban_canyon_v0 environment (a world with "
-            f"a city map and a goal); got {type(base).__name__}"
+            "the column and waypoint heuristics need an urban_canyon_v0 environment (a world "
+            f"with a city map and a goal); got {type(base).__name__}"
         )
     return base
 
 
-class _ColumnFollower:
-    """Shared machinery: plan the route, keep the column, track the slots (see module doc)."""
+def _number(
+    name: str,
+    value: Any,
+    lo: float = -math.inf,
+    hi: float = math.inf,
+    *,
+    lo_open: bool = False,
+    unit: str = "",
+) -> float:
+    """``value`` as a float, or ValueError naming it unless it is a finite number in the range
+    ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    x = float(value) if ok else math.nan
+    if not (math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi):
+        left = "(" if lo_open else "["
+        if math.isfinite(hi):
+            where = f"in {left}{lo:g}, {hi:g}]"
+        else:
+            where = f"{'>' if lo_open else '>='} {lo:g}"
+        raise ValueError(f"{name} must be {where}{unit}, got {value!r}")
+    return x
+
+
+@dataclass(frozen=True)
+class Derived:
+    """A setting of a preset computed from the column's other settings when it is made.
+
+    ``rule(settings, n_uavs)`` gets the column's settings (``spacing_m`` and
+    ``goal_spacing_m`` already resolved to floats) and the number of UAVs, and returns the
+    value. An option given explicitly always replaces it.
+    """
+
+    rule: Callable[[Mapping[str, Any], int], Any]
+    text: str
+
+    def __repr__(self) -> str:
+        return f"Derived({self.text!r})"
+
+
+class ColumnPolicy:
+    """The swarm flies its street route to the goal as a column (see the module doc).
+
+    Every option has a default, which together fly the plain ``column`` (ex ``formation``);
+    :data:`COLUMN_PRESETS` names other combinations and :func:`column_policy` makes them.
+
+    Parameters
+    ----------
+    env : urban_canyon_v0 ParallelEnv
+    spacing_m : float, default 7.0
+        Distance between consecutive UAVs of the column en route, > 0 [m] (a column of 5 at
+        7 m spans 28 m and stops centred on the goal, inside the default 25 m goal radius).
+    cruise_speed_mps : float, default 7.0
+        Speed of the column on straight legs, > 0 [m/s] (at most the maximum speed).
+    turn_speed_mps, brake_mps2 : float, default 2.0, 1.0
+        Speed at a corner and deceleration used to approach it, > 0.
+    gain_per_s : float, default 0.6
+        Proportional gain from slot error (and altitude error) to velocity, > 0 [1/s].
+    max_lag_m : float, default 10.0
+        The column slows down when a UAV is farther than this behind its slot, > 0 [m].
+    goal_spacing_m : float, optional
+        Spacing at the goal, > 0 [m]; default ``spacing_m``. With a wider ``spacing_m`` the
+        column flies stretched (its UAVs see different parts of the sky, which the
+        cooperative solution pools) and closes up to this spacing over the last
+        ``close_distance_m`` so that it fits the goal area.
+    close_distance_m : float, default 60.0
+        Distance before the end of the route over which the spacing closes, > 0 [m].
+    open_distance_m : float or None, default None
+        With a value (> 0 [m]), the column starts at ``goal_spacing_m`` and opens to
+        ``spacing_m`` over the head's first ``open_distance_m`` of route, the leader going
+        ahead while the tail holds (``(N - 1) (spacing_m - goal_spacing_m)`` keeps the last
+        UAV still): a wide column then forms ahead of the start instead of sending its rear
+        UAVs back along the route's backward extension, which in a dead end or at a wall is
+        a crash. None (default) forms the column around the start at once.
+    wall_margin_m : float or None, default None
+        With a value in (0, 50] m, a wall guard: each UAV is pushed away from every wall its
+        range sensor (the ``wall_distance`` field, true distances) puts closer than this, by
+        ``wall_gain_per_s`` times the intrusion (m/s per m), on top of its slot tracking. The
+        slots are tracked with the *estimated* position, which under degraded navigation
+        (fixes rejected, dead reckoning drifting) can lead a UAV into a wall; the guard is
+        what keeps it off. None (default): no guard.
+    wall_gain_per_s : float, default 1.0
+        Gain of the wall guard, in [0, 100] [1/s].
+    route_index : int, default 0
+        Fly the candidate route of this index (modulo their number) instead; 0 is
+        :func:`street_route`'s. For studies that fly every route of an episode.
+    route_max_turns : int, default 3
+        Most turns of a candidate route, in [0, 8].
+    route_choice : str, default "first"
+        Which of the equally short street routes to fly (:func:`street_routes`, planned at
+        the first step from the estimated centre of the swarm): ``"first"`` the one of
+        :func:`street_route`; a feature name of :data:`coopnav_env.agents.routes.ROUTE_FEATURES`
+        (e.g. ``"swarm_mean"``) the route with the best value of that feature, e.g. the most
+        satellites predicted in line of sight along it by the city map at the column's
+        altitude. On board: the map, the satellites' directions and the estimated positions
+        only.
+    route_model : coopnav_env.agents.routes.RouteModel or str, optional
+        A learned route model (or the path of one): fly the route it predicts the lowest
+        error for (the ``route:<path>`` policies of :func:`coopnav_env.agents.make_policy`).
+        ``route_choice``, ``route_index`` and ``route_model`` exclude each other.
+    route_split : str, default "none"
+        Split the column over two equally short routes: a feature name of
+        :data:`coopnav_env.agents.routes.ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the
+        leader's) on the chosen route and the slots 1, 3, ... on the best *other* candidate by
+        that feature, at the same arc length, so that the two sub-columns fly abreast through
+        different streets and the cooperative fix pools the sky of both
+        (:func:`coopnav_env.agents.routes.split_features` predicts what they pool). An
+        episode with one candidate flies one column. ``"none"``: no split.
+    route_split_index : int, default 0
+        Split onto this candidate (counted among the candidates other than the chosen
+        route, from 1, modulo their number) instead; 0: no split. For studies that fly every
+        split of an episode. Excludes ``route_split``.
+    route_split_model : RouteModel or str, optional
+        A learned split model (:class:`coopnav_env.agents.routes.RouteModel` of kind
+        ``"split"``, or a path; ``pretrained`` and ``pretrained/s<k>`` are the shipped ones):
+        the column splits onto the other candidate route the model predicts lowest, or flies
+        unsplit where it predicts that lowest (:meth:`split_table` gives what it scores).
+        Excludes ``route_split`` and ``route_split_index``. Policy name ``split:<path>``.
+    max_offset_m : float or None, default None
+        With a value (>= 0 [m]), each UAV shifts across the street toward the open side of
+        the sky, by at most this much from the centre line: the skylines to the left and
+        right of its direction of travel (the ``skyline`` field of
+        :func:`coopnav_env.envs.obs_layout`, a fraction of 90 deg, interpolated) give the
+        shift ``-max_offset_m * tanh(4 (left - right))``, away from the higher side. None
+        (default): the centre line.
+    smoothing : float, default 0.7
+        Low-pass factor of that lateral shift between steps, in [0, 1).
+    ceiling_margin_m : float or None, default None
+        With a value in [-50, 50] m, the column flies ``ceiling_margin_m`` below the top of
+        the altitude band (never below the start altitude) instead of at the start altitude
+        (None, default). The altitude is held by a proportional term on the *estimated*
+        altitude; a negative margin puts the target above the band, so that the UAVs climb
+        and stay at the band's top (the world clamps them there) whatever their estimated
+        altitude reads.
+    hold_contact : bool, default False
+        The head of the column stops while any UAV has no neighbour in relative-sensing
+        range, until contact is back.
+    """
 
     name = "column"
 
@@ -91,33 +268,108 @@ class _ColumnFollower:
         route_split: str = "none",
         route_split_index: int = 0,
         route_split_model: Any = None,
+        max_offset_m: float | None = None,
+        smoothing: float = 0.7,
+        ceiling_margin_m: float | None = None,
+        hold_contact: bool = False,
     ):
+        given = {k: v for k, v in locals().items() if k not in ("self", "env", "__class__")}
         self.env = env
         self.base = _world_of(env)
         cfg = self.base.config
         self.cfg = cfg
-        self.spacing_m = float(spacing_m)
-        self.cruise_speed_mps = float(min(cruise_speed_mps, cfg.kinematics.max_speed_mps))
-        self.turn_speed_mps = float(turn_speed_mps)
-        self.brake_mps2 = float(brake_mps2)
-        self.gain_per_s = float(gain_per_s)
-        self.max_lag_m = float(max_lag_m)
-        self.goal_spacing_m = float(spacing_m if goal_spacing_m is None else goal_spacing_m)
-        self.close_distance_m = float(close_distance_m)
-        self.open_distance_m = None if open_distance_m is None else float(open_distance_m)
-        if self.open_distance_m is not None and not self.open_distance_m > 0.0:
-            raise ValueError(f"open_distance_m must be > 0 or None, got {open_distance_m!r}")
-        if not (self.spacing_m > 0.0 and self.goal_spacing_m > 0.0 and close_distance_m > 0.0):
-            raise ValueError(
-                "spacing_m, goal_spacing_m and close_distance_m must be > 0, got "
-                f"{spacing_m}, {goal_spacing_m}, {close_distance_m}"
+        s = self._resolve(given, len(self.base.possible_agents))
+        self.spacing_m = s["spacing_m"]
+        self.goal_spacing_m = s["goal_spacing_m"]
+        self.cruise_speed_mps = float(
+            min(
+                _number("cruise_speed_mps", s["cruise_speed_mps"], 0.0, lo_open=True, unit=" m/s"),
+                cfg.kinematics.max_speed_mps,
             )
-        if wall_margin_m is not None and not (0.0 < float(wall_margin_m) <= 50.0):
-            raise ValueError(f"wall_margin_m must be in (0, 50] or None, got {wall_margin_m!r}")
-        if not (0.0 <= float(wall_gain_per_s) <= 100.0):
-            raise ValueError(f"wall_gain_per_s must be in [0, 100], got {wall_gain_per_s!r}")
-        self.wall_margin_m = None if wall_margin_m is None else float(wall_margin_m)
-        self.wall_gain_per_s = float(wall_gain_per_s)
+        )
+        self.turn_speed_mps = _number(
+            "turn_speed_mps", s["turn_speed_mps"], 0.0, lo_open=True, unit=" m/s"
+        )
+        self.brake_mps2 = _number("brake_mps2", s["brake_mps2"], 0.0, lo_open=True, unit=" m/s2")
+        self.gain_per_s = _number("gain_per_s", s["gain_per_s"], 0.0, lo_open=True, unit=" 1/s")
+        self.max_lag_m = _number("max_lag_m", s["max_lag_m"], 0.0, lo_open=True, unit=" m")
+        self.close_distance_m = _number(
+            "close_distance_m", s["close_distance_m"], 0.0, lo_open=True, unit=" m"
+        )
+        open_distance_m = s["open_distance_m"]
+        if open_distance_m is not None and not (
+            isinstance(open_distance_m, (int, float, np.integer, np.floating))
+            and not isinstance(open_distance_m, bool)
+            and 0.0 < float(open_distance_m) < math.inf
+        ):
+            raise ValueError(f"open_distance_m must be > 0 m or None, got {open_distance_m!r}")
+        self.open_distance_m = None if open_distance_m is None else float(open_distance_m)
+        wall_margin_m = s["wall_margin_m"]
+        self.wall_margin_m = (
+            None
+            if wall_margin_m is None
+            else _number("wall_margin_m", wall_margin_m, 0.0, 50.0, lo_open=True, unit=" m")
+        )
+        self.wall_gain_per_s = _number(
+            "wall_gain_per_s", s["wall_gain_per_s"], 0.0, 100.0, unit=" 1/s"
+        )
+        self._set_routes(s)
+        max_offset_m = s["max_offset_m"]
+        self.max_offset_m = (
+            None
+            if max_offset_m is None
+            else _number("max_offset_m", max_offset_m, 0.0, 50.0, unit=" m")
+        )
+        smoothing = _number("smoothing", s["smoothing"], 0.0, 1.0)
+        if smoothing >= 1.0:
+            raise ValueError(f"smoothing must be in [0, 1), got {s['smoothing']!r}")
+        self.smoothing = smoothing
+        margin = s["ceiling_margin_m"]
+        self.ceiling_margin_m = (
+            None if margin is None else _number("ceiling_margin_m", margin, -50.0, 50.0, unit=" m")
+        )
+        if not isinstance(s["hold_contact"], (bool, np.bool_)):
+            raise ValueError(f"hold_contact must be True or False, got {s['hold_contact']!r}")
+        self.hold_contact = bool(s["hold_contact"])
+        self._index = {a: i for i, a in enumerate(self.base.possible_agents)}
+        self.layout = obs_layout(cfg)
+        self._walls = self.layout["wall_distance"]
+        az = np.radians(np.arange(self._walls.size) * 360.0 / self._walls.size)
+        self._wall_dirs = np.stack([np.sin(az), np.cos(az)], axis=1)  # (A, 2) East, North
+        self._position = self.layout["position_to_goal"]
+        self._sky = self.layout["skyline"].slice
+        self._present = self.layout.neighbour_present_indices()
+        self._path: Polyline | None = None
+        self._paths: list[Polyline] = []  # one per sub-column (one without a split)
+        self.route_split_chosen: int | None = None  # the second route, when split
+        self._shifts: np.ndarray | None = None  # learned slot shifts (set_slot_shifts)
+        self._offset = np.zeros(len(self._index))  # lateral shifts toward open sky
+
+    @staticmethod
+    def _resolve(given: dict[str, Any], n_uavs: int) -> dict[str, Any]:
+        """The settings with the spacings checked and every :class:`Derived` value computed."""
+        s = dict(given)
+        s["spacing_m"] = _number("spacing_m", s["spacing_m"], 0.0, lo_open=True, unit=" m")
+        goal = s["goal_spacing_m"]
+        s["goal_spacing_m"] = (
+            s["spacing_m"]
+            if goal is None
+            else _number("goal_spacing_m", goal, 0.0, lo_open=True, unit=" m")
+        )
+        for key, value in given.items():
+            if isinstance(value, Derived):
+                s[key] = value.rule(s, n_uavs)
+        return s
+
+    def _set_routes(self, s: Mapping[str, Any]) -> None:
+        """Check and keep the route settings (``route_*``)."""
+        route_index = s["route_index"]
+        route_max_turns = s["route_max_turns"]
+        route_choice = s["route_choice"]
+        route_model = s["route_model"]
+        route_split = s["route_split"]
+        route_split_index = s["route_split_index"]
+        route_split_model = s["route_split_model"]
         if isinstance(route_index, bool) or not isinstance(route_index, (int, np.integer)):
             raise ValueError(f"route_index must be an int >= 0, got {route_index!r}")
         if route_index < 0:
@@ -191,32 +443,64 @@ class _ColumnFollower:
         self.route_candidates: list[np.ndarray] = []  # the routes of the last plan
         self.route_chosen = 0  # index of the flown one among them
         self.route_feature_table: np.ndarray | None = None  # their features, when scored
-        self._index = {a: i for i, a in enumerate(self.base.possible_agents)}
-        self.layout = obs_layout(cfg)
-        self._walls = self.layout["wall_distance"]
-        az = np.radians(np.arange(self._walls.size) * 360.0 / self._walls.size)
-        self._wall_dirs = np.stack([np.sin(az), np.cos(az)], axis=1)  # (A, 2) East, North
-        self._position = self.layout["position_to_goal"]
-        self._sky = self.layout["skyline"].slice
-        self._present = self.layout.neighbour_present_indices()
-        self._path: Polyline | None = None
-        self._paths: list[Polyline] = []  # one per sub-column (one without a split)
-        self.route_split_chosen: int | None = None  # the second route, when split
-        self._shifts: np.ndarray | None = None  # learned slot shifts (set_slot_shifts)
 
-    # -- to be specialised ----------------------------------------------------------------
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore a pickled column, also one pickled before the settings ``max_offset_m``,
+        ``ceiling_margin_m`` and ``hold_contact`` existed (the sky-seeking columns had the
+        first two and held contact)."""
+        sky = "max_offset_m" in state
+        state.setdefault("max_offset_m", None)
+        state.setdefault("ceiling_margin_m", None)
+        state.setdefault("smoothing", 0.7)
+        state.setdefault("hold_contact", sky)
+        if "_offset" not in state and "_index" in state:
+            state["_offset"] = np.zeros(len(state["_index"]))
+        self.__dict__.update(state)
+
+    # -- altitude, lateral shift, contact ---------------------------------------------------
 
     def _altitude_m(self) -> float:
-        return float(self.cfg.start_altitude_m)
+        if self.ceiling_margin_m is None:
+            return float(self.cfg.start_altitude_m)
+        kin = self.cfg.kinematics
+        return float(max(kin.altitude_max_m - self.ceiling_margin_m, self.cfg.start_altitude_m))
+
+    def _sky_at(self, sky: np.ndarray, az_deg: np.ndarray) -> np.ndarray:
+        """Skyline (fraction of 90 deg) per UAV at azimuths ``az_deg``, circular interpolation."""
+        a = sky.shape[1]
+        pos = np.mod(az_deg, 360.0) / (360.0 / a)
+        k0 = np.floor(pos).astype(int) % a
+        k1 = (k0 + 1) % a
+        w = pos - np.floor(pos)
+        rows = np.arange(sky.shape[0])
+        return (1.0 - w) * sky[rows, k0] + w * sky[rows, k1]
 
     def _lateral_offsets_m(self, obs: np.ndarray, tangent: np.ndarray) -> np.ndarray:
-        return np.zeros(obs.shape[0])
+        if self.max_offset_m is None:
+            return np.zeros(obs.shape[0])
+        sky = obs[:, self._sky]
+        az_travel = np.degrees(np.arctan2(tangent[:, 0], tangent[:, 1]))  # from North, cw
+        left = self._sky_at(sky, az_travel - 90.0)
+        right = self._sky_at(sky, az_travel + 90.0)
+        want = -self.max_offset_m * np.tanh(4.0 * (left - right))
+        idx = self._cur_idx
+        new = self.smoothing * self._offset[idx] + (1.0 - self.smoothing) * want
+        self._offset[idx] = new
+        return new
+
+    def _contact_factor(self, obs: np.ndarray) -> float:
+        if not self.hold_contact or self._present.size == 0 or obs.shape[0] < 2:
+            return 1.0
+        flags = obs[:, self._present]
+        return 0.0 if np.any(flags.max(axis=1) < 0.5) else 1.0
 
     # -- protocol -------------------------------------------------------------------------
 
     def reset(self, seed: int | None = None) -> None:
-        """Forget the route: it is planned at the first :meth:`act` of the episode."""
+        """Forget the route (planned at the first :meth:`act` of the episode) and the
+        lateral shifts."""
         self._path = None
+        self._offset = np.zeros(len(self._index))
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Velocity commands that keep each UAV on its slot of the column."""
@@ -278,9 +562,6 @@ class _ColumnFollower:
             v[:, :2] -= self.wall_gain_per_s * near @ self._wall_dirs
         cmd = np.clip(v / vmax, -1.0, 1.0).astype(np.float32)
         return {a: cmd[i] for i, a in enumerate(agents)}
-
-    def _contact_factor(self, obs: np.ndarray) -> float:
-        return 1.0
 
     def guard_delta(self, obs: np.ndarray, delta: np.ndarray, time_s: float = 2.0) -> np.ndarray:
         """``delta`` (N, 3), a change to the column's commands, limited so that it does not
@@ -415,9 +696,10 @@ class _ColumnFollower:
 
     def split_table(self, routes: list[np.ndarray], k: int) -> tuple[list[int], np.ndarray]:
         """The options of splitting the column flown on ``routes[k]``: the indices of the
-        other routes, and the :data:`~coopnav_env.agents.routes.SPLIT_FEATURES` ``(1 + others, F)`` of
-        flying unsplit (row 0) and of splitting onto each other route (row ``1 + i``), at the
-        column's altitude and spacing; kept as :attr:`split_feature_table`."""
+        other routes, and the :data:`~coopnav_env.agents.routes.SPLIT_FEATURES`
+        ``(1 + others, F)`` of flying unsplit (row 0) and of splitting onto each other route
+        (row ``1 + i``), at the column's altitude and spacing; kept as
+        :attr:`split_feature_table`."""
         from coopnav_env.agents.routes import split_features
 
         others = [j for j in range(len(routes)) if j != k]
@@ -551,328 +833,128 @@ def v_corner_at(
     return np.minimum(vmax, v_turn + np.sqrt(2.0 * brake * d))
 
 
-class FormationPolicy(_ColumnFollower):
-    """Fixed column along the street centre line at the start altitude, to the goal.
-
-    Ignores navigation quality (see the module docstring).
-
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    spacing_m : float, default 7.0
-        Distance between consecutive UAVs of the column [m] (a column of 5 spans 28 m and
-        stops centred on the goal, inside the default 25 m goal radius).
-    cruise_speed_mps : float, default 7.0
-        Speed of the column on straight legs [m/s].
-    turn_speed_mps, brake_mps2 : float, default 2.0, 1.0
-        Speed at a corner and deceleration used to approach it.
-    gain_per_s : float, default 0.6
-        Proportional gain from slot error to velocity [1/s].
-    max_lag_m : float, default 10.0
-        The column slows down when a UAV is farther than this behind its slot.
-    goal_spacing_m : float, optional
-        Spacing at the goal; default ``spacing_m``. With a wider ``spacing_m`` the column flies
-        stretched (its UAVs see different parts of the sky, which the cooperative solution
-        pools) and closes up to this spacing over the last ``close_distance_m`` so that it
-        fits the goal area.
-    close_distance_m : float, default 60.0
-        Distance before the end of the route over which the spacing closes [m].
-    open_distance_m : float or None, default None
-        With a value, the column starts at ``goal_spacing_m`` and opens to ``spacing_m``
-        over the head's first ``open_distance_m`` of route [m], the leader going ahead while
-        the tail holds (``(N - 1) (spacing_m - goal_spacing_m)`` keeps the last UAV still):
-        a wide column then forms ahead of the start instead of sending its rear UAVs back
-        along the route's backward extension, which in a dead end or at a wall is a crash.
-        None (default) forms the column around the start at once.
-    wall_margin_m : float or None, default None
-        With a value in (0, 50] m, a wall guard: each UAV is pushed away from every wall its
-        range sensor (the ``wall_distance`` field, true distances) puts closer than this, by
-        ``wall_gain_per_s`` times the intrusion (m/s per m), on top of its slot tracking. The
-        slots are tracked with the *estimated* position, which under degraded navigation
-        (fixes rejected, dead reckoning drifting) can lead a UAV into a wall; the guard is
-        what keeps it off. None (default): no guard.
-    wall_gain_per_s : float, default 1.0
-        Gain of the wall guard, in [0, 100] [1/s].
-    route_choice : str, default "first"
-        Which of the equally short street routes to fly (:func:`street_routes`, planned at
-        the first step from the estimated centre of the swarm): ``"first"`` the one of
-        :func:`street_route`; a feature name of :data:`coopnav_env.agents.routes.ROUTE_FEATURES` (e.g.
-        ``"swarm_mean"``) the route with the best value of that feature, i.e. the most
-        satellites predicted in line of sight along it by the city map at the column's
-        altitude (docs/marl/README.md, "Route choice"). On board: the map, the satellites'
-        directions and the estimated positions only.
-    route_max_turns : int, default 3
-        Most turns of a candidate route, in [0, 8].
-    route_index : int, default 0
-        Fly the candidate route of this index (modulo their number) instead; 0 is
-        :func:`street_route`'s. For studies that fly every route of an episode.
-    route_model : coopnav_env.agents.routes.RouteModel or str, optional
-        A learned route model (or the path of one): fly the route it predicts the lowest
-        error for (the ``route:<path>`` policies of :func:`coopnav_env.agents.make_policy`).
-    route_split : str, default "none"
-        Split the column over two equally short routes: a feature name of
-        :data:`coopnav_env.agents.routes.ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the leader's) on
-        the chosen route and the slots 1, 3, ... on the best *other* candidate by that
-        feature, at the same arc length, so that the two sub-columns fly abreast through
-        different streets and the cooperative fix pools the sky of both (relative sensing
-        reaches 200 m; :func:`coopnav_env.agents.routes.split_features` predicts what they pool). An
-        episode with one candidate flies one column. ``"none"``: no split.
-    route_split_index : int, default 0
-        Split onto this candidate (counted among the candidates other than the chosen
-        route, from 1, modulo their number) instead; 0: no split. For studies that fly every
-        split of an episode. Excludes ``route_split``.
-    route_split_model : RouteModel or str, optional
-        A learned split model (:class:`coopnav_env.agents.routes.RouteModel` of kind ``"split"``, or a
-        path; ``pretrained`` and ``pretrained/s<k>`` are the shipped ones): the column
-        splits onto the other candidate route the model predicts lowest, or flies unsplit
-        where it predicts that lowest (:meth:`split_table` gives what it scores). Excludes
-        ``route_split`` and ``route_split_index``. Policy name ``split:<path>``.
-    """
-
-    name = "formation"
+def _tail_holds(s: Mapping[str, Any], n_uavs: int) -> float:
+    return max(n_uavs - 1, 1) * max(s["spacing_m"] - s["goal_spacing_m"], 1.0)
 
 
-class SkySeekingPolicy(_ColumnFollower):
-    """Column along the route that climbs and shifts each UAV toward the open side of the sky.
-
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    max_offset_m : float, default 4.0
-        Largest lateral shift from the street centre line [m].
-    ceiling_margin_m : float, default 2.0
-        Altitude kept below the top of the altitude band [m], in [-50, 50]. The altitude is
-        held by a proportional term on the *estimated* altitude; a negative margin puts the
-        target above the band, so that the UAV climbs and stays at the band's top (the world
-        clamps it there) whatever its estimated altitude reads (``ceiling``).
-    smoothing : float, default 0.7
-        Low-pass factor of the lateral shift between steps, in [0, 1).
-    **kwargs
-        As :class:`FormationPolicy`.
-
-    Notes
-    -----
-    Skyline elevation per azimuth comes from the observation (the ``skyline`` field of
-    :func:`coopnav_env.envs.obs_layout`, a fraction of 90 deg).
-    For each UAV the skylines to the left and right of its direction of travel are
-    interpolated; the shift is ``-max_offset_m * tanh(4 (left - right))`` (away from the
-    higher side). A UAV with no neighbour in relative range holds the column (the head stops)
-    until contact is back.
-    """
-
-    name = "sky"
-
-    def __init__(
-        self,
-        env: Any,
-        max_offset_m: float = 4.0,
-        ceiling_margin_m: float = 2.0,
-        smoothing: float = 0.7,
-        **kwargs: Any,
-    ):
-        super().__init__(env, **kwargs)
-        self.max_offset_m = float(max_offset_m)
-        if not -50.0 <= float(ceiling_margin_m) <= 50.0:
-            raise ValueError(f"ceiling_margin_m must be in [-50, 50] m, got {ceiling_margin_m!r}")
-        self.ceiling_margin_m = float(ceiling_margin_m)
-        self.smoothing = float(smoothing)
-        self._offset = np.zeros(len(self._index))
-
-    def reset(self, seed: int | None = None) -> None:
-        """Forget the route and the lateral shifts."""
-        super().reset(seed)
-        self._offset = np.zeros(len(self._index))
-
-    def _altitude_m(self) -> float:
-        kin = self.cfg.kinematics
-        return float(max(kin.altitude_max_m - self.ceiling_margin_m, self.cfg.start_altitude_m))
-
-    def _sky_at(self, sky: np.ndarray, az_deg: np.ndarray) -> np.ndarray:
-        """Skyline (fraction of 90 deg) per UAV at azimuths ``az_deg``, circular interpolation."""
-        a = sky.shape[1]
-        pos = np.mod(az_deg, 360.0) / (360.0 / a)
-        k0 = np.floor(pos).astype(int) % a
-        k1 = (k0 + 1) % a
-        w = pos - np.floor(pos)
-        rows = np.arange(sky.shape[0])
-        return (1.0 - w) * sky[rows, k0] + w * sky[rows, k1]
-
-    def _lateral_offsets_m(self, obs: np.ndarray, tangent: np.ndarray) -> np.ndarray:
-        sky = obs[:, self._sky]
-        az_travel = np.degrees(np.arctan2(tangent[:, 0], tangent[:, 1]))  # from North, cw
-        left = self._sky_at(sky, az_travel - 90.0)
-        right = self._sky_at(sky, az_travel + 90.0)
-        want = -self.max_offset_m * np.tanh(4.0 * (left - right))
-        idx = self._cur_idx
-        new = self.smoothing * self._offset[idx] + (1.0 - self.smoothing) * want
-        self._offset[idx] = new
-        return new
-
-    def _contact_factor(self, obs: np.ndarray) -> float:
-        if self._present.size == 0 or obs.shape[0] < 2:
-            return 1.0
-        flags = obs[:, self._present]
-        return 0.0 if np.any(flags.max(axis=1) < 0.5) else 1.0
+def _best_sky_route_choice(s: Mapping[str, Any], n_uavs: int) -> str:
+    return "pdop_gt3" if s["route_model"] is None and not s["route_index"] else "first"
 
 
-class SpreadColumnPolicy(SkySeekingPolicy):
-    """The sky seeker as a stretched column that closes up at the goal (the tuned heuristic).
+_SKY = {"max_offset_m": 4.0, "ceiling_margin_m": 2.0, "hold_contact": True}
+_STRETCHED = {
+    **_SKY,
+    "spacing_m": 20.0,
+    "goal_spacing_m": 6.0,
+    "close_distance_m": 80.0,
+    "max_offset_m": 6.0,
+    "ceiling_margin_m": 0.5,
+}
+_WIDE = {
+    **_STRETCHED,
+    "spacing_m": 45.0,
+    "close_distance_m": Derived(lambda s, n: 4.0 * s["spacing_m"], "4 x spacing_m"),
+    "open_distance_m": Derived(
+        _tail_holds, "(N - 1) x (spacing_m - goal_spacing_m), at least N - 1 m: the tail holds"
+    ),
+}
+_GUARDED = {**_WIDE, "wall_margin_m": 8.0, "wall_gain_per_s": 4.0, "gain_per_s": 0.2}
+_CEILING = {**_GUARDED, "ceiling_margin_m": -10.0}
 
-    :class:`SkySeekingPolicy` with other defaults: 20 m between UAVs en route (the UAVs of a
-    stretched column stand in different parts of the street grid, one near an intersection or
-    an open square while another is in a canyon, so the cooperative solution pools more
-    distinct satellites), closing to 6 m over the last 80 m so that the column fits the 25 m
-    goal area; 6 m lateral shifts; 0.5 m below the ceiling. Found by a small search on 40
-    held-out episodes (docs/marl/report.md lists every variant tried): the 7 m column of
-    ``sky`` flies at 2.46 m mean cooperative error, a 12 m one at 2.10 m but misses a goal,
-    this one at about 2.0 m with every goal reached.
+#: Named settings of :class:`ColumnPolicy`, each on top of its defaults (the table of the
+#: module doc says what each column does). A :class:`Derived` value is computed from the other
+#: settings when the column is made, so that it follows an option given on top: ``wide_column``
+#: closes over 4 spacings and opens over ``(N - 1) (spacing_m - goal_spacing_m)`` whatever
+#: ``spacing_m`` is given; ``best_sky_route`` chooses its route by ``pdop_gt3`` unless a
+#: ``route_model`` or a ``route_index`` is given. Options given explicitly replace any value.
+COLUMN_PRESETS: dict[str, dict[str, Any]] = {
+    "column": {},
+    "sky_column": _SKY,
+    "stretched_column": _STRETCHED,
+    "wide_column": _WIDE,
+    "guarded_column": _GUARDED,
+    "ceiling_column": _CEILING,
+    "best_sky_route": {
+        **_CEILING,
+        "route_choice": Derived(
+            _best_sky_route_choice, "'pdop_gt3' unless route_model or route_index is given"
+        ),
+    },
+}
 
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    **kwargs
-        As :class:`SkySeekingPolicy` and :class:`FormationPolicy`; the defaults here are
-        ``spacing_m=20``, ``goal_spacing_m=6``, ``close_distance_m=80``, ``max_offset_m=6``,
-        ``ceiling_margin_m=0.5``.
-    """
+#: Earlier names of the presets, accepted everywhere a preset name is (``make_policy``,
+#: ``residual_base`` of a learned residual, a route model's ``base``).
+COLUMN_ALIASES: dict[str, str] = {
+    "formation": "column",
+    "sky": "sky_column",
+    "spread": "stretched_column",
+    "wide": "wide_column",
+    "guarded": "guarded_column",
+    "ceiling": "ceiling_column",
+    "skyroute": "best_sky_route",
+}
 
-    name = "spread"
-
-    def __init__(self, env: Any, **kwargs: Any) -> None:
-        defaults = {
-            "spacing_m": 20.0,
-            "goal_spacing_m": 6.0,
-            "close_distance_m": 80.0,
-            "max_offset_m": 6.0,
-            "ceiling_margin_m": 0.5,
-        }
-        super().__init__(env, **{**defaults, **kwargs})
+COLUMN_OPTIONS: tuple[str, ...] = tuple(
+    p for p in inspect.signature(ColumnPolicy.__init__).parameters if p not in ("self", "env")
+)
+"""The options of :class:`ColumnPolicy` (and so of every preset, after ``@``)."""
 
 
-class WideColumnPolicy(SpreadColumnPolicy):
-    """:class:`SpreadColumnPolicy` as a 45 m column that opens ahead of the start.
-
-    The best heuristic of the learning study (docs/marl/README.md lists the search): the
-    stretched column keeps lowering the cooperative error as it widens (its UAVs stand in more
-    different parts of the street grid) until about 45 m between slots, where the error stops
-    falling (50-80 m give the same), provided the column *opens ahead of the start*
-    (``open_distance_m``: the leader goes ahead, the tail holds) instead of sending its rear
-    UAVs back along the route, which at 30 m and more crashes them into the walls of dead
-    ends, and closes over the last ``4 x spacing_m`` so that it fits the goal area.
-
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    **kwargs
-        As :class:`SpreadColumnPolicy`; the defaults here are ``spacing_m=45``,
-        ``close_distance_m=180`` and ``open_distance_m = (N - 1) (spacing_m -
-        goal_spacing_m)`` (the tail holds while the column opens).
-    """
-
-    name = "wide"
-
-    def __init__(self, env: Any, **kwargs: Any) -> None:
-        n = len(_world_of(env).possible_agents)
-        spacing = float(kwargs.pop("spacing_m", 45.0))
-        goal_spacing = float(kwargs.pop("goal_spacing_m", 6.0))
-        defaults = {
-            "close_distance_m": 4.0 * spacing,
-            "open_distance_m": max(n - 1, 1) * max(spacing - goal_spacing, 1.0),
-        }
-        super().__init__(
-            env, spacing_m=spacing, goal_spacing_m=goal_spacing, **{**defaults, **kwargs}
+def _check_option_names(policy: str, options: Mapping[str, Any], allowed: tuple[str, ...]) -> None:
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {', '.join(map(repr, unknown))} of policy {policy!r}; its "
+            f"options are {', '.join(allowed)}"
         )
 
 
-class GuardedColumnPolicy(WideColumnPolicy):
-    """:class:`WideColumnPolicy` made safe for degraded navigation: a wall guard and soft slot
-    tracking.
+def column_policy(name: str, env: Any, **options: Any) -> ColumnPolicy:
+    """The :class:`ColumnPolicy` of preset ``name`` (:data:`COLUMN_PRESETS`, or an alias of
+    :data:`COLUMN_ALIASES`) for ``env``, with ``options`` on top; its ``name`` is ``name``.
 
-    Under realistic urban reception (``preset="urban_nlos_3dma"`` with
-    ``dead_reckoning_noise=True``: NLOS delays, fault exclusion, 3D-mapping-aided exclusion,
-    a dead reckoning that drifts while fixes are rejected) the *estimated* position a UAV
-    tracks its slot with is often metres, sometimes tens of metres, off, and ``wide``
-    crashes in about one episode in six, flown into a wall by its own estimate. This column
-    adds the wall guard (``wall_margin_m=8``, ``wall_gain_per_s=4``: pushed away from any
-    wall its range sensor puts within 8 m) and tracks its slots softly (``gain_per_s=0.2``
-    instead of 0.6, so that a jump of the estimate is not turned into a dash at full speed).
-    On 300 such episodes it crashes in 2 % (``wide``: 15 %); docs/marl/README.md lists the
-    variants tried. In the default environment, where the estimate is good, the guard and
-    the lagging slots only cost accuracy: 2.34 m mean cooperative error against ``wide``'s
-    2.05 m on the study's 100 episodes; use ``wide`` there.
-
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    **kwargs
-        As :class:`WideColumnPolicy`; the defaults here are ``wall_margin_m=8``,
-        ``wall_gain_per_s=4`` and ``gain_per_s=0.2``.
+    Raises
+    ------
+    ValueError
+        An unknown preset or option name (the message lists the valid ones), or a bad value
+        (the message names it).
     """
-
-    name = "guarded"
-
-    def __init__(self, env: Any, **kwargs: Any) -> None:
-        defaults = {"wall_margin_m": 8.0, "wall_gain_per_s": 4.0, "gain_per_s": 0.2}
-        super().__init__(env, **{**defaults, **kwargs})
-
-
-class CeilingColumnPolicy(GuardedColumnPolicy):
-    """:class:`GuardedColumnPolicy` that climbs hard and holds the top of the altitude band.
-
-    ``guarded`` tracks its altitude (0.5 m below the band's top) with a soft proportional
-    term on the *estimated* altitude: it climbs slowly from the start altitude and, with a
-    vertical error of a metre or two, hovers below the top. What the learned MAPPO swarm of
-    the study does instead is climb fast and stay at the top, where the roofs mask the least
-    sky (docs/marl/README.md, Part 2). This heuristic does the same by hand: its altitude
-    target lies ``-ceiling_margin_m`` above the band (default 10 m), so that the vertical
-    command is always upward, about 2 m/s at the top, and the world holds every UAV at the
-    band's top whatever its estimate reads. Found by a small search over the margin (-3, -6,
-    -10, -20 m) on the study's exploratory episodes (docs/marl/README.md). On the 1000 fresh
-    episodes of the second confirmatory study (``docs/marl/nlos2``) it flies at 3.34 m mean
-    error of the estimate used against ``guarded``'s 3.56 m (paired -0.22 m [-0.36, -0.07]),
-    at the same goal rate (0.98), and no learned swarm of the study is below it. In the
-    default environment it differs from ``guarded`` only in altitude.
-
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    **kwargs
-        As :class:`GuardedColumnPolicy`; the default here is ``ceiling_margin_m=-10``.
-    """
-
-    name = "ceiling"
-
-    def __init__(self, env: Any, **kwargs: Any) -> None:
-        super().__init__(env, **{"ceiling_margin_m": -10.0, **kwargs})
+    preset = COLUMN_ALIASES.get(name, name)
+    if preset not in COLUMN_PRESETS:
+        valid = [*COLUMN_PRESETS, *COLUMN_ALIASES]
+        raise ValueError(f"unknown column preset {name!r}; presets are {', '.join(valid)}")
+    _check_option_names(name, options, COLUMN_OPTIONS)
+    policy = ColumnPolicy(env, **{**COLUMN_PRESETS[preset], **options})
+    policy.name = name
+    return policy
 
 
-class SkyRoutePolicy(CeilingColumnPolicy):
-    """:class:`CeilingColumnPolicy` on the equally short street route with the best sky.
+def _deprecated_column_class(old: str, preset: str, alias: str) -> type[ColumnPolicy]:
+    def __init__(self: ColumnPolicy, env: Any, **options: Any) -> None:
+        warnings.warn(
+            f"{old} is deprecated: use coopnav_env.agents.heuristics.column_policy({preset!r}, "
+            f"env, ...) or make_policy({preset!r}, env)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        _check_option_names(alias, options, COLUMN_OPTIONS)
+        ColumnPolicy.__init__(self, env, **{**COLUMN_PRESETS[preset], **options})
 
-    On the street grid many routes to the goal are equally short
-    (:func:`~coopnav_env.sim.route.street_routes`); they pass different buildings. At the
-    first step this heuristic predicts, with the city map, the satellites in line of sight
-    every 5 m along each candidate at the column's altitude and flies the route with the
-    smallest share of points whose line-of-sight satellites give a PDOP above 3
-    (``route_choice="pdop_gt3"``, :data:`coopnav_env.agents.routes.ROUTE_FEATURES`). That rule was the
-    best of the 13 one-feature rules on the learning study's 1000 exploratory episodes
-    (docs/marl/README.md, "Route choice"). It uses the map, the satellites' directions and
-    the swarm's estimated centre: on board.
+    doc = (
+        f"Deprecated: :class:`ColumnPolicy` with the ``{preset}`` settings "
+        f"(:data:`COLUMN_PRESETS`), policy name ``{alias}``; kept so that code and pickles "
+        "that name this class keep working."
+    )
+    return type(old, (ColumnPolicy,), {"__init__": __init__, "__doc__": doc, "name": alias})
 
-    Parameters
-    ----------
-    env : urban_canyon_v0 ParallelEnv
-    **kwargs
-        As :class:`CeilingColumnPolicy`; the default here is ``route_choice="pdop_gt3"``
-        (a learned ``route_model`` replaces it).
-    """
 
-    name = "skyroute"
-
-    def __init__(self, env: Any, **kwargs: Any) -> None:
-        if kwargs.get("route_model") is None and not kwargs.get("route_index"):
-            kwargs.setdefault("route_choice", "pdop_gt3")
-        super().__init__(env, **kwargs)
+FormationPolicy = _deprecated_column_class("FormationPolicy", "column", "formation")
+SkySeekingPolicy = _deprecated_column_class("SkySeekingPolicy", "sky_column", "sky")
+SpreadColumnPolicy = _deprecated_column_class("SpreadColumnPolicy", "stretched_column", "spread")
+WideColumnPolicy = _deprecated_column_class("WideColumnPolicy", "wide_column", "wide")
+GuardedColumnPolicy = _deprecated_column_class("GuardedColumnPolicy", "guarded_column", "guarded")
+CeilingColumnPolicy = _deprecated_column_class("CeilingColumnPolicy", "ceiling_column", "ceiling")
+SkyRoutePolicy = _deprecated_column_class("SkyRoutePolicy", "best_sky_route", "skyroute")
 
 
 class WaypointPolicy:
@@ -883,18 +965,21 @@ class WaypointPolicy:
     :func:`coopnav_env.envs.obs_layout`, the waypoint minus the UAV's *estimated* position) at
     ``cruise_speed_mps``, slowing down within a few metres of it, and a proportional term holds
     ``altitude_m`` (from the estimated altitude, the ``altitude`` field). No map, no
-    neighbours, no walls: ten lines that reach the goal about as often as
-    :class:`FormationPolicy` (19 of 20 held-out episodes). ``coopnav train`` can start PPO from
-    a behaviour-cloned copy of it (``pretrain`` in ``training/configs/ppo.yaml``).
+    neighbours, no walls. ``coopnav train`` can start PPO from a behaviour-cloned copy of it
+    (``pretrain`` in ``training/configs/ppo.yaml``).
 
     Parameters
     ----------
     env : urban_canyon_v0 ParallelEnv
     cruise_speed_mps : float, default 7.0
+        Speed toward the waypoint, > 0 [m/s] (at most the maximum speed).
     altitude_m : float, optional
-        Altitude to hold [m]; default the environment's ``start_altitude_m``.
+        Altitude to hold [m], inside the environment's altitude band
+        (``kinematics.altitude_min_m`` to ``altitude_max_m``); default the environment's
+        ``start_altitude_m``.
     gain_per_s : float, default 0.6
-        Proportional gain on the distance to the waypoint and on the altitude error [1/s].
+        Proportional gain on the distance to the waypoint and on the altitude error, > 0
+        [1/s].
     """
 
     name = "waypoint"
@@ -907,11 +992,26 @@ class WaypointPolicy:
         gain_per_s: float = 0.6,
     ):
         base = _world_of(env)
-        cfg = base.config
-        self.cfg = cfg
-        self.cruise_speed_mps = float(min(cruise_speed_mps, cfg.kinematics.max_speed_mps))
-        self.altitude_m = float(cfg.start_altitude_m if altitude_m is None else altitude_m)
-        self.gain_per_s = float(gain_per_s)
+        cfg = self.cfg = base.config
+        kin = cfg.kinematics
+        self.cruise_speed_mps = float(
+            min(
+                _number("cruise_speed_mps", cruise_speed_mps, 0.0, lo_open=True, unit=" m/s"),
+                kin.max_speed_mps,
+            )
+        )
+        self.altitude_m = (
+            float(cfg.start_altitude_m)
+            if altitude_m is None
+            else _number(
+                "altitude_m",
+                altitude_m,
+                float(kin.altitude_min_m),
+                float(kin.altitude_max_m),
+                unit=" m (the environment's altitude band)",
+            )
+        )
+        self.gain_per_s = _number("gain_per_s", gain_per_s, 0.0, lo_open=True, unit=" 1/s")
         self.layout = obs_layout(cfg)
         self._waypoint = self.layout["next_waypoint"]
         self._altitude = self.layout["altitude"]
@@ -935,3 +1035,16 @@ class WaypointPolicy:
         v[:, 2] = self.gain_per_s * (self.altitude_m - alt)
         cmd = np.clip(v / kin.max_speed_mps, -1.0, 1.0).astype(np.float32)
         return {a: cmd[i] for i, a in enumerate(agents)}
+
+
+WAYPOINT_OPTIONS: tuple[str, ...] = tuple(
+    p for p in inspect.signature(WaypointPolicy.__init__).parameters if p not in ("self", "env")
+)
+"""The options of :class:`WaypointPolicy` (after ``waypoint@``)."""
+
+
+def waypoint_policy(env: Any, **options: Any) -> WaypointPolicy:
+    """A :class:`WaypointPolicy` for ``env``; an unknown option name raises ValueError listing
+    the valid ones."""
+    _check_option_names("waypoint", options, WAYPOINT_OPTIONS)
+    return WaypointPolicy(env, **options)

@@ -7,10 +7,10 @@ reseeded, the same for every candidate of a step), so the planner knows the geom
 future exactly but not its noise: it cannot pick a path for a lucky noise draw. It chooses the
 swarm's velocity commands by sampling-based model-predictive control: at every step it
 
-1. proposes ``n_samples`` candidate plans: the command of a base heuristic (default
-   :class:`~coopnav_env.agents.heuristics.WideColumnPolicy`, copied with the environment so that it
-   keeps planning the route) plus a per-UAV velocity offset held for the horizon (one
-   candidate is always the base alone, offset zero);
+1. proposes ``n_samples`` candidate plans: the command of a base heuristic (default the
+   :class:`~coopnav_env.agents.heuristics.ColumnPolicy` ``wide_column``, copied with the
+   environment so that it keeps planning the route) plus a per-UAV velocity offset held for
+   the horizon (one candidate is always the base alone, offset zero);
 2. flies each candidate ``horizon`` steps in a deep copy of the environment (with fresh noise) and
    scores it by
    the swarm's mean *true* cooperative 3-D error (the estimate's error where there is no
@@ -86,7 +86,7 @@ class PrivilegedPlanner:
         estimate.
     guard_offsets : bool
         Limit every offset, in the look-ahead and in the command applied, toward walls the
-        range sensor sees (:meth:`coopnav_env.agents.heuristics.WideColumnPolicy.guard_delta`: nothing
+        range sensor sees (:meth:`coopnav_env.agents.heuristics.ColumnPolicy.guard_delta`: nothing
         toward a wall inside the base column's wall margin, toward one beyond it no faster
         than reaches the margin in 2 s; the base must have a wall guard, e.g. ``ceiling``).
         Without it an offset can cancel the base's wall guard or outrun it, which is how the

@@ -28,7 +28,7 @@ class _Hover:
 
 @pytest.fixture(autouse=True)
 def _empty_registry(monkeypatch):
-    monkeypatch.setattr(agents, "_REGISTERED", {})
+    monkeypatch.setattr(coopnav_env.agents, "_REGISTERED", {})
 
 
 def test_registered_policy_is_made_with_options() -> None:
