@@ -264,3 +264,50 @@ def test_debug_shows_the_traceback(files, capsys, monkeypatch):
     monkeypatch.setenv("COOPNAV_DEBUG", "0")
     assert main(argv) == 2
     capsys.readouterr()
+
+
+# --------------------------------------------------------------------------------------------
+# issue 35, finding 5: YAML 1.1 reads off/on/yes/no as booleans
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("prefix", ["", "env.", "torchrl.env."])
+@pytest.mark.parametrize("word", ["off", "on", "yes", "no", "true", "false", "Off"])
+def test_a_word_setting_gets_the_text_as_typed(prefix, word):
+    """``integrity``/``nlos_exclusion`` take words: ``--env-set integrity=off`` means "off"
+    (YAML alone would read False); a boolean setting still reads the YAML boolean."""
+    from coopnav_env.training.config import apply_overrides
+
+    items = [f"{prefix}integrity={word}", f"{prefix}nlos_exclusion={word}"]
+    items.append(f"{prefix}dead_reckoning_noise={word}")
+    out = apply_overrides({}, items)
+    for part in prefix.split(".")[:-1]:
+        out = out[part]
+    assert out["integrity"] == word and out["nlos_exclusion"] == word
+    assert out["dead_reckoning_noise"] is (word.lower() in ("on", "yes", "true"))
+
+
+def test_integrity_off_from_the_command_line_switches_a_presets_integrity_off():
+    from coopnav_env.training.route_learning import env_kwargs_from_overrides
+
+    from coopnav_env.envs.config import make_config
+
+    on = make_config(**env_kwargs_from_overrides(["preset=urban_nlos_3dma"]))
+    assert on.integrity == "fde" and on.nlos_exclusion == "map"
+    kwargs = env_kwargs_from_overrides(
+        ["preset=urban_nlos_3dma", "integrity=off", "nlos_exclusion=off", "dead_reckoning_noise=no"]
+    )
+    cfg = make_config(**kwargs)
+    assert (cfg.integrity, cfg.nlos_exclusion, cfg.dead_reckoning_noise) == ("off", "off", False)
+    # a word the setting does not take is named as typed, with the allowed words
+    for word in ("on", "yes", "true"):
+        with pytest.raises(ValueError, match=rf"integrity must be one of .*'raim'.*got '{word}'"):
+            env_kwargs_from_overrides([f"integrity={word}"])
+
+
+def test_evaluate_accepts_env_set_integrity_off(capsys):
+    argv = ["evaluate", "--policies", "nope", "--env-set", "preset=urban_nlos_3dma"]
+    argv += ["--env-set", "integrity=off", "--env-set", "nlos_exclusion=off"]
+    assert _run([*argv, "--episodes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "got False" not in err and "unknown policy 'nope'" in err, err  # env built

@@ -25,9 +25,11 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import importlib
 import math
 import re
+import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -64,8 +66,8 @@ BACKENDS: dict[str, str] = {
 MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.marl`)."""
 
 VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
-"""Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of ``coopnav_env.training.vec_env.VEC_ENV_KINDS``
-(listed here without importing SB3)."""
+"""Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of
+``coopnav_env.training.vec_env.VEC_ENV_KINDS`` (listed here without importing SB3)."""
 
 PRETRAIN_DEFAULTS: dict[str, Any] = {
     "policy": "waypoint",
@@ -225,9 +227,11 @@ class TrainConfig:
         else at inference; episode returns in the logs and ``monitor.csv`` stay unscaled. A
         resumed run restarts the running estimate.
     pretrain : dict or None, default None
-        Behaviour cloning before PPO (:func:`coopnav_env.training.sb3_backend.behaviour_clone`): ``policy`` (a
-        :func:`coopnav_env.agents.make_policy` name, e.g. ``"waypoint"``) and its ``policy_kwargs``,
-        ``episodes`` (teacher episodes on training seeds), ``epochs`` and ``learning_rate``.
+        Behaviour cloning before PPO
+        (:func:`coopnav_env.training.sb3_backend.behaviour_clone`): ``policy`` (a
+        :func:`coopnav_env.agents.make_policy` name, e.g. ``"waypoint"``) and its
+        ``policy_kwargs``, ``episodes`` (teacher episodes on training seeds), ``epochs`` and
+        ``learning_rate``.
         The policy's mean action is fitted to the teacher's actions (its log-std keeps
         ``log_std_init``) and the value network to the teacher's discounted returns, so that
         PPO starts from a policy that flies the route instead of discovering flight between
@@ -236,15 +240,18 @@ class TrainConfig:
     verbose : int, default 0
         SB3 verbosity (1 prints the training table).
     backend : {"sb3", "rllib"}, default "sb3"
-        Stable-Baselines3 in this process (:func:`coopnav_env.training.sb3_backend.train`), or Ray RLlib
-        with env runners on a Ray cluster (:func:`coopnav_env.training.rllib_backend.train`, needs the
-        ``ray`` extra); the keys of :data:`BACKENDS`.
+        Stable-Baselines3 in this process (:func:`coopnav_env.training.sb3_backend.train`), or
+        Ray RLlib with env runners on a Ray cluster
+        (:func:`coopnav_env.training.rllib_backend.train`, needs the ``ray`` extra); the keys of
+        :data:`BACKENDS`.
     rllib : dict
-        Settings of the RLlib backend (:class:`coopnav_env.training.rllib_backend.RLlibSettings`: env
-        runners, Ray address, ``ppo`` and ``model``); the SB3 backend ignores them.
+        Settings of the RLlib backend
+        (:class:`coopnav_env.training.rllib_backend.RLlibSettings`: env runners, Ray address,
+        ``ppo`` and ``model``); the SB3 backend ignores them.
     torchrl : dict
-        Settings of the TorchRL MAPPO/IPPO backend (:class:`coopnav_env.agents.marl_nets.MARLSettings`
-        fields, plus ``env``: environment settings that override ``env`` for this backend).
+        Settings of the TorchRL MAPPO/IPPO backend
+        (:class:`coopnav_env.agents.marl_nets.MARLSettings` fields, plus ``env``: environment
+        settings that override ``env`` for this backend).
     """
 
     out: str
@@ -429,11 +436,29 @@ def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) ->
     return section
 
 
+@functools.cache
+def env_word_settings() -> dict[str, tuple[str, ...]]:
+    """The ``urban_canyon_v0`` settings whose values are words (a ``Literal`` of strings),
+    each with the words it takes, e.g. ``{"integrity": ("off", "raim", "fde"), ...}``."""
+    from coopnav_env.envs.config import UrbanCanyonConfig
+
+    hints = typing.get_type_hints(UrbanCanyonConfig)
+    return {
+        name: tuple(typing.get_args(hint))
+        for name, hint in hints.items()
+        if typing.get_origin(hint) is typing.Literal
+        and all(isinstance(v, str) for v in typing.get_args(hint))
+    }
+
+
 def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str, Any]:
     """Apply ``key=value`` overrides with dotted keys (``ppo.learning_rate=1e-4``).
 
     Values are parsed as YAML (``3``, ``1e-4``, ``true``, ``[64, 64]``, ``null``). Nested
-    mappings are created as needed; the input is not modified.
+    mappings are created as needed; the input is not modified. An environment setting that
+    takes a word (:func:`env_word_settings`: ``integrity``, ``nlos_exclusion``, ...; a key of
+    its own or under ``env.``) gets the text as typed where YAML 1.1 would read a boolean:
+    ``integrity=off`` is ``"off"``, not False (a boolean setting still reads ``off`` as False).
 
     Raises
     ------
@@ -447,6 +472,10 @@ def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str
         if not sep or not key or any(not part for part in key.split(".")):
             raise ValueError(f"override {item!r} must look like key=value (dotted keys allowed)")
         value = parse_yaml(raw, f"the value of {item!r}") if raw.strip() else ""
+        parts = key.split(".")
+        if isinstance(value, bool) and parts[-1] in env_word_settings():
+            if len(parts) == 1 or parts[-2] == "env":  # an environment setting
+                value = raw.strip()  # "off", "no", ...: the setting names the words it takes
         # YAML 1.1 reads "1e-4" as a string; accept it as a float
         if isinstance(value, str):
             try:
@@ -454,7 +483,6 @@ def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str
             except ValueError:
                 pass
         node = out
-        parts = key.split(".")
         for part in parts[:-1]:
             nxt = node.get(part)
             if not isinstance(nxt, dict):
