@@ -1,7 +1,8 @@
 """The networks and checkpoints of the TorchRL MAPPO/IPPO backend (shared by training and
 evaluation): :class:`MARLSettings`, :func:`build_modules`, :func:`load_marl_checkpoint`.
 
-The training loop is :mod:`coopnav_env.training.marl`; the evaluation policy :mod:`coopnav_env.agents.marl_policy`.
+The training loop is :mod:`coopnav_env.training.marl`; the evaluation policy
+:mod:`coopnav_env.agents.marl_policy`.
 """
 
 from __future__ import annotations
@@ -71,24 +72,32 @@ class MARLSettings:
         ``velocity``: the learned action is a velocity residual added to the base command (the
         base command is part of the actor's input). ``offset``: the learned action moves each
         UAV's slot of the base column (along the route, to the left, up) by the action times
-        ``offset_scale_m`` (the base must be a column follower: ``formation``, ``sky``,
-        ``spread``, ``wide``, ``guarded``, ``ceiling``), so the policy shapes the formation
-        while the base flies the route. ``options``: each UAV chooses one of a few discrete
-        slot shifts (``option_shifts_m``) from a categorical distribution (per-UAV logits,
-        shared parameters), usually held for several steps with ``action_repeat``: exploration
-        then tries whole manoeuvres (drop back 10 m, move 5 m to the left, ...) rather than
-        Gaussian noise around the base, and a policy that keeps choosing the first option
-        (no shift) flies exactly like its base. Evaluation takes the most probable option.
+        ``offset_scale_m`` (the base must be a column heuristic,
+        :class:`~coopnav_env.agents.heuristics.ColumnPolicy`), so the policy shapes the formation
+        while the base flies the route. ``options`` (*experimental*, see
+        :data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`): each UAV chooses one of a few
+        discrete slot shifts (``option_shifts_m``) from a categorical distribution (per-UAV
+        logits, shared parameters), usually held for several steps with ``action_repeat``:
+        exploration then tries whole manoeuvres (drop back 10 m, move 5 m to the left, ...)
+        rather than Gaussian noise around the base, and a policy that keeps choosing the first
+        option (no shift) flies exactly like its base. Evaluation takes the most probable
+        option.
     offset_scale_m : list of 3 floats
         Largest slot shift along the route, to the left and up [m] (``offset`` mode).
     option_shifts_m : list of [along, left, up] lists
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
         The slot shifts [m] the ``options`` mode chooses among (at least 2, each in
         ``[-100, 100]``); by convention the first is no shift.
     option_init_prob : float
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
         ``options`` mode: the probability of the first option at the start of training (the
         output layer starts at zero weights and a bias that gives it this probability, the
         others sharing the rest), in ``(0, 1)``.
     action_repeat : int
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
         Swarm steps per decision of the actor, >= 1 (default 1: a decision every step). The
         network's output is held for ``action_repeat`` steps while the base heuristic keeps
         acting every step (velocity mode: the held residual is added to each step's base
@@ -100,14 +109,15 @@ class MARLSettings:
         transition there; the copy's next episode starts with the rest of the held output
         (at most ``action_repeat - 1`` steps), which no transition is credited with.
     residual_wall_guard : bool
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
         Velocity mode: limit the residual's horizontal part toward walls the range sensor
-        sees (:meth:`coopnav_env.agents.heuristics.ColumnPolicy.guard_delta`: nothing toward a wall
-        inside the base column's wall margin, toward one beyond it no faster than reaches
-        the margin in 2 s), so that neither the
-        learned residual nor exploration noise around it can cancel the base's wall guard
-        (default False, which trains bit for bit as before). The base must be a column
-        follower with a wall margin (``guarded``, ``ceiling``). What the policy's
-        log-probability is computed on is the network's raw output; the guard acts on the
+        sees (:meth:`coopnav_env.agents.heuristics.ColumnPolicy.guard_delta`: nothing toward a
+        wall inside the base column's wall margin, toward one beyond it no faster than reaches
+        the margin in 2 s), so that neither the learned residual nor exploration noise around
+        it can cancel the base's wall guard (default False: no limit). The base must be a
+        column heuristic with a wall margin (``guarded_column``, ``ceiling_column``). What the
+        policy's log-probability is computed on is the network's raw output; the guard acts on the
         command, like the clipping, and is part of the environment as the actor sees it.
     """
 

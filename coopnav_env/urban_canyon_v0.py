@@ -421,6 +421,13 @@ paper's Figure 6; and the per-UAV standalone and cooperative errors (`docs/rende
 is a frame of a default episode half-way). `render_mode="human"` shows the same frame in a
 matplotlib window. matplotlib is imported only when rendering (about 1 s per frame).
 
+## Experimental settings
+
+`obs_lookahead`, `obs_candidate_sky` and `obs_true_error` (and, for training, some settings of
+the `torchrl:` section) are experimental: kept for the studies that used them, off by default,
+and liable to change or go without notice. `coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`
+lists them, each with one line on what it does.
+
 ## Seeding, determinism and pickling
 
 The environment owns one `numpy.random.Generator`, reseeded only by `reset(seed=...)`; the same

@@ -16,10 +16,12 @@ from coopnav_env.sim.city import _check_int, _check_real
 from coopnav_env.sim.scenario import ScenarioConfig, _check_bool, _check_choice
 
 __all__ = [
+    "EXPERIMENTAL_SETTINGS",
     "PER_STEP_REWARD_FIELDS",
     "PRESETS",
     "REWARD_SCHEMES",
     "V1_DEFAULTS",
+    "ExperimentalSetting",
     "UrbanCanyonConfig",
     "config_field_names",
     "make_config",
@@ -156,6 +158,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         and clipped to [0, 1]. What a real receiver knows from its almanac and its tracking
         loops: where the satellites it misses are.
     obs_lookahead : bool, default False
+        *Experimental* (:data:`EXPERIMENTAL_SETTINGS`: may change or be removed).
         Append four entries after everything else: the satellites the city model predicts in
         line of sight from the point ``15`` and ``30`` m further along the UAV's route (from
         its *estimated* position, through its next waypoint and on, at its estimated
@@ -164,6 +167,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         counts none. What a receiver with the map and the almanac can predict of the sky
         ahead (``studies/planner_headroom`` trains with it).
     obs_candidate_sky : bool, default False
+        *Experimental* (:data:`EXPERIMENTAL_SETTINGS`: may change or be removed).
         Append ten entries after everything else (after ``obs_lookahead``'s when those are
         on): for five candidate positions of the UAV (where it believes it is; 10 m further
         along its route; that point 6 m to the left and to the right; 25 m along the route;
@@ -177,6 +181,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         ``obs_lookahead`` these say what a move would change, and they count what the
         receiver keeps after the exclusion, which shrinks as its uncertainty grows.
     obs_true_error : bool, default False
+        *Experimental* (:data:`EXPERIMENTAL_SETTINGS`: may change or be removed).
         **Privileged: a diagnostic, not an on-board observation.** Append three entries last
         (after every other optional block): the UAV's true position error, East, North, Up,
         of the estimate it uses (``nav_error``), each divided by ``obs_sigma_max_m`` and
@@ -334,6 +339,90 @@ class UrbanCanyonConfig(ScenarioConfig):
     def state_dim(self) -> int:
         """Length of the global state vector: ``13 N + 4``."""
         return 13 * self.n_uavs + 4
+
+
+@dataclass(frozen=True)
+class ExperimentalSetting:
+    """One entry of :data:`EXPERIMENTAL_SETTINGS`.
+
+    Parameters
+    ----------
+    settings : str
+        The settings class the field belongs to: ``"UrbanCanyonConfig"`` (this module) or
+        ``"MARLSettings"`` (:class:`coopnav_env.agents.marl_nets.MARLSettings`, the
+        ``torchrl:`` section of a training config).
+    name : str
+        The field.
+    value : object or None
+        The experimental value of the field, or None when every non-default value is.
+    what : str
+        What it does, in one line.
+    """
+
+    settings: str
+    name: str
+    value: Any
+    what: str
+
+
+#: Settings that are experimental: study switches kept so that the studies that used them (and
+#: any policy trained with them) still run, but not part of the supported surface. Each may
+#: change or be removed in a later release without a deprecation period; their defaults leave
+#: them off. The environment's page (:mod:`coopnav_env.urban_canyon_v0`) and each field's
+#: docstring point here.
+EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
+    ExperimentalSetting(
+        "UrbanCanyonConfig",
+        "obs_lookahead",
+        None,
+        "4 observation entries: the satellites the city model predicts in line of sight "
+        "15 m and 30 m ahead along the route, for the UAV and the swarm",
+    ),
+    ExperimentalSetting(
+        "UrbanCanyonConfig",
+        "obs_candidate_sky",
+        None,
+        "10 observation entries: the satellites the receiver would use at five candidate "
+        "positions of the UAV, and over the swarm",
+    ),
+    ExperimentalSetting(
+        "UrbanCanyonConfig",
+        "obs_true_error",
+        None,
+        "privileged diagnostic: 3 observation entries with the true error of the estimate "
+        "(no receiver knows it)",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "residual_mode",
+        "options",
+        "the learned residual chooses one of a few discrete slot shifts of the base column",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "option_shifts_m",
+        None,
+        "the slot shifts residual_mode='options' chooses among",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "option_init_prob",
+        None,
+        "residual_mode='options': the probability of the first option when training starts",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "action_repeat",
+        None,
+        "the actor decides every action_repeat steps, its output held in between",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "residual_wall_guard",
+        None,
+        "the velocity residual is limited toward walls the range sensor sees",
+    ),
+)
 
 
 def config_field_names() -> list[str]:
