@@ -10,14 +10,16 @@ seed. The file holds the day 2026-12-03 (GPST): GPS ephemerides every 2 h (toe 0
 day is covered. GPS PRNs are the nominal slot labels G01-G24; the BeiDou satellites take
 BeiDou-3 numbers: MEO C19-C37 and C41-C45, IGSO C38-C40, GEO C59-C61.
 
-Each satellite's broadcast orbit is one consistent trajectory: for MEO and IGSO satellites
-and GPS every ephemerides' elements are the same orbit referred to its own ``toe`` (mean
-anomaly advanced, node and inclination drifted by the broadcast rates), so the positions of
-consecutive ephemerides agree where they overlap. For a BeiDou GEO the orbit is a two-body
-orbit fixed in inertial space, written at each ``toe`` in the ICD's frame tilted by +5 deg
-about the X axis of the Earth-fixed frame at ``toe`` (elements from the state vector).
+Each satellite's broadcast orbit is one consistent trajectory: for GPS and the BeiDou MEO and
+IGSO satellites all ephemerides hold the same orbit referred to their own ``toe`` (mean
+anomaly advanced, node and inclination drifted by the broadcast rates), so consecutive
+ephemerides give the same positions where they overlap. A BeiDou GEO's orbit is a two-body
+orbit fixed in inertial space, written at each ``toe`` in the ICD's frame (the Earth-fixed
+axes at ``toe`` tilted by +5 deg about X; elements from the state vector); its small harmonic
+and drift terms are the same numbers in every ephemeris, so consecutive ephemerides differ by
+a few metres.
 
-Run ``python coopnav_env/data/make_sample_nav.py`` to rewrite the file (same bytes every
+Run ``python coopnav_env/data/make_sample_nav.py`` to rewrite the file (the same text every
 time; ``tests/gnss/test_rinex.py`` checks that the shipped file is what this writes).
 """
 

@@ -8,10 +8,11 @@ Reading
 fixed-width (19 characters each, four per orbit line after four blanks, three after the epoch
 of the first line), so numbers that run together (``1.0D-05-2.0D-07``) are read correctly;
 ``D``, ``d`` and ``E`` exponents are accepted. GPS (``G``) and BeiDou (``C``) records are kept
-(8 lines each); GLONASS (``R``) and SBAS (``S``) records (4 lines) and Galileo (``E``), QZSS
-(``J``) and NavIC (``I``) records (8 lines) are skipped and counted
-(:attr:`NavigationFile.skipped`). Any other system letter, a record cut short, or a field that
-is not a number raises ``ValueError`` naming the file, the line number and what is wrong.
+(8 lines each); GLONASS (``R``), SBAS (``S``), Galileo (``E``), QZSS (``J``) and NavIC (``I``)
+records (an epoch line and its indented orbit lines, however many the version gives) are
+skipped and counted (:attr:`NavigationFile.skipped`). Any other system letter, a record cut
+short, or a field that is not a number raises ``ValueError`` naming the file, the line number
+and what is wrong.
 Unhealthy ephemerides (GPS SV health or BeiDou SatH1 not 0) are dropped and counted.
 
 Propagation
@@ -151,7 +152,7 @@ _LEAP_SECONDS: tuple[tuple[_dt.date, int], ...] = tuple(
 )
 
 _KEPT_SYSTEMS = {"G": "GPS", "C": "BDS"}
-_SKIPPED_LINES = {"R": 4, "S": 4, "E": 8, "J": 8, "I": 8}
+_SKIPPED_SYSTEMS = frozenset("RSEJI")
 _HEADER_SYSTEMS = {"G", "C", "R", "E", "J", "I", "S", "M"}
 
 # Columns of the element table (one row per ephemeris) in RINEX order after the epoch line.
@@ -447,9 +448,11 @@ def read_rinex_nav(path: str | os.PathLike[str]) -> NavigationFile:
             continue
         where = f"{name}, line {k + 1}"
         letter = line[0]
-        if letter in _SKIPPED_LINES:
+        if letter in _SKIPPED_SYSTEMS:  # the epoch line and its indented orbit lines
             skipped[letter] = skipped.get(letter, 0) + 1
-            k += _SKIPPED_LINES[letter]
+            k += 1
+            while k < n_lines and lines[k][:4] == "    " and lines[k].strip():
+                k += 1
             continue
         if letter not in _KEPT_SYSTEMS:
             raise ValueError(

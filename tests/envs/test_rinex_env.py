@@ -39,6 +39,15 @@ def test_parallel_api_and_seed_tests_pass() -> None:
     parallel_seed_test(lambda: urban_canyon_v0.parallel_env(city="canyon", **SKY), num_cycles=30)
 
 
+@pytest.mark.slow
+def test_pettingzoo_render_test_passes(monkeypatch) -> None:
+    pytest.importorskip("matplotlib")
+    from pettingzoo.test import render_test
+
+    monkeypatch.setenv("MPLBACKEND", "Agg")  # "human" frames go to a window-less backend
+    render_test(lambda render_mode=None: urban_canyon_v0.env(render_mode=render_mode, **SKY))
+
+
 def test_gymnasium_checker_passes() -> None:
     env = gymnasium.make(GYM_ENV_ID, **SKY)
     assert isinstance(env.unwrapped.par_env.world.constellation, BroadcastConstellation)

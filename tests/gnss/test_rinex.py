@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -176,7 +177,14 @@ def test_shipped_sample_is_what_the_generator_writes() -> None:
     spec = importlib.util.spec_from_file_location("make_sample_nav", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    assert mod.sample_nav_text() == Path(SAMPLE_NAV_PATH).read_text()
+    made, shipped = mod.sample_nav_text(), Path(SAMPLE_NAV_PATH).read_text()
+    # the same text apart from the last digit a platform's libm may round otherwise
+    number = re.compile(r"-?\d\.\d{12}D[+-]\d\d")
+    assert number.sub("#", made) == number.sub("#", shipped)
+    a, b = (
+        np.array([float(x.replace("D", "E")) for x in number.findall(t)]) for t in (made, shipped)
+    )
+    np.testing.assert_allclose(a, b, rtol=1e-11, atol=0.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -264,10 +272,11 @@ def _write(tmp_path: Path, body: str, header: str = HEADER) -> Path:
 
 
 def test_parser_reads_fields_that_run_together_and_skips_other_systems(tmp_path) -> None:
-    p = _write(tmp_path, GLONASS_RECORD + GPS_RECORD + _galileo_record() + GPS_RECORD)
-    nav = read_rinex_nav(p)
+    glonass_305 = GLONASS_RECORD + GLONASS_RECORD.splitlines(keepends=True)[-1]  # 3.05: 5 lines
+    body = GLONASS_RECORD + GPS_RECORD + _galileo_record() + GPS_RECORD + glonass_305
+    nav = read_rinex_nav(_write(tmp_path, body))
     assert nav.version == 3.04 and nav.file_system == "M"
-    assert nav.skipped == {"R": 1, "E": 1}
+    assert nav.skipped == {"R": 2, "E": 1}
     assert nav.prn == ("G05",)  # the repeated broadcast of the same toe is kept once
     el = {k: float(v[0]) for k, v in nav.elements.items()}
     assert el["af0_s"] == -1.234567890123e-04 and el["af1_sps"] == -2e-12
