@@ -574,7 +574,7 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
         sky = world_constellation(cfg)
     except ValueError as exc:
         raise ValueError(f"{o}.constellation={spec!r}: {exc}") from None
-    if isinstance(start, datetime.datetime):
+    if isinstance(start, datetime.date):  # a datetime too (YAML reads ISO times as them)
         start = start.isoformat()
         object.__setattr__(cfg, "constellation_start", start)
     if cfg.t0_s != 0.0:
