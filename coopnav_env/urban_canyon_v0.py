@@ -211,7 +211,10 @@ before averaging, or read it with `coopnav_env.envs.urban_canyon.fix_error_m(inf
 which returns `inf` for a missing fix), `sig_e_m`, `sig_n_m`, `sig_u_m`, `sig_3d_m` (predicted
 sigma of the estimate used [m]), `n_sats`, `n_sats_swarm`, `n_sats_open_sky`, `coop_status` and
 `standalone_status` (`coopnav_env.nav.NavStatus`: 0 OK, 1 too few satellites, 2 singular, 3
-not converged, 4 no relative position, 5 implausible position: the spurious far root),
+not converged, 4 no relative position, 5 implausible position: the spurious far root; OK
+means the solver converged on enough measurements, and with `integrity` off no residual test
+runs, so a fix built on a faulty pseudorange, such as a 1 km NLOS outlier, is OK too, its
+error far beyond `sig_3d_m`: the integrity figures below appear only when a test ran),
 `nav_source` (`coopnav_env.sim.NavSource`: 0 cooperative, 1 standalone, 2 dead reckoning),
 `goal_distance_m`, `next_waypoint` (index into `world.route_xy_m`), `coop_rejected` and
 `standalone_rejected` (the solver's fix was OK but the integrity gate `max_fix_sigma_m`

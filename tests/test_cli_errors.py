@@ -36,6 +36,19 @@ CASES: list[tuple[str, list[str], int, str]] = [
     ("yaml-set-malformed", ["train", "--set", "ppo.n_steps=[1,"], 2, "not valid YAML"),
     ("yaml-env-set-malformed", ["train", "--env-set", "city={a"], 2, "not valid YAML"),
     ("set-no-equals", ["train", "--set", "timesteps"], 2, "key=value"),
+    # issue 35, finding 12: a bad --set value is an error even where a flag replaces it
+    (
+        "set-timesteps-abc-flag",
+        ["train", "{toy}", "--set", "timesteps=abc", "--timesteps", "64"],
+        2,
+        "timesteps must be an integer, got 'abc'",
+    ),
+    (
+        "set-seed-neg-flag",
+        ["train", "{toy}", "--set", "seed=-3", "--seed", "1"],
+        2,
+        "seed must be in [0,",
+    ),
     ("env-list", ["train", "--set", "env=[1,2]"], 2, "env must be a mapping"),
     ("ppo-list", ["train", "--set", "ppo=[1]"], 2, "ppo must be a mapping"),
     ("unknown-setting", ["train", "--set", "bogus=1"], 2, "unknown training setting"),

@@ -401,6 +401,30 @@ class TrainConfig:
         return copy.deepcopy(dataclasses.asdict(self))
 
 
+def check_replaced_settings(data: Mapping[str, Any], flags: Mapping[str, Any]) -> None:
+    """Check the values ``data`` holds for the settings that command-line ``flags`` replace.
+
+    ``coopnav train --set timesteps=abc --timesteps 64`` would otherwise lose the bad value
+    silently under the flag's. Each replaced top-level setting (an entry of ``flags`` that is
+    not None, whose value in ``data`` differs) is checked on its own, as
+    :class:`TrainConfig` checks it; ``ValueError`` names it and says which flag replaces it.
+    (``seed`` is checked with one environment, its loosest bound; the whole configuration is
+    checked again afterwards.)
+    """
+    names = {f.name for f in dataclasses.fields(TrainConfig)} - {"out", "resume"}
+    for name, value in flags.items():
+        if value is None or name not in names or name not in data or data[name] == value:
+            continue
+        probe: dict[str, Any] = {"out": "-", name: data[name]}
+        if name == "seed":
+            probe["n_envs"] = 1
+        try:
+            TrainConfig.from_dict(probe)
+        except ValueError as exc:
+            flag = "--" + name.replace("_", "-")
+            raise ValueError(f"{exc} (the value {flag} {value} would have replaced)") from None
+
+
 def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) -> dict[str, Any]:
     """The section ``env_id`` of a YAML hyperparameter file, as a plain dict.
 

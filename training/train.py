@@ -24,6 +24,7 @@ from coopnav_env.training.config import (
     TrainConfig,
     apply_overrides,
     backend_module,
+    check_replaced_settings,
     load_config,
 )
 from coopnav_env.training.envs import DEFAULT_ENV_ID, make_env_fn
@@ -203,6 +204,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         "resume": args.resume,
         "verbose": args.verbose,
     }
+    check_replaced_settings(data, flags)  # a bad --set timesteps=abc is refused all the same
     data.update({k: v for k, v in flags.items() if v is not None})
     if args.backend is not None:
         data["backend"] = args.backend

@@ -33,7 +33,11 @@ class NavStatus(IntEnum):
     Attributes
     ----------
     OK
-        A valid fix with its covariance.
+        A valid fix with its covariance: the solver converged on enough measurements. It
+        says nothing of their consistency unless an integrity monitor tested the residuals
+        (:mod:`coopnav_env.nav.integrity`; the environment's ``integrity`` setting): without
+        one, a fix that uses a faulty pseudorange (a 1 km outlier) is OK too, its error far
+        beyond its covariance.
     TOO_FEW_SATELLITES
         Fewer usable measurements than unknowns (standalone needs ``3 + N_const``; the
         cooperative DDT needs one satellite at the centroid UAV, SDT ``3 + N_const`` there).

@@ -370,7 +370,10 @@ class ScenarioConfig:
         test identifies and re-solves, until the test passes or redundancy runs out. The
         protection levels and FDE figures of the estimate used go to
         ``Epoch.hpl_m``/``vpl_m``/``integrity_status``/``fault_detected``/``fde_excluded``.
-        Needs ``covariance="exact"``. ``"off"`` (default) leaves every episode as before.
+        Needs ``covariance="exact"``. ``"off"`` (default) runs no residual test and leaves
+        every episode as before: a fix's status ``OK`` then says only that the solver
+        converged, and a fix that uses a faulty pseudorange (an NLOS or multipath outlier,
+        even 1 km) is used, however large its error.
     integrity_p_fa : float, default 1e-3
         False-alarm probability of each residual test, in (0, 0.5].
     integrity_risk : float, default 1e-7

@@ -116,3 +116,36 @@ def test_batched_step_refuses_a_transposed_action_array():
         batched.step(np.zeros((2, 9)))
     batched.step(np.zeros((2, 3, 3)))
     batched.step(np.zeros((6, 3)))  # the documented flat form (copy-major)
+
+
+def test_integrity_off_is_said_to_test_no_residuals():
+    """Issue 35, finding 12: with no integrity monitor a 1 km outlier gives a fix of status
+    OK with an error of hundreds of metres, because nothing tests the residuals; FDE removes
+    it. Where a user reads the status and the setting, the documentation says so."""
+    from coopnav_env.nav import IntegrityStatus, NavStatus, fde_standalone, solve_standalone
+    from coopnav_env.sim.scenario import ScenarioConfig
+    from tests.nav.test_integrity import paper_swarm, with_bias
+
+    sc = paper_swarm(0.0)
+    obs = sc.observations(np.random.default_rng(0))
+    q = 1  # an open-sky UAV: 15 satellites, plenty of redundancy
+    bad = with_bias(obs, q, int(np.flatnonzero(sc.visible[q])[0]), 1000.0)
+    sol = solve_standalone(bad)
+    err_m = np.linalg.norm(sol.pos_ecef_m[q] - sc.pos_ecef[q])
+    assert sol.status[q] == NavStatus.OK and err_m > 100.0  # OK, and far off
+    fixed, checked = fde_standalone(bad, enu_rotation=sc.rot)
+    assert checked.status[q] == IntegrityStatus.EXCLUDED
+    assert np.linalg.norm(fixed.pos_ecef_m[q] - sc.pos_ecef[q]) < 10.0
+
+    import coopnav_env.urban_canyon_v0 as page
+
+    def text(doc):
+        return " ".join((doc or "").split())
+
+    assert "with `integrity` off no residual test runs" in text(page.__doc__)
+    assert "unless an integrity monitor tested" in text(NavStatus.__doc__)
+    assert '``"off"`` (default) runs no residual test' in text(ScenarioConfig.__doc__)
+    # and a program can tell: the integrity figures are in the infos only when it ran
+    env = urban_canyon_v0.parallel_env(n_uavs=2)
+    _, infos = env.reset(seed=0)
+    assert "integrity_status" not in infos["uav_0"]
