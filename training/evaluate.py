@@ -703,20 +703,3 @@ def _markdown_document(report: Report) -> str:
         "",
     ]
     return "\n".join(lines)
-
-
-#: names that moved to :mod:`coopnav_env.training.evaluate_cli` (the ``coopnav evaluate``
-#: command line), still reachable here
-_CLI_NAMES: frozenset[str] = frozenset(
-    {"TRAINED_KINDS", "add_arguments", "reward_settings", "run", "train_config_of_policies"}
-)
-
-
-def __getattr__(name: str) -> Any:
-    """Forward the command-line names (``run``, ``add_arguments``, ...) to
-    :mod:`coopnav_env.training.evaluate_cli`, where they live."""
-    if name in _CLI_NAMES:
-        from coopnav_env.training import evaluate_cli
-
-        return getattr(evaluate_cli, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -25,7 +25,7 @@ from typing import Any
 from coopnav_env.training.compile_notice import compile_notice, warm_up_env
 from coopnav_env.training.config import apply_overrides, parse_yaml
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
-from coopnav_env.training.evaluate import DEFAULT_EPISODES, _make_env, evaluate
+from coopnav_env.training.evaluate import DEFAULT_EPISODES, evaluate
 from coopnav_env.training.files import claim_output_folder, jsonable
 
 EVALUATE_OUTPUTS = (
@@ -239,7 +239,7 @@ _NAMED_SETTINGS: tuple[str, ...] = (
 def reward_settings(env_id: str, env_kwargs: Mapping[str, Any]) -> str:
     """``key=value`` of the main reward and episode settings the env resolves, or ""."""
     try:
-        env = _make_env(env_id, env_kwargs)
+        env = make_env_fn(env_id, env_kwargs)()
     except Exception:  # the evaluation itself reports bad settings, with its own message
         return ""
     config = getattr(getattr(env, "unwrapped", env), "config", None)

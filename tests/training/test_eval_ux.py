@@ -144,7 +144,7 @@ def toy_run(tmp_path_factory):
 
 
 def _evaluate_cli(*argv: str) -> int:
-    from coopnav_env.training import evaluate as ev
+    from coopnav_env.training import evaluate_cli as ev
 
     parser = argparse.ArgumentParser()
     ev.add_arguments(parser)
@@ -187,7 +187,7 @@ def test_the_run_settings_are_named_in_the_header(toy_run, tmp_path, capsys) -> 
 
 @pytest.mark.skipif(not HAS_ENV, reason="urban_canyon_v0 not available")
 def test_the_warning_names_thereward_settings() -> None:
-    from coopnav_env.training.evaluate import reward_settings
+    from coopnav_env.training.evaluate_cli import reward_settings
 
     text = reward_settings("urban_canyon_v0", {"n_uavs": 3, "collision_penalty": 7.0})
     assert "n_uavs=3" in text and "collision_penalty=7.0" in text

@@ -176,7 +176,7 @@ def test_rllib_policy_and_resume_errors(tmp_path, capsys):
 
 
 def test_evaluate_reads_the_environment_of_an_rllib_run(tmp_path):
-    from coopnav_env.training.evaluate import train_config_of_policies
+    from coopnav_env.training.evaluate_cli import train_config_of_policies
 
     run = tmp_path / "run"
     (run / "final_model").mkdir(parents=True)

@@ -434,7 +434,7 @@ def test_urban_bad_env_setting_is_a_clear_error(tmp_path):
 
 def test_evaluate_cli_uses_the_training_environment(tmp_path, capsys):
     """``coopnav evaluate ppo:RUN/final_model.zip`` runs in the env RUN was trained in."""
-    from coopnav_env.training import evaluate as ev
+    from coopnav_env.training import evaluate_cli as ev
 
     final = train(toy_cfg(tmp_path / "run", timesteps=200, env={"n_uavs": 2, "max_steps": 5}))
     parser = argparse.ArgumentParser()
