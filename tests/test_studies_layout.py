@@ -119,8 +119,13 @@ def _installed_files(suffixes: tuple[str, ...] = (".py",)) -> list[Path]:
 
 
 def _study_folders() -> list[Path]:
+    """The folders under ``studies/`` that hold a file (git keeps no empty folder)."""
     return sorted(
-        p for p in (ROOT / "studies").iterdir() if p.is_dir() and not p.name.startswith((".", "_"))
+        p
+        for p in (ROOT / "studies").iterdir()
+        if p.is_dir()
+        and not p.name.startswith((".", "_"))
+        and any(f.is_file() for f in p.rglob("*") if "__pycache__" not in f.parts)
     )
 
 
