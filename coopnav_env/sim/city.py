@@ -273,6 +273,8 @@ def is_inside_building(buildings: Buildings, pos_enu_m: ArrayLike) -> BoolArray:
         or roof are outside).
     """
     pos = _as_points(pos_enu_m, "pos_enu_m")
+    if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
+        return buildings.is_inside(pos)
     inside = np.zeros(pos.shape[0], dtype=bool)
     for c in _chunk_slices(buildings.n, 3 * max(pos.shape[0], 1)):
         lo = buildings.min_m[None, c, :]
@@ -407,6 +409,8 @@ def sky_directions(dir_enu: ArrayLike) -> SkyDirections:
 def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirections) -> BoolArray:
     """:func:`line_of_sight` from validated receivers and prepared directions (in one
     compiled call, :func:`coopnav_env.sim._kernels.line_of_sight`, with ``_USE_KERNEL``)."""
+    if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
+        return buildings.trace_line_of_sight(pos, sky)
     if _USE_KERNEL:
         return _kernels.line_of_sight(
             np.ascontiguousarray(pos, dtype=float),
@@ -597,6 +601,8 @@ def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: Array
         Skyline elevation [deg], in [0, 90]: 0 where no building taller than the receiver lies
         along the azimuth, 90 for a receiver inside a building.
     """
+    if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
+        return buildings.sky_and_walls(pos_enu_m, az_deg)[0]
     if _USE_KERNEL:
         return sky_and_walls(buildings, pos_enu_m, az_deg)[0]
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
@@ -638,6 +644,8 @@ def sky_and_walls(
     Both trace the same horizontal rays (receivers x azimuths) through the same footprints;
     this computes the slab intervals once and returns exactly what the two functions return.
     """
+    if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
+        return buildings.sky_and_walls(pos_enu_m, az_deg)
     if _USE_KERNEL:
         # every building goes to the kernel: one whose roof is not above a receiver changes
         # nothing for it (the sweep's "taller than the lowest receiver" cull is implied)
@@ -679,7 +687,7 @@ def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLik
         Distance [m], >= 0: ``inf`` where the ray meets no building taller than the receiver,
         0 for a receiver inside a building.
     """
-    if _USE_KERNEL:
+    if _USE_KERNEL or not isinstance(buildings, Buildings):
         return sky_and_walls(buildings, pos_enu_m, az_deg)[1]
     pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
     dist = np.full(sweep.shape, np.inf)

@@ -1,0 +1,971 @@
+"""A city from a file: building footprints from GeoJSON, extruded to their roof heights.
+
+What it reads
+-------------
+A GeoJSON ``FeatureCollection`` (RFC 7946: WGS 84 longitude/latitude in degrees) whose
+features are ``Polygon`` or ``MultiPolygon`` building footprints, the form OpenStreetMap
+extracts and the open building datasets are shared in. Each polygon of a ``MultiPolygon``
+becomes its own building; interior rings (courtyards) are kept. Other geometry types
+(points, lines) are skipped and counted. The roof height of a feature comes from, in order:
+
+1. ``properties["height"]``: metres, a number or a string such as ``"12"``, ``"12 m"`` or
+   ``"40 ft"`` (feet are converted);
+2. ``properties["building:levels"]`` times ``storey_height_m`` (default
+   :data:`STOREY_HEIGHT_M`, 3.0 m per storey);
+3. ``default_height_m`` (the environment uses :data:`DEFAULT_HEIGHT_M`, 10 m), counted in
+   :attr:`FileCity.n_default_height` and reported in one warning; with
+   ``default_height_m=None`` a feature without a height is an error.
+
+Frames
+------
+The footprints are converted to the environment's local East-North-Up frame (metres) at a
+stated geodetic origin with :mod:`coopnav_env.gnss.frames` (geodetic -> ECEF -> ENU, the
+vertices at the origin's ellipsoidal height). The origin is the centroid of all footprint
+vertices (mean latitude and longitude) unless the caller gives one. The ground is the plane
+``z = 0`` of that frame; over the :data:`MAX_ORIGIN_DISTANCE_M` a file may span, the Earth's
+curvature drops the ground by at most ``d^2 / (2 R)`` (8 m at 10 km, 0.08 m at 1 km), which is
+neglected. Every vertex farther than ``max_origin_distance_m`` from the origin is an error.
+
+Errors
+------
+A bad file raises :class:`CityFileError` (a ``ValueError``) naming the file, the feature
+(index and ``id`` when it has one), the ring and what is wrong: not JSON, not a
+FeatureCollection, an unsupported geometry, non-finite or out-of-range coordinates, an open
+ring (first position differs from the last), a ring with fewer than 3 distinct vertices, a
+self-intersecting ring, a point beyond ``max_origin_distance_m``, no height (with no default)
+or an unreadable height.
+
+Geometry
+--------
+:class:`ExtrudedBuildings` holds the polygons as flat edge arrays and traces them with the
+compiled loops of :mod:`coopnav_env.sim._polygon_kernels`: line of sight (the same rule as
+the box city: a ray is blocked when it is at most roof-high where it first enters a footprint),
+the skyline and wall-distance sensors, the inside test and swept-sphere collisions.
+:class:`FileCity` is a :class:`~coopnav_env.sim.city.City` whose ``buildings`` are
+:class:`ExtrudedBuildings`; the free functions of :mod:`coopnav_env.sim.city`
+(:func:`~coopnav_env.sim.city.line_of_sight`, :func:`~coopnav_env.sim.city.sky_and_walls`, ...)
+hand such buildings to these methods, so the world uses a file city wherever it uses a grid
+city.
+
+Routes
+------
+A file city has no street grid. Its free space is a grid of square cells
+(``grid_resolution_m``, default 5 m) whose centres lie outside every footprint and at least
+``clearance_m`` (default 3 m) from every wall; buildings count as obstacles whatever their
+height. Cells are 8-connected (a diagonal step needs both of its orthogonal neighbours free).
+Start and goal points are drawn in the largest connected piece of free space; a route is the
+A* shortest path (octile distance) between the cells of its ends, shortened by keeping only
+the waypoints it cannot cut (a straight leg crosses reachable cells only, by an exact grid
+traversal).
+"""
+
+from __future__ import annotations
+
+import functools
+import heapq
+import json
+import math
+import os
+import re
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from coopnav_env.gnss.frames import ecef_to_enu, enu_to_ecef, geodetic_to_ecef
+from coopnav_env.gnss.frames import ecef_to_geodetic as _ecef_to_geodetic
+from coopnav_env.sim import _polygon_kernels as _pk
+from coopnav_env.sim.city import City, SkyDirections, _as_points, _ray_directions, _readonly
+
+__all__ = [
+    "CLEARANCE_M",
+    "DEFAULT_HEIGHT_M",
+    "GEOJSON_PREFIX",
+    "GRID_RESOLUTION_M",
+    "MAX_ORIGIN_DISTANCE_M",
+    "STOREY_HEIGHT_M",
+    "CityFileError",
+    "ExtrudedBuildings",
+    "FileCity",
+    "load_file_city",
+    "read_geojson_footprints",
+    "sample_city_geojson",
+    "sample_city_path",
+    "write_sample_city",
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+GEOJSON_PREFIX: str = "geojson:"
+"""Prefix of the environment's ``city`` setting that names a GeoJSON file."""
+STOREY_HEIGHT_M: float = 3.0
+"""Height of one storey [m] for features with ``building:levels`` but no ``height``."""
+DEFAULT_HEIGHT_M: float = 10.0
+"""Roof height [m] the environment gives a feature with neither ``height`` nor levels."""
+MAX_ORIGIN_DISTANCE_M: float = 10_000.0
+"""Default farthest a footprint vertex may lie from the origin [m] (the flat-ground limit)."""
+GRID_RESOLUTION_M: float = 5.0
+"""Default cell size of the free-space grid [m]."""
+CLEARANCE_M: float = 3.0
+"""Default smallest distance from a free cell's centre to a wall [m]."""
+EXTENT_MARGIN_M: float = 20.0
+"""Open ground around the footprints' bounding box, inside the city's extent [m]."""
+
+
+class CityFileError(ValueError):
+    """A city file that cannot be used; the message names the file, feature and problem."""
+
+
+# --------------------------------------------------------------------------------------------
+# extruded polygons
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ExtrudedBuildings:
+    """Buildings that are polygons (with holes) extruded from the ground to a flat roof.
+
+    Build with :meth:`from_rings`. Fields are read-only arrays.
+
+    Attributes
+    ----------
+    rings_m : tuple of tuple of ndarray
+        Per building, its rings (exterior first, then holes), each ``(k, 2)`` East/North
+        vertices [m] without the closing repeat.
+    heights_m : ndarray, shape (n_b,)
+        Roof heights [m], > 0.
+    edges_m : ndarray, shape (n_e, 4)
+        Every ring edge ``(ax, ay, bx, by)`` [m], building after building.
+    edge_start : ndarray of int64, shape (n_b + 1,)
+        Building ``b`` owns ``edges_m[edge_start[b]:edge_start[b + 1]]``.
+    bbox_m : ndarray, shape (n_b, 4)
+        ``(x_min, y_min, x_max, y_max)`` of each footprint [m].
+    feature_ids : tuple of str
+        Per building, the feature it came from (``"feature 3"``, with ``" (id 'b3')"`` when
+        the feature has an ``id``).
+    """
+
+    rings_m: tuple[tuple[FloatArray, ...], ...]
+    heights_m: FloatArray
+    edges_m: FloatArray
+    edge_start: NDArray[np.int64]
+    bbox_m: FloatArray
+    feature_ids: tuple[str, ...] = field(default=())
+
+    @classmethod
+    def from_rings(
+        cls,
+        rings_m: Sequence[Sequence[ArrayLike]],
+        heights_m: ArrayLike,
+        feature_ids: Sequence[str] | None = None,
+    ) -> ExtrudedBuildings:
+        """Buildings from their rings (per building: exterior then holes, ``(k, 2)`` [m],
+        closed or not) and roof heights ``(n_b,)`` [m]."""
+        h = np.array(heights_m, dtype=np.float64).reshape(-1)
+        if h.size != len(rings_m):
+            raise ValueError(
+                f"heights_m must have one value per building ({len(rings_m)}), got {h.size}"
+            )
+        if not np.all(np.isfinite(h) & (h > 0.0)):
+            raise ValueError("heights_m must be finite and > 0")
+        all_rings, edges, starts, boxes = [], [], [0], []
+        for b, rings in enumerate(rings_m):
+            if len(rings) == 0:
+                raise ValueError(f"building {b} has no ring")
+            kept = []
+            for ring in rings:
+                r = np.array(ring, dtype=np.float64).reshape(-1, 2)
+                if r.shape[0] > 1 and np.array_equal(r[0], r[-1]):
+                    r = r[:-1]
+                if r.shape[0] < 3 or not np.all(np.isfinite(r)):
+                    raise ValueError(f"building {b}: a ring needs >= 3 finite vertices")
+                kept.append(_readonly(r))
+                edges.append(np.concatenate([r, np.roll(r, -1, axis=0)], axis=1))
+            all_rings.append(tuple(kept))
+            starts.append(starts[-1] + sum(k.shape[0] for k in kept))
+            ext = kept[0]
+            boxes.append([*ext.min(axis=0), *ext.max(axis=0)])
+        ids = tuple(feature_ids) if feature_ids is not None else ()
+        return cls(
+            rings_m=tuple(all_rings),
+            heights_m=_readonly(h),
+            edges_m=_readonly(np.concatenate(edges) if edges else np.zeros((0, 4))),
+            edge_start=_readonly(np.array(starts, dtype=np.int64)),
+            bbox_m=_readonly(np.array(boxes, dtype=np.float64).reshape(-1, 4)),
+            feature_ids=ids,
+        )
+
+    @property
+    def n(self) -> int:
+        """Number of buildings ``n_b``."""
+        return int(self.heights_m.shape[0])
+
+    @property
+    def footprints_m(self) -> FloatArray:
+        """Bounding boxes ``(x_min, y_min, x_max, y_max)`` of the footprints, ``(n_b, 4)`` [m]
+        (what a box-city drawing shows; :attr:`rings_m` has the polygons)."""
+        return self.bbox_m.copy()
+
+    def _args(self) -> tuple[Any, ...]:
+        return self.edges_m, self.edge_start, self.heights_m, self.bbox_m
+
+    def is_inside(self, pos_enu_m: ArrayLike) -> BoolArray:
+        """Whether each point ``(n, 3)`` [m] is inside a building (inside a footprint by the
+        even-odd rule, ``0 < z < roof``); ``(n,)`` bool. Points on a wall may fall either
+        way."""
+        pos = np.ascontiguousarray(_as_points(pos_enu_m, "pos_enu_m"))
+        return _pk.inside_buildings(pos, *self._args())
+
+    def trace_line_of_sight(self, pos_enu_m: ArrayLike, sky: SkyDirections) -> BoolArray:
+        """Line of sight ``(n_rx, n_sv)`` from receivers to prepared satellite directions
+        (:func:`~coopnav_env.sim.city.sky_directions`): the rule of
+        :func:`~coopnav_env.sim.city.line_of_sight` (directions at elevation <= 0 never
+        visible; a ray that grazes an edge or a roof counts as blocked)."""
+        pos = np.ascontiguousarray(_as_points(pos_enu_m, "pos_enu_m"))
+        return _pk.line_of_sight(pos, *self._args(), sky.up, sky.order, sky.cot_s, sky.h_dir)
+
+    def sky_and_walls(
+        self, pos_enu_m: ArrayLike, az_deg: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Skyline elevation [deg] and nearest-wall distance [m] along each azimuth,
+        ``(n, n_az)`` each, as :func:`~coopnav_env.sim.city.sky_and_walls` defines them (90 deg
+        and 0 m inside a footprint below its roof; 0 deg and ``inf`` where nothing is met)."""
+        pos = np.ascontiguousarray(_as_points(pos_enu_m, "pos_enu_m"))
+        tan_max, dist = _pk.sky_and_walls(pos, _ray_directions(az_deg), *self._args())
+        return np.degrees(np.arctan(tan_max)), dist
+
+    def swept_collisions(
+        self, start_enu_m: ArrayLike, end_enu_m: ArrayLike, radius_m: float
+    ) -> BoolArray:
+        """Whether spheres of ``radius_m`` moving along straight segments ``(n, 3)`` [m] touch
+        a building (distance <= radius: touching collides); ``(n,)`` bool."""
+        p0 = np.ascontiguousarray(_as_points(start_enu_m, "start_enu_m"))
+        p1 = np.ascontiguousarray(_as_points(end_enu_m, "end_enu_m"))
+        if p0.shape != p1.shape:
+            raise ValueError(f"start and end must share one shape, got {p0.shape}, {p1.shape}")
+        return _pk.swept_collisions(*self._args(), p0, p1, float(radius_m))
+
+
+# --------------------------------------------------------------------------------------------
+# reading GeoJSON
+# --------------------------------------------------------------------------------------------
+
+_HEIGHT_RE = re.compile(
+    r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*(m|metres|meters|ft|feet|')?\s*$"
+)
+
+
+def _parse_height(value: Any, where: str, key: str) -> float:
+    """A positive height in metres from a number or a string such as ``"12 m"``."""
+    if isinstance(value, bool):
+        raise CityFileError(f"{where}: {key} {value!r} is not a height")
+    if isinstance(value, (int, float)):
+        h = float(value)
+    elif isinstance(value, str):
+        m = _HEIGHT_RE.match(value)
+        if m is None:
+            raise CityFileError(f"{where}: cannot read {key} {value!r} (expected e.g. '12 m')")
+        h = float(m.group(1)) * (0.3048 if m.group(2) in ("ft", "feet", "'") else 1.0)
+    else:
+        raise CityFileError(f"{where}: {key} {value!r} is not a number or a string")
+    if not (math.isfinite(h) and h > 0.0):
+        raise CityFileError(f"{where}: {key} {value!r} must be a finite height > 0 m")
+    return h
+
+
+def _feature_height(
+    props: dict[str, Any], where: str, storey_m: float, default_m: float | None
+) -> tuple[float, bool]:
+    """Roof height of a feature and whether the default was used."""
+    if props.get("height") is not None:
+        return _parse_height(props["height"], where, "height"), False
+    if props.get("building:levels") is not None:
+        levels = _parse_height(props["building:levels"], where, "building:levels")
+        return levels * storey_m, False
+    if default_m is None:
+        raise CityFileError(
+            f"{where}: no height (neither 'height' nor 'building:levels') and no default height"
+        )
+    return default_m, True
+
+
+def _segments_cross(p: FloatArray, q: FloatArray) -> bool:
+    """Whether any two non-adjacent edges of the closed ring ``p`` (k, 2) intersect (``q`` is
+    ``p`` rolled by one: edge ``i`` runs from ``p[i]`` to ``q[i]``). Pure numpy, O(k^2)."""
+    k = p.shape[0]
+    a, b = p[:, None, :], q[:, None, :]
+    c, d = p[None, :, :], q[None, :, :]
+
+    def orient(u, v, w):
+        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (
+            w[..., 0] - u[..., 0]
+        )
+
+    o1, o2 = orient(a, b, c), orient(a, b, d)
+    o3, o4 = orient(c, d, a), orient(c, d, b)
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
+
+    def on_seg(u, v, w, o):  # w on segment u v given orient(u, v, w) == o
+        return (
+            (o == 0)
+            & (np.minimum(u[..., 0], v[..., 0]) <= w[..., 0])
+            & (w[..., 0] <= np.maximum(u[..., 0], v[..., 0]))
+            & (np.minimum(u[..., 1], v[..., 1]) <= w[..., 1])
+            & (w[..., 1] <= np.maximum(u[..., 1], v[..., 1]))
+        )
+
+    touch = on_seg(a, b, c, o1) | on_seg(a, b, d, o2) | on_seg(c, d, a, o3) | on_seg(c, d, b, o4)
+    i, j = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+    adjacent = (i == j) | ((i + 1) % k == j) | ((j + 1) % k == i)
+    return bool(np.any((proper | touch) & ~adjacent))
+
+
+@dataclass(frozen=True)
+class _Footprints:
+    rings_lonlat: list[list[FloatArray]]  # per building, rings (k, 2) lon/lat, not closed
+    heights_m: list[float]
+    ids: list[str]
+    n_default_height: int
+    n_skipped: int
+
+
+def _read_lonlat(path: Path, storey_m: float, default_m: float | None) -> _Footprints:
+    """Parse and check the GeoJSON file's polygons in lon/lat (errors name the feature)."""
+    name = str(path)
+    if not path.is_file():
+        raise CityFileError(f"city file {name}: no such file")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CityFileError(f"city file {name}: not readable GeoJSON ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
+        raise CityFileError(f"city file {name}: expected a GeoJSON FeatureCollection")
+    feats = doc.get("features")
+    if not isinstance(feats, list):
+        raise CityFileError(f"city file {name}: 'features' must be a list")
+    out = _Footprints([], [], [], 0, 0)
+    n_default = n_skipped = 0
+    for i, feat in enumerate(feats):
+        fid = feat.get("id") if isinstance(feat, dict) else None
+        where = f"city file {name}, feature {i}" + (f" (id {fid!r})" if fid is not None else "")
+        if not isinstance(feat, dict) or feat.get("type") != "Feature":
+            raise CityFileError(f"{where}: not a GeoJSON Feature")
+        geom = feat.get("geometry")
+        props = feat.get("properties") or {}
+        if not isinstance(props, dict):
+            raise CityFileError(f"{where}: 'properties' must be an object")
+        gtype = geom.get("type") if isinstance(geom, dict) else None
+        if gtype not in ("Polygon", "MultiPolygon"):
+            n_skipped += 1
+            continue
+        coords = geom.get("coordinates")
+        polys = [coords] if gtype == "Polygon" else coords
+        if not isinstance(polys, list) or not polys:
+            raise CityFileError(f"{where}: empty {gtype} coordinates")
+        height, defaulted = _feature_height(props, where, storey_m, default_m)
+        n_default += int(defaulted)
+        for pi, poly in enumerate(polys):
+            pw = where if gtype == "Polygon" else f"{where}, polygon {pi}"
+            if not isinstance(poly, list) or not poly:
+                raise CityFileError(f"{pw}: a polygon needs at least an exterior ring")
+            rings = []
+            for ri, ring in enumerate(poly):
+                rw = f"{pw}, ring {ri}"
+                try:
+                    arr = np.array(ring, dtype=np.float64)
+                except (TypeError, ValueError):
+                    raise CityFileError(f"{rw}: coordinates are not numbers") from None
+                if arr.ndim != 2 or arr.shape[1] < 2:
+                    raise CityFileError(f"{rw}: positions must be [lon, lat] pairs")
+                arr = arr[:, :2]
+                if not np.all(np.isfinite(arr)):
+                    raise CityFileError(f"{rw}: non-finite coordinates")
+                if np.any(np.abs(arr[:, 1]) > 90.0) or np.any(np.abs(arr[:, 0]) > 180.0):
+                    raise CityFileError(f"{rw}: longitude/latitude out of range")
+                if arr.shape[0] < 2 or not np.array_equal(arr[0], arr[-1]):
+                    raise CityFileError(
+                        f"{rw}: open ring (the last position must repeat the first)"
+                    )
+                arr = arr[:-1]
+                distinct = np.unique(arr, axis=0).shape[0]
+                if distinct < 3:
+                    raise CityFileError(f"{rw}: fewer than 3 distinct vertices ({distinct})")
+                if distinct != arr.shape[0] or _segments_cross(arr, np.roll(arr, -1, axis=0)):
+                    raise CityFileError(f"{rw}: self-intersecting ring")
+                rings.append(arr)
+            out.rings_lonlat.append(rings)
+            out.heights_m.append(height)
+            out.ids.append(where[len(f"city file {name}, ") :])
+    if not out.rings_lonlat:
+        raise CityFileError(f"city file {name}: no Polygon or MultiPolygon feature")
+    return _Footprints(out.rings_lonlat, out.heights_m, out.ids, n_default, n_skipped)
+
+
+def read_geojson_footprints(
+    path: str | os.PathLike[str],
+    *,
+    origin_lat_lon: tuple[float, float] | None = None,
+    alt_m: float = 0.0,
+    storey_height_m: float = STOREY_HEIGHT_M,
+    default_height_m: float | None = DEFAULT_HEIGHT_M,
+    max_origin_distance_m: float = MAX_ORIGIN_DISTANCE_M,
+) -> tuple[ExtrudedBuildings, tuple[float, float, float], int]:
+    """Read building footprints from a GeoJSON file into the ENU frame of an origin.
+
+    Parameters
+    ----------
+    path : path-like
+        The GeoJSON FeatureCollection (module docstring).
+    origin_lat_lon : (float, float), optional
+        Geodetic origin of the ENU frame [deg]; default: the mean latitude and longitude of
+        all footprint vertices.
+    alt_m : float, default 0.0
+        Ellipsoidal height of the origin (the ground) [m].
+    storey_height_m : float, default :data:`STOREY_HEIGHT_M`
+        Metres per ``building:levels`` storey, > 0.
+    default_height_m : float or None, default :data:`DEFAULT_HEIGHT_M`
+        Height of a feature without ``height`` or levels [m]; None: such a feature is an error.
+    max_origin_distance_m : float, default :data:`MAX_ORIGIN_DISTANCE_M`
+        Farthest a vertex may lie from the origin (horizontally) [m].
+
+    Returns
+    -------
+    buildings : ExtrudedBuildings
+    origin : (float, float, float)
+        ``(lat_deg, lon_deg, alt_m)`` of the ENU frame.
+    n_default_height : int
+        Buildings that got ``default_height_m``.
+
+    Raises
+    ------
+    CityFileError
+        Naming the file, the feature and what is wrong.
+    """
+    p = Path(path)
+    if not (math.isfinite(storey_height_m) and storey_height_m > 0.0):
+        raise ValueError(f"storey_height_m must be finite and > 0, got {storey_height_m!r}")
+    if default_height_m is not None and not (
+        math.isfinite(default_height_m) and default_height_m > 0.0
+    ):
+        raise ValueError(f"default_height_m must be None or > 0, got {default_height_m!r}")
+    fp = _read_lonlat(p, float(storey_height_m), default_height_m)
+    if origin_lat_lon is None:
+        allv = np.concatenate([r for rings in fp.rings_lonlat for r in rings])
+        lat0, lon0 = float(allv[:, 1].mean()), float(allv[:, 0].mean())
+    else:
+        lat0, lon0 = (float(v) for v in origin_lat_lon)
+        if not (math.isfinite(lat0) and math.isfinite(lon0) and abs(lat0) <= 85.0):
+            raise ValueError(
+                f"origin_lat_lon must be finite with |lat| <= 85, got {origin_lat_lon}"
+            )
+    rings_enu = []
+    for k, rings in enumerate(fp.rings_lonlat):
+        conv = []
+        for ri, r in enumerate(rings):
+            ecef = geodetic_to_ecef(r[:, 1], r[:, 0], np.full(r.shape[0], float(alt_m)))
+            enu = ecef_to_enu(ecef, lat0, lon0, float(alt_m))[:, :2]
+            far = np.hypot(enu[:, 0], enu[:, 1]) > max_origin_distance_m
+            if np.any(far):
+                j = int(np.argmax(far))
+                raise CityFileError(
+                    f"city file {p}, {fp.ids[k]}, ring {ri}: vertex {j} lies "
+                    f"{float(np.hypot(*enu[j])):.0f} m from the origin ({lat0:.6f}, "
+                    f"{lon0:.6f}), beyond the {max_origin_distance_m:.0f} m limit"
+                )
+            conv.append(enu)
+        rings_enu.append(conv)
+    buildings = ExtrudedBuildings.from_rings(rings_enu, fp.heights_m, fp.ids)
+    return buildings, (lat0, lon0, float(alt_m)), fp.n_default_height
+
+
+# --------------------------------------------------------------------------------------------
+# the city
+# --------------------------------------------------------------------------------------------
+
+_STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))
+
+
+@dataclass(frozen=True, eq=False)
+class FileCity(City):
+    """A :class:`~coopnav_env.sim.city.City` read from a file: extruded polygon buildings,
+    a free-space grid for start, goal and routes, and the geodetic origin of its frame.
+
+    Build with :func:`load_file_city`. ``street_centres_x_m``/``_y_m`` and ``open_squares``
+    are empty; ``street_width_m`` is twice the clearance (the narrowest passage the free
+    space keeps); ``buildings`` is an :class:`ExtrudedBuildings`.
+
+    Attributes
+    ----------
+    grid_x_m, grid_y_m : ndarray
+        East/North of the free-space cell centres [m].
+    free : ndarray of bool, shape (n_y, n_x)
+        Free cells (outside footprints, clearance kept).
+    reachable : ndarray of bool, shape (n_y, n_x)
+        Free cells of the largest 8-connected piece of free space (where starts and goals are
+        drawn).
+    origin : (float, float, float)
+        ``(lat_deg, lon_deg, alt_m)`` of the ENU frame.
+    source : str
+        The file read.
+    n_default_height : int
+        Buildings that got the default height.
+    """
+
+    grid_x_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    grid_y_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    free: BoolArray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    reachable: BoolArray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    source: str = ""
+    n_default_height: int = 0
+
+    @property
+    def resolution_m(self) -> float:
+        """Cell size of the free-space grid [m]."""
+        return float(self.grid_x_m[1] - self.grid_x_m[0]) if self.grid_x_m.size > 1 else 1.0
+
+    def lat_lon_to_xy(self, lat_deg: float, lon_deg: float) -> FloatArray:
+        """East/North [m], shape ``(2,)``, of a point on the ground in this city's frame."""
+        lat0, lon0, alt0 = self.origin
+        ecef = geodetic_to_ecef(float(lat_deg), float(lon_deg), alt0)
+        return ecef_to_enu(ecef, lat0, lon0, alt0)[:2]
+
+    def xy_to_lat_lon(self, xy: ArrayLike) -> tuple[float, float]:
+        """Latitude and longitude [deg] of an East/North point [m] on the ground."""
+        lat0, lon0, alt0 = self.origin
+        p = np.asarray(xy, dtype=float).reshape(2)
+        ecef = enu_to_ecef(np.array([p[0], p[1], 0.0]), lat0, lon0, alt0)
+        lat, lon, _ = _ecef_to_geodetic(ecef)
+        return float(lat), float(lon)
+
+    def _cell(self, xy: ArrayLike) -> tuple[int, int]:
+        """``(row, col)`` of the cell holding ``xy`` (clipped to the grid)."""
+        p = np.asarray(xy, dtype=float).reshape(2)
+        res = self.resolution_m
+        col = int(
+            np.clip(np.floor((p[0] - self.grid_x_m[0]) / res + 0.5), 0, self.grid_x_m.size - 1)
+        )
+        row = int(
+            np.clip(np.floor((p[1] - self.grid_y_m[0]) / res + 0.5), 0, self.grid_y_m.size - 1)
+        )
+        return row, col
+
+    def is_free_xy(self, xy: ArrayLike) -> BoolArray:
+        """Whether each East/North point ``(n, 2)`` [m] lies in a reachable free cell."""
+        p = np.asarray(xy, dtype=float).reshape(-1, 2)
+        res = self.resolution_m
+        col = np.floor((p[:, 0] - self.grid_x_m[0]) / res + 0.5).astype(np.int64)
+        row = np.floor((p[:, 1] - self.grid_y_m[0]) / res + 0.5).astype(np.int64)
+        ok = (col >= 0) & (col < self.grid_x_m.size) & (row >= 0) & (row < self.grid_y_m.size)
+        out = np.zeros(p.shape[0], dtype=bool)
+        out[ok] = self.reachable[row[ok], col[ok]]
+        return out
+
+    def random_street_points(
+        self,
+        rng: np.random.Generator,
+        n: int,
+        altitude_m: float = 10.0,
+        margin_m: float = 2.0,
+    ) -> FloatArray:
+        """Uniformly random points ``(n, 3)`` [m] in the reachable free space (a random
+        reachable cell, then uniformly within ``resolution / 2 - margin`` of its centre, at
+        ``altitude_m``). ``margin_m`` is clipped to ``[0, resolution / 2]``."""
+        rows, cols = np.nonzero(self.reachable)
+        k = rng.integers(0, rows.size, size=int(n))
+        half = max(self.resolution_m / 2.0 - max(float(margin_m), 0.0), 0.0)
+        jitter = rng.uniform(-half, half, size=(int(n), 2))
+        x = self.grid_x_m[cols[k]] + jitter[:, 0]
+        y = self.grid_y_m[rows[k]] + jitter[:, 1]
+        return np.stack([x, y, np.full(int(n), float(altitude_m))], axis=1)
+
+    def _segment_free(self, a: FloatArray, b: FloatArray) -> bool:
+        """Whether the straight leg ``a -> b`` crosses reachable cells only (every cell it
+        passes through, by a grid traversal; a leg through a cell corner checks both cells
+        beside it)."""
+        res = self.resolution_m
+        u0 = (a[0] - self.grid_x_m[0]) / res + 0.5
+        v0 = (a[1] - self.grid_y_m[0]) / res + 0.5
+        u1 = (b[0] - self.grid_x_m[0]) / res + 0.5
+        v1 = (b[1] - self.grid_y_m[0]) / res + 0.5
+        ny, nx = self.reachable.shape
+        i, j = math.floor(u0), math.floor(v0)
+        i_end, j_end = math.floor(u1), math.floor(v1)
+        du, dv = u1 - u0, v1 - v0
+        si, sj = (1 if du > 0 else -1), (1 if dv > 0 else -1)
+        tx = ((i + (si > 0)) - u0) / du if du != 0 else math.inf
+        ty = ((j + (sj > 0)) - v0) / dv if dv != 0 else math.inf
+        dtx = abs(1.0 / du) if du != 0 else math.inf
+        dty = abs(1.0 / dv) if dv != 0 else math.inf
+
+        def ok(ci: int, cj: int) -> bool:
+            return 0 <= ci < nx and 0 <= cj < ny and bool(self.reachable[cj, ci])
+
+        for _ in range(abs(i_end - i) + abs(j_end - j) + 2):
+            if not ok(i, j):
+                return False
+            if i == i_end and j == j_end:
+                return True
+            if tx == ty:  # through a corner: both side cells must be free too
+                if not (ok(i + si, j) and ok(i, j + sj)):
+                    return False
+                i, j, tx, ty = i + si, j + sj, tx + dtx, ty + dty
+            elif tx < ty:
+                i, tx = i + si, tx + dtx
+            else:
+                j, ty = j + sj, ty + dty
+        return ok(i, j)
+
+    def free_space_route(self, start_xy: ArrayLike, goal_xy: ArrayLike) -> FloatArray:
+        """The route ``(k, 2)`` [m] from start to goal through the free space (module
+        docstring): A* on the reachable cells between the cells of the two ends, shortened.
+
+        Raises
+        ------
+        ValueError
+            When an end is not on a reachable free cell.
+        """
+        s = np.asarray(start_xy, dtype=float).reshape(2)
+        g = np.asarray(goal_xy, dtype=float).reshape(2)
+        for name, p in (("start", s), ("goal", g)):
+            if not self.is_free_xy(p)[0]:
+                raise ValueError(
+                    f"route {name} ({p[0]:.1f}, {p[1]:.1f}) m is not in the reachable free "
+                    f"space of {self.source or 'the city'} (inside or within the clearance of "
+                    "a building, or cut off from the rest)"
+                )
+        cells = _astar(self.reachable, self._cell(s), self._cell(g))
+        pts = [s] + [np.array([self.grid_x_m[c], self.grid_y_m[r]]) for r, c in cells[1:-1]] + [g]
+        out = [pts[0]]
+        i = 0
+        while i < len(pts) - 1:  # keep the farthest waypoint reachable in a straight leg
+            j = len(pts) - 1
+            while j > i + 1 and not self._segment_free(pts[i], pts[j]):
+                j -= 1
+            out.append(pts[j])
+            i = j
+        return np.array(out, dtype=float).reshape(-1, 2)
+
+
+def _astar(free: BoolArray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]]:
+    """Shortest 8-connected path of cells (octile metric, no corner cutting) on ``free``."""
+    ny, nx = free.shape
+    sq2 = math.sqrt(2.0)
+
+    def h(rc: tuple[int, int]) -> float:
+        dr, dc = abs(rc[0] - goal[0]), abs(rc[1] - goal[1])
+        return max(dr, dc) + (sq2 - 1.0) * min(dr, dc)
+
+    g_cost = {start: 0.0}
+    parent: dict[tuple[int, int], tuple[int, int]] = {}
+    heap = [(h(start), 0, start)]
+    counter = 0
+    done = set()
+    while heap:
+        _, _, cur = heapq.heappop(heap)
+        if cur == goal:
+            path = [cur]
+            while cur in parent:
+                cur = parent[cur]
+                path.append(cur)
+            return path[::-1]
+        if cur in done:
+            continue
+        done.add(cur)
+        r, c = cur
+        for dr, dc in _STEPS:
+            rr, cc = r + dr, c + dc
+            if not (0 <= rr < ny and 0 <= cc < nx) or not free[rr, cc]:
+                continue
+            if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
+                continue
+            cost = g_cost[cur] + (sq2 if dr and dc else 1.0)
+            if cost < g_cost.get((rr, cc), math.inf):
+                g_cost[(rr, cc)] = cost
+                parent[(rr, cc)] = cur
+                counter += 1
+                heapq.heappush(heap, (cost + h((rr, cc)), counter, (rr, cc)))
+    raise ValueError(f"no free-space route between cells {start} and {goal}")
+
+
+def _largest_component(free: BoolArray) -> BoolArray:
+    """The largest 8-connected piece of ``free`` (the same moves as :func:`_astar`)."""
+    ny, nx = free.shape
+    label = np.full(free.shape, -1, dtype=np.int64)
+    sizes = []
+    for r0, c0 in zip(*np.nonzero(free)):
+        if label[r0, c0] >= 0:
+            continue
+        k = len(sizes)
+        label[r0, c0] = k
+        stack, size = [(int(r0), int(c0))], 0
+        while stack:
+            r, c = stack.pop()
+            size += 1
+            for dr, dc in _STEPS:
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < ny and 0 <= cc < nx and free[rr, cc] and label[rr, cc] < 0:
+                    if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
+                        continue
+                    label[rr, cc] = k
+                    stack.append((rr, cc))
+        sizes.append(size)
+    if not sizes:
+        return np.zeros_like(free)
+    return label == int(np.argmax(sizes))
+
+
+def load_file_city(
+    spec: str | os.PathLike[str],
+    *,
+    origin_lat_lon: tuple[float, float] | None = None,
+    alt_m: float = 0.0,
+    grid_resolution_m: float = GRID_RESOLUTION_M,
+    clearance_m: float = CLEARANCE_M,
+    default_height_m: float | None = DEFAULT_HEIGHT_M,
+    warn: bool = True,
+) -> FileCity:
+    """Read a city file into a :class:`FileCity` (cached per file version and arguments).
+
+    Parameters
+    ----------
+    spec : str or path-like
+        The GeoJSON file, with or without the ``geojson:`` prefix.
+    origin_lat_lon : (float, float), optional
+        Origin of the ENU frame [deg]; default: the footprints' centroid.
+    alt_m : float, default 0.0
+        Ellipsoidal height of the ground at the origin [m].
+    grid_resolution_m : float, default :data:`GRID_RESOLUTION_M`
+        Free-space cell size, in [0.5, 100] [m].
+    clearance_m : float, default :data:`CLEARANCE_M`
+        Distance kept from walls by the free space, in [0, 100] [m].
+    default_height_m : float or None, default :data:`DEFAULT_HEIGHT_M`
+        As for :func:`read_geojson_footprints`.
+    warn : bool, default True
+        Warn (once per load) how many buildings got the default height.
+
+    Raises
+    ------
+    CityFileError
+        A bad file (naming it, the feature and the problem), or a file without free space.
+    """
+    text = os.fspath(spec)
+    if text.startswith(GEOJSON_PREFIX):
+        text = text[len(GEOJSON_PREFIX) :]
+    p = Path(text).expanduser().resolve()
+    if not p.is_file():
+        raise CityFileError(f"city file {text}: no such file")
+    if not 0.5 <= float(grid_resolution_m) <= 100.0:
+        raise ValueError(f"grid_resolution_m must be in [0.5, 100], got {grid_resolution_m!r}")
+    if not 0.0 <= float(clearance_m) <= 100.0:
+        raise ValueError(f"clearance_m must be in [0, 100], got {clearance_m!r}")
+    st = p.stat()
+    origin = None if origin_lat_lon is None else tuple(float(v) for v in origin_lat_lon)
+    city, n_def = _load_cached(
+        str(p),
+        st.st_mtime_ns,
+        st.st_size,
+        origin,
+        float(alt_m),
+        float(grid_resolution_m),
+        float(clearance_m),
+        default_height_m,
+    )
+    if warn and n_def:
+        warnings.warn(
+            f"city file {p}: {n_def} of {city.buildings.n} buildings have neither 'height' nor "
+            f"'building:levels'; they get the default height {default_height_m} m",
+            stacklevel=2,
+        )
+    return city
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached(
+    path: str,
+    mtime_ns: int,
+    size: int,
+    origin: tuple[float, float] | None,
+    alt_m: float,
+    res: float,
+    clearance: float,
+    default_height_m: float | None,
+) -> tuple[FileCity, int]:
+    buildings, org, n_def = read_geojson_footprints(
+        path, origin_lat_lon=origin, alt_m=alt_m, default_height_m=default_height_m
+    )
+    bb = buildings.bbox_m
+    x0, y0 = bb[:, 0].min() - EXTENT_MARGIN_M, bb[:, 1].min() - EXTENT_MARGIN_M
+    x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
+    xs = x0 + res / 2.0 + res * np.arange(max(int((x1 - x0) // res), 1))
+    ys = y0 + res / 2.0 + res * np.arange(max(int((y1 - y0) // res), 1))
+    free = _pk.free_cells(xs, ys, clearance, buildings.edges_m, buildings.edge_start, bb)
+    reach = _largest_component(free)
+    if not np.any(reach):
+        raise CityFileError(f"city file {path}: no free space between the buildings")
+    city = FileCity(
+        buildings=buildings,  # type: ignore[arg-type]
+        extent_m=(float(x0), float(x1), float(y0), float(y1)),
+        street_centres_x_m=np.zeros(0),
+        street_centres_y_m=np.zeros(0),
+        open_squares=np.zeros((0, 2)),
+        config=None,
+        street_width_m=max(2.0 * clearance, res),
+        grid_x_m=_readonly(xs),
+        grid_y_m=_readonly(ys),
+        free=_readonly(free),
+        reachable=_readonly(reach),
+        origin=org,
+        source=path,
+        n_default_height=n_def,
+    )
+    return city, n_def
+
+
+# --------------------------------------------------------------------------------------------
+# the sample city
+# --------------------------------------------------------------------------------------------
+
+SAMPLE_ORIGIN_LAT_LON: tuple[float, float] = (31.2330, 121.4950)
+"""Where the sample city stands (Shanghai's Huangpu riverside, near the paper's site) [deg]."""
+
+
+def sample_city_path() -> Path:
+    """The sample city shipped with the package (``coopnav_env/data/sample_city.geojson``)."""
+    return Path(__file__).resolve().parent.parent / "data" / "sample_city.geojson"
+
+
+def _shape(rng: np.random.Generator, cx: float, cy: float, w: float, d: float) -> list[FloatArray]:
+    """A footprint (rings) of one of five shapes inside a ``w`` x ``d`` lot centred at
+    ``(cx, cy)`` [m]: rotated rectangle, L, U, convex polygon, courtyard block."""
+    kind = int(rng.integers(0, 5))
+    hw, hd = w / 2.0, d / 2.0
+    if kind == 0:  # rectangle turned by a small angle
+        a = math.radians(float(rng.uniform(-20.0, 20.0)))
+        s = 1.0 / (abs(math.cos(a)) + abs(math.sin(a)))
+        pts = np.array([[-hw, -hd], [hw, -hd], [hw, hd], [-hw, hd]]) * s
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        return [pts @ rot.T + [cx, cy]]
+    if kind == 1:  # L
+        fx, fy = rng.uniform(0.35, 0.6, size=2)
+        pts = np.array(
+            [
+                [-hw, -hd],
+                [hw, -hd],
+                [hw, -hd + fy * d],
+                [-hw + fx * w, -hd + fy * d],
+                [-hw + fx * w, hd],
+                [-hw, hd],
+            ]
+        )
+        return [pts + np.array([cx, cy])]
+    if kind == 2:  # U
+        f = float(rng.uniform(0.25, 0.35))
+        pts = np.array(
+            [
+                [-hw, -hd],
+                [hw, -hd],
+                [hw, hd],
+                [hw - f * w, hd],
+                [hw - f * w, -hd + f * d],
+                [-hw + f * w, -hd + f * d],
+                [-hw + f * w, hd],
+                [-hw, hd],
+            ]
+        )
+        return [pts + np.array([cx, cy])]
+    if kind == 3:  # convex polygon (5 to 8 vertices on an ellipse)
+        k = int(rng.integers(5, 9))
+        ang = np.sort(rng.uniform(0.0, 2 * math.pi, size=k))
+        ang = np.linspace(0.0, 2 * math.pi, k, endpoint=False) + 0.3 * (ang - ang.mean()) / k
+        return [np.stack([cx + hw * np.cos(ang), cy + hd * np.sin(ang)], axis=1)]
+    # courtyard block: a rectangle with a rectangular hole
+    f = float(rng.uniform(0.25, 0.35))
+    outer = np.array([[-hw, -hd], [hw, -hd], [hw, hd], [-hw, hd]]) + np.array([cx, cy])
+    inner = np.array([[-hw, -hd], [-hw, hd], [hw, hd], [hw, -hd]]) * (1.0 - 2.0 * f) + np.array(
+        [cx, cy]
+    )
+    return [outer, inner]
+
+
+def sample_city_geojson(seed: int = 7, n_blocks: int = 8) -> dict[str, Any]:
+    """The sample city as a GeoJSON dict: ``n_blocks`` x ``n_blocks`` blocks of 60 m between
+    20 m streets (with 10 % of blocks left open and 25 m-wide diagonal avenue cut through), each
+    with up to four buildings of five shapes (:func:`_shape`), heights given as numbers, as
+    ``"NN m"`` strings, as ``building:levels`` or (one in twenty) not at all. Deterministic in
+    ``seed``; the shipped file is ``sample_city_geojson()`` (``tests/sim/test_file_city.py``
+    checks it)."""
+    rng = np.random.default_rng(seed)
+    block, street = 60.0, 20.0
+    pitch = block + street
+    size = n_blocks * block + (n_blocks + 1) * street
+    lat0, lon0 = SAMPLE_ORIGIN_LAT_LON
+    feats = []
+    for bx in range(n_blocks):
+        for by in range(n_blocks):
+            if rng.random() < 0.1:
+                continue
+            x0 = -size / 2 + street + pitch * bx
+            y0 = -size / 2 + street + pitch * by
+            split = int(rng.integers(2, 4))
+            lot = block / split
+            for i in range(split):
+                for j in range(split):
+                    if rng.random() < 0.1:
+                        continue
+                    cx, cy = x0 + lot * (i + 0.5), y0 + lot * (j + 0.5)
+                    if abs(cx - cy) < 25.0:  # the diagonal avenue
+                        continue
+                    w, d = lot * rng.uniform(0.7, 0.92, size=2)
+                    rings = _shape(rng, cx, cy, w, d)
+                    ll = []
+                    for r in rings:
+                        ecef = enu_to_ecef(
+                            np.column_stack([r, np.zeros(r.shape[0])]), lat0, lon0, 0.0
+                        )
+                        lat, lon, _ = _ecef_to_geodetic(ecef)
+                        ring = np.round(np.column_stack([lon, lat]), 8).tolist()
+                        ll.append([*ring, ring[0]])
+                    h = float(np.clip(rng.lognormal(math.log(30.0), 0.6), 6.0, 180.0))
+                    style = rng.random()
+                    if style < 0.05:
+                        props: dict[str, Any] = {"building": "yes"}
+                    elif style < 0.35:
+                        props = {"building": "yes", "building:levels": max(round(h / 3.0), 2)}
+                    elif style < 0.65:
+                        props = {"building": "yes", "height": f"{h:.1f} m"}
+                    else:
+                        props = {"building": "yes", "height": round(h, 1)}
+                    feats.append(
+                        {
+                            "type": "Feature",
+                            "id": f"b{len(feats)}",
+                            "properties": props,
+                            "geometry": {"type": "Polygon", "coordinates": ll},
+                        }
+                    )
+    return {
+        "type": "FeatureCollection",
+        "name": "coopnav sample city (synthetic footprints, not a real place's buildings)",
+        "features": feats,
+    }
+
+
+def write_sample_city(path: str | os.PathLike[str], seed: int = 7) -> Path:
+    """Write :func:`sample_city_geojson` to ``path`` (temporary name, then rename)."""
+    out = Path(path)
+    tmp = out.with_name(out.name + ".tmp")
+    tmp.write_text(json.dumps(sample_city_geojson(seed), indent=None) + "\n", encoding="utf-8")
+    os.replace(tmp, out)
+    return out
+
+
+if __name__ == "__main__":  # python -m coopnav_env.sim.file_city [PATH]
+    import sys
+
+    print(write_sample_city(sys.argv[1] if len(sys.argv) > 1 else sample_city_path()))
