@@ -89,7 +89,7 @@ def _interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
         if isinstance(cause, KeyboardInterrupt):
             return cause
         seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
+        cause = cause.__cause__
     return None
 
 

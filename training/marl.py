@@ -732,6 +732,9 @@ def train(cfg: TrainConfig) -> Path:
                     f"{resume['env_kwargs']}, not {env_kwargs}"
                 )
             check_resumable_settings(resume, settings, resume_path)
+            if run.nothing_to_do(cfg.timesteps):  # e.g. --resume RUN/final_model
+                run.say_finished()
+                return out / "final_model.pt"
             steps = int(resume["agent_steps"])
             if steps > cfg.timesteps:
                 raise ValueError(
@@ -739,9 +742,6 @@ def train(cfg: TrainConfig) -> Path:
                     f"checkpoint {resume_path}: nothing would be trained; ask for more "
                     f"(--timesteps M with M > {steps})"
                 )
-            if run.finished is not None and run.finished["num_timesteps"] >= cfg.timesteps:
-                run.say_finished()  # e.g. --resume RUN/final_model of a finished run
-                return out / "final_model.pt"
         torch.set_num_threads(cfg.torch_threads)
         resolved = cfg.to_dict()
         resolved["env"] = env_kwargs

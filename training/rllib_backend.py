@@ -23,7 +23,8 @@ Everything a run produces goes to ``--out DIR``, laid out as for SB3::
     DIR/final_model/                     RLlib checkpoint of the trained algorithm
                                          (``rllib:DIR/final_model`` in ``coopnav evaluate``)
     DIR/checkpoints/rllib_<N>_steps/     periodic checkpoints (N agent-steps)
-    DIR/logs/progress*.csv               one row per iteration (+ TensorBoard events)
+    DIR/logs/progress.csv                one row per iteration, every iteration once over
+                                         resumed sessions (+ TensorBoard events)
     DIR/ray/                             Ray's session files and logs (local Ray only)
 
 Counting: ``timesteps`` and ``checkpoint_freq`` are *agent*-steps, as for SB3 (one step of a
@@ -47,7 +48,6 @@ run with ``seed + N`` (``N`` agent-steps done, modulo the training seed range), 
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import functools
 import json
@@ -69,6 +69,7 @@ from coopnav_env.training.config import TrainConfig
 from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
 from coopnav_env.training.files import atomic_path, write_json, write_yaml
 from coopnav_env.training.runs import (
+    ProgressLog,
     check_same_environment,
     checkpoint_candidates,
     first_loadable,
@@ -761,7 +762,6 @@ def train(cfg: TrainConfig) -> Path:
 
         logs = out / "logs"
         logs.mkdir(exist_ok=True)
-        suffix = "" if n0 == 0 else f"_resumed_at_{n0}"
         counters = dict(start)
         setup_t0 = time.perf_counter()
         training = False
@@ -781,9 +781,7 @@ def train(cfg: TrainConfig) -> Path:
                         algo.restore_from_path(str(resume_path.absolute()))
                     setup_s = time.perf_counter() - setup_t0
                     training = True  # from here on an interrupt writes a checkpoint
-                    wall_s = _train_loop(
-                        cfg, algo, out, logs / f"progress{suffix}.csv", counters, n_agents
-                    )
+                    wall_s = _train_loop(cfg, algo, out, logs / "progress.csv", counters, n_agents)
                     final = _save(algo, out / "final_model", counters)
                 finally:
                     algo.stop()
@@ -851,53 +849,53 @@ def _train_loop(
         pass
     last_ckpt = counters["agent_steps"]
     t0 = time.perf_counter()
-    with progress.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=_PROGRESS_COLUMNS, extrasaction="ignore")
-        w.writeheader()
-        try:
-            while counters["agent_steps"] < cfg.timesteps:
-                row = _iteration_row(algo.train())
-                if not row["env_steps_iter"] > 0:
-                    raise RuntimeError(f"RLlib reported no sampled env-steps: {row}")
-                if not math.isfinite(row["agent_steps_iter"]):  # every UAV stepped each time
-                    row["agent_steps_iter"] = row["env_steps_iter"] * n_agents
-                counters["iterations"] += 1
-                counters["agent_steps"] += int(row["agent_steps_iter"])
-                counters["env_steps"] += int(row["env_steps_iter"])
-                row.update(
-                    iteration=counters["iterations"],
-                    agent_steps=counters["agent_steps"],
-                    env_steps=counters["env_steps"],
-                )
-                w.writerow({k: _csv(v) for k, v in row.items()})
-                fh.flush()
-                if writer is not None:
-                    for k in _PROGRESS_COLUMNS[3:]:
-                        if math.isfinite(row[k]):
-                            writer.add_scalar(f"rllib/{k}", row[k], counters["agent_steps"])
-                if cfg.progress_bar:
-                    print(
-                        f"iteration {counters['iterations']}: {counters['agent_steps']} / "
-                        f"{cfg.timesteps} agent-steps, {row['env_steps_per_s']:.0f} env-steps/s,"
-                        f" return {row['episode_return_mean']:.2f}",
-                        file=sys.stderr,
-                    )
-                n = counters["agent_steps"]
-                freq = cfg.checkpoint_freq
-                if freq > 0 and n // freq > last_ckpt // freq:
-                    _save(algo, out / "checkpoints" / f"rllib_{n}_steps", counters)
-                    last_ckpt = n
-        except KeyboardInterrupt:
-            path = out / "checkpoints" / f"rllib_{counters['agent_steps']}_steps"
-            _save(algo, path, counters)
-            print(
-                f"\ninterrupted: checkpoint written to {path}; continue with --resume {path}",
-                file=sys.stderr,
+    # one learning curve over resumed sessions: the rows after the checkpoint are dropped
+    log = ProgressLog(
+        progress, "agent_steps", resumed_at=last_ckpt or None, columns=_PROGRESS_COLUMNS
+    )
+    try:
+        while counters["agent_steps"] < cfg.timesteps:
+            row = _iteration_row(algo.train())
+            if not row["env_steps_iter"] > 0:
+                raise RuntimeError(f"RLlib reported no sampled env-steps: {row}")
+            if not math.isfinite(row["agent_steps_iter"]):  # every UAV stepped each time
+                row["agent_steps_iter"] = row["env_steps_iter"] * n_agents
+            counters["iterations"] += 1
+            counters["agent_steps"] += int(row["agent_steps_iter"])
+            counters["env_steps"] += int(row["env_steps_iter"])
+            row.update(
+                iteration=counters["iterations"],
+                agent_steps=counters["agent_steps"],
+                env_steps=counters["env_steps"],
             )
-            raise
-        finally:
+            log.append({k: _csv(row[k]) for k in _PROGRESS_COLUMNS if k in row})
             if writer is not None:
-                writer.close()
+                for k in _PROGRESS_COLUMNS[3:]:
+                    if math.isfinite(row[k]):
+                        writer.add_scalar(f"rllib/{k}", row[k], counters["agent_steps"])
+            if cfg.progress_bar:
+                print(
+                    f"iteration {counters['iterations']}: {counters['agent_steps']} / "
+                    f"{cfg.timesteps} agent-steps, {row['env_steps_per_s']:.0f} env-steps/s,"
+                    f" return {row['episode_return_mean']:.2f}",
+                    file=sys.stderr,
+                )
+            n = counters["agent_steps"]
+            freq = cfg.checkpoint_freq
+            if freq > 0 and n // freq > last_ckpt // freq:
+                _save(algo, out / "checkpoints" / f"rllib_{n}_steps", counters)
+                last_ckpt = n
+    except KeyboardInterrupt:
+        path = out / "checkpoints" / f"rllib_{counters['agent_steps']}_steps"
+        _save(algo, path, counters)
+        print(
+            f"\ninterrupted: checkpoint written to {path}; continue with --resume {path}",
+            file=sys.stderr,
+        )
+        raise
+    finally:
+        if writer is not None:
+            writer.close()
     return time.perf_counter() - t0
 
 

@@ -455,15 +455,15 @@ def train(cfg: TrainConfig) -> Path:
         resume_path, start_steps = _resume_point(cfg, run.finished)
         if resume_path is not None:
             check_same_environment(cfg, Path(cfg.out) / "config.yaml")
+            if run.nothing_to_do(cfg.timesteps):  # e.g. --resume RUN/final_model.zip
+                run.say_finished()
+                return Path(cfg.out) / "final_model.zip"
             if start_steps > cfg.timesteps:
                 raise ValueError(
                     f"--timesteps {cfg.timesteps} is below the {start_steps} agent-steps of the "
                     f"checkpoint {resume_path}: nothing would be trained; ask for more "
                     f"(--timesteps M with M > {start_steps})"
                 )
-            if run.finished is not None and run.finished["num_timesteps"] >= cfg.timesteps:
-                run.say_finished()  # e.g. --resume RUN/final_model of a finished run
-                return Path(cfg.out) / "final_model.zip"
         return _train_in_folder(cfg, env_fn, n_agents, monitor_keys, resume_path, start_steps)
 
 

@@ -315,7 +315,10 @@ def test_rllib_train_resume_and_evaluate_beside_sb3(tmp_path):
     assert info["resumed_from"] == str(rl / "final_model")
     assert (info["iterations"], info["session_iterations"], info["num_timesteps"]) == (3, 1, 576)
     assert (rl / "config_resumed_at_384.yaml").is_file()
-    (row,) = _rows(rl / "logs" / "progress_resumed_at_384.csv")
+    # one learning curve over both sessions: every iteration once, in order (issue 35)
+    rows = _rows(rl / "logs" / "progress.csv")
+    assert [int(r["agent_steps"]) for r in rows] == [192, 384, 576]
+    row = rows[-1]
     # RLlib's own step counter continues: the algorithm's state was restored
     assert row["iteration"] == "3" and float(row["rllib_env_steps_lifetime"]) == 192
 

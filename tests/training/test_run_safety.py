@@ -383,6 +383,28 @@ def test_sigint_inside_a_step_is_taken_after_it(tmp_path, monkeypatch, capsys, p
         assert "interrupted during the behaviour-cloning warm start" in err
 
 
+def test_resume_of_a_finished_model_or_below_its_checkpoint_is_said(tmp_path, capsys):
+    """An explicit --resume of a finished run's final model touches nothing (today: run.json
+    rewritten with 0 agent-steps/s); --timesteps below the checkpoint's steps is refused
+    (today: 0 steps trained silently and the run marked finished)."""
+    config = toy_yaml(tmp_path, checkpoint_freq=192)
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(config), "--env-id", TOY, "--out", str(out)]) == 0
+    before = snapshot(out)
+    capsys.readouterr()
+    args = ["train", "--env-id", TOY, "--out", str(out)]
+    assert main([*args, "--resume", str(out / "final_model.zip")]) == 0
+    assert "holds a finished run (768 agent-steps); nothing to do" in capsys.readouterr().err
+    assert snapshot(out) == before
+    (out / "run.json").unlink()
+    (out / "final_model.zip").unlink()
+    assert main([*args, "--resume", "latest", "--timesteps", "200"]) == 2
+    assert "--timesteps 200 is below the 576 agent-steps of the checkpoint" in (
+        capsys.readouterr().err
+    )
+    assert not (out / "final_model.zip").exists()
+
+
 def test_training_refuses_render_modes(tmp_path, capsys):
     config = toy_yaml(tmp_path)
     args = ["train", "--config", str(config), "--env-id", TOY, "--out", str(tmp_path / "r")]
