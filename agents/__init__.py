@@ -202,7 +202,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
             raise ValueError("policy 'route:<path>' needs the path of a route model")
         from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
-        model = RouteModel.load(resolve_route_model(path))
+        model = RouteModel.load(resolve_route_model(path), kind="route")
         return make_policy(model.base, env, route_model=model, **kwargs)
     if name.startswith("split:"):
         path = name[len("split:") :]
@@ -210,7 +210,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
             raise ValueError("policy 'split:<path>' needs the path of a split model")
         from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
-        model = RouteModel.load(resolve_route_model(path, kind="split"))
+        model = RouteModel.load(resolve_route_model(path, kind="split"), kind="split")
         if model.kind != "split":
             raise ValueError(f"policy 'split:{path}' needs a split model, got a {model.kind} model")
         return make_policy(model.base, env, route_split_model=model, **kwargs)

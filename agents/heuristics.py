@@ -416,7 +416,7 @@ class ColumnPolicy:
             from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
             route_split_model = RouteModel.load(
-                resolve_route_model(str(route_split_model), kind="split")
+                resolve_route_model(str(route_split_model), kind="split"), kind="split"
             )
         if route_split_model is not None and (
             not hasattr(route_split_model, "predict")
@@ -436,7 +436,7 @@ class ColumnPolicy:
         if isinstance(route_model, (str, Path)):
             from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
-            route_model = RouteModel.load(resolve_route_model(str(route_model)))
+            route_model = RouteModel.load(resolve_route_model(str(route_model)), kind="route")
         if route_model is not None and not hasattr(route_model, "predict"):
             raise ValueError(f"route_model must be a RouteModel or a path, got {route_model!r}")
         self.route_model = route_model

@@ -350,8 +350,8 @@ class RouteModel:
     alpha : float
         The ridge penalty chosen by cross-validation.
     base : str
-        The column heuristic (a :func:`coopnav_env.agents.make_policy` name) that flies the chosen route,
-        and that flew the training episodes.
+        The column heuristic (a :func:`coopnav_env.agents.make_policy` name) that flies the
+        chosen route, and that flew the training episodes.
     info : dict
         What the model was fitted on (environment settings, seeds, sizes, CV scores).
     kind : str
@@ -374,12 +374,32 @@ class RouteModel:
         if self.kind not in MODEL_KINDS:
             raise ValueError(f"model kind must be one of {list(MODEL_KINDS)}, got {self.kind!r}")
         table = self.table
+        for name in ("features", "mean", "scale", "weights"):
+            value = getattr(self, name)
+            if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
+                raise ValueError(f"RouteModel {name} must be a list, got {value!r}")
         unknown = [f for f in self.features if f not in table]
         if unknown:
             raise ValueError(f"unknown {self.kind} features {unknown}; known: {list(table)}")
         k = len(self.features)
         if not (len(self.mean) == len(self.scale) == len(self.weights) == k):
             raise ValueError("RouteModel needs one mean, scale and weight per feature")
+        # a NaN weight or a zero scale would make every prediction NaN or inf, and the
+        # choice among them arbitrary: refused here, where the model is made or loaded
+        for name in ("mean", "weights", "scale"):
+            value = getattr(self, name)
+            ok = all(_is_real(v) and math.isfinite(v) for v in value)
+            if name == "scale":
+                if not ok or not all(v > 0 for v in value):
+                    raise ValueError(f"RouteModel scale must be finite numbers > 0, got {value}")
+            elif not ok:
+                raise ValueError(f"RouteModel {name} must be finite numbers, got {value}")
+        if not _is_real(self.alpha) or not math.isfinite(self.alpha) or self.alpha < 0:
+            raise ValueError(f"RouteModel alpha must be a finite number >= 0, got {self.alpha!r}")
+        if not isinstance(self.base, str) or not self.base:
+            raise ValueError(f"RouteModel base must be a policy name, got {self.base!r}")
+        if not isinstance(self.info, dict):
+            raise ValueError(f"RouteModel info must be a mapping, got {self.info!r}")
         self._cols = np.array([table.index(f) for f in self.features], dtype=int)
 
     @property
@@ -419,29 +439,60 @@ class RouteModel:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> RouteModel:
+    def load(cls, path: str | Path, kind: str | None = None) -> RouteModel:
         """Read a model written by :meth:`save` (a ``.json`` file, or a folder holding
-        ``route_model.json``)."""
+        ``route_model.json`` or ``split_model.json``).
+
+        With ``kind`` (``"route"`` or ``"split"``), a model of the other kind is refused (a
+        folder is searched for that kind's file first). Every refusal is a ``ValueError``
+        naming the file: not JSON, not a model, a field missing or of the wrong type, a
+        NaN or infinite number, a scale <= 0 (:class:`RouteModel` checks the fields).
+        """
+        if kind is not None and kind not in MODEL_KINDS:
+            raise ValueError(f"kind must be one of {list(MODEL_KINDS)}, got {kind!r}")
         p = Path(path)
         if p.is_dir():
-            p = p / (
-                "split_model.json" if (p / "split_model.json").is_file() else "route_model.json"
-            )
+            names = [f"{k}_model.json" for k in ((kind,) if kind else ())]
+            names += ["split_model.json", "route_model.json"]
+            p = next((p / n for n in names if (p / n).is_file()), p / names[-1])
         if not p.is_file():
             raise FileNotFoundError(f"no route model at {str(path)!r} (looked for {p})")
-        d = json.loads(p.read_text())
-        if d.get("format") != "coopnav-route-model/1":
-            raise ValueError(f"{p} is not a coopnav route model (format {d.get('format')!r})")
-        return cls(
-            features=list(d["features"]),
-            mean=list(d["mean"]),
-            scale=list(d["scale"]),
-            weights=list(d["weights"]),
-            alpha=float(d["alpha"]),
-            base=str(d["base"]),
-            info=dict(d.get("info", {})),
-            kind=str(d.get("kind", "route")),
-        )
+        try:
+            d = json.loads(p.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{p} is not a coopnav route model: not valid JSON ({exc})") from None
+        if not isinstance(d, dict) or d.get("format") != "coopnav-route-model/1":
+            fmt = d.get("format") if isinstance(d, dict) else type(d).__name__
+            raise ValueError(f"{p} is not a coopnav route model (format {fmt!r})")
+        missing = [
+            k for k in ("features", "mean", "scale", "weights", "alpha", "base") if k not in d
+        ]
+        if missing:
+            raise ValueError(f"{p} is not a complete route model: it lacks {missing}")
+        found = d.get("kind", "route")
+        if kind is not None and found != kind:
+            raise ValueError(
+                f"{p} holds a {found} model, not a {kind} model: {kind}:<path> takes a "
+                f"{kind}_model.json; give it as {found}:{path}"
+            )
+        try:
+            return cls(
+                features=d["features"],
+                mean=d["mean"],
+                scale=d["scale"],
+                weights=d["weights"],
+                alpha=d["alpha"],
+                base=d["base"],
+                info=d.get("info", {}),
+                kind=found,
+            )
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{p}: {exc}") from None
+
+
+def _is_real(v: Any) -> bool:
+    """A real number (int or float, numpy's too), not a bool or a string."""
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
 def _centred(x: np.ndarray, y: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from coopnav_env.agents import make_policy
 from coopnav_env.agents.routes import (
     FEATURE_SENSE,
@@ -18,6 +17,7 @@ from coopnav_env.agents.routes import (
     resolve_route_model,
     route_features,
 )
+
 from coopnav_env.sim.route import street_route, street_routes
 
 
@@ -392,7 +392,11 @@ def test_route_features_for_any_column_spacing(spacing):
 
 
 def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean():
-    from coopnav_env.training.route_learning import arrays_to_episodes, collect_episode, episodes_to_arrays
+    from coopnav_env.training.route_learning import (
+        arrays_to_episodes,
+        collect_episode,
+        episodes_to_arrays,
+    )
 
     env = _env()
     seed = _multi_route_seed(env)
@@ -495,3 +499,66 @@ def test_a_split_model_chooses_whether_and_where_the_column_splits(tmp_path):
         )
     with pytest.raises(ValueError, match="needs the path of a split model"):
         make_policy("split:", env)
+
+
+# --------------------------------------------------------------------------------------------
+# issue 35, finding 8: corrupt or mismatched model files are refused on load
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("weights", [float("nan"), 0.1], r"weights must be finite numbers, got \[nan, 0\.1\]"),
+        ("weights", [float("inf"), 0.1], r"weights must be finite"),
+        ("mean", [1.0, float("nan")], r"mean must be finite"),
+        ("scale", [0.0, 1.0], r"scale must be finite numbers > 0, got \[0\.0, 1\.0\]"),
+        ("scale", [-2.0, 1.0], r"scale must be finite numbers > 0"),
+        ("scale", [float("nan"), 1.0], r"scale must be finite numbers > 0"),
+        ("alpha", float("nan"), r"alpha must be a finite number >= 0"),
+        ("weights", ["a", 1.0], r"weights must be finite numbers"),
+        ("weights", None, r"weights must be a list"),
+        ("base", 3, r"base must be a policy name"),
+    ],
+)
+def test_route_model_files_with_bad_numbers_are_refused_naming_file_and_field(
+    tmp_path, field, value, match
+):
+    good = RouteModel(["los_mean", "turns"], [10.0, 1.0], [2.0, 1.0], [-0.5, 0.1], 1.0, "ceiling")
+    data = good.to_json()
+    data[field] = value
+    path = tmp_path / "route_model.json"
+    path.write_text(json.dumps(data))  # Python writes NaN and Infinity as JSON extensions
+    with pytest.raises(ValueError, match=match) as info:
+        RouteModel.load(path)
+    assert str(path) in str(info.value)
+    env = _env(n_uavs=2)
+    with pytest.raises(ValueError, match=match):
+        make_policy(f"route:{tmp_path}", env)
+
+
+@pytest.mark.parametrize("text", ["[1, 2]", "{not json", '{"format": "coopnav-route-model/1"}'])
+def test_route_model_files_that_are_no_model_are_refused_naming_the_file(tmp_path, text):
+    path = tmp_path / "route_model.json"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=r"route_model\.json") as info:
+        RouteModel.load(path)
+    assert "Traceback" not in str(info.value)
+
+
+def test_a_split_model_is_refused_as_a_route_model_and_the_reverse(tmp_path):
+    env = _env(n_uavs=2)
+    split_dir = tmp_path / "split"
+    _split_model(-1.0).save(split_dir / "split_model.json")
+    route_dir = tmp_path / "route"
+    RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(route_dir / "route_model.json")
+    for name in (f"route:{split_dir}", f"route:{split_dir / 'split_model.json'}"):
+        with pytest.raises(ValueError, match=r"holds a split model.*route:.*split:") as info:
+            make_policy(name, env)
+        assert "split_model.json" in str(info.value)
+    for name in (f"split:{route_dir}", f"split:{route_dir / 'route_model.json'}"):
+        with pytest.raises(ValueError, match=r"holds a route model.*split:.*route:"):
+            make_policy(name, env)
+    # the right kinds still load
+    assert make_policy(f"route:{route_dir}", env).route_model.kind == "route"
+    assert make_policy(f"split:{split_dir}", env).route_split_model.kind == "split"
