@@ -295,8 +295,8 @@ def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Collect (resumably), fit and save; prints the cross-validated choice."""
     from coopnav_env.agents import make_policy
-    from coopnav_env.agents.routes import ROUTE_FEATURES, fit_route_model
-    from coopnav_env.training.files import atomic_path, write_json
+    from coopnav_env.agents.routes import ROUTE_FEATURES
+    from coopnav_env.training.files import ensure_folder, folder_lock
 
     from coopnav_env import urban_canyon_v0
 
@@ -333,6 +333,22 @@ def run(args: argparse.Namespace) -> int:
     }
     if args.noise_replicates != 1:  # (absent from the settings of earlier runs)
         settings["noise_replicates"] = args.noise_replicates
+    ensure_folder(out)
+    with folder_lock(out):  # one command at a time in a folder (a second fails at once)
+        return _collect_and_fit(args, out, settings, env_kwargs, first)
+
+
+def _collect_and_fit(
+    args: argparse.Namespace,
+    out: Path,
+    settings: dict[str, Any],
+    env_kwargs: dict[str, Any],
+    first: int,
+) -> int:
+    """The locked part of :func:`run`: check the folder, collect what is missing, fit, save."""
+    from coopnav_env.agents.routes import fit_route_model
+    from coopnav_env.training.files import atomic_path, write_json
+
     model_path = out / "route_model.json"
     if model_path.exists():
         raise ValueError(f"{out} holds a finished run (route_model.json); use another --out")
@@ -356,7 +372,7 @@ def run(args: argparse.Namespace) -> int:
                     "use another --out"
                 )
             print(f"resuming {out}: {len(seeds)} of {args.episodes} episodes collected")
-    elif out.exists() and any(out.iterdir()):
+    elif out.exists() and any(not p.name.startswith(".") for p in out.iterdir()):
         raise ValueError(f"--out {out} exists and is not a train-routes run folder")
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()

@@ -162,6 +162,20 @@ def test_a_locked_folder_is_refused_at_once(tmp_path, capsys, monkeypatch):
         assert "is in use by another coopnav command" in capsys.readouterr().err
 
 
+def test_train_routes_locks_its_folder_and_refuses_a_report_folder(tmp_path, capsys, no_flights):
+    routes = ["train-routes", "--episodes", "5", "--jobs", "1"]
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    with folder_lock(busy):
+        assert main([*routes, "--out", str(busy)]) == 2
+        assert "is in use by another coopnav command" in capsys.readouterr().err
+    assert not (busy / "run.json").exists()
+    study = tmp_path / "study"
+    assert main([*STUDY, "--out", str(study)]) == 0
+    assert main([*routes, "--out", str(study)]) == 2
+    assert "is not a train-routes run folder" in capsys.readouterr().err
+
+
 def test_a_failed_command_leaves_its_claim_unfinished(tmp_path):
     out = tmp_path / "out"
     with pytest.raises(RuntimeError, match="boom"):
