@@ -379,6 +379,9 @@ BenchMARL use, is accepted as an alias (giving both with different values raises
 `obs_route_scale_m`, `obs_wall_scale_m` (50, 50): scales of the route and wall-distance
 observations [m].
 
+`reward_scheme` (`"per_step"`, the rewards above; `"navigated_distance"` is the reward of
+`urban_canyon_v1`, whose page defines it: there the undiscounted return is the task's score).
+
 `nav_reward` (`"error"`), `nav_reward_weight`, `nav_reward_scale_m`, `nav_reward_cap_m`
 (0.1, 10, 10), `nav_team_weight` (0: own error; 1: the swarm mean),
 `progress_reward_weight` (1), `collision_penalty` (40), `separation_penalty`
@@ -445,6 +448,8 @@ continues exactly like the original.
 
 ## Version History
 
+* v1 (`coopnav_env.urban_canyon_v1`): the same world with a reward whose return is the
+  task's score; v0 is unchanged and stays importable.
 * v0: Initial release (coopnav 0.1.0). Before the release the observation gained the route
   (next waypoint, the leg after it, remaining route), the altitude in the band and the wall
   distances (38 -> 52 entries by default), the progress reward moved from the straight-line
