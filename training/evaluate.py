@@ -99,7 +99,8 @@ class EpisodeRecord:
     collided : bool
         Whether the episode ended in a collision.
     episode_return : float
-        Sum of the rewards of all UAVs, divided by N.
+        Sum of the rewards of all UAVs, divided by N: in ``urban_canyon_v1`` the episode's
+        score (its page defines it).
     length : int
         Steps.
     h_error_m, hpl_m : ndarray, shape (T, N), or None
@@ -304,7 +305,8 @@ _TABLE: tuple[tuple[str, str, str], ...] = (
     ("goal rate", "goal_rate", "{:.3f}"),
     ("collisions", "collisions", "{:d}"),
     ("sats/UAV", "n_sats_mean", "{:.1f}"),
-    ("return", "return_mean", "{:.1f}"),
+    ("return", "return_mean", "{:.3f}"),  # urban_canyon_v1: the task's score
+    ("steps", "length_mean", "{:.1f}"),
     ("availability", "availability", "{:.3f}"),
     ("MI rate", "misleading_rate", "{:.4f}"),
 )
