@@ -31,6 +31,10 @@ CASES = {
         ["--timesteps", "200", "--n-steps", "32", "--max-steps", "10", "--save", "{tmp}/v.zip"],
         ["trained 384 agent-steps (6 slots)", "(TimeLimit.truncated)", "evaluation episode:"],
     ),
+    "fly_file_city.py": (
+        ["--max-steps", "15", "--out", "{tmp}/frames"],
+        ["formation episode 0 (335 buildings): 15 steps", "frame written to"],
+    ),
     "evaluate_own_policy.py": (
         ["--episodes", "1", "--max-steps", "15", "--out", "{tmp}/eval"],
         ["| formation |", "| wall_shy |", "| wall_shy@altitude_m=15 |"],

@@ -152,12 +152,24 @@ def _draw_buildings(ax: Any, world: UrbanWorld, norm: Any, cmap: Any) -> Any:
     from matplotlib.patches import Rectangle
 
     b = world.city.buildings
-    rects = [
-        Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1]) for lo, hi in zip(b.min_m, b.max_m)
-    ]
+    if hasattr(b, "rings_m"):  # a file city's polygons (holes drawn over in street colour)
+        from matplotlib.patches import Polygon
+
+        rects = [Polygon(rings[0], closed=True) for rings in b.rings_m]
+        holes = [Polygon(h, closed=True) for rings in b.rings_m for h in rings[1:]]
+    else:
+        rects = [
+            Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1])
+            for lo, hi in zip(b.min_m, b.max_m)
+        ]
+        holes = []
     coll = PatchCollection(rects, cmap=cmap, norm=norm, edgecolor="#4a4e69", linewidth=0.4)
-    coll.set_array(b.max_m[:, 2])
+    coll.set_array(np.asarray(b.heights_m))
     ax.add_collection(coll)
+    if holes:
+        ax.add_collection(
+            PatchCollection(holes, facecolor=STREET_COLOUR, edgecolor="#4a4e69", linewidth=0.4)
+        )
     return coll
 
 
@@ -165,7 +177,7 @@ def _height_norm(world: UrbanWorld) -> tuple[Any, Any]:
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
 
-    h = world.city.buildings.max_m[:, 2]
+    h = np.asarray(world.city.buildings.heights_m)
     top = float(h.max()) if h.size else 50.0
     return Normalize(0.0, max(top, 50.0)), colormaps["bone_r"].resampled(256)
 

@@ -1,5 +1,5 @@
 """Compiled (numba) loops of :mod:`coopnav_env.sim.file_city`: rays, inside tests, swept
-collisions and the free-space grid against buildings that are extruded polygons.
+collisions and the wall-clearance grid against buildings that are extruded polygons.
 
 The buildings are given as flat arrays (see :class:`~coopnav_env.sim.file_city.ExtrudedBuildings`):
 ``edges`` ``(n_e, 4)`` rows ``(ax, ay, bx, by)`` of every ring edge (exterior and holes, ENU [m]),
@@ -354,31 +354,29 @@ def swept_collisions(edges, edge_start, heights, bbox, start, end, radius):
 
 
 @njit(cache=True)
-def free_cells(xs, ys, clearance, edges, edge_start, bbox):
-    """Free-space grid: ``free[j, i]`` when the cell centre ``(xs[i], ys[j])`` lies outside
-    every footprint and at least ``clearance`` from every wall."""
+def wall_clearance(xs, ys, reach, edges, edge_start, bbox):
+    """Clearance grid: ``out[j, i]`` is the distance from the cell centre ``(xs[i], ys[j])`` to
+    the nearest wall, 0 inside a footprint, capped at ``reach`` (buildings whose box lies
+    farther are skipped)."""
     ny, nx = ys.shape[0], xs.shape[0]
-    free = np.ones((ny, nx), dtype=np.bool_)
-    c2 = clearance * clearance
+    out = np.full((ny, nx), reach)
     for j in range(ny):
         qy = ys[j]
         for i in range(nx):
             qx = xs[i]
+            best2 = reach * reach
             for b in range(edge_start.shape[0] - 1):
-                if qx < bbox[b, 0] - clearance or qx > bbox[b, 2] + clearance:
+                if qx < bbox[b, 0] - reach or qx > bbox[b, 2] + reach:
                     continue
-                if qy < bbox[b, 1] - clearance or qy > bbox[b, 3] + clearance:
+                if qy < bbox[b, 1] - reach or qy > bbox[b, 3] + reach:
                     continue
                 e0, e1 = edge_start[b], edge_start[b + 1]
                 if inside_footprint(qx, qy, edges, e0, e1):
-                    free[j, i] = False
+                    best2 = 0.0
                     break
-                near = False
                 for e in range(e0, e1):
-                    if _edge_dist2(qx, qy, edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3]) < c2:
-                        near = True
-                        break
-                if near:
-                    free[j, i] = False
-                    break
-    return free
+                    d2 = _edge_dist2(qx, qy, edges[e, 0], edges[e, 1], edges[e, 2], edges[e, 3])
+                    if d2 < best2:
+                        best2 = d2
+            out[j, i] = math.sqrt(best2)
+    return out

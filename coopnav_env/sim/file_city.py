@@ -54,8 +54,10 @@ A file city has no street grid. Its free space is a grid of square cells
 ``clearance_m`` (default 3 m) from every wall; buildings count as obstacles whatever their
 height. Cells are 8-connected (a diagonal step needs both of its orthogonal neighbours free).
 Start and goal points are drawn in the largest connected piece of free space; a route is the
-A* shortest path (octile distance) between the cells of its ends, shortened by keeping only
-the waypoints it cannot cut (a straight leg crosses reachable cells only, by an exact grid
+A* cheapest path between the cells of its ends, where a cell nearer a wall than
+:data:`PREFERRED_CLEARANCE_M` (10 m) costs more to cross (the route keeps to the middle of the
+streets), shortened by keeping only the waypoints it cannot cut (a straight leg crosses
+reachable cells only, none nearer a wall than the path it replaces or 10 m, by an exact grid
 traversal).
 """
 
@@ -87,6 +89,7 @@ __all__ = [
     "GEOJSON_PREFIX",
     "GRID_RESOLUTION_M",
     "MAX_ORIGIN_DISTANCE_M",
+    "PREFERRED_CLEARANCE_M",
     "STOREY_HEIGHT_M",
     "CityFileError",
     "ExtrudedBuildings",
@@ -113,6 +116,11 @@ GRID_RESOLUTION_M: float = 5.0
 """Default cell size of the free-space grid [m]."""
 CLEARANCE_M: float = 3.0
 """Default smallest distance from a free cell's centre to a wall [m]."""
+PREFERRED_CLEARANCE_M: float = 10.0
+"""Clearance from walls a route keeps where the free space allows [m]: cells nearer a wall cost
+more to cross (up to 5 times), and a shortcut may not pass nearer a wall than the path it
+replaces or this (so that a column of UAVs a few metres either side of the route clears the
+corners)."""
 EXTENT_MARGIN_M: float = 20.0
 """Open ground around the footprints' bounding box, inside the city's extent [m]."""
 
@@ -514,6 +522,10 @@ class FileCity(City):
         The file read.
     n_default_height : int
         Buildings that got the default height.
+    clearance_grid_m : ndarray, shape (n_y, n_x)
+        Distance from each cell centre to the nearest wall [m], capped at
+        :data:`PREFERRED_CLEARANCE_M` or the clearance, whichever is larger (0 inside a
+        footprint).
     """
 
     grid_x_m: FloatArray = field(default_factory=lambda: np.zeros(0))
@@ -523,6 +535,7 @@ class FileCity(City):
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     source: str = ""
     n_default_height: int = 0
+    clearance_grid_m: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def resolution_m(self) -> float:
@@ -584,10 +597,10 @@ class FileCity(City):
         y = self.grid_y_m[rows[k]] + jitter[:, 1]
         return np.stack([x, y, np.full(int(n), float(altitude_m))], axis=1)
 
-    def _segment_free(self, a: FloatArray, b: FloatArray) -> bool:
-        """Whether the straight leg ``a -> b`` crosses reachable cells only (every cell it
-        passes through, by a grid traversal; a leg through a cell corner checks both cells
-        beside it)."""
+    def _segment_free(self, a: FloatArray, b: FloatArray, min_clear_m: float = 0.0) -> bool:
+        """Whether the straight leg ``a -> b`` crosses reachable cells with a clearance of at
+        least ``min_clear_m`` only (every cell it passes through, by a grid traversal; a leg
+        through a cell corner checks both cells beside it)."""
         res = self.resolution_m
         u0 = (a[0] - self.grid_x_m[0]) / res + 0.5
         v0 = (a[1] - self.grid_y_m[0]) / res + 0.5
@@ -604,7 +617,12 @@ class FileCity(City):
         dty = abs(1.0 / dv) if dv != 0 else math.inf
 
         def ok(ci: int, cj: int) -> bool:
-            return 0 <= ci < nx and 0 <= cj < ny and bool(self.reachable[cj, ci])
+            return (
+                0 <= ci < nx
+                and 0 <= cj < ny
+                and bool(self.reachable[cj, ci])
+                and self.clearance_grid_m[cj, ci] >= min_clear_m
+            )
 
         for _ in range(abs(i_end - i) + abs(j_end - j) + 2):
             if not ok(i, j):
@@ -621,39 +639,74 @@ class FileCity(City):
                 j, ty = j + sj, ty + dty
         return ok(i, j)
 
-    def free_space_route(self, start_xy: ArrayLike, goal_xy: ArrayLike) -> FloatArray:
+    def nearest_free_xy(self, xy: ArrayLike) -> FloatArray:
+        """Centre ``(2,)`` [m] of the reachable cell nearest to ``xy`` (ties: the first in
+        row-major order)."""
+        p = np.asarray(xy, dtype=float).reshape(2)
+        rows, cols = np.nonzero(self.reachable)
+        d2 = (self.grid_x_m[cols] - p[0]) ** 2 + (self.grid_y_m[rows] - p[1]) ** 2
+        k = int(np.argmin(d2))
+        return np.array([self.grid_x_m[cols[k]], self.grid_y_m[rows[k]]])
+
+    def free_space_route(
+        self, start_xy: ArrayLike, goal_xy: ArrayLike, *, snap: bool = False
+    ) -> FloatArray:
         """The route ``(k, 2)`` [m] from start to goal through the free space (module
         docstring): A* on the reachable cells between the cells of the two ends, shortened.
+
+        Parameters
+        ----------
+        start_xy, goal_xy : array_like, shape (2,)
+            East/North of the ends [m].
+        snap : bool, default False
+            An end off the reachable free space is refused (False) or planned from the
+            nearest reachable cell (True: the route then runs from the end itself to that
+            cell first, or from it to the end last).
 
         Raises
         ------
         ValueError
-            When an end is not on a reachable free cell.
+            Without ``snap``, when an end is not on a reachable free cell.
         """
         s = np.asarray(start_xy, dtype=float).reshape(2)
         g = np.asarray(goal_xy, dtype=float).reshape(2)
+        head, tail = [], []
         for name, p in (("start", s), ("goal", g)):
-            if not self.is_free_xy(p)[0]:
+            if self.is_free_xy(p)[0]:
+                continue
+            if not snap:
                 raise ValueError(
                     f"route {name} ({p[0]:.1f}, {p[1]:.1f}) m is not in the reachable free "
                     f"space of {self.source or 'the city'} (inside or within the clearance of "
                     "a building, or cut off from the rest)"
                 )
-        cells = _astar(self.reachable, self._cell(s), self._cell(g))
+            if name == "start":
+                head, s = [s], self.nearest_free_xy(s)
+            else:
+                tail, g = [g], self.nearest_free_xy(g)
+        cells = _astar(self.reachable, self.clearance_grid_m, self._cell(s), self._cell(g))
         pts = [s] + [np.array([self.grid_x_m[c], self.grid_y_m[r]]) for r, c in cells[1:-1]] + [g]
+        clear = np.array([self.clearance_grid_m[r, c] for r, c in cells])
         out = [pts[0]]
         i = 0
         while i < len(pts) - 1:  # keep the farthest waypoint reachable in a straight leg
             j = len(pts) - 1
-            while j > i + 1 and not self._segment_free(pts[i], pts[j]):
+            while j > i + 1 and not self._segment_free(
+                pts[i], pts[j], min(float(clear[i : j + 1].min()), PREFERRED_CLEARANCE_M)
+            ):
                 j -= 1
             out.append(pts[j])
             i = j
-        return np.array(out, dtype=float).reshape(-1, 2)
+        return np.array(head + out + tail, dtype=float).reshape(-1, 2)
 
 
-def _astar(free: BoolArray, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]]:
-    """Shortest 8-connected path of cells (octile metric, no corner cutting) on ``free``."""
+def _astar(
+    free: BoolArray, clear: FloatArray, start: tuple[int, int], goal: tuple[int, int]
+) -> list[tuple[int, int]]:
+    """Cheapest 8-connected path of cells (no corner cutting) on ``free``: a step costs its
+    length (1 or sqrt 2 cells) times ``1 + 4 (1 - clear / PREFERRED_CLEARANCE_M)`` of the cell
+    entered (``clear`` capped there), so routes keep to the middle of streets; the octile
+    distance is the (admissible) heuristic."""
     ny, nx = free.shape
     sq2 = math.sqrt(2.0)
 
@@ -684,7 +737,8 @@ def _astar(free: BoolArray, start: tuple[int, int], goal: tuple[int, int]) -> li
                 continue
             if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
                 continue
-            cost = g_cost[cur] + (sq2 if dr and dc else 1.0)
+            near = 1.0 - min(clear[rr, cc], PREFERRED_CLEARANCE_M) / PREFERRED_CLEARANCE_M
+            cost = g_cost[cur] + (sq2 if dr and dc else 1.0) * (1.0 + 4.0 * near)
             if cost < g_cost.get((rr, cc), math.inf):
                 g_cost[(rr, cc)] = cost
                 parent[(rr, cc)] = cur
@@ -804,7 +858,10 @@ def _load_cached(
     x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
     xs = x0 + res / 2.0 + res * np.arange(max(int((x1 - x0) // res), 1))
     ys = y0 + res / 2.0 + res * np.arange(max(int((y1 - y0) // res), 1))
-    free = _pk.free_cells(xs, ys, clearance, buildings.edges_m, buildings.edge_start, bb)
+    clear = _pk.wall_clearance(
+        xs, ys, max(clearance, PREFERRED_CLEARANCE_M), buildings.edges_m, buildings.edge_start, bb
+    )
+    free = clear >= clearance
     reach = _largest_component(free)
     if not np.any(reach):
         raise CityFileError(f"city file {path}: no free space between the buildings")
@@ -823,6 +880,7 @@ def _load_cached(
         origin=org,
         source=path,
         n_default_height=n_def,
+        clearance_grid_m=_readonly(clear),
     )
     return city, n_def
 

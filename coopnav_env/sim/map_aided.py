@@ -205,7 +205,7 @@ def predicted_line_of_sight(
         raise ValueError(
             f"pos_enu_m must be (N, 3) and cov_enu_m2 (N, 3, 3), got {pos.shape} and {cov.shape}"
         )
-    if _USE_KERNEL:
+    if _USE_KERNEL and isinstance(buildings, Buildings):  # (polygons: the functions below)
         return _predict_kernel(
             pos,
             cov,

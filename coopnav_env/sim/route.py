@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from coopnav_env.sim import _kernels
+from coopnav_env.sim.file_city import FileCity
 
 _USE_KERNEL = True
 """Waypoint advance through :mod:`coopnav_env.sim._kernels` (False: the numpy formulation)."""
@@ -76,6 +77,10 @@ def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarr
     intersection; on two parallel streets it turns twice, through the cross street that
     minimises the length (ties: the first in the city's order).
 
+    A :class:`~coopnav_env.sim.file_city.FileCity` has no street grid: its route is
+    :meth:`~coopnav_env.sim.file_city.FileCity.free_space_route` (ends off the free space are
+    snapped to it).
+
     Parameters
     ----------
     city : coopnav_env.sim.city.City
@@ -91,6 +96,8 @@ def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarr
         Waypoints [m], ``1 <= k <= 4``: the snapped start, the corners, the snapped goal,
         without repeated points (``k = 1`` when both ends snap to the same point).
     """
+    if isinstance(city, FileCity):
+        return city.free_space_route(start_xy, goal_xy, snap=True)
     cx, cy, (s_kind, sx, sy), (g_kind, gx, gy) = _snapped_ends(city, start_xy, goal_xy)
     pts: list[tuple[float, float]] = [(sx, sy)]
     if s_kind == g_kind == "ns":
@@ -168,6 +175,8 @@ def street_routes(
     if not 0 <= int(max_turns) <= 8:
         raise ValueError(f"max_turns must be in [0, 8], got {max_turns}")
     first = street_route(city, start_xy, goal_xy)
+    if isinstance(city, FileCity):  # one route through the free space
+        return [first]
     cx, cy, (s_kind, sx, sy), (g_kind, gx, gy) = _snapped_ends(city, start_xy, goal_xy)
     s_c = sx if s_kind == "ns" else sy
     g_c = gx if g_kind == "ns" else gy

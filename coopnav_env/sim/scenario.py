@@ -157,6 +157,13 @@ from coopnav_env.sim.city import (
     is_inside_building,
     sky_directions,
 )
+from coopnav_env.sim.file_city import (
+    CLEARANCE_M,
+    GEOJSON_PREFIX,
+    FileCity,
+    load_file_city,
+    sample_city_path,
+)
 from coopnav_env.sim.map_aided import predicted_line_of_sight
 from coopnav_env.sim.route import advance_waypoints, route_tail_lengths_m, street_route
 from coopnav_env.sim.swarm import (
@@ -262,10 +269,15 @@ class ScenarioConfig:
     ----------
     n_uavs : int, default 5
         Number of UAVs, in [1, 256].
-    city : {"grid", "canyon"}, default "grid"
+    city : {"grid", "canyon"} or "geojson:PATH", default "grid"
         ``"grid"``: a random street grid with open squares (:func:`generate_city` with
         ``city_config``). ``"canyon"``: the paper's single straight canyon (Section 4.1,
-        :func:`canyon_city` with the ``canyon_*`` fields).
+        :func:`canyon_city` with the ``canyon_*`` fields). ``"geojson:PATH"``: the building
+        footprints of a GeoJSON file (:mod:`coopnav_env.sim.file_city`: heights from
+        ``height``, else ``building:levels`` x 3 m, else 10 m; the same city every episode;
+        start, goal and route in its free space), read and checked on construction (a bad
+        file raises naming it, the feature and the problem); ``"geojson:sample"``: the sample
+        city shipped with the package.
     city_config : CityConfig, default CityConfig()
         Street grid parameters (``city="grid"`` only): 6 x 6 blocks of 60 m, 20 m streets,
         roofs 10-150 m (mean 45 m), 10 % open squares; 500 m x 500 m.
@@ -400,6 +412,16 @@ class ScenarioConfig:
         position only).
     nlos_exclusion_max_margin_m : float, default 10.0
         Cap on each candidate's displacement [m], in [0, 1000].
+    city_origin : {"file", "config"}, default "file"
+        With ``city="geojson:..."``: ``"file"`` puts the ENU origin at the footprints'
+        centroid and sets ``lat_deg``/``lon_deg`` to it on construction (the satellites are
+        then seen from the city); ``"config"`` uses ``lat_deg``, ``lon_deg``, ``alt_m`` as
+        given. Other cities ignore it.
+    city_start_lat_lon, city_goal_lat_lon : (float, float) or None, default None
+        With ``city="geojson:..."``: the start (centre of the formation) and the goal
+        ``(lat_deg, lon_deg)`` of every episode; None: drawn per episode in the free space.
+        A point inside a building, or not in the reachable free space, is refused on
+        construction.
     """
 
     n_uavs: int = 5
@@ -446,12 +468,20 @@ class ScenarioConfig:
     nlos_exclusion: Literal["off", "map"] = "off"
     nlos_exclusion_margin_sigma: float = 2.0
     nlos_exclusion_max_margin_m: float = 10.0
+    city_origin: Literal["file", "config"] = "file"
+    city_start_lat_lon: tuple[float, float] | None = None
+    city_goal_lat_lon: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         o = type(self).__name__
         setv = object.__setattr__
         _check_int(o, "n_uavs", self.n_uavs, 1, 256)
-        _check_choice(o, "city", self.city, ("grid", "canyon"))
+        if not _is_file_city(self.city) and self.city not in ("grid", "canyon"):
+            raise ValueError(
+                f"{o}.city must be one of ('grid', 'canyon') or 'geojson:PATH' (a GeoJSON file "
+                f"of building footprints; 'geojson:sample' for the shipped one), got "
+                f"{self.city!r}"
+            )
         setv(
             self, "city_config", _coerce_sub_config(o, "city_config", self.city_config, CityConfig)
         )
@@ -463,6 +493,7 @@ class ScenarioConfig:
         _check_real(o, "lat_deg", self.lat_deg, -85.0, 85.0)
         _check_real(o, "lon_deg", self.lon_deg, -180.0, 360.0)
         _check_real(o, "alt_m", self.alt_m, -500.0, 10_000.0)
+        _check_city_file_settings(self, o)
         _check_real(o, "t0_s", self.t0_s, 0.0, 1e9)
         _check_real(o, "t0_random_s", self.t0_random_s, 0.0, 1e7)
         systems = self.systems
@@ -558,6 +589,67 @@ class ScenarioConfig:
 # --------------------------------------------------------------------------------------------
 
 
+def _is_file_city(spec: Any) -> bool:
+    """Whether a ``city`` setting names a file (``"geojson:..."``)."""
+    return isinstance(spec, str) and spec.startswith(GEOJSON_PREFIX)
+
+
+def _file_city(cfg: ScenarioConfig, *, warn: bool = False) -> FileCity:
+    """The city of ``cfg.city = "geojson:PATH"`` (read once per file version)."""
+    spec = cfg.city[len(GEOJSON_PREFIX) :]
+    path = sample_city_path() if spec == "sample" else spec
+    origin = None if cfg.city_origin == "file" else (cfg.lat_deg, cfg.lon_deg)
+    return load_file_city(path, origin_lat_lon=origin, alt_m=cfg.alt_m, warn=warn)
+
+
+def _check_city_file_settings(cfg: ScenarioConfig, o: str) -> None:
+    """Validate ``city="geojson:..."`` (reading the file), ``city_origin`` and the start and
+    goal points; with ``city_origin="file"``, set ``lat_deg``/``lon_deg`` to the city's."""
+    setv = object.__setattr__
+    _check_choice(o, "city_origin", cfg.city_origin, ("file", "config"))
+    ends: dict[str, tuple[float, float]] = {}
+    for name in ("city_start_lat_lon", "city_goal_lat_lon"):
+        value = getattr(cfg, name)
+        if value is None:
+            continue
+        try:
+            pair = tuple(float(v) for v in value)
+        except (TypeError, ValueError):
+            pair = ()
+        if not (len(pair) == 2 and all(math.isfinite(v) for v in pair) and abs(pair[0]) <= 90.0):
+            raise ValueError(f"{o}.{name} must be (lat_deg, lon_deg), got {value!r}")
+        setv(cfg, name, pair)
+        ends[name] = pair  # type: ignore[assignment]
+    if not _is_file_city(cfg.city):
+        if cfg.city_origin != "file" or ends:
+            name = next(iter(ends), "city_origin")
+            raise ValueError(f"{o}.{name} needs city='geojson:PATH', got city={cfg.city!r}")
+        return
+    if not cfg.city[len(GEOJSON_PREFIX) :].strip():
+        raise ValueError(f"{o}.city={cfg.city!r} names no file")
+    try:
+        city = _file_city(cfg, warn=True)
+    except ValueError as exc:
+        raise ValueError(f"{o}.city={cfg.city!r}: {exc}") from None
+    if cfg.city_origin == "file":
+        setv(cfg, "lat_deg", city.origin[0])
+        setv(cfg, "lon_deg", city.origin[1])
+    for name, (lat, lon) in ends.items():
+        xy = city.lat_lon_to_xy(lat, lon)
+        inside = bool(is_inside_building(city.buildings, np.array([[xy[0], xy[1], 1.0]]))[0])
+        if inside or not city.is_free_xy(xy)[0]:
+            why = "inside a building"
+            if not inside:
+                why = (
+                    f"not in the reachable free space (within {CLEARANCE_M:g} m of a wall, "
+                    "outside the map or cut off from it)"
+                )
+            raise ValueError(
+                f"{o}.{name}=({lat}, {lon}) lies {why} of {city.source} (at East "
+                f"{xy[0]:.1f} m, North {xy[1]:.1f} m of its origin)"
+            )
+
+
 def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
     """Validate ``constellation`` and ``constellation_start`` (reading a RINEX file)."""
     spec, start = cfg.constellation, cfg.constellation_start
@@ -647,8 +739,11 @@ def make_city(config: ScenarioConfig, rng: np.random.Generator) -> City:
 
     ``city="canyon"``: :func:`canyon_city` (deterministic). ``city="grid"`` with ``city_seed``:
     the same generated city every time (its own generator, ``rng`` untouched); without:
-    :func:`generate_city` drawing from ``rng``.
+    :func:`generate_city` drawing from ``rng``. ``city="geojson:PATH"``: the file's city
+    (:func:`~coopnav_env.sim.file_city.load_file_city`, cached; ``rng`` untouched).
     """
+    if _is_file_city(config.city):
+        return _file_city(config)
     if config.city == "canyon":
         return canyon_city(
             h_over_d=config.canyon_h_over_d,
@@ -740,6 +835,85 @@ def _street_frames(
     x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
     xy = np.stack([np.where(ns, centre, x_along), np.where(ns, y_along, centre)], axis=1)
     return xy, ns
+
+
+_NO_BOXES = np.zeros((0, 3))
+_NO_BOXES.setflags(write=False)
+
+
+def _file_city_start_goal(
+    city: FileCity,
+    rng: np.random.Generator,
+    config: ScenarioConfig,
+    start_pos_enu_m: ArrayLike | None,
+    goal_enu_m: ArrayLike | None,
+) -> tuple[FloatArray, FloatArray]:
+    """True start positions (N, 3) and goal (3,) in a file city's free space.
+
+    256 candidate points are drawn in the reachable free space
+    (:meth:`~coopnav_env.sim.file_city.FileCity.random_street_points`). The formation
+    (:func:`formation_offsets`, ``formation_spacing_m`` apart, up to one spacing across) is
+    centred on the first candidate (or on ``city_start_lat_lon``) where every UAV lies in the
+    free space and at least its radius plus 1 m from every wall, laid along East, else along
+    North; failing that, as a single file. The goal is
+    the first later candidate at least ``goal_distance_min_m`` from the start (the farthest if
+    none is), or ``city_goal_lat_lon``.
+    """
+    cfg = config
+    n = cfg.n_uavs
+    kin = cfg.kinematics
+    cand = city.random_street_points(rng, 256, margin_m=0.0)[:, :2]
+    if start_pos_enu_m is None:
+        if cfg.city_start_lat_lon is not None:
+            centres = city.lat_lon_to_xy(*cfg.city_start_lat_lon)[None, :]
+        else:
+            centres = cand
+        pos = None
+        for half_width in (cfg.formation_spacing_m, 0.0):
+            off = formation_offsets(
+                n,
+                cfg.formation_spacing_m,
+                half_width,
+                cfg.start_altitude_m,
+                kin.altitude_min_m + kin.uav_radius_m,
+                kin.altitude_max_m - kin.uav_radius_m,
+            )
+            for c in centres:
+                for along, across in ((0, 1), (1, 0)):
+                    xy = np.empty((n, 2))
+                    xy[:, along], xy[:, across] = c[along] + off[:, 0], c[across] + off[:, 1]
+                    if city.is_free_xy(xy).all():
+                        trial = np.column_stack([xy, off[:, 2]])
+                        clear = kin.uav_radius_m + 1.0  # every UAV 1 m clear of the walls
+                        if not city.buildings.swept_collisions(trial, trial, clear).any():
+                            pos = trial
+                            break
+                if pos is not None:
+                    break
+            if pos is not None:
+                break
+        if pos is None:
+            raise ValueError(
+                f"no room for a formation of {n} UAVs {cfg.formation_spacing_m:g} m apart in "
+                f"the free space of {city.source} at the start"
+            )
+    else:
+        pos = np.array(start_pos_enu_m, dtype=float)
+        if pos.shape != (n, 3) or not np.all(np.isfinite(pos)):
+            raise ValueError(f"start_pos_enu_m must be finite with shape ({n}, 3)")
+    if goal_enu_m is not None:
+        goal = np.array(goal_enu_m, dtype=float)
+        if goal.shape != (3,) or not np.all(np.isfinite(goal)):
+            raise ValueError("goal_enu_m must be finite with shape (3,)")
+    elif cfg.city_goal_lat_lon is not None:
+        goal = np.r_[city.lat_lon_to_xy(*cfg.city_goal_lat_lon), cfg.start_altitude_m]
+    else:
+        centre = pos[:, :2].mean(axis=0)
+        dist = np.hypot(*(cand[1:] - centre).T)
+        ok = dist >= cfg.goal_distance_min_m
+        pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
+        goal = np.r_[cand[1 + pick], cfg.start_altitude_m]
+    return pos, goal
 
 
 def _place_formation(
@@ -1139,23 +1313,10 @@ class UrbanWorld:
         city = self.city
         self.t_s = episode_start_s(cfg, self.constellation, rng)
         margin = cfg.kinematics.uav_radius_m + 1.0
-        cand, ns = _street_frames(city, rng, 256, margin)
-        if start_pos_enu_m is None:
-            pos = _place_formation(city, cand[0], bool(ns[0]), cfg)
+        if isinstance(city, FileCity):
+            pos, goal = _file_city_start_goal(city, rng, cfg, start_pos_enu_m, goal_enu_m)
         else:
-            pos = np.array(start_pos_enu_m, dtype=float)
-            if pos.shape != (n, 3) or not np.all(np.isfinite(pos)):
-                raise ValueError(f"start_pos_enu_m must be finite with shape ({n}, 3)")
-        if goal_enu_m is None:
-            centre = pos[:, :2].mean(axis=0)
-            dist = np.hypot(*(cand[1:] - centre).T)
-            ok = dist >= cfg.goal_distance_min_m
-            pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
-            goal = np.r_[cand[1 + pick], cfg.start_altitude_m]
-        else:
-            goal = np.array(goal_enu_m, dtype=float)
-            if goal.shape != (3,) or not np.all(np.isfinite(goal)):
-                raise ValueError("goal_enu_m must be finite with shape (3,)")
+            pos, goal = self._street_start_goal(city, rng, margin, start_pos_enu_m, goal_enu_m)
         self.goal_enu_m = goal
         self.route_xy_m = street_route(city, pos[:, :2].mean(axis=0), goal[:2])
         self.route_tail_m = route_tail_lengths_m(self.route_xy_m)  # route left after each point
@@ -1173,6 +1334,36 @@ class UrbanWorld:
         zeros = np.zeros(n, dtype=bool)
         self.last = self._epoch(rng, zeros, zeros)
         return self.last
+
+    def _street_start_goal(
+        self,
+        city: City,
+        rng: np.random.Generator,
+        margin: float,
+        start_pos_enu_m: ArrayLike | None,
+        goal_enu_m: ArrayLike | None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """True start positions (N, 3) and goal (3,) on a street city's streets."""
+        cfg = self.config
+        n = cfg.n_uavs
+        cand, ns = _street_frames(city, rng, 256, margin)
+        if start_pos_enu_m is None:
+            pos = _place_formation(city, cand[0], bool(ns[0]), cfg)
+        else:
+            pos = np.array(start_pos_enu_m, dtype=float)
+            if pos.shape != (n, 3) or not np.all(np.isfinite(pos)):
+                raise ValueError(f"start_pos_enu_m must be finite with shape ({n}, 3)")
+        if goal_enu_m is None:
+            centre = pos[:, :2].mean(axis=0)
+            dist = np.hypot(*(cand[1:] - centre).T)
+            ok = dist >= cfg.goal_distance_min_m
+            pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
+            goal = np.r_[cand[1 + pick], cfg.start_altitude_m]
+        else:
+            goal = np.array(goal_enu_m, dtype=float)
+            if goal.shape != (3,) or not np.all(np.isfinite(goal)):
+                raise ValueError("goal_enu_m must be finite with shape (3,)")
+        return pos, goal
 
     def step(self, cmd: ArrayLike, rng: np.random.Generator) -> Epoch:
         """Advance one time step with velocity commands ``cmd`` (N, 3) in [-1, 1] (clipped).
@@ -1192,6 +1383,8 @@ class UrbanWorld:
         r = kin.uav_radius_m
         lo = np.array([x0 + r, y0 + r])
         hi = np.array([x1 - r, y1 - r])
+        b = self.city.buildings
+        polygons = not isinstance(b, Buildings)  # a file city's extruded polygons
         if _USE_KERNEL:
             if cmd.shape != pos0.shape:
                 raise ValueError(f"cmd must have shape {pos0.shape}, got {cmd.shape}")
@@ -1208,17 +1401,25 @@ class UrbanWorld:
                 float(kin.altitude_max_m),
                 lo,
                 hi,
-                self.city.buildings.min_m,
-                self.city.buildings.max_m,
+                _NO_BOXES if polygons else b.min_m,
+                _NO_BOXES if polygons else b.max_m,
                 float(r),
                 float(kin.min_separation_m),
             )
+            if polygons:  # the motion above met no building: collide with the polygons
+                hit = b.swept_collisions(pos0, pos1, r)
+                pos1[hit] = pos0[hit]
+                vel1[hit] = 0.0
+                sep = _sim_kernels.separation_violations(pos1, float(kin.min_separation_m))
         else:
             pos1, vel1 = step_kinematics(pos0, vel0, cmd, kin)
             out = (pos1[:, :2] < lo) | (pos1[:, :2] > hi)
             pos1[:, :2] = np.clip(pos1[:, :2], lo, hi)
             vel1[:, :2] = np.where(out, 0.0, vel1[:, :2])
-            hit = _swept_collisions_culled(self.city.buildings, pos0, pos1, r)
+            if polygons:
+                hit = b.swept_collisions(pos0, pos1, r)
+            else:
+                hit = _swept_collisions_culled(b, pos0, pos1, r)
             pos1[hit] = pos0[hit]
             vel1[hit] = 0.0
             sep = separation_violations(pos1, kin.min_separation_m)
