@@ -178,6 +178,7 @@ def _world(env: Any) -> dict[str, Any]:
         heights = getattr(city.buildings, "heights_m", None)
         out["heights"] = None if heights is None else np.asarray(heights, dtype=float)
         out["extent"] = tuple(city.extent_m)
+        out["rings"] = getattr(city.buildings, "rings_m", None)  # a file city's polygons
     goal = getattr(world, "goal_enu_m", None)
     out["goal"] = np.asarray(goal, dtype=float)[:2] if goal is not None else None
     route = getattr(world, "route_xy_m", None)
@@ -222,7 +223,14 @@ def trajectory_figure(env: Any, record: Any, title: str = "") -> Figure | None:
         height_ratios=[3.0, 1.3],
         layout="constrained",
     )
-    if world["footprints"] is not None:
+    if world.get("rings") is not None:  # polygons (holes drawn over in white)
+        from matplotlib.patches import Polygon
+
+        for rings in world["rings"]:
+            top.add_patch(Polygon(rings[0], color="0.78", lw=0))
+            for hole in rings[1:]:
+                top.add_patch(Polygon(hole, color="white", lw=0))
+    elif world["footprints"] is not None:
         for x0, y0, x1, y1 in world["footprints"]:
             top.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.78", lw=0))
     route = world["route"]

@@ -151,3 +151,15 @@ def test_rgb_frame_draws_the_polygons() -> None:
     env.reset(seed=0)
     frame = env.render()
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 10
+
+
+def test_coopnav_evaluate_runs_on_the_sample_city(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    from coopnav_env.training.cli import main
+
+    city = f"city=geojson:{sample_city_path()}"
+    argv = ["evaluate", "--policies", "formation", "wide", "--episodes", "2"]
+    assert main([*argv, "--env-set", city, "--out", str(tmp_path / "ev")]) == 0
+    report = json.loads((tmp_path / "ev" / "report.json").read_text())
+    assert "geojson:" in json.dumps(report)
+    assert (tmp_path / "ev" / "trajectories_wide.png").stat().st_size > 10_000
