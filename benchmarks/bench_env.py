@@ -28,6 +28,12 @@ machines):
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the
    speed-up any vector environment can bring.
+7. **A city from a file**: parallel-env steps/s at N = 5 on the default grid city and on a
+   GeoJSON city of about 500 extruded polygons
+   (:func:`coopnav_env.sim.file_city.sample_city_geojson` with 10 x 10 blocks, written to a
+   temporary file), hovering (200-step episodes) and with the ``formation`` heuristic flying
+   its route, in alternating rounds; the ratio is the cost of a file-city step over a
+   grid-city step.
 
 Usage::
 
@@ -62,7 +68,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from coopnav_env import urban_canyon_v0
 
-SECTIONS = ("compare", "stages", "memory", "scaling", "batched", "train")
+SECTIONS = ("compare", "stages", "memory", "scaling", "batched", "train", "file_city")
 
 # --------------------------------------------------------------------------------------------
 # environments under test
@@ -664,6 +670,65 @@ def section_train(args, out: dict) -> None:
 
 
 # --------------------------------------------------------------------------------------------
+# 7. a city from a file
+# --------------------------------------------------------------------------------------------
+
+
+class PolicyStepper(RandomStepper):
+    """A named heuristic of :func:`coopnav_env.agents.make_policy` flies the swarm."""
+
+    def __init__(self, env: Any, policy: str, seed: int = 0):
+        from coopnav_env.agents import make_policy
+
+        self.policy = make_policy(policy, env)
+        super().__init__(env, seed)
+        self.obs, _ = env.reset(seed=seed)
+        self.policy.reset(seed=seed)
+
+    def run(self, steps: int) -> None:
+        env = self.env
+        for _ in range(steps):
+            if not env.agents:
+                self.obs, _ = env.reset()
+                self.policy.reset()
+                self.episodes += 1
+            self.obs = env.step(self.policy.act(self.obs))[0]
+            self.steps += 1
+
+
+def section_file_city(args, out: dict) -> None:
+    import warnings
+
+    from coopnav_env.sim.file_city import sample_city_geojson
+
+    print("\n== 7. a city from a GeoJSON file vs the grid city, N = 5 (steps/s) ==")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "city500.geojson"
+        path.write_text(json.dumps(sample_city_geojson(seed=11, n_blocks=10)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the buildings without a height
+            file_kw = {"city": f"geojson:{path}"}
+            n_b = make_urban(5, **file_kw)
+            n_b.reset(seed=0)
+            n_buildings = n_b.world.city.buildings.n
+            rows = []
+            for label, stepper in (
+                ("hover", lambda **kw: HoverStepper(make_urban(5, **kw)).run),
+                ("formation", lambda **kw: PolicyStepper(make_urban(5, **kw), "formation").run),
+            ):
+                best = side_by_side(
+                    {"grid": stepper(), "file": stepper(**file_kw)}, args.seconds, args.rounds
+                )
+                ratio = best["grid"] / best["file"]
+                print(
+                    f"   {label:>9}: grid city {best['grid']:8.1f}, file city ({n_buildings} "
+                    f"buildings) {best['file']:8.1f}; a file-city step costs {ratio:.2f}x"
+                )
+                rows.append({"actions": label, **best, "cost_ratio": ratio})
+    out["file_city"] = {"n_buildings": n_buildings, "rows": rows}
+
+
+# --------------------------------------------------------------------------------------------
 # main
 # --------------------------------------------------------------------------------------------
 
@@ -729,6 +794,7 @@ def main(argv: list[str] | None = None) -> int:
         "scaling": section_scaling,
         "batched": section_batched,
         "train": section_train,
+        "file_city": section_file_city,
     }
     for name in SECTIONS:
         if name in args.sections:

@@ -801,7 +801,7 @@ def load_file_city(
     default_height_m : float or None, default :data:`DEFAULT_HEIGHT_M`
         As for :func:`read_geojson_footprints`.
     warn : bool, default True
-        Warn (once per load) how many buildings got the default height.
+        Warn how many buildings got the default height (once per file version and process).
 
     Raises
     ------
@@ -830,13 +830,19 @@ def load_file_city(
         float(clearance_m),
         default_height_m,
     )
-    if warn and n_def:
+    key = (str(p), st.st_mtime_ns, default_height_m)
+    if warn and n_def and key not in _WARNED:
+        _WARNED.add(key)
         warnings.warn(
             f"city file {p}: {n_def} of {city.buildings.n} buildings have neither 'height' nor "
             f"'building:levels'; they get the default height {default_height_m} m",
             stacklevel=2,
         )
     return city
+
+
+_WARNED: set[tuple[str, int, float | None]] = set()
+"""Files whose default heights were already reported (one warning per file version)."""
 
 
 @functools.lru_cache(maxsize=16)
