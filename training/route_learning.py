@@ -283,9 +283,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
     """Environment keyword arguments from ``KEY=VALUE`` items (values parsed as YAML),
     checked by building the config, so that a bad setting fails before anything is flown."""
-    from coopnav_env.training.config import apply_overrides
-
     from coopnav_env.envs.config import make_config
+    from coopnav_env.training.config import apply_overrides
 
     kwargs = apply_overrides({}, list(items))
     make_config(**kwargs)  # fails early, naming the bad setting
@@ -294,11 +293,10 @@ def env_kwargs_from_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """Collect (resumably), fit and save; prints the cross-validated choice."""
+    from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.agents.routes import ROUTE_FEATURES
     from coopnav_env.training.files import ensure_folder, folder_lock
-
-    from coopnav_env import urban_canyon_v0
 
     if args.episodes < 5:
         raise ValueError(f"--episodes must be >= 5 (5-fold cross-validation), got {args.episodes}")
@@ -373,7 +371,11 @@ def _collect_and_fit(
                 )
             print(f"resuming {out}: {len(seeds)} of {args.episodes} episodes collected")
     elif out.exists() and any(not p.name.startswith(".") for p in out.iterdir()):
-        raise ValueError(f"--out {out} exists and is not a train-routes run folder")
+        from coopnav_env.training.runs import claiming_command
+
+        owner = claiming_command(out)
+        held = f": it holds the outputs of `{owner}`" if owner else ""
+        raise ValueError(f"--out {out} exists and is not a train-routes run folder{held}")
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
     write_json(run_json, {"settings": settings, "status": "collecting"})

@@ -24,6 +24,12 @@ finished). :func:`open_run` applies these rules before a backend does any work:
   steps (:func:`raise_if_interrupted`): an exception raised inside compiled (numba) code or
   inside a destructor would otherwise end in a ``SystemError`` or be swallowed. A second
   signal raises at once.
+* **A folder of its own**: a folder another command claimed (``command.json`` of ``coopnav
+  study``, ``coopnav evaluate`` or ``coopnav reproduce``, see
+  :func:`coopnav_env.training.files.claim_output_folder`) or one holding a route or split
+  model run or a study's flights (:data:`OTHER_RUN_FILES`) is refused, naming the command,
+  with ``overwrite`` and ``resume`` too: a training run never mixes with another command's
+  outputs nor removes them.
 * **A backend that matches**: resuming a folder with another ``--backend`` than its run was
   trained with is refused, naming both.
 * **The learning curve**: ``logs/progress.csv`` holds every iteration once, in order, however
@@ -53,6 +59,7 @@ from typing import TYPE_CHECKING, Any
 
 from coopnav_env.training.config import parse_yaml
 from coopnav_env.training.files import (
+    CLAIM_NAME,
     atomic_path,
     atomic_write_text,
     ensure_folder,
@@ -65,6 +72,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [  # atomic_path ... write_yaml: coopnav_env.training.files, also importable from here
     "LOCK_NAME",
+    "OTHER_RUN_FILES",
     "RUN_OUTPUTS",
     "Interrupted",
     "ProgressLog",
@@ -74,6 +82,7 @@ __all__ = [  # atomic_path ... write_yaml: coopnav_env.training.files, also impo
     "atomic_write_text",
     "check_same_environment",
     "checkpoint_candidates",
+    "claiming_command",
     "finished_run",
     "first_loadable",
     "install_interrupt_handlers",
@@ -105,6 +114,16 @@ RUN_OUTPUTS: tuple[str, ...] = (
 )
 """Glob patterns of what a training run writes into its folder (any backend)."""
 
+OTHER_RUN_FILES: tuple[str, ...] = (
+    "route_model.json",
+    "split_model.json",
+    "episodes.npz",
+    "settings.json",
+)
+"""Files of a run of another command, which ``coopnav train`` never writes into: a route or
+split model run (``coopnav train-routes``) and the flights of a study
+(:func:`coopnav_env.training.files.claim_run_folder`)."""
+
 
 class RunFolderError(ValueError):
     """The output folder cannot be used as asked (a usage error: the command exits 2)."""
@@ -130,6 +149,43 @@ def run_outputs(out: str | Path) -> list[Path]:
         return []
     found = {p for pattern in RUN_OUTPUTS for p in out.glob(pattern)}
     return sorted(found)
+
+
+def claiming_command(out: str | Path) -> str | None:
+    """The command that claimed the folder ``out`` (``"coopnav study"``, ...), or None.
+
+    Read from its ``command.json`` (:func:`coopnav_env.training.files.claim_output_folder`);
+    a ``command.json`` that cannot be read or names no command gives ``"an unknown
+    command"``: the folder is claimed all the same.
+    """
+    path = Path(out) / CLAIM_NAME
+    if not path.is_file():
+        return None
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return "an unknown command"
+    command = record.get("command") if isinstance(record, dict) else None
+    return command if isinstance(command, str) and command else "an unknown command"
+
+
+def _refuse_another_command(out: Path) -> None:
+    """Refuse ``out`` if it belongs to another command than ``coopnav train`` (see the
+    module docstring); ``--overwrite`` and ``--resume`` do not change that."""
+    how = (
+        "`coopnav train` writes a training run into a folder of its own (neither --overwrite "
+        "nor --resume takes another command's folder): choose another --out"
+    )
+    owner = claiming_command(out)
+    if owner is not None:
+        raise RunFolderError(f"{out} holds the outputs of `{owner}` ({CLAIM_NAME}); {how}")
+    others = sorted({p for pattern in OTHER_RUN_FILES for p in out.glob(pattern)})
+    if others:
+        names = ", ".join(p.name for p in others)
+        raise RunFolderError(
+            f"{out} holds the run of another command ({names}: `coopnav train-routes` or a "
+            f"study's flights); {how}"
+        )
 
 
 def finished_run(out: str | Path) -> dict[str, Any] | None:
@@ -564,13 +620,15 @@ def open_run(cfg: TrainConfig) -> Iterator[RunState]:
     ------
     RunFolderError
         ``cfg.out`` is a file or not writable, another run holds it, it holds a run and
-        neither ``cfg.overwrite`` nor ``cfg.resume`` is set, or ``cfg.resume`` asks to
-        continue a run of another backend.
+        neither ``cfg.overwrite`` nor ``cfg.resume`` is set, ``cfg.resume`` asks to
+        continue a run of another backend, or it belongs to another command (whatever
+        ``cfg.overwrite`` and ``cfg.resume`` say).
     """
     out = Path(cfg.out)
     with interrupts_raise():
         ensure_folder(out)
         with _folder_lock(out):
+            _refuse_another_command(out)
             outputs = run_outputs(out)
             if cfg.resume is not None:
                 backend = recorded_backend(out)

@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from coopnav_env.training import marl_study
 from coopnav_env.training.cli import main
 from coopnav_env.training.files import CLAIM_NAME, claim_output_folder, folder_lock
@@ -198,3 +199,82 @@ def test_study_default_out_is_no_committed_folder_and_help_says_models_are_pickl
     assert parser.get_default("out") == "runs/study"
     help_text = " ".join(parser.format_help().split())
     assert "is a pickle: loading it runs code from it" in help_text
+
+
+# --------------------------------------------------------------------------------------------
+# coopnav train refuses another command's folder, as study and evaluate refuse a training run
+# --------------------------------------------------------------------------------------------
+
+
+def _toy_train(tmp_path: Path, out: Path, *extra: str) -> int:
+    """``coopnav train`` of a few seconds on the toy environment (SB3) into ``out``."""
+    pytest.importorskip("stable_baselines3")
+    import yaml
+
+    from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
+
+    config = tmp_path / "toy.yaml"
+    config.write_text(yaml.safe_dump({TOY_ENV_ID: TOY_TRAINING}))
+    argv = ["train", "--config", str(config), "--env-id", TOY_ENV_ID, "--out", str(out)]
+    return main([*argv, *extra])
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file() and p.name[0] != "."}
+
+
+@pytest.mark.parametrize("extra", [[], ["--overwrite"], ["--resume", "latest"]])
+def test_train_refuses_a_study_folder_naming_it(tmp_path, capsys, no_flights, extra):
+    out = tmp_path / "shared"
+    assert main([*STUDY, "--out", str(out)]) == 0
+    before = _files(out)
+    capsys.readouterr()
+    assert _toy_train(tmp_path, out, *extra) == 2
+    err = capsys.readouterr().err
+    assert f"{out} holds the outputs of `coopnav study` ({CLAIM_NAME})" in err, err
+    assert "choose another --out" in err
+    assert _files(out) == before  # nothing written, nothing removed
+    assert not (out / "config.yaml").exists() and not (out / "checkpoints").exists()
+
+
+@pytest.mark.parametrize("command", ["coopnav evaluate", "coopnav reproduce"])
+def test_train_refuses_a_folder_claimed_by_another_command(tmp_path, capsys, command):
+    out = tmp_path / "shared"
+    with claim_output_folder(out, command, {"a": 1}, outputs=["report.*"]) as claim:
+        (out / "report.md").write_text("# report\n")
+        claim.finish([out / "report.md"])
+    before = _files(out)
+    assert _toy_train(tmp_path, out, "--overwrite") == 2
+    assert f"holds the outputs of `{command}`" in capsys.readouterr().err
+    assert _files(out) == before
+
+
+@pytest.mark.parametrize("name", ["route_model.json", "episodes.npz", "settings.json"])
+def test_train_refuses_a_route_run_or_a_studys_flights(tmp_path, capsys, name):
+    """A train-routes run holds a ``run.json`` too: --overwrite used to remove it (and
+    --resume to read it as a training run's)."""
+    out = tmp_path / "routes"
+    out.mkdir()
+    (out / "run.json").write_text(json.dumps({"settings": {}, "status": "collecting"}))
+    (out / name).write_bytes(b"flights")
+    before = _files(out)
+    assert _toy_train(tmp_path, out, "--overwrite") == 2
+    err = capsys.readouterr().err
+    assert f"holds the run of another command ({name}" in err and "train-routes" in err, err
+    assert _files(out) == before
+
+
+def test_train_takes_its_own_folder_and_train_routes_names_the_claim(tmp_path, capsys):
+    """The refusal is of other commands only: a run folder of train is still trained in (the
+    rules for one's own run are tested in test_run_safety.py); train-routes names the
+    command that claimed a folder."""
+    out = tmp_path / "run"
+    assert _toy_train(tmp_path, out) == 0
+    assert not (out / CLAIM_NAME).exists()
+    claimed = tmp_path / "evaluated"
+    with claim_output_folder(claimed, "coopnav evaluate", {}, outputs=["report.*"]):
+        pass
+    routes = ["train-routes", "--episodes", "5", "--jobs", "1", "--out", str(claimed)]
+    assert main(routes) == 2
+    err = capsys.readouterr().err
+    assert "is not a train-routes run folder: it holds the outputs of `coopnav evaluate`" in err
