@@ -275,7 +275,11 @@ itself, `env(...)` is `pettingzoo.utils.parallel_to_aec(parallel_env(...))` (AEC
 
 `n_uavs` (5): number of UAVs, in [1, 256].
 
-`city` (`"grid"`): `"grid"`, a random street grid, or `"canyon"`, the paper's canyon.
+`city` (`"grid"`): `"grid"`, a random street grid, `"canyon"`, the paper's canyon, or
+`"geojson:PATH"`, building footprints from a file (section "A city from a GeoJSON file").
+
+`city_origin`, `city_start_lat_lon`, `city_goal_lat_lon` (`"file"`, None, None): the file
+city's geodetic origin and fixed start and goal (same section).
 
 `city_config` (`CityConfig()`): the grid: 6 x 6 blocks of 60 m, 20 m streets, roofs 10-150 m
 (mean 45 m), 10 % of the blocks open squares; 500 m x 500 m.
@@ -405,6 +409,26 @@ is read and checked when the environment is made: a missing or malformed file (t
 names the file and line), or a start outside the ephemerides' validity, raises `ValueError`.
 On the command line: `coopnav evaluate ... --env-set constellation=rinex:my_nav.rnx
 --env-set constellation_start=2026-12-03T06:00:00Z`.
+
+## A city from a GeoJSON file
+
+`city="geojson:PATH"` flies over the building footprints of a GeoJSON FeatureCollection
+(`Polygon`/`MultiPolygon` features in WGS 84 longitude/latitude, courtyards kept), extruded to
+their roofs: `height` (metres; `"12 m"` and feet read too), else `building:levels` x 3 m, else
+10 m (counted in one warning). `"geojson:sample"` is a synthetic city of 335 buildings shipped
+with the package (`coopnav_env/data/sample_city.geojson`). The city is the same every episode;
+line of sight, skyline, wall distances and collisions use the polygons
+(`coopnav_env.sim.file_city`). With `city_origin="file"` the ENU origin is the footprints'
+centroid and `lat_deg`/`lon_deg` are set to it (the satellites are seen from the city);
+`"config"` keeps `lat_deg`, `lon_deg`, `alt_m`. Start and goal are drawn per episode in the free
+space between the buildings (cells of 5 m at least 3 m from every wall, the largest connected
+piece), or given as `city_start_lat_lon` / `city_goal_lat_lon` = `(lat, lon)`; the route is an
+A* path through the free space, kept away from walls. The file is read and checked when the
+environment is made: a missing file, bad JSON, an open, self-intersecting or degenerate ring,
+an unreadable height, a point beyond 10 km of the origin, or a start or goal inside a building
+raises `ValueError` naming the file, the feature and the problem. On the command line:
+`coopnav evaluate --policies formation wide --env-set city=geojson:my_city.geojson`;
+`examples/fly_file_city.py` flies and renders it.
 
 ## Gymnasium (one agent commands the swarm)
 
