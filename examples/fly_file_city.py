@@ -22,9 +22,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-from coopnav_env.agents import make_policy
 
 from coopnav_env import urban_canyon_v0
+from coopnav_env.agents import make_policy
 
 
 def _lat_lon(text: str) -> tuple[float, float]:

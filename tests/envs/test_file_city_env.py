@@ -10,11 +10,11 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
-from coopnav_env.agents import make_policy
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from coopnav_env import GYM_ENV_ID, urban_canyon_v0
+from coopnav_env.agents import make_policy
 from coopnav_env.envs import make_config
 from coopnav_env.sim.city import is_inside_building
 from coopnav_env.sim.file_city import FileCity, load_file_city, sample_city_path
@@ -163,3 +163,24 @@ def test_coopnav_evaluate_runs_on_the_sample_city(tmp_path: Path) -> None:
     report = json.loads((tmp_path / "ev" / "report.json").read_text())
     assert "geojson:" in json.dumps(report)
     assert (tmp_path / "ev" / "trajectories_wide.png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_pettingzoo_render_test_passes(monkeypatch) -> None:
+    pytest.importorskip("matplotlib")
+    from pettingzoo.test import render_test
+
+    monkeypatch.setenv("MPLBACKEND", "Agg")  # "human" frames go to a window-less backend
+    render_test(lambda render_mode=None: urban_canyon_v0.env(render_mode=render_mode, **CITY))
+
+
+def test_coopnav_train_runs_on_the_sample_city(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    from coopnav_env.training.cli import main
+
+    tiny = ["--timesteps", "128", "--n-envs", "1", "--no-progress"]
+    sets = ["--set", "ppo.n_steps=64", "--set", "ppo.batch_size=64", "--set", "pretrain=null"]
+    out = tmp_path / "run"
+    assert main(["train", "--out", str(out), "--city", "geojson:sample", *tiny, *sets]) == 0
+    assert (out / "final_model.zip").is_file()
+    assert "geojson:sample" in (out / "config.yaml").read_text()
