@@ -184,3 +184,28 @@ def test_coopnav_train_runs_on_the_sample_city(tmp_path: Path) -> None:
     assert main(["train", "--out", str(out), "--city", "geojson:sample", *tiny, *sets]) == 0
     assert (out / "final_model.zip").is_file()
     assert "geojson:sample" in (out / "config.yaml").read_text()
+
+
+def test_numpy_motion_path_equals_the_compiled_one(monkeypatch) -> None:
+    from coopnav_env.sim import scenario
+
+    fast = _episode(urban_canyon_v0.parallel_env(**CITY), 4, 30)
+    monkeypatch.setattr(scenario, "_USE_KERNEL", False)
+    slow = _episode(urban_canyon_v0.parallel_env(**CITY), 4, 30)
+    assert len(fast) == len(slow)
+    for a, b in zip(fast, slow):
+        for x, y in zip(a[0].values(), b[0].values()):  # observations
+            np.testing.assert_array_equal(x, y)
+
+
+def test_map_aided_exclusion_and_lookahead_run_on_polygons() -> None:
+    env = urban_canyon_v0.parallel_env(
+        **CITY, nlos_exclusion="map", obs_lookahead=True, obs_candidate_sky=True
+    )
+    obs, _ = env.reset(seed=1)
+    space = env.observation_space("uav_0")
+    for _ in range(10):
+        obs, _, _, _, _ = env.step({a: np.array([0.1, 0.1, 0.0]) for a in env.agents})
+        assert all(space.contains(o) for o in obs.values())
+    ep = env.world.last
+    assert ep.received.sum() > 0 and (ep.map_excluded is not None)
