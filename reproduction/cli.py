@@ -1,7 +1,12 @@
 """``coopnav reproduce``: run the reproduction and write its files (:func:`reproduce`).
 
 Everything goes to ``--out DIR``: ``config.json`` (``--config`` reruns it exactly),
-``results.json``, ``report.md`` and the ``fig*.png`` figures.
+``results.json``, ``report.md`` and the ``fig*.png`` figures. The command claims ``DIR``
+before any work (:func:`coopnav_env.training.files.claim_output_folder`: a lock, and
+``command.json`` recording the configuration): a folder of another command, a training run,
+a result of another configuration or this very finished result is refused; ``--overwrite``
+replaces the outputs of the command (or the earlier reproduction) that ``DIR`` holds, never a
+training run.
 """
 
 from __future__ import annotations
@@ -24,14 +29,29 @@ from coopnav_env.reproduction.scenario import (
 )
 from coopnav_env.reproduction.simulation import json_float, run_studies
 from coopnav_env.reproduction.tables import summarize
-from coopnav_env.training.files import atomic_write_text, ensure_folder, write_json
+from coopnav_env.training.files import (
+    atomic_write_text,
+    claim_output_folder,
+    ensure_folder,
+    write_json,
+)
 
 __all__ = [
+    "REPRODUCE_OUTPUTS",
     "add_arguments",
     "build_config",
     "reproduce",
     "run",
 ]
+
+REPRODUCE_OUTPUTS: tuple[str, ...] = (
+    "config.json",
+    "results.json",
+    "report.md",
+    "fig*.png",
+    "table*.png",
+)
+"""Glob patterns of the files ``coopnav reproduce`` writes into its ``--out``."""
 
 
 def _json_default(o: Any) -> Any:
@@ -58,6 +78,13 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
     Path
         ``out_dir``.
     """
+    out = Path(out_dir)
+    _write_reproduction(config, out)
+    return out
+
+
+def _write_reproduction(config: ReproduceConfig, out_dir: str | Path) -> list[Path]:
+    """:func:`reproduce`, returning the paths of the files it wrote."""
     if not isinstance(config, ReproduceConfig):
         raise ValueError(f"config must be a ReproduceConfig, got {type(config).__name__}")
     out = ensure_folder(out_dir)
@@ -79,7 +106,8 @@ def reproduce(config: ReproduceConfig, out_dir: str | Path = "reproduce_out") ->
         json.dumps(results, indent=1, default=_json_default, allow_nan=False) + "\n",
     )
     atomic_write_text(out / "report.md", report_markdown(config, summary, figs, runtime))
-    return out
+    written = [out / "config.json", *(out / name for name, _ in figs)]
+    return [*written, out / "results.json", out / "report.md"]
 
 
 def _parse_value(text: str) -> Any:
@@ -160,7 +188,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``coopnav reproduce`` (defaults shown by ``--help``)."""
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = _defaults_epilog()
-    parser.add_argument("--out", required=True, help="output directory (required)")
+    parser.add_argument(
+        "--out",
+        required=True,
+        help="output directory, of this reproduction alone: a folder of another command, of "
+        "another configuration, or holding this finished reproduction is refused (required)",
+    )
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of the command (or the earlier reproduction) that --out "
+        "holds; a training run is never replaced; default: %(default)s (refuse)",
+    )
     parser.add_argument(
         "--quick",
         action="store_true",
@@ -205,7 +244,16 @@ def run(args: argparse.Namespace) -> int:
     """``coopnav reproduce``: returns the process exit status (errors: one line and exit 2
     for a bad configuration, see :mod:`coopnav_env.training.cli`)."""
     cfg = build_config(args)
-    out = reproduce(cfg, args.out)
+    settings = {k: v for k, v in cfg.to_dict().items() if k != "progress"}  # not the result's
+    with claim_output_folder(
+        args.out,
+        "coopnav reproduce",
+        settings,
+        outputs=REPRODUCE_OUTPUTS,
+        overwrite=args.overwrite,
+    ) as claim:  # --out is claimed (locked, checked, recorded) before any work
+        claim.finish(_write_reproduction(cfg, args.out))
+    out = Path(args.out)
     extra = " and the figures" if cfg.figures else ""
     smoke = " (a smoke run, not the reproduction)" if cfg.smoke_reasons() else ""
     print(f"wrote report.md, results.json, config.json{extra} to {out}{smoke}")

@@ -278,3 +278,76 @@ def test_train_takes_its_own_folder_and_train_routes_names_the_claim(tmp_path, c
     assert main(routes) == 2
     err = capsys.readouterr().err
     assert "is not a train-routes run folder: it holds the outputs of `coopnav evaluate`" in err
+
+
+# --------------------------------------------------------------------------------------------
+# coopnav reproduce claims its --out too
+# --------------------------------------------------------------------------------------------
+
+REPRODUCE = ["reproduce", "--quick", "--no-sensitivity", "--no-figures", "--no-progress"]
+REPRODUCE += ["--set", "n_epochs=2", "--set", "n_samples=2", "--set", "n_samples_sweep=2"]
+
+
+def _never_reproduce(monkeypatch) -> None:
+    """Make the reproduction's simulation fail the test (the claim must come first)."""
+    from coopnav_env.reproduction import cli as reproduce_cli
+
+    def simulate(*a, **kw):
+        raise AssertionError("coopnav reproduce simulated before checking --out")
+
+    monkeypatch.setattr(reproduce_cli, "run_studies", simulate)
+
+
+def test_reproduce_refuses_another_commands_folder_before_any_work(
+    tmp_path, capsys, no_flights, monkeypatch
+):
+    study = tmp_path / "study"
+    assert main([*STUDY, "--out", str(study)]) == 0
+    before = _files(study)
+    _never_reproduce(monkeypatch)
+    capsys.readouterr()
+    assert main([*REPRODUCE, "--out", str(study)]) == 2
+    err = capsys.readouterr().err
+    assert f"{study} holds the outputs of `coopnav study`" in err and "--overwrite" in err
+    assert _files(study) == before
+    trained = tmp_path / "trained"
+    trained.mkdir()
+    (trained / "final_model.zip").write_text("x")
+    assert main([*REPRODUCE, "--out", str(trained), "--overwrite"]) == 2
+    assert "--overwrite never removes a training run" in capsys.readouterr().err
+    assert _files(trained) == {"final_model.zip": b"x"}
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    with folder_lock(busy):
+        assert main([*REPRODUCE, "--out", str(busy)]) == 2
+        assert "is in use by another coopnav command" in capsys.readouterr().err
+
+
+def test_reproduce_claims_its_folder_and_overwrite_replaces_an_old_result(tmp_path, capsys):
+    """As the committed reproduction (docs/reproduction): files of an older version without
+    a claim are refused; --overwrite replaces the command's outputs and keeps the rest."""
+    out = tmp_path / "reproduction"
+    out.mkdir()
+    (out / "README.md").write_text("# the page\n")
+    (out / "results.json").write_text("{}")
+    (out / "fig6_skyplot.png").write_bytes(b"old figure")
+    assert main([*REPRODUCE, "--out", str(out)]) == 2
+    assert "already holds files of no `coopnav reproduce` run" in capsys.readouterr().err
+    assert (out / "results.json").read_text() == "{}"
+    assert main([*REPRODUCE, "--out", str(out), "--overwrite"]) == 0
+    claim = json.loads((out / CLAIM_NAME).read_text())
+    assert claim["command"] == "coopnav reproduce" and claim["status"] == "finished"
+    assert claim["outputs"] == ["config.json", "report.md", "results.json"]
+    assert claim["settings"]["seed"] == 0 and "progress" not in claim["settings"]
+    names = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+    assert names == sorted([CLAIM_NAME, "README.md", *claim["outputs"]])  # old figure gone
+    assert (out / "README.md").read_text() == "# the page\n"
+    assert json.loads((out / "results.json").read_text())["config"]["seed"] == 0
+    # a finished reproduction: the same configuration (with or without a progress bar) and
+    # another one are refused, naming what differs
+    capsys.readouterr()
+    again = [a for a in REPRODUCE if a != "--no-progress"]
+    assert main([*again, "--out", str(out)]) == 2
+    assert "holds the finished result of `coopnav reproduce`" in capsys.readouterr().err
+    assert main([*REPRODUCE, "--seed", "1", "--out", str(out)]) == 2
+    assert "result of other settings (seed)" in capsys.readouterr().err

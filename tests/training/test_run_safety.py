@@ -474,7 +474,7 @@ def test_a_failed_rewrite_keeps_the_earlier_outputs(tmp_path, command, first_onl
     before = {k: v[0] for k, v in snapshot(out).items()}
     limit = 8192
     assert any(len(data) > limit for data in before.values())
-    rerun = ["--overwrite"] if command[0] == "evaluate" else []  # other settings (issue 35)
+    rerun = ["--overwrite"]  # other settings (issue 35)
     again = _coopnav([*command, *rerun, "--out", str(out)], limit_bytes=limit)
     assert again.returncode == 1, again.stderr  # a failure of the system, not of usage
     assert "File too large" in again.stderr and "Traceback" not in again.stderr
