@@ -50,6 +50,7 @@ __all__ = [
     "check_bool",
     "check_number",
     "load_config",
+    "parse_settings_yaml",
     "parse_yaml",
 ]
 
@@ -91,6 +92,55 @@ def parse_yaml(text: str, what: str) -> Any:
         where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise ValueError(f"{what} is not valid YAML{where}: {problem}") from None
+
+
+class _TypedBool(str):
+    """A YAML 1.1 boolean (``off``, ``yes``, ...) as typed, until its place says what it is."""
+
+
+def parse_settings_yaml(text: str, what: str) -> Any:
+    """:func:`parse_yaml` for a file of settings: an environment setting that takes words
+    keeps the text as typed where YAML 1.1 would read a boolean.
+
+    Under a key ``env`` (a section's ``env`` and ``torchrl.env``), a setting of
+    :func:`env_word_settings` (``integrity``, ``nlos_exclusion``, ...) written ``off``,
+    ``on``, ``yes`` or ``no`` without quotes is that word, not False or True, as
+    :func:`apply_overrides` reads ``--env-set integrity=off``; every other boolean (a
+    boolean setting's ``off`` included) stays a boolean.
+    """
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_constructor(
+        "tag:yaml.org,2002:bool", lambda loader, node: _TypedBool(loader.construct_scalar(node))
+    )
+    try:
+        data = yaml.load(text, Loader=Loader)  # a SafeLoader: builds no arbitrary objects
+    except yaml.YAMLError:
+        return parse_yaml(text, what)  # the same error, in parse_yaml's words
+    return _settle_booleans(data, parent=None)
+
+
+def _settle_booleans(node: Any, parent: Any) -> Any:
+    """``node`` with each :class:`_TypedBool` made a boolean, or left as its text where it
+    is the value of a word setting in an ``env`` mapping (``parent``: the key above)."""
+    import yaml
+
+    if isinstance(node, _TypedBool):
+        return yaml.SafeLoader.bool_values[node.lower()]
+    if isinstance(node, dict):
+        words = env_word_settings() if parent == "env" else {}
+        return {
+            _settle_booleans(k, None): (
+                str(v) if isinstance(v, _TypedBool) and k in words else _settle_booleans(v, k)
+            )
+            for k, v in node.items()
+        }
+    if isinstance(node, list):
+        return [_settle_booleans(v, None) for v in node]
+    return node
 
 
 def backend_module(name: str) -> ModuleType:
@@ -446,7 +496,7 @@ def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) ->
     p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
     if not p.is_file():
         raise FileNotFoundError(f"hyperparameter file not found: {p}")
-    data = parse_yaml(p.read_text(), f"hyperparameter file {p}") or {}
+    data = parse_settings_yaml(p.read_text(), f"hyperparameter file {p}") or {}
     if not isinstance(data, Mapping):
         raise ValueError(f"hyperparameter file {p} must be a mapping of sections, got {data!r}")
     key = env_id if env_id in data or ":" not in env_id else DEFAULT_ENV_ID

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from coopnav_env.training.compile_notice import compile_notice, warm_up_env
-from coopnav_env.training.config import apply_overrides, parse_yaml
+from coopnav_env.training.config import apply_overrides, parse_settings_yaml
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
 from coopnav_env.training.evaluate import DEFAULT_EPISODES, evaluate
 from coopnav_env.training.files import claim_output_folder, jsonable
@@ -132,7 +132,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read_train_config(path: Path) -> dict[str, Any]:
-    data = parse_yaml(path.read_text(), f"training config {path}") or {}
+    data = parse_settings_yaml(path.read_text(), f"training config {path}") or {}
     if not isinstance(data, Mapping):
         raise ValueError(f"training config {path} must be a mapping of settings")
     return dict(data)

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from coopnav_env.training.config import parse_yaml
+from coopnav_env.training.config import parse_settings_yaml, parse_yaml
 from coopnav_env.training.files import (
     CLAIM_NAME,
     atomic_path,
@@ -221,7 +221,7 @@ def recorded_config(out: str | Path) -> dict[str, Any] | None:
     path = Path(out) / "config.yaml"
     if not path.is_file():
         return None
-    data = parse_yaml(path.read_text(), f"the run's settings {path}")
+    data = parse_settings_yaml(path.read_text(), f"the run's settings {path}")
     if not isinstance(data, dict):
         raise RunFolderError(f"{path} does not hold the settings of a run (not a mapping)")
     # a run trained further (--resume --timesteps M) records M in config_resumed_at_*.yaml
