@@ -3,6 +3,7 @@ and every figure it keeps names the command that gives it."""
 
 from __future__ import annotations
 
+import json
 import re
 import warnings
 from pathlib import Path
@@ -70,17 +71,41 @@ def test_train_and_evaluate_quick_start_is_the_main_job():
     assert [c for c in main_job if c.startswith("coopnav ")] == shown
 
 
-def test_results_name_the_command_that_gives_them():
-    """Every number of the results table comes from a command the section names: the
-    evaluation of the first README command."""
-    section = _section("Results")
-    evaluate = next(c for c in _readme_commands()[0].split(" && ") if c.startswith("coopnav eval"))
-    assert evaluate in section
+def _numeric_rows(section: str) -> list[str]:
     rows = [r for r in section.splitlines() if r.startswith("| ") and not r.startswith("| policy")]
-    assert len(rows) >= 4
     for row in rows:
         cells = [c.strip() for c in row.strip().strip("|").split("|")][1:]
         assert cells and all(re.fullmatch(r"\d+\.\d+", c) for c in cells), row
+    return rows
+
+
+def test_results_name_the_command_that_gives_them():
+    """Every number of the results table comes from the command the section names, and the
+    quick start's table from the evaluation of the first README command."""
+    section = _section("Results")
+    command = re.search(r"```text\n(coopnav alignment .*?)\n```", section, re.S)
+    assert command is not None
+    assert "--out studies/task_objective/alignment" in command.group(1)
+    assert len(_numeric_rows(section)) >= 4
+    quick = _section("Quick start: train and evaluate")
+    evaluate = next(c for c in _readme_commands()[0].split(" && ") if c.startswith("coopnav eval"))
+    assert evaluate in quick
+    assert len(_numeric_rows(quick)) >= 4
+
+
+def test_results_are_the_committed_alignment_report():
+    """The Results table quotes studies/task_objective/alignment/report.json to the digit."""
+    report = json.loads((ROOT / "studies/task_objective/alignment/report.json").read_text())
+    rows = {r["policy"]: r for r in report["rows"]}
+    section = _section("Results")
+    for line in _numeric_rows(section):
+        name = re.search(r"`([^`]+)`", line).group(1)
+        row = rows[name]
+        cells = [c.strip() for c in line.strip().strip("|").split("|")][1:]
+        assert cells[0] == f"{row['score']:.3f}"
+        assert cells[1] == f"{row['nav_error_m']:.2f}"
+        assert cells[2] == f"{row['goal_rate']:.3f}"
+        assert cells[3] == f"{row['v0:disc@0.99']:.1f}"
 
 
 def test_readme_names_the_installed_namespace_only():
