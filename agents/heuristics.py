@@ -130,6 +130,15 @@ def _number(
     return x
 
 
+def _model_kind(model: Any) -> str:
+    """How a refused ``route_model`` / ``route_split_model`` value is named in the error."""
+    kind = getattr(model, "kind", None)
+    if hasattr(model, "predict") and isinstance(kind, str):
+        hint = {"split": " (pass it as route_split_model)", "route": " (pass it as route_model)"}
+        return f"a {type(model).__name__} of kind {kind!r}{hint.get(kind, '')}"
+    return repr(model)
+
+
 @dataclass(frozen=True)
 class Derived:
     """A setting of a preset computed from the column's other settings when it is made.
@@ -422,9 +431,10 @@ class ColumnPolicy:
             not hasattr(route_split_model, "predict")
             or getattr(route_split_model, "kind", None) != "split"
         ):
+            got = _model_kind(route_split_model)
             raise ValueError(
                 f"route_split_model must be a split model (RouteModel of kind 'split') or a "
-                f"path to one, got {route_split_model!r}"
+                f"path to one, got {got}"
             )
         if route_split_model is not None and (route_split != "none" or route_split_index):
             raise ValueError(
@@ -437,8 +447,13 @@ class ColumnPolicy:
             from coopnav_env.agents.routes import RouteModel, resolve_route_model
 
             route_model = RouteModel.load(resolve_route_model(str(route_model)), kind="route")
-        if route_model is not None and not hasattr(route_model, "predict"):
-            raise ValueError(f"route_model must be a RouteModel or a path, got {route_model!r}")
+        if route_model is not None and (
+            not hasattr(route_model, "predict") or getattr(route_model, "kind", "route") != "route"
+        ):
+            raise ValueError(
+                "route_model must be a route model (RouteModel of kind 'route') or a path to "
+                f"one, got {_model_kind(route_model)}"
+            )
         self.route_model = route_model
         self.route_candidates: list[np.ndarray] = []  # the routes of the last plan
         self.route_chosen = 0  # index of the flown one among them
