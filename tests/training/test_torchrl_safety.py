@@ -101,23 +101,24 @@ def test_progress_csv_keeps_every_iteration_over_interrupts_and_resumes(tmp_path
 
 
 def test_sigint_inside_a_compiled_call_is_taken_after_it(tmp_path, monkeypatch, capsys):
-    """SIGINT while ``epoch_navigation`` (numba) runs: the call completes, the interrupt is
-    taken after it, a checkpoint is saved and the run resumes (today the interrupt raised
-    inside the call: ``SystemError: CPUDispatcher(...)``, no checkpoint)."""
-    from coopnav_env.sim import _kernels
+    """SIGINT while a world step runs its compiled (numba) kernels (motion, then
+    ``epoch_navigation``): the step completes, the interrupt is taken after it, a checkpoint
+    is saved and the run resumes (today the interrupt raised inside the call: ``SystemError:
+    CPUDispatcher(...)``, no checkpoint)."""
+    from coopnav_env.sim.scenario import UrbanWorld
 
-    real = _kernels.epoch_navigation
+    real = UrbanWorld.step
     calls = {"started": 0, "finished": 0}
 
-    def compiled_call(*args):
+    def compiled_call(self, cmd, rng):
         calls["started"] += 1
         if calls["started"] == 40:
-            os.kill(os.getpid(), signal.SIGINT)  # lands while the "compiled" call runs
-        result = real(*args)
+            os.kill(os.getpid(), signal.SIGINT)  # lands while the compiled calls run
+        result = real(self, cmd, rng)
         calls["finished"] += 1
         return result
 
-    monkeypatch.setattr(_kernels, "epoch_navigation", compiled_call)
+    monkeypatch.setattr(UrbanWorld, "step", compiled_call)
     out = tmp_path / "run"
     assert train(out, "--timesteps", "160") == 130
     assert calls["started"] >= 40 and calls["finished"] == calls["started"]
