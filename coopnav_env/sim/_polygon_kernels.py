@@ -380,3 +380,103 @@ def wall_clearance(xs, ys, reach, edges, edge_start, bbox):
                         best2 = d2
             out[j, i] = math.sqrt(best2)
     return out
+
+
+@njit(cache=True, inline="always")
+def _heap_less(hf, hc, i, j):
+    return hf[i] < hf[j] or (hf[i] == hf[j] and hc[i] < hc[j])
+
+
+@njit(cache=True)
+def astar(free, clear, preferred, start, goal):
+    """Cheapest 8-connected path of cells on ``free`` (n_y, n_x) from ``start`` to ``goal``
+    (flat indices ``row * n_x + col``), no corner cutting: a step costs its length (1 or
+    sqrt 2) times ``1 + 4 (1 - min(clear, preferred) / preferred)`` of the cell entered; the
+    octile distance is the heuristic; ties go to the earlier pushed node. Returns the flat
+    indices of the path, start first (empty when the goal cannot be reached)."""
+    ny, nx = free.shape
+    n = ny * nx
+    sq2 = math.sqrt(2.0)
+    g = np.full(n, np.inf)
+    parent = np.full(n, -1, dtype=np.int64)
+    done = np.zeros(n, dtype=np.bool_)
+    cap = 8 * n + 1
+    hf = np.empty(cap)
+    hc = np.empty(cap, dtype=np.int64)
+    hn = np.empty(cap, dtype=np.int64)
+    size = 0
+    counter = 0
+    gr, gc = goal // nx, goal % nx
+    g[start] = 0.0
+    dr0, dc0 = abs(start // nx - gr), abs(start % nx - gc)
+    hf[0] = max(dr0, dc0) + (sq2 - 1.0) * min(dr0, dc0)
+    hc[0] = 0
+    hn[0] = start
+    size = 1
+    steps_r = (1, -1, 0, 0, 1, 1, -1, -1)
+    steps_c = (0, 0, 1, -1, 1, -1, 1, -1)
+    while size > 0:
+        cur = hn[0]
+        # pop: move the last to the root and sift down
+        size -= 1
+        hf[0], hc[0], hn[0] = hf[size], hc[size], hn[size]
+        i = 0
+        while True:
+            a, b = 2 * i + 1, 2 * i + 2
+            m = i
+            if a < size and _heap_less(hf, hc, a, m):
+                m = a
+            if b < size and _heap_less(hf, hc, b, m):
+                m = b
+            if m == i:
+                break
+            hf[i], hf[m] = hf[m], hf[i]
+            hc[i], hc[m] = hc[m], hc[i]
+            hn[i], hn[m] = hn[m], hn[i]
+            i = m
+        if cur == goal:
+            length = 1
+            k = cur
+            while parent[k] >= 0:
+                k = parent[k]
+                length += 1
+            path = np.empty(length, dtype=np.int64)
+            k = cur
+            for j in range(length - 1, -1, -1):
+                path[j] = k
+                k = parent[k]
+            return path
+        if done[cur]:
+            continue
+        done[cur] = True
+        r, c = cur // nx, cur % nx
+        for s in range(8):
+            dr, dc = steps_r[s], steps_c[s]
+            rr, cc = r + dr, c + dc
+            if rr < 0 or rr >= ny or cc < 0 or cc >= nx or not free[rr, cc]:
+                continue
+            if dr != 0 and dc != 0 and not (free[r + dr, c] and free[r, c + dc]):
+                continue
+            near = 1.0 - min(clear[rr, cc], preferred) / preferred
+            cost = g[cur] + (sq2 if dr != 0 and dc != 0 else 1.0) * (1.0 + 4.0 * near)
+            nxt = rr * nx + cc
+            if cost < g[nxt]:
+                g[nxt] = cost
+                parent[nxt] = cur
+                counter += 1
+                ddr, ddc = abs(rr - gr), abs(cc - gc)
+                # push and sift up
+                i = size
+                size += 1
+                hf[i] = cost + max(ddr, ddc) + (sq2 - 1.0) * min(ddr, ddc)
+                hc[i] = counter
+                hn[i] = nxt
+                while i > 0:
+                    p = (i - 1) // 2
+                    if not _heap_less(hf, hc, i, p):
+                        break
+                    hf[i], hf[p] = hf[p], hf[i]
+                    hc[i], hc[p] = hc[p], hc[i]
+                    hn[i], hn[p] = hn[p], hn[i]
+                    i = p
+    return np.empty(0, dtype=np.int64)

@@ -64,7 +64,6 @@ traversal).
 from __future__ import annotations
 
 import functools
-import heapq
 import json
 import math
 import os
@@ -697,7 +696,13 @@ class FileCity(City):
                 j -= 1
             out.append(pts[j])
             i = j
-        return np.array(head + out + tail, dtype=float).reshape(-1, 2)
+        keep = [out[0]]  # drop waypoints on a straight line (the same path, fewer legs)
+        for k in range(1, len(out) - 1):
+            u, v = out[k] - keep[-1], out[k + 1] - out[k]
+            if abs(u[0] * v[1] - u[1] * v[0]) > 1e-9 * (u @ u + v @ v) or u @ v <= 0.0:
+                keep.append(out[k])
+        keep.append(out[-1])
+        return np.array(head + keep + tail, dtype=float).reshape(-1, 2)
 
 
 def _astar(
@@ -706,45 +711,18 @@ def _astar(
     """Cheapest 8-connected path of cells (no corner cutting) on ``free``: a step costs its
     length (1 or sqrt 2 cells) times ``1 + 4 (1 - clear / PREFERRED_CLEARANCE_M)`` of the cell
     entered (``clear`` capped there), so routes keep to the middle of streets; the octile
-    distance is the (admissible) heuristic."""
-    ny, nx = free.shape
-    sq2 = math.sqrt(2.0)
-
-    def h(rc: tuple[int, int]) -> float:
-        dr, dc = abs(rc[0] - goal[0]), abs(rc[1] - goal[1])
-        return max(dr, dc) + (sq2 - 1.0) * min(dr, dc)
-
-    g_cost = {start: 0.0}
-    parent: dict[tuple[int, int], tuple[int, int]] = {}
-    heap = [(h(start), 0, start)]
-    counter = 0
-    done = set()
-    while heap:
-        _, _, cur = heapq.heappop(heap)
-        if cur == goal:
-            path = [cur]
-            while cur in parent:
-                cur = parent[cur]
-                path.append(cur)
-            return path[::-1]
-        if cur in done:
-            continue
-        done.add(cur)
-        r, c = cur
-        for dr, dc in _STEPS:
-            rr, cc = r + dr, c + dc
-            if not (0 <= rr < ny and 0 <= cc < nx) or not free[rr, cc]:
-                continue
-            if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
-                continue
-            near = 1.0 - min(clear[rr, cc], PREFERRED_CLEARANCE_M) / PREFERRED_CLEARANCE_M
-            cost = g_cost[cur] + (sq2 if dr and dc else 1.0) * (1.0 + 4.0 * near)
-            if cost < g_cost.get((rr, cc), math.inf):
-                g_cost[(rr, cc)] = cost
-                parent[(rr, cc)] = cur
-                counter += 1
-                heapq.heappush(heap, (cost + h((rr, cc)), counter, (rr, cc)))
-    raise ValueError(f"no free-space route between cells {start} and {goal}")
+    distance is the (admissible) heuristic (:func:`coopnav_env.sim._polygon_kernels.astar`)."""
+    nx = free.shape[1]
+    path = _pk.astar(
+        free,
+        np.ascontiguousarray(clear, dtype=np.float64),
+        float(PREFERRED_CLEARANCE_M),
+        start[0] * nx + start[1],
+        goal[0] * nx + goal[1],
+    )
+    if path.size == 0:
+        raise ValueError(f"no free-space route between cells {start} and {goal}")
+    return [(int(k) // nx, int(k) % nx) for k in path]
 
 
 def _largest_component(free: BoolArray) -> BoolArray:

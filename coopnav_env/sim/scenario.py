@@ -854,8 +854,8 @@ def _file_city_start_goal(
     (:meth:`~coopnav_env.sim.file_city.FileCity.random_street_points`). The formation
     (:func:`formation_offsets`, ``formation_spacing_m`` apart, up to one spacing across) is
     centred on the first candidate (or on ``city_start_lat_lon``) where every UAV lies in the
-    free space and at least its radius plus 1 m from every wall, laid along East, else along
-    North; failing that, as a single file. The goal is
+    free space and at least its radius plus one spacing from every wall (failing that, its
+    radius plus 1 m), laid along East, else along North; failing that, as a single file. The goal is
     the first later candidate at least ``goal_distance_min_m`` from the start (the farthest if
     none is), or ``city_goal_lat_lon``.
     """
@@ -869,7 +869,13 @@ def _file_city_start_goal(
         else:
             centres = cand
         pos = None
-        for half_width in (cfg.formation_spacing_m, 0.0):
+        tries = [
+            (half_width, clear)
+            for half_width in (cfg.formation_spacing_m, 0.0)
+            # every UAV a spacing plus its radius clear of the walls where possible, else 1 m
+            for clear in (cfg.formation_spacing_m + kin.uav_radius_m, kin.uav_radius_m + 1.0)
+        ]
+        for half_width, clear in tries:
             off = formation_offsets(
                 n,
                 cfg.formation_spacing_m,
@@ -884,7 +890,6 @@ def _file_city_start_goal(
                     xy[:, along], xy[:, across] = c[along] + off[:, 0], c[across] + off[:, 1]
                     if city.is_free_xy(xy).all():
                         trial = np.column_stack([xy, off[:, 2]])
-                        clear = kin.uav_radius_m + 1.0  # every UAV 1 m clear of the walls
                         if not city.buildings.swept_collisions(trial, trial, clear).any():
                             pos = trial
                             break
