@@ -77,8 +77,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from coopnav_env.gnss.frames import ecef_to_enu, enu_to_ecef, geodetic_to_ecef
-from coopnav_env.gnss.frames import ecef_to_geodetic as _ecef_to_geodetic
+from coopnav_env.gnss.frames import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from coopnav_env.sim import _polygon_kernels as _pk
 from coopnav_env.sim.city import City, SkyDirections, _as_points, _ray_directions, _readonly
 
@@ -552,7 +551,7 @@ class FileCity(City):
         lat0, lon0, alt0 = self.origin
         p = np.asarray(xy, dtype=float).reshape(2)
         ecef = enu_to_ecef(np.array([p[0], p[1], 0.0]), lat0, lon0, alt0)
-        lat, lon, _ = _ecef_to_geodetic(ecef)
+        lat, lon, _ = ecef_to_geodetic(ecef)
         return float(lat), float(lon)
 
     def _cell(self, xy: ArrayLike) -> tuple[int, int]:
@@ -940,8 +939,8 @@ def sample_city_geojson(seed: int = 7, n_blocks: int = 8) -> dict[str, Any]:
     20 m streets (with 10 % of blocks left open and 25 m-wide diagonal avenue cut through), each
     with up to four buildings of five shapes (:func:`_shape`), heights given as numbers, as
     ``"NN m"`` strings, as ``building:levels`` or (one in twenty) not at all. Deterministic in
-    ``seed``; the shipped file is ``sample_city_geojson()`` (``tests/sim/test_file_city.py``
-    checks it)."""
+    ``seed``; the shipped file is ``sample_city_geojson()``, written by
+    ``write_sample_city(sample_city_path())`` (``tests/sim/test_file_city.py`` checks it)."""
     rng = np.random.default_rng(seed)
     block, street = 60.0, 20.0
     pitch = block + street
@@ -970,7 +969,7 @@ def sample_city_geojson(seed: int = 7, n_blocks: int = 8) -> dict[str, Any]:
                         ecef = enu_to_ecef(
                             np.column_stack([r, np.zeros(r.shape[0])]), lat0, lon0, 0.0
                         )
-                        lat, lon, _ = _ecef_to_geodetic(ecef)
+                        lat, lon, _ = ecef_to_geodetic(ecef)
                         ring = np.round(np.column_stack([lon, lat]), 8).tolist()
                         ll.append([*ring, ring[0]])
                     h = float(np.clip(rng.lognormal(math.log(30.0), 0.6), 6.0, 180.0))
@@ -1005,9 +1004,3 @@ def write_sample_city(path: str | os.PathLike[str], seed: int = 7) -> Path:
     tmp.write_text(json.dumps(sample_city_geojson(seed), indent=None) + "\n", encoding="utf-8")
     os.replace(tmp, out)
     return out
-
-
-if __name__ == "__main__":  # python -m coopnav_env.sim.file_city [PATH]
-    import sys
-
-    print(write_sample_city(sys.argv[1] if len(sys.argv) > 1 else sample_city_path()))
