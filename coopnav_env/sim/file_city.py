@@ -936,9 +936,12 @@ def _shape(rng: np.random.Generator, cx: float, cy: float, w: float, d: float) -
 
 def sample_city_geojson(seed: int = 7, n_blocks: int = 8) -> dict[str, Any]:
     """The sample city as a GeoJSON dict: ``n_blocks`` x ``n_blocks`` blocks of 60 m between
-    20 m streets (with 10 % of blocks left open and 25 m-wide diagonal avenue cut through), each
-    with up to four buildings of five shapes (:func:`_shape`), heights given as numbers, as
-    ``"NN m"`` strings, as ``building:levels`` or (one in twenty) not at all. Deterministic in
+    20 m streets, about one block in ten left open and a diagonal avenue (no lot whose centre
+    lies within 25 m of ``x = y``); each block split into 2 x 2 or 3 x 3 lots, nine in ten
+    built with one footprint of five shapes (:func:`_shape`; roofs log-normal around 30 m, in
+    [6, 180] m), its height given as a number, as a ``"NN m"`` string, as
+    ``building:levels`` or (one in twenty) not at all. Synthetic: not a real place's
+    buildings, placed near :data:`SAMPLE_ORIGIN_LAT_LON`. Deterministic in
     ``seed``; the shipped file is ``sample_city_geojson()``, written by
     ``write_sample_city(sample_city_path())`` (``tests/sim/test_file_city.py`` checks it)."""
     rng = np.random.default_rng(seed)
