@@ -89,11 +89,12 @@ UAVs, unchanged.
 ## Discounting
 
 Learners discount. Discounting at `gamma` pays a reward `t` steps ahead `gamma**t` of its
-worth, so the goal bonus of a trip 20 steps longer is worth `gamma**20` as much: at 0.99 that
-is 18 % less, as much as the whole navigation difference between the best and the worst
-heuristic. The training configurations of v1 (`training/configs/ppo.yaml`, section
-`urban_canyon_v1`) use the discount that `coopnav alignment` shows to keep the ranking of a
-family of policies (its report is in `studies/task_objective/`).
+worth, so the goal bonus of a trip 20 steps longer is worth `gamma**20` as much (0.82 at
+`gamma = 0.99`): a loss of the size of the differences in navigation quality the score ranks,
+which makes a discounted learner prefer a shorter trip again. The training configurations of
+v1 (`training/configs/ppo.yaml`, section `urban_canyon_v1`) use the discount under which
+`coopnav alignment` finds the discounted return ranking a family of policies as the score
+does (`studies/task_objective`).
 
 ## Arguments
 
@@ -109,10 +110,11 @@ weights 0. Keyword fields (and `preset=...`) apply on top of the v1 defaults; a 
 ## Version History
 
 * v1: The reward is the task's score (`reward_scheme="navigated_distance"`). v0's return
-  ranked the best-navigating swarm below swarms with 60 % more error that arrived sooner:
-  its navigation term was a cost per step in an episode that ends at the goal, so a shorter
-  trip paid less of it, and discounting over 60-80 steps valued arriving sooner about as much
-  as the whole navigation term. The world, observations, actions, infos and episode end are
+  paid for a short trip as well as for low error: its navigation term was a cost per step in
+  an episode that ends at the goal, so a shorter trip paid less of it, and discounting over
+  the 60-80 steps of a trip valued arriving sooner on top; a swarm that navigates worse but
+  arrives sooner could earn more than the one that navigates best (`studies/task_objective`
+  measures it). The world, observations, actions, infos and episode end are
   v0's; with v0's reward settings (`reward_scheme="per_step"` and v0's weights) a v1
   environment steps exactly as v0. v0 stays importable and unchanged: its results are
   reproduced by their commands with `urban_canyon_v0`.
