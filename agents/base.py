@@ -1,9 +1,9 @@
 """The policy protocol shared by heuristics, random and trained policies.
 
 A policy maps the observations of the UAVs still flying to their actions. It is bound to an
-environment when it is made (:func:`coopnav_env.agents.make_policy`), so it knows the agents' spaces and,
-for the heuristics, the map and the goal (which a real UAV would have); it never sees the true
-positions.
+environment when it is made (:func:`coopnav_env.agents.make_policy`), so it knows the agents'
+spaces and, for the heuristics, the map and the goal (which a real UAV would have); it never
+sees the true positions.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from coopnav_env.agents.marl_nets import (
     MARLSettings,
     base_command_before,

@@ -48,8 +48,8 @@ class PrivilegedPlanner:
     env : urban_canyon_v0 ParallelEnv
         The environment itself (the planner copies it; it must be the object being stepped).
     base : Policy
-        The base heuristic, acting in ``env`` (:func:`coopnav_env.agents.make_policy` builds ``wide``
-        unless told otherwise, e.g. ``planner@base='spread'``).
+        The base heuristic, acting in ``env`` (:func:`coopnav_env.agents.make_policy` builds
+        ``wide`` unless told otherwise, e.g. ``planner@base='spread'``).
     horizon : int
         Look-ahead steps, >= 1.
     n_samples, n_elite, iterations : int
@@ -241,8 +241,8 @@ class PrivilegedPlanner:
         """The first command of the best plan found (see the module docstring).
 
         Afterwards :attr:`last_plan` describes the choice, for analyses of what the planner
-        does (``studies/planner_headroom/planner_headroom.py``): ``base_cost`` (the look-ahead cost of the
-        base heuristic alone, offset zero), ``best_cost`` (of the plan applied; at most
+        does (``studies/planner_headroom/planner_headroom.py``): ``base_cost`` (the look-ahead
+        cost of the base heuristic alone, offset zero), ``best_cost`` (of the plan applied; at most
         ``base_cost``), ``offsets`` (``(n_agents, 3)``, the per-UAV offset applied, in the
         order of ``possible_agents``, before the wall guard and clipping), ``base_command``
         (the base heuristic's command per agent), and ``candidates`` (``(n_samples * iterations,

@@ -1,9 +1,9 @@
 """A policy trained on Ray RLlib (``coopnav train --backend rllib``) behind the policy protocol.
 
-``rllib:<path>`` in :func:`coopnav_env.agents.make_policy` and ``coopnav evaluate``. The path may be an
-algorithm checkpoint (``DIR/final_model``, ``DIR/checkpoints/rllib_<N>_steps``), a run folder
-(its ``final_model``), or the checkpoint of the RLModule itself. Only the RLModule is loaded:
-no Ray cluster is started.
+``rllib:<path>`` in :func:`coopnav_env.agents.make_policy` and ``coopnav evaluate``. The path
+may be an algorithm checkpoint (``DIR/final_model``, ``DIR/checkpoints/rllib_<N>_steps``), a
+run folder (its ``final_model``), or the checkpoint of the RLModule itself. Only the RLModule
+is loaded: no Ray cluster is started.
 """
 
 from __future__ import annotations

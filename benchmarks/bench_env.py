@@ -21,9 +21,10 @@ machines):
    size of the grid city (blocks per side), with the growth explained.
 5. **Batched**: env-steps/s (swarm steps) of K copies at N = 5 stepped as one SB3 vector
    environment, SuperSuit's adapters vs the batched vector environment
-   (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched environments; and
-   the time inside the compiled kernels per swarm step (:func:`kernel_timers`), whose inverse
-   times two cores is a ceiling for any batching of this simulation.
+   (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched
+   environments; and the time inside the compiled kernels per swarm step
+   (:func:`kernel_timers`), whose inverse times two cores is a ceiling for any batching of
+   this simulation.
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the

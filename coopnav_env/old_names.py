@@ -48,7 +48,9 @@ def _outside_stacklevel() -> int:
         or frame.f_globals.get("__name__") in OLD_NAMES
     ):
         # warnings.warn skips the import machinery's own frames when it counts
-        internal = "importlib" in frame.f_code.co_filename and "_bootstrap" in frame.f_code.co_filename
+        internal = (
+            "importlib" in frame.f_code.co_filename and "_bootstrap" in frame.f_code.co_filename
+        )
         frame, level = frame.f_back, level + (0 if internal else 1)
     return level
 
@@ -81,9 +83,10 @@ class _AliasLoader(importlib.abc.Loader):
 
 
 class OldNameFinder(importlib.abc.MetaPathFinder):
-    """Finds ``agents``, ``training``, ``reproduction`` and their submodules under their new names."""
+    """Finds ``agents``, ``training``, ``reproduction`` and their submodules under their new
+    names."""
 
-    def find_spec(self, fullname, path=None, target=None):  # noqa: D102 (the finder protocol)
+    def find_spec(self, fullname, path=None, target=None):  # the finder protocol
         new = _new_name(fullname)
         if new is None or importlib.util.find_spec(new) is None:
             return None

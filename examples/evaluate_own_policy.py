@@ -2,9 +2,10 @@
 
 A policy is any class with the ``coopnav_env.agents.base.Policy`` protocol: a ``name``,
 ``reset(seed)`` and ``act(observations) -> actions`` over the PettingZoo dicts of the UAVs
-still flying. ``coopnav_env.agents.register_policy`` gives it a name, and ``coopnav_env.training.evaluate.evaluate``
-flies it on the same held-out episodes as ``formation`` (same cities, satellites and noise),
-with the same statistics as ``coopnav evaluate``. Run it::
+still flying. ``coopnav_env.agents.register_policy`` gives it a name, and
+``coopnav_env.training.evaluate.evaluate`` flies it on the same held-out episodes as
+``formation`` (same cities, satellites and noise), with the same statistics as ``coopnav
+evaluate``. Run it::
 
     python examples/evaluate_own_policy.py --episodes 4 --out runs/own_eval
 """

@@ -1,7 +1,8 @@
 """Train SB3 PPO with one policy shared by every UAV, on coopnav's seeded vector environment.
 
-``coopnav_env.training.vec_env.urban_canyon_vec_env`` turns ``n_copies`` swarms of ``urban_canyon_v0`` into
-a Stable-Baselines3 ``VecEnv`` with one slot per UAV (parameter sharing, as ``coopnav train``).
+``coopnav_env.training.vec_env.urban_canyon_vec_env`` turns ``n_copies`` swarms of
+``urban_canyon_v0`` into a Stable-Baselines3 ``VecEnv`` with one slot per UAV (parameter
+sharing, as ``coopnav train``).
 Unlike PettingZoo's published SuperSuit recipe it works with ``PPO(..., seed=0)`` (the same
 seed gives the same episodes and weights) and reports the episode length limit to PPO as
 ``info["TimeLimit.truncated"]``, so PPO bootstraps the value there instead of treating the

@@ -1,8 +1,8 @@
 r"""Reproduce the simulation results of the paper's Section 4 with one command.
 
 ``coopnav reproduce --out DIR`` (or :func:`reproduce`) simulates the scenario of Section 4.1
-(:mod:`coopnav_env.reproduction.scenario`), runs the navigation core of :mod:`coopnav_env.nav` on it and
-writes to ``DIR``:
+(:mod:`coopnav_env.reproduction.scenario`), runs the navigation core of :mod:`coopnav_env.nav`
+on it and writes to ``DIR``:
 
 * ``results.json`` - every reproduced number, the published one beside it, the qualitative
   claims checked, exclusions and (under ``"timing"``) the run time;
@@ -65,12 +65,13 @@ Modules, one job each
 
 from coopnav_env.old_names import redirect as _redirect_old_name
 
-_redirect_old_name(__name__)  # imported as 'reproduction' (a source checkout): becomes 'coopnav_env.reproduction'
+# imported as 'reproduction' (a source checkout): becomes 'coopnav_env.reproduction'
+_redirect_old_name(__name__)
 
-from coopnav_env.reproduction.cli import build_config, reproduce
-from coopnav_env.reproduction.config import PUBLISHED, ReproduceConfig
-from coopnav_env.reproduction.scenario import PaperEpoch, PaperScenario
-from coopnav_env.reproduction.simulation import run_studies, simulate_epoch
+from coopnav_env.reproduction.cli import build_config, reproduce  # noqa: E402
+from coopnav_env.reproduction.config import PUBLISHED, ReproduceConfig  # noqa: E402
+from coopnav_env.reproduction.scenario import PaperEpoch, PaperScenario  # noqa: E402
+from coopnav_env.reproduction.simulation import run_studies, simulate_epoch  # noqa: E402
 
 __all__ = [
     "PUBLISHED",

@@ -8,7 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from coopnav_env.reproduction.config import AXES, FAIL_PLOT_M, PUBLISHED, THRESHOLD_3D_M, ReproduceConfig
+from coopnav_env.reproduction.config import (
+    AXES,
+    FAIL_PLOT_M,
+    PUBLISHED,
+    THRESHOLD_3D_M,
+    ReproduceConfig,
+)
 from coopnav_env.reproduction.simulation import epoch_times
 from coopnav_env.training.files import atomic_path
 

@@ -32,7 +32,14 @@ from coopnav_env.nav import (
 # --------------------------------------------------------------------------------------------
 # One epoch: all methods on K noise realisations
 # --------------------------------------------------------------------------------------------
-from coopnav_env.reproduction.config import AXES, THRESHOLD_3D_M, BoolArray, FloatArray, Method, ReproduceConfig
+from coopnav_env.reproduction.config import (
+    AXES,
+    THRESHOLD_3D_M,
+    BoolArray,
+    FloatArray,
+    Method,
+    ReproduceConfig,
+)
 from coopnav_env.reproduction.scenario import (
     PaperEpoch,
     PaperScenario,

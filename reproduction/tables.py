@@ -1,9 +1,10 @@
 """The reproduced numbers beside the published ones, and the paper's claims checked.
 
-:func:`summarize` turns the pooled studies of :func:`coopnav_env.reproduction.simulation.run_studies`
-into the content of ``results.json``: Table 1, P(3-D error < 3 m), Table 2, the LOS and
-relative-error studies, the sensitivity table, the comparison with :data:`PUBLISHED` and the
-paper's qualitative claims, each marked as holding or not.
+:func:`summarize` turns the pooled studies of
+:func:`coopnav_env.reproduction.simulation.run_studies` into the content of ``results.json``:
+Table 1, P(3-D error < 3 m), Table 2, the LOS and relative-error studies, the sensitivity
+table, the comparison with :data:`PUBLISHED` and the paper's qualitative claims, each marked
+as holding or not.
 """
 
 from __future__ import annotations

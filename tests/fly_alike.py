@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from coopnav_env.agents import make_policy
 from coopnav_env import urban_canyon_v0
+from coopnav_env.agents import make_policy
 
 
 def assert_fly_alike(name_a: str, name_b: str, seed: int, steps: int) -> None:

@@ -15,8 +15,8 @@ import zipfile
 import numpy as np
 import pytest
 import yaml
-from coopnav_env.training.cli import main
 
+from coopnav_env.training.cli import main
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 
 TOY = TOY_ENV_ID
@@ -301,9 +301,8 @@ def test_a_word_setting_gets_the_text_as_typed(prefix, word):
 
 
 def test_integrity_off_from_the_command_line_switches_a_presets_integrity_off():
-    from coopnav_env.training.route_learning import env_kwargs_from_overrides
-
     from coopnav_env.envs.config import make_config
+    from coopnav_env.training.route_learning import env_kwargs_from_overrides
 
     on = make_config(**env_kwargs_from_overrides(["preset=urban_nlos_3dma"]))
     assert on.integrity == "fde" and on.nlos_exclusion == "map"

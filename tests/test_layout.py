@@ -32,8 +32,11 @@ CHECKED = (
 ACYCLIC = ("training", "reproduction", "agents")
 
 
-INSTALLED_AS = {"agents": "coopnav_env.agents", "training": "coopnav_env.training",
-                "reproduction": "coopnav_env.reproduction"}
+INSTALLED_AS = {
+    "agents": "coopnav_env.agents",
+    "training": "coopnav_env.training",
+    "reproduction": "coopnav_env.reproduction",
+}
 """Top-level folder -> the package it installs as."""
 
 
@@ -120,7 +123,12 @@ def test_no_module_imports_a_private_name_of_another():
 
 def test_no_import_cycle():
     graph = import_graph(ACYCLIC)
-    assert {"coopnav_env.training.config", "coopnav_env.training.sb3_backend", "coopnav_env.reproduction.cli"} <= set(graph)
+    expected = {
+        "coopnav_env.training.config",
+        "coopnav_env.training.sb3_backend",
+        "coopnav_env.reproduction.cli",
+    }
+    assert expected <= set(graph)
     assert find_cycle(graph) is None
 
 
@@ -128,7 +136,8 @@ def test_the_checks_can_fail():
     """The checkers see what they are meant to see (on made-up modules)."""
     source = (
         "from coopnav_env.training.evaluate import _slug\nfrom coopnav_env.nav._kernels import x\n"
-        "import numpy\nfrom numpy import _core\nfrom coopnav_env.training.envs import EVAL_SEED_START\n"
+        "import numpy\nfrom numpy import _core\n"
+        "from coopnav_env.training.envs import EVAL_SEED_START\n"
     )
     assert private_imports(source) == [
         (1, "coopnav_env.training.evaluate._slug"),

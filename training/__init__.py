@@ -2,4 +2,5 @@
 
 from coopnav_env.old_names import redirect as _redirect_old_name
 
-_redirect_old_name(__name__)  # imported as 'training' (a source checkout): becomes 'coopnav_env.training'
+# imported as 'training' (a source checkout): becomes 'coopnav_env.training'
+_redirect_old_name(__name__)

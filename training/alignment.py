@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from coopnav_env.training.envs import heldout_seeds, make_env_fn
 
 __all__ = [

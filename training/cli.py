@@ -23,8 +23,14 @@ import traceback
 
 #: subcommand -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("coopnav_env.training.demo", "navigation demo: standalone vs cooperative error of a canyon UAV"),
-    "reproduce": ("coopnav_env.reproduction.cli", "regenerate the paper's tables and figures (Section 4)"),
+    "demo": (
+        "coopnav_env.training.demo",
+        "navigation demo: standalone vs cooperative error of a canyon UAV",
+    ),
+    "reproduce": (
+        "coopnav_env.reproduction.cli",
+        "regenerate the paper's tables and figures (Section 4)",
+    ),
     "train": (
         "coopnav_env.training.train",
         "train a shared policy on urban_canyon_v0 (SB3 PPO, Ray RLlib, or TorchRL MAPPO/IPPO)",

@@ -156,8 +156,9 @@ def error_cdf_figure(
 
 
 def plot_error_cdf(report: Any, path: str | Path, threshold_m: float = 3.0) -> Path:
-    """Write the error CDF of a :class:`coopnav_env.training.evaluate.Report` to ``path`` (PNG), with a
-    labelled line at ``threshold_m`` (``coopnav_env.training.evaluate.ERROR_THRESHOLD_M``)."""
+    """Write the error CDF of a :class:`coopnav_env.training.evaluate.Report` to ``path``
+    (PNG), with a labelled line at ``threshold_m``
+    (``coopnav_env.training.evaluate.ERROR_THRESHOLD_M``)."""
     return save_figure(error_cdf_figure(report.episodes, threshold_m), path, dpi=120)
 
 

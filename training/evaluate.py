@@ -44,6 +44,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from coopnav_env.envs.urban_canyon import fix_error_m
 from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
 from coopnav_env.training.files import (
     atomic_path,
@@ -52,8 +54,6 @@ from coopnav_env.training.files import (
     jsonable,
     write_json,
 )
-
-from coopnav_env.envs.urban_canyon import fix_error_m
 
 __all__ = [
     "DEFAULT_EPISODES",

@@ -68,6 +68,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
 from coopnav_env.agents.marl_nets import (
     CHECKPOINT_FORMAT,
     MARLSettings,

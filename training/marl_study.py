@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from coopnav_env.training.config import apply_overrides
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
 from coopnav_env.training.eval_plots import distance_along_route, save_figure, short_label
@@ -128,10 +129,9 @@ def fly_episodes(
     policy_name: str, env_kwargs: Mapping[str, Any], seeds: Sequence[int], keep_positions: bool
 ) -> list[EpisodeResult]:
     """Fly ``policy_name`` through ``reset(seed)`` for every seed; one env for all episodes."""
+    from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.training.evaluate import run_episode
-
-    from coopnav_env import urban_canyon_v0
 
     env = urban_canyon_v0.parallel_env(**dict(env_kwargs))
     policy = make_policy(policy_name, env)

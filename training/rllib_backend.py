@@ -1,8 +1,8 @@
 """``coopnav train --backend rllib``: PPO with one shared policy on Ray RLlib.
 
-The same swarm task as :mod:`coopnav_env.training.sb3_backend` (the SB3 backend), distributed with Ray: every
-UAV of ``urban_canyon_v0`` is mapped to one policy (``"shared"``: parameter sharing), the
-PettingZoo env is wrapped by RLlib's
+The same swarm task as :mod:`coopnav_env.training.sb3_backend` (the SB3 backend), distributed
+with Ray: every UAV of ``urban_canyon_v0`` is mapped to one policy (``"shared"``: parameter
+sharing), the PettingZoo env is wrapped by RLlib's
 :class:`~ray.rllib.env.wrappers.pettingzoo_env.ParallelPettingZooEnv`, ``num_env_runners``
 Ray actors (processes, possibly on other machines) step swarm copies and send their episodes
 to the learner, which runs in this process. With ``num_env_runners = 0`` this process also

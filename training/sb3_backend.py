@@ -324,6 +324,7 @@ def behaviour_clone(
     """
     import numpy as np
     import torch
+
     from coopnav_env.agents import make_policy
 
     env = env_fn()
@@ -660,10 +661,11 @@ def _train_in_folder(
     import numpy as np
     import stable_baselines3
     import torch
-    from coopnav_env.training.vec_env import make_vec_env
     from stable_baselines3 import PPO
     from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
     from stable_baselines3.common.vec_env import VecMonitor
+
+    from coopnav_env.training.vec_env import make_vec_env
 
     out = Path(cfg.out)
     ppo_kwargs = dict(cfg.ppo)

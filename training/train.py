@@ -1,10 +1,11 @@
 """``coopnav train``: train one PPO policy shared by every UAV, with the backend of choice.
 
 This module is the command line: it merges the YAML section, ``--set``/``--env-set`` and the
-explicit flags into a :class:`coopnav_env.training.config.TrainConfig` (validated before any work starts)
-and hands it to the backend's module (:data:`coopnav_env.training.config.BACKENDS`):
-:mod:`coopnav_env.training.sb3_backend` (Stable-Baselines3, default) or :mod:`coopnav_env.training.rllib_backend`
-(Ray RLlib). The run folder (``--out``) is laid out alike for every backend; see the backend
+explicit flags into a :class:`coopnav_env.training.config.TrainConfig` (validated before any
+work starts) and hands it to the backend's module
+(:data:`coopnav_env.training.config.BACKENDS`): :mod:`coopnav_env.training.sb3_backend`
+(Stable-Baselines3, default) or :mod:`coopnav_env.training.rllib_backend` (Ray RLlib). The
+run folder (``--out``) is laid out alike for every backend; see the backend
 modules for what goes in it.
 """
 
@@ -172,8 +173,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 
     The settings are the YAML section of ``--config`` (default: the packaged file), or, with
     ``--resume`` in a folder that holds a run, the settings that run recorded
-    (:func:`coopnav_env.training.runs.recorded_config`), so that a resumed run continues under its own
-    settings and its own ``timesteps`` unless a flag or ``--set`` changes one.
+    (:func:`coopnav_env.training.runs.recorded_config`), so that a resumed run continues under
+    its own settings and its own ``timesteps`` unless a flag or ``--set`` changes one.
     """
     recorded = recorded_config(args.out) if args.resume is not None else None
     if recorded is not None:
@@ -238,8 +239,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
 def run(args: argparse.Namespace) -> int:
     """Run ``coopnav train``; returns the exit status.
 
-    Errors propagate to :func:`coopnav_env.training.cli.main`, which turns them into one-line messages
-    and exit statuses (2 for a usage error, 130/143 after an interrupt).
+    Errors propagate to :func:`coopnav_env.training.cli.main`, which turns them into one-line
+    messages and exit statuses (2 for a usage error, 130/143 after an interrupt).
     """
     cfg = config_from_args(args)
     with compile_notice("about a minute", prefix="coopnav train"):

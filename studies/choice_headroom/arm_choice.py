@@ -47,10 +47,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 def _chunk(common: tuple[dict[str, Any], list[str], int], seeds: list[int]) -> list[np.ndarray]:
     import torch
-    from coopnav_env.agents import make_policy
-    from coopnav_env.training.evaluate import run_episode
 
     from coopnav_env import urban_canyon_v0
+    from coopnav_env.agents import make_policy
+    from coopnav_env.training.evaluate import run_episode
 
     torch.set_num_threads(1)
     env_kwargs, arms, replicates = common
@@ -206,11 +206,10 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
     from coopnav_env.training.route_learning import env_kwargs_from_overrides
-
-    from coopnav_env import urban_canyon_v0
 
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],

@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, np.ndarray]:
     import torch
+
     from coopnav_env.training.marl_study import fly_episodes
 
     torch.set_num_threads(1)
@@ -73,9 +74,8 @@ def _parse_group_env(
     items: list[str], groups: dict[str, list[str]], env_kwargs: dict[str, Any]
 ) -> dict[str, dict[str, Any]]:
     """Each group's environment: ``env_kwargs`` plus its ``--group-env`` overrides."""
-    from coopnav_env.training.config import apply_overrides
-
     from coopnav_env.envs.config import make_config
+    from coopnav_env.training.config import apply_overrides
 
     per: dict[str, list[str]] = {g: [] for g in groups}
     for item in items:

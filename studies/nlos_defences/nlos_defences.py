@@ -53,12 +53,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from coopnav_env.agents import make_policy
-from coopnav_env.training.files import write_json
-
 from coopnav_env import urban_canyon_v0
+from coopnav_env.agents import make_policy
 from coopnav_env.envs import PRESETS
 from coopnav_env.nav import integrity_rates
+from coopnav_env.training.files import write_json
 
 ALERT_LIMIT_M = 30.0
 RECEPTION = ("nlos_probability", "nlos_bias_mean_m", "nlos_bias_floor_m")

@@ -72,9 +72,8 @@ def fly(
     policy: str, env_kwargs: dict[str, Any], seeds: list[int], steer: tuple[float, float] | None
 ) -> dict[str, Any]:
     """Per-episode errors and goals, and (unsteered) the per-step records of item 1-2."""
-    from coopnav_env.agents import make_policy
-
     from coopnav_env import urban_canyon_v0
+    from coopnav_env.agents import make_policy
 
     env = urban_canyon_v0.parallel_env(**{**env_kwargs, "obs_candidate_sky": True})
     pol = make_policy(policy, env)

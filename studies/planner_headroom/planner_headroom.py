@@ -139,9 +139,9 @@ def _worker(
     env_kwargs: dict[str, Any], base: str, seeds: list[int], out: str, planner_set: list[str]
 ) -> int:
     import torch
-    from coopnav_env.agents import make_policy
 
     from coopnav_env import urban_canyon_v0
+    from coopnav_env.agents import make_policy
 
     torch.set_num_threads(1)
     env = urban_canyon_v0.parallel_env(**env_kwargs)

@@ -8,6 +8,7 @@ import pickle
 
 import numpy as np
 import pytest
+
 from coopnav_env.agents import COLUMN_PRESET_NAMES, POLICY_NAMES, make_policy
 from coopnav_env.agents import heuristics as h
 

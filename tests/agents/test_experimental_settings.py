@@ -5,8 +5,8 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from coopnav_env.agents.marl_nets import MARLSettings
 
+from coopnav_env.agents.marl_nets import MARLSettings
 from coopnav_env.envs.config import EXPERIMENTAL_SETTINGS, UrbanCanyonConfig
 
 _CLASSES = {"UrbanCanyonConfig": UrbanCanyonConfig, "MARLSettings": MARLSettings}

@@ -102,10 +102,9 @@ def step_hash(actions: dict[str, np.ndarray]) -> np.uint64:
 def fly(policy_name: str, env_name: str, seed: int, steps: int) -> np.ndarray:
     """Fly ``policy_name`` for at most ``steps`` steps from reset seed ``seed``; the hash of
     every step's actions (uint64, one per step flown)."""
+    from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.agents.marl_policy import PRETRAINED_DIR
-
-    from coopnav_env import urban_canyon_v0
 
     env = urban_canyon_v0.parallel_env(**ENVIRONMENTS[env_name])
     try:

@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from coopnav_env.agents import make_policy
 from coopnav_env import urban_canyon_v0
+from coopnav_env.agents import make_policy
 from tests.fly_alike import assert_fly_alike
 
 

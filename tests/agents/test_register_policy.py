@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import coopnav_env.agents
-from coopnav_env.agents import make_policy, register_policy
 from coopnav_env import urban_canyon_v0
+from coopnav_env.agents import make_policy, register_policy
 
 
 class _Hover:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from coopnav_env.agents import make_policy
 from coopnav_env.agents.routes import (
     FEATURE_SENSE,
@@ -17,7 +18,6 @@ from coopnav_env.agents.routes import (
     resolve_route_model,
     route_features,
 )
-
 from coopnav_env.sim.route import street_route, street_routes
 
 

@@ -312,7 +312,8 @@ def test_supersuit_sb3_vec_env_with_crashes() -> None:
             crashes += bool(np.any(rewards[dones.astype(bool)] < -30.0))  # the -40 crash penalty
             # SuperSuit's own auto-reset merges the next episode's reset infos over the
             # terminal step's ({**step, **reset}: the keys are the same): the documented
-            # reason to use coopnav_env.training.vec_env.make_vec_env, which keeps the terminal infos
+            # reason to use coopnav_env.training.vec_env.make_vec_env, which keeps the terminal
+            # infos
             assert all(i["step"] == 0 for i in done_infos)
     assert crashes >= 2  # crashed, reset automatically, and crashed again
     vec.close()

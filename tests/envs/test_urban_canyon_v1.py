@@ -7,10 +7,10 @@ from types import SimpleNamespace
 import gymnasium
 import numpy as np
 import pytest
-from coopnav_env.agents import make_policy
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from coopnav_env import GYM_ENV_ID_V1, urban_canyon_v0, urban_canyon_v1
+from coopnav_env.agents import make_policy
 from coopnav_env.envs.config import PER_STEP_REWARD_FIELDS, V1_DEFAULTS, UrbanCanyonConfig
 from coopnav_env.envs.urban_canyon import REWARD_TERMS
 from coopnav_env.sim.route import route_tail_lengths_m

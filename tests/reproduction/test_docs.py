@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from coopnav_env.reproduction import ReproduceConfig
 
 ROOT = Path(__file__).resolve().parents[2]

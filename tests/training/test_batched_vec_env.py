@@ -13,12 +13,12 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
 from coopnav_env import urban_canyon_v0
-from tests.training.test_train_eval import params, toy_cfg, urban_cfg
-from tests.training.toy_env import ToyParallelEnv
 from coopnav_env.training.config import TrainConfig, load_config
 from coopnav_env.training.sb3_backend import train
 from coopnav_env.training.train import add_arguments, config_from_args
 from coopnav_env.training.vec_env import BatchedVecEnv, SeededVecEnv, make_vec_env
+from tests.training.test_train_eval import params, toy_cfg, urban_cfg
+from tests.training.toy_env import ToyParallelEnv
 
 
 def _same(a, b) -> bool:

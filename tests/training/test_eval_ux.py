@@ -9,7 +9,6 @@ import shutil
 import numpy as np
 import pytest
 
-from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 from coopnav_env.training.envs import heldout_seeds
 from coopnav_env.training.eval_plots import (
     CDF_CAPTION,
@@ -20,6 +19,7 @@ from coopnav_env.training.eval_plots import (
     trajectory_figure,
 )
 from coopnav_env.training.evaluate import EpisodeRecord, evaluate
+from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 
 pytest.importorskip("matplotlib")
 HAS_ENV = importlib.util.find_spec("coopnav_env.urban_canyon_v0") is not None

@@ -11,12 +11,12 @@ import pytest
 pytest.importorskip("torchrl")
 torch = pytest.importorskip("torch")
 
+from coopnav_env import urban_canyon_v0  # noqa: E402
 from coopnav_env.agents import make_policy  # noqa: E402
 from coopnav_env.agents.marl_nets import MARLSettings  # noqa: E402
-from coopnav_env import urban_canyon_v0  # noqa: E402
-from tests.fly_alike import assert_fly_alike  # noqa: E402
 from coopnav_env.training.cli import main  # noqa: E402
 from coopnav_env.training.marl import MARLTrainer  # noqa: E402
+from tests.fly_alike import assert_fly_alike  # noqa: E402
 
 SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--no-progress"]
 

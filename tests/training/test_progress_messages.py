@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING, ToyParallelEnv
 from coopnav_env.training import compile_notice as cn
+from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING, ToyParallelEnv
 
 ROOT = Path(__file__).resolve().parents[2]
 

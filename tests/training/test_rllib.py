@@ -144,16 +144,16 @@ def test_missing_ray_is_a_clear_error(monkeypatch, tmp_path, capsys):
     module = tmp_path / "ckpt" / "learner_group" / "learner" / "rl_module" / "shared"
     module.mkdir(parents=True)
     (module / "module_state.pkl").write_bytes(b"")
-    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
+    from coopnav_env.agents import make_policy
 
     with pytest.raises(ImportError, match=r"pip install -e \"\.\[ray\]\""):
         make_policy(f"rllib:{tmp_path / 'ckpt'}", urban_canyon_v0.parallel_env(n_uavs=2))
 
 
 def test_rllib_policy_and_resume_errors(tmp_path, capsys):
-    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
+    from coopnav_env.agents import make_policy
     from coopnav_env.training.cli import main
     from coopnav_env.training.rllib_backend import resolve_resume
 

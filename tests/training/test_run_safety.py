@@ -29,7 +29,6 @@ from coopnav_env.training.cli import main
 from coopnav_env.training.config import TrainConfig, load_config
 from coopnav_env.training.runs import LOCK_NAME
 from coopnav_env.training.sb3_backend import find_latest_checkpoint, train
-
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -18,13 +18,13 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
-from tests.training.toy_env import ToyParallelEnv
 from coopnav_env.training.config import TrainConfig, apply_overrides, load_config
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
 from coopnav_env.training.evaluate import evaluate
 from coopnav_env.training.sb3_backend import find_latest_checkpoint, train
 from coopnav_env.training.train import config_from_args
 from coopnav_env.training.vec_env import make_vec_env
+from tests.training.toy_env import ToyParallelEnv
 
 TOY = "tests.training.toy_env:ToyParallelEnv"
 TOY_ENV = {"n_uavs": 3, "max_steps": 12}
@@ -380,8 +380,8 @@ def test_urban_behaviour_cloning_warm_start(tmp_path):
     import torch
     from stable_baselines3 import PPO
 
-    from coopnav_env.agents import make_policy
     from coopnav_env import urban_canyon_v0
+    from coopnav_env.agents import make_policy
 
     out = tmp_path / "bc"
     cfg = urban_cfg(out, timesteps=1, pretrain={"episodes": 3, "epochs": 20})

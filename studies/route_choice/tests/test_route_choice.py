@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from coopnav_env.agents.routes import ROUTE_FEATURES, RouteModel
 
+from coopnav_env.agents.routes import ROUTE_FEATURES, RouteModel
 from studies.route_choice import route_choice as bench
 
 

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from coopnav_env.agents.routes import RouteModel
 
+from coopnav_env.agents.routes import RouteModel
 from coopnav_env.sim.route import street_routes
 from studies.split_choice import split_choice as bench
 
