@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
-from coopnav_env import GYM_ENV_ID, urban_canyon_v0
+from coopnav_env import GYM_ENV_ID, GYM_ENV_ID_V1, urban_canyon_v0
 from coopnav_env.envs.gym_wrapper import UrbanCanyonSwarmEnv
 
 
@@ -61,13 +61,18 @@ def test_gymnasium_env_checker_passes() -> None:
     assert len(messages) == 1
 
 
-def test_stable_baselines3_env_checker_passes() -> None:
+@pytest.mark.parametrize("env_id", [GYM_ENV_ID, GYM_ENV_ID_V1])
+def test_stable_baselines3_env_checker_passes(env_id: str) -> None:
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        sb3_check_env(gymnasium.make(GYM_ENV_ID, n_uavs=3), warn=True)
-    assert [str(w.message) for w in caught] == []
+        sb3_check_env(gymnasium.make(env_id, n_uavs=3), warn=True)
+    messages = [str(w.message) for w in caught]
+    if env_id == GYM_ENV_ID:  # Gymnasium's own note that v1 supersedes v0, and nothing else
+        assert len(messages) == 1 and "out of date" in messages[0] and "v1" in messages[0]
+    else:
+        assert messages == []
 
 
 def test_spaces_and_kwargs_are_forwarded() -> None:
