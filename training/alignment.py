@@ -22,6 +22,7 @@ reward setting), so every setting sees the same episodes; :func:`fly` checks it.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -64,6 +65,9 @@ and speeds, the obs-only waypoint follower, and a fast tight clump
 
 DEFAULT_GAMMAS: tuple[float, ...] = (0.99, 0.995, 0.999, 1.0)
 """The discounts compared by default."""
+
+OUTPUTS: tuple[str, ...] = ("report.json", "report.md")
+"""The files ``coopnav alignment --out`` writes."""
 
 REWARD_SETTINGS: dict[str, str] = {"v0": "urban_canyon_v0", "v1": "urban_canyon_v1"}
 """Named reward settings: the environment whose default reward each names."""
@@ -340,28 +344,47 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="world settings applied under every reward setting (e.g. preset=urban_nlos)",
     )
-    p.add_argument("--out", default=None, help="write report.json and report.md here")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing report in --out")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="write report.json and report.md here, a folder of this command alone: a folder of "
+        "another command, of other settings or holding this finished report is refused",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the outputs of the command (or the earlier report) that --out holds",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     """``coopnav alignment``: print the table (and write it to ``--out``)."""
     from coopnav_env.training.config import apply_overrides
     from coopnav_env.training.envs import EVAL_SEED_START
-    from coopnav_env.training.files import atomic_write_text, ensure_folder, write_json
+    from coopnav_env.training.files import atomic_write_text, claim_output_folder, write_json
 
     if args.episodes < 1:
         raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
-    out = Path(args.out) if args.out else None
-    if out is not None and (out / "report.json").exists() and not args.overwrite:
-        raise ValueError(f"--out {out} already holds a report.json; pass --overwrite to replace it")
     seeds = heldout_seeds(args.episodes, args.seed_start or EVAL_SEED_START)
     env_kwargs = apply_overrides({}, args.env_set)
-    report = alignment(args.policies, seeds, args.settings, args.gammas, env_kwargs, progress=True)
-    text = report.to_markdown()
+    claim = contextlib.nullcontext(None)
+    if args.out is not None:  # claimed (locked, checked, recorded) before any flight
+        settings = {"policies": args.policies, "seeds": seeds, "gammas": args.gammas}
+        settings |= {"settings": args.settings, "env": env_kwargs}
+        claim = claim_output_folder(
+            args.out, "coopnav alignment", settings, outputs=OUTPUTS, overwrite=args.overwrite
+        )
+    with claim as folder:
+        report = alignment(
+            args.policies, seeds, args.settings, args.gammas, env_kwargs, progress=True
+        )
+        text = report.to_markdown()
+        if folder is not None:
+            out = Path(args.out)
+            files = [
+                write_json(out / "report.json", report.to_json()),
+                atomic_write_text(out / "report.md", "# Reward alignment\n\n" + text),
+            ]
+            folder.finish(files)
     print(text)
-    if out is not None:
-        ensure_folder(out)
-        write_json(out / "report.json", report.to_json())
-        atomic_write_text(out / "report.md", "# Reward alignment\n\n" + text)
     return 0
