@@ -351,3 +351,55 @@ def test_reproduce_claims_its_folder_and_overwrite_replaces_an_old_result(tmp_pa
     assert "holds the finished result of `coopnav reproduce`" in capsys.readouterr().err
     assert main([*REPRODUCE, "--seed", "1", "--out", str(out)]) == 2
     assert "result of other settings (seed)" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------------------
+# coopnav alignment claims its --out too
+# --------------------------------------------------------------------------------------------
+
+ALIGNMENT = ["alignment", "--policies", "formation", "wide", "--episodes", "2"]
+
+
+@pytest.fixture
+def no_alignment_flights(monkeypatch):
+    """The alignment's flights replaced by a fixed report (only the claim is under test)."""
+    from coopnav_env.training import alignment as alignment_module
+
+    calls: list[tuple] = []
+
+    class Report:
+        def to_markdown(self) -> str:
+            return "| policy | score |\n"
+
+        def to_json(self) -> dict:
+            return {"rows": []}
+
+    def fake(*args, **kw):
+        calls.append(args)
+        return Report()
+
+    monkeypatch.setattr(alignment_module, "alignment", fake)
+    return calls
+
+
+def test_alignment_claims_its_folder(tmp_path, capsys, no_flights, no_alignment_flights):
+    study = tmp_path / "study"
+    assert main([*STUDY, "--out", str(study)]) == 0
+    capsys.readouterr()
+    assert main([*ALIGNMENT, "--out", str(study)]) == 2
+    assert f"{study} holds the outputs of `coopnav study`" in capsys.readouterr().err
+    assert no_alignment_flights == []  # refused before any flight
+    # --overwrite replaces the study's outputs instead of mixing the two reports
+    assert main([*ALIGNMENT, "--out", str(study), "--overwrite"]) == 0
+    claim = json.loads((study / CLAIM_NAME).read_text())
+    assert claim["command"] == "coopnav alignment" and claim["status"] == "finished"
+    names = sorted(p.name for p in study.iterdir() if not p.name.startswith("."))
+    assert names == [CLAIM_NAME, "report.json", "report.md"]  # the study's errors.png gone
+    assert main([*ALIGNMENT, "--out", str(study)]) == 2
+    assert "finished result of `coopnav alignment`" in capsys.readouterr().err
+    trained = tmp_path / "trained"
+    trained.mkdir()
+    (trained / "final_model.zip").write_text("x")
+    assert main([*ALIGNMENT, "--out", str(trained), "--overwrite"]) == 2
+    assert "holds a training run" in capsys.readouterr().err
+    assert _files(trained) == {"final_model.zip": b"x"} and len(no_alignment_flights) == 1
