@@ -258,7 +258,10 @@ def retune(
 
     def per_episode(flights: dict[str, dict[str, np.ndarray]]) -> dict[str, Any]:
         return {
-            p: {"score": f["score"].tolist(), "nav_error_m": f["nav_error_m"].tolist()}
+            p: {
+                "score": np.round(f["score"], 6).tolist(),
+                "nav_error_m": np.round(f["nav_error_m"], 4).tolist(),
+            }
             for p, f in flights.items()
         }
 
@@ -301,14 +304,17 @@ def report_markdown(report: dict[str, Any]) -> str:
         "",
         f"Named heuristics, and the best named column (`{report['best_named_column']}`) over "
         f"spacing_m {g['spacing_m']} x cruise_speed_mps {g['cruise_speed_mps']} x "
-        f"ceiling_margin_m {g['ceiling_margin_m']} (a grid point equal to a named preset is "
-        "listed under its name). Score: the undiscounted return, the mean over UAVs (at most "
+        f"ceiling_margin_m {g['ceiling_margin_m']} (ceiling_margin_m: how far below the top of "
+        "the altitude band the column flies, on its estimated altitude; a negative margin holds "
+        "the band's top; a grid point equal to a named preset is listed under its name). "
+        "Score: the undiscounted return, the mean over UAVs (at most "
         "2: 1 for the route at perfect navigation, 1 for arriving). Sorted by score; the last "
         f"column is the paired difference to the best, `{report['best_on_tuning']}`.",
         "",
         *table_lines(report["tuning"], report["best_on_tuning"]),
         "",
-        "Grid (mean score on the tuning episodes):",
+        "Grid (mean score on the tuning episodes; per-episode scores and errors of every "
+        "policy are in report.json):",
         "",
         "| setting | score |",
         "|---|---:|",
