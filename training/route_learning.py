@@ -354,6 +354,15 @@ def _collect_and_fit(
     data_path = out / "episodes.npz"
     seeds: list[int] = []
     eps: list[dict] = []
+    from coopnav_env.training.runs import claiming_command, recorded_backend
+
+    # another command's folder: a report's claim, or a coopnav train run (its run.json too)
+    owner = claiming_command(out) or ("coopnav train" if recorded_backend(out) else None)
+    if owner is not None:
+        raise ValueError(
+            f"--out {out} exists and is not a train-routes run folder: it holds the outputs of "
+            f"`{owner}`; use another --out"
+        )
     if run_json.exists():
         old = _read_run_json(run_json)
         if old.get("settings") != json.loads(json.dumps(settings)):
@@ -371,11 +380,7 @@ def _collect_and_fit(
                 )
             print(f"resuming {out}: {len(seeds)} of {args.episodes} episodes collected")
     elif out.exists() and any(not p.name.startswith(".") for p in out.iterdir()):
-        from coopnav_env.training.runs import claiming_command
-
-        owner = claiming_command(out)
-        held = f": it holds the outputs of `{owner}`" if owner else ""
-        raise ValueError(f"--out {out} exists and is not a train-routes run folder{held}")
+        raise ValueError(f"--out {out} exists and is not a train-routes run folder")
     out.mkdir(parents=True, exist_ok=True)
     started = time.time()
     write_json(run_json, {"settings": settings, "status": "collecting"})

@@ -266,11 +266,17 @@ def test_train_refuses_a_route_run_or_a_studys_flights(tmp_path, capsys, name):
 
 def test_train_takes_its_own_folder_and_train_routes_names_the_claim(tmp_path, capsys):
     """The refusal is of other commands only: a run folder of train is still trained in (the
-    rules for one's own run are tested in test_run_safety.py); train-routes names the
-    command that claimed a folder."""
+    rules for one's own run are tested in test_run_safety.py); train-routes refuses a train
+    run and a claimed folder, naming the command."""
     out = tmp_path / "run"
     assert _toy_train(tmp_path, out) == 0
     assert not (out / CLAIM_NAME).exists()
+    before = _files(out)
+    capsys.readouterr()
+    assert main(["train-routes", "--episodes", "5", "--jobs", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "is not a train-routes run folder: it holds the outputs of `coopnav train`" in err
+    assert _files(out) == before  # its run.json untouched
     claimed = tmp_path / "evaluated"
     with claim_output_folder(claimed, "coopnav evaluate", {}, outputs=["report.*"]):
         pass

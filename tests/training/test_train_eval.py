@@ -306,7 +306,10 @@ def test_paired_difference_by_episode():
 
 
 def test_evaluate_bad_policies(tmp_path):
-    with pytest.raises(ValueError, match=r"unknown policy 'greedy'.*random, formation, sky"):
+    with pytest.raises(
+        ValueError,
+        match=r"unknown policy 'greedy'; valid policies: random, column, .*formation, sky,",
+    ):
         evaluate(["greedy"], [EVAL_SEED_START], TOY_ENV, None, env_id=TOY)
     with pytest.raises(FileNotFoundError, match=r"missing/model\.zip"):
         evaluate(["ppo:missing/model.zip"], [EVAL_SEED_START], TOY_ENV, None, env_id=TOY)
