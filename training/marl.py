@@ -41,6 +41,15 @@ bootstrap from the last state): the batched environment resets a finished copy i
 step, so the state after the last step is gone. Episodes end at the goal or in a crash well
 before the default 200 steps in almost every training episode, so the bias is small.
 
+Behaviour-cloning warm start
+----------------------------
+With ``pretrain`` set in the ``torchrl:`` section (:class:`WarmStart`), a new run (never a
+resumed one) first flies a heuristic teacher (:func:`coopnav_env.agents.make_policy`) in the
+same batched environment, on training reset seeds, fits the actor's mean to the teacher's
+actions and the critic to the teacher's return-to-go, and only then starts PPO
+(:meth:`MARLTrainer.warm_start`). ``run.json`` records it under ``warm_start``. It needs a
+policy without a residual base (the teacher's command is what the actor outputs).
+
 Residual policies
 -----------------
 With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the command of a
@@ -96,10 +105,13 @@ __all__ = [
     "ARCHITECTURE_SETTINGS",
     "MARLSettings",
     "MARLTrainer",
+    "WarmStart",
     "check",
+    "check_pretrain",
     "check_resumable_settings",
     "export_policy",
     "find_latest_checkpoint",
+    "pretrain_of",
     "settings_of",
     "train",
     "train_marl",
@@ -148,6 +160,108 @@ class _RunningStd:
 
     def load_state_dict(self, d: Mapping[str, Any]) -> None:
         self.mean, self.var, self.count = float(d["mean"]), float(d["var"]), float(d["count"])
+
+
+WARM_START_KEYS: tuple[str, ...] = (
+    "policy",
+    "policy_kwargs",
+    "episodes",
+    "epochs",
+    "learning_rate",
+)
+"""The entries of the ``torchrl.pretrain`` mapping (:class:`WarmStart`)."""
+
+WARM_START_BATCH = 256
+"""Agent-samples per gradient step of the warm start's fit."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WarmStart:
+    """A behaviour-cloning warm start (``torchrl.pretrain``; :meth:`MARLTrainer.warm_start`).
+
+    Parameters
+    ----------
+    policy : str
+        The teacher: a heuristic policy name of :func:`coopnav_env.agents.make_policy`.
+    policy_kwargs : dict
+        The teacher's options.
+    episodes : int
+        Teacher episodes flown, >= 1 (reset seeds ``EVAL_SEED_START // 2 + seed + i``, below
+        the held-out evaluation seeds).
+    epochs : int
+        Passes over the teacher's samples, >= 1.
+    learning_rate : float
+        Adam's learning rate of the fit, > 0.
+    """
+
+    policy: str
+    policy_kwargs: dict[str, Any]
+    episodes: int
+    epochs: int
+    learning_rate: float
+
+    @classmethod
+    def from_value(cls, value: Any, seed: int = 0) -> WarmStart | None:
+        """The warm start of a ``torchrl.pretrain`` value (None: no warm start).
+
+        Every entry must be given. Raises ``ValueError`` naming the entry: unknown or missing
+        keys, a teacher that is not a heuristic policy name, ``episodes`` or ``epochs`` below
+        1, a learning rate that is not positive, or teacher seeds that would reach the held-out
+        evaluation seeds with this ``seed``.
+        """
+        if value is None:
+            return None
+        if not isinstance(value, Mapping):
+            raise ValueError(
+                f"torchrl.pretrain must be null or a mapping with {', '.join(WARM_START_KEYS)}, "
+                f"got {value!r}"
+            )
+        unknown = sorted(set(value) - set(WARM_START_KEYS))
+        if unknown:
+            raise ValueError(
+                f"unknown torchrl.pretrain setting(s) {unknown}; valid: {list(WARM_START_KEYS)}"
+            )
+        missing = [k for k in WARM_START_KEYS if k not in value]
+        if missing:
+            raise ValueError(f"torchrl.pretrain lacks {', '.join(missing)}")
+        from coopnav_env.agents import POLICY_NAMES
+
+        policy = value["policy"]
+        if not isinstance(policy, str) or policy not in POLICY_NAMES:
+            raise ValueError(
+                f"torchrl.pretrain.policy must be a heuristic policy name (one of "
+                f"{', '.join(POLICY_NAMES)}), got {policy!r}"
+            )
+        kwargs = value["policy_kwargs"]
+        if kwargs is None:
+            kwargs = {}
+        if not isinstance(kwargs, Mapping):
+            raise ValueError(
+                f"torchrl.pretrain.policy_kwargs must be a mapping of the teacher's options, "
+                f"got {kwargs!r}"
+            )
+        for key in ("episodes", "epochs"):
+            v = value[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"torchrl.pretrain.{key} must be an integer >= 1, got {v!r}")
+        lr = value["learning_rate"]
+        if isinstance(lr, bool) or not isinstance(lr, int | float) or not 0.0 < lr < math.inf:
+            raise ValueError(f"torchrl.pretrain.learning_rate must be a number > 0, got {lr!r}")
+        first = EVAL_SEED_START // 2 + int(seed)
+        if first + int(value["episodes"]) > EVAL_SEED_START:
+            raise ValueError(
+                f"torchrl.pretrain.episodes: the teacher's reset seeds {first}.."
+                f"{first + int(value['episodes']) - 1} would reach the held-out evaluation "
+                f"seeds (>= {EVAL_SEED_START}); lower the seed ({seed}) or the episodes"
+            )
+        return cls(
+            str(policy), dict(kwargs), int(value["episodes"]), int(value["epochs"]), float(lr)
+        )
+
+
+def pretrain_of(cfg: TrainConfig) -> WarmStart | None:
+    """The run's warm start (``cfg.torchrl["pretrain"]``; None: none, the default)."""
+    return WarmStart.from_value(dict(cfg.torchrl).get("pretrain"), seed=cfg.seed)
 
 
 class MARLTrainer:
@@ -222,7 +336,9 @@ class MARLTrainer:
         self.agent_steps = 0
         self.iterations = 0
         self._bases = self._make_bases()
-        obs, _ = self.venv.reset(seed=self.seed if env_seed is None else int(env_seed))
+        self._env_seed = self.seed if env_seed is None else int(env_seed)
+        self.warm_start_info: dict[str, Any] | None = None
+        obs, _ = self.venv.reset(seed=self._env_seed)
         self._obs = obs.copy()
         for b in self._bases:
             if b is not None:
@@ -396,6 +512,194 @@ class MARLTrainer:
             self._ep_err_sum[k] = 0.0
             self._ep_err_n[k] = 0.0
 
+    # ---- warm start -----------------------------------------------------------------------
+
+    def warm_start(self, spec: WarmStart, progress: bool = False) -> dict[str, Any]:
+        """Behaviour cloning of a heuristic teacher before the first PPO iteration.
+
+        The teacher (:func:`coopnav_env.agents.make_policy` ``(spec.policy, copy,
+        **spec.policy_kwargs)``, one per swarm copy) flies ``spec.episodes`` episodes in this
+        trainer's batched environment, ``n_copies`` at a time: episode ``i`` from reset seed
+        ``EVAL_SEED_START // 2 + seed + i`` (training seeds, below the held-out ones). Each
+        UAV's step gives a sample: its actor input, the teacher's command clipped to
+        ``[-1, 1]``, its critic input (with ``state()`` for MAPPO) and its return-to-go
+        (the rewards to the episode's end, discounted with ``gamma`` per step).
+
+        With ``normalize_reward`` the teacher's rewards also feed the trainer's running
+        return scale (as PPO's rollouts do), and the critic is fitted to the return-to-go
+        divided by that scale, so that its values are in the units PPO's value targets will
+        have. Then, for ``spec.epochs`` passes (Adam, ``spec.learning_rate``, minibatches of
+        :data:`WARM_START_BATCH` agent-samples, shuffled by a generator seeded with ``seed``),
+        the actor's mean (the Gaussian's location, whose clipped value is the command) is
+        fitted to the teacher's commands and the critic to the scaled return-to-go, both by
+        mean squared error. The log standard deviation is left as it was, so PPO explores
+        around the teacher. Afterwards the environment is reset with the run's own seed, so
+        PPO meets the episodes it would have met without the warm start.
+
+        Interrupts are taken between steps and between minibatches
+        (:func:`coopnav_env.training.runs.raise_if_interrupted`).
+
+        Returns
+        -------
+        dict
+            What ``run.json`` records under ``warm_start``: the teacher and its options,
+            episodes, epochs, learning rate, samples, the teacher's goal rate, the return
+            scale, and the actor's mean squared error to the teacher's commands before and
+            after the fit (``action_mse_before``, ``action_mse_after``), the critic's after.
+
+        Raises
+        ------
+        ValueError
+            A residual policy (its output is not the command), or teacher options the policy
+            rejects.
+        """
+        import torch
+        from tensordict import TensorDict
+        from tensordict.nn import AddStateIndependentNormalScale
+
+        from coopnav_env.agents import make_policy
+
+        s = self.settings
+        if s.residual_base is not None:
+            raise ValueError(
+                "torchrl.pretrain needs torchrl.residual_base null: a residual policy's output "
+                "is not the command the teacher gives"
+            )
+        k_, n_ = s.n_copies, self.n_agents
+        agents = self.venv.possible_agents
+        try:
+            teachers = [make_policy(spec.policy, e, **spec.policy_kwargs) for e in self.venv.envs]
+        except TypeError as exc:
+            raise ValueError(
+                f"torchrl.pretrain.policy_kwargs: the {spec.policy!r} teacher does not take "
+                f"{spec.policy_kwargs} ({exc})"
+            ) from None
+        first_seed = EVAL_SEED_START // 2 + self.seed
+        actor_in: list[np.ndarray] = []
+        critic_in: list[np.ndarray] = []
+        acts: list[np.ndarray] = []
+        rtg: list[np.ndarray] = []
+        goals = 0
+        waves = -(-spec.episodes // k_)
+        bar = _steps_bar(spec.episodes, progress, "warm start: teacher", "episode")
+        for w in range(waves):
+            obs, _ = self.venv.reset(seed=first_seed + w * k_)
+            obs = obs.copy()
+            for k, t in enumerate(teachers):
+                t.reset(seed=first_seed + w * k_ + k)
+            # copy k records its first episode of the wave (the last wave: only those needed)
+            recording = np.arange(k_) < spec.episodes - w * k_
+            ep: list[dict[str, list[np.ndarray]]] = [
+                {"a_in": [], "c_in": [], "act": [], "rew": []} for _ in range(k_)
+            ]
+            state = self._states()
+            while recording.any():
+                raise_if_interrupted()  # between steps (see runs.interrupts_deferred)
+                obs_d = [dict(zip(agents, obs[k])) for k in range(k_)]
+                cmd = np.stack(
+                    [np.stack([teachers[k].act(obs_d[k])[a] for a in agents]) for k in range(k_)]
+                ).astype(np.float64)
+                cmd = np.clip(cmd, -1.0, 1.0)
+                c_in = _critic_inputs(obs, state)
+                for k in np.flatnonzero(recording).tolist():
+                    ep[k]["a_in"].append(obs[k].copy())
+                    ep[k]["c_in"].append(c_in[k].copy())
+                    ep[k]["act"].append(cmd[k].astype(np.float32))
+                nxt, rew, terminated, truncated, infos, _ = self.venv.step(cmd)
+                done = terminated | truncated
+                if s.normalize_reward:
+                    self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
+                for k in np.flatnonzero(recording).tolist():
+                    ep[k]["rew"].append(rew[k].copy())
+                    if done[k]:
+                        recording[k] = False
+                        goals += all(bool(v["in_goal"]) for v in infos[k].values())
+                        rewards = np.stack(ep[k]["rew"])  # (T, N)
+                        togo = np.zeros_like(rewards)
+                        acc = np.zeros(n_)
+                        for t in range(len(rewards) - 1, -1, -1):
+                            acc = rewards[t] + s.gamma * acc
+                            togo[t] = acc
+                        actor_in.append(np.stack(ep[k]["a_in"]))
+                        critic_in.append(np.stack(ep[k]["c_in"]))
+                        acts.append(np.stack(ep[k]["act"]))
+                        rtg.append(togo)
+                        if bar is not None:
+                            bar.update(1)
+                for k in np.flatnonzero(done).tolist():
+                    teachers[k].reset()
+                obs = nxt.copy()
+                state = self._states()
+        if bar is not None:
+            bar.close()
+        # the accumulated discounted returns start again at zero, as in a run without it
+        self.reward_std.ret = np.zeros_like(self.reward_std.ret)
+        ret_scale = math.sqrt(self.reward_std.var + 1e-8) if s.normalize_reward else 1.0
+
+        def rows(xs: list[np.ndarray], width: int) -> Any:
+            return torch.as_tensor(np.concatenate(xs).reshape(-1, width), dtype=torch.float32)
+
+        x, y, xc = rows(actor_in, self.actor_dim), rows(acts, 3), rows(critic_in, self.critic_dim)
+        v = torch.as_tensor(np.concatenate(rtg).reshape(-1) / ret_scale, dtype=torch.float32)
+        actor_module = self.actor.module[0]  # writes ("agents", "loc") and ("agents", "scale")
+        critic_net = self.critic.module
+
+        def mean_of(rows: Any) -> Any:
+            td = TensorDict({("agents", "observation"): rows}, batch_size=[rows.shape[0]])
+            return actor_module(td)["agents", "loc"]
+
+        scale_ids = {
+            id(p)
+            for m in self.actor.modules()
+            if isinstance(m, AddStateIndependentNormalScale)
+            for p in m.parameters()
+        }
+        params = [p for p in self.actor.parameters() if id(p) not in scale_ids]
+        params += list(critic_net.parameters())
+        opt = torch.optim.Adam(params, lr=spec.learning_rate)
+        gen = torch.Generator().manual_seed(self.seed)
+        with torch.no_grad():
+            mse_before = float(torch.mean((mean_of(x) - y) ** 2))
+        ebar = _steps_bar(spec.epochs, progress, "warm start: fitting", "epoch")
+        for _ in range(spec.epochs):
+            perm = torch.randperm(x.shape[0], generator=gen)
+            for i in range(0, x.shape[0], WARM_START_BATCH):
+                raise_if_interrupted()
+                idx = perm[i : i + WARM_START_BATCH]
+                loss_pi = torch.mean((mean_of(x[idx]) - y[idx]) ** 2)
+                loss_vf = torch.mean((critic_net(xc[idx]).squeeze(-1) - v[idx]) ** 2)
+                opt.zero_grad()
+                (loss_pi + loss_vf).backward()
+                opt.step()
+            if ebar is not None:
+                ebar.update(1)
+        if ebar is not None:
+            ebar.close()
+        with torch.no_grad():
+            mse_after = float(torch.mean((mean_of(x) - y) ** 2))
+            vf_after = float(torch.mean((critic_net(xc).squeeze(-1) - v) ** 2))
+        # PPO starts from the run's own episodes
+        obs, _ = self.venv.reset(seed=self._env_seed)
+        self._obs = obs.copy()
+        for b in self._bases:
+            if b is not None:
+                b.reset()
+        self.warm_start_info = {
+            "teacher": spec.policy,
+            "policy_kwargs": dict(spec.policy_kwargs),
+            "episodes": spec.episodes,
+            "epochs": spec.epochs,
+            "learning_rate": spec.learning_rate,
+            "first_seed": first_seed,
+            "samples": int(x.shape[0]),
+            "teacher_goal_rate": goals / spec.episodes,
+            "return_scale": ret_scale,
+            "action_mse_before": mse_before,
+            "action_mse_after": mse_after,
+            "value_mse_after": vf_after,
+        }
+        return dict(self.warm_start_info)
+
     # ---- update ---------------------------------------------------------------------------
 
     def update(self, data: Any) -> dict[str, float]:
@@ -463,6 +767,7 @@ class MARLTrainer:
             "agent_steps": self.agent_steps,
             "iterations": self.iterations,
             "seed": self.seed,
+            **({} if self.warm_start_info is None else {"warm_start": self.warm_start_info}),
         }
 
     def load_state_dict(self, d: Mapping[str, Any]) -> None:
@@ -482,6 +787,7 @@ class MARLTrainer:
             ) from exc
         self.agent_steps = int(d["agent_steps"])
         self.iterations = int(d["iterations"])
+        self.warm_start_info = d.get("warm_start")
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`state_dict` to ``path`` atomically (temporary file, then rename)."""
@@ -520,6 +826,17 @@ class MARLTrainer:
                     row[f"ep_{key}"] = float(np.mean([e[key] for e in recent]))
             if on_iteration is not None:
                 on_iteration(row)
+
+
+def _steps_bar(total: int, show: bool, desc: str, unit: str) -> Any:
+    """A ``tqdm`` bar on stderr of ``total`` units when ``show`` (and tqdm is there), else None."""
+    if not show:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a training dependency
+        return None
+    return tqdm(total=total, desc=desc, unit=unit, dynamic_ncols=True, mininterval=0.5)
 
 
 def _save_torch(obj: Any, path: str | Path) -> Path:
@@ -590,17 +907,54 @@ def settings_of(cfg: TrainConfig) -> tuple[MARLSettings, dict[str, Any]]:
     """The backend's settings and the environment settings of a run configuration.
 
     ``cfg.torchrl`` holds :class:`MARLSettings` fields plus an optional ``env`` mapping whose
-    entries override ``cfg.env`` for this backend (the learning study's rewards).
+    entries override ``cfg.env`` for this backend (the learning study's rewards) and an
+    optional ``pretrain`` mapping (the warm start, read by :func:`pretrain_of`).
     """
     from coopnav_env.envs.config import V1_DEFAULTS
 
     d = dict(cfg.torchrl)
     env_over = d.pop("env", None) or {}
+    d.pop("pretrain", None)  # the warm start: pretrain_of
     if not isinstance(env_over, Mapping):
         raise ValueError(f"torchrl.env must be a mapping of environment settings, got {env_over!r}")
     # the batched environment is built from settings alone: name urban_canyon_v1's own
     v1 = V1_DEFAULTS if cfg.env_id == "urban_canyon_v1" else {}
     return MARLSettings.from_dict(d), {**v1, **cfg.env, **env_over}
+
+
+def check_pretrain(
+    cfg: TrainConfig, settings: MARLSettings, env_kwargs: Mapping[str, Any]
+) -> WarmStart | None:
+    """The run's warm start (:func:`pretrain_of`), checked against the other settings.
+
+    Raises
+    ------
+    ValueError
+        A bad ``torchrl.pretrain`` entry (named), a residual policy (its output is not the
+        command the teacher gives), or teacher options the teacher rejects.
+    """
+    pretrain = pretrain_of(cfg)
+    if pretrain is not None:
+        if settings.residual_base is not None:
+            raise ValueError(
+                "torchrl.pretrain needs torchrl.residual_base null: a residual policy's output "
+                f"is not the command the teacher gives (residual_base is "
+                f"{settings.residual_base!r})"
+            )
+        from coopnav_env.agents import make_policy
+        from coopnav_env.envs import UrbanCanyonEnv
+
+        env = UrbanCanyonEnv(**env_kwargs)
+        try:
+            make_policy(pretrain.policy, env, **pretrain.policy_kwargs)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"torchrl.pretrain.policy_kwargs: the {pretrain.policy!r} teacher does not take "
+                f"{pretrain.policy_kwargs} ({exc})"
+            ) from None
+        finally:
+            env.close()
+    return pretrain
 
 
 def check(cfg: TrainConfig) -> None:
@@ -617,6 +971,7 @@ def check(cfg: TrainConfig) -> None:
     from coopnav_env.envs import make_config
 
     make_config(**env_kwargs)  # environment settings
+    check_pretrain(cfg, settings, env_kwargs)
     if settings.residual_base is not None:
         from coopnav_env.agents import POLICY_NAMES
 
@@ -720,6 +1075,7 @@ def train(cfg: TrainConfig) -> Path:
     import torch
 
     settings, env_kwargs = settings_of(cfg)
+    pretrain = check_pretrain(cfg, settings, env_kwargs)  # before anything is written
     out = Path(cfg.out)
     with open_run(cfg) as run, interrupts_deferred():
         if cfg.resume == "latest" and run.nothing_to_do(cfg.timesteps):
@@ -765,6 +1121,7 @@ def train(cfg: TrainConfig) -> Path:
                 checkpoint_freq=cfg.checkpoint_freq,
                 resume=resume,
                 progress=cfg.progress_bar,
+                pretrain=pretrain,
             )
         except _NothingTrained:
             if resume is None and wrote_config is not None:
@@ -853,13 +1210,17 @@ def train_marl(
     checkpoint_freq: int = 0,
     resume: Mapping[str, Any] | None = None,
     progress: bool = True,
+    pretrain: WarmStart | None = None,
 ) -> Path:
     """Train and write ``out``: ``logs/progress.csv``, ``checkpoints/``, ``final_model.pt``.
 
     ``timesteps`` and ``checkpoint_freq`` count agent-steps. Returns the final model's path.
-    SIGINT and SIGTERM are taken between steps: the trainer's state is saved as
+    ``pretrain``: a behaviour-cloning warm start (:meth:`MARLTrainer.warm_start`) before the
+    first iteration of a new run; a resumed run (``resume``) never runs it again. SIGINT and
+    SIGTERM are taken between steps: the trainer's state is saved as
     ``checkpoints/marl_<N>_steps.pt`` and the interrupt re-raised (an interrupt before the
-    trainer exists raises a ``KeyboardInterrupt`` with nothing saved).
+    trainer exists or during the warm start raises a ``KeyboardInterrupt`` with nothing
+    saved).
     """
     import warnings
 
@@ -880,6 +1241,14 @@ def train_marl(
                 built = MARLTrainer(settings, env_kwargs, seed, env_seed=env_seed)
                 if resume is not None:
                     built.load_state_dict(resume)
+                elif pretrain is not None:
+                    print(
+                        f"behaviour-cloning warm start: {pretrain.episodes} episodes of the "
+                        f"{pretrain.policy} teacher, {pretrain.epochs} epochs",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                    built.warm_start(pretrain, progress=progress)
             except KeyboardInterrupt as exc:
                 raise _NothingTrained(exc) from None
             trainer = built
@@ -953,6 +1322,8 @@ def train_marl(
         "agent_steps_per_s": round(trained / max(elapsed, 1e-9), 1) if trained > 0 else None,
         "settings": dataclasses.asdict(settings),
         "env": dict(env_kwargs),
+        # a behaviour-cloning warm start of this run (None: it started from random weights)
+        "warm_start": trainer.warm_start_info,
         "finished": True,
     }
     write_json(out / "run.json", run)
