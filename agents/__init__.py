@@ -82,6 +82,7 @@ __all__ = [
     "Policy",
     "clip_actions",
     "make_policy",
+    "parse_policy_name",
     "register_policy",
 ]
 
@@ -152,7 +153,7 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
     if not isinstance(name, str):
         raise ValueError(f"policy name must be a string, got {name!r}")
     if "@" in name and ":" not in name.split("@", 1)[0]:
-        base, options = _parse_options(name)
+        base, options = parse_policy_name(name)
         try:
             return make_policy(base, env, **{**options, **kwargs})
         except (TypeError, ValueError) as exc:  # an option the constructor rejects
@@ -267,8 +268,14 @@ def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: boo
     _REGISTERED[name] = factory
 
 
-def _parse_options(name: str) -> tuple[str, dict[str, Any]]:
-    """Split ``"waypoint@altitude_m=28,cruise_speed_mps=5"`` into a name and keyword options."""
+def parse_policy_name(name: str) -> tuple[str, dict[str, Any]]:
+    """Split ``"waypoint@altitude_m=28,cruise_speed_mps=5"`` into a name and keyword options.
+
+    Values are read as Python literals (numbers, strings, ``True``/``False``), else kept as
+    text; a name without ``@`` has no options. A malformed item raises ``ValueError``.
+    """
+    if "@" not in name:
+        return name, {}
     import ast
 
     base, _, text = name.partition("@")

@@ -427,7 +427,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         covered_m = self._unpaid_m if reached else np.clip(self._unpaid_m - now_m, 0.0, None)
         self._unpaid_m = self._unpaid_m - covered_m
         share = covered_m / self._route_m
-        shortfall = np.minimum(ep.nav_error_m, cfg.nav_reward_cap_m) / cfg.nav_reward_cap_m
+        # np.fmin: an error that is not a number (no estimate) counts as the cap (quality 0)
+        shortfall = np.fmin(ep.nav_error_m, cfg.nav_reward_cap_m) / cfg.nav_reward_cap_m
         return -share * shortfall, share
 
     def _integrity_term(self, terms: dict[str, np.ndarray], reward: np.ndarray) -> np.ndarray:

@@ -85,13 +85,13 @@ def effective_setting(name: str) -> tuple[str, float, float, float] | None:
     Two names with the same setting fly the same episodes (every other option is the
     preset's), so a grid point equal to a named preset reuses its flights.
     """
-    from coopnav_env.agents import _parse_options
+    from coopnav_env.agents import parse_policy_name
     from coopnav_env.agents.heuristics import COLUMN_PRESETS, ColumnPolicy
 
     preset = column_preset(name)
     if preset is None:
         return None
-    options = _parse_options(name)[1] if "@" in name else {}
+    options = parse_policy_name(name)[1]
     if set(options) - set(TUNED):
         return None  # other options: never the same as a grid point
     defaults = {
