@@ -545,7 +545,8 @@ class MARLTrainer:
             What ``run.json`` records under ``warm_start``: the teacher and its options,
             episodes, epochs, learning rate, samples, the teacher's goal rate, the return
             scale, and the actor's mean squared error to the teacher's commands before and
-            after the fit (``action_mse_before``, ``action_mse_after``), the critic's after.
+            after the fit (``action_mse_before``, ``action_mse_after``), the critic's after,
+            and the wall-clock seconds it took (not part of ``run.json``'s ``train_s``).
 
         Raises
         ------
@@ -575,6 +576,7 @@ class MARLTrainer:
                 f"{spec.policy_kwargs} ({exc})"
             ) from None
         first_seed = EVAL_SEED_START // 2 + self.seed
+        t_start = time.perf_counter()
         actor_in: list[np.ndarray] = []
         critic_in: list[np.ndarray] = []
         acts: list[np.ndarray] = []
@@ -697,6 +699,7 @@ class MARLTrainer:
             "action_mse_before": mse_before,
             "action_mse_after": mse_after,
             "value_mse_after": vf_after,
+            "seconds": round(time.perf_counter() - t_start, 1),
         }
         return dict(self.warm_start_info)
 
