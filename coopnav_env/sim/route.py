@@ -5,8 +5,8 @@ whole city (a Manhattan grid: north-south centre lines ``street_centres_x_m``, e
 ``street_centres_y_m``), so the shortest route along street centre lines from one street point
 to another has at most two turns (:func:`street_route`). The environment plans this route at
 reset and tracks each UAV's next waypoint on it (:func:`advance_waypoints`,
-:func:`remaining_route_m`); the heuristic column followers of :mod:`coopnav_env.agents.heuristics` fly
-along it with :class:`Polyline`.
+:func:`remaining_route_m`); the column heuristics of :mod:`coopnav_env.agents.heuristics`
+fly along it with :class:`Polyline`.
 
 Frames and units: the city's local East-North-Up frame, metres; routes are horizontal
 ``(k, 2)`` arrays of East/North waypoints.
@@ -146,11 +146,11 @@ def street_routes(
 
     On a Manhattan grid many routes share the shortest length: any staircase that never
     moves away from the goal. They differ in the streets they fly through, and so in the
-    buildings that shade the sky along them (the route choice of
-    :class:`coopnav_env.agents.heuristics.RouteChoice`). Each end is snapped to its nearest street centre
-    line as in :func:`street_route`; the routes alternate between north-south and east-west
-    legs, starting on the start's street and ending on the goal's, and turn only at street
-    intersections.
+    buildings that shade the sky along them (the ``route_choice`` option of
+    :class:`coopnav_env.agents.heuristics.ColumnPolicy`). Each end is snapped to its nearest
+    street centre line as in :func:`street_route`; the routes alternate between north-south and
+    east-west legs, starting on the start's street and ending on the goal's, and turn only at
+    street intersections.
 
     Parameters
     ----------
