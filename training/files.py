@@ -223,12 +223,17 @@ a split chooser, a benchmark's flights): a report command never writes into one.
 
 
 @contextmanager
-def folder_lock(out: str | Path) -> Iterator[None]:
+def folder_lock(
+    out: str | Path,
+    *,
+    holder_kind: str = "another coopnav command",
+    error: type[ValueError] = ValueError,
+) -> Iterator[None]:
     """Hold an exclusive lock on the folder ``out`` (``fcntl.flock`` on ``out/.coopnav.lock``).
 
-    A second command into the same folder fails at once with a :class:`ValueError` naming
-    the process that holds it; the operating system releases the lock when the process ends,
-    however it ends. Not POSIX: no lock.
+    A second command into the same folder fails at once with ``error`` (a :class:`ValueError`)
+    naming the process that holds it, as ``holder_kind``; the operating system releases the
+    lock when the process ends, however it ends. Not POSIX: no lock.
     """
     try:
         import fcntl
@@ -239,15 +244,15 @@ def folder_lock(out: str | Path) -> Iterator[None]:
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
-        raise ValueError(f"cannot create the lock file {path}: {exc.strerror}") from exc
+        raise error(f"cannot create the lock file {path}: {exc.strerror}") from exc
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
-            raise ValueError(
-                f"{out} is in use by another coopnav command ({holder}); wait for it to end, "
-                "or choose another --out"
+            raise error(
+                f"{out} is in use by {holder_kind} ({holder}); wait for it to end, or choose "
+                "another --out"
             ) from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()}\n".encode(), 0)

@@ -45,7 +45,6 @@ and names every newer one it had to skip. Every file is written atomically
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import signal
@@ -60,9 +59,11 @@ from typing import TYPE_CHECKING, Any
 from coopnav_env.training.config import parse_settings_yaml, parse_yaml
 from coopnav_env.training.files import (
     CLAIM_NAME,
+    LOCK_NAME,
     atomic_path,
     atomic_write_text,
     ensure_folder,
+    folder_lock,
     write_json,
     write_yaml,
 )
@@ -98,8 +99,6 @@ __all__ = [  # atomic_path ... write_yaml: coopnav_env.training.files, also impo
     "write_yaml",
 ]
 
-LOCK_NAME: str = ".coopnav.lock"
-"""The lock file of a run folder (kept; holding it is what counts)."""
 
 RUN_OUTPUTS: tuple[str, ...] = (
     "config.yaml",
@@ -466,34 +465,8 @@ class RunState:
 @contextmanager
 def _folder_lock(out: Path) -> Iterator[None]:
     """Hold an exclusive lock on ``out`` (see the module docstring)."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX: no locking
+    with folder_lock(out, holder_kind="another training run", error=RunFolderError):
         yield
-        return
-    path = out / LOCK_NAME
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as exc:
-        raise RunFolderError(f"cannot create the lock file {path}: {exc.strerror}") from exc
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "another process"
-            raise RunFolderError(
-                f"{out} is in use by another training run ({holder}); wait for it to end, "
-                "or choose another --out"
-            ) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"pid {os.getpid()}\n".encode(), 0)
-        try:
-            yield
-        finally:
-            os.ftruncate(fd, 0)
-            fcntl.flock(fd, fcntl.LOCK_UN)
-    finally:
-        os.close(fd)
 
 
 def _describe(outputs: Sequence[Path], out: Path) -> str:
