@@ -1,0 +1,221 @@
+"""Learned swarms against the heuristics on the v1 score, with paired intervals.
+
+Flies every policy on the same held-out episodes of ``urban_canyon_v1`` and reports, per
+policy and per method (a method = its training seeds, averaged per episode):
+
+* the score (the undiscounted return, mean over UAVs) with its 95 % bootstrap interval, the
+  goal and collision rates, the mean navigation error, the steps;
+* what was learned: the mean distance of a UAV to its nearest neighbour during the cruise
+  (the middle 60 % of the episode's steps, leaving out the start lattice and the closing at
+  the goal) and the mean altitude;
+* the paired difference in score to the reference heuristic and to the baseline, and the
+  share of the gap between the baseline and the reference that the method closes.
+
+Example::
+
+    python studies/task_objective/compare_learned.py \\
+        --methods mappo=mappo:runs/v1/mappo_bc_s0,mappo:runs/v1/mappo_bc_s1 \\
+        --heuristics formation wide wide@spacing_m=60,cruise_speed_mps=10,ceiling_margin_m=-10 \\
+        --reference wide@spacing_m=60,cruise_speed_mps=10,ceiling_margin_m=-10 \\
+        --episodes 100 --seed-start 1000100 --out studies/task_objective/learned_v1
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+CRUISE = (0.2, 0.8)
+"""The share of an episode's steps that counts as the cruise (start and end left out)."""
+
+
+def fly(policy_name: str, seeds: Sequence[int]) -> list[dict[str, float]]:
+    """Per-episode figures of ``policy_name`` on ``urban_canyon_v1`` (its defaults)."""
+    from coopnav_env import urban_canyon_v1
+    from coopnav_env.agents import make_policy
+    from coopnav_env.training.evaluate import run_episode
+
+    env = urban_canyon_v1.parallel_env()
+    policy = make_policy(policy_name, env)
+    out = []
+    for seed in seeds:
+        rec = run_episode(env, policy, int(seed))
+        pos = np.asarray(rec.pos_enu_m, dtype=float)  # (T + 1, N, 3)
+        t0, t1 = (round(f * (len(pos) - 1)) for f in CRUISE)
+        cruise = pos[max(t0, 1) : max(t1, t0 + 1) + 1]
+        d = np.linalg.norm(cruise[:, :, None, :] - cruise[:, None, :, :], axis=-1)
+        n = d.shape[1]
+        d[:, np.arange(n), np.arange(n)] = np.inf
+        nav = np.asarray(rec.nav_error_m, dtype=float)
+        out.append(
+            {
+                "seed": int(seed),
+                "score": float(rec.episode_return),
+                "goal": float(rec.success),
+                "collided": float(rec.collided),
+                "nav_error_m": float(np.nanmean(nav)) if nav.size else float("nan"),
+                "steps": float(rec.length),
+                "cruise_spacing_m": float(d.min(axis=2).mean()),
+                "cruise_altitude_m": float(cruise[:, :, 2].mean()),
+            }
+        )
+    env.close()
+    return out
+
+
+def _mean_ci(x: np.ndarray, reps: int) -> list[float]:
+    from coopnav_env.training.stats import bootstrap_mean_interval
+
+    return list(bootstrap_mean_interval(x, reps, np.random.default_rng(0)))
+
+
+def _paired(a: np.ndarray, b: np.ndarray, reps: int) -> list[float]:
+    """Paired difference of two ``(runs, episodes)`` matrices (runs resampled too)."""
+    from coopnav_env.training.stats import paired_difference
+
+    iv, _ = paired_difference(a, b, reps=reps, seed=0)
+    return [iv.value, iv.low, iv.high]
+
+
+def _gap_closed(method: np.ndarray, base: np.ndarray, ref: np.ndarray, reps: int) -> list[float]:
+    """``(method - base) / (ref - base)`` of the episode means, with a paired bootstrap."""
+    rng = np.random.default_rng(0)
+    est = float((method.mean() - base.mean()) / (ref.mean() - base.mean()))
+    idx = rng.integers(0, len(method), size=(reps, len(method)))
+    m, b, r = method[idx].mean(axis=1), base[idx].mean(axis=1), ref[idx].mean(axis=1)
+    boots = (m - b) / (r - b)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return [est, float(lo), float(hi)]
+
+
+def compare(
+    methods: Mapping[str, Sequence[str]],
+    heuristics: Sequence[str],
+    reference: str,
+    baseline: str,
+    seeds: Sequence[int],
+    reps: int = 2000,
+) -> dict[str, Any]:
+    """Fly every policy and summarise (see the module docstring)."""
+    from tqdm.auto import tqdm
+
+    names = list(dict.fromkeys([*heuristics, reference, baseline]))
+    names += [p for ps in methods.values() for p in ps if p not in names]
+    flown = {name: fly(name, seeds) for name in tqdm(names, desc="policies")}
+    keys = (
+        "score",
+        "goal",
+        "collided",
+        "nav_error_m",
+        "steps",
+        "cruise_spacing_m",
+        "cruise_altitude_m",
+    )
+
+    def matrix(per_policy: Sequence[str], key: str) -> np.ndarray:
+        return np.array([[e[key] for e in flown[p]] for p in per_policy], dtype=float)
+
+    def arrays(per_policy: Sequence[str]) -> dict[str, np.ndarray]:
+        return {k: matrix(per_policy, k).mean(axis=0) for k in keys}
+
+    groups = {name: [name] for name in heuristics} | {m: list(ps) for m, ps in methods.items()}
+    groups |= {name: [name] for ps in methods.values() for name in ps}
+    ref, base = arrays([reference]), arrays([baseline])
+    rows = []
+    for name, members in groups.items():
+        a = arrays(members)
+        row: dict[str, Any] = {"name": name, "policies": members}
+        row["score"] = _mean_ci(a["score"], reps)
+        for k in keys[1:]:
+            row[k] = float(np.mean(a[k]))
+        scores = matrix(members, "score")
+        row["score_minus_reference"] = _paired(scores, matrix([reference], "score"), reps)
+        row["score_minus_baseline"] = _paired(scores, matrix([baseline], "score"), reps)
+        row["gap_closed"] = _gap_closed(a["score"], base["score"], ref["score"], reps)
+        rows.append(row)
+    return {
+        "environment": "urban_canyon_v1",
+        "seeds": [int(seeds[0]), int(seeds[-1])],
+        "episodes": len(seeds),
+        "reference": reference,
+        "baseline": baseline,
+        "cruise": list(CRUISE),
+        "rows": rows,
+        "episodes_per_policy": flown,
+    }
+
+
+def to_markdown(report: Mapping[str, Any]) -> str:
+    """The summary table."""
+
+    def iv(v: Sequence[float], nd: int = 3) -> str:
+        return f"{v[0]:+.{nd}f} [{v[1]:+.{nd}f}, {v[2]:+.{nd}f}]"
+
+    lines = [
+        f"`urban_canyon_v1`, {report['episodes']} held-out episodes (reset seeds "
+        f"{report['seeds'][0]}-{report['seeds'][1]}); a method's seeds are averaged per "
+        f"episode. Reference: `{report['reference']}`; baseline: `{report['baseline']}`.",
+        "",
+        "| policy | score [95 % CI] | goal | collisions | nav error [m] | steps | cruise "
+        "spacing [m] | cruise altitude [m] | score - reference | gap closed |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|---|",
+    ]
+    for r in sorted(report["rows"], key=lambda r: -r["score"][0]):
+        s = r["score"]
+        lines.append(
+            f"| `{r['name']}` | {s[0]:.3f} [{s[1]:.3f}, {s[2]:.3f}] | {r['goal']:.2f} | "
+            f"{r['collided']:.2f} | {r['nav_error_m']:.2f} | {r['steps']:.1f} | "
+            f"{r['cruise_spacing_m']:.1f} | {r['cruise_altitude_m']:.1f} | "
+            f"{iv(r['score_minus_reference'])} | {iv(r['gap_closed'], 2)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line (``--help``)."""
+    from coopnav_env.training.envs import heldout_seeds
+    from coopnav_env.training.files import atomic_write_text, write_json
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument(
+        "--methods",
+        nargs="*",
+        default=[],
+        metavar="NAME=POLICY[,POLICY...]",
+        help="learned methods: a name and its policies, one per training seed",
+    )
+    p.add_argument("--heuristics", nargs="+", default=["formation", "wide"])
+    p.add_argument("--reference", default="wide", help="the heuristic to beat")
+    p.add_argument("--baseline", default="formation", help="the gap's other end")
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--seed-start", type=int, default=1_000_100)
+    p.add_argument("--reps", type=int, default=2000, help="bootstrap replicates")
+    p.add_argument("--out", required=True, help="folder for report.json and report.md")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing report")
+    args = p.parse_args(argv)
+    out = Path(args.out)
+    if (out / "report.json").exists() and not args.overwrite:
+        p.error(f"{out} already holds a report.json; pass --overwrite to replace it")
+    methods: dict[str, list[str]] = {}
+    for item in args.methods:
+        name, eq, policies = item.partition("=")
+        if not eq or not name or not policies.strip(","):
+            p.error(f"--methods {item!r} must look like NAME=POLICY[,POLICY...]")
+        methods[name] = [x for x in policies.split(",") if x]
+    seeds = heldout_seeds(args.episodes, args.seed_start)
+    report = compare(methods, args.heuristics, args.reference, args.baseline, seeds, args.reps)
+    text = to_markdown(report)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "report.json", report)
+    atomic_write_text(out / "report.md", "# Learned swarms on v1\n\n" + text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
