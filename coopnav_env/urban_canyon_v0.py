@@ -153,6 +153,11 @@ a learned policy falls short of the privileged planner for want of information o
 learning (`studies/planner_headroom`), and a policy trained with it must not be reported as an
 on-board one.
 
+With `obs_agent_index=True`, `n_uavs` entries follow last: `agent_index`, the UAV's one-hot
+index in `possible_agents`. A UAV knows which one it is; with one network shared by every UAV,
+this lets the UAVs of a tight group, whose observations are otherwise nearly equal, act
+differently (agent indication, Terry et al. 2020).
+
 `state()` returns the global state for centralised critics (truth included), float32 in
 `state_space`: `(pos - goal) / L` (3N), `velocity / max_speed` (3N), `(goal - city centre) / (L/2)`
 (3), `(estimate - pos) / nav_reward_cap_m` (3N), `sigma / obs_sigma_max_m` (3N),
@@ -357,7 +362,8 @@ excludes the measurement the test identifies and re-solves until the test passes
 residual (NLOS delays are positive). `alert_limit_m` (30):
 horizontal alert limit [m] (availability, the reward term and the observation scale).
 `integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False),
-`obs_lookahead` (False), `obs_candidate_sky` (False) and `obs_true_error` (False): above.
+`obs_lookahead` (False), `obs_candidate_sky` (False), `obs_true_error` (False) and
+`obs_agent_index` (False): above.
 With `"off"` every episode is exactly as before. The preset
 `coopnav_env.envs.preset_config("urban_nlos", **fields)` turns on realistic urban reception:
 half of the blocked satellites received through reflections with a bias of 3 m + Exp(30 m),

@@ -189,6 +189,13 @@ class UrbanCanyonConfig(ScenarioConfig):
         where the UAVs are). It tells whether a learned policy falls short of the planner
         for want of information or for want of learning (``studies/planner_headroom``); a
         policy trained with it must never be reported as an on-board one.
+    obs_agent_index : bool, default False
+        Append ``n_uavs`` entries last (after every other optional block): the one-hot index
+        of the UAV (1 at its position in ``possible_agents``, 0 elsewhere). A UAV knows which
+        one it is; with one network shared by every UAV (parameter sharing) this is what lets
+        the UAVs of a tight group, whose observations are otherwise nearly equal, act
+        differently (*agent indication*: Terry et al., *Revisiting Parameter Sharing in
+        Multi-Agent Deep Reinforcement Learning*, 2020; the agent id of Yu et al.'s MAPPO).
     """
 
     max_steps: int = 200
@@ -218,6 +225,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     obs_lookahead: bool = False
     obs_candidate_sky: bool = False
     obs_true_error: bool = False
+    obs_agent_index: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -249,6 +257,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_bool(o, "obs_lookahead", self.obs_lookahead)
         _check_bool(o, "obs_candidate_sky", self.obs_candidate_sky)
         _check_bool(o, "obs_true_error", self.obs_true_error)
+        _check_bool(o, "obs_agent_index", self.obs_agent_index)
         if self.reward_scheme == "navigated_distance":
             self._check_navigated_distance(o)
         if self.integrity == "off":
@@ -284,7 +293,8 @@ class UrbanCanyonConfig(ScenarioConfig):
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
         with ``obs_protection_level``, plus ``2 obs_sky_azimuths`` with
         ``obs_satellite_sectors``, plus 4 with ``obs_lookahead``, plus 10 with
-        ``obs_candidate_sky``, plus 3 with ``obs_true_error``."""
+        ``obs_candidate_sky``, plus 3 with ``obs_true_error``, plus ``n_uavs`` with
+        ``obs_agent_index``."""
         return self.obs_base_dim + self.obs_extra_dim
 
     @property
@@ -296,12 +306,14 @@ class UrbanCanyonConfig(ScenarioConfig):
     def obs_extra_dim(self) -> int:
         """Entries of the optional blocks appended after the base ones: 2 with
         ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``, 4
-        with ``obs_lookahead``, 10 with ``obs_candidate_sky``, 3 with ``obs_true_error``."""
+        with ``obs_lookahead``, 10 with ``obs_candidate_sky``, 3 with ``obs_true_error``,
+        ``n_uavs`` with ``obs_agent_index``."""
         pl = 2 if self.obs_protection_level else 0
         sectors = 2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0
         ahead = 4 if self.obs_lookahead else 0
         cand = 10 if self.obs_candidate_sky else 0
-        return pl + sectors + ahead + cand + (3 if self.obs_true_error else 0)
+        index = self.n_uavs if self.obs_agent_index else 0
+        return pl + sectors + ahead + cand + (3 if self.obs_true_error else 0) + index
 
     @property
     def max_cycles(self) -> int:

@@ -59,6 +59,9 @@ satellites``                                  candidate, the others ahead); only
 ``true_error``             3      m           ``obs_sigma_max_m`` (the true error of the
                                               estimate used, E, N, U; privileged, a
                                               diagnostic); only with ``obs_true_error``
+``agent_index``            N      1           1 (one-hot index of the UAV in
+                                              ``possible_agents``); only with
+                                              ``obs_agent_index``
 =========================  =====  ==========  ==============================================
 
 The sector of skyline azimuth ``360 a / A`` is centred on it and ``360 / A`` degrees wide
@@ -452,6 +455,17 @@ def obs_layout(config: Any = None, **overrides: Any) -> ObsLayout:
             "true position error of the estimate used (privileged: a diagnostic)",
             "obs_sigma_max_m",
             _ENU,
+        )
+    if cfg.obs_agent_index:
+        add(
+            "agent_index",
+            cfg.n_uavs,
+            "1",
+            1,
+            0,
+            "one-hot index of the UAV in possible_agents",
+            "1",
+            tuple(str(i) for i in range(cfg.n_uavs)),
         )
     if fields[-1].stop != cfg.obs_dim:  # pragma: no cover - guarded by the tests
         raise AssertionError(f"layout covers {fields[-1].stop} entries, obs_dim {cfg.obs_dim}")

@@ -17,7 +17,8 @@ entries each (``obs_satellite_sectors``, :meth:`UrbanCanyonEnv._satellite_sector
 satellites predicted in line of sight along the route ahead, 4 entries (``obs_lookahead``,
 :meth:`UrbanCanyonEnv._lookahead`), then the satellites the receiver would use at five
 candidate positions, for the UAV and for the swarm, 10 entries (``obs_candidate_sky``,
-:meth:`UrbanCanyonEnv._candidate_sky`).
+:meth:`UrbanCanyonEnv._candidate_sky`), then the true position error, 3 entries
+(``obs_true_error``), then the UAV's one-hot index, ``N`` entries (``obs_agent_index``).
 """
 
 from __future__ import annotations
@@ -492,7 +493,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         satellite-sector columns (:meth:`_satellite_sectors`), then with ``obs_lookahead`` the
         4 look-ahead columns (:meth:`_lookahead`), then with ``obs_candidate_sky`` the 10
         candidate columns (:meth:`_candidate_sky`), then with ``obs_true_error``
-        (privileged) the 3 columns of the true position error.
+        (privileged) the 3 columns of the true position error, then with ``obs_agent_index``
+        the ``N`` columns of the UAV's one-hot index.
         """
         obs = self._observation_rows()
         cfg = self.config
@@ -502,6 +504,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             or cfg.obs_lookahead
             or cfg.obs_candidate_sky
             or cfg.obs_true_error
+            or cfg.obs_agent_index
         ):
             return obs
         ep = self._epoch
@@ -519,6 +522,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         if cfg.obs_true_error:  # privileged (a diagnostic): the truth no receiver knows
             err = (ep.nav_pos_enu_m - ep.pos_enu_m) / cfg.obs_sigma_max_m
             blocks.append(np.clip(err, -1.0, 1.0).astype(np.float32))
+        if cfg.obs_agent_index:
+            blocks.append(np.eye(cfg.n_uavs, dtype=np.float32))
         return np.concatenate(blocks, axis=1)
 
     #: Distances along the route of the ``obs_lookahead`` points [m].
@@ -1062,6 +1067,7 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(4 if cfg.obs_lookahead else 0),  # satellites predicted ahead
             np.zeros(10 if cfg.obs_candidate_sky else 0),  # satellites usable at candidates
             -np.ones(3 if cfg.obs_true_error else 0),  # true position error (privileged)
+            np.zeros(cfg.n_uavs if cfg.obs_agent_index else 0),  # one-hot index of the UAV
         ]
     )
     hi = np.ones(cfg.obs_dim)
