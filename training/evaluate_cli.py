@@ -150,10 +150,20 @@ def _is_trained(name: str) -> bool:
 
 def _config_of_policy(name: str) -> Path | None:
     """The ``config.yaml`` of the run a trained policy came from (None: not found, or the
-    policy is not a trained one): beside the model, or one or two folders up."""
+    policy is not a trained one): beside the model, or one or two folders up (for a shipped
+    TorchRL policy, ``mappo:pretrained/...``, in its folder under ``agents/pretrained``)."""
     if not _is_trained(name):
         return None
-    model = Path(name.partition(":")[2])
+    kind, _, path = name.partition(":")
+    model = Path(path)
+    shipped = path == "pretrained" or path.startswith("pretrained/")
+    if kind in ("mappo", "ippo", "torchrl") and shipped:
+        from coopnav_env.agents.marl_policy import resolve_marl_checkpoint
+
+        try:  # a shipped policy: its folder under agents/pretrained
+            model = resolve_marl_checkpoint(path, "ippo" if kind == "ippo" else "mappo")
+        except FileNotFoundError:
+            return None
     for folder in (model, model.parent, model.parent.parent):
         cfg = folder / "config.yaml"
         if cfg.is_file():

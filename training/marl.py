@@ -1011,7 +1011,8 @@ def find_latest_checkpoint(out: str | Path) -> Path:
 def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
     """Write the acting part of a run into ``out_dir``: ``final_model.pt`` (the actor, its
     settings and the environment; no critic, no optimiser: about 100 kB instead of 700),
-    and the run's ``run.json`` and ``logs/progress.csv`` when they exist beside it.
+    and the run's ``run.json``, ``config.yaml`` and ``logs/progress.csv`` when they exist
+    beside it (``coopnav evaluate`` reads the environment from ``config.yaml``).
 
     ``checkpoint`` is a run folder (its ``final_model.pt``) or a checkpoint file. The result is
     a folder that ``coopnav evaluate --policies mappo:OUT_DIR`` and ``coopnav study --runs``
@@ -1040,7 +1041,7 @@ def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _save_torch(small, out / "final_model.pt")
-    for name in ("run.json", "logs/progress.csv"):
+    for name in ("run.json", "config.yaml", "logs/progress.csv"):
         f = run_dir / name
         if f.is_file():
             (out / name).parent.mkdir(parents=True, exist_ok=True)

@@ -350,8 +350,11 @@ def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
     tr = MARLTrainer(s, {}, seed=0)
     tr.update(tr.collect())
     tr.save(tmp_path / "run" / "final_model.pt")
+    (tmp_path / "run" / "config.yaml").write_text("env_id: urban_canyon_v0\nenv: {}\n")
     small = export_policy(tmp_path / "run", tmp_path / "shipped")
     assert small.stat().st_size < 0.3 * (tmp_path / "run" / "final_model.pt").stat().st_size
+    # the run's environment travels with it, for coopnav evaluate
+    assert (tmp_path / "shipped" / "config.yaml").read_text().startswith("env_id: urban_canyon_v0")
     env_a, env_b = urban_canyon_v0.parallel_env(), urban_canyon_v0.parallel_env()
     full = make_policy(f"ippo:{tmp_path / 'run'}", env_a)
     shipped = make_policy(f"ippo:{tmp_path / 'shipped'}", env_b)
