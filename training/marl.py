@@ -18,12 +18,11 @@ every UAV with TorchRL's multi-agent building blocks:
 
 Why not BenchMARL
 -----------------
-BenchMARL 1.5 pins ``torchrl<0.12`` and needs ``torchvision``; with the CPU build of torch
-2.13 that this project installs, pip resolves it to torch 2.14.1 with the CUDA libraries
-(several GB) and torchvision, which does not import beside the CPU wheel. TorchRL 0.14 itself
-installs beside torch 2.13 and adds no other torch, so this backend uses TorchRL directly
-(the ``marl`` extra). The environment passes TorchRL's ``check_env_specs`` through its
-``PettingZooWrapper`` with and without ``state`` (tested), so BenchMARL tasks can wrap it too.
+BenchMARL 1.5 pins ``torchrl<0.12`` and needs ``torchvision``, so it cannot share a venv with
+this backend's TorchRL 0.14; it has an extra and a venv of its own (``benchmarl``), and
+:mod:`coopnav_env.benchmarl_task` is its coopnav task. This backend uses TorchRL directly.
+The environment passes TorchRL's ``check_env_specs`` through its ``PettingZooWrapper`` with
+and without ``state`` (tested).
 
 Collection
 ----------
