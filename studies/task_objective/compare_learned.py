@@ -9,7 +9,8 @@ policy and per method (a method = its training seeds, averaged per episode):
   (the middle 60 % of the episode's steps, leaving out the start lattice and the closing at
   the goal) and the mean altitude;
 * the paired difference in score to the reference heuristic and to the baseline, and the
-  share of the gap between the baseline and the reference that the method closes.
+  share of the gap between the baseline and the reference that the method closes;
+* the paired difference in score between every two methods (in the order given).
 
 Example::
 
@@ -23,8 +24,9 @@ Example::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,14 +36,80 @@ CRUISE = (0.2, 0.8)
 """The share of an episode's steps that counts as the cruise (start and end left out)."""
 
 
+SCORE_NEUTRAL_SETTINGS = frozenset({"nav_team_weight", "obs_agent_index"})
+"""Environment settings a training run may change without changing the flight of a policy
+that ignores them or the score (team credit moves reward between UAVs, leaving their mean;
+the index only adds observation entries)."""
+
+
+def env_settings_of(policy_name: str) -> dict[str, Any]:
+    """The ``urban_canyon_v1`` settings ``policy_name`` is flown in: a trained policy's run's
+    own (from its ``config.yaml``, by
+    :func:`coopnav_env.training.evaluate_cli.train_config_of_policies`), else the
+    environment's defaults (``{}``).
+
+    Raises ``ValueError`` for a run on another environment, or one whose settings differ from
+    the defaults in anything but :data:`SCORE_NEUTRAL_SETTINGS` (its episodes would not be
+    scored as the others').
+    """
+    from coopnav_env.training.evaluate_cli import train_config_of_policies
+
+    run = train_config_of_policies([policy_name])
+    if not run:
+        return {}
+    if run.get("env_id") != "urban_canyon_v1":
+        raise ValueError(f"{policy_name} was trained on {run.get('env_id')}, not urban_canyon_v1")
+    from coopnav_env.envs.config import V1_DEFAULTS
+
+    env = dict(run.get("env") or {})
+    other = sorted(
+        k for k, v in env.items() if k not in SCORE_NEUTRAL_SETTINGS and V1_DEFAULTS.get(k) != v
+    )
+    if other:
+        raise ValueError(
+            f"{policy_name} was trained with env settings {other} that change the episodes; "
+            f"only {sorted(SCORE_NEUTRAL_SETTINGS)} may differ from urban_canyon_v1's defaults"
+        )
+    return env
+
+
+@contextlib.contextmanager
+def one_torch_thread() -> Iterator[None]:
+    """Run the body with torch on one intra-op thread (when torch is installed), restoring the
+    previous count after: a network's output can differ in the last bits with the thread count,
+    and a report's episodes must fly the same on every machine."""
+    try:
+        import torch
+    except ImportError:
+        yield
+        return
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
 def fly(policy_name: str, seeds: Sequence[int]) -> list[dict[str, float]]:
-    """Per-episode figures of ``policy_name`` on ``urban_canyon_v1`` (its defaults)."""
+    """Per-episode figures of ``policy_name`` on ``urban_canyon_v1`` (in
+    :func:`env_settings_of` it), its network run on one torch thread
+    (:func:`one_torch_thread`)."""
     from coopnav_env import urban_canyon_v1
     from coopnav_env.agents import make_policy
+
+    env = urban_canyon_v1.parallel_env(**env_settings_of(policy_name))
+    with one_torch_thread():
+        out = fly_policy(env, make_policy(policy_name, env), seeds)
+    env.close()
+    return out
+
+
+def fly_policy(env: Any, policy: Any, seeds: Sequence[int]) -> list[dict[str, float]]:
+    """Per-episode figures of ``policy`` flown in ``env`` (an ``urban_canyon_v1``) on ``seeds``:
+    score, goal, collided, nav_error_m, steps, cruise_spacing_m, cruise_altitude_m."""
     from coopnav_env.training.evaluate import run_episode
 
-    env = urban_canyon_v1.parallel_env()
-    policy = make_policy(policy_name, env)
     out = []
     for seed in seeds:
         rec = run_episode(env, policy, int(seed))
@@ -64,7 +132,6 @@ def fly(policy_name: str, seeds: Sequence[int]) -> list[dict[str, float]]:
                 "cruise_altitude_m": float(cruise[:, :, 2].mean()),
             }
         )
-    env.close()
     return out
 
 
@@ -138,6 +205,18 @@ def compare(
         row["score_minus_baseline"] = _paired(scores, matrix([baseline], "score"), reps)
         row["gap_closed"] = _gap_closed(a["score"], base["score"], ref["score"], reps)
         rows.append(row)
+    names_m = list(methods)
+    between = [
+        {
+            "a": a,
+            "b": b,
+            "score_a_minus_b": _paired(
+                matrix(methods[a], "score"), matrix(methods[b], "score"), reps
+            ),
+        }
+        for i, a in enumerate(names_m)
+        for b in names_m[i + 1 :]
+    ]
     return {
         "environment": "urban_canyon_v1",
         "seeds": [int(seeds[0]), int(seeds[-1])],
@@ -146,6 +225,7 @@ def compare(
         "baseline": baseline,
         "cruise": list(CRUISE),
         "rows": rows,
+        "between_methods": between,
         "episodes_per_policy": flown,
     }
 
@@ -173,6 +253,10 @@ def to_markdown(report: Mapping[str, Any]) -> str:
             f"{r['cruise_spacing_m']:.1f} | {r['cruise_altitude_m']:.1f} | "
             f"{iv(r['score_minus_reference'])} | {iv(r['gap_closed'], 2)} |"
         )
+    if report.get("between_methods"):
+        lines += ["", "| method a - method b | paired score difference [95 % CI] |", "|---|---|"]
+        for d in report["between_methods"]:
+            lines.append(f"| `{d['a']}` - `{d['b']}` | {iv(d['score_a_minus_b'])} |")
     return "\n".join(lines) + "\n"
 
 

@@ -30,6 +30,8 @@ def test_compare_writes_the_report_and_its_figures_are_consistent(tmp_path) -> N
     # the wide column flies farther apart during the cruise than the formation
     assert rows["wide"]["cruise_spacing_m"] > 2 * rows["formation"]["cruise_spacing_m"]
     assert "gap closed" in (out / "report.md").read_text()
+    # one method: no difference between methods to report
+    assert report["between_methods"] == []
     with pytest.raises(SystemExit):  # an existing report needs --overwrite
         cl.main(args)
 
@@ -37,3 +39,37 @@ def test_compare_writes_the_report_and_its_figures_are_consistent(tmp_path) -> N
 def test_bad_methods_are_refused(tmp_path) -> None:
     with pytest.raises(SystemExit):
         cl.main(["--methods", "m=", "--out", str(tmp_path / "x")])
+
+
+def test_a_trained_policy_is_flown_in_its_runs_settings_and_others_are_refused(tmp_path) -> None:
+    def run(env_id: str, env: str) -> str:
+        folder = tmp_path / f"run{len(list(tmp_path.iterdir()))}"
+        folder.mkdir()
+        (folder / "config.yaml").write_text(f"env_id: {env_id}\nenv: {env}\n")
+        return f"mappo:{folder}"
+
+    neutral = "{reward_scheme: navigated_distance, nav_team_weight: 1.0, obs_agent_index: true}"
+    assert cl.env_settings_of(run("urban_canyon_v1", neutral)) == {
+        "reward_scheme": "navigated_distance",
+        "nav_team_weight": 1.0,
+        "obs_agent_index": True,
+    }
+    assert cl.env_settings_of("wide") == {}
+    with pytest.raises(ValueError, match=r"\['collision_penalty'\]"):
+        cl.env_settings_of(run("urban_canyon_v1", "{collision_penalty: 5.0}"))
+    with pytest.raises(ValueError, match="urban_canyon_v0"):
+        cl.env_settings_of(run("urban_canyon_v0", "{}"))
+
+
+def test_methods_are_compared_pairwise_on_the_same_episodes(tmp_path) -> None:
+    out = tmp_path / "pairs"
+    args = ["--methods", "a=sky", "b=wide", "--heuristics", "formation", "wide"]
+    args += ["--episodes", "2", "--reps", "50", "--out", str(out)]
+    assert cl.main(args) == 0
+    report = json.loads((out / "report.json").read_text())
+    (d,) = report["between_methods"]
+    assert (d["a"], d["b"]) == ("a", "b")
+    eps = report["episodes_per_policy"]
+    want = np.mean([x["score"] - y["score"] for x, y in zip(eps["sky"], eps["wide"])])
+    assert d["score_a_minus_b"][0] == pytest.approx(want, abs=1e-12)
+    assert "`a` - `b`" in (out / "report.md").read_text()
