@@ -71,8 +71,19 @@ def test_train_and_evaluate_quick_start_is_the_main_job():
     assert [c for c in main_job if c.startswith("coopnav ")] == shown
 
 
-def _numeric_rows(section: str) -> list[str]:
-    rows = [r for r in section.splitlines() if r.startswith("| ") and not r.startswith("| policy")]
+def _tables(section: str) -> list[list[str]]:
+    """The data rows of each table of ``section`` (a table starts at its ``| policy`` header)."""
+    tables: list[list[str]] = []
+    for r in section.splitlines():
+        if r.startswith("| policy"):
+            tables.append([])
+        elif r.startswith("| ") and tables:
+            tables[-1].append(r)
+    return tables
+
+
+def _numeric_rows(section: str, table: int = 0) -> list[str]:
+    rows = _tables(section)[table]
     for row in rows:
         cells = [c.strip() for c in row.strip().strip("|").split("|")][1:]
         assert cells and all(re.fullmatch(r"\d+\.\d+", c) for c in cells), row
@@ -106,6 +117,35 @@ def test_results_are_the_committed_alignment_report():
         assert cells[1] == f"{row['nav_error_m']:.2f}"
         assert cells[2] == f"{row['goal_rate']:.3f}"
         assert cells[3] == f"{row['v0:disc@0.99']:.1f}"
+
+
+def test_learned_results_are_the_committed_comparison_of_the_shipped_policies():
+    """The learned table quotes studies/task_objective/learned_v1_by_backend/report.json (the
+    shipped policies) to the digit, and names the command that gives those rows."""
+    report = json.loads(
+        (ROOT / "studies/task_objective/learned_v1_by_backend/report.json").read_text()
+    )
+    rows = {r["name"]: r for r in report["rows"]}
+    section = _section("Results")
+    command = re.search(r"```text\n(python studies/task_objective/compare_learned.py .*?)\n```",
+                        section, re.S)  # fmt: skip
+    assert command is not None
+    assert "--episodes 100 --seed-start 1000100" in command.group(1)
+    table = _tables(section)[1]
+    assert len(table) >= 4
+    for line in table:
+        name = re.search(r"`([^`]+)`", line).group(1)
+        row = rows[name]
+        for policy in row["policies"]:
+            assert policy in command.group(1)  # the shipped policies, not training runs
+        cells = [c.strip() for c in line.strip().strip("|").split("|")][1:]
+        s = row["score"]
+        assert cells == [
+            f"{s[0]:.3f}",
+            f"{s[1]:.3f}-{s[2]:.3f}",
+            f"{row['goal']:.2f}",
+            f"{row['cruise_spacing_m']:.1f}",
+        ]
 
 
 def test_readme_names_the_installed_namespace_only():
