@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "train": (
         "coopnav_env.training.train",
-        "train a shared policy on urban_canyon_v0 (SB3 PPO, Ray RLlib, or TorchRL MAPPO/IPPO)",
+        "train a shared policy on urban_canyon_v0 or v1 (SB3 PPO, RLlib, or TorchRL MAPPO/IPPO)",
     ),
     "train-routes": (
         "coopnav_env.training.route_learning",
