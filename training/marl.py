@@ -1015,12 +1015,17 @@ def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
 
     ``checkpoint`` is a run folder (its ``final_model.pt``) or a checkpoint file. The result is
     a folder that ``coopnav evaluate --policies mappo:OUT_DIR`` and ``coopnav study --runs``
-    read like a run; it cannot be resumed.
+    read like a run; it cannot be resumed. From an intermediate checkpoint
+    (``RUN/checkpoints/marl_<N>_steps.pt``) only the run's ``config.yaml`` is copied: its
+    ``run.json`` and learning curve describe the finished run, not the checkpoint.
     """
     src = Path(checkpoint)
-    run_dir = src if src.is_dir() else src.parent
     if src.is_dir():
-        src = src / "final_model.pt"
+        run_dir, src = src, src / "final_model.pt"
+    else:
+        run_dir = src.parent.parent if src.parent.name == "checkpoints" else src.parent
+    final = src.name == "final_model.pt"
+    beside = ("run.json", "config.yaml", "logs/progress.csv") if final else ("config.yaml",)
     d = load_checked_checkpoint(src, "fly")
     small = {
         k: d[k]
@@ -1040,7 +1045,7 @@ def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _save_torch(small, out / "final_model.pt")
-    for name in ("run.json", "config.yaml", "logs/progress.csv"):
+    for name in beside:
         f = run_dir / name
         if f.is_file():
             (out / name).parent.mkdir(parents=True, exist_ok=True)

@@ -364,6 +364,21 @@ def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
         np.testing.assert_array_equal(a[k], b[k])
 
 
+def test_export_policy_from_a_checkpoint_takes_the_runs_config_only(tmp_path) -> None:
+    from coopnav_env.training.marl import export_policy
+
+    s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
+    tr = MARLTrainer(s, {}, seed=0)
+    run = tmp_path / "run"
+    tr.save(run / "checkpoints" / "marl_4_steps.pt")
+    (run / "config.yaml").write_text("env_id: urban_canyon_v0\nenv: {}\n")
+    (run / "run.json").write_text('{"agent_steps": 1000}')
+    export_policy(run / "checkpoints" / "marl_4_steps.pt", tmp_path / "early")
+    assert (tmp_path / "early" / "config.yaml").read_text().startswith("env_id: urban_canyon_v0")
+    assert not (tmp_path / "early" / "run.json").exists()  # it describes the finished run
+    make_policy(f"ippo:{tmp_path / 'early'}", urban_canyon_v0.parallel_env())
+
+
 @pytest.mark.parametrize(
     "name",
     [
