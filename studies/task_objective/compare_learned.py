@@ -91,18 +91,53 @@ def one_torch_thread() -> Iterator[None]:
         torch.set_num_threads(before)
 
 
-def fly(policy_name: str, seeds: Sequence[int]) -> list[dict[str, float]]:
-    """Per-episode figures of ``policy_name`` on ``urban_canyon_v1`` (in
-    :func:`env_settings_of` it), its network run on one torch thread
-    (:func:`one_torch_thread`)."""
+@contextlib.contextmanager
+def policy_in_its_env(policy_name: str) -> Iterator[tuple[Any, Any]]:
+    """``(env, policy)``: an ``urban_canyon_v1`` in :func:`env_settings_of` ``policy_name``
+    and the policy acting in it, torch on one thread (:func:`one_torch_thread`) for the body;
+    the environment is closed after."""
     from coopnav_env import urban_canyon_v1
     from coopnav_env.agents import make_policy
 
     env = urban_canyon_v1.parallel_env(**env_settings_of(policy_name))
-    with one_torch_thread():
-        out = fly_policy(env, make_policy(policy_name, env), seeds)
-    env.close()
+    try:
+        with one_torch_thread():
+            yield env, make_policy(policy_name, env)
+    finally:
+        env.close()
+
+
+def fly(policy_name: str, seeds: Sequence[int]) -> list[dict[str, float]]:
+    """Per-episode figures of ``policy_name`` on ``urban_canyon_v1``
+    (:func:`policy_in_its_env`, :func:`fly_policy`)."""
+    with policy_in_its_env(policy_name) as (env, policy):
+        return fly_policy(env, policy, seeds)
+
+
+def report_folder(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Path:
+    """``args.out`` as a folder for ``report.json``; ``parser.error`` (exit 2) when it holds
+    one already and ``args.overwrite`` is not set."""
+    out = Path(args.out)
+    if (out / "report.json").exists() and not args.overwrite:
+        parser.error(f"{out} already holds a report.json; pass --overwrite to replace it")
     return out
+
+
+def add_report_arguments(parser: argparse.ArgumentParser) -> None:
+    """The ``--out`` and ``--overwrite`` options of a study report (:func:`report_folder`)."""
+    parser.add_argument("--out", required=True, help="folder for report.json and report.md")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing report")
+
+
+def write_report(out: Path, title: str, report: Mapping[str, Any], text: str) -> None:
+    """Write ``report.json`` and ``report.md`` (``# title`` over ``text``) into ``out``, each
+    by temporary name and rename, and print ``text``."""
+    from coopnav_env.training.files import atomic_write_text, write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "report.json", report)
+    atomic_write_text(out / "report.md", f"# {title}\n\n" + text)
+    print(text)
 
 
 def fly_policy(env: Any, policy: Any, seeds: Sequence[int]) -> list[dict[str, float]]:
@@ -263,7 +298,6 @@ def to_markdown(report: Mapping[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line (``--help``)."""
     from coopnav_env.training.envs import heldout_seeds
-    from coopnav_env.training.files import atomic_write_text, write_json
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument(
@@ -279,12 +313,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed-start", type=int, default=1_000_100)
     p.add_argument("--reps", type=int, default=2000, help="bootstrap replicates")
-    p.add_argument("--out", required=True, help="folder for report.json and report.md")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing report")
+    add_report_arguments(p)
     args = p.parse_args(argv)
-    out = Path(args.out)
-    if (out / "report.json").exists() and not args.overwrite:
-        p.error(f"{out} already holds a report.json; pass --overwrite to replace it")
+    out = report_folder(p, args)
     methods: dict[str, list[str]] = {}
     for item in args.methods:
         name, eq, policies = item.partition("=")
@@ -293,11 +324,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         methods[name] = [x for x in policies.split(",") if x]
     seeds = heldout_seeds(args.episodes, args.seed_start)
     report = compare(methods, args.heuristics, args.reference, args.baseline, seeds, args.reps)
-    text = to_markdown(report)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    atomic_write_text(out / "report.md", "# Learned swarms on v1\n\n" + text)
-    print(text)
+    write_report(out, "Learned swarms on v1", report, to_markdown(report))
     return 0
 
 

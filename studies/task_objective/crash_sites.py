@@ -53,18 +53,12 @@ def distance_to_route(route_xy_m: np.ndarray, xy_m: np.ndarray) -> float:
 
 
 def crashes_of(policy_name: str, seeds: Sequence[int]) -> list[dict[str, float]]:
-    """:func:`crashes_in` for ``policy_name``, flown in the environment
-    :func:`~studies.task_objective.compare_learned.env_settings_of` gives it, on one torch
-    thread."""
-    from coopnav_env import urban_canyon_v1
-    from coopnav_env.agents import make_policy
-    from studies.task_objective.compare_learned import env_settings_of, one_torch_thread
+    """:func:`crashes_in` for ``policy_name`` in its run's environment, on one torch thread
+    (:func:`~studies.task_objective.compare_learned.policy_in_its_env`)."""
+    from studies.task_objective.compare_learned import policy_in_its_env
 
-    env = urban_canyon_v1.parallel_env(**env_settings_of(policy_name))
-    with one_torch_thread():
-        out = crashes_in(env, make_policy(policy_name, env), seeds)
-    env.close()
-    return out
+    with policy_in_its_env(policy_name) as (env, policy):
+        return crashes_in(env, policy, seeds)
 
 
 def crashes_in(env: Any, policy: Any, seeds: Sequence[int]) -> list[dict[str, float]]:
@@ -143,7 +137,11 @@ def to_markdown(report: Mapping[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line (``--help``)."""
     from coopnav_env.training.envs import heldout_seeds
-    from coopnav_env.training.files import atomic_write_text, write_json
+    from studies.task_objective.compare_learned import (
+        add_report_arguments,
+        report_folder,
+        write_report,
+    )
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--policies", nargs="+", required=True, help="policy names to fly")
@@ -155,14 +153,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=20.0,
         help="a crash this close to a turn is at a corner [m]",
     )
-    p.add_argument("--out", required=True, help="folder for report.json and report.md")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing report")
+    add_report_arguments(p)
     args = p.parse_args(argv)
     if not args.corner_m > 0:
         p.error(f"--corner-m must be > 0, got {args.corner_m}")
-    out = Path(args.out)
-    if (out / "report.json").exists() and not args.overwrite:
-        p.error(f"{out} already holds a report.json; pass --overwrite to replace it")
+    out = report_folder(p, args)
     seeds = heldout_seeds(args.episodes, args.seed_start)
     from tqdm.auto import tqdm
 
@@ -179,11 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "policies": policies,
         "crashes": records,
     }
-    text = to_markdown(report)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    atomic_write_text(out / "report.md", "# Where the swarms crash\n\n" + text)
-    print(text)
+    write_report(out, "Where the swarms crash", report, to_markdown(report))
     return 0
 
 

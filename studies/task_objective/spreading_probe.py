@@ -98,14 +98,12 @@ def probe(
     """Fly both parts (module docstring); returns the report as a dict."""
     from tqdm.auto import tqdm
 
-    from coopnav_env import urban_canyon_v1
-    from coopnav_env.agents import make_policy
     from coopnav_env.training.stats import paired_difference
     from studies.task_objective.compare_learned import (
         env_settings_of,
         fly,
         fly_policy,
-        one_torch_thread,
+        policy_in_its_env,
     )
 
     column = []
@@ -114,13 +112,11 @@ def probe(
         rows = fly(name, seeds)
         column.append({"spacing_m": float(s), "policy": name, **_summary(rows, reps)})
 
-    env = urban_canyon_v1.parallel_env(**env_settings_of(policy_name))
     base_scores: np.ndarray | None = None
     slowed = []
     for sd in tqdm(slowdowns, desc="slowdowns"):
-        policy = SlowedPolicy(make_policy(policy_name, env), env.possible_agents, sd)
-        with one_torch_thread():
-            rows = fly_policy(env, policy, seeds)
+        with policy_in_its_env(policy_name) as (env, policy):
+            rows = fly_policy(env, SlowedPolicy(policy, env.possible_agents, sd), seeds)
         scores = np.array([r["score"] for r in rows])
         if base_scores is None:
             base_scores = scores if sd == 0 else None
@@ -129,7 +125,6 @@ def probe(
             iv, _ = paired_difference(scores[None], base_scores[None], reps=reps, seed=0)
             row["score_minus_unslowed"] = [iv.value, iv.low, iv.high]
         slowed.append(row)
-    env.close()
     return {
         "environment": "urban_canyon_v1",
         "policy": policy_name,
@@ -184,7 +179,11 @@ def to_markdown(report: Mapping[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line (``--help``)."""
     from coopnav_env.training.envs import heldout_seeds
-    from coopnav_env.training.files import atomic_write_text, write_json
+    from studies.task_objective.compare_learned import (
+        add_report_arguments,
+        report_folder,
+        write_report,
+    )
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--policy", required=True, help="the learned policy to slow down")
@@ -201,12 +200,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--episodes", type=int, default=40, help="held-out episodes (default: 40)")
     p.add_argument("--seed-start", type=int, default=1_000_000, help="first reset seed")
     p.add_argument("--reps", type=int, default=2000, help="bootstrap replicates")
-    p.add_argument("--out", required=True, help="folder for report.json and report.md")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing report")
+    add_report_arguments(p)
     args = p.parse_args(argv)
-    out = Path(args.out)
-    if (out / "report.json").exists() and not args.overwrite:
-        p.error(f"{out} already holds a report.json; pass --overwrite to replace it")
+    out = report_folder(p, args)
     try:
         slowdowns = [float(x) for x in args.slowdowns.split(",") if x]
         spacings = [float(x) for x in args.spacings.split(",") if x]
@@ -216,13 +212,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error(f"--slowdowns must start with 0 (the policy itself), got {args.slowdowns!r}")
     seeds = heldout_seeds(args.episodes, args.seed_start)
     report = probe(args.policy, slowdowns, spacings, seeds, args.reps)
-    text = to_markdown(report)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "report.json", report)
-    atomic_write_text(
-        out / "report.md", "# Spreading: its worth, and its cost to a learned swarm\n\n" + text
-    )
-    print(text)
+    title = "Spreading: its worth, and its cost to a learned swarm"
+    write_report(out, title, report, to_markdown(report))
     return 0
 
 
