@@ -13,9 +13,7 @@ import argparse
 import csv
 import importlib.util
 import json
-import os
 import socket
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -32,8 +30,8 @@ from coopnav_env.training.rllib_backend import (
     import_rllib,
 )
 from coopnav_env.training.train import add_arguments, config_from_args
+from tests.training.ray_cli import isolated_ray_env, run_coopnav
 
-ROOT = Path(__file__).resolve().parents[2]
 HAS_RAY = importlib.util.find_spec("ray") is not None
 
 
@@ -243,19 +241,6 @@ RLLIB_SMALL = [
 ]  # fmt: skip
 
 
-def _coopnav(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
-    proc = subprocess.run(
-        [sys.executable, "-m", "coopnav_env.training.cli", *args],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=400,
-    )
-    assert proc.returncode == 0, f"coopnav {' '.join(args)}\n{proc.stdout}\n{proc.stderr}"
-    return proc
-
-
 def _rows(path: Path) -> list[dict[str, str]]:
     with path.open() as fh:
         return list(csv.DictReader(fh))
@@ -265,16 +250,12 @@ def _rows(path: Path) -> list[dict[str, str]]:
 def test_rllib_train_resume_and_evaluate_beside_sb3(tmp_path):
     pytest.importorskip("ray.rllib")
     pytest.importorskip("stable_baselines3")
-    home, tmp = tmp_path / "home", tmp_path / "tmp"
-    home.mkdir()
-    tmp.mkdir()
-    env = {**os.environ, "HOME": str(home), "TMPDIR": str(tmp), "RAY_USAGE_STATS_ENABLED": "0"}
-    for key in ("RAY_ADDRESS", "RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH", "RAY_AUTH_MODE"):
-        env.pop(key, None)
+    env = isolated_ray_env(tmp_path)
+    home = Path(env["HOME"])
     rl = tmp_path / "rl"
 
     # two iterations with two env runners; a checkpoint after each
-    _coopnav(
+    run_coopnav(
         ["train", "--backend", "rllib", "--out", str(rl), "--num-env-runners", "2",
          "--timesteps", "384", "--checkpoint-freq", "192", *SMALL, *RLLIB_SMALL],
         env,
@@ -301,12 +282,12 @@ def test_rllib_train_resume_and_evaluate_beside_sb3(tmp_path):
 
     # the run is finished: resuming it without asking for more changes nothing (issue 15)
     before = (rl / "run.json").read_bytes()
-    proc = _coopnav(["train", "--out", str(rl), "--resume", "latest"], env)
+    proc = run_coopnav(["train", "--out", str(rl), "--resume", "latest"], env)
     assert "holds a finished run (384 agent-steps)" in proc.stderr
     assert (rl / "run.json").read_bytes() == before
 
     # train it further from its final model, in this process (0 env runners), one iteration
-    _coopnav(
+    run_coopnav(
         ["train", "--backend", "rllib", "--out", str(rl), "--num-env-runners", "0",
          "--timesteps", "576", "--resume", "latest", *SMALL, *RLLIB_SMALL],
         env,
@@ -332,7 +313,7 @@ def test_rllib_train_resume_and_evaluate_beside_sb3(tmp_path):
          "--set", "ppo.n_epochs=1", *SMALL]
     ) == 0  # fmt: skip
     ev = tmp_path / "eval"
-    proc = _coopnav(
+    proc = run_coopnav(
         ["evaluate", "--policies", "formation", f"ppo:{sb3 / 'final_model.zip'}",
          f"rllib:{rl / 'final_model'}", f"rllib:{rl / 'checkpoints' / 'rllib_192_steps'}",
          "--episodes", "2", "--no-plots", "--out", str(ev)],

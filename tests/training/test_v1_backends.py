@@ -9,9 +9,6 @@ environment. The studies' full runs are in ``studies/task_objective``.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 
@@ -20,8 +17,8 @@ import yaml
 
 from coopnav_env.envs.config import V1_DEFAULTS
 from coopnav_env.training.cli import main
+from tests.training.ray_cli import isolated_ray_env, run_coopnav
 
-ROOT = Path(__file__).resolve().parents[2]
 SMALL = [
     "--env-id", "urban_canyon_v1", "--env-set", "n_uavs=3", "--env-set", "max_steps=20",
     "--seed", "3", "--no-progress",
@@ -88,27 +85,13 @@ def test_torchrl_trains_on_v1_from_the_policy_alone_and_evaluates(tmp_path, algo
 @pytest.mark.slow
 def test_rllib_trains_on_v1(tmp_path) -> None:
     pytest.importorskip("ray.rllib")
-    home, tmp = tmp_path / "home", tmp_path / "tmp"
-    home.mkdir()
-    tmp.mkdir()
-    env = {**os.environ, "HOME": str(home), "TMPDIR": str(tmp), "RAY_USAGE_STATS_ENABLED": "0"}
-    for key in ("RAY_ADDRESS", "RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH", "RAY_AUTH_MODE"):
-        env.pop(key, None)
     out = tmp_path / "rl"
     args = ["train", "--backend", "rllib", "--out", str(out), "--num-env-runners", "0"]
     args += ["--timesteps", "192", *SMALL]
     args += ["--set", "rllib.ppo.train_batch_size_per_learner=64"]
     args += ["--set", "rllib.ppo.minibatch_size=64", "--set", "rllib.ppo.num_epochs=1"]
     args += ["--set", "rllib.model.fcnet_hiddens=[16, 16]"]
-    proc = subprocess.run(
-        [sys.executable, "-m", "coopnav_env.training.cli", *args],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=400,
-    )
-    assert proc.returncode == 0, f"{proc.stdout}\n{proc.stderr}"
+    run_coopnav(args, isolated_ray_env(tmp_path))
     cfg = _check_run_config(out)
     assert cfg["rllib"]["ppo"]["gamma"] == 1.0
     assert json.loads((out / "run.json").read_text())["backend"] == "rllib"
