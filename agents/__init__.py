@@ -24,6 +24,9 @@ name                      policy
                           satellite geometry predicted by the city map; also ``skyroute``
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`coopnav_env.agents.heuristics`)
+``setpoints``             fixed route-frame set-points (speed, offset, altitude) for
+                          every UAV, each ``speed_step_mps`` slower than the one before;
+                          needs ``action_frame="route"``
 ``route:<path>``          a column heuristic that flies the route a learned route model
                           predicts best (:mod:`coopnav_env.agents.routes`;
                           ``coopnav train-routes``);
@@ -110,6 +113,7 @@ POLICY_NAMES: tuple[str, ...] = (
     "random",
     *COLUMN_PRESET_NAMES,
     "waypoint",
+    "setpoints",
     "planner",
     "ppo:<path>",
     "rllib:<path>",
@@ -183,6 +187,10 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from coopnav_env.agents.heuristics import waypoint_policy
 
         return waypoint_policy(env, **kwargs)
+    if name == "setpoints":
+        from coopnav_env.agents.heuristics import setpoint_policy
+
+        return setpoint_policy(env, **kwargs)
     if name.startswith("ppo:"):
         path = name[len("ppo:") :]
         if not path:

@@ -77,6 +77,7 @@ __all__ = [
     "COLUMN_ALIASES",
     "COLUMN_OPTIONS",
     "COLUMN_PRESETS",
+    "SETPOINT_OPTIONS",
     "WAYPOINT_OPTIONS",
     "CeilingColumnPolicy",
     "ColumnPolicy",
@@ -84,12 +85,14 @@ __all__ = [
     "FormationPolicy",
     "GuardedColumnPolicy",
     "Polyline",
+    "SetPointPolicy",
     "SkyRoutePolicy",
     "SkySeekingPolicy",
     "SpreadColumnPolicy",
     "WaypointPolicy",
     "WideColumnPolicy",
     "column_policy",
+    "setpoint_policy",
     "street_route",
     "waypoint_policy",
 ]
@@ -103,6 +106,12 @@ def _world_of(env: Any) -> Any:
         raise ValueError(
             "the column and waypoint heuristics need an urban_canyon_v0 environment (a world "
             f"with a city map and a goal); got {type(base).__name__}"
+        )
+    frame = getattr(config, "action_frame", "velocity")
+    if frame != "velocity":
+        raise ValueError(
+            "the column and waypoint heuristics command velocities: they need "
+            f"action_frame='velocity', got action_frame={frame!r}"
         )
     return base
 
@@ -1063,3 +1072,90 @@ def waypoint_policy(env: Any, **options: Any) -> WaypointPolicy:
     the valid ones."""
     _check_option_names("waypoint", options, WAYPOINT_OPTIONS)
     return WaypointPolicy(env, **options)
+
+
+class SetPointPolicy:
+    """Fixed route-frame set-points for every UAV (``action_frame="route"`` only).
+
+    Each UAV flies along its street route at ``speed_mps`` minus ``k * speed_step_mps`` (``k``
+    its index in ``possible_agents``), ``offset_m`` to the left of the centre line, at
+    ``altitude_m``; the environment's autopilot tracks them from the UAV's estimate. With
+    ``speed_step_mps = 0`` every UAV is given the same set-points, so the swarm flies the
+    route together (the `waypoint` follower at a set speed and altitude); with a step > 0 it
+    strings out along the route, each UAV slower than the one before.
+
+    Parameters
+    ----------
+    env : urban_canyon_v1 ParallelEnv with ``action_frame="route"``
+    speed_mps : float, default 7.0
+        Speed along the route of the first UAV, in [0, ``max_speed_mps``] [m/s].
+    altitude_m : float, optional
+        Altitude inside the band (default the environment's ``start_altitude_m``) [m].
+    offset_m : float, default 0.0
+        Offset across the street, in [-``route_offset_max_m``, ``route_offset_max_m``] [m].
+    speed_step_mps : float, default 0.0
+        How much slower each UAV flies than the one before, >= 0 [m/s]; every UAV's speed must
+        stay >= 0.
+    """
+
+    name = "setpoints"
+
+    def __init__(
+        self,
+        env: Any,
+        speed_mps: float = 7.0,
+        altitude_m: float | None = None,
+        offset_m: float = 0.0,
+        speed_step_mps: float = 0.0,
+    ):
+        base = getattr(env, "unwrapped", env)
+        cfg = getattr(base, "config", None)
+        frame = getattr(cfg, "action_frame", None)
+        if frame != "route":
+            raise ValueError(
+                f"the setpoints policy needs action_frame='route', got action_frame={frame!r}"
+            )
+        kin = cfg.kinematics
+        n = cfg.n_uavs
+        v_max = float(kin.max_speed_mps)
+        speed = _number("speed_mps", speed_mps, 0.0, v_max, unit=" m/s")
+        step = _number("speed_step_mps", speed_step_mps, 0.0, unit=" m/s")
+        if speed - (n - 1) * step < 0.0:
+            raise ValueError(
+                f"speed_step_mps must leave the last of {n} UAVs a speed >= 0: "
+                f"{speed:g} - {n - 1} * {step:g} < 0, got speed_step_mps={speed_step_mps!r}"
+            )
+        lo, hi = float(kin.altitude_min_m), float(kin.altitude_max_m)
+        alt = (
+            float(cfg.start_altitude_m)
+            if altitude_m is None
+            else _number("altitude_m", altitude_m, lo, hi, unit=" m (the altitude band)")
+        )
+        w = float(cfg.route_offset_max_m)
+        off = _number("offset_m", offset_m, -w, w, unit=" m (route_offset_max_m)")
+        speeds = speed - step * np.arange(n)
+        a = np.empty((n, 3), dtype=np.float32)
+        a[:, 0] = 2.0 * speeds / v_max - 1.0
+        a[:, 1] = off / w if w > 0 else 0.0
+        a[:, 2] = 2.0 * (alt - lo) / (hi - lo) - 1.0
+        self._action = {agent: a[i] for i, agent in enumerate(base.possible_agents)}
+
+    def reset(self, seed: int | None = None) -> None:
+        """Nothing to reset: the policy has no state."""
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Each live UAV's set-points (copies)."""
+        return {agent: self._action[agent].copy() for agent in observations}
+
+
+SETPOINT_OPTIONS: tuple[str, ...] = tuple(
+    p for p in inspect.signature(SetPointPolicy.__init__).parameters if p not in ("self", "env")
+)
+"""The options of :class:`SetPointPolicy` (after ``setpoints@``)."""
+
+
+def setpoint_policy(env: Any, **options: Any) -> SetPointPolicy:
+    """A :class:`SetPointPolicy` for ``env``; an unknown option name raises ValueError listing
+    the valid ones."""
+    _check_option_names("setpoints", options, SETPOINT_OPTIONS)
+    return SetPointPolicy(env, **options)

@@ -59,6 +59,17 @@ norm, and the velocity moves toward it by at most `max_accel_mps2 * dt_s`. Value
 [-1, 1] are clipped. A missing or unknown agent, a shape other than (3,), or a NaN/inf entry
 raises `ValueError`.
 
+With `action_frame="route"` the same three numbers are set-points in the frame of the street
+route instead, which the UAV's autopilot tracks from its *estimated* position: the speed along
+the route (`-1` holds its place, `+1` is `max_speed_mps`), the offset across the street from
+the route's centre line (`+-route_offset_max_m`, 4 m, positive to the left of travel), and
+the altitude (`-1` the bottom of the band, `+1` its top). The autopilot is the `waypoint`
+follower's (toward the next waypoint, moved by the offset, slowing before it; the altitude
+held with a gain of 0.6 per second), and its output is the velocity command above. The frame
+keeps a learner on its streets while it learns how fast, how far apart and how high its UAVs
+fly; a constant action flies every UAV along the route together. The column and waypoint
+heuristics command velocities and refuse it.
+
 ## Observation Space
 
 One float32 vector per agent, containing only what a UAV can know on board (never its true
@@ -364,6 +375,7 @@ horizontal alert limit [m] (availability, the reward term and the observation sc
 `integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False),
 `obs_lookahead` (False), `obs_candidate_sky` (False), `obs_true_error` (False) and
 `obs_agent_index` (False): above.
+`action_frame` (`"velocity"`), `route_offset_max_m` (4): above (Action Space).
 With `"off"` every episode is exactly as before. The preset
 `coopnav_env.envs.preset_config("urban_nlos", **fields)` turns on realistic urban reception:
 half of the blocked satellites received through reflections with a bias of 3 m + Exp(30 m),

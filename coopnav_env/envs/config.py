@@ -16,6 +16,7 @@ from coopnav_env.sim.city import _check_int, _check_real
 from coopnav_env.sim.scenario import ScenarioConfig, _check_bool, _check_choice
 
 __all__ = [
+    "ACTION_FRAMES",
     "EXPERIMENTAL_SETTINGS",
     "PER_STEP_REWARD_FIELDS",
     "PRESETS",
@@ -30,6 +31,9 @@ __all__ = [
 
 REWARD_SCHEMES: tuple[str, ...] = ("per_step", "navigated_distance")
 """The values of :attr:`UrbanCanyonConfig.reward_scheme`."""
+
+ACTION_FRAMES: tuple[str, ...] = ("velocity", "route")
+"""The values of :attr:`UrbanCanyonConfig.action_frame`."""
 
 PER_STEP_REWARD_FIELDS: tuple[str, ...] = (
     "nav_reward_weight",
@@ -196,6 +200,25 @@ class UrbanCanyonConfig(ScenarioConfig):
         the UAVs of a tight group, whose observations are otherwise nearly equal, act
         differently (*agent indication*: Terry et al., *Revisiting Parameter Sharing in
         Multi-Agent Deep Reinforcement Learning*, 2020; the agent id of Yu et al.'s MAPPO).
+    action_frame : {"velocity", "route"}, default "velocity"
+        What an action ``(a0, a1, a2)`` in ``[-1, 1]`` commands. ``"velocity"``: the desired
+        velocity, East, North, Up, as fractions of ``max_speed_mps``. ``"route"``: set-points
+        in the frame of the UAV's street route, which its autopilot tracks from its
+        *estimated* position (what the UAV knows): ``a0`` the speed along the route,
+        ``(a0 + 1) / 2 * max_speed_mps`` (``-1`` holds its place); ``a1`` the offset across
+        the street from the route's centre line, ``a1 * route_offset_max_m`` (positive to
+        the left of travel); ``a2`` the altitude, from ``altitude_min_m`` (``-1``) to
+        ``altitude_max_m`` (``+1``). The autopilot flies along the leg toward the UAV's next
+        waypoint, slowing to ``1 + 0.6 d`` m/s at ``d`` m before a turn, and steers the offset
+        and the altitude with a gain of 0.6 per second (the `waypoint` follower's); the result
+        is the velocity command of ``"velocity"``, so kinematics, collisions and everything
+        after them are the same. The frame keeps a policy on its streets while it learns
+        where along, across and above them to fly (how far apart, how high); it does not
+        say where that is: a constant action flies every UAV along the route together.
+    route_offset_max_m : float, default 4.0
+        Largest offset across the street of ``action_frame="route"`` [m], at least 0 and
+        less than half the street width minus the UAV radius (checked when the world is
+        built).
     """
 
     max_steps: int = 200
@@ -226,6 +249,8 @@ class UrbanCanyonConfig(ScenarioConfig):
     obs_candidate_sky: bool = False
     obs_true_error: bool = False
     obs_agent_index: bool = False
+    action_frame: Literal["velocity", "route"] = "velocity"
+    route_offset_max_m: float = 4.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -258,6 +283,8 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_bool(o, "obs_candidate_sky", self.obs_candidate_sky)
         _check_bool(o, "obs_true_error", self.obs_true_error)
         _check_bool(o, "obs_agent_index", self.obs_agent_index)
+        _check_choice(o, "action_frame", self.action_frame, ACTION_FRAMES)
+        _check_real(o, "route_offset_max_m", self.route_offset_max_m, 0.0, 1000.0)
         if self.reward_scheme == "navigated_distance":
             self._check_navigated_distance(o)
         if self.integrity == "off":

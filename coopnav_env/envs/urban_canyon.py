@@ -52,6 +52,7 @@ __all__ = [
     "fix_error_m",
     "parallel_env",
     "parallel_env_v1",
+    "route_frame_command",
 ]
 
 _USE_KERNEL = True
@@ -250,6 +251,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.agents = self.possible_agents[:]
         self._steps = 0
         self._epoch = self.world.reset(self._rng)
+        if self.config.action_frame == "route":
+            _check_route_offset(self.config, float(self.world.city.street_width_m))
         self._city_scale_m = _city_scale_m(self.world)
         # the observation kernel's scales (the city scale changes with the city)
         cfg = self.config
@@ -335,6 +338,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         """
         cfg = self.config
         prev = self._epoch
+        if cfg.action_frame == "route":
+            cmd = route_frame_command(
+                cmd,
+                prev.nav_pos_enu_m,
+                prev.next_waypoint,
+                self.world.route_xy_m,
+                cfg,
+            )
         ep = self.world.step(cmd, self._rng)
         self._epoch = ep
         self._steps += 1
@@ -1097,6 +1108,85 @@ def fix_error_m(info: dict[str, Any], key: str) -> float:
 
 
 _FIX_FLAGS = {"coop_error_m": "coop_fix", "standalone_error_m": "standalone_fix"}
+
+
+ROUTE_FRAME_GAIN_PER_S = 0.6
+"""Gain of the ``action_frame="route"`` autopilot on the offset, the altitude and the speed
+before a turn [1/s] (the `waypoint` follower's)."""
+
+
+def _check_route_offset(cfg: UrbanCanyonConfig, street_width_m: float) -> None:
+    """Refuse a ``route_offset_max_m`` that reaches the walls of a street ``street_width_m``
+    wide."""
+    room_m = street_width_m / 2.0 - cfg.kinematics.uav_radius_m
+    if not cfg.route_offset_max_m < room_m:
+        raise ValueError(
+            f"route_offset_max_m must be less than half the street width minus the UAV radius "
+            f"({street_width_m:g} / 2 - {cfg.kinematics.uav_radius_m:g} = {room_m:g} m), got "
+            f"{cfg.route_offset_max_m!r}"
+        )
+
+
+def route_frame_command(
+    action: np.ndarray,
+    est_enu_m: np.ndarray,
+    next_waypoint: np.ndarray,
+    route_xy_m: np.ndarray,
+    cfg: UrbanCanyonConfig,
+) -> np.ndarray:
+    """The velocity command of route-frame set-points (``action_frame="route"``).
+
+    Parameters
+    ----------
+    action : ndarray, shape (N, 3)
+        Set-points in ``[-1, 1]``: speed along the route, offset across the street, altitude
+        (:class:`~coopnav_env.envs.config.UrbanCanyonConfig`, ``action_frame``).
+    est_enu_m : ndarray, shape (N, 3)
+        Each UAV's estimated position [m] (the autopilot flies on what the UAV knows).
+    next_waypoint : ndarray of int, shape (N,)
+        Each UAV's next waypoint on ``route_xy_m``.
+    route_xy_m : ndarray, shape (k, 2)
+        The street route's waypoints [m].
+    cfg : UrbanCanyonConfig
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        The velocity command, fractions of ``max_speed_mps`` in ``[-1, 1]``: the `waypoint`
+        follower's autopilot with set-points. Horizontally, from the estimated position
+        toward the next waypoint moved ``o = a1 * route_offset_max_m`` to the left of the leg
+        that ends there (before the first waypoint: of the way to it), at the speed
+        ``(a0 + 1) / 2 * max_speed_mps``, at most ``1 + 0.6 d`` m/s at ``d`` m from that
+        point. Vertically ``0.6 (h - h_est)`` (the estimated altitude clamped to the band)
+        toward ``h`` from ``altitude_min_m``
+        (``a2 = -1``) to ``altitude_max_m`` (``+1``). A UAV with no finite estimate holds
+        still (zero command).
+    """
+    kin = cfg.kinematics
+    gain = ROUTE_FRAME_GAIN_PER_S
+    act = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    route = np.asarray(route_xy_m, dtype=np.float64).reshape(-1, 2)
+    wp = np.asarray(next_waypoint, dtype=np.int64)
+    est = np.asarray(est_enu_m, dtype=np.float64)
+    ok = np.all(np.isfinite(est), axis=1)
+    est = np.where(ok[:, None], est, 0.0)
+    target = route[wp]
+    # the leg that ends at the next waypoint; before the first one, the way to it
+    leg = np.where((wp > 0)[:, None], target - route[np.maximum(wp - 1, 0)], target - est[:, :2])
+    norm = np.linalg.norm(leg, axis=1)
+    tangent = np.where((norm > 1e-9)[:, None], leg / np.maximum(norm, 1e-9)[:, None], 0.0)
+    left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    aim = target + left * (act[:, 1] * cfg.route_offset_max_m)[:, None] - est[:, :2]
+    dist = np.linalg.norm(aim, axis=1)
+    speed = np.minimum((act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps, 1.0 + gain * dist)
+    v = np.zeros((act.shape[0], 3))
+    v[:, :2] = aim / np.maximum(dist, 1e-6)[:, None] * speed[:, None]
+    band_m = kin.altitude_max_m - kin.altitude_min_m
+    height = kin.altitude_min_m + (act[:, 2] + 1.0) / 2.0 * band_m
+    # the UAV flies inside the altitude band: an estimate outside it is clamped to it
+    v[:, 2] = gain * (height - np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m))
+    v[~ok] = 0.0
+    return np.clip(v / kin.max_speed_mps, -1.0, 1.0)
 
 
 def _team_mix(nav: np.ndarray, weight: float) -> np.ndarray:

@@ -36,10 +36,13 @@ CRUISE = (0.2, 0.8)
 """The share of an episode's steps that counts as the cruise (start and end left out)."""
 
 
-SCORE_NEUTRAL_SETTINGS = frozenset({"nav_team_weight", "obs_agent_index"})
-"""Environment settings a training run may change without changing the flight of a policy
-that ignores them or the score (team credit moves reward between UAVs, leaving their mean;
-the index only adds observation entries)."""
+SCORE_NEUTRAL_SETTINGS = frozenset(
+    {"nav_team_weight", "obs_agent_index", "action_frame", "route_offset_max_m"}
+)
+"""Environment settings a training run may change without changing the world its episodes
+are flown in or their score (team credit moves reward between UAVs, leaving their mean; the
+index only adds observation entries; the action frame says what the policy's action
+commands, the route frame's autopilot turning it into the velocity command)."""
 
 
 def env_settings_of(policy_name: str) -> dict[str, Any]:
