@@ -951,8 +951,8 @@ def check_pretrain(
             make_policy(pretrain.policy, env, **pretrain.policy_kwargs)
         except (TypeError, ValueError) as exc:
             raise ValueError(
-                f"torchrl.pretrain.policy_kwargs: the {pretrain.policy!r} teacher does not take "
-                f"{pretrain.policy_kwargs} ({exc})"
+                f"torchrl.pretrain: the {pretrain.policy!r} teacher with policy_kwargs "
+                f"{pretrain.policy_kwargs} cannot fly this environment: {exc}"
             ) from None
         finally:
             env.close()

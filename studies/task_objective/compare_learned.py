@@ -45,11 +45,16 @@ index only adds observation entries; the action frame says what the policy's act
 commands, the route frame's autopilot turning it into the velocity command)."""
 
 
+ROUTE_FRAME_POLICIES = frozenset({"setpoints"})
+"""Heuristics that command route-frame set-points: flown with ``action_frame="route"``."""
+
+
 def env_settings_of(policy_name: str) -> dict[str, Any]:
     """The ``urban_canyon_v1`` settings ``policy_name`` is flown in: a trained policy's run's
     own (from its ``config.yaml``, by
-    :func:`coopnav_env.training.evaluate_cli.train_config_of_policies`), else the
-    environment's defaults (``{}``).
+    :func:`coopnav_env.training.evaluate_cli.train_config_of_policies`), ``action_frame=
+    "route"`` for a heuristic of :data:`ROUTE_FRAME_POLICIES`, else the environment's
+    defaults (``{}``).
 
     Raises ``ValueError`` for a run on another environment, or one whose settings differ from
     the defaults in anything but :data:`SCORE_NEUTRAL_SETTINGS` (its episodes would not be
@@ -57,6 +62,8 @@ def env_settings_of(policy_name: str) -> dict[str, Any]:
     """
     from coopnav_env.training.evaluate_cli import train_config_of_policies
 
+    if policy_name.split("@", 1)[0] in ROUTE_FRAME_POLICIES:
+        return {"action_frame": "route"}
     run = train_config_of_policies([policy_name])
     if not run:
         return {}

@@ -82,6 +82,29 @@ def test_torchrl_trains_on_v1_from_the_policy_alone_and_evaluates(tmp_path, algo
     _evaluate(f"{algorithm}:{out}", tmp_path / "eval")
 
 
+def test_torchrl_trains_in_the_route_frame_and_evaluates_in_it(tmp_path, capsys) -> None:
+    """The route-frame configuration of the study: set-point actions, from scratch or warm
+    started from fixed set-points; the waypoint teacher, which commands velocities, is
+    refused with a message naming the frame."""
+    pytest.importorskip("torchrl")
+    base = ["train", "--backend", "torchrl", "--algorithm", "mappo", "--timesteps", "24"]
+    base += [*SMALL, "--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=4"]
+    base += ["--set", "torchrl.hidden=[16,16]", "--set", "torchrl.epochs=1"]
+    base += ["--set", "env.action_frame=route", "--set", "torchrl.gae_lambda=1.0"]
+    assert main([*base, "--out", str(tmp_path / "refused")]) == 2
+    assert "need action_frame='velocity', got action_frame='route'" in capsys.readouterr().err
+    out = tmp_path / "route"
+    warm = ["--set", "torchrl.pretrain.policy=setpoints", "--set", "torchrl.pretrain.episodes=2"]
+    warm += ["--set", "torchrl.pretrain.epochs=1"]
+    warm += ["--set", "torchrl.pretrain.policy_kwargs={speed_mps: 7, altitude_m: 28}"]
+    assert main([*base, *warm, "--out", str(out)]) == 0
+    assert _check_run_config(out)["env"]["action_frame"] == "route"
+    run = json.loads((out / "run.json").read_text())
+    assert run["warm_start"]["teacher"] == "setpoints"
+    report = _evaluate(f"mappo:{out}", tmp_path / "eval")
+    assert report["env_kwargs"]["action_frame"] == "route"
+
+
 @pytest.mark.slow
 def test_rllib_trains_on_v1(tmp_path) -> None:
     pytest.importorskip("ray.rllib")
