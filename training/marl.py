@@ -951,7 +951,7 @@ def check_pretrain(
             make_policy(pretrain.policy, env, **pretrain.policy_kwargs)
         except (TypeError, ValueError) as exc:
             raise ValueError(
-                f"torchrl.pretrain: the {pretrain.policy!r} teacher with policy_kwargs "
+                f"torchrl.pretrain.policy_kwargs: the {pretrain.policy!r} teacher with "
                 f"{pretrain.policy_kwargs} cannot fly this environment: {exc}"
             ) from None
         finally:
