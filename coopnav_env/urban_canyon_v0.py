@@ -66,9 +66,10 @@ the route's centre line (`+-route_offset_max_m`, 4 m, positive to the left of tr
 the altitude (`-1` the bottom of the band, `+1` its top). The autopilot is the `waypoint`
 follower's (toward the next waypoint, moved by the offset, slowing before it; the altitude
 held with a gain of 0.6 per second), and its output is the velocity command above. The frame
-keeps a learner on its streets while it learns how fast, how far apart and how high its UAVs
-fly; a constant action flies every UAV along the route together. The column and waypoint
-heuristics command velocities and refuse it.
+flies a learner along its street route, so that what it learns is how fast, how far apart
+and how high its UAVs fly; a constant action flies every UAV along the route together. The
+column and waypoint heuristics command velocities and refuse it; `setpoints` gives fixed
+set-points.
 
 ## Observation Space
 

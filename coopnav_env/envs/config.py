@@ -208,13 +208,13 @@ class UrbanCanyonConfig(ScenarioConfig):
         ``(a0 + 1) / 2 * max_speed_mps`` (``-1`` holds its place); ``a1`` the offset across
         the street from the route's centre line, ``a1 * route_offset_max_m`` (positive to
         the left of travel); ``a2`` the altitude, from ``altitude_min_m`` (``-1``) to
-        ``altitude_max_m`` (``+1``). The autopilot flies along the leg toward the UAV's next
-        waypoint, slowing to ``1 + 0.6 d`` m/s at ``d`` m before a turn, and steers the offset
-        and the altitude with a gain of 0.6 per second (the `waypoint` follower's); the result
+        ``altitude_max_m`` (``+1``). The autopilot is the `waypoint` follower's: it flies toward
+        the UAV's next waypoint, moved by the offset, slowing to ``1 + 0.6 d`` m/s at ``d`` m
+        from it, and holds the altitude with a gain of 0.6 per second; the result
         is the velocity command of ``"velocity"``, so kinematics, collisions and everything
-        after them are the same. The frame keeps a policy on its streets while it learns
-        where along, across and above them to fly (how far apart, how high); it does not
-        say where that is: a constant action flies every UAV along the route together.
+        after them are the same. The frame flies a policy along its street route, so that
+        what it learns is where along, across and above it each UAV flies (how far apart,
+        how high); it does not say where: a constant action flies the UAVs together.
     route_offset_max_m : float, default 4.0
         Largest offset across the street of ``action_frame="route"`` [m], at least 0 and
         less than half the street width minus the UAV radius (checked when the world is

@@ -1111,8 +1111,8 @@ _FIX_FLAGS = {"coop_error_m": "coop_fix", "standalone_error_m": "standalone_fix"
 
 
 ROUTE_FRAME_GAIN_PER_S = 0.6
-"""Gain of the ``action_frame="route"`` autopilot on the offset, the altitude and the speed
-before a turn [1/s] (the `waypoint` follower's)."""
+"""Gain of the ``action_frame="route"`` autopilot on the altitude and on the speed before
+a waypoint [1/s] (the `waypoint` follower's)."""
 
 
 def _check_route_offset(cfg: UrbanCanyonConfig, street_width_m: float) -> None:
@@ -1157,10 +1157,9 @@ def route_frame_command(
         toward the next waypoint moved ``o = a1 * route_offset_max_m`` to the left of the leg
         that ends there (before the first waypoint: of the way to it), at the speed
         ``(a0 + 1) / 2 * max_speed_mps``, at most ``1 + 0.6 d`` m/s at ``d`` m from that
-        point. Vertically ``0.6 (h - h_est)`` (the estimated altitude clamped to the band)
-        toward ``h`` from ``altitude_min_m``
-        (``a2 = -1``) to ``altitude_max_m`` (``+1``). A UAV with no finite estimate holds
-        still (zero command).
+        point. Vertically ``0.6 (h - h_est)`` toward ``h`` from ``altitude_min_m``
+        (``a2 = -1``) to ``altitude_max_m`` (``+1``), with the estimated altitude ``h_est``
+        clamped to the band. A UAV with no finite estimate holds still (zero command).
     """
     kin = cfg.kinematics
     gain = ROUTE_FRAME_GAIN_PER_S

@@ -1,8 +1,9 @@
 """The shipped v1 policies give back the committed comparison without training.
 
-``learned_v1_by_backend/report.json`` keeps every policy's per-episode figures; flying the
-shipped policies (``agents/pretrained/mappo_v1_s*``, ``ippo_v1_s*`` and the SB3 models under
-``policies/``) on the report's first episodes must give the same scores, to the bit.
+``learned_v1_by_backend/report.json`` and ``learned_route_frame/report.json`` keep every
+policy's per-episode figures; flying the shipped policies (``agents/pretrained/mappo_v1_s*``,
+``ippo_v1_s*``, ``mappo_v1_route_s*``, ``ippo_v1_route_s*`` and the models under
+``policies/``) on a report's first episodes must give the same figures, to the bit.
 """
 
 from __future__ import annotations
@@ -14,7 +15,9 @@ import pytest
 
 from studies.task_objective import compare_learned as cl
 
-REPORT = Path(__file__).resolve().parents[1] / "learned_v1_by_backend" / "report.json"
+STUDY = Path(__file__).resolve().parents[1]
+REPORT = STUDY / "learned_v1_by_backend" / "report.json"
+ROUTE_REPORT = STUDY / "learned_route_frame" / "report.json"
 SHIPPED = (
     "mappo:pretrained/v1_s0",
     "mappo:pretrained/v1_s1",
@@ -25,14 +28,28 @@ SHIPPED = (
 )
 
 
-@pytest.mark.parametrize("policy", SHIPPED)
-def test_a_shipped_policy_flies_the_reports_episodes_again(policy, monkeypatch) -> None:
+ROUTE_SHIPPED = (
+    "mappo:pretrained/v1_route_s0",
+    "mappo:pretrained/v1_route_s1",
+    "mappo:pretrained/v1_route_s2",
+    "mappo:studies/task_objective/policies/mappo_route_6m_s0",
+    "ippo:pretrained/v1_route_s0",
+)
+
+
+@pytest.mark.parametrize(
+    ("report_path", "policy"),
+    [(REPORT, p) for p in SHIPPED] + [(ROUTE_REPORT, p) for p in ROUTE_SHIPPED],
+)
+def test_a_shipped_policy_flies_the_reports_episodes_again(
+    report_path, policy, monkeypatch
+) -> None:
     if policy.startswith("ppo:"):
         pytest.importorskip("stable_baselines3")
     else:
         pytest.importorskip("torch")
-    monkeypatch.chdir(REPORT.parents[3])  # the SB3 model's path is relative to the repository
-    report = json.loads(REPORT.read_text())
+    monkeypatch.chdir(STUDY.parents[1])  # the models' paths are relative to the repository
+    report = json.loads(report_path.read_text())
     stored = report["episodes_per_policy"][policy][:2]
     flown = cl.fly(policy, [e["seed"] for e in stored])
     for got, want in zip(flown, stored):
