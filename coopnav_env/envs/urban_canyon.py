@@ -1157,7 +1157,8 @@ def route_frame_command(
         toward the next waypoint moved ``o = a1 * route_offset_max_m`` to the left of the leg
         that ends there (before the first waypoint: of the way to it), at the speed
         ``(a0 + 1) / 2 * max_speed_mps``, at most ``1 + 0.6 d`` m/s at ``d`` m from that
-        point. Vertically ``0.6 (h - h_est)`` toward ``h`` from ``altitude_min_m``
+        point (with ``route_turn_brake_mps2 = b > 0``, also at most ``1 + sqrt(2 b (d - 3))``
+        m/s before a turn). Vertically ``0.6 (h - h_est)`` toward ``h`` from ``altitude_min_m``
         (``a2 = -1``) to ``altitude_max_m`` (``+1``), with the estimated altitude ``h_est``
         clamped to the band. A UAV with no finite estimate holds still (zero command).
     """
@@ -1178,6 +1179,9 @@ def route_frame_command(
     aim = target + left * (act[:, 1] * cfg.route_offset_max_m)[:, None] - est[:, :2]
     dist = np.linalg.norm(aim, axis=1)
     speed = np.minimum((act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps, 1.0 + gain * dist)
+    if cfg.route_turn_brake_mps2 > 0.0:
+        room = np.sqrt(2.0 * cfg.route_turn_brake_mps2 * np.maximum(dist - 3.0, 0.0))
+        speed = np.where(wp < route.shape[0] - 1, np.minimum(speed, 1.0 + room), speed)
     v = np.zeros((act.shape[0], 3))
     v[:, :2] = aim / np.maximum(dist, 1e-6)[:, None] * speed[:, None]
     band_m = kin.altitude_max_m - kin.altitude_min_m

@@ -37,7 +37,13 @@ CRUISE = (0.2, 0.8)
 
 
 SCORE_NEUTRAL_SETTINGS = frozenset(
-    {"nav_team_weight", "obs_agent_index", "action_frame", "route_offset_max_m"}
+    {
+        "nav_team_weight",
+        "obs_agent_index",
+        "action_frame",
+        "route_offset_max_m",
+        "route_turn_brake_mps2",
+    }
 )
 """Environment settings a training run may change without changing the world its episodes
 are flown in or their score (team credit moves reward between UAVs, leaving their mean; the

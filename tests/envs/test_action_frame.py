@@ -143,3 +143,18 @@ def test_setpoints_that_step_the_speed_string_the_swarm_out() -> None:
         pos = env.unwrapped._epoch.pos_enu_m
         gaps[step] = np.linalg.norm(pos[0] - pos[2])
     assert gaps[0.0] < 8.0 < 30.0 < gaps[1.5]
+
+
+def test_turn_braking_limits_the_speed_before_a_turn_only() -> None:
+    kin = make_config().kinematics
+    est = [[80.0, 0.0, 17.5], [95.0, 0.0, 17.5], [100.0, 50.0, 17.5]]
+    act = [[1.0, 0.0, 0.0]] * 3
+    plain = _command(act, est, [1, 1, 2]) * kin.max_speed_mps
+    braked = _command(act, est, [1, 1, 2], route_turn_brake_mps2=2.0) * kin.max_speed_mps
+    np.testing.assert_allclose(plain[:, :2], [[10.0, 0.0], [4.0, 0.0], [0.0, 10.0]])
+    # 1 + sqrt(2 * 2 * (d - 3)) at d = 20 and 5 m before the turn; the goal leg unchanged
+    np.testing.assert_allclose(braked[0, 0], 1.0 + np.sqrt(68.0))
+    np.testing.assert_allclose(braked[1, 0], 1.0 + np.sqrt(8.0))
+    np.testing.assert_allclose(braked[2], plain[2])
+    with pytest.raises(ValueError, match=r"route_turn_brake_mps2 must be in .* got -1"):
+        make_config(route_turn_brake_mps2=-1.0)
