@@ -377,6 +377,9 @@ horizontal alert limit [m] (availability, the reward term and the observation sc
 `obs_lookahead` (False), `obs_candidate_sky` (False), `obs_true_error` (False) and
 `obs_agent_index` (False): above.
 `action_frame` (`"velocity"`), `route_offset_max_m` (4): above (Action Space).
+`route_turn_brake_mps2` (0): with `action_frame="route"` and a value `b > 0`, the autopilot
+also limits the speed to `1 + sqrt(2 b (d - 3))` m/s at `d` m before a turn of the route, so
+that a UAV at full speed can brake for it.
 With `"off"` every episode is exactly as before. The preset
 `coopnav_env.envs.preset_config("urban_nlos", **fields)` turns on realistic urban reception:
 half of the blocked satellites received through reflections with a bias of 3 m + Exp(30 m),
