@@ -70,6 +70,7 @@ from typing import Any
 
 import numpy as np
 
+from coopnav_env.envs.autopilot import pursuit_velocity
 from coopnav_env.envs.observation_layout import obs_layout
 from coopnav_env.sim.route import Polyline, extend_route, street_route, street_routes
 
@@ -1051,12 +1052,8 @@ class WaypointPolicy:
         kin = self.cfg.kinematics
         obs = np.stack([np.asarray(observations[a], dtype=np.float64) for a in agents])
         to_wp = self._waypoint.decode(obs)
-        dist = np.linalg.norm(to_wp, axis=1)
-        speed = np.minimum(self.cruise_speed_mps, self.gain_per_s * dist + 1.0)
-        v = np.zeros((len(agents), 3))
-        v[:, :2] = to_wp / np.maximum(dist, 1e-6)[:, None] * speed[:, None]
         alt = self._altitude.decode(obs)[:, 0]
-        v[:, 2] = self.gain_per_s * (self.altitude_m - alt)
+        v = pursuit_velocity(to_wp, self.cruise_speed_mps, self.altitude_m - alt, self.gain_per_s)
         cmd = np.clip(v / kin.max_speed_mps, -1.0, 1.0).astype(np.float32)
         return {a: cmd[i] for i, a in enumerate(agents)}
 

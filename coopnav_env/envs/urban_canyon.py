@@ -34,6 +34,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from coopnav_env.envs import _kernels
+from coopnav_env.envs.autopilot import pursuit_velocity
 from coopnav_env.envs.config import V1_DEFAULTS, UrbanCanyonConfig, make_config
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import city as _city
@@ -1177,17 +1178,16 @@ def route_frame_command(
     tangent = np.where((norm > 1e-9)[:, None], leg / np.maximum(norm, 1e-9)[:, None], 0.0)
     left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
     aim = target + left * (act[:, 1] * cfg.route_offset_max_m)[:, None] - est[:, :2]
-    dist = np.linalg.norm(aim, axis=1)
-    speed = np.minimum((act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps, 1.0 + gain * dist)
+    speed = (act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps
     if cfg.route_turn_brake_mps2 > 0.0:
+        dist = np.linalg.norm(aim, axis=1)
         room = np.sqrt(2.0 * cfg.route_turn_brake_mps2 * np.maximum(dist - 3.0, 0.0))
         speed = np.where(wp < route.shape[0] - 1, np.minimum(speed, 1.0 + room), speed)
-    v = np.zeros((act.shape[0], 3))
-    v[:, :2] = aim / np.maximum(dist, 1e-6)[:, None] * speed[:, None]
     band_m = kin.altitude_max_m - kin.altitude_min_m
     height = kin.altitude_min_m + (act[:, 2] + 1.0) / 2.0 * band_m
     # the UAV flies inside the altitude band: an estimate outside it is clamped to it
-    v[:, 2] = gain * (height - np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m))
+    climb = height - np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
+    v = pursuit_velocity(aim, speed, climb, gain)
     v[~ok] = 0.0
     return np.clip(v / kin.max_speed_mps, -1.0, 1.0)
 
