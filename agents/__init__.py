@@ -82,7 +82,9 @@ from coopnav_env.agents.base import Policy, clip_actions  # noqa: E402
 __all__ = [
     "COLUMN_PRESET_NAMES",
     "POLICY_NAMES",
+    "ROUTE_FRAME_HEURISTICS",
     "Policy",
+    "action_frame_of",
     "clip_actions",
     "make_policy",
     "parse_policy_name",
@@ -124,7 +126,25 @@ POLICY_NAMES: tuple[str, ...] = (
 )
 """Names :func:`make_policy` accepts (plus those given to :func:`register_policy`)."""
 
+ROUTE_FRAME_HEURISTICS: frozenset[str] = frozenset({"setpoints"})
+"""The heuristics whose actions are route-frame set-points (``action_frame="route"``); the
+other heuristics command velocities (``action_frame="velocity"``)."""
+
 _REGISTERED: dict[str, Callable[..., Policy]] = {}
+
+
+def action_frame_of(name: str) -> str | None:
+    """The action frame (``UrbanCanyonConfig.action_frame``) the heuristic ``name`` flies in.
+
+    ``"route"`` for :data:`ROUTE_FRAME_HEURISTICS`, ``"velocity"`` for the other built-in
+    heuristics, and None for a trained policy (``kind:<path>``) or one given to
+    :func:`register_policy`: those fly the frame of the environment they are given (a
+    trained policy's is its run's). Options after ``@`` are ignored.
+    """
+    base = name.partition("@")[0]
+    if ":" in base or base in _REGISTERED:
+        return None
+    return "route" if base in ROUTE_FRAME_HEURISTICS else "velocity"
 
 
 def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:

@@ -22,6 +22,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from coopnav_env.agents import action_frame_of
 from coopnav_env.training.compile_notice import compile_notice, warm_up_env
 from coopnav_env.training.config import apply_overrides, parse_settings_yaml
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
@@ -200,6 +201,10 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
     flags = bool(args.env_overrides) or args.n_uavs is not None or args.city is not None
     if flags:
         source = "; ".join(x for x in (source, "changed by --env-set/--n-uavs/--city") if x)
+    route = [action_frame_of(p) == "route" for p in args.policies]
+    if "action_frame" not in env and route and all(route):
+        env["action_frame"] = "route"  # heuristics that command route-frame set-points
+        source = "; ".join(x for x in (source, "action_frame=route: the policies' frame") if x)
     if not args.train_config:
         _warn_untracked(args.policies, env_id, env, bool(trained))
     return env_id, env, source

@@ -51,24 +51,22 @@ index only adds observation entries; the action frame says what the policy's act
 commands, the route frame's autopilot turning it into the velocity command)."""
 
 
-ROUTE_FRAME_POLICIES = frozenset({"setpoints"})
-"""Heuristics that command route-frame set-points: flown with ``action_frame="route"``."""
-
-
 def env_settings_of(policy_name: str) -> dict[str, Any]:
     """The ``urban_canyon_v1`` settings ``policy_name`` is flown in: a trained policy's run's
     own (from its ``config.yaml``, by
     :func:`coopnav_env.training.evaluate_cli.train_config_of_policies`), ``action_frame=
-    "route"`` for a heuristic of :data:`ROUTE_FRAME_POLICIES`, else the environment's
+    "route"`` for a heuristic that flies in that frame
+    (:func:`coopnav_env.agents.action_frame_of`), else the environment's
     defaults (``{}``).
 
     Raises ``ValueError`` for a run on another environment, or one whose settings differ from
     the defaults in anything but :data:`SCORE_NEUTRAL_SETTINGS` (its episodes would not be
     scored as the others').
     """
+    from coopnav_env.agents import action_frame_of
     from coopnav_env.training.evaluate_cli import train_config_of_policies
 
-    if policy_name.split("@", 1)[0] in ROUTE_FRAME_POLICIES:
+    if action_frame_of(policy_name) == "route":
         return {"action_frame": "route"}
     run = train_config_of_policies([policy_name])
     if not run:
@@ -183,6 +181,18 @@ def fly_policy(env: Any, policy: Any, seeds: Sequence[int]) -> list[dict[str, fl
                 "cruise_altitude_m": float(cruise[:, :, 2].mean()),
             }
         )
+    return out
+
+
+def summarise(
+    rows: Sequence[Mapping[str, float]], keys: Sequence[str], reps: int
+) -> dict[str, Any]:
+    """The mean score of per-episode ``rows`` (:func:`fly_policy`) with its 95 % bootstrap
+    interval (``[mean, low, high]``), and the mean of every other entry of ``keys``."""
+    out: dict[str, Any] = {"score": _mean_ci(np.array([r["score"] for r in rows]), reps)}
+    for k in keys:
+        if k != "score":
+            out[k] = float(np.mean([r[k] for r in rows]))
     return out
 
 

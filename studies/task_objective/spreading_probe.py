@@ -76,18 +76,6 @@ class SlowedPolicy:
         return out
 
 
-def _summary(rows: Sequence[Mapping[str, float]], reps: int) -> dict[str, Any]:
-    from coopnav_env.training.stats import bootstrap_mean_interval
-
-    score = np.array([r["score"] for r in rows])
-    out: dict[str, Any] = {
-        "score": list(bootstrap_mean_interval(score, reps, np.random.default_rng(0)))
-    }
-    for k in KEYS[1:]:
-        out[k] = float(np.mean([r[k] for r in rows]))
-    return out
-
-
 def probe(
     policy_name: str,
     slowdowns: Sequence[float],
@@ -104,13 +92,14 @@ def probe(
         fly,
         fly_policy,
         policy_in_its_env,
+        summarise,
     )
 
     column = []
     for s in tqdm(spacings_m, desc="column spacings"):
         name = COLUMN.format(spacing=s)
         rows = fly(name, seeds)
-        column.append({"spacing_m": float(s), "policy": name, **_summary(rows, reps)})
+        column.append({"spacing_m": float(s), "policy": name, **summarise(rows, KEYS, reps)})
 
     base_scores: np.ndarray | None = None
     slowed = []
@@ -120,7 +109,7 @@ def probe(
         scores = np.array([r["score"] for r in rows])
         if base_scores is None:
             base_scores = scores if sd == 0 else None
-        row = {"slowdown": float(sd), **_summary(rows, reps)}
+        row = {"slowdown": float(sd), **summarise(rows, KEYS, reps)}
         if base_scores is not None:
             iv, _ = paired_difference(scores[None], base_scores[None], reps=reps, seed=0)
             row["score_minus_unslowed"] = [iv.value, iv.low, iv.high]

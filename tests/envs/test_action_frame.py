@@ -158,3 +158,35 @@ def test_turn_braking_limits_the_speed_before_a_turn_only() -> None:
     np.testing.assert_allclose(braked[2], plain[2])
     with pytest.raises(ValueError, match=r"route_turn_brake_mps2 must be in .* got -1"):
         make_config(route_turn_brake_mps2=-1.0)
+
+
+def test_action_frame_of_names_the_frame_each_policy_flies_in() -> None:
+    from coopnav_env.agents import action_frame_of
+
+    assert action_frame_of("setpoints") == "route"
+    assert action_frame_of("setpoints@speed_mps=10,altitude_m=30") == "route"
+    assert action_frame_of("waypoint@altitude_m=28") == "velocity"
+    assert action_frame_of("wide") == "velocity"
+    assert action_frame_of("mappo:runs/v1/any") is None  # its run's frame
+
+
+def test_evaluate_flies_route_frame_heuristics_in_their_frame(tmp_path) -> None:
+    """``coopnav evaluate --policies setpoints`` needs no ``--env-set action_frame=route``;
+    a velocity heuristic beside it keeps the environment's default and is refused by name."""
+    import argparse
+    import json
+
+    from coopnav_env.training import evaluate_cli as ev
+
+    parser = argparse.ArgumentParser()
+    ev.add_arguments(parser)
+    common = ["--env-id", "urban_canyon_v1", "--episodes", "1", "--no-plots"]
+    common += ["--env-set", "max_steps=4"]
+    out = tmp_path / "ev"
+    args = parser.parse_args(["--policies", "setpoints", "--out", str(out), *common])
+    assert ev.run(args) == 0
+    data = json.loads((out / "report.json").read_text())
+    assert data["env_kwargs"] == {"max_steps": 4, "action_frame": "route"}
+    mixed = parser.parse_args(["--policies", "setpoints", "waypoint", *common])
+    with pytest.raises(ValueError, match="needs action_frame='route'"):
+        ev.run(mixed)
