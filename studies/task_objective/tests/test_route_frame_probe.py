@@ -1,0 +1,62 @@
+"""route_frame_probe.py: fixed set-points, and learned route-frame policies overridden."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from studies.task_objective import route_frame_probe as rp
+
+
+class _Constant:
+    name = "constant"
+
+    def reset(self, seed=None) -> None:
+        self.seed = seed
+
+    def act(self, observations):
+        return {a: np.array([0.6, -0.4, 0.2], dtype=np.float32) for a in observations}
+
+
+def test_overrides_raise_the_altitude_and_scale_the_speed_set_point() -> None:
+    agents = ["uav_0", "uav_1", "uav_2"]
+    p = rp.OverriddenPolicy(_Constant(), agents, top=True, slowdown=0.2)
+    p.reset(seed=3)
+    assert p.policy.seed == 3
+    out = p.act({a: np.zeros(3) for a in agents})
+    for k, a in enumerate(agents):
+        speed_share = (0.6 + 1.0) / 2.0 * (1.0 - 0.2 * k)  # of max_speed_mps
+        np.testing.assert_allclose(out[a], [2.0 * speed_share - 1.0, -0.4, 1.0], rtol=1e-6)
+    same = rp.OverriddenPolicy(_Constant(), agents, top=False, slowdown=0.0)
+    for a in agents:
+        np.testing.assert_allclose(same.act({a: np.zeros(3)})[a], [0.6, -0.4, 0.2], rtol=1e-6)
+    with pytest.raises(ValueError, match="slowdown must be in"):
+        rp.OverriddenPolicy(_Constant(), agents, top=False, slowdown=0.5)  # the last would stop
+
+
+def test_probe_writes_both_parts_and_the_overrides_do_what_they_say(tmp_path) -> None:
+    out = tmp_path / "probe"
+    args = ["--policies", "mappo:pretrained/v1_route_s0", "--altitudes", "30"]
+    args += ["--steps", "0,1.5", "--episodes", "2", "--reps", "50", "--out", str(out)]
+    assert rp.main(args) == 0
+    report = json.loads((out / "report.json").read_text())
+    fixed, (learned,) = report["fixed"], report["learned"]
+    assert [r["step_mps"] for r in fixed] == [0.0, 1.5]
+    assert fixed[1]["cruise_spacing_m"] > 3 * fixed[0]["cruise_spacing_m"]
+    by = {r["variant"]: r for r in learned["variants"]}
+    assert list(by) == list(rp.OVERRIDES)
+    assert "score_minus_as_is" not in by["as is"]
+    assert by["top of the band"]["cruise_altitude_m"] > by["as is"]["cruise_altitude_m"]
+    assert by["strung out"]["cruise_spacing_m"] > by["as is"]["cruise_spacing_m"]
+    assert "overridden" in (out / "report.md").read_text()
+    with pytest.raises(SystemExit):  # an existing report needs --overwrite
+        rp.main(args)
+
+
+def test_probe_refuses_a_policy_of_the_velocity_frame(tmp_path) -> None:
+    args = ["--policies", "mappo:pretrained/v1_s0", "--episodes", "1"]
+    with pytest.raises(ValueError, match="not trained in the route frame"):
+        rp.main([*args, "--out", str(tmp_path / "x")])
+    assert not (tmp_path / "x").exists()  # refused before its folder was claimed
