@@ -64,12 +64,14 @@ route instead, which the UAV's autopilot tracks from its *estimated* position: t
 the route (`-1` holds its place, `+1` is `max_speed_mps`), the offset across the street from
 the route's centre line (`+-route_offset_max_m`, 4 m, positive to the left of travel), and
 the altitude (`-1` the bottom of the band, `+1` its top). The autopilot is the `waypoint`
-follower's (toward the next waypoint, moved by the offset, slowing before it; the altitude
-held with a gain of 0.6 per second), and its output is the velocity command above. The frame
+follower's (`coopnav_env.envs.autopilot.pursuit_velocity`: toward the next waypoint, moved by
+the offset, slowing before it; the altitude held with a gain of 0.6 per second), and its
+output is the velocity command above. The frame
 flies a learner along its street route, so that what it learns is how fast, how far apart
 and how high its UAVs fly; a constant action flies every UAV along the route together. The
 column and waypoint heuristics command velocities and refuse it; `setpoints` gives fixed
-set-points.
+set-points (`coopnav evaluate` flies it in this frame by itself;
+`coopnav_env.agents.action_frame_of` names each heuristic's frame).
 
 ## Observation Space
 
