@@ -234,12 +234,55 @@ class MARLPolicy:
         self._held = None
         self._since = 0
 
+    def _actor_head(self, observations: Mapping[str, np.ndarray], base_cmd: Any) -> Any:
+        """The actor's loc/scale (or logits) module on the swarm's observations (a batch of
+        one swarm)."""
+        from tensordict import TensorDict
+
+        obs = np.stack([np.asarray(observations[a], dtype=np.float32) for a in self.agents])
+        inp = obs if base_cmd is None else np.concatenate([obs, base_cmd], axis=1)
+        td = TensorDict({("agents", "observation"): self._torch.from_numpy(inp[None])}, [1])
+        with self._torch.no_grad():
+            return self._actor.module[0](td)
+
+    def action_distribution(
+        self, observations: Mapping[str, np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The Gaussian the actor samples every UAV's action from in training.
+
+        Parameters
+        ----------
+        observations : mapping of agent name to observation
+            One observation for every agent of ``possible_agents``.
+
+        Returns
+        -------
+        (loc, scale) : ndarrays, shape (N, action size)
+            Mean and standard deviation per UAV (in ``possible_agents`` order) and action
+            entry, before the clip to the action box that the environment applies.
+
+        Raises
+        ------
+        ValueError
+            A residual policy (its action adds a base heuristic's command, which this does
+            not fly), or observations of other agents than ``possible_agents``.
+        """
+        if self._base is not None:
+            raise ValueError(
+                f"a residual policy (base {self.settings.residual_base!r}) has no action "
+                "distribution of its own: its action adds the base heuristic's command"
+            )
+        if list(observations) != self.agents:
+            raise ValueError(
+                f"observations of {list(observations)}, expected every agent of {self.agents}"
+            )
+        td = self._actor_head(observations, None)
+        return td["agents", "loc"][0].numpy(), td["agents", "scale"][0].numpy()
+
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The mean action of every UAV (``options`` mode: the most probable option), combined
         with the base policy as in training (a new decision every ``action_repeat`` steps
         after :meth:`reset`, held in between)."""
-        from tensordict import TensorDict
-
         live = list(observations)
         if not live:
             return {}
@@ -248,13 +291,9 @@ class MARLPolicy:
                 "a TorchRL swarm policy acts for the whole swarm at once; got observations of "
                 f"{live}, expected {self.agents}"
             )
-        obs = np.stack([np.asarray(observations[a], dtype=np.float32) for a in self.agents])
         base_cmd = base_command_before(self.settings, self._base, observations, self.agents)
         if self._held is None or self._since >= self.settings.action_repeat:
-            inp = obs if base_cmd is None else np.concatenate([obs, base_cmd], axis=1)
-            td = TensorDict({("agents", "observation"): self._torch.from_numpy(inp[None])}, [1])
-            with self._torch.no_grad():
-                td = self._actor.module[0](td)  # the loc/scale (or logits) module
+            td = self._actor_head(observations, base_cmd)
             if self.settings.residual_mode == "options":  # the most probable option, one-hot
                 logits = td["agents", "logits"][0].numpy()
                 held = np.zeros_like(logits)

@@ -451,3 +451,28 @@ def test_command_line_env_settings_win_over_the_backends_env_block(tmp_path) -> 
     _, env = settings_of(cfg)
     assert env["collision_penalty"] == 700 and env["nav_reward_weight"] == 0.5
     assert env["nav_team_weight"] == 1.0  # the rest of the block stays
+
+
+def test_action_distribution_is_the_gaussian_whose_mean_the_policy_flies(tmp_path) -> None:
+    from coopnav_env import urban_canyon_v1
+
+    env = urban_canyon_v1.parallel_env(
+        action_frame="route", nav_team_weight=1.0, obs_agent_index=True
+    )
+    policy = make_policy("mappo:pretrained/v1_route_s0", env)
+    obs, _ = env.reset(seed=1_000_001)
+    policy.reset(1_000_001)
+    loc, scale = policy.action_distribution(obs)
+    assert loc.shape == scale.shape == (len(env.possible_agents), 3)
+    assert np.all(scale > 0)
+    acts = policy.act(obs)
+    np.testing.assert_allclose(
+        np.stack([acts[a] for a in env.possible_agents]), np.clip(loc, -1.0, 1.0), atol=1e-6
+    )
+    with pytest.raises(ValueError, match="expected every agent"):
+        policy.action_distribution({env.possible_agents[0]: obs[env.possible_agents[0]]})
+    s = MARLSettings(n_copies=1, rollout_steps=2, residual_base="spread", residual_mode="offset")
+    MARLTrainer(s, {}, seed=0).save(tmp_path / "final_model.pt")
+    residual = make_policy(f"mappo:{tmp_path}", urban_canyon_v0.parallel_env())
+    with pytest.raises(ValueError, match="residual policy"):
+        residual.action_distribution(obs)
