@@ -1,0 +1,182 @@
+"""How likely is a held-back start under a learned route-frame policy's own exploration?
+
+The column opens its spacing at the start: every UAV but the first holds back while the one
+ahead flies on. In the route frame that is a speed set-point near 0 for the first seconds. PPO
+improves only what its Gaussian samples, so this probe asks how often a learned policy's
+exploration would sample it. Each learned policy's mean actions are flown on held-out
+episodes; at every decision in the first ``--hold-s`` seconds the actor's Gaussian for every
+UAV's speed set-point (``MARLPolicy.action_distribution``, what training samples from) gives
+the probability that the sample is at most ``--speed-mps``; their product over those decisions
+is the chance that exploration holds that UAV back for the whole time.
+
+Per policy: the decisions in the window, the mean speed set-point of the actor's mean and its
+standard deviation (in m/s), and the median and the largest (over UAVs and episodes) log10 of
+that chance. The study (``studies/task_objective``) runs::
+
+    python studies/task_objective/exploration_probe.py \\
+        --policies mappo:studies/task_objective/policies/mappo_route_brake_4m_s2 \\
+        --episodes 20 --seed-start 1000100 --out studies/task_objective/exploration_probe
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository (studies/)
+
+
+def log10_normal_cdf(x: np.ndarray) -> np.ndarray:
+    """``log10(Phi(x))`` of the standard normal, accurate far into the lower tail."""
+    from scipy.special import log_ndtr
+
+    return log_ndtr(np.asarray(x, dtype=np.float64)) / math.log(10.0)
+
+
+def hold_back_chances(
+    policy: Any, env: Any, seed: int, hold_s: float, speed_mps: float
+) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    """Fly ``policy``'s mean actions in ``env`` from ``reset(seed)`` for ``hold_s`` seconds.
+
+    Returns ``(log10_chance, means, stds)``: per UAV, log10 of the chance that the actor's
+    Gaussian samples a speed set-point of at most ``speed_mps`` at every decision of the
+    window, and per decision the speed set-point of the actor's mean and its standard
+    deviation [m/s] for every UAV. An episode that ends earlier ends the window.
+    """
+    cfg = env.unwrapped.config
+    vmax = float(cfg.kinematics.max_speed_mps)
+    steps = max(1, math.ceil(hold_s / float(cfg.dt_s)))
+    repeat = int(policy.settings.action_repeat)
+    a0_limit = 2.0 * speed_mps / vmax - 1.0  # the speed set-point is (a0 + 1) / 2 * vmax
+    obs, _ = env.reset(seed=int(seed))
+    policy.reset(seed=int(seed))
+    chance = np.zeros(len(env.possible_agents))
+    means: list[np.ndarray] = []
+    stds: list[np.ndarray] = []
+    for t in range(steps):
+        if not env.agents:
+            break
+        if t % repeat == 0:  # a decision: the actor's Gaussian at this observation
+            loc, scale = policy.action_distribution(obs)
+            chance += log10_normal_cdf((a0_limit - loc[:, 0]) / scale[:, 0])
+            means.append((np.clip(loc[:, 0], -1.0, 1.0) + 1.0) / 2.0 * vmax)
+            stds.append(scale[:, 0] / 2.0 * vmax)
+        obs, *_ = env.step(policy.act(obs))
+    return chance, means, stds
+
+
+def check_route_frame(policies: Sequence[str]) -> None:
+    """``ValueError`` naming a policy that was not trained in the route frame."""
+    from studies.task_objective.compare_learned import env_settings_of
+
+    for name in policies:
+        if env_settings_of(name).get("action_frame") != "route":
+            raise ValueError(f"{name} was not trained in the route frame (action_frame)")
+
+
+def probe(
+    policies: Sequence[str], seeds: Sequence[int], hold_s: float, speed_mps: float
+) -> dict[str, Any]:
+    """Fly every policy on ``seeds`` (module docstring); returns the report as a dict."""
+    from tqdm.auto import tqdm
+
+    from studies.task_objective.compare_learned import policy_in_its_env
+
+    check_route_frame(policies)
+    rows = []
+    for name in tqdm(policies, desc="policies"):
+        chances, means, stds = [], [], []
+        with policy_in_its_env(name) as (env, policy):
+            if not hasattr(policy, "action_distribution"):
+                raise ValueError(f"{name} is not a TorchRL policy (mappo:/ippo:)")
+            for seed in seeds:
+                c, m, s = hold_back_chances(policy, env, seed, hold_s, speed_mps)
+                chances.append(c)
+                means += m
+                stds += s
+            repeat = int(policy.settings.action_repeat)
+            dt = float(env.unwrapped.config.dt_s)
+        c = np.concatenate(chances)
+        rows.append(
+            {
+                "policy": name,
+                "action_repeat": repeat,
+                "decisions": math.ceil(max(1, math.ceil(hold_s / dt)) / repeat),
+                "mean_speed_setpoint_mps": float(np.mean(means)),
+                "speed_setpoint_std_mps": float(np.mean(stds)),
+                "log10_chance_median": float(np.median(c)),
+                "log10_chance_max": float(np.max(c)),
+            }
+        )
+    return {
+        "environment": "urban_canyon_v1",
+        "seeds": [int(seeds[0]), int(seeds[-1])],
+        "episodes": len(seeds),
+        "hold_s": hold_s,
+        "speed_mps": speed_mps,
+        "policies": rows,
+    }
+
+
+def to_markdown(report: Mapping[str, Any]) -> str:
+    """The table of ``report`` (:func:`probe`)."""
+    lo, hi = report["seeds"]
+    lines = [
+        f"`urban_canyon_v1`, {report['episodes']} held-out episodes (reset seeds {lo}-{hi}); "
+        f"the chance that the actor's exploration holds a UAV at a speed set-point of at most "
+        f"{report['speed_mps']:g} m/s at every decision of the first {report['hold_s']:g} s.",
+        "",
+        "| policy | action repeat | decisions | mean speed set-point [m/s] | its std [m/s] "
+        "| log10 chance, median | log10 chance, largest |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in report["policies"]:
+        lines.append(
+            f"| `{r['policy']}` | {r['action_repeat']} | {r['decisions']} "
+            f"| {r['mean_speed_setpoint_mps']:.1f} | {r['speed_setpoint_std_mps']:.1f} "
+            f"| {r['log10_chance_median']:.1f} | {r['log10_chance_max']:.1f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Command line (``--help``)."""
+    from coopnav_env.training.envs import heldout_seeds
+    from studies.task_objective.compare_learned import (
+        add_report_arguments,
+        report_folder,
+        write_report,
+    )
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument(
+        "--policies", nargs="+", required=True, help="learned route-frame TorchRL policies"
+    )
+    p.add_argument("--hold-s", type=float, default=8.0, help="the window, s (default: 8)")
+    p.add_argument(
+        "--speed-mps", type=float, default=2.0, help="held back: at most this, m/s (default: 2)"
+    )
+    p.add_argument("--episodes", type=int, default=20, help="held-out episodes (default: 20)")
+    p.add_argument("--seed-start", type=int, default=1_000_000, help="first reset seed")
+    add_report_arguments(p)
+    args = p.parse_args(argv)
+    if not args.hold_s > 0:
+        p.error(f"--hold-s must be > 0, got {args.hold_s}")
+    if not args.speed_mps >= 0:
+        p.error(f"--speed-mps must be >= 0, got {args.speed_mps}")
+    check_route_frame(args.policies)  # before the report's folder is claimed
+    out = report_folder(p, args)
+    seeds = heldout_seeds(args.episodes, args.seed_start)
+    report = probe(args.policies, seeds, args.hold_s, args.speed_mps)
+    write_report(out, "Exploration: the chance of a held-back start", report, to_markdown(report))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
