@@ -1,10 +1,9 @@
 """The shipped v1 policies give back the committed comparison without training.
 
-``learned_v1_by_backend``, ``learned_route_frame``, ``learned_route_braking``,
-``learned_route_braking_8m`` and ``learned_route_repeat`` (``report.json``) keep every
-policy's per-episode figures; flying the shipped policies (``agents/pretrained/mappo_v1_s*``,
-``ippo_v1_s*``, ``mappo_v1_route_s*``, ``ippo_v1_route_s*`` and the models under
-``policies/``) on a report's first episodes must give the same figures, to the bit.
+The comparison reports of this study (``learned_*/report.json``) keep every policy's
+per-episode figures; flying the shipped policies (``agents/pretrained/mappo_v1_*``,
+``ippo_v1_*`` and the models under ``policies/``) on a report's first episodes must give the
+same figures, to the bit.
 """
 
 from __future__ import annotations
@@ -22,6 +21,7 @@ ROUTE_REPORT = STUDY / "learned_route_frame" / "report.json"
 BRAKE_REPORT = STUDY / "learned_route_braking" / "report.json"
 BRAKE_8M_REPORT = STUDY / "learned_route_braking_8m" / "report.json"
 REPEAT_REPORT = STUDY / "learned_route_repeat" / "report.json"
+REPEAT_8M_REPORT = STUDY / "learned_route_repeat_8m" / "report.json"
 SHIPPED = (
     "mappo:pretrained/v1_s0",
     "mappo:pretrained/v1_s1",
@@ -47,7 +47,8 @@ ROUTE_SHIPPED = (
     + [(ROUTE_REPORT, p) for p in ROUTE_SHIPPED]
     + [(BRAKE_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_4m_s2")]
     + [(BRAKE_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_8m_s0")]
-    + [(REPEAT_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_4m_s0")],
+    + [(REPEAT_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_4m_s0")]
+    + [(REPEAT_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_8m_s1")],
 )
 def test_a_shipped_policy_flies_the_reports_episodes_again(
     report_path, policy, monkeypatch
