@@ -55,6 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         default=["random", "formation", "sky"],
         help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
+        "setpoints (route-frame set-points; when every policy is one, flown with "
+        "action_frame=route), "
         "ppo:<path> (SB3 .zip), mappo:<path> / ippo:<path> (TorchRL run or .pt), rllib:<path> "
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28. Model files are pickles: loading an SB3 .zip or "
