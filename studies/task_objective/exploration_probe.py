@@ -39,6 +39,11 @@ def log10_normal_cdf(x: np.ndarray) -> np.ndarray:
     return log_ndtr(np.asarray(x, dtype=np.float64)) / math.log(10.0)
 
 
+def window_steps(env: Any, hold_s: float) -> int:
+    """The steps of ``env`` in the first ``hold_s`` seconds of an episode (at least 1)."""
+    return max(1, math.ceil(hold_s / float(env.unwrapped.config.dt_s)))
+
+
 def hold_back_chances(
     policy: Any, env: Any, seed: int, hold_s: float, speed_mps: float
 ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
@@ -51,7 +56,7 @@ def hold_back_chances(
     """
     cfg = env.unwrapped.config
     vmax = float(cfg.kinematics.max_speed_mps)
-    steps = max(1, math.ceil(hold_s / float(cfg.dt_s)))
+    steps = window_steps(env, hold_s)
     repeat = int(policy.settings.action_repeat)
     a0_limit = 2.0 * speed_mps / vmax - 1.0  # the speed set-point is (a0 + 1) / 2 * vmax
     obs, _ = env.reset(seed=int(seed))
@@ -101,13 +106,13 @@ def probe(
                 means += m
                 stds += s
             repeat = int(policy.settings.action_repeat)
-            dt = float(env.unwrapped.config.dt_s)
+            decisions = math.ceil(window_steps(env, hold_s) / repeat)
         c = np.concatenate(chances)
         rows.append(
             {
                 "policy": name,
                 "action_repeat": repeat,
-                "decisions": math.ceil(max(1, math.ceil(hold_s / dt)) / repeat),
+                "decisions": decisions,
                 "mean_speed_setpoint_mps": float(np.mean(means)),
                 "speed_setpoint_std_mps": float(np.mean(stds)),
                 "log10_chance_median": float(np.median(c)),

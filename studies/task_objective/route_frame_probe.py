@@ -74,14 +74,11 @@ class OverriddenPolicy:
         top: bool,
         slowdown: float,
     ) -> None:
-        n = len(agents)
-        if not 0.0 <= slowdown < 1.0 / max(n - 1, 1):
-            raise ValueError(
-                f"slowdown must be in [0, 1/(N-1)) = [0, {1 / max(n - 1, 1):.3f}), got {slowdown}"
-            )
+        from studies.task_objective.spreading_probe import slowdown_factors
+
+        self.factor = slowdown_factors(agents, slowdown)
         self.policy = policy
         self.top = bool(top)
-        self.factor = {a: 1.0 - k * slowdown for k, a in enumerate(agents)}
         self.name = getattr(policy, "name", "policy")
 
     def reset(self, seed: int | None = None) -> None:

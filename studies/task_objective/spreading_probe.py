@@ -40,6 +40,17 @@ COLUMN = "wide@spacing_m={spacing:g},cruise_speed_mps=10,ceiling_margin_m=-10"
 KEYS = ("score", "goal", "collided", "nav_error_m", "cruise_spacing_m", "steps")
 
 
+def slowdown_factors(agents: Sequence[str], slowdown: float) -> dict[str, float]:
+    """``{agent: 1 - k * slowdown}`` for UAV ``k`` of ``agents``; ``ValueError`` unless
+    ``slowdown`` is in ``[0, 1 / (N - 1))`` (the last UAV would stop)."""
+    n = len(agents)
+    if not 0.0 <= slowdown < 1.0 / max(n - 1, 1):
+        raise ValueError(
+            f"slowdown must be in [0, 1/(N-1)) = [0, {1 / max(n - 1, 1):.3f}), got {slowdown}"
+        )
+    return {a: 1.0 - k * slowdown for k, a in enumerate(agents)}
+
+
 class SlowedPolicy:
     """``policy`` with UAV ``k``'s horizontal command scaled by ``1 - k * slowdown``.
 
@@ -55,13 +66,8 @@ class SlowedPolicy:
     """
 
     def __init__(self, policy: Any, agents: Sequence[str], slowdown: float) -> None:
-        n = len(agents)
-        if not 0.0 <= slowdown < 1.0 / max(n - 1, 1):
-            raise ValueError(
-                f"slowdown must be in [0, 1/(N-1)) = [0, {1 / max(n - 1, 1):.3f}), got {slowdown}"
-            )
+        self.factor = slowdown_factors(agents, slowdown)
         self.policy = policy
-        self.factor = {a: 1.0 - k * slowdown for k, a in enumerate(agents)}
         self.name = f"{getattr(policy, 'name', 'policy')}, slowed by {slowdown:g} per UAV"
 
     def reset(self, seed: int | None = None) -> None:
