@@ -1179,15 +1179,13 @@ def route_frame_command(
     left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
     aim = target + left * (act[:, 1] * cfg.route_offset_max_m)[:, None] - est[:, :2]
     speed = (act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps
-    if cfg.route_turn_brake_mps2 > 0.0:
-        dist = np.linalg.norm(aim, axis=1)
-        room = np.sqrt(2.0 * cfg.route_turn_brake_mps2 * np.maximum(dist - 3.0, 0.0))
-        speed = np.where(wp < route.shape[0] - 1, np.minimum(speed, 1.0 + room), speed)
+    # braking for the route's turns: before every waypoint but the last
+    brake = np.where(wp < route.shape[0] - 1, cfg.route_turn_brake_mps2, 0.0)
     band_m = kin.altitude_max_m - kin.altitude_min_m
     height = kin.altitude_min_m + (act[:, 2] + 1.0) / 2.0 * band_m
     # the UAV flies inside the altitude band: an estimate outside it is clamped to it
     climb = height - np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
-    v = pursuit_velocity(aim, speed, climb, gain)
+    v = pursuit_velocity(aim, speed, climb, gain, brake)
     v[~ok] = 0.0
     return np.clip(v / kin.max_speed_mps, -1.0, 1.0)
 
