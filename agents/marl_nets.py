@@ -119,6 +119,19 @@ class MARLSettings:
         column heuristic with a wall margin (``guarded_column``, ``ceiling_column``). What the
         policy's log-probability is computed on is the network's raw output; the guard acts on the
         command, like the clipping, and is part of the environment as the actor sees it.
+    noise_correlation : float
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
+        Correlation ``rho`` in ``[0, 1]`` of the exploration noise from one decision to the
+        next (default 0: independent draws, TorchRL's own sampling). With ``rho > 0`` every
+        UAV's action is ``loc + scale * eps``, where ``eps`` starts each episode as a
+        standard normal draw and follows ``eps <- rho * eps + sqrt(1 - rho**2) * eta``
+        (``eta`` standard normal) at each later decision, so that its marginal stays standard
+        normal: each action is still a draw from the actor's Gaussian, and PPO's
+        probability ratios are those of that Gaussian, but a deviation persists for about
+        ``1 / (1 - rho)`` decisions (``rho = 1``: the whole episode), so exploration tries
+        held manoeuvres (drop back for the first seconds) that independent draws almost never
+        produce. Not with ``residual_mode: options``.
     """
 
     algorithm: str = "mappo"
@@ -154,6 +167,7 @@ class MARLSettings:
     option_init_prob: float = 0.8
     action_repeat: int = 1
     residual_wall_guard: bool = False
+    noise_correlation: float = 0.0
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -236,6 +250,15 @@ class MARLSettings:
             0.0 < float(self.option_init_prob) < 1.0
         ):
             raise bad("option_init_prob", "a number in (0, 1)")
+        if (
+            isinstance(self.noise_correlation, bool)
+            or not isinstance(self.noise_correlation, int | float)
+            or not 0.0 <= float(self.noise_correlation) <= 1.0
+        ):
+            raise bad("noise_correlation", "a number in [0, 1]")
+        self.noise_correlation = float(self.noise_correlation)
+        if self.noise_correlation > 0.0 and self.residual_mode == "options":
+            raise bad("noise_correlation", "0 with residual_mode 'options' (a categorical)")
         if not isinstance(self.residual_wall_guard, bool):
             raise bad("residual_wall_guard", "true or false")
         if self.residual_wall_guard and (

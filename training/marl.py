@@ -339,6 +339,7 @@ class MARLTrainer:
         self.warm_start_info: dict[str, Any] | None = None
         obs, _ = self.venv.reset(seed=self._env_seed)
         self._obs = obs.copy()
+        self._start_noise()
         for b in self._bases:
             if b is not None:
                 b.reset()
@@ -383,19 +384,23 @@ class MARLTrainer:
             base = self._before(obs_d)
             a_in = _actor_inputs(self._obs, base)
             c_in = _critic_inputs(self._obs, state)
-            # sample (TorchRL's modules return the distribution's mode unless told otherwise)
-            with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
-                td = TensorDict(
-                    {("agents", "observation"): torch.from_numpy(a_in)}, batch_size=[k_]
-                )
-                td = self.actor(td)
-            raw = td["agents", "action"].numpy()
+            td = TensorDict({("agents", "observation"): torch.from_numpy(a_in)}, batch_size=[k_])
+            if s.noise_correlation > 0.0:
+                raw, logp = self._sample_correlated(td)
+            else:
+                # sample (TorchRL's modules return the distribution's mode unless told
+                # otherwise)
+                with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
+                    td = self.actor(td)
+                raw, logp = td["agents", "action"].numpy(), td["agents", "action_log_prob"].numpy()
             n_c_in, acc, ended, state = self._act_held(raw, obs_d, base)
+            if s.noise_correlation > 0.0:
+                self._advance_noise(ended)
             actor_in.append(a_in)
             critic_in.append(c_in)
             next_critic_in.append(n_c_in)
             acts.append(raw)
-            logps.append(td["agents", "action_log_prob"].numpy())
+            logps.append(logp)
             rewards.append(acc)
             dones.append(ended)
             terms.append(ended)
@@ -420,6 +425,36 @@ class MARLTrainer:
             batch_size=[k_, t_],
         )
         return data
+
+    def _start_noise(self) -> None:
+        """Every copy's first noise draw (``noise_correlation > 0``), from a generator of its
+        own seeded with the reset seed, so that the default path keeps TorchRL's sampling from
+        torch's generator unchanged."""
+        self._noise_rng = np.random.default_rng([self._env_seed, 0x6E6F6973])
+        self._noise = self._noise_rng.standard_normal(
+            (self.settings.n_copies, self.n_agents, 3), dtype=np.float32
+        )
+
+    def _sample_correlated(self, td: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Every UAV's action ``loc + scale * noise`` and its log-probability under the
+        actor's Gaussian (``noise_correlation > 0``: the noise is :attr:`_noise`)."""
+        import torch
+
+        with torch.no_grad():
+            dist = self.actor.get_dist(td)
+            normal = dist.base_dist
+            action = normal.loc + normal.scale * torch.from_numpy(self._noise)
+            logp = dist.log_prob(action)
+        return action.numpy(), logp.numpy()
+
+    def _advance_noise(self, ended: np.ndarray) -> None:
+        """The next decision's noise: a fresh standard normal draw for the copies whose
+        episode ``ended``, ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
+        rho = self.settings.noise_correlation
+        eta = self._noise_rng.standard_normal(self._noise.shape, dtype=np.float32)
+        nxt = (rho * self._noise + np.sqrt(1.0 - rho * rho) * eta).astype(np.float32)
+        nxt[ended] = eta[ended]
+        self._noise = nxt
 
     def _act_held(
         self, raw: np.ndarray, obs_d: list[dict[str, np.ndarray]], base: np.ndarray | None
@@ -682,6 +717,7 @@ class MARLTrainer:
         # PPO starts from the run's own episodes
         obs, _ = self.venv.reset(seed=self._env_seed)
         self._obs = obs.copy()
+        self._start_noise()
         for b in self._bases:
             if b is not None:
                 b.reset()

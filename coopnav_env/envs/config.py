@@ -470,6 +470,12 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
         None,
         "the velocity residual is limited toward walls the range sensor sees",
     ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "noise_correlation",
+        None,
+        "exploration noise correlated from one decision to the next (held manoeuvres)",
+    ),
 )
 
 

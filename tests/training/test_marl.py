@@ -46,6 +46,8 @@ def _one_thread():
         ("option_shifts_m", [[0.0, 0.0, 0.0]]),
         ("option_shifts_m", [[0.0, 0.0], [1.0, 0.0]]),
         ("option_init_prob", 1.0),
+        ("noise_correlation", 1.5),
+        ("noise_correlation", True),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -248,6 +250,58 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
     assert done.any()  # an episode of 7 steps ended within the 12 steps
     # the per-decision discount
     assert tr.loss.value_estimator.gamma == pytest.approx(0.99**3)
+
+
+def _standardised_noise(tr: MARLTrainer, data) -> np.ndarray:
+    """(action - loc) / scale of every stored decision, under the actor's Gaussian now."""
+    with torch.no_grad():
+        normal = tr.actor.get_dist(data.select(("agents", "observation"))).base_dist
+    return ((data["agents", "action"] - normal.loc) / normal.scale).numpy()
+
+
+def test_correlated_noise_keeps_the_gaussian_and_holds_its_deviation() -> None:
+    s = MARLSettings(algorithm="ippo", n_copies=64, rollout_steps=8, noise_correlation=0.9)
+    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 200}, seed=3)
+    data = tr.collect()
+    eps = _standardised_noise(tr, data)  # (copy, decision, UAV, axis)
+    # each action is a draw of the actor's Gaussian: logged log-probabilities are its own
+    with torch.no_grad():
+        dist = tr.actor.get_dist(data.select(("agents", "observation")))
+        want = dist.log_prob(data["agents", "action"]).numpy()
+    np.testing.assert_allclose(data["agents", "action_log_prob"].numpy(), want, rtol=1e-5)
+    # marginal standard normal, lag-one correlation rho within episodes: 64*8*3*3 = 4608
+    # values, ~4000 pairs; 5 standard errors (sd of the correlation ~ (1 - rho^2) / sqrt(n))
+    n = eps.size
+    assert abs(eps.mean()) <= 5.0 / np.sqrt(n)
+    assert abs(eps.std() - 1.0) <= 5.0 / np.sqrt(2 * n)
+    same = ~data["next", "agents", "done"].numpy()[:, :-1, 0, 0]  # (copy, decision)
+    a, b = eps[:, :-1][same].ravel(), eps[:, 1:][same].ravel()
+    assert a.size >= 3000
+    assert abs(np.corrcoef(a, b)[0, 1] - 0.9) <= 5.0 * (1 - 0.81) / np.sqrt(a.size)
+    # independent draws (the default) are not correlated
+    tr0 = MARLTrainer(MARLSettings(algorithm="ippo", n_copies=64, rollout_steps=8), {}, seed=3)
+    e0 = _standardised_noise(tr0, tr0.collect())
+    assert abs(np.corrcoef(e0[:, :-1].ravel(), e0[:, 1:].ravel())[0, 1]) <= 5.0 / np.sqrt(a.size)
+
+
+def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -> None:
+    s = MARLSettings(algorithm="mappo", n_copies=2, rollout_steps=6, noise_correlation=1.0)
+    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
+    data = tr.collect()
+    eps = _standardised_noise(tr, data)
+    done = data["next", "agents", "done"].numpy()[:, :, 0, 0]  # (copy, decision)
+    assert done[:, :4].any(axis=1).all()  # episodes of at most 4 steps: each copy had a new one
+    for k in range(2):
+        for d in range(5):
+            if done[k, d]:  # a new episode, a new draw
+                assert np.all(np.abs(eps[k, d + 1] - eps[k, d]) > 1e-3)
+            else:  # held within the episode
+                np.testing.assert_allclose(eps[k, d + 1], eps[k, d], atol=1e-4)
+    # the same seed gives the same draws
+    tr2 = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
+    np.testing.assert_array_equal(_standardised_noise(tr2, tr2.collect()), eps)
+    with pytest.raises(ValueError, match="noise_correlation"):
+        MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
 
 
 def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) -> None:
