@@ -39,6 +39,46 @@ def log10_normal_cdf(x: np.ndarray) -> np.ndarray:
     return log_ndtr(np.asarray(x, dtype=np.float64)) / math.log(10.0)
 
 
+def log10_ar1_all_below(x: Sequence[float], rho: float) -> float:
+    """``log10 P(z_1 <= x_1, ..., z_D <= x_D)`` for standard normal ``z`` whose successive
+    entries are correlated ``rho`` in ``[0, 1]`` (the AR(1) noise of
+    ``torchrl.noise_correlation``; ``rho = 0``: independent, ``rho = 1``: one draw).
+
+    For ``0 < rho < 1`` the density of ``z_d`` on the event so far is carried on a grid from
+    ``min(x) - 8`` to ``max(x)`` (rescaled at every decision, so that chances far in the tail
+    do not underflow) and propagated with the Gaussian transition ``N(rho z, 1 - rho**2)``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if x.size == 0:
+        return 0.0
+    if not 0.0 <= rho <= 1.0:
+        raise ValueError(f"rho must be in [0, 1], got {rho!r}")
+    if rho == 0.0 or x.size == 1:
+        return float(np.sum(log10_normal_cdf(x)))
+    if rho == 1.0:
+        return float(log10_normal_cdf(np.array([x.min()]))[0])
+    sd = math.sqrt(1.0 - rho * rho)
+    lo, hi = float(x.min()) - 8.0, float(x.max())
+    n = int(min(6000, max(400, math.ceil((hi - lo) / (sd / 20.0)))))
+    z = np.linspace(lo, hi, n)
+    dz = z[1] - z[0]
+    log_f = -0.5 * z * z - 0.5 * math.log(2.0 * math.pi)  # density of z_1
+    log_scale = float(log_f.max())
+    f = np.exp(log_f - log_scale)
+    kernel = np.exp(-0.5 * ((z[:, None] - rho * z[None, :]) / sd) ** 2) / (
+        sd * math.sqrt(2 * math.pi)
+    )
+    for d in range(x.size - 1):
+        f = kernel @ (f * (z <= x[d]) * dz)  # density of z_{d+1} on the event so far
+        top = float(f.max())
+        if top <= 0.0:
+            return -math.inf
+        f /= top
+        log_scale += math.log(top)
+    mass = float(np.sum(f * (z <= x[-1])) * dz)
+    return -math.inf if mass <= 0.0 else (math.log(mass) + log_scale) / math.log(10.0)
+
+
 def window_steps(env: Any, hold_s: float) -> int:
     """The steps of ``env`` in the first ``hold_s`` seconds of an episode (at least 1)."""
     return max(1, math.ceil(hold_s / float(env.unwrapped.config.dt_s)))
@@ -51,8 +91,9 @@ def hold_back_chances(
 
     Returns ``(log10_chance, means, stds)``: per UAV, log10 of the chance that the actor's
     Gaussian samples a speed set-point of at most ``speed_mps`` at every decision of the
-    window, and per decision the speed set-point of the actor's mean and its standard
-    deviation [m/s] for every UAV. An episode that ends earlier ends the window.
+    window (with the noise correlation ``policy`` was trained with,
+    :func:`log10_ar1_all_below`), and per decision the speed set-point of the actor's mean
+    and its standard deviation [m/s] for every UAV. An episode that ends earlier ends the window.
     """
     cfg = env.unwrapped.config
     vmax = float(cfg.kinematics.max_speed_mps)
@@ -61,7 +102,7 @@ def hold_back_chances(
     a0_limit = 2.0 * speed_mps / vmax - 1.0  # the speed set-point is (a0 + 1) / 2 * vmax
     obs, _ = env.reset(seed=int(seed))
     policy.reset(seed=int(seed))
-    chance = np.zeros(len(env.possible_agents))
+    limits: list[np.ndarray] = []  # per decision: every UAV's limit in standard deviations
     means: list[np.ndarray] = []
     stds: list[np.ndarray] = []
     for t in range(steps):
@@ -69,10 +110,13 @@ def hold_back_chances(
             break
         if t % repeat == 0:  # a decision: the actor's Gaussian at this observation
             loc, scale = policy.action_distribution(obs)
-            chance += log10_normal_cdf((a0_limit - loc[:, 0]) / scale[:, 0])
+            limits.append((a0_limit - loc[:, 0]) / scale[:, 0])
             means.append((np.clip(loc[:, 0], -1.0, 1.0) + 1.0) / 2.0 * vmax)
             stds.append(scale[:, 0] / 2.0 * vmax)
         obs, *_ = env.step(policy.act(obs))
+    rho = float(policy.settings.noise_correlation)
+    per_uav = np.stack(limits, axis=1)  # (UAV, decision)
+    chance = np.array([log10_ar1_all_below(row, rho) for row in per_uav])
     return chance, means, stds
 
 
@@ -112,6 +156,7 @@ def probe(
             {
                 "policy": name,
                 "action_repeat": repeat,
+                "noise_correlation": float(policy.settings.noise_correlation),
                 "decisions": decisions,
                 "mean_speed_setpoint_mps": float(np.mean(means)),
                 "speed_setpoint_std_mps": float(np.mean(stds)),
@@ -137,13 +182,14 @@ def to_markdown(report: Mapping[str, Any]) -> str:
         f"the chance that the actor's exploration holds a UAV at a speed set-point of at most "
         f"{report['speed_mps']:g} m/s at every decision of the first {report['hold_s']:g} s.",
         "",
-        "| policy | action repeat | decisions | mean speed set-point [m/s] | its std [m/s] "
-        "| log10 chance, median | log10 chance, largest |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| policy | action repeat | noise correlation | decisions | mean speed set-point [m/s] "
+        "| its std [m/s] | log10 chance, median | log10 chance, largest |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in report["policies"]:
         lines.append(
-            f"| `{r['policy']}` | {r['action_repeat']} | {r['decisions']} "
+            f"| `{r['policy']}` | {r['action_repeat']} | {r.get('noise_correlation', 0.0):g} "
+            f"| {r['decisions']} "
             f"| {r['mean_speed_setpoint_mps']:.1f} | {r['speed_setpoint_std_mps']:.1f} "
             f"| {r['log10_chance_median']:.1f} | {r['log10_chance_max']:.1f} |"
         )
