@@ -132,6 +132,16 @@ class MARLSettings:
         ``1 / (1 - rho)`` decisions (``rho = 1``: the whole episode), so exploration tries
         held manoeuvres (drop back for the first seconds) that independent draws almost never
         produce. Not with ``residual_mode: options``.
+    noise_centred_entries : list of int
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
+        Action entries (0, 1, 2) whose exploration noise is centred over the swarm (default
+        none; needs ``noise_correlation > 0``): at every draw the swarm's mean is subtracted
+        and the rest scaled by ``sqrt(N / (N - 1))`` (N UAVs), so that each UAV's noise stays
+        standard normal but the swarm's noises sum to zero. With one policy shared by every
+        UAV and a team reward, a deviation of one UAV that helps the team (one UAV held back
+        so that the swarm spreads) otherwise moves the shared mean of every UAV (all slower);
+        centred, the swarm tries differences between its UAVs, not a common shift.
     """
 
     algorithm: str = "mappo"
@@ -168,6 +178,7 @@ class MARLSettings:
     action_repeat: int = 1
     residual_wall_guard: bool = False
     noise_correlation: float = 0.0
+    noise_centred_entries: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -259,6 +270,16 @@ class MARLSettings:
         self.noise_correlation = float(self.noise_correlation)
         if self.noise_correlation > 0.0 and self.residual_mode == "options":
             raise bad("noise_correlation", "0 with residual_mode 'options' (a categorical)")
+        ents = self.noise_centred_entries
+        if (
+            not isinstance(ents, list | tuple)
+            or any(isinstance(e, bool) or e not in (0, 1, 2) for e in ents)
+            or len(set(ents)) != len(ents)
+        ):
+            raise bad("noise_centred_entries", "a list of distinct action entries 0, 1, 2")
+        self.noise_centred_entries = [int(e) for e in ents]
+        if ents and self.noise_correlation == 0.0:
+            raise bad("noise_centred_entries", "empty unless noise_correlation > 0")
         if not isinstance(self.residual_wall_guard, bool):
             raise bad("residual_wall_guard", "true or false")
         if self.residual_wall_guard and (

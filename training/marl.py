@@ -431,9 +431,20 @@ class MARLTrainer:
         own seeded with the reset seed, so that the default path keeps TorchRL's sampling from
         torch's generator unchanged."""
         self._noise_rng = np.random.default_rng([self._env_seed, 0x6E6F6973])
-        self._noise = self._noise_rng.standard_normal(
+        self._noise = self._draw_noise()
+
+    def _draw_noise(self) -> np.ndarray:
+        """Standard normal noise (copy, UAV, entry), the entries of ``noise_centred_entries``
+        centred over each copy's swarm and rescaled to unit variance."""
+        eta = self._noise_rng.standard_normal(
             (self.settings.n_copies, self.n_agents, 3), dtype=np.float32
         )
+        ents = self.settings.noise_centred_entries
+        if ents and self.n_agents > 1:
+            n = self.n_agents
+            part = eta[..., ents]
+            eta[..., ents] = (part - part.mean(axis=1, keepdims=True)) * np.sqrt(n / (n - 1.0))
+        return eta
 
     def _sample_correlated(self, td: Any) -> tuple[np.ndarray, np.ndarray]:
         """Every UAV's action ``loc + scale * noise`` and its log-probability under the
@@ -451,7 +462,7 @@ class MARLTrainer:
         """The next decision's noise: a fresh standard normal draw for the copies whose
         episode ``ended``, ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
         rho = self.settings.noise_correlation
-        eta = self._noise_rng.standard_normal(self._noise.shape, dtype=np.float32)
+        eta = self._draw_noise()
         nxt = (rho * self._noise + np.sqrt(1.0 - rho * rho) * eta).astype(np.float32)
         nxt[ended] = eta[ended]
         self._noise = nxt

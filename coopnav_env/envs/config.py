@@ -476,6 +476,12 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
         None,
         "exploration noise correlated from one decision to the next (held manoeuvres)",
     ),
+    ExperimentalSetting(
+        "MARLSettings",
+        "noise_centred_entries",
+        None,
+        "the exploration noise of these action entries sums to zero over the swarm",
+    ),
 )
 
 

@@ -48,6 +48,9 @@ def _one_thread():
         ("option_init_prob", 1.0),
         ("noise_correlation", 1.5),
         ("noise_correlation", True),
+        ("noise_centred_entries", [3]),
+        ("noise_centred_entries", [0, 0]),
+        ("noise_centred_entries", [0]),  # needs noise_correlation > 0
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -282,6 +285,23 @@ def test_correlated_noise_keeps_the_gaussian_and_holds_its_deviation() -> None:
     tr0 = MARLTrainer(MARLSettings(algorithm="ippo", n_copies=64, rollout_steps=8), {}, seed=3)
     e0 = _standardised_noise(tr0, tr0.collect())
     assert abs(np.corrcoef(e0[:, :-1].ravel(), e0[:, 1:].ravel())[0, 1]) <= 5.0 / np.sqrt(a.size)
+
+
+def test_centred_noise_sums_to_zero_over_the_swarm_and_stays_standard_normal() -> None:
+    s = MARLSettings(
+        algorithm="ippo",
+        n_copies=64,
+        rollout_steps=8,
+        noise_correlation=0.5,
+        noise_centred_entries=[0],
+    )
+    tr = MARLTrainer(s, {"n_uavs": 5, "max_steps": 200}, seed=4)
+    eps = _standardised_noise(tr, tr.collect())  # (copy, decision, UAV, entry)
+    np.testing.assert_allclose(eps[..., 0].sum(axis=2), 0.0, atol=1e-4)  # over the UAVs
+    assert np.abs(eps[..., 1:].sum(axis=2)).max() > 0.1  # the other entries are not centred
+    # each UAV's noise is still standard normal: 64*8*5 = 2560 values, 5 standard errors
+    n = eps[..., 0].size
+    assert abs(eps[..., 0].std() - 1.0) <= 5.0 / np.sqrt(2 * n / 1.25)
 
 
 def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -> None:
