@@ -132,6 +132,14 @@ class MARLSettings:
         ``1 / (1 - rho)`` decisions (``rho = 1``: the whole episode), so exploration tries
         held manoeuvres (drop back for the first seconds) that independent draws almost never
         produce. Not with ``residual_mode: options``.
+    noise_correlated_decisions : int
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
+        The correlation of ``noise_correlation`` holds for the first this many decisions of
+        each episode; later decisions draw independent noise (default 0: the whole episode).
+        With ``noise_correlation: 1`` and ``3``, the noise is one draw for the episode's
+        first 3 decisions: exploration tries held starts and flies the rest as with
+        independent draws.
     noise_centred_entries : list of int
         *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
         removed).
@@ -178,6 +186,7 @@ class MARLSettings:
     action_repeat: int = 1
     residual_wall_guard: bool = False
     noise_correlation: float = 0.0
+    noise_correlated_decisions: int = 0
     noise_centred_entries: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -270,6 +279,9 @@ class MARLSettings:
         self.noise_correlation = float(self.noise_correlation)
         if self.noise_correlation > 0.0 and self.residual_mode == "options":
             raise bad("noise_correlation", "0 with residual_mode 'options' (a categorical)")
+        k = self.noise_correlated_decisions
+        if isinstance(k, bool) or not isinstance(k, int) or k < 0:
+            raise bad("noise_correlated_decisions", "an integer >= 0")
         ents = self.noise_centred_entries
         if (
             not isinstance(ents, list | tuple)

@@ -432,6 +432,7 @@ class MARLTrainer:
         torch's generator unchanged."""
         self._noise_rng = np.random.default_rng([self._env_seed, 0x6E6F6973])
         self._noise = self._draw_noise()
+        self._decisions = np.zeros(self.settings.n_copies, dtype=np.int64)  # in the episode
 
     def _draw_noise(self) -> np.ndarray:
         """Standard normal noise (copy, UAV, entry), the entries of ``noise_centred_entries``
@@ -460,11 +461,17 @@ class MARLTrainer:
 
     def _advance_noise(self, ended: np.ndarray) -> None:
         """The next decision's noise: a fresh standard normal draw for the copies whose
-        episode ``ended``, ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
-        rho = self.settings.noise_correlation
+        episode ``ended`` or that are past the episode's first ``noise_correlated_decisions``
+        decisions, ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
+        s = self.settings
+        rho = s.noise_correlation
         eta = self._draw_noise()
         nxt = (rho * self._noise + np.sqrt(1.0 - rho * rho) * eta).astype(np.float32)
-        nxt[ended] = eta[ended]
+        self._decisions = np.where(ended, 0, self._decisions + 1)
+        fresh = ended.copy()
+        if s.noise_correlated_decisions > 0:
+            fresh |= self._decisions >= s.noise_correlated_decisions
+        nxt[fresh] = eta[fresh]
         self._noise = nxt
 
     def _act_held(

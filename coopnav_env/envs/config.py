@@ -478,6 +478,12 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
     ),
     ExperimentalSetting(
         "MARLSettings",
+        "noise_correlated_decisions",
+        None,
+        "the noise correlation holds for an episode's first decisions only",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
         "noise_centred_entries",
         None,
         "the exploration noise of these action entries sums to zero over the swarm",

@@ -48,6 +48,7 @@ def _one_thread():
         ("option_init_prob", 1.0),
         ("noise_correlation", 1.5),
         ("noise_correlation", True),
+        ("noise_correlated_decisions", -1),
         ("noise_centred_entries", [3]),
         ("noise_centred_entries", [0, 0]),
         ("noise_centred_entries", [0]),  # needs noise_correlation > 0
@@ -320,6 +321,22 @@ def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -
     # the same seed gives the same draws
     tr2 = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
     np.testing.assert_array_equal(_standardised_noise(tr2, tr2.collect()), eps)
+    # held for the first 2 decisions of each episode only
+    s2 = MARLSettings(
+        algorithm="mappo",
+        n_copies=2,
+        rollout_steps=6,
+        noise_correlation=1.0,
+        noise_correlated_decisions=2,
+    )
+    tr3 = MARLTrainer(s2, {"n_uavs": 3, "max_steps": 50}, seed=2)
+    data3 = tr3.collect()
+    e3 = _standardised_noise(tr3, data3)
+    one = ~data3["next", "agents", "done"].numpy()[:, :5, 0, 0].any(axis=1)  # one episode
+    assert one.any()
+    np.testing.assert_allclose(e3[one, 1], e3[one, 0], atol=1e-4)
+    for d in range(1, 5):  # then a new draw every decision
+        assert np.all(np.abs(e3[one, d + 1] - e3[one, d]) > 1e-4)
     with pytest.raises(ValueError, match="noise_correlation"):
         MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
 
