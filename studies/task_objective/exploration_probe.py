@@ -91,9 +91,10 @@ def hold_back_chances(
 
     Returns ``(log10_chance, means, stds)``: per UAV, log10 of the chance that the actor's
     Gaussian samples a speed set-point of at most ``speed_mps`` at every decision of the
-    window (with the noise correlation ``policy`` was trained with,
-    :func:`log10_ar1_all_below`), and per decision the speed set-point of the actor's mean
-    and its standard deviation [m/s] for every UAV. An episode that ends earlier ends the window.
+    window (with the noise correlation ``policy`` was trained with, over the decisions it
+    held it for, :func:`log10_ar1_all_below`), and per decision the speed set-point of the
+    actor's mean and its standard deviation [m/s] for every UAV. An episode that ends
+    earlier ends the window.
     """
     cfg = env.unwrapped.config
     vmax = float(cfg.kinematics.max_speed_mps)
@@ -115,8 +116,15 @@ def hold_back_chances(
             stds.append(scale[:, 0] / 2.0 * vmax)
         obs, *_ = env.step(policy.act(obs))
     rho = float(policy.settings.noise_correlation)
+    held = int(policy.settings.noise_correlated_decisions) or len(limits)
     per_uav = np.stack(limits, axis=1)  # (UAV, decision)
-    chance = np.array([log10_ar1_all_below(row, rho) for row in per_uav])
+    # correlated over the episode's first `held` decisions, independent draws after them
+    chance = np.array(
+        [
+            log10_ar1_all_below(row[:held], rho) + float(np.sum(log10_normal_cdf(row[held:])))
+            for row in per_uav
+        ]
+    )
     return chance, means, stds
 
 

@@ -65,3 +65,39 @@ def test_probe_refuses_a_policy_of_the_velocity_frame(tmp_path) -> None:
     with pytest.raises(ValueError, match="not trained in the route frame"):
         ep.main(args)
     assert not (tmp_path / "x").exists()
+
+
+class _FixedGaussian:
+    """A route-frame actor whose Gaussian is the same at every observation."""
+
+    def __init__(self, rho: float, held: int) -> None:
+        from coopnav_env.agents.marl_nets import MARLSettings
+
+        self.settings = MARLSettings(noise_correlation=rho, noise_correlated_decisions=held)
+        self.loc = np.array([0.2, -0.1, 0.0, 0.3, 0.5], dtype=np.float32)  # speed entry per UAV
+
+    def reset(self, seed=None) -> None:
+        pass
+
+    def action_distribution(self, observations):
+        n = len(observations)
+        return np.stack([self.loc[:n], np.zeros(n), np.zeros(n)], axis=1), np.full((n, 3), 0.4)
+
+    def act(self, observations):
+        return {a: np.array([self.loc[0], 0.0, 0.0], dtype=np.float32) for a in observations}
+
+
+def test_the_chance_is_held_over_the_correlated_decisions_only() -> None:
+    from coopnav_env import urban_canyon_v1
+
+    env = urban_canyon_v1.parallel_env(action_frame="route")
+    steps = ep.window_steps(env, 4.0)  # one decision per step
+    limit = (2.0 * 2.0 / float(env.unwrapped.config.kinematics.max_speed_mps) - 1.0 - 0.2) / 0.4
+    per_step = float(ep.log10_normal_cdf(np.array([limit]))[0])  # UAV 0, every decision
+    for rho, held, want in (
+        (0.0, 0, steps * per_step),
+        (1.0, 0, per_step),  # one draw for the whole window
+        (1.0, 2, per_step + (steps - 2) * per_step),  # one draw for 2 decisions, then fresh
+    ):
+        chance, _, _ = ep.hold_back_chances(_FixedGaussian(rho, held), env, 5, 4.0, 2.0)
+        assert chance[0] == pytest.approx(want, rel=1e-6)  # float32 actor outputs
