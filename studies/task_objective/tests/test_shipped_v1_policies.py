@@ -22,6 +22,7 @@ BRAKE_REPORT = STUDY / "learned_route_braking" / "report.json"
 BRAKE_8M_REPORT = STUDY / "learned_route_braking_8m" / "report.json"
 REPEAT_REPORT = STUDY / "learned_route_repeat" / "report.json"
 REPEAT_8M_REPORT = STUDY / "learned_route_repeat_8m" / "report.json"
+NOISE_HELD_REPORT = STUDY / "learned_route_noise_held" / "report.json"
 SHIPPED = (
     "mappo:pretrained/v1_s0",
     "mappo:pretrained/v1_s1",
@@ -48,7 +49,8 @@ ROUTE_SHIPPED = (
     + [(BRAKE_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_4m_s2")]
     + [(BRAKE_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_8m_s0")]
     + [(REPEAT_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_4m_s0")]
-    + [(REPEAT_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_8m_s1")],
+    + [(REPEAT_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_8m_s1")]
+    + [(NOISE_HELD_REPORT, "mappo:studies/task_objective/policies/mappo_route_noise_held_bc_s0")],
 )
 def test_a_shipped_policy_flies_the_reports_episodes_again(
     report_path, policy, monkeypatch
