@@ -135,8 +135,8 @@ class MARLSettings:
     noise_correlated_decisions : int
         *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
         removed).
-        The correlation of ``noise_correlation`` holds for the first this many decisions of
-        each episode; later decisions draw independent noise (default 0: the whole episode).
+        The number of decisions at the start of each episode over which ``noise_correlation``
+        holds; later decisions draw independent noise (default 0: the whole episode).
         With ``noise_correlation: 1`` and ``3``, the noise is one draw for the episode's
         first 3 decisions: exploration tries held starts and flies the rest as with
         independent draws.
@@ -146,10 +146,8 @@ class MARLSettings:
         Action entries (0, 1, 2) whose exploration noise is centred over the swarm (default
         none; needs ``noise_correlation > 0``): at every draw the swarm's mean is subtracted
         and the rest scaled by ``sqrt(N / (N - 1))`` (N UAVs), so that each UAV's noise stays
-        standard normal but the swarm's noises sum to zero. With one policy shared by every
-        UAV and a team reward, a deviation of one UAV that helps the team (one UAV held back
-        so that the swarm spreads) otherwise moves the shared mean of every UAV (all slower);
-        centred, the swarm tries differences between its UAVs, not a common shift.
+        standard normal but the swarm's noises sum to zero: every draw tries differences
+        between the UAVs (some held back, others ahead), never a shift of the whole swarm.
     """
 
     algorithm: str = "mappo"
