@@ -23,6 +23,9 @@ BRAKE_8M_REPORT = STUDY / "learned_route_braking_8m" / "report.json"
 REPEAT_REPORT = STUDY / "learned_route_repeat" / "report.json"
 REPEAT_8M_REPORT = STUDY / "learned_route_repeat_8m" / "report.json"
 NOISE_HELD_REPORT = STUDY / "learned_route_noise_held" / "report.json"
+NOISE_START_REPORT = STUDY / "learned_route_noise_start" / "report.json"
+NOISE_START_8M_REPORT = STUDY / "learned_route_noise_start_8m" / "report.json"
+POLICIES = "studies/task_objective/policies"
 SHIPPED = (
     "mappo:pretrained/v1_s0",
     "mappo:pretrained/v1_s1",
@@ -50,7 +53,9 @@ ROUTE_SHIPPED = (
     + [(BRAKE_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_8m_s0")]
     + [(REPEAT_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_4m_s0")]
     + [(REPEAT_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_8m_s1")]
-    + [(NOISE_HELD_REPORT, "mappo:studies/task_objective/policies/mappo_route_noise_held_bc_s0")],
+    + [(NOISE_HELD_REPORT, "mappo:studies/task_objective/policies/mappo_route_noise_held_bc_s0")]
+    + [(NOISE_START_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_bc_4m_s1")]
+    + [(NOISE_START_8M_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_8m_s2")],
 )
 def test_a_shipped_policy_flies_the_reports_episodes_again(
     report_path, policy, monkeypatch
