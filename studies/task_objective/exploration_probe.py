@@ -7,7 +7,9 @@ exploration would sample it. Each learned policy's mean actions are flown on hel
 episodes; at every decision in the first ``--hold-s`` seconds the actor's Gaussian for every
 UAV's speed set-point (``MARLPolicy.action_distribution``, what training samples from) gives
 the probability that the sample is at most ``--speed-mps``; their product over those decisions
-is the chance that exploration holds that UAV back for the whole time.
+(for a policy trained with ``torchrl.noise_correlation``, the joint chance under that
+correlation over the decisions it held it for) is the chance that exploration holds that UAV
+back for the whole time.
 
 Per policy: the decisions in the window, the mean speed set-point of the actor's mean and its
 standard deviation (in m/s), and the median and the largest (over UAVs and episodes) log10 of
