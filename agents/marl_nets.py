@@ -140,6 +140,11 @@ class MARLSettings:
         With ``noise_correlation: 1`` and ``3``, the noise is one draw for the episode's
         first 3 decisions: exploration tries held starts and flies the rest as with
         independent draws.
+    noise_correlated_entries : list of int or None
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
+        Action entries (0, 1, 2) whose noise ``noise_correlation`` correlates (default None:
+        every entry); the others draw independent noise at every decision.
     noise_centred_entries : list of int
         *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
         removed).
@@ -185,6 +190,7 @@ class MARLSettings:
     residual_wall_guard: bool = False
     noise_correlation: float = 0.0
     noise_correlated_decisions: int = 0
+    noise_correlated_entries: list[int] | None = None
     noise_centred_entries: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -280,6 +286,19 @@ class MARLSettings:
         k = self.noise_correlated_decisions
         if isinstance(k, bool) or not isinstance(k, int) or k < 0:
             raise bad("noise_correlated_decisions", "an integer >= 0")
+        cor = self.noise_correlated_entries
+        if cor is not None:
+            if (
+                not isinstance(cor, list | tuple)
+                or not cor
+                or any(isinstance(e, bool) or e not in (0, 1, 2) for e in cor)
+                or len(set(cor)) != len(cor)
+            ):
+                raise bad(
+                    "noise_correlated_entries",
+                    "null (every entry) or a non-empty list of distinct entries 0, 1, 2",
+                )
+            self.noise_correlated_entries = [int(e) for e in cor]
         ents = self.noise_centred_entries
         if (
             not isinstance(ents, list | tuple)

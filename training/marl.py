@@ -462,7 +462,8 @@ class MARLTrainer:
     def _advance_noise(self, ended: np.ndarray) -> None:
         """The next decision's noise: a fresh standard normal draw for the copies whose
         episode ``ended`` or that are past the episode's first ``noise_correlated_decisions``
-        decisions, ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
+        decisions and for the entries outside ``noise_correlated_entries``,
+        ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
         s = self.settings
         rho = s.noise_correlation
         eta = self._draw_noise()
@@ -472,6 +473,9 @@ class MARLTrainer:
         if s.noise_correlated_decisions > 0:
             fresh |= self._decisions >= s.noise_correlated_decisions
         nxt[fresh] = eta[fresh]
+        if s.noise_correlated_entries is not None:  # the other entries: a new draw each time
+            other = [e for e in range(3) if e not in s.noise_correlated_entries]
+            nxt[..., other] = eta[..., other]
         self._noise = nxt
 
     def _act_held(

@@ -484,6 +484,12 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
     ),
     ExperimentalSetting(
         "MARLSettings",
+        "noise_correlated_entries",
+        None,
+        "the noise correlation applies to these action entries only",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
         "noise_centred_entries",
         None,
         "the exploration noise of these action entries sums to zero over the swarm",

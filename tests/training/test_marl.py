@@ -49,6 +49,8 @@ def _one_thread():
         ("noise_correlation", 1.5),
         ("noise_correlation", True),
         ("noise_correlated_decisions", -1),
+        ("noise_correlated_entries", []),
+        ("noise_correlated_entries", [0, 5]),
         ("noise_centred_entries", [3]),
         ("noise_centred_entries", [0, 0]),
         ("noise_centred_entries", [0]),  # needs noise_correlation > 0
@@ -337,6 +339,21 @@ def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -
     np.testing.assert_allclose(e3[one, 1], e3[one, 0], atol=1e-4)
     for d in range(1, 5):  # then a new draw every decision
         assert np.all(np.abs(e3[one, d + 1] - e3[one, d]) > 1e-4)
+    # held for the speed entry only: the others are new at every decision
+    s4 = MARLSettings(
+        algorithm="mappo",
+        n_copies=2,
+        rollout_steps=6,
+        noise_correlation=1.0,
+        noise_correlated_entries=[0],
+    )
+    tr4 = MARLTrainer(s4, {"n_uavs": 3, "max_steps": 50}, seed=2)
+    data4 = tr4.collect()
+    e4 = _standardised_noise(tr4, data4)
+    one = ~data4["next", "agents", "done"].numpy()[:, :5, 0, 0].any(axis=1)
+    assert one.any()
+    np.testing.assert_allclose(e4[one, 1:, :, 0], e4[one, :1, :, 0].repeat(5, 1), atol=1e-4)
+    assert np.all(np.abs(np.diff(e4[one][..., 1:], axis=1)) > 1e-4)
     with pytest.raises(ValueError, match="noise_correlation"):
         MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
 
