@@ -25,6 +25,7 @@ REPEAT_8M_REPORT = STUDY / "learned_route_repeat_8m" / "report.json"
 NOISE_HELD_REPORT = STUDY / "learned_route_noise_held" / "report.json"
 NOISE_START_REPORT = STUDY / "learned_route_noise_start" / "report.json"
 NOISE_START_8M_REPORT = STUDY / "learned_route_noise_start_8m" / "report.json"
+NOISE_SPEED_REPORT = STUDY / "learned_route_noise_start_speed" / "report.json"
 POLICIES = "studies/task_objective/policies"
 SHIPPED = (
     "mappo:pretrained/v1_s0",
@@ -55,7 +56,8 @@ ROUTE_SHIPPED = (
     + [(REPEAT_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_8m_s1")]
     + [(NOISE_HELD_REPORT, "mappo:studies/task_objective/policies/mappo_route_noise_held_bc_s0")]
     + [(NOISE_START_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_bc_4m_s1")]
-    + [(NOISE_START_8M_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_8m_s2")],
+    + [(NOISE_START_8M_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_8m_s2")]
+    + [(NOISE_SPEED_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_speed_bc_4m_s1")],
 )
 def test_a_shipped_policy_flies_the_reports_episodes_again(
     report_path, policy, monkeypatch
