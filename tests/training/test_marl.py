@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import warnings
 
@@ -307,6 +308,15 @@ def test_centred_noise_sums_to_zero_over_the_swarm_and_stays_standard_normal() -
     assert abs(eps[..., 0].std() - 1.0) <= 5.0 / np.sqrt(2 * n / 1.25)
 
 
+def _noise_of_whole_episodes(s: MARLSettings) -> np.ndarray:
+    """:func:`_standardised_noise` of the copies whose first 6 decisions are one episode."""
+    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 50}, seed=2)
+    data = tr.collect()
+    one = ~data["next", "agents", "done"].numpy()[:, :5, 0, 0].any(axis=1)
+    assert one.any()
+    return _standardised_noise(tr, data)[one]
+
+
 def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -> None:
     s = MARLSettings(algorithm="mappo", n_copies=2, rollout_steps=6, noise_correlation=1.0)
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
@@ -324,36 +334,14 @@ def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -
     tr2 = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
     np.testing.assert_array_equal(_standardised_noise(tr2, tr2.collect()), eps)
     # held for the first 2 decisions of each episode only
-    s2 = MARLSettings(
-        algorithm="mappo",
-        n_copies=2,
-        rollout_steps=6,
-        noise_correlation=1.0,
-        noise_correlated_decisions=2,
-    )
-    tr3 = MARLTrainer(s2, {"n_uavs": 3, "max_steps": 50}, seed=2)
-    data3 = tr3.collect()
-    e3 = _standardised_noise(tr3, data3)
-    one = ~data3["next", "agents", "done"].numpy()[:, :5, 0, 0].any(axis=1)  # one episode
-    assert one.any()
-    np.testing.assert_allclose(e3[one, 1], e3[one, 0], atol=1e-4)
+    e3 = _noise_of_whole_episodes(dataclasses.replace(s, noise_correlated_decisions=2))
+    np.testing.assert_allclose(e3[:, 1], e3[:, 0], atol=1e-4)
     for d in range(1, 5):  # then a new draw every decision
-        assert np.all(np.abs(e3[one, d + 1] - e3[one, d]) > 1e-4)
+        assert np.all(np.abs(e3[:, d + 1] - e3[:, d]) > 1e-4)
     # held for the speed entry only: the others are new at every decision
-    s4 = MARLSettings(
-        algorithm="mappo",
-        n_copies=2,
-        rollout_steps=6,
-        noise_correlation=1.0,
-        noise_correlated_entries=[0],
-    )
-    tr4 = MARLTrainer(s4, {"n_uavs": 3, "max_steps": 50}, seed=2)
-    data4 = tr4.collect()
-    e4 = _standardised_noise(tr4, data4)
-    one = ~data4["next", "agents", "done"].numpy()[:, :5, 0, 0].any(axis=1)
-    assert one.any()
-    np.testing.assert_allclose(e4[one, 1:, :, 0], e4[one, :1, :, 0].repeat(5, 1), atol=1e-4)
-    assert np.all(np.abs(np.diff(e4[one][..., 1:], axis=1)) > 1e-4)
+    e4 = _noise_of_whole_episodes(dataclasses.replace(s, noise_correlated_entries=[0]))
+    np.testing.assert_allclose(e4[:, 1:, :, 0], e4[:, :1, :, 0].repeat(5, 1), atol=1e-4)
+    assert np.all(np.abs(np.diff(e4[..., 1:], axis=1)) > 1e-4)
     with pytest.raises(ValueError, match="noise_correlation"):
         MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
 
