@@ -153,6 +153,19 @@ class MARLSettings:
         and the rest scaled by ``sqrt(N / (N - 1))`` (N UAVs), so that each UAV's noise stays
         standard normal but the swarm's noises sum to zero: every draw tries differences
         between the UAVs (some held back, others ahead), never a shift of the whole swarm.
+    start_hold_decisions : int
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
+        Exploring starts for training (default 0: off; needs ``env.action_frame: route`` and
+        no residual base). At every training episode's start each UAV draws ``h`` uniformly
+        from ``0, 1, ..., start_hold_decisions``, and for its first ``h`` decisions its speed
+        set-point is -1 (held in place; its other set-points are the actor's draws). Those
+        decisions are left out of PPO's objective (advantage weight 0; the advantages of the
+        others are standardised over the rollout's learning decisions), so that to the learner
+        an episode starts where the held UAVs are released: a swarm strung out along the
+        route by up to ``start_hold_decisions * action_repeat`` steps, or together. The
+        critic still learns every decision's value. Evaluation and exported policies never
+        hold.
     """
 
     algorithm: str = "mappo"
@@ -192,6 +205,7 @@ class MARLSettings:
     noise_correlated_decisions: int = 0
     noise_correlated_entries: list[int] | None = None
     noise_centred_entries: list[int] = field(default_factory=list)
+    start_hold_decisions: int = 0
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -307,6 +321,11 @@ class MARLSettings:
         ):
             raise bad("noise_centred_entries", "a list of distinct action entries 0, 1, 2")
         self.noise_centred_entries = [int(e) for e in ents]
+        h = self.start_hold_decisions
+        if isinstance(h, bool) or not isinstance(h, int) or h < 0:
+            raise bad("start_hold_decisions", "an integer >= 0")
+        if h > 0 and self.residual_base is not None:
+            raise bad("start_hold_decisions", "0 with a residual_base (it holds set-points)")
         if ents and self.noise_correlation == 0.0:
             raise bad("noise_centred_entries", "empty unless noise_correlation > 0")
         if not isinstance(self.residual_wall_guard, bool):

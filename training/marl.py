@@ -330,6 +330,14 @@ class MARLTrainer:
             gamma=settings.gamma**settings.action_repeat,
             lmbda=settings.gae_lambda,
         )
+        if settings.start_hold_decisions > 0:
+            if self.venv.config.action_frame != "route":
+                raise ValueError(
+                    "torchrl.start_hold_decisions needs env.action_frame 'route' (its speed "
+                    f"set-point -1 holds a UAV in place), got {self.venv.config.action_frame!r}"
+                )
+            # the advantages are standardised over the learning decisions in update()
+            self.loss.normalize_advantage = False
         self.optim = torch.optim.Adam(self.loss.parameters(), lr=settings.learning_rate)
         self.reward_std = _RunningStd((settings.n_copies, self.n_agents), settings.gamma)
         self.agent_steps = 0
@@ -340,6 +348,7 @@ class MARLTrainer:
         obs, _ = self.venv.reset(seed=self._env_seed)
         self._obs = obs.copy()
         self._start_noise()
+        self._start_hold()
         for b in self._bases:
             if b is not None:
                 b.reset()
@@ -375,7 +384,7 @@ class MARLTrainer:
         s = self.settings
         k_, t_, n_ = s.n_copies, s.rollout_steps, self.n_agents
         actor_in, critic_in, next_critic_in, acts, logps = [], [], [], [], []
-        rewards, dones, terms = [], [], []
+        rewards, dones, terms, learns = [], [], [], []
         agents = self.venv.possible_agents
         state = self._states()
         for _ in range(t_):
@@ -393,9 +402,17 @@ class MARLTrainer:
                 with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
                     td = self.actor(td)
                 raw, logp = td["agents", "action"].numpy(), td["agents", "action_log_prob"].numpy()
-            n_c_in, acc, ended, state = self._act_held(raw, obs_d, base)
+            held = self._hold > 0  # (K, N): exploring starts (start_hold_decisions)
+            flown = raw
+            if held.any():
+                flown = raw.copy()
+                flown[..., 0][held] = -1.0
+            n_c_in, acc, ended, state = self._act_held(flown, obs_d, base)
             if s.noise_correlation > 0.0:
                 self._advance_noise(ended)
+            if s.start_hold_decisions > 0:
+                self._advance_hold(ended)
+            learns.append(~held)
             actor_in.append(a_in)
             critic_in.append(c_in)
             next_critic_in.append(n_c_in)
@@ -424,7 +441,23 @@ class MARLTrainer:
             },
             batch_size=[k_, t_],
         )
+        if s.start_hold_decisions > 0:
+            data["agents", "learn"] = stack(learns, torch.bool)[..., None]
         return data
+
+    def _start_hold(self) -> None:
+        """Every copy's held decisions for its first episode (``start_hold_decisions``),
+        from a generator of its own seeded with the reset seed."""
+        self._hold_rng = np.random.default_rng([self._env_seed, 0x686F6C64])
+        self._hold = np.zeros((self.settings.n_copies, self.n_agents), dtype=np.int64)
+        self._advance_hold(np.ones(self.settings.n_copies, dtype=bool))
+
+    def _advance_hold(self, ended: np.ndarray) -> None:
+        """One decision less to hold for every UAV; a new draw, uniform in ``0, 1, ...,
+        start_hold_decisions``, for every UAV of the copies whose episode ``ended``."""
+        h = self.settings.start_hold_decisions
+        draw = self._hold_rng.integers(0, h + 1, size=self._hold.shape)
+        self._hold = np.where(ended[:, None], draw, np.maximum(self._hold - 1, 0))
 
     def _start_noise(self) -> None:
         """Every copy's first noise draw (``noise_correlation > 0``), from a generator of its
@@ -773,6 +806,8 @@ class MARLTrainer:
                 params=self.loss.critic_network_params,
                 target_params=self.loss.target_critic_network_params,
             )
+        if s.start_hold_decisions > 0:
+            _standardise_learning_advantages(data)
         flat = data.reshape(-1)
         n = flat.shape[0]
         mb = max(1, s.minibatch_size // self.n_agents)
@@ -886,6 +921,22 @@ class MARLTrainer:
                     row[f"ep_{key}"] = float(np.mean([e[key] for e in recent]))
             if on_iteration is not None:
                 on_iteration(row)
+
+
+def _standardise_learning_advantages(data: Any) -> None:
+    """Standardise the rollout's advantages over its learning decisions (``("agents",
+    "learn")``) and set the others' to 0, so that PPO's objective leaves them out."""
+    import torch
+
+    learn = data["agents", "learn"]
+    adv = data["agents", "advantage"]
+    sel = adv[learn]
+    if sel.numel() > 1:
+        std = sel.std().clamp_min(1e-8)
+        adv = torch.where(learn, (adv - sel.mean()) / std, torch.zeros_like(adv))
+    else:
+        adv = torch.zeros_like(adv)
+    data["agents", "advantage"] = adv
 
 
 def _steps_bar(total: int, show: bool, desc: str, unit: str) -> Any:

@@ -490,6 +490,12 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
     ),
     ExperimentalSetting(
         "MARLSettings",
+        "start_hold_decisions",
+        None,
+        "exploring starts: training episodes start with UAVs held in place a random while",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
         "noise_centred_entries",
         None,
         "the exploration noise of these action entries sums to zero over the swarm",

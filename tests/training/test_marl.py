@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import warnings
 
@@ -55,6 +56,8 @@ def _one_thread():
         ("noise_centred_entries", [3]),
         ("noise_centred_entries", [0, 0]),
         ("noise_centred_entries", [0]),  # needs noise_correlation > 0
+        ("start_hold_decisions", -1),
+        ("start_hold_decisions", True),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -344,6 +347,56 @@ def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -
     assert np.all(np.abs(np.diff(e4[..., 1:], axis=1)) > 1e-4)
     with pytest.raises(ValueError, match="noise_correlation"):
         MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
+
+
+def test_exploring_starts_hold_uavs_in_place_and_leave_them_out_of_the_objective() -> None:
+    s = MARLSettings(algorithm="mappo", n_copies=16, rollout_steps=8, start_hold_decisions=2)
+    env = {"n_uavs": 3, "max_steps": 5, "action_frame": "route"}
+    tr = MARLTrainer(s, env, seed=5)
+    flown = []
+    step = tr.venv.step
+    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    data = tr.collect()
+    learn = data["agents", "learn"].numpy()[..., 0]  # (copy, decision, UAV)
+    cmd = np.stack(flown, axis=1)  # (copy, decision, UAV, entry): action_repeat 1
+    raw = np.clip(data["agents", "action"].numpy(), -1.0, 1.0)
+    # held decisions fly the speed set-point -1 (in place), the others the actor's draw
+    assert np.all(cmd[..., 0][~learn] == -1.0)
+    np.testing.assert_array_equal(cmd[..., 0][learn], raw[..., 0][learn])
+    np.testing.assert_array_equal(cmd[..., 1:], raw[..., 1:])
+    # each UAV is held for the first 0, 1 or 2 decisions of every episode, then released
+    done = data["next", "agents", "done"].numpy()[:, :, 0, 0]
+    starts = np.zeros_like(done)
+    starts[:, 1:] = done[:, :-1]
+    starts[:, 0] = True
+    held_counts = []
+    for k in range(16):
+        begin = [*np.flatnonzero(starts[k]).tolist(), 8]
+        for a, b in itertools.pairwise(begin):
+            if b - a < 3:  # an episode cut by the rollout's end
+                continue
+            for u in range(3):
+                h = int(np.argmax(learn[k, a:b, u])) if learn[k, a:b, u].any() else b - a
+                assert learn[k, a + h : b, u].all() and not learn[k, a : a + h, u].any()
+                held_counts.append(h)
+    assert set(held_counts) == {0, 1, 2}
+    assert done.any()  # some copies met a second episode, with new holds
+    # the update leaves held decisions out (advantage 0) and standardises the others
+    tr.update(data)
+    adv = data["agents", "advantage"].numpy()[..., 0]
+    assert np.all(adv[~learn] == 0.0)
+    assert abs(adv[learn].mean()) < 1e-5 and abs(adv[learn].std(ddof=1) - 1.0) < 1e-4
+    # the same seed holds the same UAVs
+    tr2 = MARLTrainer(s, env, seed=5)
+    np.testing.assert_array_equal(tr2.collect()["agents", "learn"].numpy()[..., 0], learn)
+    # off by default: no mask, nothing held
+    assert ("agents", "learn") not in MARLTrainer(
+        dataclasses.replace(s, start_hold_decisions=0), env, seed=5
+    ).collect().keys(True)
+    with pytest.raises(ValueError, match=r"start_hold_decisions.*route"):
+        MARLTrainer(s, {"n_uavs": 3}, seed=5)
+    with pytest.raises(ValueError, match="start_hold_decisions"):
+        MARLSettings(residual_base="wide", start_hold_decisions=2)
 
 
 def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) -> None:
