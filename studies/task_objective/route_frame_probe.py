@@ -12,7 +12,10 @@ Two measurements on held-out episodes of ``urban_canyon_v1`` in the route action
    altitude set-point at the top of the band (``a2 = 1``), with UAV ``k``'s speed set-point
    scaled by ``1 - k * slowdown`` (strung out, as the set-points above), and with both. The
    paired difference in score to the policy as it is says how much each change, which needs
-   nothing new to be learned, would be worth.
+   nothing new to be learned, would be worth. With ``--hold-s H > 0`` two more variants:
+   UAV ``k`` held in place (speed set-point -1) for the episode's first ``k * H`` steps and
+   then flown by the policy, as it is and at the top of the band: what the policy makes of
+   a swarm opened like the column (one slot of ``H`` seconds per UAV).
 
 Each row gives the mean score with its 95 % bootstrap interval, the goal and collision rates,
 the mean navigation error, the mean distance to the nearest UAV during the cruise, the mean
@@ -51,6 +54,9 @@ KEYS = (
 OVERRIDES = ("as is", "top of the band", "strung out", "top of the band, strung out")
 """The variants of part 2, in order (the first is the policy itself)."""
 
+HELD_OVERRIDES = ("held start", "held start, top of the band")
+"""The variants of part 2 added by ``hold_s > 0``."""
+
 
 class OverriddenPolicy:
     """A route-frame ``policy`` with some of its set-points replaced.
@@ -65,6 +71,9 @@ class OverriddenPolicy:
         Fly every UAV's altitude set-point at the top of the band (``a2 = 1``).
     slowdown : float
         UAV ``k``'s speed set-point is scaled by ``1 - k * slowdown``, in ``[0, 1 / (N - 1))``.
+    hold_steps : int
+        UAV ``k``'s speed set-point is -1 (held in place) for the episode's first
+        ``k * hold_steps`` steps (default 0: never).
     """
 
     def __init__(
@@ -73,16 +82,22 @@ class OverriddenPolicy:
         agents: Sequence[str],
         top: bool,
         slowdown: float,
+        hold_steps: int = 0,
     ) -> None:
         from studies.task_objective.spreading_probe import slowdown_factors
 
+        if hold_steps < 0:
+            raise ValueError(f"hold_steps must be >= 0, got {hold_steps!r}")
         self.factor = slowdown_factors(agents, slowdown)
+        self.held_for = {agent: k * int(hold_steps) for k, agent in enumerate(agents)}
         self.policy = policy
         self.top = bool(top)
         self.name = getattr(policy, "name", "policy")
+        self._t = 0
 
     def reset(self, seed: int | None = None) -> None:
         self.policy.reset(seed=seed)
+        self._t = 0
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         out = {}
@@ -90,9 +105,12 @@ class OverriddenPolicy:
             a = np.clip(np.array(a, dtype=np.float32, copy=True), -1.0, 1.0)
             # the speed set-point is (a0 + 1) / 2 * max_speed_mps
             a[0] = (a[0] + 1.0) * self.factor[agent] - 1.0
+            if self._t < self.held_for[agent]:
+                a[0] = -1.0
             if self.top:
                 a[2] = 1.0
             out[agent] = a
+        self._t += 1
         return out
 
 
@@ -119,6 +137,7 @@ def probe(
     slowdown: float,
     seeds: Sequence[int],
     reps: int = 2000,
+    hold_s: float = 0.0,
 ) -> dict[str, Any]:
     """Fly both parts (module docstring); returns the report as a dict."""
     from tqdm.auto import tqdm
@@ -153,12 +172,15 @@ def probe(
         variants = []
         base: np.ndarray | None = None
         with policy_in_its_env(name) as (env, policy):
-            for label in OVERRIDES:
+            hold_steps = round(hold_s / env.config.dt_s)
+            labels = OVERRIDES + (HELD_OVERRIDES if hold_steps > 0 else ())
+            for label in labels:
                 wrapped = OverriddenPolicy(
                     policy,
                     env.possible_agents,
                     top="top" in label,
                     slowdown=slowdown if "strung" in label else 0.0,
+                    hold_steps=hold_steps if "held" in label else 0,
                 )
                 rows = fly_policy(env, wrapped, seeds)
                 scores = np.array([r["score"] for r in rows])
@@ -177,6 +199,7 @@ def probe(
         "episodes": len(seeds),
         "speed_mps": speed_mps,
         "slowdown": slowdown,
+        **({"hold_s": hold_s} if hold_s > 0 else {}),
         "fixed": fixed,
         "learned": learned,
     }
@@ -208,10 +231,11 @@ def to_markdown(report: Mapping[str, Any]) -> str:
     for r in report["fixed"]:
         lines.append(f"| {r['altitude_m']:g} | {r['step_mps']:g} | {iv(r['score'])} | {parts(r)}")
     sd = report["slowdown"]
+    held = f"; held start: UAV k held {report['hold_s']:g} k s" if "hold_s" in report else ""
     for pol in report["learned"]:
         lines += [
             "",
-            f"## `{pol['policy']}` overridden (strung out: UAV k's speed x (1 - {sd:g} k))",
+            f"## `{pol['policy']}` overridden (strung out: UAV k's speed x (1 - {sd:g} k){held})",
             "",
             "| variant | score [95 % CI] | minus as is " + head,
             "|---|---|---|---:|---:|---:|---:|---:|---:|",
@@ -260,6 +284,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="the strung-out variants scale UAV k's speed set-point by 1 - k x this "
         "(default: 0.15, the speed steps of 1.5 m/s at 10 m/s)",
     )
+    p.add_argument(
+        "--hold-s",
+        type=float,
+        default=0.0,
+        help="add the held-start variants: UAV k held in place for the first k x this "
+        "many seconds (default: 0, none)",
+    )
     p.add_argument("--episodes", type=int, default=40, help="held-out episodes (default: 40)")
     p.add_argument("--seed-start", type=int, default=1_000_000, help="first reset seed")
     p.add_argument("--reps", type=int, default=2000, help="bootstrap replicates")
@@ -270,7 +301,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     altitudes = _numbers(p, "--altitudes", args.altitudes)
     steps = _numbers(p, "--steps", args.steps)
     seeds = heldout_seeds(args.episodes, args.seed_start)
-    report = probe(args.policies, args.speed, altitudes, steps, args.slowdown, seeds, args.reps)
+    if args.hold_s < 0:
+        p.error(f"--hold-s must be >= 0, got {args.hold_s!r}")
+    report = probe(
+        args.policies, args.speed, altitudes, steps, args.slowdown, seeds, args.reps, args.hold_s
+    )
     title = "The route frame: what altitude and spreading are worth"
     write_report(out, title, report, to_markdown(report))
     return 0

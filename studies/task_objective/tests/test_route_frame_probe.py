@@ -36,6 +36,21 @@ def test_overrides_raise_the_altitude_and_scale_the_speed_set_point() -> None:
         rp.OverriddenPolicy(_Constant(), agents, top=False, slowdown=0.5)  # the last would stop
 
 
+def test_a_held_start_holds_uav_k_for_k_slots_then_lets_the_policy_fly() -> None:
+    agents = ["uav_0", "uav_1", "uav_2"]
+    p = rp.OverriddenPolicy(_Constant(), agents, top=False, slowdown=0.0, hold_steps=2)
+    obs = {a: np.zeros(3) for a in agents}
+    for episode in range(2):  # reset starts the hold again
+        p.reset(seed=episode)
+        acts = [p.act(obs) for _ in range(6)]  # one call per step
+        speeds = np.array([[act[a][0] for a in agents] for act in acts])
+        held = np.array([[t < 2 * k for k in range(3)] for t in range(6)])
+        np.testing.assert_array_equal(speeds[held], -1.0)
+        np.testing.assert_allclose(speeds[~held], 0.6, rtol=1e-6)
+    with pytest.raises(ValueError, match="hold_steps"):
+        rp.OverriddenPolicy(_Constant(), agents, top=False, slowdown=0.0, hold_steps=-1)
+
+
 def test_probe_writes_both_parts_and_the_overrides_do_what_they_say(tmp_path) -> None:
     out = tmp_path / "probe"
     args = ["--policies", "mappo:pretrained/v1_route_s0", "--altitudes", "30"]
@@ -46,13 +61,24 @@ def test_probe_writes_both_parts_and_the_overrides_do_what_they_say(tmp_path) ->
     assert [r["step_mps"] for r in fixed] == [0.0, 1.5]
     assert fixed[1]["cruise_spacing_m"] > 3 * fixed[0]["cruise_spacing_m"]
     by = {r["variant"]: r for r in learned["variants"]}
-    assert list(by) == list(rp.OVERRIDES)
+    assert list(by) == list(rp.OVERRIDES)  # no held start unless asked
+    assert "hold_s" not in report
     assert "score_minus_as_is" not in by["as is"]
     assert by["top of the band"]["cruise_altitude_m"] > by["as is"]["cruise_altitude_m"]
     assert by["strung out"]["cruise_spacing_m"] > by["as is"]["cruise_spacing_m"]
     assert "overridden" in (out / "report.md").read_text()
     with pytest.raises(SystemExit):  # an existing report needs --overwrite
         rp.main(args)
+    # the held start: UAVs opened like a column fly farther apart than as is
+    held = [*args[:-1], str(tmp_path / "held"), "--hold-s", "6", "--steps", "0"]
+    assert rp.main(held) == 0
+    report = json.loads((tmp_path / "held" / "report.json").read_text())
+    by = {r["variant"]: r for r in report["learned"][0]["variants"]}
+    assert list(by) == list(rp.OVERRIDES + rp.HELD_OVERRIDES)
+    assert report["hold_s"] == 6.0
+    assert by["held start"]["cruise_spacing_m"] > by["as is"]["cruise_spacing_m"] + 5.0
+    with pytest.raises(SystemExit):
+        rp.main([*held, "--hold-s", "-1", "--overwrite"])
 
 
 def test_probe_refuses_a_policy_of_the_velocity_frame(tmp_path) -> None:
