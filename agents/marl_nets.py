@@ -166,6 +166,16 @@ class MARLSettings:
         route by up to ``start_hold_decisions * action_repeat`` steps, or together. The
         critic still learns every decision's value. Evaluation and exported policies never
         hold.
+    start_hold_objective : {"masked", "importance"}
+        *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
+        removed).
+        What PPO makes of the held decisions of ``start_hold_decisions`` (default
+        ``"masked"``: left out, as above). ``"importance"``: a held decision's speed entry is
+        drawn from the actor's Gaussian below -1 (its tail, which the clipping flies as -1)
+        and its logged log-probability is that of the behaviour, the actor's minus
+        ``log P(a0 <= -1)``, so that PPO's ratio is the importance weight ``pi / behaviour``
+        of a hold: the held decisions then teach the actor to hold where holding paid,
+        weighted by how likely the actor was to hold.
     """
 
     algorithm: str = "mappo"
@@ -206,6 +216,7 @@ class MARLSettings:
     noise_correlated_entries: list[int] | None = None
     noise_centred_entries: list[int] = field(default_factory=list)
     start_hold_decisions: int = 0
+    start_hold_objective: str = "masked"
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -326,6 +337,8 @@ class MARLSettings:
             raise bad("start_hold_decisions", "an integer >= 0")
         if h > 0 and self.residual_base is not None:
             raise bad("start_hold_decisions", "0 with a residual_base (it holds set-points)")
+        if self.start_hold_objective not in ("masked", "importance"):
+            raise bad("start_hold_objective", "'masked' or 'importance'")
         if ents and self.noise_correlation == 0.0:
             raise bad("noise_centred_entries", "empty unless noise_correlation > 0")
         if not isinstance(self.residual_wall_guard, bool):

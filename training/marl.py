@@ -330,12 +330,16 @@ class MARLTrainer:
             gamma=settings.gamma**settings.action_repeat,
             lmbda=settings.gae_lambda,
         )
+        self._masked_holds = (
+            settings.start_hold_decisions > 0 and settings.start_hold_objective == "masked"
+        )
         if settings.start_hold_decisions > 0:
             if self.venv.config.action_frame != "route":
                 raise ValueError(
                     "torchrl.start_hold_decisions needs env.action_frame 'route' (its speed "
                     f"set-point -1 holds a UAV in place), got {self.venv.config.action_frame!r}"
                 )
+        if self._masked_holds:
             # the advantages are standardised over the learning decisions in update()
             self.loss.normalize_advantage = False
         self.optim = torch.optim.Adam(self.loss.parameters(), lr=settings.learning_rate)
@@ -404,7 +408,10 @@ class MARLTrainer:
                 raw, logp = td["agents", "action"].numpy(), td["agents", "action_log_prob"].numpy()
             held = self._hold > 0  # (K, N): exploring starts (start_hold_decisions)
             flown = raw
-            if held.any():
+            if held.any() and not self._masked_holds:
+                raw, logp = self._draw_holds(td, raw, logp, held)
+                flown = raw
+            elif held.any():
                 flown = raw.copy()
                 flown[..., 0][held] = -1.0
             n_c_in, acc, ended, state = self._act_held(flown, obs_d, base)
@@ -441,9 +448,34 @@ class MARLTrainer:
             },
             batch_size=[k_, t_],
         )
-        if s.start_hold_decisions > 0:
+        if self._masked_holds:
             data["agents", "learn"] = stack(learns, torch.bool)[..., None]
         return data
+
+    def _draw_holds(
+        self, td: Any, raw: np.ndarray, logp: np.ndarray, held: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``start_hold_objective: importance``: the held UAVs' speed entry redrawn from the
+        actor's Gaussian below -1 and their log-probabilities made the behaviour's (the
+        actor's minus ``log P(a0 <= -1)``); the others' as drawn."""
+        import torch
+
+        with torch.no_grad():
+            dist = self.actor.get_dist(td.select(("agents", "observation")))
+            normal = dist.base_dist
+            mu = normal.loc[..., 0].double()
+            sd = normal.scale[..., 0].double()
+            c = (-1.0 - mu) / sd  # the standardised edge of the tail
+            log_tail = torch.special.log_ndtr(c)
+            u = torch.from_numpy(self._hold_rng.random(tuple(c.shape)))
+            z = torch.special.ndtri(u * torch.exp(log_tail))
+            z = torch.where(torch.isfinite(z), torch.minimum(z, c), c)
+            action = torch.from_numpy(raw.copy())
+            mask = torch.from_numpy(held)
+            action[..., 0] = torch.where(mask, (mu + sd * z).float(), action[..., 0])
+            action[..., 0] = torch.where(mask, action[..., 0].clamp_max(-1.0), action[..., 0])
+            behaviour = dist.log_prob(action) - torch.where(mask, log_tail, 0.0).float()
+        return action.numpy(), np.where(held, behaviour.numpy(), logp)
 
     def _start_hold(self) -> None:
         """Every copy's held decisions for its first episode (``start_hold_decisions``),
@@ -806,7 +838,7 @@ class MARLTrainer:
                 params=self.loss.critic_network_params,
                 target_params=self.loss.target_critic_network_params,
             )
-        if s.start_hold_decisions > 0:
+        if self._masked_holds:
             _standardise_learning_advantages(data)
         flat = data.reshape(-1)
         n = flat.shape[0]

@@ -496,6 +496,12 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
     ),
     ExperimentalSetting(
         "MARLSettings",
+        "start_hold_objective",
+        None,
+        "held decisions left out of PPO's objective, or weighted by importance",
+    ),
+    ExperimentalSetting(
+        "MARLSettings",
         "noise_centred_entries",
         None,
         "the exploration noise of these action entries sums to zero over the swarm",

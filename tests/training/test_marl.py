@@ -58,6 +58,7 @@ def _one_thread():
         ("noise_centred_entries", [0]),  # needs noise_correlation > 0
         ("start_hold_decisions", -1),
         ("start_hold_decisions", True),
+        ("start_hold_objective", "ignored"),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -397,6 +398,44 @@ def test_exploring_starts_hold_uavs_in_place_and_leave_them_out_of_the_objective
         MARLTrainer(s, {"n_uavs": 3}, seed=5)
     with pytest.raises(ValueError, match="start_hold_decisions"):
         MARLSettings(residual_base="wide", start_hold_decisions=2)
+
+
+def test_importance_weighted_holds_draw_the_tail_and_log_the_behaviour() -> None:
+    from scipy.stats import norm
+
+    s = MARLSettings(
+        algorithm="mappo",
+        n_copies=16,
+        rollout_steps=4,
+        start_hold_decisions=2,
+        start_hold_objective="importance",
+    )
+    env = {"n_uavs": 3, "max_steps": 50, "action_frame": "route"}
+    tr = MARLTrainer(s, env, seed=6)
+    flown = []
+    step = tr.venv.step
+    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    data = tr.collect()
+    assert ("agents", "learn") not in data.keys(True)  # every decision learns
+    assert tr.loss.normalize_advantage
+    act = data["agents", "action"].numpy()
+    with torch.no_grad():
+        dist = tr.actor.get_dist(data.select(("agents", "observation")))
+        pi = dist.log_prob(data["agents", "action"]).numpy()
+        mu, sd = dist.base_dist.loc[..., 0].numpy(), dist.base_dist.scale[..., 0].numpy()
+    tail = norm.logcdf((-1.0 - mu) / sd)
+    logged = data["agents", "action_log_prob"].numpy()
+    # the first decision: which UAVs are held is a draw of 0, 1, 2 per UAV (2 of 3 held)
+    first = act[:, 0, :, 0] <= -1.0
+    assert 0.5 < first.mean() < 0.85  # 48 draws, P(held) = 2/3
+    cmd = np.stack(flown, axis=1)
+    np.testing.assert_array_equal(cmd[:, 0, :, 0][first], -1.0)
+    # held: the behaviour's log-probability (tail-truncated speed draw), else the actor's
+    np.testing.assert_allclose(logged[:, 0][first], (pi[:, 0] - tail[:, 0])[first], rtol=1e-4)
+    np.testing.assert_allclose(logged[:, 0][~first], pi[:, 0][~first], rtol=1e-5)
+    # by the third decision nobody is held: actor's own draws, below -1 only by chance
+    np.testing.assert_allclose(logged[:, 2:], pi[:, 2:], rtol=1e-5)
+    assert (act[:, 2:, :, 0] <= -1.0).mean() < 0.2
 
 
 def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) -> None:
