@@ -166,7 +166,7 @@ class MARLSettings:
         route by up to ``start_hold_decisions * action_repeat`` steps, or together. The
         critic still learns every decision's value. Evaluation and exported policies never
         hold.
-    start_hold_objective : {"masked", "importance"}
+    start_hold_objective : {"masked", "importance", "unweighted"}
         *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
         removed).
         What PPO makes of the held decisions of ``start_hold_decisions`` (default
@@ -175,7 +175,10 @@ class MARLSettings:
         and its logged log-probability is that of the behaviour, the actor's minus
         ``log P(a0 <= -1)``, so that PPO's ratio is the importance weight ``pi / behaviour``
         of a hold: the held decisions then teach the actor to hold where holding paid,
-        weighted by how likely the actor was to hold.
+        weighted by how likely the actor was to hold. ``"unweighted"``: the same draws,
+        logged with the actor's own log-probability, as if it had drawn them (PPO's ratio
+        starts at 1): a biased estimate that pushes the actor toward holds that paid, and
+        away from holds that did not, as strongly as toward its own draws.
     """
 
     algorithm: str = "mappo"
@@ -337,8 +340,8 @@ class MARLSettings:
             raise bad("start_hold_decisions", "an integer >= 0")
         if h > 0 and self.residual_base is not None:
             raise bad("start_hold_decisions", "0 with a residual_base (it holds set-points)")
-        if self.start_hold_objective not in ("masked", "importance"):
-            raise bad("start_hold_objective", "'masked' or 'importance'")
+        if self.start_hold_objective not in ("masked", "importance", "unweighted"):
+            raise bad("start_hold_objective", "'masked', 'importance' or 'unweighted'")
         if ents and self.noise_correlation == 0.0:
             raise bad("noise_centred_entries", "empty unless noise_correlation > 0")
         if not isinstance(self.residual_wall_guard, bool):

@@ -455,9 +455,10 @@ class MARLTrainer:
     def _draw_holds(
         self, td: Any, raw: np.ndarray, logp: np.ndarray, held: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``start_hold_objective: importance``: the held UAVs' speed entry redrawn from the
-        actor's Gaussian below -1 and their log-probabilities made the behaviour's (the
-        actor's minus ``log P(a0 <= -1)``); the others' as drawn."""
+        """The held UAVs' speed entry redrawn from the actor's Gaussian below -1 and their
+        log-probabilities the behaviour's (the actor's minus ``log P(a0 <= -1)``;
+        ``start_hold_objective: importance``) or the actor's (``unweighted``); the others'
+        as drawn."""
         import torch
 
         with torch.no_grad():
@@ -474,7 +475,9 @@ class MARLTrainer:
             mask = torch.from_numpy(held)
             action[..., 0] = torch.where(mask, (mu + sd * z).float(), action[..., 0])
             action[..., 0] = torch.where(mask, action[..., 0].clamp_max(-1.0), action[..., 0])
-            behaviour = dist.log_prob(action) - torch.where(mask, log_tail, 0.0).float()
+            behaviour = dist.log_prob(action)
+            if self.settings.start_hold_objective == "importance":
+                behaviour = behaviour - torch.where(mask, log_tail, 0.0).float()
         return action.numpy(), np.where(held, behaviour.numpy(), logp)
 
     def _start_hold(self) -> None:

@@ -436,6 +436,11 @@ def test_importance_weighted_holds_draw_the_tail_and_log_the_behaviour() -> None
     # by the third decision nobody is held: actor's own draws, below -1 only by chance
     np.testing.assert_allclose(logged[:, 2:], pi[:, 2:], rtol=1e-5)
     assert (act[:, 2:, :, 0] <= -1.0).mean() < 0.2
+    # unweighted: the same held draws, logged with the actor's own log-probability
+    tr_u = MARLTrainer(dataclasses.replace(s, start_hold_objective="unweighted"), env, seed=6)
+    data_u = tr_u.collect()
+    np.testing.assert_array_equal(data_u["agents", "action"].numpy(), act)
+    np.testing.assert_allclose(data_u["agents", "action_log_prob"].numpy(), pi, rtol=1e-5)
 
 
 def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) -> None:
