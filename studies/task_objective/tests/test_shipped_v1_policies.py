@@ -26,6 +26,8 @@ NOISE_HELD_REPORT = STUDY / "learned_route_noise_held" / "report.json"
 NOISE_START_REPORT = STUDY / "learned_route_noise_start" / "report.json"
 NOISE_START_8M_REPORT = STUDY / "learned_route_noise_start_8m" / "report.json"
 NOISE_SPEED_REPORT = STUDY / "learned_route_noise_start_speed" / "report.json"
+HOLD_REPORT = STUDY / "learned_route_hold" / "report.json"
+HOLD_IPPO_REPORT = STUDY / "learned_route_hold_ippo" / "report.json"
 POLICIES = "studies/task_objective/policies"
 SHIPPED = (
     "mappo:pretrained/v1_s0",
@@ -57,7 +59,10 @@ ROUTE_SHIPPED = (
     + [(NOISE_HELD_REPORT, "mappo:studies/task_objective/policies/mappo_route_noise_held_bc_s0")]
     + [(NOISE_START_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_bc_4m_s1")]
     + [(NOISE_START_8M_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_8m_s2")]
-    + [(NOISE_SPEED_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_speed_bc_4m_s1")],
+    + [(NOISE_SPEED_REPORT, f"mappo:{POLICIES}/mappo_route_noise_start_speed_bc_4m_s1")]
+    + [(HOLD_REPORT, f"mappo:{POLICIES}/mappo_route_hold_unweighted_bc_8m_s0")]
+    + [(HOLD_REPORT, f"mappo:{POLICIES}/mappo_route_hold_importance_bc_4m_s2")]
+    + [(HOLD_IPPO_REPORT, f"ippo:{POLICIES}/ippo_route_hold_unweighted_bc_4m_s1")],
 )
 def test_a_shipped_policy_flies_the_reports_episodes_again(
     report_path, policy, monkeypatch
