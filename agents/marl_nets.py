@@ -159,13 +159,13 @@ class MARLSettings:
         Exploring starts for training (default 0: off; needs ``env.action_frame: route`` and
         no residual base). At every training episode's start each UAV draws ``h`` uniformly
         from ``0, 1, ..., start_hold_decisions``, and for its first ``h`` decisions its speed
-        set-point is -1 (held in place; its other set-points are the actor's draws). Those
-        decisions are left out of PPO's objective (advantage weight 0; the advantages of the
-        others are standardised over the rollout's learning decisions), so that to the learner
-        an episode starts where the held UAVs are released: a swarm strung out along the
-        route by up to ``start_hold_decisions * action_repeat`` steps, or together. The
-        critic still learns every decision's value. Evaluation and exported policies never
-        hold.
+        set-point is -1 (held in place; its other set-points are the actor's draws). With the
+        default ``start_hold_objective: masked`` those decisions are left out of PPO's
+        objective (advantage weight 0; the advantages of the others are standardised over the
+        rollout's learning decisions), so that to the learner an episode starts where the held
+        UAVs are released: a swarm strung out along the route by up to
+        ``start_hold_decisions * action_repeat`` steps, or together. The critic learns every
+        decision's value. Evaluation and exported policies never hold.
     start_hold_objective : {"masked", "importance", "unweighted"}
         *Experimental* (:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`: may change or be
         removed).
