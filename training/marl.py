@@ -408,12 +408,13 @@ class MARLTrainer:
                 raw, logp = td["agents", "action"].numpy(), td["agents", "action_log_prob"].numpy()
             held = self._hold > 0  # (K, N): exploring starts (start_hold_decisions)
             flown = raw
-            if held.any() and not self._masked_holds:
-                raw, logp = self._draw_holds(td, raw, logp, held)
-                flown = raw
-            elif held.any():
-                flown = raw.copy()
-                flown[..., 0][held] = -1.0
+            if held.any():
+                if self._masked_holds:  # flown held, stored as drawn (left out of the loss)
+                    flown = raw.copy()
+                    flown[..., 0][held] = -1.0
+                else:  # stored as flown, a tail draw
+                    raw, logp = self._draw_holds(td, raw, logp, held)
+                    flown = raw
             n_c_in, acc, ended, state = self._act_held(flown, obs_d, base)
             if s.noise_correlation > 0.0:
                 self._advance_noise(ended)
@@ -473,8 +474,8 @@ class MARLTrainer:
             z = torch.where(torch.isfinite(z), torch.minimum(z, c), c)
             action = torch.from_numpy(raw.copy())
             mask = torch.from_numpy(held)
-            action[..., 0] = torch.where(mask, (mu + sd * z).float(), action[..., 0])
-            action[..., 0] = torch.where(mask, action[..., 0].clamp_max(-1.0), action[..., 0])
+            tail = (mu + sd * z).float().clamp_max(-1.0)
+            action[..., 0] = torch.where(mask, tail, action[..., 0])
             behaviour = dist.log_prob(action)
             if self.settings.start_hold_objective == "importance":
                 behaviour = behaviour - torch.where(mask, log_tail, 0.0).float()

@@ -350,13 +350,19 @@ def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -
         MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
 
 
+def _record_commands(tr: MARLTrainer) -> list[np.ndarray]:
+    """The list that every swarm command ``tr`` flies from now on is appended to."""
+    flown: list[np.ndarray] = []
+    step = tr.venv.step
+    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    return flown
+
+
 def test_exploring_starts_hold_uavs_in_place_and_leave_them_out_of_the_objective() -> None:
     s = MARLSettings(algorithm="mappo", n_copies=16, rollout_steps=8, start_hold_decisions=2)
     env = {"n_uavs": 3, "max_steps": 5, "action_frame": "route"}
     tr = MARLTrainer(s, env, seed=5)
-    flown = []
-    step = tr.venv.step
-    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    flown = _record_commands(tr)
     data = tr.collect()
     learn = data["agents", "learn"].numpy()[..., 0]  # (copy, decision, UAV)
     cmd = np.stack(flown, axis=1)  # (copy, decision, UAV, entry): action_repeat 1
@@ -412,9 +418,7 @@ def test_importance_weighted_holds_draw_the_tail_and_log_the_behaviour() -> None
     )
     env = {"n_uavs": 3, "max_steps": 50, "action_frame": "route"}
     tr = MARLTrainer(s, env, seed=6)
-    flown = []
-    step = tr.venv.step
-    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    flown = _record_commands(tr)
     data = tr.collect()
     assert ("agents", "learn") not in data.keys(True)  # every decision learns
     assert tr.loss.normalize_advantage
