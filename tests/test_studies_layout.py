@@ -8,9 +8,12 @@ Checked by reading the source (``ast``, ``tokenize``, regular expressions), noth
   confidence interval (``-0.22 m [-0.36, -0.07]``), no count of episodes with the figure
   measured on them, no path to a study's results beside a figure, and no ``docs/marl`` (the
   old home of the results); docstrings say what the code does and link the study instead;
-* ``studies/`` is not a package of the wheel, and every study folder has a README.md with the
-  sections question, set-up, commands, result, status (in that order), listed with a headline
-  number in ``studies/README.md``;
+* ``studies/`` is not a package of the wheel, and every study folder has a README.md that
+  answers first: the sections question, answer, how to regenerate, set-up (in that order), at
+  most 150 lines, an answer of at most about 30 lines of prose beside its tables; the record
+  in the order it was done lives in a LOG.md beside it, which the README links; the scripts
+  that either page runs exist; every study is listed with a headline number in
+  ``studies/README.md``;
 * ``benchmarks/`` holds speed measurements only (``bench_*.py``).
 """
 
@@ -26,7 +29,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 INSTALLED = ("coopnav_env", "agents", "training", "reproduction")
-STUDY_SECTIONS = ("question", "set-up", "commands", "result", "status")
+STUDY_SECTIONS = ("question", "answer", "how to regenerate", "set-up")
+MAX_README_LINES = 150
+MAX_ANSWER_PROSE_LINES = 30
+"""Non-blank lines of a study's Answer outside its tables."""
 
 _NUMBER = r"[+-]?\d+(?:[.,]\d+)*"
 _INTERVAL = re.compile(rf"{_NUMBER}\s*(?:m|%|s)?\s*\[\s*{_NUMBER}\s*,\s*{_NUMBER}\s*\]")
@@ -214,14 +220,97 @@ def readme_sections(text: str) -> list[str]:
     return heads
 
 
-def test_every_study_has_a_readme_with_its_sections():
+def readme_section(text: str, name: str) -> str:
+    """The body of the level-2 section ``name`` (lower case) of a Markdown page, up to the next
+    level-2 heading (code blocks skipped); ``""`` if there is none."""
+    body, inside, fenced = [], False, False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            fenced = not fenced
+        if not fenced and line.startswith("## "):
+            inside = line[3:].strip().lower() == name
+            continue
+        if inside:
+            body.append(line)
+    return "\n".join(body)
+
+
+def answer_prose_lines(text: str) -> int:
+    """Non-blank lines of the page's Answer that are not table rows."""
+    lines = readme_section(text, "answer").splitlines()
+    return sum(1 for x in lines if x.strip() and not x.lstrip().startswith("|"))
+
+
+def page_scripts(text: str) -> list[str]:
+    """The ``PATH.py`` of every ``python PATH.py`` command of a page."""
+    return re.findall(r"\bpython3? ((?:[\w.-]+/)*[\w.-]+\.py)\b", text)
+
+
+def _study_pages(folder: Path) -> list[Path]:
+    return [p for p in (folder / "README.md", folder / "LOG.md") if p.is_file()]
+
+
+def test_every_study_has_a_readme_that_answers_first():
     folders = _study_folders()
     assert len(folders) >= 5
     for folder in folders:
         readme = folder / "README.md"
         assert readme.is_file(), folder
-        heads = readme_sections(readme.read_text())
-        assert heads[: len(STUDY_SECTIONS)] == list(STUDY_SECTIONS), (folder.name, heads)
+        text = readme.read_text()
+        assert readme_sections(text) == list(STUDY_SECTIONS), (folder.name, readme_sections(text))
+        n = len(text.splitlines())
+        assert n <= MAX_README_LINES, (
+            f"{folder.name}/README.md: {n} lines; move the record to LOG.md"
+        )
+        prose = answer_prose_lines(text)
+        assert prose <= MAX_ANSWER_PROSE_LINES, f"{folder.name}: an Answer of {prose} lines"
+        assert readme_section(text, "how to regenerate").count("```") >= 2, folder.name
+
+
+def test_every_study_log_is_linked_from_its_readme():
+    logs = [folder for folder in _study_folders() if (folder / "LOG.md").is_file()]
+    assert logs
+    for folder in logs:
+        assert "](LOG.md)" in (folder / "README.md").read_text(), folder.name
+        assert (folder / "LOG.md").read_text().startswith("# "), folder.name
+
+
+def test_the_scripts_the_study_pages_run_exist():
+    """``python PATH.py`` in a study's README or LOG.md names a script of the repository (or of
+    the study's folder, for a path relative to it)."""
+    missing = [
+        f"{page.relative_to(ROOT)}: {script}"
+        for folder in _study_folders()
+        for page in _study_pages(folder)
+        for script in page_scripts(page.read_text())
+        if not (ROOT / script).is_file() and not (folder / script).is_file()
+    ]
+    assert missing == []
+
+
+def _slugs(path: Path) -> set[str]:
+    """GitHub's anchors of the headings of a Markdown page (code blocks skipped)."""
+    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+    heads = re.findall(r"^#{1,6} (.+)$", text, re.M)
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in heads}
+
+
+def test_the_links_of_the_study_pages_resolve():
+    """Every relative link of a study's README and LOG.md, and of the index, names a file or
+    folder of the repository, and every ``#anchor`` a heading of its target."""
+    pages = [ROOT / "studies" / "README.md"]
+    pages += [page for folder in _study_folders() for page in _study_pages(folder)]
+    broken = []
+    for page in pages:
+        text = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)
+        for link in re.findall(r"\]\(([^)\s]+)\)", text):
+            if re.match(r"[a-z]+://", link):
+                continue
+            target, _, anchor = link.partition("#")
+            path = (page.parent / target).resolve() if target else page
+            if not path.exists() or (anchor and (not path.is_file() or anchor not in _slugs(path))):
+                broken.append(f"{page.relative_to(ROOT)}: {link}")
+    assert broken == []
 
 
 def test_the_index_lists_every_study_with_a_number():
@@ -235,6 +324,35 @@ def test_the_index_lists_every_study_with_a_number():
 def test_readme_sections_are_checked():
     good = "# T\n\n## Question\n\n## Set-up\n```\n## not a heading\n```\n## Commands\n"
     assert readme_sections(good) == ["question", "set-up", "commands"]
+    page = (
+        "# T\n\n## Question\n\nQ?\n\n## Answer\n\nNo.\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\n"
+        "Because.\n```text\n## not a heading\n```\n\n## How to regenerate\n\n"
+        "```text\npython studies/x/run.py --out y\npython3 tools/z.py\n```\n"
+    )
+    assert readme_section(page, "answer").split() == [
+        "No.",
+        "|",
+        "a",
+        "|",
+        "b",
+        "|",
+        "|---|---|",
+        "|",
+        "1",
+        "|",
+        "2",
+        "|",
+        "Because.",
+        "```text",
+        "##",
+        "not",
+        "a",
+        "heading",
+        "```",
+    ]
+    assert answer_prose_lines(page) == 5
+    assert readme_section(page, "status") == ""
+    assert page_scripts(page) == ["studies/x/run.py", "tools/z.py"]
 
 
 def test_benchmarks_hold_speed_measurements_only():
