@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policies",
         nargs="+",
-        default=["random", "formation", "sky"],
+        default=["random", "column", "sky_column"],
         help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
         "setpoints (route-frame set-points; when every policy is one, flown with "
         "action_frame=route), "
