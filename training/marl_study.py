@@ -786,13 +786,13 @@ def _fly_and_report(
     if f is not None:
         figs["learning_curves"] = f.name
     figs["errors"] = plot_errors(summary, out / "errors.png", SCORE_AXIS[args.score]).name
-    # formation, the best heuristic (lowest mean score) and the first two learned methods
+    # the plain column, the best heuristic (lowest mean score) and the first two learned methods
     best = min(
-        (h for h in args.heuristics if h != "column"),
+        (h for h in args.heuristics if h not in ("column", "formation")),
         key=lambda h: summary["methods"][h]["error_mean"]["value"],
         default=None,
     )
-    show = [h for h in ("column", best) if h in results] + list(groups)[:2]
+    show = [h for h in ("column", "formation", best) if h in results] + list(groups)[:2]
     flights = {
         n: results[n][0][0].pos_enu_m for n in show if results[n][0][0].pos_enu_m is not None
     }

@@ -108,7 +108,9 @@ def one_torch_thread() -> Iterator[None]:
 def policy_in_its_env(policy_name: str) -> Iterator[tuple[Any, Any]]:
     """``(env, policy)``: an ``urban_canyon_v1`` in :func:`env_settings_of` ``policy_name``
     and the policy acting in it, torch on one thread (:func:`one_torch_thread`) for the body;
-    the environment is closed after."""
+    the environment is closed after. The privileged planner of
+    :mod:`studies.planner_headroom.planner` is registered (``planner@base=...``)."""
+    import studies.planner_headroom.planner  # noqa: F401  (registers 'planner')
     from coopnav_env import urban_canyon_v1
     from coopnav_env.agents import make_policy
 
