@@ -62,7 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28. Model files are pickles: loading an SB3 .zip or "
         "an RLlib checkpoint runs code stored in it, so load only files you trust (TorchRL .pt "
-        "files are read with torch's weights_only loader) (default: %(default)s)",
+        "files are read with torch's weights_only loader) (default: random column sky_column)",
     )
     parser.add_argument(
         "--out",
