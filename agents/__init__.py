@@ -7,37 +7,28 @@ name                      policy
 ``random``                uniform random velocity commands
                           (:mod:`coopnav_env.agents.random_policy`)
 ``column``                the swarm flies the street network to the goal as a rigid column
-                          at the start altitude, ignoring navigation quality; also
-                          ``formation`` (:mod:`coopnav_env.agents.heuristics`, as below)
+                          at the start altitude, ignoring navigation quality
+                          (:mod:`coopnav_env.agents.heuristics`, as below)
 ``sky_column``            ``column`` that climbs and shifts each UAV toward open sky while
-                          keeping contact with its neighbours; also ``sky``
+                          keeping contact with its neighbours
 ``stretched_column``      ``sky_column`` as a stretched column (20 m spacing) that closes up
-                          at the goal; also ``spread``
+                          at the goal
 ``wide_column``           ``stretched_column`` 45 m apart, opening ahead of the start and
-                          closing at the goal; also ``wide``
+                          closing at the goal
+``high_wide_column``      ``wide_column`` 60 m apart at 10 m/s, holding the top of the
+                          altitude band
 ``guarded_column``        ``wide_column`` with a wall guard (range sensor) and soft slot
-                          tracking, for degraded navigation; also ``guarded``
+                          tracking, for degraded navigation
 ``ceiling_column``        ``guarded_column`` that climbs at once and holds the top of the
-                          altitude band; also ``ceiling``
+                          altitude band
 ``best_sky_route``        ``ceiling_column`` on the street route with the best sky: of the
                           equally short routes, the one with the fewest points of poor
-                          satellite geometry predicted by the city map; also ``skyroute``
+                          satellite geometry predicted by the city map
 ``waypoint``              each UAV flies toward its next route waypoint from its own
                           observation only (:mod:`coopnav_env.agents.heuristics`)
 ``setpoints``             fixed route-frame set-points (speed, offset, altitude) for
                           every UAV, each ``speed_step_mps`` slower than the one before;
                           needs ``action_frame="route"``
-``route:<path>``          a column heuristic that flies the route a learned route model
-                          predicts best (:mod:`coopnav_env.agents.routes`;
-                          ``coopnav train-routes``);
-                          ``route:pretrained`` (``.../s1``) the shipped study models
-``split:<path>``          a column heuristic that splits over two streets where a learned
-                          split model predicts it best (:mod:`coopnav_env.agents.routes`;
-                          ``studies/split_choice/split_choice.py --fit-model``);
-                          ``split:pretrained`` (``.../s1``, ``.../s2``) the shipped models
-``planner``               privileged MPC that looks ahead in copies of the environment with
-                          the true errors: the headroom reference
-                          (:mod:`coopnav_env.agents.planner`)
 ``ppo:<path>``            a PPO model saved by ``coopnav train`` (:mod:`coopnav_env.agents.ppo`)
 ``rllib:<path>``          an RLlib checkpoint of ``coopnav train --backend rllib``
                           (:mod:`coopnav_env.agents.rllib_policy`; needs the ``ray`` extra)
@@ -49,15 +40,17 @@ name                      policy
 ========================  ==================================================================
 
 The column heuristics are one policy, :class:`~coopnav_env.agents.heuristics.ColumnPolicy`,
-with named settings (:data:`~coopnav_env.agents.heuristics.COLUMN_PRESETS`);
-the table gives their earlier names, still accepted. A heuristic takes options after ``@`` as
+with named settings (:data:`~coopnav_env.agents.heuristics.COLUMN_PRESETS`). Their earlier
+names (``formation``, ``sky``, ``spread``, ``wide``, ``guarded``, ``ceiling``, ``skyroute``)
+are accepted for one release with a ``DeprecationWarning`` naming the new one
+(:data:`~coopnav_env.agents.heuristics.COLUMN_ALIASES`). A heuristic takes options after ``@`` as
 ``key=value`` pairs separated by commas, e.g. ``waypoint@altitude_m=28`` or
 ``column@cruise_speed_mps=5,spacing_m=10``; values are read as Python literals (numbers,
 strings, ``True``/``False``). An unknown option or a bad value raises ``ValueError`` naming it.
 
 >>> from coopnav_env import urban_canyon_v0  # doctest: +SKIP
 >>> env = urban_canyon_v0.parallel_env()  # doctest: +SKIP
->>> policy = make_policy("formation", env)  # doctest: +SKIP
+>>> policy = make_policy("column", env)  # doctest: +SKIP
 >>> obs, infos = env.reset(seed=1); policy.reset(seed=1)  # doctest: +SKIP
 >>> obs, rewards, terms, truncs, infos = env.step(policy.act(obs))  # doctest: +SKIP
 
@@ -96,6 +89,7 @@ COLUMN_PRESET_NAMES: tuple[str, ...] = (
     "sky_column",
     "stretched_column",
     "wide_column",
+    "high_wide_column",
     "guarded_column",
     "ceiling_column",
     "best_sky_route",
@@ -109,20 +103,17 @@ COLUMN_PRESET_NAMES: tuple[str, ...] = (
 )
 """The column heuristics' names: the presets of
 :data:`coopnav_env.agents.heuristics.COLUMN_PRESETS`, then their earlier names
-(:data:`~coopnav_env.agents.heuristics.COLUMN_ALIASES`)."""
+(:data:`~coopnav_env.agents.heuristics.COLUMN_ALIASES`, deprecated)."""
 
 POLICY_NAMES: tuple[str, ...] = (
     "random",
     *COLUMN_PRESET_NAMES,
     "waypoint",
     "setpoints",
-    "planner",
     "ppo:<path>",
     "rllib:<path>",
     "mappo:<path>",
     "ippo:<path>",
-    "route:<path>",
-    "split:<path>",
 )
 """Names :func:`make_policy` accepts (plus those given to :func:`register_policy`)."""
 
@@ -198,11 +189,6 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from coopnav_env.agents.heuristics import column_policy
 
         return column_policy(name, env, **kwargs)
-    if name == "planner":
-        from coopnav_env.agents.planner import PrivilegedPlanner
-
-        base = kwargs.pop("base", "wide")
-        return PrivilegedPlanner(env, make_policy(base, env), **kwargs)
     if name == "waypoint":
         from coopnav_env.agents.heuristics import waypoint_policy
 
@@ -225,24 +211,6 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
         from coopnav_env.agents.rllib_policy import RLlibPolicy
 
         return RLlibPolicy(env, path, **kwargs)
-    if name.startswith("route:"):
-        path = name[len("route:") :]
-        if not path:
-            raise ValueError("policy 'route:<path>' needs the path of a route model")
-        from coopnav_env.agents.routes import RouteModel, resolve_route_model
-
-        model = RouteModel.load(resolve_route_model(path), kind="route")
-        return make_policy(model.base, env, route_model=model, **kwargs)
-    if name.startswith("split:"):
-        path = name[len("split:") :]
-        if not path:
-            raise ValueError("policy 'split:<path>' needs the path of a split model")
-        from coopnav_env.agents.routes import RouteModel, resolve_route_model
-
-        model = RouteModel.load(resolve_route_model(path, kind="split"), kind="split")
-        if model.kind != "split":
-            raise ValueError(f"policy 'split:{path}' needs a split model, got a {model.kind} model")
-        return make_policy(model.base, env, route_split_model=model, **kwargs)
     for prefix in ("mappo:", "ippo:", "torchrl:"):
         if name.startswith(prefix):
             path = name[len(prefix) :]
@@ -261,14 +229,15 @@ def register_policy(name: str, factory: Callable[..., Policy], *, overwrite: boo
 
     After ``register_policy("mine", MyPolicy)``, ``make_policy("mine", env, **kwargs)`` returns
     ``MyPolicy(env, **kwargs)``, ``"mine@key=value"`` passes options as for the heuristics, and
-    ``coopnav_env.training.evaluate.evaluate(["formation", "mine"], seeds)`` flies it on the
+    ``coopnav_env.training.evaluate.evaluate(["column", "mine"], seeds)`` flies it on the
     same held-out episodes as the built-in policies. The registry lives in this process only.
 
     Parameters
     ----------
     name : str
-        A Python identifier, not a built-in name (``random``, ``formation``, ``sky``,
-        ``waypoint``, ``ppo``, ``rllib``).
+        A Python identifier, not a built-in name (``random``, the column heuristics'
+        names such as ``column``, ``waypoint``, ``setpoints``, ``ppo``, ``rllib``, ``mappo``,
+        ``ippo``).
     factory : callable
         ``factory(env, **kwargs)`` returns an object with the
         :class:`~coopnav_env.agents.base.Policy` protocol (``env``: the PettingZoo parallel

@@ -23,7 +23,7 @@ class Policy(Protocol):
     Attributes
     ----------
     name : str
-        Registry name (``"random"``, ``"formation"``, ``"sky"``, ``"ppo:<path>"``).
+        Registry name (``"random"``, ``"column"``, ``"sky_column"``, ``"ppo:<path>"``).
     """
 
     name: str

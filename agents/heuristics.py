@@ -12,35 +12,39 @@ Its settings say how the column flies: how far apart its UAVs are en route and a
 at what altitude (the start altitude, or near the top of the altitude band, where more of
 the sky clears the roofs), whether each UAV shifts across the street toward the open side of
 the sky, whether a wall guard keeps it off walls its range sensor sees, and which of the
-equally short street routes it takes (or splits over). :data:`COLUMN_PRESETS` names useful
+equally short street routes it takes. :data:`COLUMN_PRESETS` names useful
 combinations, each by what it does; :func:`column_policy` makes one, with options on top,
-and :func:`coopnav_env.agents.make_policy` accepts the same names (and the older ones of
-:data:`COLUMN_ALIASES`):
+and :func:`coopnav_env.agents.make_policy` accepts the same names:
 
-====================  ====================  =============================================
-preset                also called           the column
-====================  ====================  =============================================
-``column``            ``formation``         7 m apart, at the start altitude, on the street
-                                            centre line: ignores navigation quality
-``sky_column``        ``sky``               climbs to 2 m below the band's top, shifts each
-                                            UAV up to 4 m away from the higher skyline, and
-                                            waits for a UAV that loses contact
-``stretched_column``  ``spread``            ``sky_column`` 20 m apart en route, closing to
-                                            6 m over the last 80 m; 6 m shifts, 0.5 m below
-                                            the top
-``wide_column``       ``wide``              ``stretched_column`` 45 m apart, opening ahead of
-                                            the start (the tail holds) and closing over the
-                                            last 4 spacings
-``guarded_column``    ``guarded``           ``wide_column`` with a wall guard (8 m, 4/s) and
-                                            soft slot tracking (gain 0.2/s), for degraded
-                                            navigation
-``ceiling_column``    ``ceiling``           ``guarded_column`` whose altitude target lies
-                                            10 m above the band: it climbs at once and holds
-                                            the band's top whatever its estimate reads
-``best_sky_route``    ``skyroute``          ``ceiling_column`` on the equally short route
-                                            with the fewest points of poor predicted
-                                            satellite geometry (``route_choice="pdop_gt3"``)
-====================  ====================  =============================================
+======================  ===========================================================================
+preset                  the column
+======================  ===========================================================================
+``column``              7 m apart at 7 m/s, at the start altitude, on the street centre line:
+                        ignores navigation quality
+``sky_column``          7 m apart; climbs to 2 m below the top of the altitude band, shifts each
+                        UAV up to 4 m away from the higher skyline, and waits for a UAV that
+                        loses contact
+``stretched_column``    20 m apart en route, closing to 6 m over the last 80 m; shifts up to
+                        6 m, 0.5 m below the band's top, waits for contact
+``wide_column``         45 m apart, opening ahead of the start (the tail holds) and closing to
+                        6 m over the last 4 spacings; shifts up to 6 m, 0.5 m below the top,
+                        waits for contact
+``high_wide_column``    ``wide_column`` 60 m apart at 10 m/s whose altitude target lies 10 m
+                        above the altitude band (``ceiling_margin_m=-10``): it climbs at once
+                        and holds the band's top whatever its estimated altitude reads
+``guarded_column``      ``wide_column`` with a wall guard (8 m, 4/s) and soft slot tracking
+                        (gain 0.2/s), for degraded navigation
+``ceiling_column``      ``guarded_column`` whose altitude target lies 10 m above the band
+                        (``ceiling_margin_m=-10``): it climbs at once and holds the band's top
+``best_sky_route``      ``ceiling_column`` on the equally short street route with the fewest
+                        points of poor predicted satellite geometry (``route_choice="pdop_gt3"``)
+======================  ===========================================================================
+
+:data:`COLUMN_PRESETS` holds each preset's full settings. The earlier names
+(:data:`COLUMN_ALIASES`: ``formation``, ``sky``, ``spread``, ``wide``, ``guarded``,
+``ceiling``, ``skyroute``) are still accepted for one release, with a ``DeprecationWarning``
+naming the new name; a policy made under an earlier name keeps it as its ``name`` (so that
+reports say what was asked for).
 
 :class:`WaypointPolicy` (``waypoint``) is simpler still: each UAV flies toward its next route
 waypoint from its own observation only.
@@ -65,19 +69,20 @@ import math
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from coopnav_env.envs.autopilot import pursuit_velocity
 from coopnav_env.envs.observation_layout import obs_layout
+from coopnav_env.nav import pdop
 from coopnav_env.sim.route import Polyline, extend_route, street_route, street_routes
 
 __all__ = [
     "COLUMN_ALIASES",
     "COLUMN_OPTIONS",
     "COLUMN_PRESETS",
+    "ROUTE_CHOICES",
     "SETPOINT_OPTIONS",
     "WAYPOINT_OPTIONS",
     "CeilingColumnPolicy",
@@ -93,6 +98,7 @@ __all__ = [
     "WaypointPolicy",
     "WideColumnPolicy",
     "column_policy",
+    "poor_geometry_share",
     "setpoint_policy",
     "street_route",
     "waypoint_policy",
@@ -140,13 +146,54 @@ def _number(
     return x
 
 
-def _model_kind(model: Any) -> str:
-    """How a refused ``route_model`` / ``route_split_model`` value is named in the error."""
-    kind = getattr(model, "kind", None)
-    if hasattr(model, "predict") and isinstance(kind, str):
-        hint = {"split": " (pass it as route_split_model)", "route": " (pass it as route_model)"}
-        return f"a {type(model).__name__} of kind {kind!r}{hint.get(kind, '')}"
-    return repr(model)
+ROUTE_CHOICES: tuple[str, ...] = ("first", "pdop_gt3")
+"""Values of :class:`ColumnPolicy`'s ``route_choice``."""
+
+PDOP_CAP = 30.0
+"""PDOP counted where the satellites predicted in line of sight cannot fix a position."""
+
+
+def poor_geometry_share(
+    world: Any, route_xy_m: np.ndarray, altitude_m: float, *, step_m: float = 5.0
+) -> float:
+    """Share of the points along a route where the predicted satellite geometry is poor.
+
+    Points every ``step_m`` along the route (from its start, at ``altitude_m`` clamped to the
+    flight band); at each, the satellites the city map predicts in line of sight
+    (:meth:`coopnav_env.sim.scenario.UrbanWorld.map_line_of_sight`, at the world's current
+    time) and their PDOP (:func:`coopnav_env.nav.pdop`, one receiver clock per
+    constellation; :data:`PDOP_CAP` where they are too few to fix). Returns the share of
+    points whose PDOP is above 3. On board only: the map, the satellites' directions, the
+    route; no true position.
+
+    Parameters
+    ----------
+    world : coopnav_env.sim.scenario.UrbanWorld
+        The world at planning time.
+    route_xy_m : ndarray, shape (k, 2)
+        The route's waypoints, East/North [m].
+    altitude_m : float
+        Altitude the satellites are predicted at [m].
+    step_m : float, default 5.0
+        Distance between the points, > 0 [m].
+    """
+    if not (math.isfinite(step_m) and step_m > 0.0):
+        raise ValueError(f"step_m must be finite and > 0 [m], got {step_m!r}")
+    kin = world.config.kinematics
+    z = float(np.clip(altitude_m, float(kin.altitude_min_m), float(kin.altitude_max_m)))
+    route = np.asarray(route_xy_m, dtype=float).reshape(-1, 2)
+    if route.shape[0] < 2:
+        route = np.vstack([route, route + np.array([0.0, 1e-3])])
+    path = Polyline(route)
+    s = np.arange(0.0, path.length + 1e-9, step_m)
+    xy = path.point(s)
+    los = world.map_line_of_sight(np.column_stack([xy, np.full(len(xy), z)]))
+    sky = world._sky(world.t_s)
+    az, el = np.radians(sky.az), np.radians(sky.el)
+    unit = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
+    system = np.asarray(sky.system)
+    dop = np.array([min(pdop(unit[use], system[use]), PDOP_CAP) for use in los])
+    return float((dop > 3.0).mean())
 
 
 @dataclass(frozen=True)
@@ -168,7 +215,7 @@ class Derived:
 class ColumnPolicy:
     """The swarm flies its street route to the goal as a column (see the module doc).
 
-    Every option has a default, which together fly the plain ``column`` (ex ``formation``);
+    Every option has a default, which together fly the plain ``column``;
     :data:`COLUMN_PRESETS` names other combinations and :func:`column_policy` makes them.
 
     Parameters
@@ -208,41 +255,17 @@ class ColumnPolicy:
         what keeps it off. None (default): no guard.
     wall_gain_per_s : float, default 1.0
         Gain of the wall guard, in [0, 100] [1/s].
-    route_index : int, default 0
-        Fly the candidate route of this index (modulo their number) instead; 0 is
-        :func:`street_route`'s. For studies that fly every route of an episode.
     route_max_turns : int, default 3
-        Most turns of a candidate route, in [0, 8].
+        Most turns of a candidate route, in [0, 8] (read when the route is chosen among the
+        equally short ones).
     route_choice : str, default "first"
-        Which of the equally short street routes to fly (:func:`street_routes`, planned at
-        the first step from the estimated centre of the swarm): ``"first"`` the one of
-        :func:`street_route`; a feature name of :data:`coopnav_env.agents.routes.ROUTE_FEATURES`
-        (e.g. ``"swarm_mean"``) the route with the best value of that feature, e.g. the most
-        satellites predicted in line of sight along it by the city map at the column's
-        altitude. On board: the map, the satellites' directions and the estimated positions
-        only.
-    route_model : coopnav_env.agents.routes.RouteModel or str, optional
-        A learned route model (or the path of one): fly the route it predicts the lowest
-        error for (the ``route:<path>`` policies of :func:`coopnav_env.agents.make_policy`).
-        ``route_choice``, ``route_index`` and ``route_model`` exclude each other.
-    route_split : str, default "none"
-        Split the column over two equally short routes: a feature name of
-        :data:`coopnav_env.agents.routes.ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the
-        leader's) on the chosen route and the slots 1, 3, ... on the best *other* candidate by
-        that feature, at the same arc length, so that the two sub-columns fly abreast through
-        different streets and the cooperative fix pools the sky of both
-        (:func:`coopnav_env.agents.routes.split_features` predicts what they pool). An
-        episode with one candidate flies one column. ``"none"``: no split.
-    route_split_index : int, default 0
-        Split onto this candidate (counted among the candidates other than the chosen
-        route, from 1, modulo their number) instead; 0: no split. For studies that fly every
-        split of an episode. Excludes ``route_split``.
-    route_split_model : RouteModel or str, optional
-        A learned split model (:class:`coopnav_env.agents.routes.RouteModel` of kind
-        ``"split"``, or a path; ``pretrained`` and ``pretrained/s<k>`` are the shipped ones):
-        the column splits onto the other candidate route the model predicts lowest, or flies
-        unsplit where it predicts that lowest (:meth:`split_table` gives what it scores).
-        Excludes ``route_split`` and ``route_split_index``. Policy name ``split:<path>``.
+        Which of the equally short street routes to fly (planned at the first step from the
+        estimated centre of the swarm): ``"first"`` the one of :func:`street_route`;
+        ``"pdop_gt3"`` the one of :func:`street_routes` with the smallest share of points
+        where the satellites the city map predicts in line of sight give a PDOP above 3
+        (:func:`poor_geometry_share`, at the column's altitude). On board: the map, the
+        satellites' directions and the estimated positions only. A subclass chooses other
+        routes by overriding :meth:`choose_routes`.
     max_offset_m : float or None, default None
         With a value (>= 0 [m]), each UAV shifts across the street toward the open side of
         the sky, by at most this much from the centre line: the skylines to the left and
@@ -280,13 +303,8 @@ class ColumnPolicy:
         open_distance_m: float | None = None,
         wall_margin_m: float | None = None,
         wall_gain_per_s: float = 1.0,
-        route_index: int = 0,
         route_max_turns: int = 3,
         route_choice: str = "first",
-        route_model: Any = None,
-        route_split: str = "none",
-        route_split_index: int = 0,
-        route_split_model: Any = None,
         max_offset_m: float | None = None,
         smoothing: float = 0.7,
         ceiling_margin_m: float | None = None,
@@ -360,7 +378,6 @@ class ColumnPolicy:
         self._present = self.layout.neighbour_present_indices()
         self._path: Polyline | None = None
         self._paths: list[Polyline] = []  # one per sub-column (one without a split)
-        self.route_split_chosen: int | None = None  # the second route, when split
         self._shifts: np.ndarray | None = None  # learned slot shifts (set_slot_shifts)
         self._offset = np.zeros(len(self._index))  # lateral shifts toward open sky
 
@@ -382,92 +399,20 @@ class ColumnPolicy:
 
     def _set_routes(self, s: Mapping[str, Any]) -> None:
         """Check and keep the route settings (``route_*``)."""
-        route_index = s["route_index"]
         route_max_turns = s["route_max_turns"]
         route_choice = s["route_choice"]
-        route_model = s["route_model"]
-        route_split = s["route_split"]
-        route_split_index = s["route_split_index"]
-        route_split_model = s["route_split_model"]
-        if isinstance(route_index, bool) or not isinstance(route_index, (int, np.integer)):
-            raise ValueError(f"route_index must be an int >= 0, got {route_index!r}")
-        if route_index < 0:
-            raise ValueError(f"route_index must be >= 0, got {route_index}")
-        self.route_index = int(route_index)
         if isinstance(route_max_turns, bool) or not isinstance(route_max_turns, (int, np.integer)):
             raise ValueError(f"route_max_turns must be an int in [0, 8], got {route_max_turns!r}")
         if not 0 <= route_max_turns <= 8:
             raise ValueError(f"route_max_turns must be in [0, 8], got {route_max_turns}")
         self.route_max_turns = int(route_max_turns)
-        from coopnav_env.agents.routes import ROUTE_FEATURES
-
-        if route_choice != "first" and route_choice not in ROUTE_FEATURES:
+        if route_choice not in ROUTE_CHOICES:
             raise ValueError(
-                f"route_choice must be 'first' or a route feature {list(ROUTE_FEATURES)}, got "
-                f"{route_choice!r}"
-            )
-        if sum([route_choice != "first", bool(route_index), route_model is not None]) > 1:
-            raise ValueError(
-                "route_choice, route_index and route_model exclude each other, got "
-                f"route_choice={route_choice!r}, route_index={route_index}, "
-                f"route_model={route_model!r}"
+                f"route_choice must be one of {list(ROUTE_CHOICES)}, got {route_choice!r}"
             )
         self.route_choice = route_choice
-        if route_split != "none" and route_split not in ROUTE_FEATURES:
-            raise ValueError(
-                f"route_split must be 'none' or a route feature {list(ROUTE_FEATURES)}, got "
-                f"{route_split!r}"
-            )
-        if isinstance(route_split_index, bool) or not isinstance(
-            route_split_index, (int, np.integer)
-        ):
-            raise ValueError(f"route_split_index must be an int >= 0, got {route_split_index!r}")
-        if route_split_index < 0:
-            raise ValueError(f"route_split_index must be >= 0, got {route_split_index}")
-        if route_split != "none" and route_split_index:
-            raise ValueError(
-                "route_split and route_split_index exclude each other, got "
-                f"route_split={route_split!r}, route_split_index={route_split_index}"
-            )
-        self.route_split = route_split
-        self.route_split_index = int(route_split_index)
-        if isinstance(route_split_model, (str, Path)):
-            from coopnav_env.agents.routes import RouteModel, resolve_route_model
-
-            route_split_model = RouteModel.load(
-                resolve_route_model(str(route_split_model), kind="split"), kind="split"
-            )
-        if route_split_model is not None and (
-            not hasattr(route_split_model, "predict")
-            or getattr(route_split_model, "kind", None) != "split"
-        ):
-            got = _model_kind(route_split_model)
-            raise ValueError(
-                f"route_split_model must be a split model (RouteModel of kind 'split') or a "
-                f"path to one, got {got}"
-            )
-        if route_split_model is not None and (route_split != "none" or route_split_index):
-            raise ValueError(
-                "route_split_model excludes route_split and route_split_index, got "
-                f"route_split={route_split!r}, route_split_index={route_split_index}"
-            )
-        self.route_split_model = route_split_model
-        self.split_feature_table: np.ndarray | None = None  # no split, then each split
-        if isinstance(route_model, (str, Path)):
-            from coopnav_env.agents.routes import RouteModel, resolve_route_model
-
-            route_model = RouteModel.load(resolve_route_model(str(route_model)), kind="route")
-        if route_model is not None and (
-            not hasattr(route_model, "predict") or getattr(route_model, "kind", "route") != "route"
-        ):
-            raise ValueError(
-                "route_model must be a route model (RouteModel of kind 'route') or a path to "
-                f"one, got {_model_kind(route_model)}"
-            )
-        self.route_model = route_model
         self.route_candidates: list[np.ndarray] = []  # the routes of the last plan
         self.route_chosen = 0  # index of the flown one among them
-        self.route_feature_table: np.ndarray | None = None  # their features, when scored
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Restore a pickled column, also one pickled before the settings ``max_offset_m``,
@@ -666,98 +611,32 @@ class ColumnPolicy:
             w = min(w, max((self._head - self._head0) / self.open_distance_m, 0.0))
         return self.goal_spacing_m + (self.spacing_m - self.goal_spacing_m) * w
 
-    def _choose_route(self, city: Any, centre: np.ndarray, goal: np.ndarray) -> np.ndarray:
-        """The route of the episode: :func:`street_route`'s, or another of the equally short
-        routes (:func:`~coopnav_env.sim.route.street_routes`): candidate ``route_index``
-        (modulo their number), the best by the feature ``route_choice``, or the one
-        ``route_model`` predicts lowest. Records the candidates, the index flown and (when
-        they were scored) their features."""
-        self.route_feature_table = None
-        plain = self.route_index == 0 and self.route_choice == "first" and self.route_model is None
-        if (
-            plain
-            and self.route_split == "none"
-            and not self.route_split_index
-            and self.route_split_model is None
-        ):
+    def choose_routes(
+        self, city: Any, centre_xy_m: np.ndarray, goal_xy_m: np.ndarray
+    ) -> list[np.ndarray]:
+        """The routes of the episode, planned at its first :meth:`act` from the estimated
+        centre of the swarm ``centre_xy_m`` (2,) to the goal ``goal_xy_m`` (2,) [m].
+
+        Returns one route (waypoints ``(k, 2)``, East/North [m]): :func:`street_route`'s, or
+        with ``route_choice="pdop_gt3"`` the equally short route of :func:`street_routes`
+        with the smallest :func:`poor_geometry_share` (the first of those tied). Records the
+        candidates in :attr:`route_candidates` and the index flown in :attr:`route_chosen`.
+
+        A subclass may return two equally short routes: the column then flies split, slots
+        0, 2, 4, ... (the leader's) on the first and 1, 3, ... on the second, at the same arc
+        length.
+        """
+        if self.route_choice == "first":
             self.route_candidates, self.route_chosen = [], 0
-            return street_route(city, centre, goal[:2])
-        routes = street_routes(city, centre, goal[:2], self.route_max_turns)
-        if (
-            self.route_choice == "first"
-            and self.route_model is None
-            and (
-                (self.route_split == "none" and self.route_split_model is None) or len(routes) == 1
-            )
-        ):
-            k = self.route_index % len(routes)
-        elif len(routes) == 1:
-            k = 0
-        else:
-            from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES, route_features
-
-            feats = np.stack(
-                [
-                    route_features(
-                        self.base.world,
-                        r,
-                        self._altitude_m(),
-                        spacing_m=self.spacing_m,
-                        n_uavs=len(self._index),
-                    )
-                    for r in routes
-                ]
-            )
-            self.route_feature_table = feats
-            if self.route_model is not None:
-                k = int(np.argmin(self.route_model.predict(feats)))
-            elif self.route_choice == "first":
-                k = self.route_index % len(routes)
-            else:
-                j = ROUTE_FEATURES.index(self.route_choice)
-                k = int(np.argmax(FEATURE_SENSE[self.route_choice] * feats[:, j]))
+            return [street_route(city, centre_xy_m, goal_xy_m)]
+        routes = street_routes(city, centre_xy_m, goal_xy_m, self.route_max_turns)
+        k = 0
+        if len(routes) > 1:
+            alt = self._altitude_m()
+            share = np.array([poor_geometry_share(self.base.world, r, alt) for r in routes])
+            k = int(np.argmax(-share))
         self.route_candidates, self.route_chosen = routes, k
-        return routes[k]
-
-    def split_table(self, routes: list[np.ndarray], k: int) -> tuple[list[int], np.ndarray]:
-        """The options of splitting the column flown on ``routes[k]``: the indices of the
-        other routes, and the :data:`~coopnav_env.agents.routes.SPLIT_FEATURES`
-        ``(1 + others, F)`` of flying unsplit (row 0) and of splitting onto each other route
-        (row ``1 + i``), at the column's altitude and spacing; kept as
-        :attr:`split_feature_table`."""
-        from coopnav_env.agents.routes import split_features
-
-        others = [j for j in range(len(routes)) if j != k]
-        world, alt = self.base.world, self._altitude_m()
-        feats = np.stack(
-            [split_features(world, [routes[k]], alt, spacing_m=self.spacing_m)]
-            + [
-                split_features(world, [routes[k], routes[j]], alt, spacing_m=self.spacing_m)
-                for j in others
-            ]
-        )
-        self.split_feature_table = feats
-        return others, feats
-
-    def _split_route(self, routes: list[np.ndarray], k: int) -> int | None:
-        """Index of the second route of a split swarm among ``routes`` (``k`` is the first),
-        or None to fly one column: candidate ``route_split_index`` counted among the others
-        (modulo their number), or the best other one by the feature ``route_split``."""
-        others = [j for j in range(len(routes)) if j != k]
-        if self.route_split_index:
-            return others[(self.route_split_index - 1) % len(others)]
-        if self.route_split_model is not None:
-            _, feats = self.split_table(routes, k)
-            c = int(np.argmin(self.route_split_model.predict(feats)))
-            return None if c == 0 else others[c - 1]
-        if self.route_split == "none":
-            return None
-        from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES
-
-        feats = self.route_feature_table
-        assert feats is not None
-        j = ROUTE_FEATURES.index(self.route_split)
-        return others[int(np.argmax(FEATURE_SENSE[self.route_split] * feats[others, j]))]
+        return [routes[k]]
 
     def _groups_of(self, idx: np.ndarray) -> np.ndarray:
         return self._group[idx]
@@ -794,16 +673,9 @@ class ColumnPolicy:
         n = len(self._index)
         self._n = n
         centre = est[:, :2].mean(axis=0)
-        route = self._choose_route(city, centre, goal)
-        routes = [route]
-        k2 = (
-            self._split_route(self.route_candidates, self.route_chosen)
-            if len(self.route_candidates) > 1
-            else None
-        )
-        if k2 is not None:
-            routes.append(self.route_candidates[k2])
-        self.route_split_chosen = k2
+        routes = self.choose_routes(city, centre, goal[:2])
+        if len(routes) not in (1, 2):
+            raise ValueError(f"choose_routes must return one or two routes, got {len(routes)}")
         wide = max(self.spacing_m, self.goal_spacing_m)
         back = (n + 1) * wide + 10.0
         fwd = (n - 1) * self.goal_spacing_m / 2.0 + 5.0
@@ -862,53 +734,96 @@ def _tail_holds(s: Mapping[str, Any], n_uavs: int) -> float:
     return max(n_uavs - 1, 1) * max(s["spacing_m"] - s["goal_spacing_m"], 1.0)
 
 
-def _best_sky_route_choice(s: Mapping[str, Any], n_uavs: int) -> str:
-    return "pdop_gt3" if s["route_model"] is None and not s["route_index"] else "first"
+_FOUR_SPACINGS = Derived(lambda s, n: 4.0 * s["spacing_m"], "4 x spacing_m")
+_TAIL_HOLDS = Derived(
+    _tail_holds, "(N - 1) x (spacing_m - goal_spacing_m), at least N - 1 m: the tail holds"
+)
 
-
-_SKY = {"max_offset_m": 4.0, "ceiling_margin_m": 2.0, "hold_contact": True}
-_STRETCHED = {
-    **_SKY,
-    "spacing_m": 20.0,
-    "goal_spacing_m": 6.0,
-    "close_distance_m": 80.0,
-    "max_offset_m": 6.0,
-    "ceiling_margin_m": 0.5,
-}
-_WIDE = {
-    **_STRETCHED,
-    "spacing_m": 45.0,
-    "close_distance_m": Derived(lambda s, n: 4.0 * s["spacing_m"], "4 x spacing_m"),
-    "open_distance_m": Derived(
-        _tail_holds, "(N - 1) x (spacing_m - goal_spacing_m), at least N - 1 m: the tail holds"
-    ),
-}
-_GUARDED = {**_WIDE, "wall_margin_m": 8.0, "wall_gain_per_s": 4.0, "gain_per_s": 0.2}
-_CEILING = {**_GUARDED, "ceiling_margin_m": -10.0}
-
-#: Named settings of :class:`ColumnPolicy`, each on top of its defaults (the table of the
-#: module doc says what each column does). A :class:`Derived` value is computed from the other
-#: settings when the column is made, so that it follows an option given on top: ``wide_column``
-#: closes over 4 spacings and opens over ``(N - 1) (spacing_m - goal_spacing_m)`` whatever
-#: ``spacing_m`` is given; ``best_sky_route`` chooses its route by ``pdop_gt3`` unless a
-#: ``route_model`` or a ``route_index`` is given. Options given explicitly replace any value.
+#: Named settings of :class:`ColumnPolicy`: each preset's full settings, on top of the
+#: defaults of :class:`ColumnPolicy` (the table of the module doc says what each column does).
+#: A :class:`Derived` value is computed from the other settings when the column is made, so
+#: that it follows an option given on top: the wide columns close over 4 spacings and open
+#: over ``(N - 1) (spacing_m - goal_spacing_m)`` whatever ``spacing_m`` is given. Options
+#: given explicitly replace any value.
 COLUMN_PRESETS: dict[str, dict[str, Any]] = {
+    # the plain column: every option at its default (7 m apart at 7 m/s, start altitude)
     "column": {},
-    "sky_column": _SKY,
-    "stretched_column": _STRETCHED,
-    "wide_column": _WIDE,
-    "guarded_column": _GUARDED,
-    "ceiling_column": _CEILING,
+    "sky_column": {
+        "max_offset_m": 4.0,
+        "ceiling_margin_m": 2.0,
+        "hold_contact": True,
+    },
+    "stretched_column": {
+        "spacing_m": 20.0,
+        "goal_spacing_m": 6.0,
+        "close_distance_m": 80.0,
+        "max_offset_m": 6.0,
+        "ceiling_margin_m": 0.5,
+        "hold_contact": True,
+    },
+    "wide_column": {
+        "spacing_m": 45.0,
+        "goal_spacing_m": 6.0,
+        "close_distance_m": _FOUR_SPACINGS,
+        "open_distance_m": _TAIL_HOLDS,
+        "max_offset_m": 6.0,
+        "ceiling_margin_m": 0.5,
+        "hold_contact": True,
+    },
+    # wide_column 60 m apart at 10 m/s; its altitude target 10 m above the band's top, so that
+    # it climbs at once and holds the top (the world clamps it there)
+    "high_wide_column": {
+        "spacing_m": 60.0,
+        "cruise_speed_mps": 10.0,
+        "goal_spacing_m": 6.0,
+        "close_distance_m": _FOUR_SPACINGS,
+        "open_distance_m": _TAIL_HOLDS,
+        "max_offset_m": 6.0,
+        "ceiling_margin_m": -10.0,
+        "hold_contact": True,
+    },
+    "guarded_column": {
+        "spacing_m": 45.0,
+        "goal_spacing_m": 6.0,
+        "close_distance_m": _FOUR_SPACINGS,
+        "open_distance_m": _TAIL_HOLDS,
+        "max_offset_m": 6.0,
+        "ceiling_margin_m": 0.5,
+        "hold_contact": True,
+        "wall_margin_m": 8.0,
+        "wall_gain_per_s": 4.0,
+        "gain_per_s": 0.2,
+    },
+    "ceiling_column": {
+        "spacing_m": 45.0,
+        "goal_spacing_m": 6.0,
+        "close_distance_m": _FOUR_SPACINGS,
+        "open_distance_m": _TAIL_HOLDS,
+        "max_offset_m": 6.0,
+        "ceiling_margin_m": -10.0,
+        "hold_contact": True,
+        "wall_margin_m": 8.0,
+        "wall_gain_per_s": 4.0,
+        "gain_per_s": 0.2,
+    },
     "best_sky_route": {
-        **_CEILING,
-        "route_choice": Derived(
-            _best_sky_route_choice, "'pdop_gt3' unless route_model or route_index is given"
-        ),
+        "spacing_m": 45.0,
+        "goal_spacing_m": 6.0,
+        "close_distance_m": _FOUR_SPACINGS,
+        "open_distance_m": _TAIL_HOLDS,
+        "max_offset_m": 6.0,
+        "ceiling_margin_m": -10.0,
+        "hold_contact": True,
+        "wall_margin_m": 8.0,
+        "wall_gain_per_s": 4.0,
+        "gain_per_s": 0.2,
+        "route_choice": "pdop_gt3",
     },
 }
 
-#: Earlier names of the presets, accepted everywhere a preset name is (``make_policy``,
-#: ``residual_base`` of a learned residual, a route model's ``base``).
+#: Earlier names of the presets, accepted for one release wherever a preset name is
+#: (``make_policy``, ``residual_base`` of a learned residual, ``name@option=...`` specs), with
+#: a ``DeprecationWarning`` naming the new name.
 COLUMN_ALIASES: dict[str, str] = {
     "formation": "column",
     "sky": "sky_column",
@@ -935,8 +850,9 @@ def _check_option_names(policy: str, options: Mapping[str, Any], allowed: tuple[
 
 
 def column_policy(name: str, env: Any, **options: Any) -> ColumnPolicy:
-    """The :class:`ColumnPolicy` of preset ``name`` (:data:`COLUMN_PRESETS`, or an alias of
-    :data:`COLUMN_ALIASES`) for ``env``, with ``options`` on top; its ``name`` is ``name``.
+    """The :class:`ColumnPolicy` of preset ``name`` (:data:`COLUMN_PRESETS`, or an earlier
+    name of :data:`COLUMN_ALIASES`, which warns) for ``env``, with ``options`` on top; its
+    ``name`` is ``name`` as given.
 
     Raises
     ------
@@ -948,6 +864,13 @@ def column_policy(name: str, env: Any, **options: Any) -> ColumnPolicy:
     if preset not in COLUMN_PRESETS:
         valid = [*COLUMN_PRESETS, *COLUMN_ALIASES]
         raise ValueError(f"unknown column preset {name!r}; presets are {', '.join(valid)}")
+    if preset != name:
+        warnings.warn(
+            f"policy name {name!r} is deprecated and will be removed in the next release: use "
+            f"{preset!r} (the same column)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
     _check_option_names(name, options, COLUMN_OPTIONS)
     policy = ColumnPolicy(env, **{**COLUMN_PRESETS[preset], **options})
     policy.name = name

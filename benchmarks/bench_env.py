@@ -32,7 +32,7 @@ machines):
 7. **A city from a file**: parallel-env steps/s at N = 5 on the default grid city and on a
    GeoJSON city of about 500 extruded polygons
    (:func:`coopnav_env.sim.file_city.sample_city_geojson` with 10 x 10 blocks, written to a
-   temporary file), hovering (200-step episodes) and with the ``formation`` heuristic flying
+   temporary file), hovering (200-step episodes) and with the ``column`` heuristic flying
    its route, in alternating rounds; the ratio is the cost of a file-city step over a
    grid-city step.
 
@@ -715,7 +715,7 @@ def section_file_city(args, out: dict) -> None:
             rows = []
             for label, stepper in (
                 ("hover", lambda **kw: HoverStepper(make_urban(5, **kw)).run),
-                ("formation", lambda **kw: PolicyStepper(make_urban(5, **kw), "formation").run),
+                ("column", lambda **kw: PolicyStepper(make_urban(5, **kw), "column").run),
             ):
                 best = side_by_side(
                     {"grid": stepper(), "file": stepper(**file_kw)}, args.seconds, args.rounds

@@ -142,24 +142,6 @@ exclusion) / 4, and `satellites_blocked_sector`, the number above the cut-off it
 track there / 4, each clipped to [0, 1] (68 entries by default). What a real receiver knows
 from its almanac and tracking loops: not only how many satellites it misses, but where.
 
-With `obs_lookahead=True`, 4 entries follow last (after the sectors when those are on):
-`satellites_ahead`, the satellites the city model predicts in line of sight from the points
-15 m and 30 m further along the UAV's route (from its estimated position, through its next
-waypoint and on, at its estimated altitude), and `swarm_satellites_ahead`, the distinct ones
-over the swarm's points, each / 20, clipped to [0, 1]; a point inside a building
-counts none. What a receiver with the map and the almanac can predict of the sky ahead.
-
-With `obs_candidate_sky=True`, 10 entries follow last (after `obs_lookahead`'s when those are
-on): `candidate_satellites`, for five candidate positions of the UAV (where it believes it is;
-10 m further along its route; that point 6 m to the left and to the right; 25 m along the
-route; at its estimated altitude clamped to the flight band), the satellites its receiver
-would *use* there by the rule of its 3D-mapping-aided exclusion (in line of sight from every
-point within the configured sigma margin, with its current covariance; plain line of sight
-with `nlos_exclusion="off"`), and `candidate_swarm_satellites`, the distinct satellites over
-the swarm with the UAV at that candidate and every other UAV 10 m along its own route, each
-/ 20, clipped to [0, 1]; a candidate inside a building counts none. What a move would change,
-in the satellites the receiver keeps (fewer as its uncertainty grows).
-
 With `obs_true_error=True` (**privileged: a diagnostic, not an on-board observation**), 3
 entries follow last: `true_error`, the true error of the estimate the UAV uses (East, North,
 Up) / `obs_sigma_max_m`, clipped to [-1, 1]. No receiver knows it; it exists to tell whether
@@ -376,8 +358,8 @@ excludes the measurement the test identifies and re-solves until the test passes
 residual (NLOS delays are positive). `alert_limit_m` (30):
 horizontal alert limit [m] (availability, the reward term and the observation scale).
 `integrity_penalty` (0), `obs_protection_level` (False), `obs_satellite_sectors` (False),
-`obs_lookahead` (False), `obs_candidate_sky` (False), `obs_true_error` (False) and
-`obs_agent_index` (False): above.
+`obs_true_error` (False) and `obs_agent_index` (False): above. (`obs_lookahead` and
+`obs_candidate_sky` were removed: an environment given either refuses it, saying so.)
 `action_frame` (`"velocity"`), `route_offset_max_m` (4): above (Action Space).
 `route_turn_brake_mps2` (0): with `action_frame="route"` and a value `b > 0`, the autopilot
 also limits the speed to `1 + sqrt(2 b (d - 3))` m/s at `d` m before a turn of the route, so
@@ -451,7 +433,7 @@ A* path through the free space, kept away from walls. The file is read and check
 environment is made: a missing file, bad JSON, an open, self-intersecting or degenerate ring,
 an unreadable height, a point beyond 10 km of the origin, or a start or goal inside a building
 raises `ValueError` naming the file, the feature and the problem. On the command line:
-`coopnav evaluate --policies formation wide --env-set city=geojson:my_city.geojson`;
+`coopnav evaluate --policies column wide_column --env-set city=geojson:my_city.geojson`;
 `examples/fly_file_city.py` flies and renders it.
 
 ## Gymnasium (one agent commands the swarm)
@@ -477,8 +459,8 @@ matplotlib window. matplotlib is imported only when rendering (about 1 s per fra
 
 ## Experimental settings
 
-`obs_lookahead`, `obs_candidate_sky` and `obs_true_error` (and, for training, some settings of
-the `torchrl:` section) are experimental: kept for the studies that used them, off by default,
+`obs_true_error` (and, for training, some settings of the `torchrl:` section) is
+experimental: kept for the studies that used them, off by default,
 and liable to change or go without notice. `coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`
 lists them, each with one line on what it does.
 
@@ -516,7 +498,8 @@ continues exactly like the original.
   Optional integrity monitoring (`integrity`, off by default: episodes unchanged) was added
   with them. Also off by default, with the defaults' episodes unchanged: the observation
   options `obs_protection_level`, `obs_satellite_sectors`, `obs_lookahead`,
-  `obs_candidate_sky` and `obs_true_error` (privileged, a diagnostic), and the world options
+  `obs_candidate_sky` (both since removed) and `obs_true_error` (privileged, a diagnostic),
+  and the world options
   `dead_reckoning_noise` and `preset`; and the reset option `noise_stream` (without it, reset
   is as before).
 """

@@ -11,7 +11,7 @@ episode, or given as latitude/longitude. Run it::
 
 The two lines that fly your own city with the command line tool::
 
-    coopnav evaluate --policies formation wide --episodes 5 --env-set city=geojson:my.geojson \\
+    coopnav evaluate --policies column wide_column --episodes 5 --env-set city=geojson:my.geojson \\
         --out eval_my_city
 """
 
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--start", type=_lat_lon, default=None, help="start LAT,LON [deg]")
     parser.add_argument("--goal", type=_lat_lon, default=None, help="goal LAT,LON [deg]")
     parser.add_argument(
-        "--policies", nargs="+", default=["formation", "wide"], help="heuristics to fly"
+        "--policies", nargs="+", default=["column", "wide_column"], help="heuristics to fly"
     )
     parser.add_argument("--episodes", type=int, default=1, help="episodes per policy")
     parser.add_argument("--max-steps", type=int, default=200, help="steps per episode")

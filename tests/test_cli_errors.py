@@ -209,9 +209,9 @@ def files(tmp_path):
     (tmp_path / "listrun" / "run.json").write_text("[1, 2]\n")
     (tmp_path / "routes_list").mkdir()
     (tmp_path / "routes_list" / "run.json").write_text("[1, 2]\n")
-    from coopnav_env.agents.routes import ROUTE_FEATURES
+    from studies.route_choice.routes import ROUTE_FEATURES
 
-    settings = {"env": {}, "base": "ceiling", "first_seed": 500_000, "episodes": 5}
+    settings = {"env": {}, "base": "ceiling_column", "first_seed": 500_000, "episodes": 5}
     settings |= {"max_turns": 3, "features": list(ROUTE_FEATURES)}
     for name in ("routes_npz_bad", "routes_npz_keys"):
         (tmp_path / name).mkdir()

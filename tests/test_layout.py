@@ -5,7 +5,11 @@ Checked by reading the source (``ast``), nothing is imported:
 * no module of ``training``, ``reproduction``, ``agents`` or ``benchmarks`` (nor their tests)
   imports a private name (``_name``, or a name from a private module) of another module;
 * the imports between the modules of ``training``, ``reproduction`` and ``agents`` (module
-  level and inside functions alike) form no cycle.
+  level and inside functions alike) form no cycle;
+* every module of ``agents`` and ``training`` is reached from the library: imported (directly
+  or through other reached modules) by a module of ``coopnav_env`` or ``reproduction``, by a
+  public package ``__init__``, or by a command of the ``coopnav`` CLI. A module that only
+  ``studies/`` (or tests) import belongs in its study.
 
 ``coopnav_env`` is out of scope: its subpackages share compiled kernels through private
 modules (``_kernels``) by design.
@@ -14,6 +18,7 @@ modules (``_kernels``) by design.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -132,6 +137,84 @@ def test_no_import_cycle():
     assert find_cycle(graph) is None
 
 
+LIBRARY_ROOTS = ("coopnav_env", "reproduction")
+"""Folders whose every module is library code that may reach ``agents`` and ``training``."""
+
+REACH_CHECKED = ("agents", "training")
+"""Folders whose every module must be reached from the library (:func:`unreached_modules`)."""
+
+
+def _library_modules() -> dict[str, Path]:
+    """Every module of the installed package, by its installed name."""
+    dirs = (*LIBRARY_ROOTS, *REACH_CHECKED)
+    return {
+        _module_name(p): p
+        for d in dirs
+        for p in (ROOT / d).rglob("*.py")
+        if "__pycache__" not in p.parts
+    }
+
+
+def cli_modules(pyproject: str, cli_source: str) -> set[str]:
+    """The modules a user reaches from the command line: the ``[project.scripts]`` entry
+    points of ``pyproject`` and the subcommand modules of the CLI's ``COMMANDS`` table
+    (``cli_source``, read with ``ast``: a dict of name -> (module, help))."""
+    scripts = re.search(r"^\[project\.scripts\]\n(.*?)(?:^\[|\Z)", pyproject, re.M | re.S)
+    found = set()
+    if scripts:
+        found |= set(re.findall(r'^\s*[\w-]+\s*=\s*"([\w.]+):', scripts.group(1), re.M))
+    for node in ast.walk(ast.parse(cli_source)):
+        target = node.target if isinstance(node, ast.AnnAssign) else None
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target = node.targets[0]
+        if isinstance(target, ast.Name) and target.id == "COMMANDS":
+            for value in node.value.values:  # type: ignore[union-attr]
+                first = value.elts[0] if isinstance(value, ast.Tuple) else value
+                if isinstance(first, ast.Constant) and isinstance(first.value, str):
+                    found.add(first.value)
+    return found
+
+
+def unreached_modules(graph: dict[str, set[str]], roots: set[str], checked: set[str]) -> list[str]:
+    """The modules of ``checked`` that no path of ``graph`` leads to from ``roots``."""
+    seen: set[str] = set()
+    todo = [r for r in roots if r in graph]
+    while todo:
+        v = todo.pop()
+        if v in seen:
+            continue
+        seen.add(v)
+        todo += [w for w in graph[v] if w not in seen]
+    return sorted(checked - seen)
+
+
+def reach_graph(packages: tuple[str, ...]) -> dict[str, set[str]]:
+    """As :func:`import_graph`, plus the modules a module names in a string constant
+    (``importlib.import_module("coopnav_env.training.train")``: the CLI's subcommands, the
+    training backends)."""
+    graph = import_graph(packages)
+    mods = {_module_name(p): p for d in packages for p in (ROOT / d).rglob("*.py")}
+    for name, path in mods.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and node.value in mods and node.value != name:
+                graph[name].add(node.value)
+    return graph
+
+
+def test_every_agents_and_training_module_is_reached_from_the_library():
+    mods = _library_modules()
+    graph = reach_graph((*LIBRARY_ROOTS, *REACH_CHECKED))
+    checked = {n for n, p in mods.items() if p.relative_to(ROOT).parts[0] in REACH_CHECKED}
+    packages = {n for n, p in mods.items() if p.name == "__init__.py"}  # public __init__s
+    library = {n for n, p in mods.items() if p.relative_to(ROOT).parts[0] in LIBRARY_ROOTS}
+    cli = cli_modules(
+        (ROOT / "pyproject.toml").read_text(), (ROOT / "training" / "cli.py").read_text()
+    )
+    assert "coopnav_env.training.cli" in cli and "coopnav_env.training.train" in cli
+    roots = library | packages | {m for m in cli if m in graph}
+    assert unreached_modules(graph, roots, checked) == []
+
+
 def test_the_checks_can_fail():
     """The checkers see what they are meant to see (on made-up modules)."""
     source = (
@@ -145,6 +228,11 @@ def test_the_checks_can_fail():
     ]
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set()}) is None
+    graph = {"lib": {"a"}, "a": {"b"}, "b": set(), "study_only": {"b"}}
+    assert unreached_modules(graph, {"lib"}, {"a", "b", "study_only"}) == ["study_only"]
+    cli = 'COMMANDS: dict = {"x": ("pkg.x", "help"), "y": ("pkg.y", "help")}\n'
+    scripts = '[project.scripts]\ntool = "pkg.cli:main"\n\n[tool.x]\nz = "no.thing:f"\n'
+    assert cli_modules(scripts, cli) == {"pkg.cli", "pkg.x", "pkg.y"}
 
 
 @pytest.mark.parametrize("package", ACYCLIC)

@@ -48,20 +48,20 @@ __all__ = [
 ]
 
 DEFAULT_FAMILY: tuple[str, ...] = (
-    "formation",
-    "formation@cruise_speed_mps=10,spacing_m=3",
-    "sky",
-    "spread",
-    "wide",
-    "wide@spacing_m=30",
-    "wide@cruise_speed_mps=5",
-    "wide@cruise_speed_mps=10",
+    "column",
+    "column@cruise_speed_mps=10,spacing_m=3",
+    "sky_column",
+    "stretched_column",
+    "wide_column",
+    "wide_column@spacing_m=30",
+    "wide_column@cruise_speed_mps=5",
+    "wide_column@cruise_speed_mps=10",
     "waypoint",
     "waypoint@altitude_m=28",
 )
 """The policies of ``coopnav alignment`` by default: the column heuristics at several spacings
 and speeds, the obs-only waypoint follower, and a fast tight clump
-(``formation@cruise_speed_mps=10,spacing_m=3``)."""
+(``column@cruise_speed_mps=10,spacing_m=3``)."""
 
 DEFAULT_GAMMAS: tuple[float, ...] = (0.99, 0.995, 0.999, 1.0)
 """The discounts compared by default."""

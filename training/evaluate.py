@@ -572,7 +572,7 @@ def evaluate(
     ----------
     policies : sequence of str
         Registry names (:data:`coopnav_env.agents.POLICY_NAMES`), e.g. ``["random",
-        "formation", "sky", "ppo:runs/quick/final_model.zip"]``; all are made (and checkpoints
+        "column", "sky_column", "ppo:runs/quick/final_model.zip"]``; all are made (and checkpoints
         checked) before any episode runs.
     seeds : sequence of int
         Reset seeds, one episode each (see :func:`heldout_seeds`).

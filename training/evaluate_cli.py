@@ -53,15 +53,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policies",
         nargs="+",
-        default=["random", "formation", "sky"],
-        help="policies: random, formation, sky, spread, waypoint, planner (privileged, slow), "
+        default=["random", "column", "sky_column"],
+        help="policies: random, column, sky_column, stretched_column, wide_column, "
+        "high_wide_column, guarded_column, ceiling_column, best_sky_route, waypoint, "
         "setpoints (route-frame set-points; when every policy is one, flown with "
         "action_frame=route), "
         "ppo:<path> (SB3 .zip), mappo:<path> / ippo:<path> (TorchRL run or .pt), rllib:<path> "
         "(checkpoint of `coopnav train --backend rllib`); options of a heuristic "
         "after @, e.g. waypoint@altitude_m=28. Model files are pickles: loading an SB3 .zip or "
         "an RLlib checkpoint runs code stored in it, so load only files you trust (TorchRL .pt "
-        "files are read with torch's weights_only loader) (default: random formation sky)",
+        "files are read with torch's weights_only loader) (default: random column sky_column)",
     )
     parser.add_argument(
         "--out",

@@ -51,7 +51,7 @@ policy without a residual base (the teacher's command is what the actor outputs)
 
 Residual policies
 -----------------
-With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the command of a
+With ``residual_base`` set (e.g. ``"sky_column"``), the learned action is added to the command of a
 hand-written base policy (:func:`coopnav_env.agents.make_policy`), clipped to ``[-1, 1]``:
 residual policy learning (Silver et al. 2018; Johannink et al. 2019). The network's output
 is scaled by ``residual_scale`` and its last layer starts at zero, so training starts from

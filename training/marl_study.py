@@ -129,6 +129,8 @@ def fly_episodes(
     policy_name: str, env_kwargs: Mapping[str, Any], seeds: Sequence[int], keep_positions: bool
 ) -> list[EpisodeResult]:
     """Fly ``policy_name`` through ``reset(seed)`` for every seed; one env for all episodes."""
+    import studies.planner_headroom.planner  # registers 'planner'
+    import studies.route_choice.routes  # noqa: F401  (registers the route policies)
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.training.evaluate import run_episode
@@ -505,7 +507,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--heuristics",
         nargs="+",
-        default=["formation", "sky", "spread", "wide"],
+        default=["column", "sky_column", "stretched_column", "wide_column"],
         help="heuristic policies (default: %(default)s)",
     )
     parser.add_argument(
@@ -532,7 +534,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="planner",
         help="the privileged planner and its options, e.g. "
         "planner@horizon=10,n_samples=16 (default: %(default)s: CEM over offsets to the "
-        "'wide' column, agents/planner.py)",
+        "'wide_column' column, studies.planner_headroom.planner)",
     )
     parser.add_argument(
         "--env-set",
@@ -631,9 +633,9 @@ def run_policy_name(run: Path) -> str:
     if (run / "final_model.pt").is_file():
         return f"torchrl:{run}"
     if (run / "route_model.json").is_file():
-        return f"route:{run}"
+        return f"learned_route@model='{run}'"
     if (run / "split_model.json").is_file():
-        return f"split:{run}"
+        return f"learned_split@model='{run}'"
     return f"ppo:{run / 'final_model.zip'}"
 
 
@@ -784,13 +786,13 @@ def _fly_and_report(
     if f is not None:
         figs["learning_curves"] = f.name
     figs["errors"] = plot_errors(summary, out / "errors.png", SCORE_AXIS[args.score]).name
-    # formation, the best heuristic (lowest mean score) and the first two learned methods
+    # the plain column, the best heuristic (lowest mean score) and the first two learned methods
     best = min(
-        (h for h in args.heuristics if h != "formation"),
+        (h for h in args.heuristics if h not in ("column", "formation")),
         key=lambda h: summary["methods"][h]["error_mean"]["value"],
         default=None,
     )
-    show = [h for h in ("formation", best) if h in results] + list(groups)[:2]
+    show = [h for h in ("column", "formation", best) if h in results] + list(groups)[:2]
     flights = {
         n: results[n][0][0].pos_enu_m for n in show if results[n][0][0].pos_enu_m is not None
     }

@@ -1,8 +1,8 @@
 """``coopnav train-routes``: learn which route to fly from flown episodes.
 
-A learned *route model* (:class:`coopnav_env.agents.routes.RouteModel`) scores the equally short
+A learned *route model* (:class:`studies.route_choice.routes.RouteModel`) scores the equally short
 street routes of an episode by the satellites the city map predicts along them and picks the one it
-predicts the lowest navigation error for; a column heuristic (``ceiling`` by default) flies
+predicts the lowest navigation error for; a column heuristic (``ceiling_column`` by default) flies
 it. This command teaches it by experience:
 
 1. **Collect.** For every training episode (reset seeds below the held-out range, see
@@ -19,7 +19,8 @@ it. This command teaches it by experience:
 
 The run folder holds ``run.json`` (settings, sizes, timings, cross-validation),
 ``episodes.npz`` (every flown route: seed, index, features, errors, goal) and
-``route_model.json``; fly the model with ``coopnav evaluate --policies route:RUN_DIR``.
+``route_model.json``; fly the model as the policy ``learned_route@model='RUN_DIR'`` (registered
+by ``studies.route_choice.routes``).
 Collection is saved every ``--block`` episodes, and a run started again with the same
 ``--out`` and settings continues where it stopped; a finished run (``route_model.json``
 present) is never overwritten.
@@ -49,7 +50,11 @@ TRAIN_SEED_STRIDE = 100_000
 
 
 def _with_option(base: str, option: str) -> str:
-    return f"{base}{',' if '@' in base else '@'}{option}"
+    """``base`` (a column heuristic's name, options after ``@``) as a ``route_column`` policy
+    name with ``option`` added."""
+    from studies.route_choice.routes import route_column_name
+
+    return route_column_name(base, option)
 
 
 def collect_episode(
@@ -57,7 +62,7 @@ def collect_episode(
 ) -> dict[str, np.ndarray]:
     """Fly every shortest route of episode ``seed`` with heuristic ``base``.
 
-    Returns ``features`` ``(R, F)`` (:func:`coopnav_env.agents.routes.route_features`, as the
+    Returns ``features`` ``(R, F)`` (:func:`studies.route_choice.routes.route_features`, as the
     heuristic plans them at the first step) and, per route, ``nav`` (mean error of the estimate each
     UAV used [m]), ``coop`` (mean cooperative-fix error [m], NaN without a fix) and ``goal``.
     An episode with one route is flown once (its features are NaN: nothing to choose).
@@ -85,7 +90,7 @@ def collect_episode(
     feats = planner.route_feature_table
     n_routes = len(planner.route_candidates)
     if feats is None or n_routes < 2:
-        from coopnav_env.agents.routes import ROUTE_FEATURES
+        from studies.route_choice.routes import ROUTE_FEATURES
 
         n_routes = 1
         feats = np.full((1, len(ROUTE_FEATURES)), np.nan)
@@ -260,7 +265,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--base",
-        default="ceiling",
+        default="ceiling_column",
         help="the column heuristic that flies the routes (default: %(default)s)",
     )
     parser.add_argument(
@@ -295,8 +300,8 @@ def run(args: argparse.Namespace) -> int:
     """Collect (resumably), fit and save; prints the cross-validated choice."""
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
-    from coopnav_env.agents.routes import ROUTE_FEATURES
     from coopnav_env.training.files import ensure_folder, folder_lock
+    from studies.route_choice.routes import ROUTE_FEATURES
 
     if args.episodes < 5:
         raise ValueError(f"--episodes must be >= 5 (5-fold cross-validation), got {args.episodes}")
@@ -344,8 +349,8 @@ def _collect_and_fit(
     first: int,
 ) -> int:
     """The locked part of :func:`run`: check the folder, collect what is missing, fit, save."""
-    from coopnav_env.agents.routes import fit_route_model
     from coopnav_env.training.files import atomic_path, write_json
+    from studies.route_choice.routes import fit_route_model
 
     model_path = out / "route_model.json"
     if model_path.exists():

@@ -161,29 +161,6 @@ class UrbanCanyonConfig(ScenarioConfig):
         elevation cut-off it does not track (``satellites_blocked_sector``), each divided by 4
         and clipped to [0, 1]. What a real receiver knows from its almanac and its tracking
         loops: where the satellites it misses are.
-    obs_lookahead : bool, default False
-        *Experimental* (:data:`EXPERIMENTAL_SETTINGS`: may change or be removed).
-        Append four entries after everything else: the satellites the city model predicts in
-        line of sight from the point ``15`` and ``30`` m further along the UAV's route (from
-        its *estimated* position, through its next waypoint and on, at its estimated
-        altitude), for the UAV and for the swarm (distinct satellites over every UAV's
-        point), each divided by 20 and clipped to [0, 1]; a point inside a building
-        counts none. What a receiver with the map and the almanac can predict of the sky
-        ahead (``studies/planner_headroom`` trains with it).
-    obs_candidate_sky : bool, default False
-        *Experimental* (:data:`EXPERIMENTAL_SETTINGS`: may change or be removed).
-        Append ten entries after everything else (after ``obs_lookahead``'s when those are
-        on): for five candidate positions of the UAV (where it believes it is; 10 m further
-        along its route; that point 6 m to the left and to the right; 25 m along the route;
-        from its *estimated* position, at its estimated altitude clamped to the flight
-        band), the satellites its receiver would *use* there, by the rule of its
-        3D-mapping-aided exclusion (line of sight from every point within the configured
-        margin of sigma, with its current covariance; plain line of sight when
-        ``nlos_exclusion="off"``), then the distinct satellites over the swarm if it were
-        there and every other UAV 10 m along its own route. Each count is divided by 20 and
-        clipped to [0, 1]; a candidate inside a building counts none. Unlike
-        ``obs_lookahead`` these say what a move would change, and they count what the
-        receiver keeps after the exclusion, which shrinks as its uncertainty grows.
     obs_true_error : bool, default False
         *Experimental* (:data:`EXPERIMENTAL_SETTINGS`: may change or be removed).
         **Privileged: a diagnostic, not an on-board observation.** Append three entries last
@@ -252,8 +229,6 @@ class UrbanCanyonConfig(ScenarioConfig):
     integrity_penalty: float = 0.0
     obs_protection_level: bool = False
     obs_satellite_sectors: bool = False
-    obs_lookahead: bool = False
-    obs_candidate_sky: bool = False
     obs_true_error: bool = False
     obs_agent_index: bool = False
     action_frame: Literal["velocity", "route"] = "velocity"
@@ -287,8 +262,6 @@ class UrbanCanyonConfig(ScenarioConfig):
         _check_real(o, "integrity_penalty", self.integrity_penalty, 0.0, 1000.0)
         _check_bool(o, "obs_protection_level", self.obs_protection_level)
         _check_bool(o, "obs_satellite_sectors", self.obs_satellite_sectors)
-        _check_bool(o, "obs_lookahead", self.obs_lookahead)
-        _check_bool(o, "obs_candidate_sky", self.obs_candidate_sky)
         _check_bool(o, "obs_true_error", self.obs_true_error)
         _check_bool(o, "obs_agent_index", self.obs_agent_index)
         _check_choice(o, "action_frame", self.action_frame, ACTION_FRAMES)
@@ -328,8 +301,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     def obs_dim(self) -> int:
         """Length of one agent's observation vector: ``20 + 2 obs_sky_azimuths + 4 K``, plus 2
         with ``obs_protection_level``, plus ``2 obs_sky_azimuths`` with
-        ``obs_satellite_sectors``, plus 4 with ``obs_lookahead``, plus 10 with
-        ``obs_candidate_sky``, plus 3 with ``obs_true_error``, plus ``n_uavs`` with
+        ``obs_satellite_sectors``, plus 3 with ``obs_true_error``, plus ``n_uavs`` with
         ``obs_agent_index``."""
         return self.obs_base_dim + self.obs_extra_dim
 
@@ -341,15 +313,12 @@ class UrbanCanyonConfig(ScenarioConfig):
     @property
     def obs_extra_dim(self) -> int:
         """Entries of the optional blocks appended after the base ones: 2 with
-        ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``, 4
-        with ``obs_lookahead``, 10 with ``obs_candidate_sky``, 3 with ``obs_true_error``,
-        ``n_uavs`` with ``obs_agent_index``."""
+        ``obs_protection_level``, ``2 obs_sky_azimuths`` with ``obs_satellite_sectors``, 3
+        with ``obs_true_error``, ``n_uavs`` with ``obs_agent_index``."""
         pl = 2 if self.obs_protection_level else 0
         sectors = 2 * self.obs_sky_azimuths if self.obs_satellite_sectors else 0
-        ahead = 4 if self.obs_lookahead else 0
-        cand = 10 if self.obs_candidate_sky else 0
         index = self.n_uavs if self.obs_agent_index else 0
-        return pl + sectors + ahead + cand + (3 if self.obs_true_error else 0) + index
+        return pl + sectors + (3 if self.obs_true_error else 0) + index
 
     @property
     def max_cycles(self) -> int:
@@ -419,20 +388,6 @@ class ExperimentalSetting:
 #: them off. The environment's page (:mod:`coopnav_env.urban_canyon_v0`) and each field's
 #: docstring point here.
 EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
-    ExperimentalSetting(
-        "UrbanCanyonConfig",
-        "obs_lookahead",
-        None,
-        "4 observation entries: the satellites the city model predicts in line of sight "
-        "15 m and 30 m ahead along the route, for the UAV and the swarm",
-    ),
-    ExperimentalSetting(
-        "UrbanCanyonConfig",
-        "obs_candidate_sky",
-        None,
-        "10 observation entries: the satellites the receiver would use at five candidate "
-        "positions of the UAV, and over the swarm",
-    ),
     ExperimentalSetting(
         "UrbanCanyonConfig",
         "obs_true_error",
@@ -509,6 +464,20 @@ EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
 )
 
 
+#: Settings that were removed, with what they did: constructing an environment with one raises
+#: a ``ValueError`` that says so (not the "unknown argument" of a typo).
+REMOVED_SETTINGS: dict[str, str] = {
+    "obs_lookahead": (
+        "its 4 observation entries (the satellites the city model predicted in line of sight "
+        "15 m and 30 m ahead along the route) helped no policy that was trained with them"
+    ),
+    "obs_candidate_sky": (
+        "its 10 observation entries (the satellites the receiver would use at five candidate "
+        "positions) helped no policy that was trained with them"
+    ),
+}
+
+
 def config_field_names() -> list[str]:
     """Names of every :class:`UrbanCanyonConfig` field, in declaration order."""
     return [f.name for f in fields(UrbanCanyonConfig)]
@@ -557,6 +526,12 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
             if "max_steps must" not in str(exc):
                 raise
             raise ValueError(f"{exc} (given as max_cycles, the alias of max_steps)") from None
+    removed = sorted(set(overrides) & set(REMOVED_SETTINGS))
+    if removed:
+        raise ValueError(
+            "; ".join(f"{name} was removed: {REMOVED_SETTINGS[name]}" for name in removed)
+            + ". Drop the setting (a policy trained with it cannot be flown any more)"
+        )
     valid = config_field_names()
     unknown = sorted(set(overrides) - set(valid))
     if unknown:

@@ -12,8 +12,8 @@ swarm with one policy. It is registered with Gymnasium when :mod:`coopnav_env` i
     obs, info = env.reset(seed=0)
 
 Spaces (``N = n_uavs``, ``D = obs_dim = 20 + 2A + 4K`` plus the optional blocks of
-``obs_protection_level``, ``obs_satellite_sectors``, ``obs_lookahead``,
-``obs_candidate_sky`` and ``obs_true_error``):
+``obs_protection_level``, ``obs_satellite_sectors``, ``obs_true_error`` and
+``obs_agent_index``):
 
 * observation ``Box((N * D,), float32)``: the agents' observations stacked in the order of
   ``possible_agents`` (``uav_0`` first), so agent ``i`` owns ``obs[i * D : (i + 1) * D]`` and

@@ -45,17 +45,6 @@ sector``                                      with ``obs_satellite_sectors``
 ``satellites_blocked_      A      1           4 (satellites above the cut-off not tracked,
 sector``                                      per azimuth sector); only with
                                               ``obs_satellite_sectors``
-``satellites_ahead``       2      1           20 (satellites the map predicts in line of
-                                              sight 15 m and 30 m along the route); only
-                                              with ``obs_lookahead``
-``swarm_satellites_ahead`` 2      1           20 (the same, distinct over the swarm); only
-                                              with ``obs_lookahead``
-``candidate_satellites``   5      1           20 (satellites the receiver would use at its
-                                              5 candidates: here, ahead, left, right,
-                                              far); only with ``obs_candidate_sky``
-``candidate_swarm_         5      1           20 (distinct over the swarm, the UAV at the
-satellites``                                  candidate, the others ahead); only with
-                                              ``obs_candidate_sky``
 ``true_error``             3      m           ``obs_sigma_max_m`` (the true error of the
                                               estimate used, E, N, U; privileged, a
                                               diagnostic); only with ``obs_true_error``
@@ -401,49 +390,6 @@ def obs_layout(config: Any = None, **overrides: Any) -> ObsLayout:
             "satellites above the cut-off not tracked whose azimuth is in the sector",
             "4",
             az,
-        )
-    if cfg.obs_lookahead:
-        add(
-            "satellites_ahead",
-            2,
-            "1",
-            20,
-            0,
-            "satellites the map predicts in line of sight 15 m and 30 m further along the route",
-            "20",
-            ("15m", "30m"),
-        )
-        add(
-            "swarm_satellites_ahead",
-            2,
-            "1",
-            20,
-            0,
-            "distinct satellites predicted in line of sight over the swarm's points ahead",
-            "20",
-            ("15m", "30m"),
-        )
-    if cfg.obs_candidate_sky:
-        cands = ("here", "ahead", "left", "right", "far")
-        add(
-            "candidate_satellites",
-            5,
-            "1",
-            20,
-            0,
-            "satellites the receiver would use at 5 candidate positions (3DMA exclusion rule)",
-            "20",
-            cands,
-        )
-        add(
-            "candidate_swarm_satellites",
-            5,
-            "1",
-            20,
-            0,
-            "distinct satellites over the swarm with the UAV at the candidate, others ahead",
-            "20",
-            cands,
         )
     if cfg.obs_true_error:
         add(

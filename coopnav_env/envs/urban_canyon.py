@@ -14,10 +14,7 @@ units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it 
 in this order: the two protection levels (``obs_protection_level``), then the satellites
 tracked and the satellites above the cut-off not tracked per skyline azimuth sector, ``A``
 entries each (``obs_satellite_sectors``, :meth:`UrbanCanyonEnv._satellite_sectors`), then the
-satellites predicted in line of sight along the route ahead, 4 entries (``obs_lookahead``,
-:meth:`UrbanCanyonEnv._lookahead`), then the satellites the receiver would use at five
-candidate positions, for the UAV and for the swarm, 10 entries (``obs_candidate_sky``,
-:meth:`UrbanCanyonEnv._candidate_sky`), then the true position error, 3 entries
+true position error, 3 entries
 (``obs_true_error``), then the UAV's one-hot index, ``N`` entries (``obs_agent_index``).
 """
 
@@ -502,9 +499,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         formulation :meth:`_observation_array_numpy` (``_USE_KERNEL = False``) is the readable
         definition, and the two agree bit for bit. With ``obs_protection_level`` the two
         protection-level columns follow, then with ``obs_satellite_sectors`` the ``2 A``
-        satellite-sector columns (:meth:`_satellite_sectors`), then with ``obs_lookahead`` the
-        4 look-ahead columns (:meth:`_lookahead`), then with ``obs_candidate_sky`` the 10
-        candidate columns (:meth:`_candidate_sky`), then with ``obs_true_error``
+        satellite-sector columns (:meth:`_satellite_sectors`), then with ``obs_true_error``
         (privileged) the 3 columns of the true position error, then with ``obs_agent_index``
         the ``N`` columns of the UAV's one-hot index.
         """
@@ -513,8 +508,6 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         if not (
             cfg.obs_protection_level
             or cfg.obs_satellite_sectors
-            or cfg.obs_lookahead
-            or cfg.obs_candidate_sky
             or cfg.obs_true_error
             or cfg.obs_agent_index
         ):
@@ -527,140 +520,12 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             blocks.append(pl.astype(np.float32))
         if cfg.obs_satellite_sectors:
             blocks.append(self._satellite_sectors())
-        if cfg.obs_lookahead:
-            blocks.append(self._lookahead())
-        if cfg.obs_candidate_sky:
-            blocks.append(self._candidate_sky())
         if cfg.obs_true_error:  # privileged (a diagnostic): the truth no receiver knows
             err = (ep.nav_pos_enu_m - ep.pos_enu_m) / cfg.obs_sigma_max_m
             blocks.append(np.clip(err, -1.0, 1.0).astype(np.float32))
         if cfg.obs_agent_index:
             blocks.append(np.eye(cfg.n_uavs, dtype=np.float32))
         return np.concatenate(blocks, axis=1)
-
-    #: Distances along the route of the ``obs_lookahead`` points [m].
-    LOOKAHEAD_M: ClassVar[tuple[float, ...]] = (15.0, 30.0)
-
-    def _lookahead_points(self) -> np.ndarray:
-        """``(D, N, 3)``: each UAV's point ``LOOKAHEAD_M[d]`` metres along its route.
-
-        From the UAV's *estimated* position, straight to its next waypoint and on along the
-        route's polyline (past its end: on along the last leg's direction; with no leg, the
-        position itself), at the estimated altitude clamped to the flight band.
-        """
-        return self._route_points(self.LOOKAHEAD_M)
-
-    def _route_points(self, distances_m: tuple[float, ...]) -> np.ndarray:
-        """``(D, N, 3)``: each UAV's point ``distances_m[d]`` metres along its route, as
-        :meth:`_lookahead_points` defines it."""
-        ep = self._epoch
-        world = self.world
-        route = np.asarray(world.route_xy_m, dtype=float)
-        kin = self.config.kinematics
-        est = np.asarray(ep.nav_pos_enu_m, dtype=float)
-        z = np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
-        out = np.empty((len(distances_m), est.shape[0], 3))
-        for i in range(est.shape[0]):
-            pts = np.vstack([est[i, :2], route[int(ep.next_waypoint[i]) :]])
-            seg = np.diff(pts, axis=0)
-            seg_len = np.hypot(seg[:, 0], seg[:, 1])
-            cum = np.concatenate([[0.0], np.cumsum(seg_len)])
-            for d, dist in enumerate(distances_m):
-                if cum[-1] <= 0.0:
-                    xy = est[i, :2]
-                elif dist >= cum[-1]:  # past the end: on along the last non-zero leg
-                    j = int(np.flatnonzero(seg_len > 0.0)[-1])
-                    xy = pts[-1] + seg[j] / seg_len[j] * (dist - cum[-1])
-                else:
-                    j = int(np.searchsorted(cum, dist, side="right") - 1)
-                    xy = pts[j] + seg[j] / seg_len[j] * (dist - cum[j])
-                out[d, i] = (xy[0], xy[1], z[i])
-        return out
-
-    #: ``obs_candidate_sky``: distance along the route of the near candidates [m], their
-    #: lateral offset to either side [m], and the distance of the far candidate [m].
-    CANDIDATE_AHEAD_M: ClassVar[float] = 10.0
-    CANDIDATE_SIDE_M: ClassVar[float] = 6.0
-    CANDIDATE_FAR_M: ClassVar[float] = 25.0
-
-    def _candidate_points(self) -> np.ndarray:
-        """``(5, N, 3)``: the ``obs_candidate_sky`` candidates of every UAV, in this order:
-        where it believes it is (its estimate, the altitude clamped to the flight band), the
-        point ``CANDIDATE_AHEAD_M`` along its route (:meth:`_route_points`), that point moved
-        ``CANDIDATE_SIDE_M`` to the left and to the right of the direction from the estimate
-        to it (East when the two coincide), and the point ``CANDIDATE_FAR_M`` along the route.
-        """
-        route = self._route_points((self.CANDIDATE_AHEAD_M, self.CANDIDATE_FAR_M))
-        kin = self.config.kinematics
-        here = np.array(self._epoch.nav_pos_enu_m, dtype=float, copy=True)
-        here[:, 2] = np.clip(here[:, 2], kin.altitude_min_m, kin.altitude_max_m)
-        ahead = route[0]
-        d = ahead[:, :2] - here[:, :2]
-        norm = np.hypot(d[:, 0], d[:, 1])
-        u = np.where(norm[:, None] > 0.0, d / np.where(norm > 0.0, norm, 1.0)[:, None], [1.0, 0.0])
-        left = np.stack([-u[:, 1], u[:, 0], np.zeros(len(u))], axis=1) * self.CANDIDATE_SIDE_M
-        return np.stack([here, ahead, ahead + left, ahead - left, route[1]])
-
-    def _candidate_sky(self) -> np.ndarray:
-        """The ``obs_candidate_sky`` columns, ``(N, 10)`` float32 (see the config's docstring).
-
-        Columns 0-4: the satellites the UAV's receiver would *use* at each candidate of
-        :meth:`_candidate_points`, by the rule its 3D-mapping-aided exclusion applies
-        (:func:`~coopnav_env.sim.map_aided.predicted_line_of_sight` with the UAV's current
-        covariance grown by one step of dead reckoning and the configured margin;
-        with ``nlos_exclusion="off"`` plain line of sight, margin 0). Columns 5-9: the
-        distinct satellites over the swarm if the UAV were at that candidate and every
-        other UAV at its own point ``CANDIDATE_AHEAD_M`` along its route. Each count is
-        divided by 20 and clipped to [0, 1]; a candidate inside a building counts none.
-        """
-        cfg = self.config
-        pts = self._candidate_points()
-        n_c, n = pts.shape[:2]
-        if cfg.nlos_exclusion == "map":
-            dr_var = (cfg.dead_reckoning_sigma_mps * cfg.dt_s) ** 2
-            cov = np.asarray(self.world.nav_cov_enu_m2, dtype=float) + np.eye(3) * dr_var
-            margin, cap = cfg.nlos_exclusion_margin_sigma, cfg.nlos_exclusion_max_margin_m
-        else:
-            cov, margin, cap = np.zeros((n, 3, 3)), 0.0, 0.0
-        flat = pts.reshape(-1, 3)
-        use = self._map_line_of_sight(flat, np.tile(cov, (n_c, 1, 1)), margin, cap)
-        use = use.reshape(n_c, n, -1)
-        own = use.sum(axis=2).T  # (N, 5)
-        ahead = use[1]  # (N, S): every UAV at its near point ahead
-        swarm = np.empty((n, n_c))
-        for i in range(n):
-            others = np.delete(ahead, i, axis=0).any(axis=0)
-            swarm[i] = (use[:, i] | others).sum(axis=1)
-        cols = np.concatenate([own, swarm], axis=1) / 20.0
-        return np.clip(cols, 0.0, 1.0).astype(np.float32)
-
-    def _map_line_of_sight(
-        self, points: np.ndarray, cov: np.ndarray, margin_sigma: float, max_margin_m: float
-    ) -> np.ndarray:
-        """``(P, S)`` bool: the satellites the city model puts in line of sight from each of
-        ``points`` ``(P, 3)`` by :func:`~coopnav_env.sim.map_aided.predicted_line_of_sight`
-        (covariances ``cov`` ``(P, 3, 3)``, the margin in sigma and its cap, the flight band),
-        none from a point inside a building (:meth:`UrbanWorld.map_line_of_sight`). The
-        look-ahead observations' common step."""
-        return self.world.map_line_of_sight(
-            points, cov, margin_sigma=margin_sigma, max_margin_m=max_margin_m
-        )
-
-    def _lookahead(self) -> np.ndarray:
-        """The ``obs_lookahead`` columns, ``(N, 4)`` float32 (see the config's docstring):
-        satellites predicted in line of sight (no margin) at the points of
-        :meth:`_lookahead_points`, for the UAV and distinct over the swarm (its UAVs all fly
-        until the episode ends for all of them), per distance, each ``/ 20``; a point inside
-        a building counts none."""
-        pts = self._lookahead_points()
-        n_d, n = pts.shape[:2]
-        flat = pts.reshape(-1, 3)
-        los = self._map_line_of_sight(flat, np.zeros((flat.shape[0], 3, 3)), 0.0, 0.0)
-        los = los.reshape(n_d, n, -1)
-        own = los.sum(axis=2).T / 20.0  # (N, D)
-        swarm = los.any(axis=1).sum(axis=1) / 20.0  # (D,)
-        cols = np.concatenate([own, np.broadcast_to(swarm, (n, n_d))], axis=1)
-        return np.clip(cols, 0.0, 1.0).astype(np.float32)
 
     def _tracked(self) -> np.ndarray:
         """``(N, S)`` bool: the satellites each UAV's receiver tracks this epoch, i.e. those
@@ -1076,8 +941,6 @@ def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]
             np.zeros(2 + a),  # remaining route, altitude, wall distances
             np.zeros(2 if cfg.obs_protection_level else 0),  # HPL, VPL / (2 alert limit)
             np.zeros(2 * a if cfg.obs_satellite_sectors else 0),  # satellites per sector / 4
-            np.zeros(4 if cfg.obs_lookahead else 0),  # satellites predicted ahead
-            np.zeros(10 if cfg.obs_candidate_sky else 0),  # satellites usable at candidates
             -np.ones(3 if cfg.obs_true_error else 0),  # true position error (privileged)
             np.zeros(cfg.n_uavs if cfg.obs_agent_index else 0),  # one-hot index of the UAV
         ]

@@ -42,7 +42,7 @@ measurement per round: each round assumes that the remaining set is mostly clean
 UAV has its own clocks, so NLOS delays of similar size on one UAV's satellites look like a
 clock offset and leave no residual at all. Against that no residual test helps; knowing
 *which* rows may be reflected does. Tried during the design (prototype runs of the study,
-``formation`` and ``sky``, 10-100 episodes each; not kept): the prediction at the believed
+``column`` and ``sky_column``, 10-100 episodes each; not kept): the prediction at the believed
 position alone (margin 0) did no better than FDE alone, because that position is off by
 metres and the prediction errs both ways; candidates without the vertical pair let several
 times more NLOS rows through (the vertical sigma of a GNSS fix is its largest); wider margins

@@ -1173,8 +1173,8 @@ class UrbanWorld:
         :func:`~coopnav_env.sim.map_aided.predicted_line_of_sight` (covariances ``cov``
         ``(P, 3, 3)``, default none; the margin in sigma and its cap; the flight band), none
         from a point inside a building. What a receiver that has the city map can predict:
-        the environment's look-ahead observations and the route features of
-        :mod:`coopnav_env.agents.routes` use it."""
+        the column heuristics' route choice
+        (:func:`coopnav_env.agents.heuristics.poor_geometry_share`) uses it."""
         pts = np.asarray(points, dtype=float).reshape(-1, 3)
         cov = np.zeros((pts.shape[0], 3, 3)) if cov is None else cov
         kin = self.config.kinematics

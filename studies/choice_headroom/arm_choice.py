@@ -1,23 +1,24 @@
 """What a per-episode choice among policies could gain: every arm flown under noise replicates.
 
-Flies every policy given with ``--arms`` (:func:`coopnav_env.agents.make_policy` names, e.g.
-``skyroute skyroute@spacing_m=30``) through every held-out episode, ``--noise-replicates``
-times under independent noise realisations of the same episode (the environment's
-``noise_stream`` reset option), and prints each arm's mean ``nav`` error (the 3-D error of the
-estimate each UAV used, averaged over UAV-steps, episodes and replicates) and goal rate, the
-best *fixed* arm, and the *expected-error oracle*: per episode, the arm with the lowest mean
-over R - 1 of the replicates, priced on the remaining one (each held out in turn), as a paired
-difference to the best fixed arm on that replicate. The oracle does not pick on the noise it
-is priced on, so it bounds what any per-episode choice among the arms, learned (a contextual
-bandit) or written, could gain over always flying the best one, up to the noise of R - 1
-flights. 95 % bootstrap intervals over episodes (2000 resamples, generator seed 0).
+Flies every policy given with ``--arms`` (:func:`coopnav_env.agents.make_policy` names, with the
+route policies of :mod:`studies.route_choice.routes` registered, e.g. ``best_sky_route
+best_sky_route@spacing_m=30``) through every held-out episode, ``--noise-replicates`` times
+under independent noise realisations of the same episode (the environment's ``noise_stream``
+reset option), and prints each arm's mean ``nav`` error (the 3-D error of the estimate each UAV
+used, averaged over UAV-steps, episodes and replicates) and goal rate, the best *fixed* arm, and
+the *expected-error oracle*: per episode, the arm with the lowest mean over R - 1 of the
+replicates, priced on the remaining one (each held out in turn), as a paired difference to the
+best fixed arm on that replicate. The oracle does not pick on the noise it is priced on, so it
+bounds what any per-episode choice among the arms, learned (a contextual bandit) or written,
+could gain over always flying the best one, up to the noise of R - 1 flights. 95 % bootstrap
+intervals over episodes (2000 resamples, generator seed 0).
 
 The study (``studies/choice_headroom/README.md``) runs::
 
     python studies/choice_headroom/arm_choice.py --episodes 500 --first-seed 1000000 \\
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
-        --noise-replicates 3 --arms skyroute skyroute@spacing_m=30 skyroute@spacing_m=60 \\
-        skyroute@cruise_speed_mps=10 --out runs/arms/spacing
+        --noise-replicates 3 --arms best_sky_route best_sky_route@spacing_m=30 \\
+        best_sky_route@spacing_m=60 best_sky_route@cruise_speed_mps=10 --out runs/arms/spacing
 
 about 6 minutes on 2 cores. ``--compare REF GROUP`` also prints the paired difference of a
 group of arms (comma-separated, e.g. the training seeds of one learned method; their mean per
@@ -48,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 def _chunk(common: tuple[dict[str, Any], list[str], int], seeds: list[int]) -> list[np.ndarray]:
     import torch
 
+    import studies.route_choice.routes  # noqa: F401  (registers the route policies)
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.training.evaluate import run_episode
@@ -206,6 +208,7 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    import studies.route_choice.routes  # noqa: F401  (registers the route policies)
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder

@@ -15,7 +15,7 @@ Example (the search of ``studies/learning_under_degraded_navigation``, about 20 
     python studies/learning_under_degraded_navigation/search_heuristics.py \\
         --env-set preset=urban_nlos_3dma \\
         dead_reckoning_noise=true --episodes 300 --variants wide guarded \\
-        "guarded@ceiling_margin_m=0"
+        "guarded_column@ceiling_margin_m=0"
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--variants",
         nargs="+",
         required=True,
-        help="heuristics with options, e.g. wide guarded 'guarded@ceiling_margin_m=0'",
+        help="heuristics with options, e.g. wide guarded 'guarded_column@ceiling_margin_m=0'",
     )
     parser.add_argument(
         "--episodes", type=int, default=100, help="held-out episodes (default: %(default)s)"

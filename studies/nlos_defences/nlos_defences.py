@@ -2,7 +2,7 @@
 
 The reception of the ``urban_nlos`` preset (``coopnav_env.envs.PRESETS``: half of the
 satellites a building blocks are received through a reflection, with a delay of
-3 m + Exp(30 m)) in the default grid city with 5 UAVs, flown by the ``formation`` and ``sky``
+3 m + Exp(30 m)) in the default grid city with 5 UAVs, flown by the ``column`` and ``sky_column``
 heuristics (``coopnav_env.agents.make_policy``), in three variants:
 
 * ``off``: the navigation as it is (``integrity="off"``);
@@ -155,7 +155,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--first-seed", type=int, default=1000, help="seed of the first episode")
     ap.add_argument("--n-uavs", type=int, default=5, help="swarm size (5)")
     ap.add_argument(
-        "--policies", nargs="+", default=["formation", "sky"], help="policies (formation sky)"
+        "--policies",
+        nargs="+",
+        default=["column", "sky_column"],
+        help="policies (default: %(default)s)",
     )
     ap.add_argument(
         "--variants",

@@ -1,7 +1,9 @@
 """Anatomy of the cooperative fix's outages under a heuristic, and whether map counts steer.
 
-Flies a heuristic (default ``ceiling``) through held-out episodes with the observation option
-``obs_candidate_sky`` on (which does not change how a heuristic flies) and prints:
+Flies a heuristic (default ``ceiling_column``) through held-out episodes, counts at every step
+the satellites each UAV's receiver would use at five candidate positions (:func:`candidate_sky`,
+what the environment's former ``obs_candidate_sky`` observed; it does not change how a
+heuristic flies) and prints:
 
 1. why UAV-steps have no cooperative fix: the share of each ``coop_status``
    (:class:`coopnav_env.nav.NavStatus`; ``OK`` there means a fix the integrity gate rejected)
@@ -11,7 +13,7 @@ Flies a heuristic (default ``ceiling``) through held-out episodes with the obser
    swarm step with a fix, whether an outage begins within the next ``k`` steps (k = 1, 3, 5),
    ranked by each of three counts (fewer: riskier), as the area under the ROC curve (0.5:
    no better than chance): the satellites the UAVs receive now (``n_sats``, mean over the
-   swarm), and from ``obs_candidate_sky`` the satellites a UAV's receiver would use 10 m
+   swarm), and from :func:`candidate_sky` the satellites a UAV's receiver would use 10 m
    ahead along its route (mean over the swarm) and the swarm's pooled count there;
 3. with ``--steer GAIN:THRESHOLD ...``: the heuristic plus a hand-written use of those counts,
    paired with the heuristic alone on the same episodes. Whenever a UAV's pooled count 10 m
@@ -44,13 +46,119 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
-def _steered(env: Any, obs: dict, cmd: dict, gain: float, threshold: float) -> dict:
-    """``cmd`` plus the greedy push of the module docstring (item 3)."""
-    pts = env._candidate_points()
+#: Distance along the route of the near candidates [m], their lateral offset to either side
+#: [m], and the distance of the far candidate [m].
+CANDIDATE_AHEAD_M = 10.0
+CANDIDATE_SIDE_M = 6.0
+CANDIDATE_FAR_M = 25.0
+
+
+def route_points(env: Any, distances_m: tuple[float, ...]) -> np.ndarray:
+    """``(D, N, 3)``: each UAV's point ``distances_m[d]`` metres along its route.
+
+    From the UAV's *estimated* position, straight to its next waypoint and on along the
+    route's polyline (past its end: on along the last leg's direction; with no leg, the
+    position itself), at the estimated altitude clamped to the flight band.
+    """
+    base = getattr(env, "unwrapped", env)
+    ep = base._epoch
+    route = np.asarray(base.world.route_xy_m, dtype=float)
+    kin = base.config.kinematics
+    est = np.asarray(ep.nav_pos_enu_m, dtype=float)
+    z = np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
+    out = np.empty((len(distances_m), est.shape[0], 3))
+    for i in range(est.shape[0]):
+        pts = np.vstack([est[i, :2], route[int(ep.next_waypoint[i]) :]])
+        seg = np.diff(pts, axis=0)
+        seg_len = np.hypot(seg[:, 0], seg[:, 1])
+        cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+        for d, dist in enumerate(distances_m):
+            if cum[-1] <= 0.0:
+                xy = est[i, :2]
+            elif dist >= cum[-1]:  # past the end: on along the last non-zero leg
+                j = int(np.flatnonzero(seg_len > 0.0)[-1])
+                xy = pts[-1] + seg[j] / seg_len[j] * (dist - cum[-1])
+            else:
+                j = int(np.searchsorted(cum, dist, side="right") - 1)
+                xy = pts[j] + seg[j] / seg_len[j] * (dist - cum[j])
+            out[d, i] = (xy[0], xy[1], z[i])
+    return out
+
+
+def candidate_points(env: Any) -> np.ndarray:
+    """``(5, N, 3)``: the candidates of every UAV, in this order: where it believes it is (its
+    estimate, the altitude clamped to the flight band), the point ``CANDIDATE_AHEAD_M`` along
+    its route (:func:`route_points`), that point moved ``CANDIDATE_SIDE_M`` to the left and to
+    the right of the direction from the estimate to it (East when the two coincide), and the
+    point ``CANDIDATE_FAR_M`` along the route."""
+    base = getattr(env, "unwrapped", env)
+    route = route_points(base, (CANDIDATE_AHEAD_M, CANDIDATE_FAR_M))
+    kin = base.config.kinematics
+    here = np.array(base._epoch.nav_pos_enu_m, dtype=float, copy=True)
+    here[:, 2] = np.clip(here[:, 2], kin.altitude_min_m, kin.altitude_max_m)
+    ahead = route[0]
+    d = ahead[:, :2] - here[:, :2]
+    norm = np.hypot(d[:, 0], d[:, 1])
+    u = np.where(norm[:, None] > 0.0, d / np.where(norm > 0.0, norm, 1.0)[:, None], [1.0, 0.0])
+    left = np.stack([-u[:, 1], u[:, 0], np.zeros(len(u))], axis=1) * CANDIDATE_SIDE_M
+    return np.stack([here, ahead, ahead + left, ahead - left, route[1]])
+
+
+def candidate_sky(env: Any) -> np.ndarray:
+    """``(N, 10)`` float32, every UAV's counts at its :func:`candidate_points`, each divided by
+    20 and clipped to [0, 1].
+
+    Columns 0-4: the satellites the UAV's receiver would *use* at each candidate, by the rule
+    its 3D-mapping-aided exclusion applies
+    (:func:`coopnav_env.sim.map_aided.predicted_line_of_sight` with the UAV's current
+    covariance grown by one step of dead reckoning and the configured margin; with
+    ``nlos_exclusion="off"`` plain line of sight, margin 0). Columns 5-9: the distinct
+    satellites over the swarm if the UAV were at that candidate and every other UAV at its
+    own point ``CANDIDATE_AHEAD_M`` along its route. A candidate inside a building counts
+    none.
+    """
+    base = getattr(env, "unwrapped", env)
+    cfg = base.config
+    pts = candidate_points(base)
+    n_c, n = pts.shape[:2]
+    if cfg.nlos_exclusion == "map":
+        dr_var = (cfg.dead_reckoning_sigma_mps * cfg.dt_s) ** 2
+        cov = np.asarray(base.world.nav_cov_enu_m2, dtype=float) + np.eye(3) * dr_var
+        margin, cap = cfg.nlos_exclusion_margin_sigma, cfg.nlos_exclusion_max_margin_m
+    else:
+        cov, margin, cap = np.zeros((n, 3, 3)), 0.0, 0.0
+    flat = pts.reshape(-1, 3)
+    use = base.world.map_line_of_sight(
+        flat, np.tile(cov, (n_c, 1, 1)), margin_sigma=margin, max_margin_m=cap
+    )
+    use = use.reshape(n_c, n, -1)
+    own = use.sum(axis=2).T  # (N, 5)
+    ahead = use[1]  # (N, S): every UAV at its near point ahead
+    swarm = np.empty((n, n_c))
+    for i in range(n):
+        others = np.delete(ahead, i, axis=0).any(axis=0)
+        swarm[i] = (use[:, i] | others).sum(axis=1)
+    cols = np.concatenate([own, swarm], axis=1) / 20.0
+    return np.clip(cols, 0.0, 1.0).astype(np.float32)
+
+
+def candidate_counts(env: Any) -> dict[str, np.ndarray]:
+    """Every UAV's :func:`candidate_sky` counts (times 20: satellites), by agent name."""
+    base = getattr(env, "unwrapped", env)
+    cols = candidate_sky(base)
+    return {a: cols[i] * 20.0 for i, a in enumerate(base.possible_agents)}
+
+
+def _steered(
+    env: Any, counts_of: dict[str, np.ndarray], cmd: dict, gain: float, threshold: float
+) -> dict:
+    """``cmd`` plus the greedy push of the module docstring (item 3); ``counts_of``: each
+    UAV's :func:`candidate_counts`."""
+    pts = candidate_points(env)
     out = dict(cmd)
     for a in env.agents:
         i = env.possible_agents.index(a)
-        counts = np.asarray(obs[a][-10:], dtype=float) * 20.0
+        counts = np.asarray(counts_of[a], dtype=float)
         own, pooled = counts[:5], counts[5:]
         if pooled[1] >= threshold:
             continue
@@ -75,20 +183,22 @@ def fly(
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
 
-    env = urban_canyon_v0.parallel_env(**{**env_kwargs, "obs_candidate_sky": True})
+    env = urban_canyon_v0.parallel_env(**env_kwargs)
     pol = make_policy(policy, env)
     nav, coop, goal, steps = [], [], [], []
     for seed in seeds:
         obs, _ = env.reset(seed=seed)
         pol.reset(seed)
+        counts = candidate_counts(env)
         agents = list(env.possible_agents)
         nav_sum = nav_n = coop_sum = coop_n = 0.0
         infos: dict = {}
         while env.agents:
             cmd = pol.act(obs)
             if steer is not None:
-                cmd = _steered(env, obs, cmd, *steer)
+                cmd = _steered(env, counts, cmd, *steer)
             obs, _r, _te, _tr, infos = env.step(cmd)
+            counts = candidate_counts(env)
             live = [a for a in agents if a in infos]
             for a in live:
                 nav_sum += infos[a]["nav_error_m"]
@@ -97,7 +207,7 @@ def fly(
                     coop_sum += infos[a]["coop_error_m"]
                     coop_n += 1
             if steer is None:
-                cand = np.array([obs[a][-10:] * 20.0 for a in live if a in obs])
+                cand = np.array([counts[a] for a in live if a in obs])
                 steps.append(
                     {
                         "episode": seed,
@@ -181,7 +291,9 @@ def main(argv: list[str] | None = None) -> int:
     from coopnav_env.training.files import write_json
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", default="ceiling", help="the heuristic (default: ceiling)")
+    p.add_argument(
+        "--policy", default="ceiling_column", help="the heuristic (default: %(default)s)"
+    )
     p.add_argument("--episodes", type=int, default=200, help="episodes (default: 200)")
     p.add_argument(
         "--first-seed", type=int, default=1_000_000, help="first reset seed (default: 1000000)"

@@ -47,7 +47,7 @@ receiver's belief instead, the estimate plus its own covariance)::
     python studies/planner_headroom/planner_headroom.py --episodes 200 --first-seed 5000000 \\
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true nav_reward=error \\
         nav_reward_weight=1.0 collision_penalty=250 nav_team_weight=1.0 \\
-        progress_reward_weight=0.2 --base ceiling --out runs/planner_headroom
+        progress_reward_weight=0.2 --base ceiling_column --out runs/planner_headroom
 """
 
 from __future__ import annotations
@@ -140,6 +140,7 @@ def _worker(
 ) -> int:
     import torch
 
+    import studies.planner_headroom.planner  # noqa: F401  (registers 'planner')
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
 
@@ -477,7 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     from coopnav_env.training.files import atomic_write_text
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--base", default="ceiling", help="base heuristic (default: ceiling)")
+    p.add_argument("--base", default="ceiling_column", help="base heuristic (default: %(default)s)")
     p.add_argument("--episodes", type=int, default=60, help="episodes (default: 60)")
     p.add_argument(
         "--first-seed", type=int, default=5_000_000, help="first reset seed (default: 5000000)"
@@ -488,7 +489,7 @@ def main(argv: list[str] | None = None) -> int:
         nargs="*",
         default=[],
         metavar="KEY=VALUE",
-        help="planner options (coopnav_env.agents.planner.PrivilegedPlanner), "
+        help="planner options (studies.planner_headroom.planner.PrivilegedPlanner), "
         "e.g. from_estimate=True",
     )
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default: 2)")

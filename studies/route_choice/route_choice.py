@@ -1,17 +1,16 @@
 """Route choice on held-out episodes: every route flown, every one-feature rule and model priced.
 
-Flies *every* equally short street route of each episode with a column heuristic (``ceiling``
-by default; :func:`coopnav_env.training.route_learning.collect`, the same collection ``coopnav
-train-routes`` uses, here on held-out reset seeds), then prices choosing by each one-feature
-rule of :data:`coopnav_env.agents.routes.ROUTE_FEATURES` (the route with the best value of
-the feature)
-and by each learned route model given with ``--models``: per choice, the mean ``nav`` error,
-the goal rate, and the paired difference to the first route (what the heuristic flies
-without a choice) and to the best rule, with 95 % bootstrap intervals over episodes (2000
-resamples, generator seed 0). A choice's flight is the flight of the route it picks, so one
-collection prices every rule and model exactly as if each had flown (the heuristics are
-deterministic given the reset seed). Also printed: the *noise-selected* oracle, the lowest
-of each episode's flown routes, an optimistic bound (it picks on the noise too).
+Flies *every* equally short street route of each episode with a column heuristic
+(``ceiling_column`` by default; :func:`coopnav_env.training.route_learning.collect`, the same
+collection ``coopnav train-routes`` uses, here on held-out reset seeds), then prices choosing by
+each one-feature rule of :data:`studies.route_choice.routes.ROUTE_FEATURES` (the route with the
+best value of the feature) and by each learned route model given with ``--models``: per choice,
+the mean ``nav`` error, the goal rate, and the paired difference to the first route (what the
+heuristic flies without a choice) and to the best rule, with 95 % bootstrap intervals over
+episodes (2000 resamples, generator seed 0). A choice's flight is the flight of the route it
+picks, so one collection prices every rule and model exactly as if each had flown (the
+heuristics are deterministic given the reset seed). Also printed: the *noise-selected* oracle,
+the lowest of each episode's flown routes, an optimistic bound (it picks on the noise too).
 
 With ``--noise-replicates R`` (R >= 2) every route is flown R times under independent noise
 realisations of the same episode (the environment's ``noise_stream`` reset option): rules and
@@ -83,7 +82,7 @@ def _oracle_expected(
 
 
 def _rule_picks(eps: list[dict[str, np.ndarray]], feature: str) -> list[int]:
-    from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES
+    from studies.route_choice.routes import FEATURE_SENSE, ROUTE_FEATURES
 
     j = ROUTE_FEATURES.index(feature)
     return [
@@ -95,7 +94,7 @@ def _rule_picks(eps: list[dict[str, np.ndarray]], feature: str) -> list[int]:
 def within_turns(eps: list[dict[str, np.ndarray]], max_turns: int) -> list[dict[str, np.ndarray]]:
     """``eps`` with only the routes of at most ``max_turns`` turns (the ``turns`` feature),
     in their order; an episode with one route keeps it."""
-    from coopnav_env.agents.routes import ROUTE_FEATURES
+    from studies.route_choice.routes import ROUTE_FEATURES
 
     j = ROUTE_FEATURES.index("turns")
     out = []
@@ -113,7 +112,7 @@ def within_turns(eps: list[dict[str, np.ndarray]], max_turns: int) -> list[dict[
 def compare_within_turns(
     eps: list[dict[str, np.ndarray]], rule: str, max_turns: int, reps: int = 2000
 ) -> dict[str, Any]:
-    """The rule ``rule`` (a :data:`~coopnav_env.agents.routes.ROUTE_FEATURES` name) and the
+    """The rule ``rule`` (a :data:`~studies.route_choice.routes.ROUTE_FEATURES` name) and the
     expected-error oracle choosing among all the routes of ``eps``, against the same rule choosing
     among the routes of at most ``max_turns`` turns only, paired by episode (means over the noise
     replicates; 95 % bootstrap intervals): what routes with more turns, such as a swarm that
@@ -158,8 +157,8 @@ def price_choices(
     eps: list[dict[str, np.ndarray]], models: dict[str, Any], reps: int = 2000
 ) -> dict[str, Any]:
     """Mean error, goal rate and paired differences of every rule and model on ``eps``."""
-    from coopnav_env.agents.routes import FEATURE_SENSE, ROUTE_FEATURES
     from coopnav_env.training.stats import bootstrap_mean_interval
+    from studies.route_choice.routes import FEATURE_SENSE, ROUTE_FEATURES
 
     first = np.array([e["nav"][0] for e in eps])
     picks: dict[str, list[int]] = {}
@@ -253,7 +252,6 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from coopnav_env.agents.routes import RouteModel
     from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
     from coopnav_env.training.route_learning import (
         arrays_to_episodes,
@@ -261,6 +259,7 @@ def main(argv: list[str] | None = None) -> int:
         env_kwargs_from_overrides,
         episodes_to_arrays,
     )
+    from studies.route_choice.routes import RouteModel
 
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -272,7 +271,9 @@ def main(argv: list[str] | None = None) -> int:
         "--first-seed", type=int, default=1_000_000, help="first reset seed (default: %(default)s)"
     )
     p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
-    p.add_argument("--base", default="ceiling", help="column heuristic (default: %(default)s)")
+    p.add_argument(
+        "--base", default="ceiling_column", help="column heuristic (default: %(default)s)"
+    )
     p.add_argument("--max-turns", type=int, default=3, help="most turns (default: %(default)s)")
     p.add_argument("--models", nargs="*", default=[], help="route models (run folders or files)")
     p.add_argument(

@@ -3,12 +3,12 @@
 The column heuristics can split the swarm over two equally short street routes
 (``route_split``, ``route_split_index``: slots 0, 2, 4, ... on the first route, 1, 3, ... on
 the second, abreast), so that the cooperative fix pools the sky of two streets. This
-benchmark flies, for each held-out episode, the unsplit heuristic (``skyroute`` by default,
+benchmark flies, for each held-out episode, the unsplit heuristic (``best_sky_route`` by default,
 on its chosen route) and every split of it (its route and each other candidate), each under
 ``--noise-replicates`` independent noise realisations of the same episode (the environment's
 ``noise_stream`` reset option). It prices
 
-* every one-feature rule of :data:`coopnav_env.agents.routes.SPLIT_FEATURES` choosing among
+* every one-feature rule of :data:`studies.route_choice.routes.SPLIT_FEATURES` choosing among
   *all* arms
   (no split, or a split with any other candidate) and among the splits only, as the paired
   difference of the mean error over the replicates to the unsplit heuristic;
@@ -29,13 +29,15 @@ about 12 minutes on 2 cores. ``--out`` keeps the flights (``episodes.npz``) and 
 and a folder of a run with other settings is refused (it is never overwritten).
 
 ``--fit-model PATH`` fits a learned split chooser on the flights (training episodes only:
-reset seeds below 1,000,000; :func:`fit_split_model`), the model a ``split:PATH`` policy
-flies; ``--models`` prices such models on the flights like the rules. The shipped models
-(``split:pretrained``, ``.../s1``, ``.../s2``) were fitted with::
+reset seeds below 1,000,000; :func:`fit_split_model`), the model a
+``learned_split@model='PATH'`` policy flies; ``--models`` prices such models on the flights
+like the rules. The study's models (``learned_split@model='pretrained'``, ``.../s1``,
+``.../s2``) were fitted with::
 
     python studies/split_choice/split_choice.py --episodes 1000 --first-seed 0 \\
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
-        --noise-replicates 2 --out runs/splits/train1k_s0 --fit-model agents/pretrained/split_s0
+        --noise-replicates 2 --out runs/splits/train1k_s0 \\
+        --fit-model studies/split_choice/policies/split_s0
 
 and ``--first-seed 1000`` (``s1``), ``2000`` (``s2``), about 8 minutes each on 2 cores.
 """
@@ -55,7 +57,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
 def _with_option(base: str, option: str) -> str:
-    return f"{base}{',' if '@' in base else '@'}{option}"
+    from studies.route_choice.routes import route_column_name
+
+    return route_column_name(base, option)
 
 
 def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str, np.ndarray]:
@@ -66,8 +70,8 @@ def collect_episode(env: Any, base: str, seed: int, replicates: int) -> dict[str
     estimate each UAV used [m]) and ``goal`` ``(A, replicates)``.
     """
     from coopnav_env.agents import make_policy
-    from coopnav_env.agents.routes import SPLIT_FEATURES
     from coopnav_env.training.evaluate import run_episode
+    from studies.route_choice.routes import SPLIT_FEATURES
 
     planner = make_policy(_with_option(base, "route_split='los_mean'"), env)
     obs, _ = env.reset(seed=int(seed))
@@ -131,10 +135,11 @@ def collect(
 def price(
     eps: list[dict[str, np.ndarray]], reps: int = 2000, models: dict[str, Any] | None = None
 ) -> dict[str, Any]:
-    """Rules, learned split ``models`` (name: :class:`coopnav_env.agents.routes.RouteModel` of kind
-    ``"split"``) and the expected-error oracle against the unsplit arm (see the module doc)."""
-    from coopnav_env.agents.routes import SPLIT_FEATURE_SENSE, SPLIT_FEATURES
+    """Rules, learned split ``models`` (name: :class:`studies.route_choice.routes.RouteModel`
+    of kind ``"split"``) and the expected-error oracle against the unsplit arm (see the module
+    doc)."""
     from coopnav_env.training.stats import bootstrap_mean_interval
+    from studies.route_choice.routes import SPLIT_FEATURE_SENSE, SPLIT_FEATURES
 
     def interval(d: np.ndarray) -> list[float]:
         return [float(v) for v in bootstrap_mean_interval(d, reps, np.random.default_rng(0))]
@@ -204,11 +209,11 @@ def price(
 def fit_split_model(
     eps: list[dict[str, np.ndarray]], base: str, info: dict[str, Any] | None = None
 ) -> Any:
-    """A learned split chooser: :func:`coopnav_env.agents.routes.fit_route_model` of kind
+    """A learned split chooser: :func:`studies.route_choice.routes.fit_route_model` of kind
     ``"split"`` on the flights ``eps`` (each option's mean error over its replicates; ridge penalty
     by 5-fold cross-validation over episodes). Fit it on training episodes (reset seeds below
     1,000,000), never on the episodes it is to be judged on."""
-    from coopnav_env.agents.routes import fit_route_model
+    from studies.route_choice.routes import fit_route_model
 
     feats = [np.asarray(e["features"], dtype=float) for e in eps]
     errors = [np.nanmean(np.asarray(e["nav"], dtype=float), axis=1) for e in eps]
@@ -254,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--env-set", nargs="*", default=[], metavar="KEY=VALUE")
     p.add_argument(
-        "--base", default="skyroute", help="column heuristic, unsplit (default: %(default)s)"
+        "--base", default="best_sky_route", help="column heuristic, unsplit (default: %(default)s)"
     )
     p.add_argument(
         "--noise-replicates",
@@ -302,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
             fit_path = fit_path / "split_model.json"
         if fit_path.exists():
             raise SystemExit(f"--fit-model: {fit_path} exists; a model is never overwritten")
-    from coopnav_env.agents.routes import RouteModel, resolve_route_model
+    from studies.route_choice.routes import RouteModel, resolve_route_model
 
     models = {
         str(m): RouteModel.load(resolve_route_model(str(m), kind="split")) for m in args.models

@@ -16,8 +16,7 @@ Example::
 
     python studies/task_objective/compare_learned.py \\
         --methods mappo=mappo:runs/v1/mappo_bc_s0,mappo:runs/v1/mappo_bc_s1 \\
-        --heuristics formation wide wide@spacing_m=60,cruise_speed_mps=10,ceiling_margin_m=-10 \\
-        --reference wide@spacing_m=60,cruise_speed_mps=10,ceiling_margin_m=-10 \\
+        --heuristics column wide_column high_wide_column --reference high_wide_column \\
         --episodes 100 --seed-start 1000100 --out studies/task_objective/learned_v1
 """
 
@@ -109,7 +108,9 @@ def one_torch_thread() -> Iterator[None]:
 def policy_in_its_env(policy_name: str) -> Iterator[tuple[Any, Any]]:
     """``(env, policy)``: an ``urban_canyon_v1`` in :func:`env_settings_of` ``policy_name``
     and the policy acting in it, torch on one thread (:func:`one_torch_thread`) for the body;
-    the environment is closed after."""
+    the environment is closed after. The privileged planner of
+    :mod:`studies.planner_headroom.planner` is registered (``planner@base=...``)."""
+    import studies.planner_headroom.planner  # noqa: F401  (registers 'planner')
     from coopnav_env import urban_canyon_v1
     from coopnav_env.agents import make_policy
 
@@ -333,9 +334,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         metavar="NAME=POLICY[,POLICY...]",
         help="learned methods: a name and its policies, one per training seed",
     )
-    p.add_argument("--heuristics", nargs="+", default=["formation", "wide"])
-    p.add_argument("--reference", default="wide", help="the heuristic to beat")
-    p.add_argument("--baseline", default="formation", help="the gap's other end")
+    p.add_argument("--heuristics", nargs="+", default=["column", "wide_column"])
+    p.add_argument("--reference", default="wide_column", help="the heuristic to beat")
+    p.add_argument("--baseline", default="column", help="the gap's other end")
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed-start", type=int, default=1_000_100)
     p.add_argument("--reps", type=int, default=2000, help="bootstrap replicates")

@@ -1,18 +1,18 @@
 """The heuristics on ``urban_canyon_v1``: scored, the best column re-tuned, and confirmed.
 
-Flies the named heuristics (the column presets ``formation``, ``sky``, ``spread``, ``wide``,
-``guarded``, ``ceiling``, ``skyroute``, and the waypoint follower, plain and at 28 m) on
-held-out episodes of ``urban_canyon_v1``, whose undiscounted return is the task's score
-(:func:`coopnav_env.training.alignment.fly`). The column preset with the highest mean score
-is then re-tuned on that score over a grid of spacing (``spacing_m``), cruise speed
-(``cruise_speed_mps``) and altitude (``ceiling_margin_m``: how far below the top of the
-altitude band the column flies; a negative margin puts the target above the band, so that
-the column climbs and holds the band's top whatever its estimated altitude reads), on the
-same episodes.
+Flies the named heuristics (the column presets ``column``, ``sky_column``, ``stretched_column``,
+``wide_column``, ``guarded_column``, ``ceiling_column``, ``best_sky_route``, and the waypoint
+follower, plain and at 28 m) on held-out episodes of ``urban_canyon_v1``, whose undiscounted
+return is the task's score (:func:`coopnav_env.training.alignment.fly`). The column preset with
+the highest mean score is then re-tuned on that score over a grid of spacing (``spacing_m``),
+cruise speed (``cruise_speed_mps``) and altitude (``ceiling_margin_m``: how far below the top of
+the altitude band the column flies; a negative margin puts the target above the band, so that
+the column climbs and holds the band's top whatever its estimated altitude reads), on the same
+episodes.
 
 Choosing the best of many settings on the episodes that score them flatters the winner, so
 the chosen setting is confirmed on as many *fresh* episodes (the next reset seeds): a second
-table flies it beside ``wide``, the best named column and ``formation``.
+table flies it beside ``wide_column``, the best named column and ``column``.
 
 Each table gives per policy the mean score with its 95 % bootstrap interval over episodes
 (:func:`coopnav_env.training.stats.bootstrap_mean_interval`, 2000 resamples), the score's
@@ -43,13 +43,13 @@ import numpy as np
 ENV_ID = "urban_canyon_v1"
 
 NAMED_POLICIES: tuple[str, ...] = (
-    "formation",
-    "sky",
-    "spread",
-    "wide",
-    "guarded",
-    "ceiling",
-    "skyroute",
+    "column",
+    "sky_column",
+    "stretched_column",
+    "wide_column",
+    "guarded_column",
+    "ceiling_column",
+    "best_sky_route",
     "waypoint",
     "waypoint@altitude_m=28",
 )
@@ -58,8 +58,8 @@ NAMED_POLICIES: tuple[str, ...] = (
 DEFAULT_SPACINGS_M: tuple[float, ...] = (30.0, 45.0, 60.0)
 DEFAULT_SPEEDS_MPS: tuple[float, ...] = (5.0, 7.0, 10.0)
 DEFAULT_CEILING_MARGINS_M: tuple[float, ...] = (0.5, -10.0)
-"""Altitudes of the grid: 0.5 m below the band's top on the estimated altitude (``wide``'s),
-and a target 10 m above the band (``ceiling``'s: the column holds the top)."""
+"""Altitudes of the grid: 0.5 m below the band's top on the estimated altitude (``wide_column``'s),
+and a target 10 m above the band (``ceiling_column``'s: the column holds the top)."""
 
 BOOTSTRAP_REPS = 2000
 CHUNK = 10
@@ -216,8 +216,10 @@ def retune(
     columns = [p for p in policies if column_preset(p) is not None]
     if not columns:
         raise ValueError(f"no column heuristic among the policies {list(policies)}")
-    if "wide" not in policies:
-        raise ValueError(f"the policies must include 'wide' (the confirmation's), got {policies}")
+    if "wide_column" not in policies:
+        raise ValueError(
+            f"the policies must include 'wide_column' (the confirmation's), got {policies}"
+        )
     tune_seeds = list(range(seed_start, seed_start + episodes))
     confirm_seeds = list(range(seed_start + episodes, seed_start + 2 * episodes))
     n_grid = len(spacings_m) * len(speeds_mps) * len(ceiling_margins_m)
@@ -248,7 +250,7 @@ def retune(
     top = max(tuning, key=lambda p: tuning[p]["score"].mean())
     tuning_rows = table(tuning, top)
 
-    confirm_names = list(dict.fromkeys([chosen, "wide", best_column, "formation"]))
+    confirm_names = list(dict.fromkeys([chosen, "wide_column", best_column, "column"]))
     confirm_names = [p for p in confirm_names if p in tuning]  # formation may be left out
     confirmation = {p: fly_scores(p, confirm_seeds, advance) for p in confirm_names}
     confirm_rows = table(confirmation, chosen)

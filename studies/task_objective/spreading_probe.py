@@ -3,7 +3,7 @@
 Two measurements on held-out episodes of ``urban_canyon_v1``:
 
 1. **A column at several spacings.** The re-tuned column
-   (``wide@spacing_m=S,cruise_speed_mps=10,ceiling_margin_m=-10``) flown at each spacing
+   (``wide_column@spacing_m=S,cruise_speed_mps=10,ceiling_margin_m=-10``) flown at each spacing
    ``S``: how the score and the navigation error change as the same column spreads out
    (the score's reward for spreading, with the route, speed and altitude held).
 2. **A learned policy, slowed UAV by UAV.** The policy's command for UAV ``k`` (its index in
@@ -34,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository (studies/)
 
-COLUMN = "wide@spacing_m={spacing:g},cruise_speed_mps=10,ceiling_margin_m=-10"
+COLUMN = "wide_column@spacing_m={spacing:g},cruise_speed_mps=10,ceiling_margin_m=-10"
 """The re-tuned column (``heuristics_v1``) with its spacing left open."""
 
 KEYS = ("score", "goal", "collided", "nav_error_m", "cruise_spacing_m", "steps")

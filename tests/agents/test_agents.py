@@ -82,7 +82,7 @@ def test_missing_checkpoint_names_the_path(tmp_path):
 
 
 def test_heuristics_need_the_urban_env():
-    for name in ("formation", "sky", "waypoint"):
+    for name in ("column", "sky_column", "waypoint"):
         with pytest.raises(ValueError, match="urban_canyon_v0"):
             make_policy(name, ToyParallelEnv())
 
@@ -118,7 +118,17 @@ def test_heuristics_use_the_route_module():
 
 @needs_env
 @pytest.mark.parametrize(
-    "name", ["random", "formation", "sky", "spread", "wide", "guarded", "ceiling", "waypoint"]
+    "name",
+    [
+        "random",
+        "column",
+        "sky_column",
+        "stretched_column",
+        "wide_column",
+        "guarded_column",
+        "ceiling_column",
+        "waypoint",
+    ],
 )
 def test_policies_give_valid_actions_on_the_env(name):
     env = urban(max_steps=25)
@@ -131,7 +141,16 @@ def test_policies_give_valid_actions_on_the_env(name):
 
 @needs_env
 @pytest.mark.parametrize(
-    "name", ["formation", "sky", "spread", "wide", "guarded", "ceiling", "waypoint"]
+    "name",
+    [
+        "column",
+        "sky_column",
+        "stretched_column",
+        "wide_column",
+        "guarded_column",
+        "ceiling_column",
+        "waypoint",
+    ],
 )
 def test_heuristics_reach_the_goal_along_the_canyon(name):
     """The paper's straight canyon: flying the street is enough to get there."""
@@ -155,7 +174,7 @@ def test_formation_follower_reaches_the_goal_in_an_easy_grid():
         "height_max_m": 40.0,
     }
     env = urban(n_uavs=3, max_steps=200, city_config=easy)
-    pol = make_policy("formation", env)
+    pol = make_policy("column", env)
     for seed in (1_000_002, 1_000_003):
         infos, _ = fly(env, pol, seed=seed)
         assert len(pol._path.points) >= 4  # at least one turn between the extensions
@@ -166,7 +185,7 @@ def test_formation_follower_reaches_the_goal_in_an_easy_grid():
 @needs_env
 def test_heuristics_are_deterministic():
     env = urban(max_steps=30)
-    for name in ("formation", "sky"):
+    for name in ("column", "sky_column"):
         pol = make_policy(name, env)
         _, a1 = fly(env, pol, seed=1_000_002)
         _, a2 = fly(env, pol, seed=1_000_002)
@@ -191,7 +210,7 @@ def test_opening_column_starts_tight_and_opens_ahead():
     """``open_distance_m``: the column starts at ``goal_spacing_m`` and opens to ``spacing_m``
     as the head advances, its tail held (the rear UAV is not sent back along the route)."""
     env = urban()
-    pol = make_policy("spread@spacing_m=30,close_distance_m=120,open_distance_m=96", env)
+    pol = make_policy("stretched_column@spacing_m=30,close_distance_m=120,open_distance_m=96", env)
     obs, _ = env.reset(seed=1_000_000)
     pol.reset(1_000_000)
     pol.act(obs)
@@ -208,18 +227,18 @@ def test_opening_column_starts_tight_and_opens_ahead():
     assert pol._head - head0 > 96.0
     assert pol._spacing_now() == pytest.approx(30.0)
     with pytest.raises(ValueError, match="open_distance_m"):
-        make_policy("spread@open_distance_m=0", env)
+        make_policy("stretched_column@open_distance_m=0", env)
 
 
 @needs_env
 def test_wide_column_defaults_follow_its_spacing():
-    """``wide``: close over 4 x spacing, open over (N - 1)(spacing - goal spacing); options
+    """``wide_column``: close over 4 x spacing, open over (N - 1)(spacing - goal spacing); options
     after ``@`` still override them."""
     env = urban(n_uavs=4)
-    pol = make_policy("wide", env)
+    pol = make_policy("wide_column", env)
     assert (pol.spacing_m, pol.goal_spacing_m) == (45.0, 6.0)
     assert pol.close_distance_m == 180.0 and pol.open_distance_m == 3 * 39.0
-    pol = make_policy("wide@spacing_m=30,open_distance_m=50", env)
+    pol = make_policy("wide_column@spacing_m=30,open_distance_m=50", env)
     assert pol.close_distance_m == 120.0 and pol.open_distance_m == 50.0
 
 
@@ -247,18 +266,18 @@ def test_wall_guard_pushes_away_from_a_near_wall():
         pol.reset(seed=1_000_002)
         return pol.act(o)
 
-    g = "wide@wall_margin_m=8,wall_gain_per_s=0.5"
+    g = "wide_column@wall_margin_m=8,wall_gain_per_s=0.5"
     c_far, c_near = cmd(g, far), cmd(g, near)
     assert c_far[a0][0] - c_near[a0][0] == pytest.approx(0.5 * (8.0 - 2.0) / vmax, abs=1e-6)
     assert c_far[a0][1] == pytest.approx(c_near[a0][1], abs=1e-6)  # nothing to the North
     for a in env.possible_agents[1:]:
         assert np.array_equal(c_far[a], c_near[a])
     # no guard: the wall is ignored
-    assert np.array_equal(cmd("wide", far)[a0], cmd("wide", near)[a0])
+    assert np.array_equal(cmd("wide_column", far)[a0], cmd("wide_column", near)[a0])
     with pytest.raises(ValueError, match="wall_margin_m must be in"):
-        make_policy("wide@wall_margin_m=0", env)
+        make_policy("wide_column@wall_margin_m=0", env)
     with pytest.raises(ValueError, match="wall_gain_per_s must be in"):
-        make_policy("wide@wall_margin_m=5,wall_gain_per_s=-1", env)
+        make_policy("wide_column@wall_margin_m=5,wall_gain_per_s=-1", env)
 
 
 def test_guard_delta_removes_only_the_part_toward_a_near_wall():
@@ -280,7 +299,7 @@ def test_guard_delta_removes_only_the_part_toward_a_near_wall():
     o[1, walls.start + north] = 3.0 / walls.scale
     o[2, walls.start + east] = 12.0 / walls.scale  # UAV 2: a wall 12 m East, 4 m beyond
     delta = np.array([[0.4, 0.3, 0.2], [0.4, 0.3, -0.1], [0.4, 0.3, 0.2]])
-    pol = make_policy("ceiling", env)  # wall margin 8 m
+    pol = make_policy("ceiling_column", env)  # wall margin 8 m
     vmax = env.unwrapped.config.kinematics.max_speed_mps
     out = pol.guard_delta(o, delta)
     np.testing.assert_allclose(out[0], [0.0, 0.3, 0.2], atol=1e-12)  # East part gone
@@ -294,7 +313,7 @@ def test_guard_delta_removes_only_the_part_toward_a_near_wall():
     away = pol.guard_delta(o, -delta)  # pointing away from the walls: unchanged
     np.testing.assert_array_equal(away, -delta)
     # without a wall margin the change is returned as it is
-    np.testing.assert_array_equal(make_policy("wide", env).guard_delta(o, delta), delta)
+    np.testing.assert_array_equal(make_policy("wide_column", env).guard_delta(o, delta), delta)
     with pytest.raises(ValueError, match="guard_delta needs delta"):
         pol.guard_delta(o, delta[:2])
     with pytest.raises(ValueError, match="time_s must be > 0"):
@@ -303,15 +322,15 @@ def test_guard_delta_removes_only_the_part_toward_a_near_wall():
 
 @needs_env
 def test_ceiling_climbs_to_and_holds_the_top_of_the_band():
-    """``ceiling`` = ``guarded`` with its altitude target 10 m above the band: it climbs
-    faster and then sits at the band's top, where ``guarded`` hovers below it."""
+    """``ceiling_column`` = ``guarded_column`` with its altitude target 10 m above the band: it
+    climbs faster and then sits at the band's top, where ``guarded_column`` hovers below it."""
     env = urban(preset="urban_nlos_3dma", dead_reckoning_noise=True, max_steps=60)
-    pol = make_policy("ceiling", env)
+    pol = make_policy("ceiling_column", env)
     assert pol.ceiling_margin_m == -10.0
     assert (pol.wall_margin_m, pol.gain_per_s, pol.spacing_m) == (8.0, 0.2, 45.0)
     top = env.unwrapped.config.kinematics.altitude_max_m
     alt = {}
-    for name in ("guarded", "ceiling"):
+    for name in ("guarded_column", "ceiling_column"):
         p = make_policy(name, env)
         obs, _ = env.reset(seed=1_000_000)
         p.reset(seed=1_000_000)
@@ -322,29 +341,31 @@ def test_ceiling_climbs_to_and_holds_the_top_of_the_band():
             if not env.agents:
                 break
         alt[name] = np.array(zs)
-    # after 30 s every UAV of ``ceiling`` is within 0.5 m of the top; ``guarded`` is not
-    assert np.all(alt["ceiling"][30:] >= top - 0.5), alt["ceiling"][30:].min()
-    assert alt["ceiling"][30:].mean() > alt["guarded"][30:].mean()
-    assert alt["ceiling"][:10].mean() > alt["guarded"][:10].mean()  # climbs faster
+    # after 30 s every UAV of ``ceiling_column`` is within 0.5 m of the top; ``guarded_column``
+    # is not
+    assert np.all(alt["ceiling_column"][30:] >= top - 0.5), alt["ceiling_column"][30:].min()
+    assert alt["ceiling_column"][30:].mean() > alt["guarded_column"][30:].mean()
+    assert alt["ceiling_column"][:10].mean() > alt["guarded_column"][:10].mean()  # climbs faster
     with pytest.raises(ValueError, match="ceiling_margin_m must be in"):
-        make_policy("ceiling@ceiling_margin_m=-60", env)
+        make_policy("ceiling_column@ceiling_margin_m=-60", env)
 
 
 @needs_env
 @pytest.mark.slow
 def test_guarded_defaults_and_fewer_crashes_under_degraded_navigation():
-    """``guarded`` = ``wide`` + wall guard + soft tracking; under NLOS reception with a
-    drifting dead reckoning it crashes far less than ``wide`` on the same episodes."""
+    """``guarded_column`` = ``wide_column`` + wall guard + soft tracking; under NLOS reception
+    with a drifting dead reckoning it crashes far less than ``wide_column`` on the same
+    episodes."""
     env = urban(preset="urban_nlos_3dma", dead_reckoning_noise=True)
-    pol = make_policy("guarded", env)
+    pol = make_policy("guarded_column", env)
     assert (pol.wall_margin_m, pol.wall_gain_per_s, pol.gain_per_s) == (8.0, 4.0, 0.2)
     assert pol.spacing_m == 45.0  # wide's column
     crashes = {}
-    for name in ("wide", "guarded"):
+    for name in ("wide_column", "guarded_column"):
         p = make_policy(name, env)
         crashes[name] = sum(
             any(fly(env, p, seed=s)[0][a]["collided"] for a in env.possible_agents)
             for s in range(1_000_000, 1_000_100)
         )
     # measured on these 100 episodes: wide 16, guarded 2 (300 episodes: 15 % against 2 %)
-    assert crashes["guarded"] <= crashes["wide"] - 8, crashes
+    assert crashes["guarded_column"] <= crashes["wide_column"] - 8, crashes

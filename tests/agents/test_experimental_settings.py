@@ -19,8 +19,6 @@ def _fields(cls: type) -> dict[str, dataclasses.Field]:
 def test_the_issue_s_study_switches_are_listed() -> None:
     names = {(e.settings, e.name, e.value) for e in EXPERIMENTAL_SETTINGS}
     assert {
-        ("UrbanCanyonConfig", "obs_lookahead", None),
-        ("UrbanCanyonConfig", "obs_candidate_sky", None),
         ("UrbanCanyonConfig", "obs_true_error", None),
         ("MARLSettings", "residual_mode", "options"),
         ("MARLSettings", "option_init_prob", None),

@@ -1,10 +1,11 @@
 """Golden episodes of the hand-written policies: every step's actions, bit for bit.
 
 Each case flies a policy name accepted by :func:`coopnav_env.agents.make_policy` (the
-heuristics, some with ``@`` options, the route and split models built on them, the planner
-and a residual MARL policy over a column) for a few short episodes in the default
-environment and under realistic urban reception, and compares a hash of every step's actions
-(agent names and float32 commands) with the ones stored in ``heuristic_golden.npz``.
+heuristics, some with ``@`` options, and a residual MARL policy over a column) for a few
+short episodes in the default environment and under realistic urban reception, and compares a
+hash of every step's actions (agent names and float32 commands) with the ones stored in
+``heuristic_golden.npz``. (The studies' own policies built on the column heuristics have
+golden episodes of their own in their studies' tests, flown by :func:`fly`.)
 
 The stored hashes are what the policies did when the file was written; a change to a policy,
 to the environment or to the numerical libraries that changes any action by one bit fails
@@ -50,35 +51,33 @@ CASES: tuple[tuple[str, str, tuple[int, ...], int], ...] = (
     *(
         (name, env, seeds, _STEPS)
         for name in (
-            "formation",
-            "sky",
-            "spread",
-            "wide",
-            "guarded",
-            "ceiling",
-            "skyroute",
+            "column",
+            "sky_column",
+            "stretched_column",
+            "wide_column",
+            "guarded_column",
+            "ceiling_column",
+            "best_sky_route",
             "waypoint",
         )
         for env, seeds in (("default", _DEFAULT_SEEDS), ("urban_nlos_3dma", _NLOS_SEEDS))
     ),
-    ("formation@cruise_speed_mps=5,spacing_m=10", "default", _DEFAULT_SEEDS, _STEPS),
+    ("column@cruise_speed_mps=5,spacing_m=10", "default", _DEFAULT_SEEDS, _STEPS),
     ("waypoint@altitude_m=28,cruise_speed_mps=5", "default", _DEFAULT_SEEDS, _STEPS),
-    ("sky@max_offset_m=2,smoothing=0.5,ceiling_margin_m=-3", "default", _DEFAULT_SEEDS, _STEPS),
-    ("spread@route_index=1", "default", _DEFAULT_SEEDS, _STEPS),
-    ("wide@spacing_m=30", "default", _DEFAULT_SEEDS, _STEPS),
-    ("wide@spacing_m=30,goal_spacing_m=8,open_distance_m=50", "default", _DEFAULT_SEEDS, _STEPS),
-    ("wide@route_split_index=1", "default", _DEFAULT_SEEDS, _STEPS),
-    ("guarded@ceiling_margin_m=-10", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
-    ("ceiling@route_choice='swarm_mean'", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
-    ("skyroute@route_split='pdop_gt3'", "default", _DEFAULT_SEEDS, _STEPS),
-    ("route:pretrained", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
-    ("split:pretrained", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
     (
-        "planner@base='ceiling',guard_offsets=True,horizon=2,n_samples=3,n_elite=1,iterations=1",
-        "urban_nlos_3dma",
-        (2001,),
-        6,
+        "sky_column@max_offset_m=2,smoothing=0.5,ceiling_margin_m=-3",
+        "default",
+        _DEFAULT_SEEDS,
+        _STEPS,
     ),
+    ("wide_column@spacing_m=30", "default", _DEFAULT_SEEDS, _STEPS),
+    (
+        "wide_column@spacing_m=30,goal_spacing_m=8,open_distance_m=50",
+        "default",
+        _DEFAULT_SEEDS,
+        _STEPS,
+    ),
+    ("guarded_column@ceiling_margin_m=-10", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
     ("mappo:pretrained", "default", _DEFAULT_SEEDS[:2], _STEPS),
     ("mappo:{pretrained}/mappo_nlos_ceiling_s0", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
 )
@@ -152,8 +151,8 @@ def _stored() -> dict[str, np.ndarray]:
         return {k: data[k] for k in data.files}
 
 
-#: slow cases (the look-ahead planner, torch): with ``-m slow`` only
-_SLOW_PREFIXES = ("planner", "mappo:")
+#: slow cases (torch): with ``-m slow`` only
+_SLOW_PREFIXES = ("mappo:",)
 
 
 def _params() -> list[Any]:

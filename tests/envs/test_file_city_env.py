@@ -198,10 +198,8 @@ def test_numpy_motion_path_equals_the_compiled_one(monkeypatch) -> None:
             np.testing.assert_array_equal(x, y)
 
 
-def test_map_aided_exclusion_and_lookahead_run_on_polygons() -> None:
-    env = urban_canyon_v0.parallel_env(
-        **CITY, nlos_exclusion="map", obs_lookahead=True, obs_candidate_sky=True
-    )
+def test_map_aided_exclusion_and_map_line_of_sight_run_on_polygons() -> None:
+    env = urban_canyon_v0.parallel_env(**CITY, nlos_exclusion="map")
     obs, _ = env.reset(seed=1)
     space = env.observation_space("uav_0")
     for _ in range(10):
@@ -209,3 +207,5 @@ def test_map_aided_exclusion_and_lookahead_run_on_polygons() -> None:
         assert all(space.contains(o) for o in obs.values())
     ep = env.world.last
     assert ep.received.sum() > 0 and (ep.map_excluded is not None)
+    los = env.world.map_line_of_sight(env.world.pos_enu_m)  # the route choice's prediction
+    assert los.shape == ep.received.shape and los.any()

@@ -18,10 +18,10 @@ def test_option_is_validated_off_by_default_and_named_last_in_the_layout() -> No
     assert make_config().obs_dim == 52  # the default observation is unchanged
     with pytest.raises(ValueError, match="obs_true_error must be True or False, got 1"):
         make_config(obs_true_error=1)
-    cfg = preset_config("urban_nlos_3dma", obs_candidate_sky=True, obs_true_error=True)
-    assert cfg.obs_dim == 52 + 10 + 3
+    cfg = preset_config("urban_nlos_3dma", obs_satellite_sectors=True, obs_true_error=True)
+    assert cfg.obs_dim == 52 + 16 + 3
     layout = obs_layout(cfg)
-    assert list(layout)[-2:] == ["candidate_swarm_satellites", "true_error"]
+    assert list(layout)[-2:] == ["satellites_blocked_sector", "true_error"]
     assert layout["true_error"].stop == cfg.obs_dim
     low, _ = assert_layout_bounds_are_the_space(cfg)
     np.testing.assert_array_equal(low[-3:], -1.0)

@@ -35,36 +35,36 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
     assert "b (mean" in bench.report_lines(rep)[-1]
     out = tmp_path / "arms"
     args = ["--episodes", "2", "--noise-replicates", "2", "--jobs", "1", "--out", str(out)]
-    assert bench.main(["--arms", "formation", "formation@spacing_m=12", *args]) == 0
+    assert bench.main(["--arms", "column", "column@spacing_m=12", *args]) == 0
     rep = json.loads((out / "report.json").read_text())
-    assert rep["episodes"] == 2 and set(rep["arms"]) == {"formation", "formation@spacing_m=12"}
+    assert rep["episodes"] == 2 and set(rep["arms"]) == {"column", "column@spacing_m=12"}
     # the same settings again: the flights are reused, not flown again
     stamp = (out / "episodes.npz").stat().st_mtime_ns
-    assert bench.main(["--arms", "formation", "formation@spacing_m=12", *args]) == 0
+    assert bench.main(["--arms", "column", "column@spacing_m=12", *args]) == 0
     assert (out / "episodes.npz").stat().st_mtime_ns == stamp
     # other settings into the same folder: refused, the first run's flights kept
     with pytest.raises(SystemExit, match="belongs to a run with other settings"):
-        bench.main(["--arms", "formation", "sky", *args])
+        bench.main(["--arms", "column", "sky_column", *args])
     assert (out / "episodes.npz").stat().st_mtime_ns == stamp
     # --reuse: a new run on the same episodes takes the flown arms and flies only the new one
     both = tmp_path / "both"
     argv2 = [*args[:-1], str(both), "--reuse", str(out)]
-    assert bench.main(["--arms", "formation@spacing_m=12", "sky", "formation", *argv2]) == 0
+    assert bench.main(["--arms", "column@spacing_m=12", "sky_column", "column", *argv2]) == 0
     with np.load(out / "episodes.npz") as d0, np.load(both / "episodes.npz") as d1:
         first, second = d0["flights"], d1["flights"]
     assert second.shape == (2, 3, 2, 2)
     assert np.array_equal(second[:, 0], first[:, 1]) and np.array_equal(second[:, 2], first[:, 0])
     # the reused flights are what flying them gives, bit for bit
     fresh = tmp_path / "fresh"
-    assert bench.main(["--arms", "formation", "sky", *args[:-1], str(fresh)]) == 0
+    assert bench.main(["--arms", "column", "sky_column", *args[:-1], str(fresh)]) == 0
     with np.load(fresh / "episodes.npz") as d2:
         assert np.array_equal(d2["flights"], second[:, [2, 1]])
     with pytest.raises(SystemExit, match="flown on other episodes"):
         bench.main(
             [
                 "--arms",
-                "formation",
-                "sky",
+                "column",
+                "sky_column",
                 "--episodes",
                 "3",
                 "--noise-replicates",
@@ -77,8 +77,8 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
         bench.main(
             [
                 "--arms",
-                "formation",
-                "sky",
+                "column",
+                "sky_column",
                 "--reuse",
                 str(tmp_path / "nothing"),
                 "--out",
@@ -87,8 +87,8 @@ def test_arm_choice_benchmark_prices_arms_and_the_expected_error_oracle(tmp_path
         )
     assert not (tmp_path / "unclaimed").exists()  # refused before --out is claimed
     with pytest.raises(SystemExit, match="at least 2 policies"):
-        bench.main(["--arms", "formation"])
+        bench.main(["--arms", "column"])
     with pytest.raises(SystemExit, match="not in --arms"):
-        bench.main(["--arms", "formation", "sky", "--compare", "formation", "ceiling"])
+        bench.main(["--arms", "column", "sky_column", "--compare", "column", "ceiling_column"])
     with pytest.raises(ValueError):
-        bench.main(["--arms", "formation", "nosuchpolicy"])
+        bench.main(["--arms", "column", "nosuchpolicy"])

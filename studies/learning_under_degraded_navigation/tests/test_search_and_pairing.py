@@ -10,15 +10,15 @@ from studies.learning_under_degraded_navigation import paired_variants, search_h
 def test_heuristic_search_script_prints_its_table(capsys) -> None:
     """search_heuristics.py: one row per variant, the scores of the study."""
     mod = search_heuristics
-    variants = ["--variants", "formation", "wide@spacing_m=30", "--episodes", "2"]
+    variants = ["--variants", "column", "wide_column@spacing_m=30", "--episodes", "2"]
     assert mod.main([*variants, "--env-set", "n_uavs=3", "integrity_p_fa=1e-3"]) == 0
     out = capsys.readouterr().out
     assert "'integrity_p_fa': 0.001" in out  # a float, not YAML's string "1e-3"
     rows = [line for line in out.splitlines() if line.startswith("| `")]
-    assert [r.split("|")[1].strip() for r in rows] == ["`formation`", "`wide@spacing_m=30`"]
+    assert [r.split("|")[1].strip() for r in rows] == ["`column`", "`wide_column@spacing_m=30`"]
     assert "'n_uavs': 3" in out
     with pytest.raises(SystemExit, match="--episodes must be >= 2"):
-        mod.main(["--variants", "formation", "--episodes", "1"])
+        mod.main(["--variants", "column", "--episodes", "1"])
     with pytest.raises(SystemExit, match="--env-set: override 'n_uavs' must look like key=value"):
         mod.main([*variants, "--env-set", "n_uavs"])
 
@@ -39,7 +39,7 @@ def test_paired_variants_script_pairs_groups_by_episode(capsys) -> None:
     assert per[0] == pytest.approx(a_nav, abs=0.006)  # its first policy is formation again
     assert two_nav == pytest.approx(sum(per) / 2, abs=0.006)
     with pytest.raises(SystemExit, match="NAME=POLICY"):
-        mod.main(["--groups", "formation"])
+        mod.main(["--groups", "column"])
     with pytest.raises(SystemExit, match="'a' is given twice"):
         mod.main(["--groups", "a=formation", "a=wide"])
     with pytest.raises(SystemExit, match="--episodes must be >= 1"):

@@ -44,12 +44,12 @@ def test_figures_pool_uav_steps():
 
 def test_a_tiny_run_writes_every_row(tmp_path, capsys):
     out = tmp_path / "nlos.json"
-    argv = ["--episodes", "2", "--n-uavs", "2", "--policies", "formation"]
+    argv = ["--episodes", "2", "--n-uavs", "2", "--policies", "column"]
     argv += ["--variants", "off", "map", "--bootstrap", "10", "--json", str(out)]
     assert study.main(argv) == 0
     data = json.loads(out.read_text())
-    assert set(data["results"]) == {"formation/off", "formation/map"}
-    assert data["results"]["formation/map"]["figures"]["uav_steps"] > 0
-    assert "formation   map" in capsys.readouterr().out
+    assert set(data["results"]) == {"column/off", "column/map"}
+    assert data["results"]["column/map"]["figures"]["uav_steps"] > 0
+    assert "column   map" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         study.main(["--episodes", "1"])

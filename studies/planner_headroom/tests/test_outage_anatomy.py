@@ -75,13 +75,13 @@ def test_the_greedy_push_goes_sideways_or_back_and_only_when_short(monkeypatch) 
     mod = _module()
     from coopnav_env import urban_canyon_v0
 
-    env = urban_canyon_v0.parallel_env(n_uavs=2, obs_candidate_sky=True)
-    obs, _ = env.reset(seed=3)
-    pts = env._candidate_points()
+    env = urban_canyon_v0.parallel_env(n_uavs=2)
+    env.reset(seed=3)
+    pts = mod.candidate_points(env)
     cmd = {a: np.zeros(3, np.float32) for a in env.agents}
 
     def with_counts(own, pooled):
-        return {a: np.concatenate([obs[a][:-10], np.r_[own, pooled] / 20.0]) for a in env.agents}
+        return {a: np.r_[own, pooled].astype(float) for a in env.agents}
 
     # plenty ahead: no push
     out = mod._steered(env, with_counts([5] * 5, [12] * 5), cmd, 0.3, 7)
@@ -121,3 +121,72 @@ def test_command_line_runs_and_writes_its_report(tmp_path, capsys) -> None:
         mod.main(["--jobs", "0"])
     with pytest.raises(SystemExit, match="THRESHOLD in"):
         mod.main(["--steer", "0.2:99"])
+
+
+def test_candidates_are_here_ahead_left_right_and_far() -> None:
+    from coopnav_env import urban_canyon_v0
+    from tests.env_flight import fly_random
+
+    mod = _module()
+    env = urban_canyon_v0.parallel_env(n_uavs=4)
+    kin = env.config.kinematics
+    checked = 0
+    for seed, steps in ((3, 0), (3, 25), (8, 40)):
+        fly_random(env, seed, steps)
+        if not env.agents:
+            continue
+        est = env._epoch.nav_pos_enu_m
+        pts = mod.candidate_points(env)
+        assert pts.shape == (5, 4, 3)
+        z = np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
+        assert np.all(pts[:, :, 2] == z)  # every candidate at the estimated altitude, in the band
+        np.testing.assert_array_equal(pts[0, :, :2], est[:, :2])
+        route = mod.route_points(env, (mod.CANDIDATE_AHEAD_M, mod.CANDIDATE_FAR_M))
+        np.testing.assert_array_equal(pts[1], route[0])
+        np.testing.assert_array_equal(pts[4], route[1])
+        for i in range(4):
+            fwd = pts[1, i, :2] - est[i, :2]
+            side_l = pts[2, i, :2] - pts[1, i, :2]
+            np.testing.assert_allclose(np.hypot(*side_l), mod.CANDIDATE_SIDE_M)
+            np.testing.assert_allclose(side_l, -(pts[3, i, :2] - pts[1, i, :2]))
+            if np.hypot(*fwd) > 1e-6:  # left of the way ahead: a positive cross product
+                assert fwd[0] * side_l[1] - fwd[1] * side_l[0] > 0.0
+        checked += 1
+    assert checked >= 2
+
+
+def test_candidate_counts_are_what_the_receiver_would_use_there() -> None:
+    from coopnav_env import urban_canyon_v0
+    from coopnav_env.envs import preset_config
+    from tests.env_flight import fly_random
+
+    mod = _module()
+    env = urban_canyon_v0.parallel_env(
+        config=preset_config("urban_nlos_3dma", n_uavs=3, dead_reckoning_noise=True)
+    )
+    cfg = env.config
+    fly_random(env, 11, 10)
+    pts = mod.candidate_points(env)
+    dr_var = (cfg.dead_reckoning_sigma_mps * cfg.dt_s) ** 2
+    cov = env.world.nav_cov_enu_m2 + np.eye(3) * dr_var
+
+    def usable(p, c):
+        return env.world.map_line_of_sight(
+            p,
+            c,
+            margin_sigma=cfg.nlos_exclusion_margin_sigma,
+            max_margin_m=cfg.nlos_exclusion_max_margin_m,
+        )
+
+    cols = mod.candidate_sky(env)
+    assert cols.shape == (3, 10) and cols.dtype == np.float32
+    ahead = usable(pts[1], cov)
+    for i in range(3):
+        for c in range(5):
+            use = usable(pts[c, i][None], cov[i][None])[0]
+            assert cols[i, c] == pytest.approx(min(use.sum() / 20.0, 1.0))
+            pooled = use | np.delete(ahead, i, axis=0).any(axis=0)
+            assert cols[i, 5 + c] == pytest.approx(min(pooled.sum() / 20.0, 1.0))
+            assert cols[i, 5 + c] >= cols[i, c]  # the swarm keeps at least what the UAV keeps
+    counts = mod.candidate_counts(env)
+    np.testing.assert_array_equal(counts["uav_1"], cols[1] * 20.0)

@@ -97,7 +97,7 @@ def test_planner_headroom_script_runs_resumes_and_refuses_other_settings(tmp_pat
     mod = _module()
     out = tmp_path / "h"
     env = ["--env-set", "n_uavs=3", "max_steps=4"]
-    args = ["--episodes", "2", "--first-seed", "1000000", "--jobs", "1", "--base", "wide"]
+    args = ["--episodes", "2", "--first-seed", "1000000", "--jobs", "1", "--base", "wide_column"]
     assert mod.main([*args, *env, "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "nav error planner" in text and "R^2" in text and "goal rate: planner" in text
@@ -146,7 +146,7 @@ def test_a_planner_that_only_has_its_base_is_recorded_as_its_base(tmp_path) -> N
     # (the planner's from its infos, the base's from run_episode) must agree step by step
     mod = _module()
     out = tmp_path / "same"
-    args = ["--episodes", "2", "--first-seed", "1000010", "--jobs", "1", "--base", "wide"]
+    args = ["--episodes", "2", "--first-seed", "1000010", "--jobs", "1", "--base", "wide_column"]
     env = ["--env-set", "n_uavs=3"]  # whole episodes: both reach the goal
     one = ["--planner-set", "n_samples=1", "n_elite=1", "iterations=1", "horizon=1"]
     assert mod.main([*args, *env, *one, "--out", str(out)]) == 0
@@ -195,7 +195,7 @@ def test_goal_rates_and_the_comparison_on_the_episodes_both_finish(tmp_path) -> 
     assert r["planner_goal_rate"] == 0.75 and r["base_goal_rate"] == 0.75
     assert r["both_finished_episodes"] == 2
     assert r["paired_both_finished_m"] == pytest.approx([-1.0, -1.0, -1.0])
-    assert "goal rate: planner 0.750" in "\n".join(mod.report_lines(r, "wide"))
+    assert "goal rate: planner 0.750" in "\n".join(mod.report_lines(r, "wide_column"))
     # episode files without the flag (older runs): no goal rates, rather than made-up ones
     np.savez(
         tmp_path / "14.npz",

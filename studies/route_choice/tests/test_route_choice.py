@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from coopnav_env.agents.routes import ROUTE_FEATURES, RouteModel
 from studies.route_choice import route_choice as bench
+from studies.route_choice.routes import ROUTE_FEATURES, RouteModel
 
 
 def test_route_choice_benchmark_prices_rules_and_models_from_one_collection(tmp_path):
@@ -32,7 +32,7 @@ def test_route_choice_benchmark_prices_rules_and_models_from_one_collection(tmp_
             "goal": np.array([False]),
         }
     )  # one route: nothing to choose
-    m = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling")  # fewest turns: route 0
+    m = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column")  # fewest turns: route 0
     rep = bench.price_choices(eps, {"fewest": m}, reps=200)
     assert rep["episodes"] == 41 and rep["episodes_with_a_choice"] == 40
     assert rep["best_rule"] == "rule los_mean"

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from coopnav_env.agents.routes import RouteModel
 from coopnav_env.sim.route import street_routes
+from studies.route_choice.routes import RouteModel
 from studies.split_choice import split_choice as bench
 
 
@@ -28,7 +28,7 @@ def _multi_route_seed(env, first: int = 0) -> int:
 
 
 def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
-    from coopnav_env.agents.routes import SPLIT_FEATURES
+    from studies.route_choice.routes import SPLIT_FEATURES
 
     j = SPLIT_FEATURES.index("swarm_mean")
     eps = []
@@ -82,7 +82,7 @@ def test_split_choice_benchmark_prices_rules_and_the_oracle(tmp_path):
 
 
 def test_split_choice_fits_and_prices_a_split_model(tmp_path):
-    from coopnav_env.agents.routes import SPLIT_FEATURES
+    from studies.route_choice.routes import SPLIT_FEATURES
 
     j = SPLIT_FEATURES.index("swarm_mean")
     rng = np.random.default_rng(0)
@@ -94,7 +94,7 @@ def test_split_choice_fits_and_prices_a_split_model(tmp_path):
         # more pooled satellites, lower error: 0.1 m per satellite
         nav = (3.0 - 0.1 * f[:, j])[:, None] + np.zeros((3, 2))
         eps.append({"features": f, "nav": nav, "goal": np.ones((3, 2), bool)})
-    model = bench.fit_split_model(eps, "skyroute", info={"note": "test"})
+    model = bench.fit_split_model(eps, "best_sky_route", info={"note": "test"})
     assert model.kind == "split" and model.info["note"] == "test"
     picks = [int(np.argmin(model.predict(e["features"]))) for e in eps]
     assert picks == [int(np.argmax(e["features"][:, j])) for e in eps]  # it learned the sense
@@ -108,5 +108,7 @@ def test_split_choice_fits_and_prices_a_split_model(tmp_path):
     with pytest.raises(SystemExit, match="never overwritten"):
         bench.main(["--first-seed", "0", "--fit-model", str(tmp_path / "m")])
     with pytest.raises(SystemExit, match="takes split models"):
-        r = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(tmp_path / "r.json")
+        r = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column").save(
+            tmp_path / "r.json"
+        )
         bench.main(["--models", str(r)])

@@ -13,22 +13,31 @@ from studies.task_objective import compare_learned as cl
 
 def test_compare_writes_the_report_and_its_figures_are_consistent(tmp_path) -> None:
     out = tmp_path / "cmp"
-    args = ["--methods", "m=sky,wide@spacing_m=30", "--heuristics", "formation", "wide"]
+    args = [
+        "--methods",
+        "m=sky_column,wide_column@spacing_m=30",
+        "--heuristics",
+        "column",
+        "wide_column",
+    ]
     args += ["--episodes", "2", "--reps", "50", "--out", str(out)]
     assert cl.main(args) == 0
     report = json.loads((out / "report.json").read_text())
     rows = {r["name"]: r for r in report["rows"]}
-    assert set(rows) == {"formation", "wide", "m", "sky", "wide@spacing_m=30"}
+    assert set(rows) == {"column", "wide_column", "m", "sky_column", "wide_column@spacing_m=30"}
     # a policy's score is its mean v1 return; a method's is the mean of its seeds'
-    ref = [e.episode_return for e in fly_scores("sky", "urban_canyon_v1", [1_000_100, 1_000_101])]
-    assert rows["sky"]["score"][0] == pytest.approx(np.mean(ref), abs=1e-12)
-    method = np.mean([rows["sky"]["score"][0], rows["wide@spacing_m=30"]["score"][0]])
+    ref = [
+        e.episode_return
+        for e in fly_scores("sky_column", "urban_canyon_v1", [1_000_100, 1_000_101])
+    ]
+    assert rows["sky_column"]["score"][0] == pytest.approx(np.mean(ref), abs=1e-12)
+    method = np.mean([rows["sky_column"]["score"][0], rows["wide_column@spacing_m=30"]["score"][0]])
     assert rows["m"]["score"][0] == pytest.approx(method, abs=1e-12)
     # the reference closes the whole gap, the baseline none of it
-    assert rows["wide"]["gap_closed"][0] == pytest.approx(1.0)
-    assert rows["formation"]["gap_closed"][0] == pytest.approx(0.0)
+    assert rows["wide_column"]["gap_closed"][0] == pytest.approx(1.0)
+    assert rows["column"]["gap_closed"][0] == pytest.approx(0.0)
     # the wide column flies farther apart during the cruise than the formation
-    assert rows["wide"]["cruise_spacing_m"] > 2 * rows["formation"]["cruise_spacing_m"]
+    assert rows["wide_column"]["cruise_spacing_m"] > 2 * rows["column"]["cruise_spacing_m"]
     assert "gap closed" in (out / "report.md").read_text()
     # one method: no difference between methods to report
     assert report["between_methods"] == []
@@ -54,7 +63,7 @@ def test_a_trained_policy_is_flown_in_its_runs_settings_and_others_are_refused(t
         "nav_team_weight": 1.0,
         "obs_agent_index": True,
     }
-    assert cl.env_settings_of("wide") == {}
+    assert cl.env_settings_of("wide_column") == {}
     with pytest.raises(ValueError, match=r"\['collision_penalty'\]"):
         cl.env_settings_of(run("urban_canyon_v1", "{collision_penalty: 5.0}"))
     with pytest.raises(ValueError, match="urban_canyon_v0"):
@@ -63,13 +72,13 @@ def test_a_trained_policy_is_flown_in_its_runs_settings_and_others_are_refused(t
 
 def test_methods_are_compared_pairwise_on_the_same_episodes(tmp_path) -> None:
     out = tmp_path / "pairs"
-    args = ["--methods", "a=sky", "b=wide", "--heuristics", "formation", "wide"]
+    args = ["--methods", "a=sky_column", "b=wide_column", "--heuristics", "column", "wide_column"]
     args += ["--episodes", "2", "--reps", "50", "--out", str(out)]
     assert cl.main(args) == 0
     report = json.loads((out / "report.json").read_text())
     (d,) = report["between_methods"]
     assert (d["a"], d["b"]) == ("a", "b")
     eps = report["episodes_per_policy"]
-    want = np.mean([x["score"] - y["score"] for x, y in zip(eps["sky"], eps["wide"])])
+    want = np.mean([x["score"] - y["score"] for x, y in zip(eps["sky_column"], eps["wide_column"])])
     assert d["score_a_minus_b"][0] == pytest.approx(want, abs=1e-12)
     assert "`a` - `b`" in (out / "report.md").read_text()

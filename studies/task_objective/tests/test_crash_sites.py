@@ -46,10 +46,10 @@ def test_a_crash_is_found_with_its_uav_step_and_place() -> None:
 
 def test_command_line_writes_the_report_and_refuses_to_overwrite(tmp_path) -> None:
     out = tmp_path / "crashes"
-    args = ["--policies", "formation", "--episodes", "2", "--out", str(out)]
+    args = ["--policies", "column", "--episodes", "2", "--out", str(out)]
     assert cs.main(args) == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["policies"]["formation"]["episodes"] == 2
+    assert report["policies"]["column"]["episodes"] == 2
     assert "a crash is a UAV touching a building" in (out / "report.md").read_text()
     with pytest.raises(SystemExit):
         cs.main(args)

@@ -15,7 +15,7 @@ def test_retune_writes_both_tables_and_scores_are_the_mean_return(tmp_path, caps
     out = tmp_path / "report"
     args = ["--episodes", "2", "--seed-start", "1000000", "--out", str(out), "--no-progress"]
     grid = ["--spacings", "45", "--speeds", "7", "--ceiling-margins", "0.5", "-10"]
-    assert rt.main([*args, "--policies", "formation", "wide", "waypoint", *grid]) == 0
+    assert rt.main([*args, "--policies", "column", "wide_column", "waypoint", *grid]) == 0
     report = json.loads((out / "report.json").read_text())
     assert (out / "report.md").read_text().startswith("# Heuristics on urban_canyon_v1")
     assert "Best heuristic re-tuned on v1" in capsys.readouterr().out
@@ -23,13 +23,13 @@ def test_retune_writes_both_tables_and_scores_are_the_mean_return(tmp_path, caps
     assert report["tuning_seeds"] == [1_000_000, 1_000_001]
     assert report["confirmation_seeds"] == [1_000_002, 1_000_003]
     # the grid: two settings over the best named column; the one equal to its preset reuses it
-    assert report["best_named_column"] in ("formation", "wide")
+    assert report["best_named_column"] in ("column", "wide_column")
     settings = report["grid"]["settings"]
     assert len(settings) == 2
-    if report["best_named_column"] == "wide":
-        assert sorted(str(s["same_as"]) for s in settings) == ["None", "wide"]
+    if report["best_named_column"] == "wide_column":
+        assert sorted(str(s["same_as"]) for s in settings) == ["None", "wide_column"]
     tuning = {r["policy"]: r for r in report["tuning"]}
-    assert {"formation", "wide", "waypoint"} <= set(tuning)
+    assert {"column", "wide_column", "waypoint"} <= set(tuning)
     assert len(tuning) == 3 + sum(s["same_as"] is None for s in settings)
     scores = [r["score"] for r in report["tuning"]]
     assert scores == sorted(scores, reverse=True)
@@ -50,20 +50,22 @@ def test_retune_writes_both_tables_and_scores_are_the_mean_return(tmp_path, caps
     }
     # the confirmation flies the chosen setting, wide and formation on the next seeds
     confirm = {r["policy"]: r for r in report["confirmation"]}
-    assert {report["best_retuned"], "wide", "formation"} == set(confirm)
+    assert {report["best_retuned"], "wide_column", "column"} == set(confirm)
 
     # the score is the mean undiscounted return of alignment.fly on the same seeds
     expected = np.mean(
         [e.episode_return for e in fly("waypoint", "urban_canyon_v1", [1_000_000, 1_000_001])]
     )
     assert tuning["waypoint"]["score"] == pytest.approx(expected, rel=1e-12)
-    expected = [e.episode_return for e in fly("wide", "urban_canyon_v1", [1_000_002, 1_000_003])]
-    assert report["per_episode"]["confirmation"]["wide"]["score"] == pytest.approx(expected)
-    assert confirm["wide"]["score"] == pytest.approx(np.mean(expected))
+    expected = [
+        e.episode_return for e in fly("wide_column", "urban_canyon_v1", [1_000_002, 1_000_003])
+    ]
+    assert report["per_episode"]["confirmation"]["wide_column"]["score"] == pytest.approx(expected)
+    assert confirm["wide_column"]["score"] == pytest.approx(np.mean(expected))
 
     # an existing report is not overwritten without --overwrite
     with pytest.raises(SystemExit):
-        rt.main([*args, "--policies", "wide", *grid])
+        rt.main([*args, "--policies", "wide_column", *grid])
     assert "overwrite" in capsys.readouterr().err
 
 
@@ -73,14 +75,14 @@ def test_retune_refuses_bad_input():
     with pytest.raises(ValueError, match="no column heuristic"):
         rt.retune(2, 1_000_000, policies=["waypoint"], progress=False)
     with pytest.raises(ValueError, match="at least one spacing"):
-        rt.grid_names("wide", [], [7.0], [0.5])
+        rt.grid_names("wide_column", [], [7.0], [0.5])
 
 
 def test_effective_setting_matches_a_preset_and_its_explicit_options():
-    assert rt.effective_setting("wide") == ("wide_column", 45.0, 7.0, 0.5)
+    assert rt.effective_setting("wide_column") == ("wide_column", 45.0, 7.0, 0.5)
     assert rt.effective_setting(
-        "wide@spacing_m=45,cruise_speed_mps=7,ceiling_margin_m=0.5"
-    ) == rt.effective_setting("wide")
-    assert rt.effective_setting("ceiling")[3] == -10.0
+        "wide_column@spacing_m=45,cruise_speed_mps=7,ceiling_margin_m=0.5"
+    ) == rt.effective_setting("wide_column")
+    assert rt.effective_setting("ceiling_column")[3] == -10.0
     assert rt.effective_setting("waypoint@altitude_m=28") is None
-    assert rt.effective_setting("wide@route_index=1") is None
+    assert rt.effective_setting("wide_column@route_index=1") is None

@@ -13,7 +13,7 @@ import pytest
 from coopnav_env import urban_canyon_v0
 from coopnav_env.agents import make_policy
 from coopnav_env.agents.heuristics import ColumnPolicy
-from coopnav_env.agents.routes import ROUTE_FEATURES, SPLIT_FEATURES, RouteModel
+from studies.route_choice.routes import ROUTE_FEATURES, SPLIT_FEATURES, RouteModel
 
 
 def _model(kind: str) -> RouteModel:
@@ -24,7 +24,7 @@ def _model(kind: str) -> RouteModel:
         scale=[1.0, 1.0],
         weights=[1.0, -1.0],
         alpha=1.0,
-        base="ceiling",
+        base="ceiling_column",
         kind=kind,
     )
 
@@ -38,20 +38,22 @@ def env():
 
 def test_a_split_model_as_route_model_is_refused_naming_its_kind(env):
     with pytest.raises(ValueError, match=r"route_model must be a route model") as err:
-        make_policy("ceiling", env, route_model=_model("split"))
+        make_policy("route_column@preset='ceiling_column'", env, route_model=_model("split"))
     assert "got a RouteModel of kind 'split' (pass it as route_split_model)" in str(err.value)
 
 
 def test_a_route_model_as_route_split_model_is_refused_naming_its_kind(env):
     with pytest.raises(ValueError, match=r"route_split_model must be a split model") as err:
-        make_policy("ceiling", env, route_split_model=_model("route"))
+        make_policy("route_column@preset='ceiling_column'", env, route_split_model=_model("route"))
     assert "got a RouteModel of kind 'route' (pass it as route_model)" in str(err.value)
 
 
 def test_models_of_the_right_kind_are_taken(env):
-    policy = make_policy("ceiling", env, route_model=_model("route"))
+    policy = make_policy("route_column@preset='ceiling_column'", env, route_model=_model("route"))
     assert isinstance(policy, ColumnPolicy) and policy.route_model.kind == "route"
-    policy = make_policy("ceiling", env, route_split_model=_model("split"))
+    policy = make_policy(
+        "route_column@preset='ceiling_column'", env, route_split_model=_model("split")
+    )
     assert policy.route_split_model.kind == "split"
     with pytest.raises(ValueError, match=r"route_model must be a route model .*, got 3$"):
-        make_policy("ceiling", env, route_model=3)
+        make_policy("route_column@preset='ceiling_column'", env, route_model=3)

@@ -1,5 +1,24 @@
 """Route choice: which of the equally short street routes to fly, from the map and the sky.
 
+The study's own policies, built on :class:`coopnav_env.agents.heuristics.ColumnPolicy`;
+importing this module registers them (:func:`coopnav_env.agents.register_policy`):
+
+=============================================  ==============================================
+name                                           policy
+=============================================  ==============================================
+``route_column@preset='ceiling_column',...``   a column heuristic (``preset``, a
+                                               :data:`~coopnav_env.agents.heuristics.COLUMN_PRESETS`
+                                               name) with the route options of
+                                               :class:`RouteChoiceColumn` (``route_index``,
+                                               ``route_choice`` by any feature,
+                                               ``route_split``, ``route_split_index``)
+``learned_route@model='PATH'``                 the column that flies the route a learned
+                                               route model predicts best (``pretrained``,
+                                               ``pretrained/s<k>``: the study's models)
+``learned_split@model='PATH'``                 the column split over two streets where a
+                                               learned split model predicts it best
+=============================================  ==============================================
+
 On the Manhattan street grid of ``urban_canyon_v0`` many routes from the start to the goal
 share the shortest length (:func:`coopnav_env.sim.route.street_routes`). The column
 heuristics fly the first of them (:func:`~coopnav_env.sim.route.street_route`) unless told
@@ -15,9 +34,9 @@ the UAVs' true positions or errors.
 * :func:`route_features` describes a route by the satellites predicted in line of sight along
   it (:data:`ROUTE_FEATURES`).
 * A *hand-written* choice takes the route with the best value of one feature
-  (:data:`FEATURE_SENSE`), e.g. ``ceiling@route_choice='los_mean'``.
+  (:data:`FEATURE_SENSE`), e.g. ``route_column@preset='ceiling_column',route_choice='los_mean'``.
 * A *learned* choice (:class:`RouteModel`) predicts each route's error from all features
-  with a model fitted to flown episodes (``training/route_learning.py``) and takes the lowest.
+  with a model fitted to flown episodes and takes the lowest.
 """
 
 from __future__ import annotations
@@ -31,39 +50,59 @@ from typing import Any
 
 import numpy as np
 
+from coopnav_env.agents import make_policy, register_policy
+from coopnav_env.agents.heuristics import (
+    COLUMN_ALIASES,
+    COLUMN_OPTIONS,
+    COLUMN_PRESETS,
+    ColumnPolicy,
+    street_route,
+)
 from coopnav_env.nav import pdop
-from coopnav_env.sim.route import Polyline
+from coopnav_env.sim.route import Polyline, street_routes
 
 __all__ = [
     "FEATURE_SENSE",
     "MODEL_KINDS",
-    "PRETRAINED_ROUTE_DIR",
+    "PRETRAINED_MODEL_DIRS",
     "ROUTE_FEATURES",
     "SPLIT_FEATURES",
     "SPLIT_FEATURE_SENSE",
+    "RouteChoiceColumn",
     "RouteModel",
     "fit_route_model",
+    "learned_route",
+    "learned_split",
     "resolve_route_model",
+    "route_column",
+    "route_column_name",
     "route_features",
     "split_features",
 ]
 
-PRETRAINED_ROUTE_DIR = Path(__file__).resolve().parent / "pretrained"
-"""Where the shipped route models live (``route_s<k>`` folders)."""
+_STUDIES = Path(__file__).resolve().parents[1]
+
+PRETRAINED_MODEL_DIRS: dict[str, Path] = {
+    "route": _STUDIES / "route_choice" / "policies",
+    "split": _STUDIES / "split_choice" / "policies",
+}
+"""Where the studies' fitted models live: ``route_s<k>`` (this study) and ``split_s<k>``
+(``studies/split_choice``) folders."""
 
 
 def resolve_route_model(text: str, kind: str = "route") -> Path:
-    """The file behind a ``route:<text>`` (``split:<text>``) policy name: ``pretrained`` is
-    the shipped model of training seed 0 (``agents/pretrained/route_s0``, ``split_s0``),
-    ``pretrained/s<k>`` that of seed ``k``; anything else a path (a ``route_model.json`` or
-    ``split_model.json`` file, or a folder holding one)."""
+    """The file behind a ``learned_route@model=<text>`` (``learned_split@model=<text>``)
+    policy: ``pretrained`` is the study's model of training seed 0 (``route_s0``,
+    ``split_s0`` of :data:`PRETRAINED_MODEL_DIRS`), ``pretrained/s<k>`` that of seed ``k``;
+    anything else a path (a ``route_model.json`` or ``split_model.json`` file, or a folder
+    holding one)."""
     if kind not in ("route", "split"):
         raise ValueError(f"kind must be 'route' or 'split', got {kind!r}")
     if text == "pretrained" or text.startswith("pretrained/"):
         tail = text[len("pretrained") :].lstrip("/") or "s0"
         if not (tail.startswith("s") and tail[1:].isdigit()):
-            raise ValueError(f"{kind}:pretrained takes a seed as pretrained/s<k>, got {text!r}")
-        return PRETRAINED_ROUTE_DIR / f"{kind}_{tail}"
+            raise ValueError(f"model 'pretrained' takes a seed as pretrained/s<k>, got {text!r}")
+        return PRETRAINED_MODEL_DIRS[kind] / f"{kind}_{tail}"
     return Path(text)
 
 
@@ -350,13 +389,14 @@ class RouteModel:
     alpha : float
         The ridge penalty chosen by cross-validation.
     base : str
-        The column heuristic (a :func:`coopnav_env.agents.make_policy` name) that flies the
-        chosen route, and that flew the training episodes.
+        The column heuristic (a :data:`~coopnav_env.agents.heuristics.COLUMN_PRESETS` name,
+        or an earlier name of one) that flies the chosen route, and that flew the training
+        episodes.
     info : dict
         What the model was fitted on (environment settings, seeds, sizes, CV scores).
     kind : str
         ``"route"``: scores routes by their :data:`ROUTE_FEATURES` (the ``route_model``
-        option of the column heuristics); ``"split"``: scores flying one column against
+        option of :class:`RouteChoiceColumn`); ``"split"``: scores flying one column against
         splitting it onto each other candidate route, by their :data:`SPLIT_FEATURES` (the
         ``route_split_model`` option; the first row of what it scores is the unsplit column).
     """
@@ -472,8 +512,8 @@ class RouteModel:
         found = d.get("kind", "route")
         if kind is not None and found != kind:
             raise ValueError(
-                f"{p} holds a {found} model, not a {kind} model: {kind}:<path> takes a "
-                f"{kind}_model.json; give it as {found}:{path}"
+                f"{p} holds a {found} model, not a {kind} model: learned_{kind} takes a "
+                f"{kind}_model.json; give it as learned_{found}@model='{path}'"
             )
         try:
             return cls(
@@ -596,3 +636,313 @@ def fit_route_model(
         info=meta,
         kind=kind,
     )
+
+
+def _model_kind(model: Any) -> str:
+    """How a refused ``route_model`` / ``route_split_model`` value is named in the error."""
+    kind = getattr(model, "kind", None)
+    if hasattr(model, "predict") and isinstance(kind, str):
+        hint = {"split": " (pass it as route_split_model)", "route": " (pass it as route_model)"}
+        return f"a {type(model).__name__} of kind {kind!r}{hint.get(kind, '')}"
+    return repr(model)
+
+
+class RouteChoiceColumn(ColumnPolicy):
+    """A :class:`~coopnav_env.agents.heuristics.ColumnPolicy` with this study's route options.
+
+    Every option of the column (``column_options``) is taken as it is; these choose among the
+    equally short street routes (:func:`coopnav_env.sim.route.street_routes`, planned at the
+    first step from the estimated centre of the swarm) and split the column over two of
+    them.
+
+    Parameters
+    ----------
+    route_index : int, default 0
+        Fly the candidate route of this index (modulo their number) instead; 0 is
+        :func:`~coopnav_env.sim.route.street_route`'s. For flying every route of an episode.
+    route_choice : str, default "first"
+        ``"first"``, or a feature name of :data:`ROUTE_FEATURES`: the route with the best
+        value of that feature (:data:`FEATURE_SENSE`).
+    route_model : RouteModel or str, optional
+        A learned route model (or the path of one, or ``pretrained``): fly the route it
+        predicts the lowest error for. ``route_choice``, ``route_index`` and ``route_model``
+        exclude each other.
+    route_split : str, default "none"
+        Split the column over two equally short routes: a feature name of
+        :data:`ROUTE_FEATURES` flies the slots 0, 2, 4, ... (the leader's) on the chosen route
+        and the slots 1, 3, ... on the best *other* candidate by that feature, at the same arc
+        length, so that the two sub-columns fly abreast through different streets
+        (:func:`split_features` predicts what they pool). An episode with one candidate flies
+        one column. ``"none"``: no split.
+    route_split_index : int, default 0
+        Split onto this candidate (counted among the candidates other than the chosen route,
+        from 1, modulo their number) instead; 0: no split. Excludes ``route_split``.
+    route_split_model : RouteModel or str, optional
+        A learned split model (kind ``"split"``, or a path; ``pretrained`` and
+        ``pretrained/s<k>`` are the study's): the column splits onto the other candidate route
+        the model predicts lowest, or flies unsplit where it predicts that lowest
+        (:meth:`split_table` gives what it scores). Excludes ``route_split`` and
+        ``route_split_index``.
+    **column_options
+        Options of :class:`~coopnav_env.agents.heuristics.ColumnPolicy` (its own
+        ``route_choice`` is replaced by this one).
+    """
+
+    def __init__(
+        self,
+        env: Any,
+        route_index: int = 0,
+        route_choice: str = "first",
+        route_model: Any = None,
+        route_split: str = "none",
+        route_split_index: int = 0,
+        route_split_model: Any = None,
+        **column_options: Any,
+    ) -> None:
+        super().__init__(env, **column_options)
+        if isinstance(route_index, bool) or not isinstance(route_index, (int, np.integer)):
+            raise ValueError(f"route_index must be an int >= 0, got {route_index!r}")
+        if route_index < 0:
+            raise ValueError(f"route_index must be >= 0, got {route_index}")
+        self.route_index = int(route_index)
+        if route_choice != "first" and route_choice not in ROUTE_FEATURES:
+            raise ValueError(
+                f"route_choice must be 'first' or a route feature {list(ROUTE_FEATURES)}, got "
+                f"{route_choice!r}"
+            )
+        if sum([route_choice != "first", bool(route_index), route_model is not None]) > 1:
+            raise ValueError(
+                "route_choice, route_index and route_model exclude each other, got "
+                f"route_choice={route_choice!r}, route_index={route_index}, "
+                f"route_model={route_model!r}"
+            )
+        self.route_choice = route_choice
+        if route_split != "none" and route_split not in ROUTE_FEATURES:
+            raise ValueError(
+                f"route_split must be 'none' or a route feature {list(ROUTE_FEATURES)}, got "
+                f"{route_split!r}"
+            )
+        if isinstance(route_split_index, bool) or not isinstance(
+            route_split_index, (int, np.integer)
+        ):
+            raise ValueError(f"route_split_index must be an int >= 0, got {route_split_index!r}")
+        if route_split_index < 0:
+            raise ValueError(f"route_split_index must be >= 0, got {route_split_index}")
+        if route_split != "none" and route_split_index:
+            raise ValueError(
+                "route_split and route_split_index exclude each other, got "
+                f"route_split={route_split!r}, route_split_index={route_split_index}"
+            )
+        self.route_split = route_split
+        self.route_split_index = int(route_split_index)
+        if isinstance(route_split_model, (str, Path)):
+            route_split_model = RouteModel.load(
+                resolve_route_model(str(route_split_model), kind="split"), kind="split"
+            )
+        if route_split_model is not None and (
+            not hasattr(route_split_model, "predict")
+            or getattr(route_split_model, "kind", None) != "split"
+        ):
+            got = _model_kind(route_split_model)
+            raise ValueError(
+                f"route_split_model must be a split model (RouteModel of kind 'split') or a "
+                f"path to one, got {got}"
+            )
+        if route_split_model is not None and (route_split != "none" or route_split_index):
+            raise ValueError(
+                "route_split_model excludes route_split and route_split_index, got "
+                f"route_split={route_split!r}, route_split_index={route_split_index}"
+            )
+        self.route_split_model = route_split_model
+        self.split_feature_table: np.ndarray | None = None  # no split, then each split
+        if isinstance(route_model, (str, Path)):
+            route_model = RouteModel.load(resolve_route_model(str(route_model)), kind="route")
+        if route_model is not None and (
+            not hasattr(route_model, "predict") or getattr(route_model, "kind", "route") != "route"
+        ):
+            raise ValueError(
+                "route_model must be a route model (RouteModel of kind 'route') or a path to "
+                f"one, got {_model_kind(route_model)}"
+            )
+        self.route_model = route_model
+        self.route_feature_table: np.ndarray | None = None  # the candidates' features
+        self.route_split_chosen: int | None = None  # the second route, when split
+
+    def choose_routes(
+        self, city: Any, centre_xy_m: np.ndarray, goal_xy_m: np.ndarray
+    ) -> list[np.ndarray]:
+        """The route of the episode (candidate ``route_index``, the best by the feature
+        ``route_choice``, or the one ``route_model`` predicts lowest), and a second one when
+        the column splits (:meth:`_split_route`). Records the candidates, the index flown,
+        the second route's index (:attr:`route_split_chosen`) and, when they were scored, the
+        candidates' features (:attr:`route_feature_table`)."""
+        route = self._choose_route(city, centre_xy_m, goal_xy_m)
+        k2 = (
+            self._split_route(self.route_candidates, self.route_chosen)
+            if len(self.route_candidates) > 1
+            else None
+        )
+        self.route_split_chosen = k2
+        return [route] if k2 is None else [route, self.route_candidates[k2]]
+
+    def _choose_route(self, city: Any, centre: np.ndarray, goal_xy: np.ndarray) -> np.ndarray:
+        self.route_feature_table = None
+        plain = self.route_index == 0 and self.route_choice == "first" and self.route_model is None
+        if (
+            plain
+            and self.route_split == "none"
+            and not self.route_split_index
+            and self.route_split_model is None
+        ):
+            self.route_candidates, self.route_chosen = [], 0
+            return street_route(city, centre, goal_xy)
+        routes = street_routes(city, centre, goal_xy, self.route_max_turns)
+        if (
+            self.route_choice == "first"
+            and self.route_model is None
+            and (
+                (self.route_split == "none" and self.route_split_model is None) or len(routes) == 1
+            )
+        ):
+            k = self.route_index % len(routes)
+        elif len(routes) == 1:
+            k = 0
+        else:
+            feats = np.stack(
+                [
+                    route_features(
+                        self.base.world,
+                        r,
+                        self._altitude_m(),
+                        spacing_m=self.spacing_m,
+                        n_uavs=len(self._index),
+                    )
+                    for r in routes
+                ]
+            )
+            self.route_feature_table = feats
+            if self.route_model is not None:
+                k = int(np.argmin(self.route_model.predict(feats)))
+            elif self.route_choice == "first":
+                k = self.route_index % len(routes)
+            else:
+                j = ROUTE_FEATURES.index(self.route_choice)
+                k = int(np.argmax(FEATURE_SENSE[self.route_choice] * feats[:, j]))
+        self.route_candidates, self.route_chosen = routes, k
+        return routes[k]
+
+    def split_table(self, routes: list[np.ndarray], k: int) -> tuple[list[int], np.ndarray]:
+        """The options of splitting the column flown on ``routes[k]``: the indices of the
+        other routes, and the :data:`SPLIT_FEATURES` ``(1 + others, F)`` of flying unsplit
+        (row 0) and of splitting onto each other route (row ``1 + i``), at the column's
+        altitude and spacing; kept as :attr:`split_feature_table`."""
+        others = [j for j in range(len(routes)) if j != k]
+        world, alt = self.base.world, self._altitude_m()
+        feats = np.stack(
+            [split_features(world, [routes[k]], alt, spacing_m=self.spacing_m)]
+            + [
+                split_features(world, [routes[k], routes[j]], alt, spacing_m=self.spacing_m)
+                for j in others
+            ]
+        )
+        self.split_feature_table = feats
+        return others, feats
+
+    def _split_route(self, routes: list[np.ndarray], k: int) -> int | None:
+        """Index of the second route of a split swarm among ``routes`` (``k`` is the first),
+        or None to fly one column: candidate ``route_split_index`` counted among the others
+        (modulo their number), the one the split model predicts lowest, or the best other one
+        by the feature ``route_split``."""
+        others = [j for j in range(len(routes)) if j != k]
+        if self.route_split_index:
+            return others[(self.route_split_index - 1) % len(others)]
+        if self.route_split_model is not None:
+            _, feats = self.split_table(routes, k)
+            c = int(np.argmin(self.route_split_model.predict(feats)))
+            return None if c == 0 else others[c - 1]
+        if self.route_split == "none":
+            return None
+        feats = self.route_feature_table
+        assert feats is not None
+        j = ROUTE_FEATURES.index(self.route_split)
+        return others[int(np.argmax(FEATURE_SENSE[self.route_split] * feats[others, j]))]
+
+
+_ROUTE_OPTIONS = (
+    "route_index",
+    "route_choice",
+    "route_model",
+    "route_split",
+    "route_split_index",
+    "route_split_model",
+)
+
+
+def route_column_name(base: str, options: str = "") -> str:
+    """The ``route_column`` policy name that flies the column heuristic ``base`` (a preset
+    name, options after ``@`` allowed, or a ``route_column`` name) with ``options``
+    (``"key=value,..."``) added: ``route_column_name("ceiling_column@spacing_m=30",
+    "route_index=2")`` is ``"route_column@preset='ceiling_column',spacing_m=30,route_index=2"``.
+    """
+    preset, _, own = base.partition("@")
+    if preset == "route_column":
+        parts = [own, options]
+    else:
+        parts = [f"preset={preset!r}", own, options]
+    return "route_column@" + ",".join(p for p in parts if p)
+
+
+def route_column(env: Any, preset: str = "column", **options: Any) -> RouteChoiceColumn:
+    """The :class:`RouteChoiceColumn` with the settings of the column preset ``preset`` (a
+    :data:`~coopnav_env.agents.heuristics.COLUMN_PRESETS` name, or an earlier name of one)
+    and ``options`` on top; registered as the policy ``route_column``.
+
+    A preset that chooses its route (``best_sky_route``: ``route_choice="pdop_gt3"``) flies
+    ``route_index`` or ``route_model`` instead where one is given (without a ``route_choice``
+    of its own).
+    """
+    name = COLUMN_ALIASES.get(preset, preset)
+    if name not in COLUMN_PRESETS:
+        raise ValueError(
+            f"unknown column preset {preset!r}; presets are "
+            f"{', '.join([*COLUMN_PRESETS, *COLUMN_ALIASES])}"
+        )
+    unknown = sorted(set(options) - set(COLUMN_OPTIONS) - set(_ROUTE_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {', '.join(map(repr, unknown))} of policy 'route_column'; its "
+            f"options are preset, {', '.join([*COLUMN_OPTIONS, *_ROUTE_OPTIONS])}"
+        )
+    settings = {**COLUMN_PRESETS[name], **options}
+    told = options.get("route_index") or options.get("route_model") is not None
+    if told and "route_choice" not in options:
+        settings["route_choice"] = "first"
+    policy = RouteChoiceColumn(env, **settings)
+    policy.name = preset
+    return policy
+
+
+def learned_route(env: Any, model: Any = "pretrained", **options: Any) -> RouteChoiceColumn:
+    """The column (the model's ``base``, a column heuristic's name with options after ``@``
+    allowed) that flies the route a learned route model predicts
+    best: ``model`` a :class:`RouteModel`, a path or ``pretrained`` (``pretrained/s<k>``);
+    registered as the policy ``learned_route``."""
+    if not isinstance(model, RouteModel):
+        model = RouteModel.load(resolve_route_model(str(model)), kind="route")
+    return make_policy(route_column_name(model.base), env, route_model=model, **options)
+
+
+def learned_split(env: Any, model: Any = "pretrained", **options: Any) -> RouteChoiceColumn:
+    """The column (the model's ``base``) split over two streets where a learned split model
+    predicts it best: ``model`` a :class:`RouteModel` of kind ``"split"``, a path or
+    ``pretrained`` (``pretrained/s<k>``); registered as the policy ``learned_split``."""
+    if not isinstance(model, RouteModel):
+        model = RouteModel.load(resolve_route_model(str(model), kind="split"), kind="split")
+    if model.kind != "split":
+        raise ValueError(f"learned_split needs a split model, got a {model.kind} model")
+    return make_policy(route_column_name(model.base), env, route_split_model=model, **options)
+
+
+register_policy("route_column", route_column)
+register_policy("learned_route", learned_route)
+register_policy("learned_split", learned_split)

@@ -1,4 +1,10 @@
-"""A privileged planner: the headroom reference of the learning study, not a baseline.
+"""A privileged planner: the headroom reference of the learning studies, not a baseline.
+
+Importing this module registers it as the policy ``planner``
+(:func:`coopnav_env.agents.register_policy`): ``planner@base='ceiling_column',horizon=10``
+then names it wherever :func:`coopnav_env.agents.make_policy` is used (options after ``@``
+are those of :class:`PrivilegedPlanner`; ``base`` a heuristic's name, default
+``wide_column``).
 
 :class:`PrivilegedPlanner` may use everything the simulator knows: the city, the satellites,
 the true positions and errors, and the future itself, since it looks ahead in deep copies of
@@ -24,7 +30,7 @@ It is slow (``n_samples * iterations * horizon`` environment steps and ``n_sampl
 iterations`` deep copies per step: about 0.2-0.3 s per step with the defaults on an idle
 core), uses information no on-board policy has, and is reported as a reference only: how
 much lower the error could be on the same episodes, so that the share of the gap between
-``formation`` and the best possible that a learned policy closes can be stated. Its result
+``column`` and the best possible that a learned policy closes can be stated. Its result
 is what one planner achieves, so the headroom it shows is a lower estimate of the true one
 (a better planner could do better still), not a bound.
 """
@@ -37,7 +43,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PrivilegedPlanner"]
+from coopnav_env.agents import make_policy, register_policy
+
+__all__ = ["PrivilegedPlanner", "make_planner"]
 
 
 class PrivilegedPlanner:
@@ -48,8 +56,8 @@ class PrivilegedPlanner:
     env : urban_canyon_v0 ParallelEnv
         The environment itself (the planner copies it; it must be the object being stepped).
     base : Policy
-        The base heuristic, acting in ``env`` (:func:`coopnav_env.agents.make_policy` builds
-        ``wide`` unless told otherwise, e.g. ``planner@base='spread'``).
+        The base heuristic, acting in ``env`` (:func:`make_planner` builds ``wide_column``
+        unless told otherwise, e.g. ``planner@base='stretched_column'``).
     horizon : int
         Look-ahead steps, >= 1.
     n_samples, n_elite, iterations : int
@@ -88,7 +96,7 @@ class PrivilegedPlanner:
         Limit every offset, in the look-ahead and in the command applied, toward walls the
         range sensor sees (:meth:`coopnav_env.agents.heuristics.ColumnPolicy.guard_delta`: nothing
         toward a wall inside the base column's wall margin, toward one beyond it no faster
-        than reaches the margin in 2 s; the base must have a wall guard, e.g. ``ceiling``).
+        than reaches the margin in 2 s; the base must have a wall guard, e.g. ``ceiling_column``).
         Without it an offset can cancel the base's wall guard or outrun it, which is how the
         on-board look-ahead, whose belief of where the UAVs are is metres off, flies them
         into walls (``studies/planner_headroom`` measures how often, with and without it).
@@ -152,7 +160,8 @@ class PrivilegedPlanner:
             raise ValueError(f"planner guard_offsets must be True or False, got {guard_offsets!r}")
         if guard_offsets and getattr(base, "wall_margin_m", None) is None:
             raise ValueError(
-                "planner guard_offsets=True needs a base with a wall guard (guarded, ceiling, "
+                "planner guard_offsets=True needs a base with a wall guard (guarded_column, "
+                "ceiling_column, "
                 f"or a column with wall_margin_m set), got {getattr(base, 'name', base)!r}"
             )
         self.guard_offsets = guard_offsets
@@ -294,3 +303,13 @@ class PrivilegedPlanner:
             a: np.clip(cmd[a] + applied[j], -1.0, 1.0).astype(np.float32)
             for j, a in enumerate(live_order)
         }
+
+
+def make_planner(env: Any, base: str = "wide_column", **options: Any) -> PrivilegedPlanner:
+    """The :class:`PrivilegedPlanner` over the heuristic named ``base`` (a
+    :func:`coopnav_env.agents.make_policy` name) for ``env``; ``options`` are the planner's.
+    Registered as the policy ``planner``."""
+    return PrivilegedPlanner(env, make_policy(base, env), **options)
+
+
+register_policy("planner", make_planner)

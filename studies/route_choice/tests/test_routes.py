@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from coopnav_env.agents import make_policy
-from coopnav_env.agents.routes import (
+from coopnav_env.sim.route import street_route, street_routes
+from studies.route_choice.routes import (
     FEATURE_SENSE,
     ROUTE_FEATURES,
     RouteModel,
@@ -18,7 +19,6 @@ from coopnav_env.agents.routes import (
     resolve_route_model,
     route_features,
 )
-from coopnav_env.sim.route import street_route, street_routes
 
 
 class _Grid:
@@ -123,7 +123,7 @@ def test_route_model_round_trip_and_errors(tmp_path):
         scale=[2.0, 1.0],
         weights=[-0.5, 0.1],
         alpha=1.0,
-        base="ceiling",
+        base="ceiling_column",
         info={"episodes": 3},
     )
     x = np.zeros((2, len(ROUTE_FEATURES)))
@@ -132,11 +132,11 @@ def test_route_model_round_trip_and_errors(tmp_path):
     assert np.allclose(m.predict(x), [-0.5, 0.5 + 0.2])
     path = m.save(tmp_path / "run" / "route_model.json")
     again = RouteModel.load(tmp_path / "run")  # a run folder works too
-    assert np.allclose(again.predict(x), m.predict(x)) and again.base == "ceiling"
+    assert np.allclose(again.predict(x), m.predict(x)) and again.base == "ceiling_column"
     with pytest.raises(ValueError, match="unknown route features"):
-        RouteModel(["sunshine"], [0.0], [1.0], [1.0], 1.0, "ceiling")
+        RouteModel(["sunshine"], [0.0], [1.0], [1.0], 1.0, "ceiling_column")
     with pytest.raises(ValueError, match="one mean"):
-        RouteModel(["los_mean"], [0.0, 1.0], [1.0], [1.0], 1.0, "ceiling")
+        RouteModel(["los_mean"], [0.0, 1.0], [1.0], [1.0], 1.0, "ceiling_column")
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({**json.loads(path.read_text()), "format": "other"}))
     with pytest.raises(ValueError, match="not a coopnav route model"):
@@ -158,7 +158,7 @@ def test_fit_route_model_finds_a_planted_rule_and_chooses_by_it():
         f = rng.normal(10.0, 2.0, (r, len(ROUTE_FEATURES)))
         feats.append(f)
         errs.append(3.0 - 0.3 * f[:, j] + rng.normal(0.0, 0.1, r))  # more sky, lower error
-    m = fit_route_model(feats, errs, "ceiling")
+    m = fit_route_model(feats, errs, "ceiling_column")
     assert m.info["episodes"] == sum(len(e) > 1 for e in errs)
     chosen = [int(np.argmin(m.predict(f))) for f in feats]
     truth = [int(np.argmax(f[:, j])) for f in feats]
@@ -168,16 +168,16 @@ def test_fit_route_model_finds_a_planted_rule_and_chooses_by_it():
     cv = m.info["cv_chosen_minus_mean_m"][str(m.alpha)]
     assert cv < -0.3  # the chosen route beats the mean route on held-out episodes
     with pytest.raises(ValueError, match="at least 5 episodes"):
-        fit_route_model(feats[:3], errs[:3], "ceiling")
+        fit_route_model(feats[:3], errs[:3], "ceiling_column")
     with pytest.raises(ValueError, match="differ in length"):
-        fit_route_model(feats, errs[:-1], "ceiling")
+        fit_route_model(feats, errs[:-1], "ceiling_column")
 
 
 def test_column_heuristics_choose_routes_by_a_feature_or_a_model(tmp_path):
     env = _env()
     seed = _multi_route_seed(env)
     obs, _ = env.reset(seed=seed)
-    p = make_policy("ceiling@route_choice='swarm_mean'", env)
+    p = make_policy("route_column@preset='ceiling_column',route_choice='swarm_mean'", env)
     p.reset(seed)
     p.act(obs)
     table = p.route_feature_table
@@ -186,33 +186,37 @@ def test_column_heuristics_choose_routes_by_a_feature_or_a_model(tmp_path):
     assert p.route_chosen == int(np.argmax(FEATURE_SENSE["swarm_mean"] * table[:, j]))
     # route_index flies a given candidate; 0 is street_route's
     for k in (0, 2):
-        q = make_policy(f"ceiling@route_index={k}", env)
+        q = make_policy(f"route_column@preset='ceiling_column',route_index={k}", env)
         env.reset(seed=seed)
         q.reset(seed)
         q.act(obs)
         assert np.allclose(q._path.point(np.array([q._path.length * 0.5])), p_path_mid(p, k))
     # a learned model that wants the route with the fewest turns
-    m = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling")
+    m = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column")
     m.save(tmp_path / "m" / "route_model.json")
-    r = make_policy(f"route:{tmp_path / 'm'}", env)
+    r = make_policy(f"learned_route@model='{tmp_path / 'm'}'", env)
     env.reset(seed=seed)
     r.reset(seed)
     r.act(obs)
     turns = [len(c) - 2 for c in r.route_candidates]
     assert r.route_chosen == int(np.argmin(turns)) and r.route_model is not None
     with pytest.raises(ValueError, match="route_choice must be"):
-        make_policy("ceiling@route_choice='shade'", env)
+        make_policy("route_column@preset='ceiling_column',route_choice='shade'", env)
     with pytest.raises(ValueError, match="exclude each other"):
-        make_policy("ceiling@route_choice='los_mean',route_index=2", env)
-    with pytest.raises(ValueError, match="needs the path"):
-        make_policy("route:", env)
+        make_policy(
+            "route_column@preset='ceiling_column',route_choice='los_mean',route_index=2", env
+        )
+    with pytest.raises(FileNotFoundError, match="no route model"):
+        make_policy(f"learned_route@model='{tmp_path / 'none'}'", env)
 
 
 def test_a_split_column_flies_two_routes_abreast_and_reaches_the_goal():
     env = _env()
     seed = _multi_route_seed(env)
     obs, _ = env.reset(seed=seed)
-    p = make_policy("ceiling@route_choice='pdop_gt3',route_split='los_mean'", env)
+    p = make_policy(
+        "route_column@preset='ceiling_column',route_choice='pdop_gt3',route_split='los_mean'", env
+    )
     p.reset(seed)
     p.act(obs)
     k, k2 = p.route_chosen, p.route_split_chosen
@@ -225,7 +229,9 @@ def test_a_split_column_flies_two_routes_abreast_and_reaches_the_goal():
     order = np.argsort(p._slot)
     assert list(p._group[order]) == [i % 2 for i in range(len(order))]
     # route_split_index walks the other candidates
-    q = make_policy("ceiling@route_choice='pdop_gt3',route_split_index=1", env)
+    q = make_policy(
+        "route_column@preset='ceiling_column',route_choice='pdop_gt3',route_split_index=1", env
+    )
     env.reset(seed=seed)
     q.reset(seed)
     q.act(obs)
@@ -233,29 +239,33 @@ def test_a_split_column_flies_two_routes_abreast_and_reaches_the_goal():
     # flown to the end: the two sub-columns are apart somewhere and both reach the goal
     from coopnav_env.training.evaluate import run_episode
 
-    rec = run_episode(env, make_policy("ceiling@route_split_index=1", env), seed)
+    rec = run_episode(
+        env, make_policy("route_column@preset='ceiling_column',route_split_index=1", env), seed
+    )
     assert rec.success
     # unsplit policies keep one path
-    u = make_policy("ceiling@route_choice='pdop_gt3'", env)
+    u = make_policy("route_column@preset='ceiling_column',route_choice='pdop_gt3'", env)
     env.reset(seed=seed)
     u.reset(seed)
     u.act(obs)
     assert len(u._paths) == 1 and u.route_split_chosen is None
     with pytest.raises(ValueError, match="route_split must be"):
-        make_policy("ceiling@route_split='wide'", env)
+        make_policy("route_column@preset='ceiling_column',route_split='wide_column'", env)
     with pytest.raises(ValueError, match="route_split_index must be >= 0"):
-        make_policy("ceiling@route_split_index=-1", env)
+        make_policy("route_column@preset='ceiling_column',route_split_index=-1", env)
     with pytest.raises(ValueError, match="exclude each other"):
-        make_policy("ceiling@route_split='los_mean',route_split_index=1", env)
+        make_policy(
+            "route_column@preset='ceiling_column',route_split='los_mean',route_split_index=1", env
+        )
 
 
 def test_split_features_of_one_route_match_the_route_features():
-    from coopnav_env.agents.routes import SPLIT_FEATURES, split_features
+    from studies.route_choice.routes import SPLIT_FEATURES, split_features
 
     env = _env()
     seed = _multi_route_seed(env)
     obs, _ = env.reset(seed=seed)
-    p = make_policy("ceiling@route_choice='swarm_mean'", env)
+    p = make_policy("route_column@preset='ceiling_column',route_choice='swarm_mean'", env)
     p.reset(seed)
     p.act(obs)
     world = env.unwrapped.world
@@ -308,7 +318,7 @@ def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_p
     assert all(np.array_equal(again[k], arrays[k], equal_nan=True) for k in arrays)
     assert main(argv) == 2  # finished: never overwritten
     model = RouteModel.load(out)
-    assert model.base == "ceiling" and model.info["first_seed"] == 0
+    assert model.base == "ceiling_column" and model.info["first_seed"] == 0
     # resume: a run folder with half the episodes continues and flies the same episodes
     part = tmp_path / "part"
     part.mkdir()
@@ -329,19 +339,25 @@ def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_p
         assert not (tmp_path / "y").exists()
 
 
-def test_skyroute_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points():
+def test_best_sky_route_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points():
     env = _env()
     seed = _multi_route_seed(env)
     obs, _ = env.reset(seed=seed)
-    p = make_policy("skyroute", env)
-    assert p.name == "skyroute" and p.route_choice == "pdop_gt3"
+    p = make_policy("best_sky_route", env)
+    assert p.name == "best_sky_route" and p.route_choice == "pdop_gt3"
     p.reset(seed)
     p.act(obs)
+    # the library's choice (poor_geometry_share) is the route feature pdop_gt3's
+    q = make_policy("route_column@preset='best_sky_route'", env)
+    q.reset(seed)
+    q.act(obs)
     j = ROUTE_FEATURES.index("pdop_gt3")
-    assert p.route_chosen == int(np.argmin(p.route_feature_table[:, j]))
-    c = make_policy("ceiling", env)
+    assert p.route_chosen == q.route_chosen == int(np.argmin(q.route_feature_table[:, j]))
+    assert len(p.route_candidates) == len(q.route_candidates) >= 2
+    c = make_policy("ceiling_column", env)
     assert p.cfg is c.cfg and p._altitude_m() == c._altitude_m()  # ceiling's flight
-    assert make_policy("skyroute@route_index=1", env).route_choice == "first"
+    told = make_policy("route_column@preset='best_sky_route',route_index=1", env)
+    assert told.route_choice == "first"
 
 
 def test_study_accepts_train_routes_runs(tmp_path):
@@ -349,24 +365,24 @@ def test_study_accepts_train_routes_runs(tmp_path):
 
     run = tmp_path / "r"
     run.mkdir()
-    RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(run / "route_model.json")
+    RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column").save(run / "route_model.json")
     (run / "run.json").write_text(json.dumps({"settings": {"env": {"max_fix_sigma_m": 8}}}))
     assert parse_runs([f"route={run}"]) == {"route": [run]}
-    assert run_policy_name(run) == f"route:{run}"
+    assert run_policy_name(run) == f"learned_route@model='{run}'"
     assert run_env(run) == {"max_fix_sigma_m": 8}
     with pytest.raises(ValueError, match=r"route_model\.json"):
         parse_runs([f"x={tmp_path}"])
     # a split chooser's folder (split_choice.py --fit-model): its model records the env
     split = tmp_path / "s"
-    m = RouteModel(["split"], [0.0], [1.0], [-1.0], 10.0, "skyroute", kind="split")
+    m = RouteModel(["split"], [0.0], [1.0], [-1.0], 10.0, "best_sky_route", kind="split")
     m.info = {"env": {"preset": "urban_nlos_3dma", "max_fix_sigma_m": 8}}
     m.save(split / "split_model.json")
     assert parse_runs([f"split={split}"]) == {"split": [split]}
-    assert run_policy_name(split) == f"split:{split}"
+    assert run_policy_name(split) == f"learned_split@model='{split}'"
     assert run_env(split) == {"preset": "urban_nlos_3dma", "max_fix_sigma_m": 8}
-    shipped = Path(__file__).resolve().parents[2] / "agents" / "pretrained" / "split_s1"
+    shipped = Path(__file__).resolve().parents[2] / "split_choice" / "policies" / "split_s1"
     assert run_env(shipped)["max_fix_sigma_m"] == 8 and run_policy_name(shipped).startswith(
-        "split:"
+        "learned_split@"
     )
 
 
@@ -384,7 +400,7 @@ def test_route_features_for_any_column_spacing(spacing):
     own = [ROUTE_FEATURES.index(n) for n in ("los_mean", "los_min", "los_lt6", "pdop_gt3")]
     assert np.array_equal(f[own], ref[own])
     # a 7 m column (formation's) chooses and flies a route too
-    p = make_policy("formation@route_choice='swarm_mean'", env)
+    p = make_policy("route_column@preset='column',route_choice='swarm_mean'", env)
     obs, _ = env.reset(seed=seed)
     p.reset(seed)
     p.act(obs)
@@ -400,8 +416,8 @@ def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean(
 
     env = _env()
     seed = _multi_route_seed(env)
-    one = collect_episode(env, "ceiling", seed)
-    two = collect_episode(env, "ceiling", seed, replicates=2)
+    one = collect_episode(env, "ceiling_column", seed)
+    two = collect_episode(env, "ceiling_column", seed, replicates=2)
     reps = two["nav_reps"]
     assert reps.shape == (len(one["nav"]), 2)
     # the first flight is the plain episode; the second another noise realisation of it
@@ -411,7 +427,7 @@ def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean(
     seeds, eps = arrays_to_episodes(episodes_to_arrays([seed], [two]))
     assert seeds == [seed] and np.array_equal(eps[0]["nav_reps"], reps)
     with pytest.raises(ValueError, match="replicates must be >= 1"):
-        collect_episode(env, "ceiling", seed, replicates=0)
+        collect_episode(env, "ceiling_column", seed, replicates=0)
 
 
 def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(tmp_path):
@@ -430,8 +446,8 @@ def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(
     assert not (tmp_path / "bad").exists()
 
 
-def _split_model(weight_on_split: float, base: str = "ceiling@route_choice='pdop_gt3'"):
-    from coopnav_env.agents.routes import SPLIT_FEATURES
+def _split_model(weight_on_split: float, base: str = "ceiling_column@route_choice='pdop_gt3'"):
+    from studies.route_choice.routes import SPLIT_FEATURES
 
     k = len(SPLIT_FEATURES)
     w = [0.0] * k
@@ -440,7 +456,7 @@ def _split_model(weight_on_split: float, base: str = "ceiling@route_choice='pdop
 
 
 def test_split_models_save_load_and_check_their_kind(tmp_path):
-    from coopnav_env.agents.routes import SPLIT_FEATURES, resolve_route_model
+    from studies.route_choice.routes import SPLIT_FEATURES, resolve_route_model
 
     m = _split_model(-1.0)
     path = m.save(tmp_path / "run" / "split_model.json")
@@ -451,16 +467,16 @@ def test_split_models_save_load_and_check_their_kind(tmp_path):
     assert np.array_equal(back.predict(feats), [0.0, -1.0, -1.0])
     assert json.loads(path.read_text())["kind"] == "split"
     # route models are written as before: no kind key
-    r = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling")
+    r = RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column")
     assert (
         "kind" not in r.to_json() and RouteModel.load(r.save(tmp_path / "r.json")).kind == "route"
     )
     with pytest.raises(ValueError, match="model kind must be one of"):
-        RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling", kind="speed")
+        RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column", kind="speed")
     with pytest.raises(ValueError, match="unknown split features"):
-        RouteModel(["pdop_mean"], [0.0], [1.0], [1.0], 1.0, "ceiling", kind="split")
+        RouteModel(["pdop_mean"], [0.0], [1.0], [1.0], 1.0, "ceiling_column", kind="split")
     assert resolve_route_model("pretrained/s2", kind="split").name == "split_s2"
-    with pytest.raises(ValueError, match="split:pretrained takes a seed"):
+    with pytest.raises(ValueError, match="'pretrained' takes a seed"):
         resolve_route_model("pretrained/x", kind="split")
 
 
@@ -470,7 +486,11 @@ def test_a_split_model_chooses_whether_and_where_the_column_splits(tmp_path):
     obs, _ = env.reset(seed=seed)
     # a model that predicts every split lower than flying unsplit: it splits onto the other
     # route whose split features it scores lowest (all equal here: the first other one)
-    p = make_policy("ceiling@route_choice='pdop_gt3'", env, route_split_model=_split_model(-1.0))
+    p = make_policy(
+        "route_column@preset='ceiling_column',route_choice='pdop_gt3'",
+        env,
+        route_split_model=_split_model(-1.0),
+    )
     p.reset(seed)
     p.act(obs)
     others = [i for i in range(len(p.route_candidates)) if i != p.route_chosen]
@@ -481,24 +501,34 @@ def test_a_split_model_chooses_whether_and_where_the_column_splits(tmp_path):
     o2, t2 = p.split_table(p.route_candidates, p.route_chosen)
     assert o2 == others and np.array_equal(t2, table)
     # a model that predicts flying unsplit lower: one column
-    q = make_policy("ceiling@route_choice='pdop_gt3'", env, route_split_model=_split_model(1.0))
+    q = make_policy(
+        "route_column@preset='ceiling_column',route_choice='pdop_gt3'",
+        env,
+        route_split_model=_split_model(1.0),
+    )
     q.reset(seed)
     q.act(obs)
     assert q.route_split_chosen is None and len(q._paths) == 1
-    # the split:<path> policy name flies a saved model on its base heuristic
+    # the learned_split policy flies a saved model on its base heuristic
     _split_model(-1.0).save(tmp_path / "m" / "split_model.json")
-    r = make_policy(f"split:{tmp_path / 'm'}", env)
+    r = make_policy(f"learned_split@model='{tmp_path / 'm'}'", env)
     r.reset(seed)
     r.act(obs)
     assert r.route_split_chosen == others[0]
     with pytest.raises(ValueError, match="excludes route_split"):
-        make_policy("ceiling@route_split='los_mean'", env, route_split_model=_split_model(1.0))
+        make_policy(
+            "route_column@preset='ceiling_column',route_split='los_mean'",
+            env,
+            route_split_model=_split_model(1.0),
+        )
     with pytest.raises(ValueError, match="must be a split model"):
         make_policy(
-            "ceiling", env, route_split_model=RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "c")
+            "route_column@preset='ceiling_column'",
+            env,
+            route_split_model=RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "c"),
         )
-    with pytest.raises(ValueError, match="needs the path of a split model"):
-        make_policy("split:", env)
+    with pytest.raises(FileNotFoundError, match="no route model"):
+        make_policy(f"learned_split@model='{tmp_path / 'none'}'", env)
 
 
 # --------------------------------------------------------------------------------------------
@@ -524,7 +554,9 @@ def test_a_split_model_chooses_whether_and_where_the_column_splits(tmp_path):
 def test_route_model_files_with_bad_numbers_are_refused_naming_file_and_field(
     tmp_path, field, value, match
 ):
-    good = RouteModel(["los_mean", "turns"], [10.0, 1.0], [2.0, 1.0], [-0.5, 0.1], 1.0, "ceiling")
+    good = RouteModel(
+        ["los_mean", "turns"], [10.0, 1.0], [2.0, 1.0], [-0.5, 0.1], 1.0, "ceiling_column"
+    )
     data = good.to_json()
     data[field] = value
     path = tmp_path / "route_model.json"
@@ -534,7 +566,7 @@ def test_route_model_files_with_bad_numbers_are_refused_naming_file_and_field(
     assert str(path) in str(info.value)
     env = _env(n_uavs=2)
     with pytest.raises(ValueError, match=match):
-        make_policy(f"route:{tmp_path}", env)
+        make_policy(f"learned_route@model='{tmp_path}'", env)
 
 
 @pytest.mark.parametrize("text", ["[1, 2]", "{not json", '{"format": "coopnav-route-model/1"}'])
@@ -551,14 +583,24 @@ def test_a_split_model_is_refused_as_a_route_model_and_the_reverse(tmp_path):
     split_dir = tmp_path / "split"
     _split_model(-1.0).save(split_dir / "split_model.json")
     route_dir = tmp_path / "route"
-    RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling").save(route_dir / "route_model.json")
-    for name in (f"route:{split_dir}", f"route:{split_dir / 'split_model.json'}"):
-        with pytest.raises(ValueError, match=r"holds a split model.*route:.*split:") as info:
+    RouteModel(["turns"], [0.0], [1.0], [1.0], 1.0, "ceiling_column").save(
+        route_dir / "route_model.json"
+    )
+    for name in (
+        f"learned_route@model='{split_dir}'",
+        f"learned_route@model='{split_dir / 'split_model.json'}'",
+    ):
+        with pytest.raises(
+            ValueError, match=r"holds a split model.*learned_route.*learned_split"
+        ) as info:
             make_policy(name, env)
         assert "split_model.json" in str(info.value)
-    for name in (f"split:{route_dir}", f"split:{route_dir / 'route_model.json'}"):
-        with pytest.raises(ValueError, match=r"holds a route model.*split:.*route:"):
+    for name in (
+        f"learned_split@model='{route_dir}'",
+        f"learned_split@model='{route_dir / 'route_model.json'}'",
+    ):
+        with pytest.raises(ValueError, match=r"holds a route model.*learned_split.*learned_route"):
             make_policy(name, env)
     # the right kinds still load
-    assert make_policy(f"route:{route_dir}", env).route_model.kind == "route"
-    assert make_policy(f"split:{split_dir}", env).route_split_model.kind == "split"
+    assert make_policy(f"learned_route@model='{route_dir}'", env).route_model.kind == "route"
+    assert make_policy(f"learned_split@model='{split_dir}'", env).route_split_model.kind == "split"

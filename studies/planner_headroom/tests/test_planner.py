@@ -1,4 +1,5 @@
-"""The privileged planner: copies, not the real episode; the base alone is a candidate."""
+"""The privileged planner (studies.planner_headroom.planner): copies, not the real episode; the
+base alone is a candidate."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+import studies.planner_headroom.planner  # noqa: F401  (registers 'planner')
 from coopnav_env import urban_canyon_v0
 from coopnav_env.agents import make_policy
 from tests.fly_alike import assert_fly_alike
@@ -16,11 +18,14 @@ def test_with_only_the_zero_candidate_the_planner_flies_its_base() -> None:
     # one candidate, one round: the offset is zero, so the command is the base's, and the
     # look-ahead in copies must not disturb the real episode (its generator included)
     assert_fly_alike(
-        "planner@n_samples=1,n_elite=1,iterations=1,horizon=2", "wide", seed=1_000_001, steps=15
+        "planner@n_samples=1,n_elite=1,iterations=1,horizon=2",
+        "wide_column",
+        seed=1_000_001,
+        steps=15,
     )
     assert_fly_alike(
-        "planner@n_samples=1,n_elite=1,iterations=1,horizon=1,base='spread'",
-        "spread",
+        "planner@n_samples=1,n_elite=1,iterations=1,horizon=1,base='stretched_column'",
+        "stretched_column",
         seed=1_000_001,
         steps=10,
     )
@@ -86,7 +91,7 @@ def test_the_on_board_planner_looks_ahead_from_the_estimate() -> None:
     # with the base as its only candidate it flies the base, like the privileged one
     assert_fly_alike(
         "planner@n_samples=1,n_elite=1,iterations=1,horizon=2,from_estimate=True",
-        "wide",
+        "wide_column",
         seed=1_000_001,
         steps=10,
     )
@@ -139,7 +144,7 @@ def test_guarded_offsets_never_point_at_a_near_wall() -> None:
 
     walls = obs_layout(env.unwrapped.config)["wall_distance"]
     guarded = make_policy(
-        "planner@from_estimate=True,guard_offsets=True,base='ceiling',n_samples=3,iterations=1,"
+        "planner@from_estimate=True,guard_offsets=True,base='ceiling_column',n_samples=3,iterations=1,"
         "horizon=2",
         env,
     )
@@ -155,11 +160,13 @@ def test_guarded_offsets_never_point_at_a_near_wall() -> None:
     assert applied[0, 0] == pytest.approx(0.0, abs=1e-12)  # not toward the near wall
     np.testing.assert_array_equal(applied[1:], offsets[1:])  # the others keep theirs
     # the guarded look-ahead is a different plan from the unguarded one only where it acts
-    plain = make_policy("planner@from_estimate=True,base='ceiling',n_samples=3,horizon=2", env)
+    plain = make_policy(
+        "planner@from_estimate=True,base='ceiling_column',n_samples=3,horizon=2", env
+    )
     np.testing.assert_array_equal(plain._applied(base, offsets, fake, live), offsets)
     cmd = guarded.act(obs)
     assert set(cmd) == set(obs)
     with pytest.raises(ValueError, match="guard_offsets must be True or False"):
         make_policy("planner@guard_offsets=1", env)
     with pytest.raises(ValueError, match="needs a base with a wall guard"):
-        make_policy("planner@guard_offsets=True,base='wide'", env)
+        make_policy("planner@guard_offsets=True,base='wide_column'", env)
