@@ -1,7 +1,7 @@
 """The networks and checkpoints of the TorchRL MAPPO/IPPO backend (shared by training and
 evaluation): :class:`MARLSettings`, :func:`build_modules`, :func:`load_marl_checkpoint`.
 
-The training loop is :mod:`coopnav_env.training.marl`; the evaluation policy
+The training loop is :mod:`coopnav_env.training.torchrl_backend`; the evaluation policy
 :mod:`coopnav_env.agents.marl_policy`.
 """
 
@@ -27,7 +27,8 @@ __all__ = [
 ]
 
 CHECKPOINT_FORMAT = "coopnav-marl-1"
-"""The ``format`` entry of a checkpoint of :meth:`coopnav_env.training.marl.MARLTrainer.save`."""
+"""The ``format`` entry of a checkpoint of
+:meth:`coopnav_env.training.torchrl_backend.MARLTrainer.save`."""
 
 ALGORITHMS: tuple[str, ...] = ("mappo", "ippo")
 """Algorithms of the TorchRL backend."""

@@ -60,11 +60,11 @@ DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.y
 BACKENDS: dict[str, str] = {
     "sb3": "coopnav_env.training.sb3_backend",
     "rllib": "coopnav_env.training.rllib_backend",
-    "torchrl": "coopnav_env.training.marl",
+    "torchrl": "coopnav_env.training.torchrl_backend",
 }
 """Training backends: name -> module (see the module docstring for what a module defines).
 ``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib; ``torchrl``:
-MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.marl`)."""
+MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.torchrl_backend`)."""
 
 VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
 """Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of

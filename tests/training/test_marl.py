@@ -17,7 +17,7 @@ from coopnav_env import urban_canyon_v0  # noqa: E402
 from coopnav_env.agents import make_policy  # noqa: E402
 from coopnav_env.agents.marl_nets import MARLSettings  # noqa: E402
 from coopnav_env.training.cli import main  # noqa: E402
-from coopnav_env.training.marl import MARLTrainer  # noqa: E402
+from coopnav_env.training.torchrl_backend import MARLTrainer  # noqa: E402
 from tests.fly_alike import assert_fly_alike  # noqa: E402
 
 SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--no-progress"]
@@ -215,7 +215,7 @@ def test_options_mode_samples_one_hot_choices_and_starts_at_its_base(tmp_path) -
 
 
 def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch) -> None:
-    import coopnav_env.training.marl as marl
+    import coopnav_env.training.torchrl_backend as backend
 
     s = MARLSettings(
         algorithm="mappo",
@@ -227,7 +227,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
     )
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 7}, seed=2)
     raws, steps = [], []
-    real_command, real_step = marl.swarm_command, tr.venv.step
+    real_command, real_step = backend.swarm_command, tr.venv.step
 
     def command(settings, raw, *args):
         raws.append(np.array(raw))
@@ -238,7 +238,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
         steps.append((out[1].copy(), (out[2] | out[3]).copy()))  # rewards, episode ends
         return out
 
-    monkeypatch.setattr(marl, "swarm_command", command)
+    monkeypatch.setattr(backend, "swarm_command", command)
     monkeypatch.setattr(tr.venv, "step", step)
     data = tr.collect()
     assert tr.agent_steps == 2 * 4 * 3 * 3  # copies x decisions x repeat x UAVs
@@ -541,7 +541,7 @@ def test_torchrl_wrapper_accepts_the_environment() -> None:
 
 
 def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
-    from coopnav_env.training.marl import export_policy
+    from coopnav_env.training.torchrl_backend import export_policy
 
     s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
     tr = MARLTrainer(s, {}, seed=0)
@@ -562,7 +562,7 @@ def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
 
 
 def test_export_policy_from_a_checkpoint_takes_the_runs_config_only(tmp_path) -> None:
-    from coopnav_env.training.marl import export_policy
+    from coopnav_env.training.torchrl_backend import export_policy
 
     s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
     tr = MARLTrainer(s, {}, seed=0)
@@ -633,7 +633,7 @@ def test_command_line_env_settings_win_over_the_backends_env_block(tmp_path) -> 
     too, although its ``torchrl.env`` block of the config file overrides ``env``."""
     import argparse
 
-    from coopnav_env.training.marl import settings_of
+    from coopnav_env.training.torchrl_backend import settings_of
     from coopnav_env.training.train import add_arguments, config_from_args
 
     parser = argparse.ArgumentParser()
