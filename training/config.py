@@ -36,11 +36,13 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from coopnav_env.envs.config import ExperimentalSetting
 from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
 
 __all__ = [
     "BACKENDS",
     "DEFAULT_CONFIG_PATH",
+    "EXPERIMENTAL_SETTINGS",
     "PRETRAIN_DEFAULTS",
     "VEC_ENVS",
     "TrainConfig",
@@ -65,6 +67,13 @@ BACKENDS: dict[str, str] = {
 """Training backends: name -> module (see the module docstring for what a module defines).
 ``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib; ``torchrl``:
 MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.torchrl_backend`)."""
+
+EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = ()
+"""The trainers' experimental settings, listed as the environment's are
+(:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`): a backend setting kept for a study,
+off by default, that may change or go without a deprecation period. None at present:
+``torchrl.action_repeat`` and ``torchrl.start_hold_decisions``, which the packaged
+``mappo_route`` configuration uses, are supported settings."""
 
 VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
 """Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of

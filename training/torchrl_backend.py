@@ -55,12 +55,16 @@ With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the 
 hand-written base policy (:func:`coopnav_env.agents.make_policy`), clipped to ``[-1, 1]``:
 residual policy learning (Silver et al. 2018; Johannink et al. 2019). The network's output
 is scaled by ``residual_scale`` and its last layer starts at zero, so training starts from
-the base policy's behaviour and RL only has to find what to change. The base command is part of the
-actor's input. With ``residual_base: null`` the policy flies on its own. The residual can be
-guarded against walls (``residual_wall_guard``), and two other modes replace the velocity
-residual: ``offset`` (learned slot shifts of a column base) and ``options`` (a categorical
-choice per UAV among a few slot shifts, :class:`coopnav_env.agents.marl_nets.MARLSettings` describes
-every setting).
+the base policy's behaviour and RL only has to find what to change. The base command is part
+of the actor's input. With ``residual_base: null`` the policy flies on its own.
+
+Held decisions and exploring starts
+-----------------------------------
+``action_repeat`` holds each of the actor's outputs for several swarm steps (one PPO
+transition per decision). ``start_hold_decisions`` gives training episodes exploring starts:
+each UAV is held in place for a random number of its first decisions, decisions the actor is
+credited with as if it had drawn them (:class:`coopnav_env.agents.marl_nets.MARLSettings`
+describes every setting).
 """
 
 from __future__ import annotations
@@ -82,7 +86,7 @@ from coopnav_env.agents.marl_nets import (
     MARLSettings,
     base_command_before,
     build_modules,
-    check_residual_base,
+    settings_from_record,
     swarm_command,
 )
 from coopnav_env.agents.marl_policy import load_checked_checkpoint
@@ -330,18 +334,12 @@ class MARLTrainer:
             gamma=settings.gamma**settings.action_repeat,
             lmbda=settings.gae_lambda,
         )
-        self._masked_holds = (
-            settings.start_hold_decisions > 0 and settings.start_hold_objective == "masked"
-        )
         if settings.start_hold_decisions > 0:
             if self.venv.config.action_frame != "route":
                 raise ValueError(
                     "torchrl.start_hold_decisions needs env.action_frame 'route' (its speed "
                     f"set-point -1 holds a UAV in place), got {self.venv.config.action_frame!r}"
                 )
-        if self._masked_holds:
-            # the advantages are standardised over the learning decisions in update()
-            self.loss.normalize_advantage = False
         self.optim = torch.optim.Adam(self.loss.parameters(), lr=settings.learning_rate)
         self.reward_std = _RunningStd((settings.n_copies, self.n_agents), settings.gamma)
         self.agent_steps = 0
@@ -351,7 +349,6 @@ class MARLTrainer:
         self.warm_start_info: dict[str, Any] | None = None
         obs, _ = self.venv.reset(seed=self._env_seed)
         self._obs = obs.copy()
-        self._start_noise()
         self._start_hold()
         for b in self._bases:
             if b is not None:
@@ -369,9 +366,7 @@ class MARLTrainer:
             return [None] * s.n_copies
         from coopnav_env.agents import make_policy
 
-        bases = [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
-        check_residual_base(s, bases[0])
-        return bases
+        return [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
 
     def _states(self) -> np.ndarray | None:
         if not self.settings.centralised_critic:
@@ -388,7 +383,7 @@ class MARLTrainer:
         s = self.settings
         k_, t_, n_ = s.n_copies, s.rollout_steps, self.n_agents
         actor_in, critic_in, next_critic_in, acts, logps = [], [], [], [], []
-        rewards, dones, terms, learns = [], [], [], []
+        rewards, dones, terms = [], [], []
         agents = self.venv.possible_agents
         state = self._states()
         for _ in range(t_):
@@ -398,29 +393,16 @@ class MARLTrainer:
             a_in = _actor_inputs(self._obs, base)
             c_in = _critic_inputs(self._obs, state)
             td = TensorDict({("agents", "observation"): torch.from_numpy(a_in)}, batch_size=[k_])
-            if s.noise_correlation > 0.0:
-                raw, logp = self._sample_correlated(td)
-            else:
-                # sample (TorchRL's modules return the distribution's mode unless told
-                # otherwise)
-                with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
-                    td = self.actor(td)
-                raw, logp = td["agents", "action"].numpy(), td["agents", "action_log_prob"].numpy()
+            # sample (TorchRL's modules return the distribution's mode unless told otherwise)
+            with torch.no_grad(), set_exploration_type(ExplorationType.RANDOM):
+                td = self.actor(td)
+            raw, logp = td["agents", "action"].numpy(), td["agents", "action_log_prob"].numpy()
             held = self._hold > 0  # (K, N): exploring starts (start_hold_decisions)
-            flown = raw
-            if held.any():
-                if self._masked_holds:  # flown held, stored as drawn (left out of the loss)
-                    flown = raw.copy()
-                    flown[..., 0][held] = -1.0
-                else:  # stored as flown, a tail draw
-                    raw, logp = self._draw_holds(td, raw, logp, held)
-                    flown = raw
-            n_c_in, acc, ended, state = self._act_held(flown, obs_d, base)
-            if s.noise_correlation > 0.0:
-                self._advance_noise(ended)
+            if held.any():  # stored as flown: a draw from the actor's tail below -1
+                raw, logp = self._draw_holds(td, raw, logp, held)
+            n_c_in, acc, ended, state = self._act_held(raw, obs_d, base)
             if s.start_hold_decisions > 0:
                 self._advance_hold(ended)
-            learns.append(~held)
             actor_in.append(a_in)
             critic_in.append(c_in)
             next_critic_in.append(n_c_in)
@@ -449,17 +431,14 @@ class MARLTrainer:
             },
             batch_size=[k_, t_],
         )
-        if self._masked_holds:
-            data["agents", "learn"] = stack(learns, torch.bool)[..., None]
         return data
 
     def _draw_holds(
         self, td: Any, raw: np.ndarray, logp: np.ndarray, held: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The held UAVs' speed entry redrawn from the actor's Gaussian below -1 and their
-        log-probabilities the behaviour's (the actor's minus ``log P(a0 <= -1)``;
-        ``start_hold_objective: importance``) or the actor's (``unweighted``); the others'
-        as drawn."""
+        """The held UAVs' speed entry redrawn from the actor's Gaussian below -1 (its tail,
+        flown as -1) and their log-probabilities the actor's own of the redrawn action, as if
+        the actor had drawn it; the other UAVs' actions and log-probabilities as drawn."""
         import torch
 
         with torch.no_grad():
@@ -476,10 +455,8 @@ class MARLTrainer:
             mask = torch.from_numpy(held)
             tail = (mu + sd * z).float().clamp_max(-1.0)
             action[..., 0] = torch.where(mask, tail, action[..., 0])
-            behaviour = dist.log_prob(action)
-            if self.settings.start_hold_objective == "importance":
-                behaviour = behaviour - torch.where(mask, log_tail, 0.0).float()
-        return action.numpy(), np.where(held, behaviour.numpy(), logp)
+            actor_logp = dist.log_prob(action)
+        return action.numpy(), np.where(held, actor_logp.numpy(), logp)
 
     def _start_hold(self) -> None:
         """Every copy's held decisions for its first episode (``start_hold_decisions``),
@@ -494,58 +471,6 @@ class MARLTrainer:
         h = self.settings.start_hold_decisions
         draw = self._hold_rng.integers(0, h + 1, size=self._hold.shape)
         self._hold = np.where(ended[:, None], draw, np.maximum(self._hold - 1, 0))
-
-    def _start_noise(self) -> None:
-        """Every copy's first noise draw (``noise_correlation > 0``), from a generator of its
-        own seeded with the reset seed, so that the default path keeps TorchRL's sampling from
-        torch's generator unchanged."""
-        self._noise_rng = np.random.default_rng([self._env_seed, 0x6E6F6973])
-        self._noise = self._draw_noise()
-        self._decisions = np.zeros(self.settings.n_copies, dtype=np.int64)  # in the episode
-
-    def _draw_noise(self) -> np.ndarray:
-        """Standard normal noise (copy, UAV, entry), the entries of ``noise_centred_entries``
-        centred over each copy's swarm and rescaled to unit variance."""
-        eta = self._noise_rng.standard_normal(
-            (self.settings.n_copies, self.n_agents, 3), dtype=np.float32
-        )
-        ents = self.settings.noise_centred_entries
-        if ents and self.n_agents > 1:
-            n = self.n_agents
-            part = eta[..., ents]
-            eta[..., ents] = (part - part.mean(axis=1, keepdims=True)) * np.sqrt(n / (n - 1.0))
-        return eta
-
-    def _sample_correlated(self, td: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Every UAV's action ``loc + scale * noise`` and its log-probability under the
-        actor's Gaussian (``noise_correlation > 0``: the noise is :attr:`_noise`)."""
-        import torch
-
-        with torch.no_grad():
-            dist = self.actor.get_dist(td)
-            normal = dist.base_dist
-            action = normal.loc + normal.scale * torch.from_numpy(self._noise)
-            logp = dist.log_prob(action)
-        return action.numpy(), logp.numpy()
-
-    def _advance_noise(self, ended: np.ndarray) -> None:
-        """The next decision's noise: a fresh standard normal draw for the copies whose
-        episode ``ended`` or that are past the episode's first ``noise_correlated_decisions``
-        decisions and for the entries outside ``noise_correlated_entries``,
-        ``rho * noise + sqrt(1 - rho**2) * eta`` for the others."""
-        s = self.settings
-        rho = s.noise_correlation
-        eta = self._draw_noise()
-        nxt = (rho * self._noise + np.sqrt(1.0 - rho * rho) * eta).astype(np.float32)
-        self._decisions = np.where(ended, 0, self._decisions + 1)
-        fresh = ended.copy()
-        if s.noise_correlated_decisions > 0:
-            fresh |= self._decisions >= s.noise_correlated_decisions
-        nxt[fresh] = eta[fresh]
-        if s.noise_correlated_entries is not None:  # the other entries: a new draw each time
-            other = [e for e in range(3) if e not in s.noise_correlated_entries]
-            nxt[..., other] = eta[..., other]
-        self._noise = nxt
 
     def _act_held(
         self, raw: np.ndarray, obs_d: list[dict[str, np.ndarray]], base: np.ndarray | None
@@ -808,7 +733,6 @@ class MARLTrainer:
         # PPO starts from the run's own episodes
         obs, _ = self.venv.reset(seed=self._env_seed)
         self._obs = obs.copy()
-        self._start_noise()
         for b in self._bases:
             if b is not None:
                 b.reset()
@@ -842,8 +766,6 @@ class MARLTrainer:
                 params=self.loss.critic_network_params,
                 target_params=self.loss.target_critic_network_params,
             )
-        if self._masked_holds:
-            _standardise_learning_advantages(data)
         flat = data.reshape(-1)
         n = flat.shape[0]
         mb = max(1, s.minibatch_size // self.n_agents)
@@ -959,22 +881,6 @@ class MARLTrainer:
                 on_iteration(row)
 
 
-def _standardise_learning_advantages(data: Any) -> None:
-    """Standardise the rollout's advantages over its learning decisions (``("agents",
-    "learn")``) and set the others' to 0, so that PPO's objective leaves them out."""
-    import torch
-
-    learn = data["agents", "learn"]
-    adv = data["agents", "advantage"]
-    sel = adv[learn]
-    if sel.numel() > 1:
-        std = sel.std().clamp_min(1e-8)
-        adv = torch.where(learn, (adv - sel.mean()) / std, torch.zeros_like(adv))
-    else:
-        adv = torch.zeros_like(adv)
-    data["agents", "advantage"] = adv
-
-
 def _steps_bar(total: int, show: bool, desc: str, unit: str) -> Any:
     """A ``tqdm`` bar on stderr of ``total`` units when ``show`` (and tqdm is there), else None."""
     if not show:
@@ -1011,13 +917,7 @@ def _save_torch(obj: Any, path: str | Path) -> Path:
 
 CHECKPOINT_RE = re.compile(r"^marl_(\d+)_steps\.pt$")
 
-ARCHITECTURE_SETTINGS: tuple[str, ...] = (
-    "algorithm",
-    "hidden",
-    "residual_base",
-    "residual_mode",
-    "option_shifts_m",
-)
+ARCHITECTURE_SETTINGS: tuple[str, ...] = ("algorithm", "hidden", "residual_base")
 """Settings that shape the networks: a run resumes only with the values it was trained with."""
 
 
@@ -1029,11 +929,13 @@ def check_resumable_settings(
     Raises
     ------
     ValueError
-        Naming each of :data:`ARCHITECTURE_SETTINGS` that differs, with both values.
+        Naming each of :data:`ARCHITECTURE_SETTINGS` that differs, with both values; or a
+        removed setting the checkpoint was trained with
+        (:func:`coopnav_env.agents.marl_nets.settings_from_record`).
     """
     try:
-        old = MARLSettings.from_dict(checkpoint["settings"])
-    except (TypeError, ValueError) as exc:
+        old = settings_from_record(checkpoint["settings"], path, "resume")
+    except TypeError as exc:
         raise ValueError(f"{path} holds settings this version does not read: {exc}") from exc
     diff = [
         (name, getattr(old, name), getattr(settings, name))
@@ -1056,6 +958,11 @@ def settings_of(cfg: TrainConfig) -> tuple[MARLSettings, dict[str, Any]]:
     ``cfg.torchrl`` holds :class:`MARLSettings` fields plus an optional ``env`` mapping whose
     entries override ``cfg.env`` for this backend (the learning study's rewards) and an
     optional ``pretrain`` mapping (the warm start, read by :func:`pretrain_of`).
+
+    A fresh run refuses the settings of
+    :data:`~coopnav_env.agents.marl_nets.REMOVED_SETTINGS`; a resumed one (``cfg.resume``)
+    reads what its run recorded, refusing a removed setting only where its value changed
+    what the run did (:func:`~coopnav_env.agents.marl_nets.settings_from_record`).
     """
     from coopnav_env.envs.config import V1_DEFAULTS
 
@@ -1066,7 +973,11 @@ def settings_of(cfg: TrainConfig) -> tuple[MARLSettings, dict[str, Any]]:
         raise ValueError(f"torchrl.env must be a mapping of environment settings, got {env_over!r}")
     # the batched environment is built from settings alone: name urban_canyon_v1's own
     v1 = V1_DEFAULTS if cfg.env_id == "urban_canyon_v1" else {}
-    return MARLSettings.from_dict(d), {**v1, **cfg.env, **env_over}
+    if cfg.resume is not None:
+        settings = settings_from_record(d, f"the run in {cfg.out}", "resume")
+    else:
+        settings = MARLSettings.from_dict(d)
+    return settings, {**v1, **cfg.env, **env_over}
 
 
 def check_pretrain(
