@@ -166,24 +166,6 @@ CASES: list[tuple[str, list[str], int, str]] = [
         2,
         "listrun/run.json must hold a JSON object, got a list",
     ),
-    (
-        "routes-run-json-list",
-        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_list"],
-        2,
-        "routes_list/run.json must hold a JSON object, got a list",
-    ),
-    (
-        "routes-npz-corrupt",
-        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_npz_bad"],
-        2,
-        "routes_npz_bad/episodes.npz does not load",
-    ),
-    (
-        "routes-npz-keys",
-        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_npz_keys"],
-        2,
-        "routes_npz_keys/episodes.npz lacks 'route', 'features'",
-    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -302,7 +284,7 @@ def test_a_word_setting_gets_the_text_as_typed(prefix, word):
 
 def test_integrity_off_from_the_command_line_switches_a_presets_integrity_off():
     from coopnav_env.envs.config import make_config
-    from coopnav_env.training.route_learning import env_kwargs_from_overrides
+    from studies.route_choice.route_learning import env_kwargs_from_overrides
 
     on = make_config(**env_kwargs_from_overrides(["preset=urban_nlos_3dma"]))
     assert on.integrity == "fde" and on.nlos_exclusion == "map"

@@ -218,7 +218,7 @@ TRAINING_RUN_FILES: tuple[str, ...] = (
     "episodes.npz",
     "settings.json",
 )
-"""Glob patterns that mark a folder as a training run (``coopnav train``, ``train-routes``,
+"""Glob patterns that mark a folder as a training run (``coopnav train``, a route-model run,
 a split chooser, a benchmark's flights): a report command never writes into one."""
 
 

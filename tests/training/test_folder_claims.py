@@ -1,7 +1,8 @@
 """An output folder belongs to one command (issue 35, finding 3).
 
 ``coopnav study`` and ``coopnav evaluate`` claim their ``--out`` before any work, the way
-``coopnav train`` and ``train-routes`` do: another command's folder, a training run, a result
+``coopnav train`` and ``route_learning.py`` (``studies/route_choice``) do: another command's
+folder, a training run, a result
 of other settings and a finished result are refused with a message naming what the folder
 holds; ``--overwrite`` replaces a report (never a training run); a second command into a
 locked folder fails at once; a rerun after an interrupt is taken. The flights are replaced by
@@ -18,6 +19,7 @@ import pytest
 from coopnav_env.training import marl_study
 from coopnav_env.training.cli import main
 from coopnav_env.training.files import CLAIM_NAME, claim_output_folder, folder_lock
+from studies.route_choice import route_learning
 
 STUDY = ["study", "--heuristics", "formation", "--episodes", "1", "--planner-episodes", "0"]
 STUDY += ["--reps", "20"]
@@ -164,16 +166,16 @@ def test_a_locked_folder_is_refused_at_once(tmp_path, capsys, monkeypatch):
 
 
 def test_train_routes_locks_its_folder_and_refuses_a_report_folder(tmp_path, capsys, no_flights):
-    routes = ["train-routes", "--episodes", "5", "--jobs", "1"]
+    routes = ["--episodes", "5", "--jobs", "1"]
     busy = tmp_path / "busy"
     busy.mkdir()
     with folder_lock(busy):
-        assert main([*routes, "--out", str(busy)]) == 2
+        assert route_learning.main([*routes, "--out", str(busy)]) == 2
         assert "is in use by another coopnav command" in capsys.readouterr().err
     assert not (busy / "run.json").exists()
     study = tmp_path / "study"
     assert main([*STUDY, "--out", str(study)]) == 0
-    assert main([*routes, "--out", str(study)]) == 2
+    assert route_learning.main([*routes, "--out", str(study)]) == 2
     assert "is not a train-routes run folder" in capsys.readouterr().err
 
 
@@ -273,15 +275,15 @@ def test_train_takes_its_own_folder_and_train_routes_names_the_claim(tmp_path, c
     assert not (out / CLAIM_NAME).exists()
     before = _files(out)
     capsys.readouterr()
-    assert main(["train-routes", "--episodes", "5", "--jobs", "1", "--out", str(out)]) == 2
+    assert route_learning.main(["--episodes", "5", "--jobs", "1", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "is not a train-routes run folder: it holds the outputs of `coopnav train`" in err
     assert _files(out) == before  # its run.json untouched
     claimed = tmp_path / "evaluated"
     with claim_output_folder(claimed, "coopnav evaluate", {}, outputs=["report.*"]):
         pass
-    routes = ["train-routes", "--episodes", "5", "--jobs", "1", "--out", str(claimed)]
-    assert main(routes) == 2
+    routes = ["--episodes", "5", "--jobs", "1", "--out", str(claimed)]
+    assert route_learning.main(routes) == 2
     err = capsys.readouterr().err
     assert "is not a train-routes run folder: it holds the outputs of `coopnav evaluate`" in err
 
