@@ -43,10 +43,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "coopnav_env.training.alignment",
         "does a reward rank policies as the task's score does? (return, discounted return)",
     ),
-    "study": (
-        "coopnav_env.training.marl_study",
-        "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",
-    ),
 }
 
 DEBUG_ENV: str = "COOPNAV_DEBUG"

@@ -151,7 +151,7 @@ def run_outputs(out: str | Path) -> list[Path]:
 
 
 def claiming_command(out: str | Path) -> str | None:
-    """The command that claimed the folder ``out`` (``"coopnav study"``, ...), or None.
+    """The command that claimed the folder ``out`` (``"coopnav evaluate"``, ...), or None.
 
     Read from its ``command.json`` (:func:`coopnav_env.training.files.claim_output_folder`);
     a ``command.json`` that cannot be read or names no command gives ``"an unknown

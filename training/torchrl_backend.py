@@ -51,7 +51,7 @@ policy without a residual base (the teacher's command is what the actor outputs)
 
 Residual policies
 -----------------
-With ``residual_base`` set (e.g. ``"sky"``), the learned action is added to the command of a
+With ``residual_base`` set (e.g. ``"sky_column"``), the learned action is added to the command of a
 hand-written base policy (:func:`coopnav_env.agents.make_policy`), clipped to ``[-1, 1]``:
 residual policy learning (Silver et al. 2018; Johannink et al. 2019). The network's output
 is scaled by ``residual_scale`` and its last layer starts at zero, so training starts from
@@ -1070,7 +1070,7 @@ def export_policy(checkpoint: str | Path, out_dir: str | Path) -> Path:
     beside it (``coopnav evaluate`` reads the environment from ``config.yaml``).
 
     ``checkpoint`` is a run folder (its ``final_model.pt``) or a checkpoint file. The result is
-    a folder that ``coopnav evaluate --policies mappo:OUT_DIR`` and ``coopnav study --runs``
+    a folder that ``coopnav evaluate --policies mappo:OUT_DIR`` and a study's ``--runs``
     read like a run; it cannot be resumed. From an intermediate checkpoint
     (``RUN/checkpoints/marl_<N>_steps.pt``) only the run's ``config.yaml`` is copied: its
     ``run.json`` and learning curve describe the finished run, not the checkpoint.

@@ -344,7 +344,11 @@ def test_skyroute_is_ceiling_on_the_route_with_the_fewest_poor_geometry_points()
 
 
 def test_study_accepts_train_routes_runs(tmp_path):
-    from coopnav_env.training.marl_study import parse_runs, run_env, run_policy_name
+    from studies.learning_in_default_setting.learning_study import (
+        parse_runs,
+        run_env,
+        run_policy_name,
+    )
 
     run = tmp_path / "r"
     run.mkdir()
