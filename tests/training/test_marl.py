@@ -501,3 +501,28 @@ def test_action_distribution_is_the_gaussian_whose_mean_the_policy_flies(tmp_pat
     residual = make_policy(f"mappo:{tmp_path}", urban_canyon_v0.parallel_env())
     with pytest.raises(ValueError, match="residual policy"):
         residual.action_distribution(obs)
+
+
+def test_resuming_a_run_trained_with_a_removed_switch_is_refused(tmp_path, capsys) -> None:
+    """A checkpoint of an earlier version that explored with correlated noise cannot be
+    resumed (the setting is gone); its policy still flies, as it was trained to."""
+    from coopnav_env.agents.marl_nets import load_marl_checkpoint
+
+    out = tmp_path / "run"
+    args = ["train", "--backend", "torchrl", "--algorithm", "ippo", "--out", str(out)]
+    assert main([*args, "--timesteps", "160", "--checkpoint-freq", "0", *SMALL]) == 0
+    d = load_marl_checkpoint(out / "final_model.pt")
+    d["settings"] |= {"noise_correlation": 0.9, "noise_centred_entries": [0]}
+    torch.save(d, out / "final_model.pt")
+    capsys.readouterr()
+    assert main([*args, "--timesteps", "320", "--resume", "latest", *SMALL]) == 2
+    err = capsys.readouterr().err
+    assert "torchrl.noise_correlation=0.9, a setting removed from coopnav" in err, err
+    assert "cannot have it resumed" in err
+    policy = make_policy(f"ippo:{out}", urban_canyon_v0.parallel_env())
+    assert policy.recorded_settings["noise_correlation"] == 0.9
+    assert not hasattr(policy.settings, "noise_correlation")
+    # a fresh run that names a removed setting is refused, naming it
+    fresh = [*args[:-1], str(tmp_path / "fresh"), "--set", "torchrl.residual_wall_guard=false"]
+    assert main([*fresh, *SMALL]) == 2
+    assert "['residual_wall_guard'] were removed from coopnav" in capsys.readouterr().err
