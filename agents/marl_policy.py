@@ -17,11 +17,10 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.agents.marl_nets import (
-    MARLSettings,
     base_command_before,
     build_modules,
-    check_residual_base,
     load_marl_checkpoint,
+    settings_from_record,
     swarm_command,
 )
 
@@ -181,7 +180,9 @@ class MARLPolicy:
             raise ValueError(f"algorithm must be 'mappo', 'ippo' or None, got {algorithm!r}")
         file = resolve_marl_checkpoint(path, algorithm or "mappo")
         ckpt = load_checked_checkpoint(file, "fly")
-        self.settings = MARLSettings.from_dict(ckpt["settings"])
+        #: the settings as the checkpoint records them (settings removed since included)
+        self.recorded_settings: dict[str, Any] = dict(ckpt["settings"])
+        self.settings = settings_from_record(self.recorded_settings, file, "fly")
         if algorithm is not None and self.settings.algorithm != algorithm:
             true = self.settings.algorithm
             raise ValueError(
@@ -223,7 +224,6 @@ class MARLPolicy:
             self._base = make_base(
                 self.settings.residual_base, env, **self.settings.residual_base_kwargs
             )
-            check_residual_base(self.settings, self._base)
         self._held: np.ndarray | None = None  # the actor's output, held for action_repeat
         self._since = 0  # steps it has been held
 
@@ -235,7 +235,7 @@ class MARLPolicy:
         self._since = 0
 
     def _actor_head(self, observations: Mapping[str, np.ndarray], base_cmd: Any) -> Any:
-        """The actor's loc/scale (or logits) module on the swarm's observations (a batch of
+        """The actor's loc/scale module on the swarm's observations (a batch of
         one swarm)."""
         from tensordict import TensorDict
 
@@ -280,9 +280,8 @@ class MARLPolicy:
         return td["agents", "loc"][0].numpy(), td["agents", "scale"][0].numpy()
 
     def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The mean action of every UAV (``options`` mode: the most probable option), combined
-        with the base policy as in training (a new decision every ``action_repeat`` steps
-        after :meth:`reset`, held in between)."""
+        """The mean action of every UAV, combined with the base policy as in training (a new
+        decision every ``action_repeat`` steps after :meth:`reset`, held in between)."""
         live = list(observations)
         if not live:
             return {}
@@ -294,13 +293,7 @@ class MARLPolicy:
         base_cmd = base_command_before(self.settings, self._base, observations, self.agents)
         if self._held is None or self._since >= self.settings.action_repeat:
             td = self._actor_head(observations, base_cmd)
-            if self.settings.residual_mode == "options":  # the most probable option, one-hot
-                logits = td["agents", "logits"][0].numpy()
-                held = np.zeros_like(logits)
-                held[np.arange(len(held)), np.argmax(logits, axis=1)] = 1.0
-                self._held, self._since = held, 0
-            else:  # the mean
-                self._held, self._since = td["agents", "loc"][0].numpy(), 0
+            self._held, self._since = td["agents", "loc"][0].numpy(), 0  # the mean
         self._since += 1
         mean = self._held
         cmd = swarm_command(self.settings, mean, self._base, base_cmd, observations, self.agents)

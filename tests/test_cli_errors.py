@@ -22,9 +22,6 @@ from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
 TOY = TOY_ENV_ID
 TOY_SECTION = TOY_TRAINING
 
-#: a study that, should a row pass validation after all, flies one episode of one heuristic
-_STUDY = ["--out", "{tmp}/study", "--heuristics", "formation", "--episodes", "1"]
-_STUDY += ["--planner-episodes", "0"]
 
 #: (id, argv with {tmp} placeholders, exit status, message fragment)
 CASES: list[tuple[str, list[str], int, str]] = [
@@ -156,34 +153,6 @@ CASES: list[tuple[str, list[str], int, str]] = [
     ("demo-dt-0", ["demo", "--dt", "0"], 2, "--dt"),
     ("demo-seed-neg", ["demo", "--seed", "-1"], 2, "--seed"),
     ("demo-epochs-abc", ["demo", "--epochs", "abc"], 2, "invalid int value"),
-    ("study-planner-not", ["study", "--episodes", "1", "--planner", "spread"], 2, "--planner must"),
-    # issue 35, finding 10: these ended in an internal error (after flying every episode)
-    ("study-runs-empty", ["study", *_STUDY, "--runs", "a=,"], 2, "--runs a=, names nothing after"),
-    ("study-reps-0", ["study", *_STUDY, "--reps", "0"], 2, "--reps must be >= 1, got 0"),
-    (
-        "study-run-json-list",
-        ["study", *_STUDY, "--runs", "a={tmp}/listrun"],
-        2,
-        "listrun/run.json must hold a JSON object, got a list",
-    ),
-    (
-        "routes-run-json-list",
-        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_list"],
-        2,
-        "routes_list/run.json must hold a JSON object, got a list",
-    ),
-    (
-        "routes-npz-corrupt",
-        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_npz_bad"],
-        2,
-        "routes_npz_bad/episodes.npz does not load",
-    ),
-    (
-        "routes-npz-keys",
-        ["train-routes", "--episodes", "5", "--out", "{tmp}/routes_npz_keys"],
-        2,
-        "routes_npz_keys/episodes.npz lacks 'route', 'features'",
-    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -302,7 +271,7 @@ def test_a_word_setting_gets_the_text_as_typed(prefix, word):
 
 def test_integrity_off_from_the_command_line_switches_a_presets_integrity_off():
     from coopnav_env.envs.config import make_config
-    from coopnav_env.training.route_learning import env_kwargs_from_overrides
+    from studies.route_choice.route_learning import env_kwargs_from_overrides
 
     on = make_config(**env_kwargs_from_overrides(["preset=urban_nlos_3dma"]))
     assert on.integrity == "fde" and on.nlos_exclusion == "map"

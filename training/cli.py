@@ -35,10 +35,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "coopnav_env.training.train",
         "train a shared policy on urban_canyon_v0 or v1 (SB3 PPO, RLlib, or TorchRL MAPPO/IPPO)",
     ),
-    "train-routes": (
-        "coopnav_env.training.route_learning",
-        "learn which street route to fly from flown episodes (a learned route model)",
-    ),
     "evaluate": (
         "coopnav_env.training.evaluate_cli",
         "evaluate policies: navigation error, goal rate, plots",
@@ -46,10 +42,6 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "alignment": (
         "coopnav_env.training.alignment",
         "does a reward rank policies as the task's score does? (return, discounted return)",
-    ),
-    "study": (
-        "coopnav_env.training.marl_study",
-        "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",
     ),
 }
 

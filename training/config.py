@@ -1,9 +1,22 @@
 """The run configuration shared by every training backend, and the backend registry.
 
 :class:`TrainConfig` holds everything that defines a training run; :func:`load_config` reads
-a section of the packaged YAML (``training/configs/ppo.yaml``) and :func:`apply_overrides`
-applies ``--set key=value`` items. Every setting is validated when the configuration is built,
-before any work starts, with a message that names the setting and its allowed values.
+the packaged settings of an environment, a packaged configuration by name
+(:func:`named_configs`) or a YAML file of the user's, and :func:`apply_overrides` applies
+``--set key=value`` items. Every setting is validated when the configuration is built, before
+any work starts, with a message that names the setting and its allowed values.
+
+Packaged settings
+-----------------
+The folder :data:`CONFIG_DIR` (``coopnav_env/training/configs``) holds one file per concern,
+each with one section per environment id: ``run.yaml`` (the budget, seed, checkpoints,
+backend and the environment's settings, read by every backend), ``sb3.yaml``, ``rllib.yaml``
+and ``torchrl.yaml`` (each backend's own settings). ``torchrl.yaml`` is split into groups that
+change independently, as BenchMARL's configurations are (:data:`TORCHRL_GROUPS`: ``ppo``,
+``model``, ``exploration``, beside ``pretrain`` and ``env``); the groups are one namespace,
+so a run's configuration names ``torchrl.learning_rate``, not ``torchrl.ppo.learning_rate``.
+Packaged configurations (``configs/recipes/NAME.yaml``, ``coopnav train --config NAME``) name
+what differs from the packaged settings of their environment.
 
 Backends
 --------
@@ -36,11 +49,13 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from coopnav_env.envs.config import ExperimentalSetting
 from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
 
 __all__ = [
     "BACKENDS",
-    "DEFAULT_CONFIG_PATH",
+    "CONFIG_DIR",
+    "EXPERIMENTAL_SETTINGS",
     "PRETRAIN_DEFAULTS",
     "VEC_ENVS",
     "TrainConfig",
@@ -50,21 +65,57 @@ __all__ = [
     "check_bool",
     "check_number",
     "load_config",
+    "named_configs",
     "parse_settings_yaml",
     "parse_yaml",
 ]
 
-DEFAULT_CONFIG_PATH: Path = Path(__file__).resolve().parent / "configs" / "ppo.yaml"
-"""The packaged hyperparameter file (one section per environment id)."""
+CONFIG_DIR: Path = Path(__file__).resolve().parent / "configs"
+"""The packaged settings: ``run.yaml``, one file per backend, and ``recipes/`` (see the module
+docstring)."""
+
+_SECTION_FILES: tuple[tuple[str, str | None], ...] = (
+    ("run.yaml", None),
+    ("sb3.yaml", None),
+    ("rllib.yaml", "rllib"),
+    ("torchrl.yaml", "torchrl"),
+)
+"""The packaged files of an environment's settings, each with the key its section goes under
+(None: merged into the top level)."""
+
+TORCHRL_GROUPS: tuple[str, ...] = ("ppo", "model", "exploration")
+"""The groups of the ``torchrl`` settings in a configuration file, merged into one mapping."""
+
+_MERGED_IN_RECIPES: frozenset[tuple[str, ...]] = frozenset(
+    {
+        ("env",),
+        ("ppo",),
+        ("rllib",),
+        ("rllib", "ppo"),
+        ("rllib", "model"),
+        ("torchrl",),
+        ("torchrl", "env"),
+        *(("torchrl", g) for g in TORCHRL_GROUPS),
+    }
+)
+"""The mappings of a packaged configuration that are merged into the packaged settings entry by
+entry; every other entry (``pretrain``, ``policy_kwargs``, ...) replaces the setting whole."""
 
 BACKENDS: dict[str, str] = {
     "sb3": "coopnav_env.training.sb3_backend",
     "rllib": "coopnav_env.training.rllib_backend",
-    "torchrl": "coopnav_env.training.marl",
+    "torchrl": "coopnav_env.training.torchrl_backend",
 }
 """Training backends: name -> module (see the module docstring for what a module defines).
 ``sb3``: Stable-Baselines3 in this process (default); ``rllib``: Ray RLlib; ``torchrl``:
-MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.marl`)."""
+MAPPO or IPPO on TorchRL (:mod:`coopnav_env.training.torchrl_backend`)."""
+
+EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = ()
+"""The trainers' experimental settings, listed as the environment's are
+(:data:`coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`): a backend setting kept for a study,
+off by default, that may change or go without a deprecation period. None at present:
+``torchrl.action_repeat`` and ``torchrl.start_hold_decisions``, which the packaged
+``mappo_route`` configuration uses, are supported settings."""
 
 VEC_ENVS: tuple[str, ...] = ("auto", "supersuit", "batched")
 """Values of ``TrainConfig.vec_env``: ``"auto"`` or a kind of
@@ -475,37 +526,142 @@ def check_replaced_settings(data: Mapping[str, Any], flags: Mapping[str, Any]) -
             raise ValueError(f"{exc} (the value {flag} {value} would have replaced)") from None
 
 
-def load_config(path: str | Path | None = None, env_id: str = DEFAULT_ENV_ID) -> dict[str, Any]:
-    """The section ``env_id`` of a YAML hyperparameter file, as a plain dict.
-
-    Parameters
-    ----------
-    path : path or None
-        YAML file with one top-level key per environment; None for
-        :data:`DEFAULT_CONFIG_PATH`.
-    env_id : str, default "urban_canyon_v0"
-        Section to read. A ``module:callable`` env id falls back to the default section.
-
-    Raises
-    ------
-    FileNotFoundError
-        The file does not exist.
-    ValueError
-        The file holds no such section.
-    """
-    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
+def _read_settings_file(p: Path, what: str) -> dict[str, Any]:
+    """A YAML file of settings (:func:`parse_settings_yaml`) that must hold a mapping."""
     if not p.is_file():
-        raise FileNotFoundError(f"hyperparameter file not found: {p}")
-    data = parse_settings_yaml(p.read_text(), f"hyperparameter file {p}") or {}
+        raise FileNotFoundError(f"{what} not found: {p}")
+    data = parse_settings_yaml(p.read_text(), f"{what} {p}") or {}
     if not isinstance(data, Mapping):
-        raise ValueError(f"hyperparameter file {p} must be a mapping of sections, got {data!r}")
+        raise ValueError(f"{what} {p} must be a mapping, got {data!r}")
+    return dict(data)
+
+
+def _section_of(p: Path, env_id: str) -> dict[str, Any]:
+    """The section ``env_id`` of the file ``p`` of sections (a ``module:callable`` env id
+    falls back to the default environment's)."""
+    data = _read_settings_file(p, "hyperparameter file")
     key = env_id if env_id in data or ":" not in env_id else DEFAULT_ENV_ID
     if key not in data:
         raise ValueError(f"{p} has no section {env_id!r}; sections: {sorted(data)}")
     section = copy.deepcopy(data[key]) or {}
     if not isinstance(section, Mapping):
         raise ValueError(f"section {key!r} of {p} must be a mapping of settings, got {section!r}")
-    section = dict(section)
+    return dict(section)
+
+
+def _packaged_section(env_id: str) -> dict[str, Any]:
+    """The packaged settings of ``env_id``, its ``torchrl`` groups not yet merged."""
+    out: dict[str, Any] = {}
+    for name, under in _SECTION_FILES:
+        section = _section_of(CONFIG_DIR / name, env_id)
+        if under is not None:
+            out[under] = section
+            continue
+        twice = sorted(set(section) & set(out))
+        if twice:
+            raise ValueError(f"{CONFIG_DIR / name} sets {twice}, which another file sets too")
+        out.update(section)
+    return out
+
+
+def _merge_torchrl_groups(section: dict[str, Any], where: str) -> dict[str, Any]:
+    """``section`` with the groups of its ``torchrl`` mapping (:data:`TORCHRL_GROUPS`) merged
+    into that mapping (``ValueError`` for a setting given twice)."""
+    torchrl = section.get("torchrl")
+    if not isinstance(torchrl, Mapping):
+        return section
+    flat: dict[str, Any] = {}
+    for key, value in torchrl.items():
+        entries = {key: value}
+        if key in TORCHRL_GROUPS:
+            if not isinstance(value, Mapping):
+                raise ValueError(
+                    f"{where}: torchrl.{key} is a group of settings and must be a mapping, "
+                    f"got {value!r}"
+                )
+            entries = dict(value)
+        for name, v in entries.items():
+            if name in flat:
+                raise ValueError(f"{where}: torchrl.{name} is set twice (its groups overlap)")
+            flat[name] = v
+    return {**section, "torchrl": flat}
+
+
+def _merge_recipe(
+    base: dict[str, Any], recipe: Mapping[str, Any], at: tuple[str, ...] = ()
+) -> None:
+    """Merge ``recipe`` into ``base`` in place (:data:`_MERGED_IN_RECIPES`)."""
+    for key, value in recipe.items():
+        here = (*at, key)
+        if here in _MERGED_IN_RECIPES and isinstance(value, Mapping):
+            inner = base.get(key)
+            if not isinstance(inner, dict):
+                inner = {}
+                base[key] = inner
+            _merge_recipe(inner, value, here)
+        else:
+            base[key] = copy.deepcopy(value)
+
+
+def named_configs() -> dict[str, str]:
+    """The packaged training configurations (``coopnav train --config NAME``): name -> the
+    one-line description that opens its file."""
+    found = {}
+    for p in sorted((CONFIG_DIR / "recipes").glob("*.yaml")):
+        lines = p.read_text().splitlines()
+        found[p.stem] = lines[0].lstrip("#").strip() if lines else ""
+    return found
+
+
+def load_config(path: str | Path | None = None, env_id: str | None = None) -> dict[str, Any]:
+    """The settings of a training run, as one plain dict (what :class:`TrainConfig` takes).
+
+    Parameters
+    ----------
+    path : path, str or None
+        None: the packaged settings of ``env_id`` (:data:`CONFIG_DIR`). The name of a packaged
+        configuration (:func:`named_configs`): the packaged settings of its environment with
+        the configuration's settings on top. Otherwise a YAML file with one top-level key per
+        environment (the packaged files' sections of that environment in one mapping).
+    env_id : str or None
+        The environment whose section to read (None: the default environment, or a named
+        configuration's own). A ``module:callable`` env id falls back to the default section.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file (and no packaged configuration of that name).
+    ValueError
+        The file holds no such section; a named configuration asked for another environment
+        than its own.
+    """
+    text = None if path is None else str(path)
+    if text is not None and text in named_configs():
+        p = CONFIG_DIR / "recipes" / f"{text}.yaml"
+        recipe = _read_settings_file(p, f"training configuration {text!r}")
+        own = recipe.get("env_id", DEFAULT_ENV_ID)
+        if env_id is not None and env_id != own:
+            raise ValueError(
+                f"the training configuration {text!r} trains {own}, not {env_id}: leave out "
+                "--env-id (or set env_id in a configuration file of your own)"
+            )
+        env_id = own
+        section = _packaged_section(own)
+        _merge_recipe(section, recipe)
+        where = str(p)
+    elif text is None:
+        env_id = env_id or DEFAULT_ENV_ID
+        section, where = _packaged_section(env_id), str(CONFIG_DIR)
+    else:
+        p = Path(text)
+        if not p.is_file() and not p.suffix and "/" not in text:
+            raise FileNotFoundError(
+                f"no packaged training configuration {text!r} and no file of that name; "
+                f"packaged configurations: {', '.join(named_configs())}"
+            )
+        env_id = env_id or DEFAULT_ENV_ID
+        section, where = _section_of(p, env_id), str(p)
+    section = _merge_torchrl_groups(section, where)
     section.setdefault("env_id", env_id)
     return section
 

@@ -11,7 +11,7 @@ Used by ``coopnav train`` (checkpoints, models, ``run.json``, ``config.yaml``), 
 evaluate`` (reports, plots) and ``coopnav reproduce`` (results, report, figures).
 
 An output folder belongs to one command: :func:`claim_output_folder` (``coopnav evaluate``,
-``coopnav study``) locks it, refuses another command's folder or a training run, and records
+a study's report script) locks it, refuses another command's folder or a training run, and records
 the command and its settings in ``command.json`` before any work starts.
 """
 
@@ -218,7 +218,7 @@ TRAINING_RUN_FILES: tuple[str, ...] = (
     "episodes.npz",
     "settings.json",
 )
-"""Glob patterns that mark a folder as a training run (``coopnav train``, ``train-routes``,
+"""Glob patterns that mark a folder as a training run (``coopnav train``, a route-model run,
 a split chooser, a benchmark's flights): a report command never writes into one."""
 
 
@@ -366,7 +366,7 @@ def claim_output_folder(
     out : path
         The ``--out`` folder.
     command : str
-        The command, e.g. ``"coopnav study"``.
+        The command, e.g. ``"coopnav evaluate"``.
     settings : JSON-able
         What determines the command's result (compared with a claim's record).
     outputs : sequence of str

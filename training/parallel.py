@@ -1,6 +1,7 @@
 """Per-seed work in worker processes, in seed order, with a progress bar.
 
-The data-collection commands (``coopnav train-routes``, ``studies/route_choice/route_choice.py``,
+The data-collection commands (``route_learning.py`` and ``route_choice.py`` of
+``studies/route_choice``,
 ``split_choice.py``, ``arm_choice.py``) fly thousands of episodes, one independent job per
 reset seed. :func:`map_seeds` hands the seeds to ``jobs`` worker processes in small blocks
 (one environment per block), shows a progress bar over the episodes and returns the results

@@ -120,7 +120,7 @@ OTHER_RUN_FILES: tuple[str, ...] = (
     "settings.json",
 )
 """Files of a run of another command, which ``coopnav train`` never writes into: a route or
-split model run (``coopnav train-routes``) and the flights of a study
+split model run (``route_learning.py`` of ``studies/route_choice``) and the flights of a study
 (:func:`coopnav_env.training.files.claim_run_folder`)."""
 
 
@@ -151,7 +151,7 @@ def run_outputs(out: str | Path) -> list[Path]:
 
 
 def claiming_command(out: str | Path) -> str | None:
-    """The command that claimed the folder ``out`` (``"coopnav study"``, ...), or None.
+    """The command that claimed the folder ``out`` (``"coopnav evaluate"``, ...), or None.
 
     Read from its ``command.json`` (:func:`coopnav_env.training.files.claim_output_folder`);
     a ``command.json`` that cannot be read or names no command gives ``"an unknown
@@ -182,8 +182,8 @@ def _refuse_another_command(out: Path) -> None:
     if others:
         names = ", ".join(p.name for p in others)
         raise RunFolderError(
-            f"{out} holds the run of another command ({names}: `coopnav train-routes` or a "
-            f"study's flights); {how}"
+            f"{out} holds the run of another command ({names}: a route-model run, "
+            f"route_learning.py, formerly train-routes, or a study's flights); {how}"
         )
 
 

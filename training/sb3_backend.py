@@ -6,8 +6,8 @@ a vector env with one slot per UAV and concatenates ``n_envs`` swarms
 ``--backend rllib`` trains on Ray RLlib instead (:mod:`coopnav_env.training.rllib_backend`, same
 configuration file and output layout).
 
-Hyperparameters (:class:`coopnav_env.training.config.TrainConfig`) come from
-``training/configs/ppo.yaml`` (section ``urban_canyon_v0``) and
+Hyperparameters (:class:`coopnav_env.training.config.TrainConfig`) come from the packaged
+settings (:func:`coopnav_env.training.config.load_config`: ``run.yaml`` and ``sb3.yaml``) and
 can be overridden from the command line. Everything a run produces goes to ``--out DIR``::
 
     DIR/config.yaml              the resolved configuration, seed included

@@ -20,13 +20,13 @@ from pathlib import Path
 from coopnav_env.training.compile_notice import compile_notice, warm_up_env
 from coopnav_env.training.config import (
     BACKENDS,
-    DEFAULT_CONFIG_PATH,
     VEC_ENVS,
     TrainConfig,
     apply_overrides,
     backend_module,
     check_replaced_settings,
     load_config,
+    named_configs,
 )
 from coopnav_env.training.envs import DEFAULT_ENV_ID, make_env_fn
 from coopnav_env.training.runs import recorded_config
@@ -37,10 +37,14 @@ __all__ = ["add_arguments", "config_from_args", "run"]
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``coopnav train``."""
     parser.add_argument("--out", default="runs/ppo", help="output directory (default: %(default)s)")
+    named = "; ".join(f"{name}: {about}" for name, about in named_configs().items())
     parser.add_argument(
         "--config",
         default=None,
-        help=f"hyperparameter YAML (default: the packaged {DEFAULT_CONFIG_PATH.name})",
+        metavar="NAME|FILE",
+        help="a packaged training configuration by name, or a hyperparameter YAML file "
+        f"(default: the packaged settings of --env-id). Packaged: {named}. Flags and --set "
+        "change single settings on top",
     )
     parser.add_argument(
         "--env-id",
@@ -183,7 +187,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
             k: v for k, v in recorded.items() if k in names and k not in ("resume", "overwrite")
         }
     else:
-        base = load_config(args.config, args.env_id or DEFAULT_ENV_ID)
+        base = load_config(args.config, args.env_id)
     base["env_id"] = args.env_id or base.get("env_id") or DEFAULT_ENV_ID
     base["out"] = args.out
     data = apply_overrides(base, args.overrides)

@@ -360,106 +360,42 @@ class UrbanCanyonConfig(ScenarioConfig):
 
 @dataclass(frozen=True)
 class ExperimentalSetting:
-    """One entry of :data:`EXPERIMENTAL_SETTINGS`.
+    """One entry of a list of experimental settings (:data:`EXPERIMENTAL_SETTINGS`, and the
+    trainer's :data:`coopnav_env.training.config.EXPERIMENTAL_SETTINGS`).
 
     Parameters
     ----------
     settings : str
-        The settings class the field belongs to: ``"UrbanCanyonConfig"`` (this module) or
-        ``"MARLSettings"`` (:class:`coopnav_env.agents.marl_nets.MARLSettings`, the
-        ``torchrl:`` section of a training config).
+        The settings class the field belongs to: ``"UrbanCanyonConfig"`` (this module) in the
+        environment's list, ``"MARLSettings"``
+        (:class:`coopnav_env.agents.marl_nets.MARLSettings`, the ``torchrl:`` section of a
+        training config) in the trainer's.
     name : str
         The field.
-    value : object or None
-        The experimental value of the field, or None when every non-default value is.
+    off : object
+        The value that leaves the setting off; the field's default is this value.
     what : str
-        What it does, in one line.
+        What it does when on, in one line.
     """
 
     settings: str
     name: str
-    value: Any
+    off: Any
     what: str
 
 
-#: Settings that are experimental: study switches kept so that the studies that used them (and
-#: any policy trained with them) still run, but not part of the supported surface. Each may
-#: change or be removed in a later release without a deprecation period; their defaults leave
-#: them off. The environment's page (:mod:`coopnav_env.urban_canyon_v0`) and each field's
-#: docstring point here.
+#: The environment's experimental settings: switches kept so that the studies that used them
+#: (and any policy trained with them) still run, but not part of the supported surface. Each
+#: may change or be removed in a later release without a deprecation period; its default
+#: leaves it off. The environment's page (:mod:`coopnav_env.urban_canyon_v0`) and each
+#: field's docstring point here.
 EXPERIMENTAL_SETTINGS: tuple[ExperimentalSetting, ...] = (
     ExperimentalSetting(
         "UrbanCanyonConfig",
         "obs_true_error",
-        None,
+        False,
         "privileged diagnostic: 3 observation entries with the true error of the estimate "
         "(no receiver knows it)",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "residual_mode",
-        "options",
-        "the learned residual chooses one of a few discrete slot shifts of the base column",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "option_shifts_m",
-        None,
-        "the slot shifts residual_mode='options' chooses among",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "option_init_prob",
-        None,
-        "residual_mode='options': the probability of the first option when training starts",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "action_repeat",
-        None,
-        "the actor decides every action_repeat steps, its output held in between",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "residual_wall_guard",
-        None,
-        "the velocity residual is limited toward walls the range sensor sees",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "noise_correlation",
-        None,
-        "exploration noise correlated from one decision to the next (held manoeuvres)",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "noise_correlated_decisions",
-        None,
-        "the noise correlation holds for an episode's first decisions only",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "noise_correlated_entries",
-        None,
-        "the noise correlation applies to these action entries only",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "start_hold_decisions",
-        None,
-        "exploring starts: training episodes start with UAVs held in place a random while",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "start_hold_objective",
-        None,
-        "held decisions left out of PPO's objective, or weighted by importance",
-    ),
-    ExperimentalSetting(
-        "MARLSettings",
-        "noise_centred_entries",
-        None,
-        "the exploration noise of these action entries sums to zero over the swarm",
     ),
 )
 

@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
     from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
-    from coopnav_env.training.route_learning import env_kwargs_from_overrides
+    from studies.route_choice.route_learning import env_kwargs_from_overrides
 
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],

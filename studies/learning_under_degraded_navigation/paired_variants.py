@@ -50,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, np.ndarray]:
     import torch
 
-    from coopnav_env.training.marl_study import fly_episodes
+    from studies.learning_in_default_setting.learning_study import fly_episodes
 
     torch.set_num_threads(1)
     eps = fly_episodes(policy, env_kwargs, seeds, keep_positions=False)
@@ -62,7 +62,7 @@ def _fly(policy: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str,
 
 
 def _parse_groups(items: list[str]) -> dict[str, list[str]]:
-    from coopnav_env.training.marl_study import parse_named_lists
+    from studies.learning_in_default_setting.learning_study import parse_named_lists
 
     try:
         return parse_named_lists(items, "--groups", "NAME=POLICY[,POLICY...]")

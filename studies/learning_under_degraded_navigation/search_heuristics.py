@@ -56,7 +56,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Fly every variant and print the table (``--help`` for the options)."""
     from coopnav_env.training.config import apply_overrides
     from coopnav_env.training.envs import heldout_seeds
-    from coopnav_env.training.marl_study import fly_episodes
+    from studies.learning_in_default_setting.learning_study import fly_episodes
 
     parser = argparse.ArgumentParser(
         prog="python studies/learning_under_degraded_navigation/search_heuristics.py",

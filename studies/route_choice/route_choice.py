@@ -1,8 +1,8 @@
 """Route choice on held-out episodes: every route flown, every one-feature rule and model priced.
 
 Flies *every* equally short street route of each episode with a column heuristic
-(``ceiling_column`` by default; :func:`coopnav_env.training.route_learning.collect`, the same
-collection ``coopnav train-routes`` uses, here on held-out reset seeds), then prices choosing by
+(``ceiling_column`` by default; :func:`studies.route_choice.route_learning.collect`, the same
+collection ``route_learning.py`` uses, here on held-out reset seeds), then prices choosing by
 each one-feature rule of :data:`studies.route_choice.routes.ROUTE_FEATURES` (the route with the
 best value of the feature) and by each learned route model given with ``--models``: per choice,
 the mean ``nav`` error, the goal rate, and the paired difference to the first route (what the
@@ -39,7 +39,7 @@ runs::
         --env-set preset=urban_nlos_3dma dead_reckoning_noise=true max_fix_sigma_m=8 \\
         --noise-replicates 3 --max-turns 6 --within-turns 3 --out runs/routes/explore_t6_r3
 
-``--out`` keeps the collection (``episodes.npz``, as ``coopnav train-routes`` writes it) and
+``--out`` keeps the collection (``episodes.npz``, as ``route_learning.py`` writes it) and
 the printed report (``report.json``); with an existing ``episodes.npz`` of the same settings
 the routes are not flown again, and a folder of a run with other settings is refused (it is
 never overwritten).
@@ -253,7 +253,7 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
-    from coopnav_env.training.route_learning import (
+    from studies.route_choice.route_learning import (
         arrays_to_episodes,
         collect,
         env_kwargs_from_overrides,

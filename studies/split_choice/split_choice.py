@@ -246,7 +246,7 @@ def report_lines(rep: dict[str, Any]) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     from coopnav_env.training.files import atomic_path, atomic_write_text, claim_run_folder
-    from coopnav_env.training.route_learning import env_kwargs_from_overrides
+    from studies.route_choice.route_learning import env_kwargs_from_overrides
 
     p = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],

@@ -81,6 +81,17 @@ def log10_ar1_all_below(x: Sequence[float], rho: float) -> float:
     return -math.inf if mass <= 0.0 else (math.log(mass) + log_scale) / math.log(10.0)
 
 
+def trained_noise(policy: Any) -> tuple[float, int]:
+    """``(noise_correlation, noise_correlated_decisions)`` a TorchRL policy was trained with:
+    the exploration noise of an earlier coopnav, which its checkpoint still records
+    (``MARLPolicy.recorded_settings``); ``(0.0, 0)``, independent draws, where it records none.
+    """
+    recorded = getattr(policy, "recorded_settings", None) or {}
+    return float(recorded.get("noise_correlation", 0.0)), int(
+        recorded.get("noise_correlated_decisions", 0)
+    )
+
+
 def window_steps(env: Any, hold_s: float) -> int:
     """The steps of ``env`` in the first ``hold_s`` seconds of an episode (at least 1)."""
     return max(1, math.ceil(hold_s / float(env.unwrapped.config.dt_s)))
@@ -117,8 +128,8 @@ def hold_back_chances(
             means.append((np.clip(loc[:, 0], -1.0, 1.0) + 1.0) / 2.0 * vmax)
             stds.append(scale[:, 0] / 2.0 * vmax)
         obs, *_ = env.step(policy.act(obs))
-    rho = float(policy.settings.noise_correlation)
-    held = int(policy.settings.noise_correlated_decisions) or len(limits)
+    rho, held = trained_noise(policy)
+    held = held or len(limits)
     per_uav = np.stack(limits, axis=1)  # (UAV, decision)
     # correlated over the episode's first `held` decisions, independent draws after them
     chance = np.array(
@@ -166,7 +177,7 @@ def probe(
             {
                 "policy": name,
                 "action_repeat": repeat,
-                "noise_correlation": float(policy.settings.noise_correlation),
+                "noise_correlation": trained_noise(policy)[0],
                 "decisions": decisions,
                 "mean_speed_setpoint_mps": float(np.mean(means)),
                 "speed_setpoint_std_mps": float(np.mean(stds)),

@@ -1,4 +1,10 @@
-"""The experimental settings are listed in one place, and each entry names a real setting."""
+"""The experimental settings are listed in one place per layer, off by default, and each entry
+names a real setting.
+
+The environment's list is ``coopnav_env.envs.config.EXPERIMENTAL_SETTINGS`` (settings of
+``UrbanCanyonConfig``), the trainers' ``coopnav_env.training.config.EXPERIMENTAL_SETTINGS``
+(settings of a backend, e.g. ``MARLSettings``).
+"""
 
 from __future__ import annotations
 
@@ -6,49 +12,67 @@ import dataclasses
 
 import pytest
 
-from coopnav_env.agents.marl_nets import MARLSettings
-from coopnav_env.envs.config import EXPERIMENTAL_SETTINGS, UrbanCanyonConfig
+from coopnav_env.agents.marl_nets import REMOVED_SETTINGS, MARLSettings
+from coopnav_env.envs.config import EXPERIMENTAL_SETTINGS as ENV_LIST
+from coopnav_env.envs.config import ExperimentalSetting, UrbanCanyonConfig
+from coopnav_env.training.config import EXPERIMENTAL_SETTINGS as TRAINER_LIST
 
-_CLASSES = {"UrbanCanyonConfig": UrbanCanyonConfig, "MARLSettings": MARLSettings}
-
-
-def _fields(cls: type) -> dict[str, dataclasses.Field]:
-    return {f.name: f for f in dataclasses.fields(cls)}
-
-
-def test_the_issue_s_study_switches_are_listed() -> None:
-    names = {(e.settings, e.name, e.value) for e in EXPERIMENTAL_SETTINGS}
-    assert {
-        ("UrbanCanyonConfig", "obs_true_error", None),
-        ("MARLSettings", "residual_mode", "options"),
-        ("MARLSettings", "option_init_prob", None),
-        ("MARLSettings", "action_repeat", None),
-        ("MARLSettings", "residual_wall_guard", None),
-    } <= names
-    assert len(names) == len(EXPERIMENTAL_SETTINGS)  # no entry twice
+LISTS = {
+    "environment": (ENV_LIST, {"UrbanCanyonConfig"}),
+    "trainer": (TRAINER_LIST, {"MARLSettings"}),
+}
+CLASSES = {"UrbanCanyonConfig": UrbanCanyonConfig, "MARLSettings": MARLSettings}
+ENTRIES = [(layer, e) for layer, (entries, _) in LISTS.items() for e in entries]
 
 
-@pytest.mark.parametrize("entry", EXPERIMENTAL_SETTINGS, ids=lambda e: f"{e.settings}.{e.name}")
-def test_every_entry_is_a_real_setting_and_documented(entry) -> None:
-    cls = _CLASSES[entry.settings]
-    fields = _fields(cls)
-    assert entry.name in fields, f"{entry.settings} has no field {entry.name!r}"
+def _id(item) -> str:
+    layer, entry = item
+    return f"{layer}:{entry.settings}.{entry.name}"
+
+
+def _names_a_field(entry: ExperimentalSetting) -> bool:
+    return entry.name in {f.name for f in dataclasses.fields(CLASSES[entry.settings])}
+
+
+def _off_by_default(entry: ExperimentalSetting) -> bool:
+    """The field's default is the entry's 'off' value (equal, and of its type)."""
+    default = getattr(CLASSES[entry.settings](), entry.name)
+    return default == entry.off and type(default) is type(entry.off)
+
+
+def test_the_lists_are_what_the_layers_keep_experimental() -> None:
+    assert "obs_true_error" in {e.name for e in ENV_LIST}
+    assert {e.name for e in ENV_LIST} <= {"obs_true_error"}
+    # the recipe's settings are supported, the removed ones gone
+    assert not {e.name for e in TRAINER_LIST} & {"action_repeat", "start_hold_decisions"}
+    assert not {e.name for e in TRAINER_LIST} & set(REMOVED_SETTINGS)
+    for entries, _ in LISTS.values():
+        names = [(e.settings, e.name) for e in entries]
+        assert len(set(names)) == len(names)  # no entry twice
+
+
+@pytest.mark.parametrize("item", ENTRIES, ids=_id)
+def test_every_entry_is_a_real_setting_of_its_layer_and_documented(item) -> None:
+    layer, entry = item
+    assert entry.settings in LISTS[layer][1], f"the {layer} list names {entry.settings}"
+    cls = CLASSES[entry.settings]
+    assert _names_a_field(entry), f"{entry.settings} has no field {entry.name!r}"
     assert entry.what and len(entry.what) < 160  # one line
     assert "EXPERIMENTAL_SETTINGS" in (cls.__doc__ or "").split(f"{entry.name} :")[1][:700]
-    if entry.value is not None:  # the experimental value is one the class accepts
-        kwargs = {entry.name: entry.value}
-        if entry.settings == "MARLSettings":
-            kwargs["residual_base"] = "wide"
-        cls(**kwargs)
 
 
-def test_the_experimental_settings_are_off_by_default() -> None:
-    for entry in EXPERIMENTAL_SETTINGS:
-        cls = _CLASSES[entry.settings]
-        default = getattr(cls(), entry.name)
-        assert entry.value is None or default != entry.value
-        if isinstance(default, bool):
-            assert default is False
+@pytest.mark.parametrize("item", ENTRIES, ids=_id)
+def test_every_entry_is_off_by_default(item) -> None:
+    _, entry = item
+    assert _off_by_default(entry), f"{entry.settings}.{entry.name} is not {entry.off!r} by default"
+
+
+def test_the_checks_catch_an_entry_on_by_default_or_naming_no_field() -> None:
+    on = ExperimentalSetting("UrbanCanyonConfig", "obs_true_error", True, "on by default?")
+    zero = ExperimentalSetting("MARLSettings", "start_hold_decisions", 0.0, "0.0 is not 0")
+    assert not _off_by_default(on) and not _off_by_default(zero)
+    assert _off_by_default(ExperimentalSetting("MARLSettings", "start_hold_decisions", 0, "-"))
+    assert not _names_a_field(ExperimentalSetting("MARLSettings", "noise_correlation", 0.0, "-"))
 
 
 def test_the_environment_page_points_to_the_list() -> None:

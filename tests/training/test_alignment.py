@@ -49,7 +49,7 @@ def test_the_v1_return_is_the_score_and_keeps_the_ranking(small_family) -> None:
     for r in rows.values():
         assert r["v1:return"] == r["score"] == r["v1:disc@1"]
     # the swarm that navigates best scores above the fast clump, and the shipped discount
-    # (1, training/configs/ppo.yaml, section urban_canyon_v1) ranks the family as the score
+    # (1, training/configs/*.yaml, section urban_canyon_v1) ranks the family as the score
     assert rows["wide"]["score"] > rows[FAST_CLUMP]["score"]
     assert rows["wide"]["score"] > rows["formation"]["score"]
     assert rows["wide"]["nav_error_m"] < rows[FAST_CLUMP]["nav_error_m"]

@@ -1,7 +1,8 @@
 """An output folder belongs to one command (issue 35, finding 3).
 
-``coopnav study`` and ``coopnav evaluate`` claim their ``--out`` before any work, the way
-``coopnav train`` and ``train-routes`` do: another command's folder, a training run, a result
+``learning_study.py`` and ``coopnav evaluate`` claim their ``--out`` before any work, the way
+``coopnav train`` and ``route_learning.py`` (``studies/route_choice``) do: another command's
+folder, a training run, a result
 of other settings and a finished result are refused with a message naming what the folder
 holds; ``--overwrite`` replaces a report (never a training run); a second command into a
 locked folder fails at once; a rerun after an interrupt is taken. The flights are replaced by
@@ -15,11 +16,12 @@ from pathlib import Path
 
 import pytest
 
-from coopnav_env.training import marl_study
 from coopnav_env.training.cli import main
 from coopnav_env.training.files import CLAIM_NAME, claim_output_folder, folder_lock
+from studies.learning_in_default_setting import learning_study
+from studies.route_choice import route_learning
 
-STUDY = ["study", "--heuristics", "formation", "--episodes", "1", "--planner-episodes", "0"]
+STUDY = ["--heuristics", "formation", "--episodes", "1", "--planner-episodes", "0"]
 STUDY += ["--reps", "20"]
 EVALUATE = ["evaluate", "--policies", "formation", "--episodes", "1", "--no-plots"]
 EVALUATE += ["--env-set", "n_uavs=2"]
@@ -37,7 +39,7 @@ def no_flights(monkeypatch):
         (out / "errors.png").write_bytes(b"png")
         return [out / "report.json", out / "report.md", out / "errors.png"]
 
-    monkeypatch.setattr(marl_study, "_fly_and_report", fake)
+    monkeypatch.setattr(learning_study, "_fly_and_report", fake)
     return calls
 
 
@@ -47,7 +49,7 @@ def _never_fly(monkeypatch) -> None:
     def fly(*a, **kw):
         raise AssertionError("the study flew episodes before checking --out")
 
-    monkeypatch.setattr(marl_study, "_fly_all", fly)
+    monkeypatch.setattr(learning_study, "_fly_all", fly)
 
 
 def test_study_refuses_an_evaluate_folder_before_flying(tmp_path, capsys, monkeypatch):
@@ -57,7 +59,7 @@ def test_study_refuses_an_evaluate_folder_before_flying(tmp_path, capsys, monkey
     assert "report.json" in before
     _never_fly(monkeypatch)
     capsys.readouterr()
-    assert main([*STUDY, "--out", str(out)]) == 2
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert f"{out} holds the outputs of `coopnav evaluate`" in err and "--overwrite" in err
     after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
@@ -66,20 +68,20 @@ def test_study_refuses_an_evaluate_folder_before_flying(tmp_path, capsys, monkey
 
 def test_evaluate_refuses_a_study_folder_and_overwrite_replaces_it(tmp_path, capsys, no_flights):
     out = tmp_path / "shared"
-    assert main([*STUDY, "--out", str(out)]) == 0 and no_flights == [out]
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 0 and no_flights == [out]
     claim = json.loads((out / CLAIM_NAME).read_text())
-    assert claim["command"] == "coopnav study" and claim["status"] == "finished"
+    assert claim["command"] == "learning_study.py" and claim["status"] == "finished"
     assert claim["outputs"] == ["errors.png", "report.json", "report.md"]
     capsys.readouterr()
     assert main([*EVALUATE, "--out", str(out)]) == 2
-    assert "holds the outputs of `coopnav study`" in capsys.readouterr().err
+    assert "holds the outputs of `learning_study.py`" in capsys.readouterr().err
     assert (out / "report.md").read_text() == "# study\n"
     # --overwrite: the study's outputs go, the evaluation's come, nothing mixed
     assert main([*EVALUATE, "--out", str(out), "--overwrite"]) == 0
     assert "# Policy evaluation" in (out / "report.md").read_text()
     claim = json.loads((out / CLAIM_NAME).read_text())
     assert claim["command"] == "coopnav evaluate" and claim["status"] == "finished"
-    assert "replacing coopnav study's outputs" in capsys.readouterr().err
+    assert "replacing learning_study.py's outputs" in capsys.readouterr().err
     names = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
     assert names == sorted([CLAIM_NAME, *claim["outputs"]]) and "errors.png" not in names
 
@@ -87,7 +89,7 @@ def test_evaluate_refuses_a_study_folder_and_overwrite_replaces_it(tmp_path, cap
 def test_a_failed_overwrite_keeps_the_earlier_outputs(tmp_path, capsys, no_flights, monkeypatch):
     """The outputs an --overwrite replaces stay until the new command finishes."""
     out = tmp_path / "study"
-    assert main([*STUDY, "--out", str(out)]) == 0
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 0
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.name != CLAIM_NAME}
 
     def interrupted(*a, **kw):
@@ -123,32 +125,32 @@ def test_study_checks_out_before_flying_any_episode(tmp_path, capsys, monkeypatc
         (out / name).write_text("x")
         message = "holds a training run" if kind == "training run" else "already holds files"
     _never_fly(monkeypatch)
-    assert main([*STUDY, "--out", str(out)]) == 2
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 2
     assert message in capsys.readouterr().err
     if kind == "training run":  # never replaced, not even with --overwrite
-        assert main([*STUDY, "--out", str(out), "--overwrite"]) == 2
+        assert learning_study.main([*STUDY, "--out", str(out), "--overwrite"]) == 2
         assert "--overwrite never removes a training run" in capsys.readouterr().err
         assert (out / "final_model.zip").read_text() == "x"
 
 
 def test_study_rerun_rules(tmp_path, capsys, no_flights):
     out = tmp_path / "study"
-    assert main([*STUDY, "--out", str(out)]) == 0
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 0
     # a finished study with the same settings: a rerun could lose it
-    assert main([*STUDY, "--out", str(out)]) == 2
-    assert "holds the finished result of `coopnav study` with these settings" in (
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 2
+    assert "holds the finished result of `learning_study.py` with these settings" in (
         capsys.readouterr().err
     )
     # other settings: refused, naming the setting that differs
-    assert main([*STUDY, "--score", "nav", "--out", str(out)]) == 2
+    assert learning_study.main([*STUDY, "--score", "nav", "--out", str(out)]) == 2
     assert "result of other settings (score)" in capsys.readouterr().err
     assert len(no_flights) == 1
-    assert main([*STUDY, "--score", "nav", "--out", str(out), "--overwrite"]) == 0
+    assert learning_study.main([*STUDY, "--score", "nav", "--out", str(out), "--overwrite"]) == 0
     assert json.loads((out / CLAIM_NAME).read_text())["settings"]["score"] == "nav"
     # an interrupted study (claimed, not finished) is taken again by the same command
     record = json.loads((out / CLAIM_NAME).read_text())
     (out / CLAIM_NAME).write_text(json.dumps({**record, "status": "running", "outputs": []}))
-    assert main([*STUDY, "--score", "nav", "--out", str(out)]) == 0
+    assert learning_study.main([*STUDY, "--score", "nav", "--out", str(out)]) == 0
     assert len(no_flights) == 3
 
 
@@ -157,37 +159,37 @@ def test_a_locked_folder_is_refused_at_once(tmp_path, capsys, monkeypatch):
     out.mkdir()
     _never_fly(monkeypatch)
     with folder_lock(out):  # as a running study, evaluation or training holds it
-        assert main([*STUDY, "--out", str(out)]) == 2
+        assert learning_study.main([*STUDY, "--out", str(out)]) == 2
         assert "is in use by another coopnav command (pid" in capsys.readouterr().err
         assert main([*EVALUATE, "--out", str(out)]) == 2
         assert "is in use by another coopnav command" in capsys.readouterr().err
 
 
 def test_train_routes_locks_its_folder_and_refuses_a_report_folder(tmp_path, capsys, no_flights):
-    routes = ["train-routes", "--episodes", "5", "--jobs", "1"]
+    routes = ["--episodes", "5", "--jobs", "1"]
     busy = tmp_path / "busy"
     busy.mkdir()
     with folder_lock(busy):
-        assert main([*routes, "--out", str(busy)]) == 2
+        assert route_learning.main([*routes, "--out", str(busy)]) == 2
         assert "is in use by another coopnav command" in capsys.readouterr().err
     assert not (busy / "run.json").exists()
     study = tmp_path / "study"
-    assert main([*STUDY, "--out", str(study)]) == 0
-    assert main([*routes, "--out", str(study)]) == 2
+    assert learning_study.main([*STUDY, "--out", str(study)]) == 0
+    assert route_learning.main([*routes, "--out", str(study)]) == 2
     assert "is not a train-routes run folder" in capsys.readouterr().err
 
 
 def test_a_failed_command_leaves_its_claim_unfinished(tmp_path):
     out = tmp_path / "out"
     with pytest.raises(RuntimeError, match="boom"):
-        with claim_output_folder(out, "coopnav study", {"a": 1}, outputs=["report.*"]):
+        with claim_output_folder(out, "learning_study.py", {"a": 1}, outputs=["report.*"]):
             raise RuntimeError("boom")
     assert json.loads((out / CLAIM_NAME).read_text())["status"] == "running"
-    with claim_output_folder(out, "coopnav study", {"a": 1}, outputs=["report.*"]) as claim:
+    with claim_output_folder(out, "learning_study.py", {"a": 1}, outputs=["report.*"]) as claim:
         (out / "report.md").write_text("x")
         claim.finish([out / "report.md"])
     with pytest.raises(ValueError, match="finished result"):
-        with claim_output_folder(out, "coopnav study", {"a": 1}, outputs=["report.*"]):
+        with claim_output_folder(out, "learning_study.py", {"a": 1}, outputs=["report.*"]):
             pass
 
 
@@ -195,7 +197,7 @@ def test_study_default_out_is_no_committed_folder_and_help_says_models_are_pickl
     import argparse
 
     parser = argparse.ArgumentParser()
-    marl_study.add_arguments(parser)
+    learning_study.add_arguments(parser)
     assert parser.get_default("out") == "runs/study"
     help_text = " ".join(parser.format_help().split())
     assert "is a pickle: loading it runs code from it" in help_text
@@ -226,12 +228,12 @@ def _files(folder: Path) -> dict[str, bytes]:
 @pytest.mark.parametrize("extra", [[], ["--overwrite"], ["--resume", "latest"]])
 def test_train_refuses_a_study_folder_naming_it(tmp_path, capsys, no_flights, extra):
     out = tmp_path / "shared"
-    assert main([*STUDY, "--out", str(out)]) == 0
+    assert learning_study.main([*STUDY, "--out", str(out)]) == 0
     before = _files(out)
     capsys.readouterr()
     assert _toy_train(tmp_path, out, *extra) == 2
     err = capsys.readouterr().err
-    assert f"{out} holds the outputs of `coopnav study` ({CLAIM_NAME})" in err, err
+    assert f"{out} holds the outputs of `learning_study.py` ({CLAIM_NAME})" in err, err
     assert "choose another --out" in err
     assert _files(out) == before  # nothing written, nothing removed
     assert not (out / "config.yaml").exists() and not (out / "checkpoints").exists()
@@ -273,15 +275,15 @@ def test_train_takes_its_own_folder_and_train_routes_names_the_claim(tmp_path, c
     assert not (out / CLAIM_NAME).exists()
     before = _files(out)
     capsys.readouterr()
-    assert main(["train-routes", "--episodes", "5", "--jobs", "1", "--out", str(out)]) == 2
+    assert route_learning.main(["--episodes", "5", "--jobs", "1", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "is not a train-routes run folder: it holds the outputs of `coopnav train`" in err
     assert _files(out) == before  # its run.json untouched
     claimed = tmp_path / "evaluated"
     with claim_output_folder(claimed, "coopnav evaluate", {}, outputs=["report.*"]):
         pass
-    routes = ["train-routes", "--episodes", "5", "--jobs", "1", "--out", str(claimed)]
-    assert main(routes) == 2
+    routes = ["--episodes", "5", "--jobs", "1", "--out", str(claimed)]
+    assert route_learning.main(routes) == 2
     err = capsys.readouterr().err
     assert "is not a train-routes run folder: it holds the outputs of `coopnav evaluate`" in err
 
@@ -308,13 +310,13 @@ def test_reproduce_refuses_another_commands_folder_before_any_work(
     tmp_path, capsys, no_flights, monkeypatch
 ):
     study = tmp_path / "study"
-    assert main([*STUDY, "--out", str(study)]) == 0
+    assert learning_study.main([*STUDY, "--out", str(study)]) == 0
     before = _files(study)
     _never_reproduce(monkeypatch)
     capsys.readouterr()
     assert main([*REPRODUCE, "--out", str(study)]) == 2
     err = capsys.readouterr().err
-    assert f"{study} holds the outputs of `coopnav study`" in err and "--overwrite" in err
+    assert f"{study} holds the outputs of `learning_study.py`" in err and "--overwrite" in err
     assert _files(study) == before
     trained = tmp_path / "trained"
     trained.mkdir()
@@ -390,10 +392,10 @@ def no_alignment_flights(monkeypatch):
 
 def test_alignment_claims_its_folder(tmp_path, capsys, no_flights, no_alignment_flights):
     study = tmp_path / "study"
-    assert main([*STUDY, "--out", str(study)]) == 0
+    assert learning_study.main([*STUDY, "--out", str(study)]) == 0
     capsys.readouterr()
     assert main([*ALIGNMENT, "--out", str(study)]) == 2
-    assert f"{study} holds the outputs of `coopnav study`" in capsys.readouterr().err
+    assert f"{study} holds the outputs of `learning_study.py`" in capsys.readouterr().err
     assert no_alignment_flights == []  # refused before any flight
     # --overwrite replaces the study's outputs instead of mixing the two reports
     assert main([*ALIGNMENT, "--out", str(study), "--overwrite"]) == 0

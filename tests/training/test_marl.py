@@ -15,9 +15,13 @@ torch = pytest.importorskip("torch")
 
 from coopnav_env import urban_canyon_v0  # noqa: E402
 from coopnav_env.agents import make_policy  # noqa: E402
-from coopnav_env.agents.marl_nets import MARLSettings  # noqa: E402
+from coopnav_env.agents.marl_nets import (  # noqa: E402
+    REMOVED_SETTINGS,
+    MARLSettings,
+    settings_from_record,
+)
 from coopnav_env.training.cli import main  # noqa: E402
-from coopnav_env.training.marl import MARLTrainer  # noqa: E402
+from coopnav_env.training.torchrl_backend import MARLTrainer  # noqa: E402
 from tests.fly_alike import assert_fly_alike  # noqa: E402
 
 SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--no-progress"]
@@ -39,26 +43,10 @@ def _one_thread():
         ("learning_rate", 0.0),
         ("gamma", 1.5),
         ("hidden", [64, 32]),
-        ("residual_mode", "torque"),
-        ("offset_scale_m", [1.0, 2.0]),
         ("lr_schedule", "cosine"),
         ("action_repeat", 0),
-        ("residual_wall_guard", True),  # needs a residual base in velocity mode
-        ("residual_mode", "options"),  # needs a residual base
-        ("option_shifts_m", [[0.0, 0.0, 0.0]]),
-        ("option_shifts_m", [[0.0, 0.0], [1.0, 0.0]]),
-        ("option_init_prob", 1.0),
-        ("noise_correlation", 1.5),
-        ("noise_correlation", True),
-        ("noise_correlated_decisions", -1),
-        ("noise_correlated_entries", []),
-        ("noise_correlated_entries", [0, 5]),
-        ("noise_centred_entries", [3]),
-        ("noise_centred_entries", [0, 0]),
-        ("noise_centred_entries", [0]),  # needs noise_correlation > 0
         ("start_hold_decisions", -1),
         ("start_hold_decisions", True),
-        ("start_hold_objective", "ignored"),
     ],
 )
 def test_bad_settings_name_the_field(field, value) -> None:
@@ -66,6 +54,56 @@ def test_bad_settings_name_the_field(field, value) -> None:
         MARLSettings(**{field: value})
     with pytest.raises(ValueError, match="unknown torchrl setting"):
         MARLSettings.from_dict({"lr": 1e-3})
+
+
+@pytest.mark.parametrize("name", sorted(REMOVED_SETTINGS))
+def test_a_removed_setting_is_refused_by_name_saying_it_was_removed(name) -> None:
+    with pytest.raises(ValueError, match=rf"\['{name}'\] were removed from coopnav"):
+        MARLSettings.from_dict({name: None})
+    assert name not in {f.name for f in dataclasses.fields(MARLSettings)}
+
+
+def test_recorded_settings_of_removed_switches_fly_unless_they_changed_the_flight() -> None:
+    """A checkpoint of an earlier release records every setting, removed ones included:
+    training-only ones (exploration noise, the objective of held starts) are dropped for
+    flight, flight-changing ones refused; resuming refuses any that changed the run."""
+    old = {
+        "algorithm": "mappo",
+        "action_repeat": 4,
+        "residual_mode": "velocity",
+        "offset_scale_m": [15.0, 8.0, 8.0],
+        "option_shifts_m": [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]],
+        "option_init_prob": 0.8,
+        "residual_wall_guard": False,
+        "noise_correlation": 1.0,
+        "noise_correlated_decisions": 3,
+        "noise_correlated_entries": [0],
+        "noise_centred_entries": [0],
+        "start_hold_decisions": 4,
+        "start_hold_objective": "importance",
+    }
+    flown = settings_from_record(old, "run/final_model.pt", "fly")
+    assert flown == MARLSettings(algorithm="mappo", action_repeat=4, start_hold_decisions=4)
+    with pytest.raises(ValueError, match=r"torchrl\.noise_correlation=1\.0.*removed") as info:
+        settings_from_record(old, "run/final_model.pt", "resume")
+    assert "torchrl.start_hold_objective='importance'" in str(info.value)
+    assert "run/final_model.pt" in str(info.value)
+    for mode in ("offset", "options"):
+        with pytest.raises(
+            ValueError, match=rf"residual_mode='{mode}'.*removed.*cannot have it flown"
+        ):
+            settings_from_record({**old, "residual_mode": mode}, "x.pt", "fly")
+    with pytest.raises(ValueError, match="residual_wall_guard=True"):
+        settings_from_record({**old, "residual_wall_guard": True}, "x.pt", "fly")
+    # held starts before start_hold_objective existed were masked: not resumable
+    with pytest.raises(ValueError, match="start_hold_objective='masked'"):
+        settings_from_record({"start_hold_decisions": 3}, "x.pt", "resume")
+    # what stays (held starts logged with the actor's own log-probability, no noise) resumes
+    kept = {**old, "noise_correlation": 0.0, "start_hold_objective": "unweighted"}
+    assert settings_from_record(kept, "x.pt", "resume") == flown
+    assert settings_from_record({"start_hold_objective": "masked"}, "x.pt", "resume") == (
+        MARLSettings()
+    )
 
 
 def test_linear_learning_rate_falls_to_zero_over_the_budget(tmp_path) -> None:
@@ -120,102 +158,14 @@ def test_mappo_critic_reads_the_state_and_ippo_does_not() -> None:
     assert state.shape == (cfg.state_dim,)
 
 
-def test_an_untrained_offset_policy_flies_exactly_like_its_base(tmp_path) -> None:
-    s = MARLSettings(
-        algorithm="mappo",
-        n_copies=1,
-        rollout_steps=2,
-        residual_base="spread",
-        residual_mode="offset",
-    )
-    tr = MARLTrainer(s, {}, seed=0)
-    tr.save(tmp_path / "final_model.pt")
+def test_an_untrained_residual_policy_flies_exactly_like_its_base(tmp_path) -> None:
+    s = MARLSettings(algorithm="mappo", n_copies=1, rollout_steps=2, residual_base="spread")
+    MARLTrainer(s, {}, seed=0).save(tmp_path / "final_model.pt")
     assert_fly_alike(f"mappo:{tmp_path}", "spread", seed=1_000_003, steps=40)
 
 
-def test_the_residual_wall_guard_keeps_the_residual_off_near_walls(tmp_path) -> None:
-    from coopnav_env.agents.marl_nets import swarm_command
-    from coopnav_env.envs import obs_layout
-
-    env = urban_canyon_v0.parallel_env(n_uavs=3)
-    obs, _ = env.reset(seed=1_000_002)
-    agents = env.possible_agents
-    walls = obs_layout(env.unwrapped.config)["wall_distance"]
-    for o in obs.values():
-        o[walls.slice] = 1.0
-    obs[agents[0]][walls.start + walls.size // 4] = 2.0 / walls.scale  # a wall 2 m East
-    guarded = MARLSettings(residual_base="ceiling", residual_wall_guard=True)
-    plain = MARLSettings(residual_base="ceiling")
-    base = make_policy("ceiling", env)
-    base_cmd = np.zeros((3, 3), dtype=np.float32)
-    raw = np.tile([1.0, 0.5, 0.2], (3, 1))  # every residual pushes East (and North, up)
-    g = swarm_command(guarded, raw, base, base_cmd, obs, agents)
-    p = swarm_command(plain, raw, base, base_cmd, obs, agents)
-    np.testing.assert_allclose(g[0], [0.0, 0.25, 0.1], atol=1e-7)  # East part removed
-    np.testing.assert_allclose(g[1:], p[1:])  # UAVs far from walls: as without the guard
-    np.testing.assert_allclose(p[0], [0.5, 0.25, 0.1], atol=1e-7)
-    # a base without a wall guard is refused when the trainer builds it, naming the setting
-    with pytest.raises(ValueError, match="residual_wall_guard needs a residual_base"):
-        MARLTrainer(
-            MARLSettings(
-                n_copies=1, rollout_steps=2, residual_base="wide", residual_wall_guard=True
-            ),
-            {},
-            seed=0,
-        )
-    # an untrained guarded residual (zero output) still flies exactly like its base
-    s = MARLSettings(n_copies=1, rollout_steps=2, residual_base="ceiling", residual_wall_guard=True)
-    MARLTrainer(s, {}, seed=0).save(tmp_path / "final_model.pt")
-    assert_fly_alike(f"mappo:{tmp_path}", "ceiling", seed=1_000_003, steps=20)
-
-
-def test_options_mode_samples_one_hot_choices_and_starts_at_its_base(tmp_path) -> None:
-    s = MARLSettings(
-        n_copies=2,
-        rollout_steps=8,
-        residual_base="ceiling",
-        residual_mode="options",
-        action_repeat=2,
-        option_init_prob=0.7,
-    )
-    tr = MARLTrainer(s, {}, seed=0)
-    data = tr.collect()
-    act = data["agents", "action"].numpy()
-    assert act.shape == (2, 8, 5, len(s.option_shifts_m))
-    np.testing.assert_array_equal(act.sum(axis=-1), 1.0)  # one option per UAV and decision
-    # the first option has the start probability; 80 draws: 5 standard errors
-    share = act[..., 0].mean()
-    assert abs(share - 0.7) <= 5.0 * np.sqrt(0.7 * 0.3 / act[..., 0].size)
-    logp = data["agents", "action_log_prob"].numpy()
-    expected = np.where(act[..., 0] == 1.0, np.log(0.7), np.log(0.3 / 4))
-    np.testing.assert_allclose(logp, expected, rtol=1e-5)
-    # a chosen option moves the UAV's slot by its row of option_shifts_m
-    from coopnav_env.agents.marl_nets import swarm_command
-
-    env = urban_canyon_v0.parallel_env()
-    obs, _ = env.reset(seed=1_000_003)
-    base = make_policy("ceiling", env)
-    seen: list[np.ndarray] = []
-    base.set_slot_shifts = lambda shifts: seen.append(np.asarray(shifts))  # type: ignore[method-assign]
-    onehot = np.eye(5, dtype=np.float32)[[0, 1, 2, 3, 4]]
-    swarm_command(s, onehot, base, None, obs, env.possible_agents)
-    np.testing.assert_array_equal(seen[0], np.asarray(s.option_shifts_m))
-    # a base without slots to shift is refused, naming the setting
-    with pytest.raises(ValueError, match="needs a column follower"):
-        MARLTrainer(
-            MARLSettings(
-                n_copies=1, rollout_steps=2, residual_base="waypoint", residual_mode="options"
-            ),
-            {},
-            seed=0,
-        )
-    # untrained, the most probable option is no shift: it flies exactly like its base
-    tr.save(tmp_path / "final_model.pt")
-    assert_fly_alike(f"mappo:{tmp_path}", "ceiling", seed=1_000_003, steps=30)
-
-
 def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch) -> None:
-    import coopnav_env.training.marl as marl
+    import coopnav_env.training.torchrl_backend as backend
 
     s = MARLSettings(
         algorithm="mappo",
@@ -227,7 +177,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
     )
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 7}, seed=2)
     raws, steps = [], []
-    real_command, real_step = marl.swarm_command, tr.venv.step
+    real_command, real_step = backend.swarm_command, tr.venv.step
 
     def command(settings, raw, *args):
         raws.append(np.array(raw))
@@ -238,7 +188,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
         steps.append((out[1].copy(), (out[2] | out[3]).copy()))  # rewards, episode ends
         return out
 
-    monkeypatch.setattr(marl, "swarm_command", command)
+    monkeypatch.setattr(backend, "swarm_command", command)
     monkeypatch.setattr(tr.venv, "step", step)
     data = tr.collect()
     assert tr.agent_steps == 2 * 4 * 3 * 3  # copies x decisions x repeat x UAVs
@@ -263,93 +213,6 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
     assert tr.loss.value_estimator.gamma == pytest.approx(0.99**3)
 
 
-def _standardised_noise(tr: MARLTrainer, data) -> np.ndarray:
-    """(action - loc) / scale of every stored decision, under the actor's Gaussian now."""
-    with torch.no_grad():
-        normal = tr.actor.get_dist(data.select(("agents", "observation"))).base_dist
-    return ((data["agents", "action"] - normal.loc) / normal.scale).numpy()
-
-
-def test_correlated_noise_keeps_the_gaussian_and_holds_its_deviation() -> None:
-    s = MARLSettings(algorithm="ippo", n_copies=64, rollout_steps=8, noise_correlation=0.9)
-    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 200}, seed=3)
-    data = tr.collect()
-    eps = _standardised_noise(tr, data)  # (copy, decision, UAV, axis)
-    # each action is a draw of the actor's Gaussian: logged log-probabilities are its own
-    with torch.no_grad():
-        dist = tr.actor.get_dist(data.select(("agents", "observation")))
-        want = dist.log_prob(data["agents", "action"]).numpy()
-    np.testing.assert_allclose(data["agents", "action_log_prob"].numpy(), want, rtol=1e-5)
-    # marginal standard normal, lag-one correlation rho within episodes: 64*8*3*3 = 4608
-    # values, ~4000 pairs; 5 standard errors (sd of the correlation ~ (1 - rho^2) / sqrt(n))
-    n = eps.size
-    assert abs(eps.mean()) <= 5.0 / np.sqrt(n)
-    assert abs(eps.std() - 1.0) <= 5.0 / np.sqrt(2 * n)
-    same = ~data["next", "agents", "done"].numpy()[:, :-1, 0, 0]  # (copy, decision)
-    a, b = eps[:, :-1][same].ravel(), eps[:, 1:][same].ravel()
-    assert a.size >= 3000
-    assert abs(np.corrcoef(a, b)[0, 1] - 0.9) <= 5.0 * (1 - 0.81) / np.sqrt(a.size)
-    # independent draws (the default) are not correlated
-    tr0 = MARLTrainer(MARLSettings(algorithm="ippo", n_copies=64, rollout_steps=8), {}, seed=3)
-    e0 = _standardised_noise(tr0, tr0.collect())
-    assert abs(np.corrcoef(e0[:, :-1].ravel(), e0[:, 1:].ravel())[0, 1]) <= 5.0 / np.sqrt(a.size)
-
-
-def test_centred_noise_sums_to_zero_over_the_swarm_and_stays_standard_normal() -> None:
-    s = MARLSettings(
-        algorithm="ippo",
-        n_copies=64,
-        rollout_steps=8,
-        noise_correlation=0.5,
-        noise_centred_entries=[0],
-    )
-    tr = MARLTrainer(s, {"n_uavs": 5, "max_steps": 200}, seed=4)
-    eps = _standardised_noise(tr, tr.collect())  # (copy, decision, UAV, entry)
-    np.testing.assert_allclose(eps[..., 0].sum(axis=2), 0.0, atol=1e-4)  # over the UAVs
-    assert np.abs(eps[..., 1:].sum(axis=2)).max() > 0.1  # the other entries are not centred
-    # each UAV's noise is still standard normal: 64*8*5 = 2560 values, 5 standard errors
-    n = eps[..., 0].size
-    assert abs(eps[..., 0].std() - 1.0) <= 5.0 / np.sqrt(2 * n / 1.25)
-
-
-def _noise_of_whole_episodes(s: MARLSettings) -> np.ndarray:
-    """:func:`_standardised_noise` of the copies whose first 6 decisions are one episode."""
-    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 50}, seed=2)
-    data = tr.collect()
-    one = ~data["next", "agents", "done"].numpy()[:, :5, 0, 0].any(axis=1)
-    assert one.any()
-    return _standardised_noise(tr, data)[one]
-
-
-def test_fully_correlated_noise_is_held_for_the_episode_and_redrawn_after_it() -> None:
-    s = MARLSettings(algorithm="mappo", n_copies=2, rollout_steps=6, noise_correlation=1.0)
-    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
-    data = tr.collect()
-    eps = _standardised_noise(tr, data)
-    done = data["next", "agents", "done"].numpy()[:, :, 0, 0]  # (copy, decision)
-    assert done[:, :4].any(axis=1).all()  # episodes of at most 4 steps: each copy had a new one
-    for k in range(2):
-        for d in range(5):
-            if done[k, d]:  # a new episode, a new draw
-                assert np.all(np.abs(eps[k, d + 1] - eps[k, d]) > 1e-3)
-            else:  # held within the episode
-                np.testing.assert_allclose(eps[k, d + 1], eps[k, d], atol=1e-4)
-    # the same seed gives the same draws
-    tr2 = MARLTrainer(s, {"n_uavs": 3, "max_steps": 4}, seed=1)
-    np.testing.assert_array_equal(_standardised_noise(tr2, tr2.collect()), eps)
-    # held for the first 2 decisions of each episode only
-    e3 = _noise_of_whole_episodes(dataclasses.replace(s, noise_correlated_decisions=2))
-    np.testing.assert_allclose(e3[:, 1], e3[:, 0], atol=1e-4)
-    for d in range(1, 5):  # then a new draw every decision
-        assert np.all(np.abs(e3[:, d + 1] - e3[:, d]) > 1e-4)
-    # held for the speed entry only: the others are new at every decision
-    e4 = _noise_of_whole_episodes(dataclasses.replace(s, noise_correlated_entries=[0]))
-    np.testing.assert_allclose(e4[:, 1:, :, 0], e4[:, :1, :, 0].repeat(5, 1), atol=1e-4)
-    assert np.all(np.abs(np.diff(e4[..., 1:], axis=1)) > 1e-4)
-    with pytest.raises(ValueError, match="noise_correlation"):
-        MARLSettings(residual_base="ceiling", residual_mode="options", noise_correlation=0.5)
-
-
 def _record_commands(tr: MARLTrainer) -> list[np.ndarray]:
     """The list that every swarm command ``tr`` flies from now on is appended to."""
     flown: list[np.ndarray] = []
@@ -358,20 +221,27 @@ def _record_commands(tr: MARLTrainer) -> list[np.ndarray]:
     return flown
 
 
-def test_exploring_starts_hold_uavs_in_place_and_leave_them_out_of_the_objective() -> None:
+def test_exploring_starts_hold_uavs_in_place_logged_as_the_actors_own_draws() -> None:
+    from scipy.stats import norm
+
     s = MARLSettings(algorithm="mappo", n_copies=16, rollout_steps=8, start_hold_decisions=2)
     env = {"n_uavs": 3, "max_steps": 5, "action_frame": "route"}
     tr = MARLTrainer(s, env, seed=5)
     flown = _record_commands(tr)
     data = tr.collect()
-    learn = data["agents", "learn"].numpy()[..., 0]  # (copy, decision, UAV)
-    cmd = np.stack(flown, axis=1)  # (copy, decision, UAV, entry): action_repeat 1
-    raw = np.clip(data["agents", "action"].numpy(), -1.0, 1.0)
-    # held decisions fly the speed set-point -1 (in place), the others the actor's draw
-    assert np.all(cmd[..., 0][~learn] == -1.0)
-    np.testing.assert_array_equal(cmd[..., 0][learn], raw[..., 0][learn])
-    np.testing.assert_array_equal(cmd[..., 1:], raw[..., 1:])
-    # each UAV is held for the first 0, 1 or 2 decisions of every episode, then released
+    act = data["agents", "action"].numpy()  # (copy, decision, UAV, entry)
+    held = act[..., 0] <= -1.0
+    cmd = np.stack(flown, axis=1)  # action_repeat 1: one command per decision
+    # held decisions fly the speed set-point -1 (in place); every decision flies as stored
+    np.testing.assert_array_equal(cmd, np.clip(act, -1.0, 1.0))
+    # the logged log-probability is the actor's own of the stored action, held or not
+    with torch.no_grad():
+        dist = tr.actor.get_dist(data.select(("agents", "observation")))
+        pi = dist.log_prob(data["agents", "action"]).numpy()
+        mu, sd = dist.base_dist.loc[..., 0].numpy(), dist.base_dist.scale[..., 0].numpy()
+    np.testing.assert_allclose(data["agents", "action_log_prob"].numpy(), pi, rtol=1e-5)
+    # each UAV is held for the first 0, 1 or 2 decisions of every episode, then released:
+    # the actor's own draws reach below -1 only by chance (its tail's probability)
     done = data["next", "agents", "done"].numpy()[:, :, 0, 0]
     starts = np.zeros_like(done)
     starts[:, 1:] = done[:, :-1]
@@ -383,68 +253,27 @@ def test_exploring_starts_hold_uavs_in_place_and_leave_them_out_of_the_objective
             if b - a < 3:  # an episode cut by the rollout's end
                 continue
             for u in range(3):
-                h = int(np.argmax(learn[k, a:b, u])) if learn[k, a:b, u].any() else b - a
-                assert learn[k, a + h : b, u].all() and not learn[k, a : a + h, u].any()
+                h = int(np.argmin(held[k, a:b, u])) if not held[k, a:b, u].all() else b - a
                 held_counts.append(h)
     assert set(held_counts) == {0, 1, 2}
     assert done.any()  # some copies met a second episode, with new holds
-    # the update leaves held decisions out (advantage 0) and standardises the others
+    tail = norm.cdf((-1.0 - mu) / sd)
+    assert tail[:, 2:].mean() < 0.2  # so that the holds above are the exploring starts
+    # the update standardises the advantages over every decision (nothing left out)
+    assert tr.loss.normalize_advantage
+    assert ("agents", "learn") not in data.keys(True)
     tr.update(data)
-    adv = data["agents", "advantage"].numpy()[..., 0]
-    assert np.all(adv[~learn] == 0.0)
-    assert abs(adv[learn].mean()) < 1e-5 and abs(adv[learn].std(ddof=1) - 1.0) < 1e-4
     # the same seed holds the same UAVs
     tr2 = MARLTrainer(s, env, seed=5)
-    np.testing.assert_array_equal(tr2.collect()["agents", "learn"].numpy()[..., 0], learn)
-    # off by default: no mask, nothing held
-    assert ("agents", "learn") not in MARLTrainer(
-        dataclasses.replace(s, start_hold_decisions=0), env, seed=5
-    ).collect().keys(True)
+    np.testing.assert_array_equal(tr2.collect()["agents", "action"].numpy(), act)
+    # off by default: nobody is held at the first decision beyond the actor's own tail
+    tr0 = MARLTrainer(dataclasses.replace(s, start_hold_decisions=0), env, seed=5)
+    first = tr0.collect()["agents", "action"].numpy()[:, 0, :, 0] <= -1.0
+    assert first.mean() < 0.3 and held[:, 0].mean() > 0.5  # P(held) = 2/3 with holds
     with pytest.raises(ValueError, match=r"start_hold_decisions.*route"):
         MARLTrainer(s, {"n_uavs": 3}, seed=5)
     with pytest.raises(ValueError, match="start_hold_decisions"):
         MARLSettings(residual_base="wide", start_hold_decisions=2)
-
-
-def test_importance_weighted_holds_draw_the_tail_and_log_the_behaviour() -> None:
-    from scipy.stats import norm
-
-    s = MARLSettings(
-        algorithm="mappo",
-        n_copies=16,
-        rollout_steps=4,
-        start_hold_decisions=2,
-        start_hold_objective="importance",
-    )
-    env = {"n_uavs": 3, "max_steps": 50, "action_frame": "route"}
-    tr = MARLTrainer(s, env, seed=6)
-    flown = _record_commands(tr)
-    data = tr.collect()
-    assert ("agents", "learn") not in data.keys(True)  # every decision learns
-    assert tr.loss.normalize_advantage
-    act = data["agents", "action"].numpy()
-    with torch.no_grad():
-        dist = tr.actor.get_dist(data.select(("agents", "observation")))
-        pi = dist.log_prob(data["agents", "action"]).numpy()
-        mu, sd = dist.base_dist.loc[..., 0].numpy(), dist.base_dist.scale[..., 0].numpy()
-    tail = norm.logcdf((-1.0 - mu) / sd)
-    logged = data["agents", "action_log_prob"].numpy()
-    # the first decision: which UAVs are held is a draw of 0, 1, 2 per UAV (2 of 3 held)
-    first = act[:, 0, :, 0] <= -1.0
-    assert 0.5 < first.mean() < 0.85  # 48 draws, P(held) = 2/3
-    cmd = np.stack(flown, axis=1)
-    np.testing.assert_array_equal(cmd[:, 0, :, 0][first], -1.0)
-    # held: the behaviour's log-probability (tail-truncated speed draw), else the actor's
-    np.testing.assert_allclose(logged[:, 0][first], (pi[:, 0] - tail[:, 0])[first], rtol=1e-4)
-    np.testing.assert_allclose(logged[:, 0][~first], pi[:, 0][~first], rtol=1e-5)
-    # by the third decision nobody is held: actor's own draws, below -1 only by chance
-    np.testing.assert_allclose(logged[:, 2:], pi[:, 2:], rtol=1e-5)
-    assert (act[:, 2:, :, 0] <= -1.0).mean() < 0.2
-    # unweighted: the same held draws, logged with the actor's own log-probability
-    tr_u = MARLTrainer(dataclasses.replace(s, start_hold_objective="unweighted"), env, seed=6)
-    data_u = tr_u.collect()
-    np.testing.assert_array_equal(data_u["agents", "action"].numpy(), act)
-    np.testing.assert_allclose(data_u["agents", "action_log_prob"].numpy(), pi, rtol=1e-5)
 
 
 def test_an_action_repeat_policy_decides_every_few_steps(tmp_path, monkeypatch) -> None:
@@ -515,7 +344,6 @@ def test_same_seed_same_weights(tmp_path) -> None:
             n_copies=2,
             rollout_steps=4,
             residual_base="sky",
-            residual_mode="velocity",
         )
         tr = MARLTrainer(s, {}, seed=3)
         tr.update(tr.collect())
@@ -541,7 +369,7 @@ def test_torchrl_wrapper_accepts_the_environment() -> None:
 
 
 def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
-    from coopnav_env.training.marl import export_policy
+    from coopnav_env.training.torchrl_backend import export_policy
 
     s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
     tr = MARLTrainer(s, {}, seed=0)
@@ -562,7 +390,7 @@ def test_export_keeps_the_actor_and_acts_alike(tmp_path) -> None:
 
 
 def test_export_policy_from_a_checkpoint_takes_the_runs_config_only(tmp_path) -> None:
-    from coopnav_env.training.marl import export_policy
+    from coopnav_env.training.torchrl_backend import export_policy
 
     s = MARLSettings(algorithm="ippo", n_copies=1, rollout_steps=4)
     tr = MARLTrainer(s, {}, seed=0)
@@ -633,7 +461,7 @@ def test_command_line_env_settings_win_over_the_backends_env_block(tmp_path) -> 
     too, although its ``torchrl.env`` block of the config file overrides ``env``."""
     import argparse
 
-    from coopnav_env.training.marl import settings_of
+    from coopnav_env.training.torchrl_backend import settings_of
     from coopnav_env.training.train import add_arguments, config_from_args
 
     parser = argparse.ArgumentParser()
@@ -668,8 +496,33 @@ def test_action_distribution_is_the_gaussian_whose_mean_the_policy_flies(tmp_pat
     )
     with pytest.raises(ValueError, match="expected every agent"):
         policy.action_distribution({env.possible_agents[0]: obs[env.possible_agents[0]]})
-    s = MARLSettings(n_copies=1, rollout_steps=2, residual_base="spread", residual_mode="offset")
+    s = MARLSettings(n_copies=1, rollout_steps=2, residual_base="spread")
     MARLTrainer(s, {}, seed=0).save(tmp_path / "final_model.pt")
     residual = make_policy(f"mappo:{tmp_path}", urban_canyon_v0.parallel_env())
     with pytest.raises(ValueError, match="residual policy"):
         residual.action_distribution(obs)
+
+
+def test_resuming_a_run_trained_with_a_removed_switch_is_refused(tmp_path, capsys) -> None:
+    """A checkpoint of an earlier version that explored with correlated noise cannot be
+    resumed (the setting is gone); its policy still flies, as it was trained to."""
+    from coopnav_env.agents.marl_nets import load_marl_checkpoint
+
+    out = tmp_path / "run"
+    args = ["train", "--backend", "torchrl", "--algorithm", "ippo", "--out", str(out)]
+    assert main([*args, "--timesteps", "160", "--checkpoint-freq", "0", *SMALL]) == 0
+    d = load_marl_checkpoint(out / "final_model.pt")
+    d["settings"] |= {"noise_correlation": 0.9, "noise_centred_entries": [0]}
+    torch.save(d, out / "final_model.pt")
+    capsys.readouterr()
+    assert main([*args, "--timesteps", "320", "--resume", "latest", *SMALL]) == 2
+    err = capsys.readouterr().err
+    assert "torchrl.noise_correlation=0.9, a setting removed from coopnav" in err, err
+    assert "cannot have it resumed" in err
+    policy = make_policy(f"ippo:{out}", urban_canyon_v0.parallel_env())
+    assert policy.recorded_settings["noise_correlation"] == 0.9
+    assert not hasattr(policy.settings, "noise_correlation")
+    # a fresh run that names a removed setting is refused, naming it
+    fresh = [*args[:-1], str(tmp_path / "fresh"), "--set", "torchrl.residual_wall_guard=false"]
+    assert main([*fresh, *SMALL]) == 2
+    assert "['residual_wall_guard'] were removed from coopnav" in capsys.readouterr().err

@@ -20,7 +20,7 @@ from coopnav_env.agents.marl_nets import MARLSettings, load_marl_checkpoint  # n
 from coopnav_env.envs.config import V1_DEFAULTS  # noqa: E402
 from coopnav_env.training.cli import main  # noqa: E402
 from coopnav_env.training.envs import EVAL_SEED_START  # noqa: E402
-from coopnav_env.training.marl import MARLTrainer, WarmStart  # noqa: E402
+from coopnav_env.training.torchrl_backend import MARLTrainer, WarmStart  # noqa: E402
 
 TINY = [
     "--backend",

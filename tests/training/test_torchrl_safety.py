@@ -22,7 +22,7 @@ torch = pytest.importorskip("torch")
 
 from coopnav_env.agents import make_policy  # noqa: E402
 from coopnav_env.agents.marl_nets import load_marl_checkpoint  # noqa: E402
-from coopnav_env.training import marl  # noqa: E402
+from coopnav_env.training import torchrl_backend  # noqa: E402
 from coopnav_env.training.cli import main  # noqa: E402
 
 TINY = [
@@ -62,14 +62,14 @@ def rows(out: Path) -> list[dict[str, str]]:
 
 def sigint_on_update(monkeypatch, *when: int) -> None:
     """Send SIGINT during the update that starts with ``trainer.iterations`` in ``when``."""
-    real = marl.MARLTrainer.update
+    real = torchrl_backend.MARLTrainer.update
 
     def update(self, data):
         if self.iterations in when:
             os.kill(os.getpid(), signal.SIGINT)
         return real(self, data)
 
-    monkeypatch.setattr(marl.MARLTrainer, "update", update)
+    monkeypatch.setattr(torchrl_backend.MARLTrainer, "update", update)
 
 
 # --------------------------------------------------------------------------------------------
@@ -132,7 +132,7 @@ def test_sigint_during_start_up_is_not_swallowed(tmp_path, monkeypatch, capsys):
     """SIGINT while the networks are built, inside a destructor (where Python ignores an
     exception, as in the reported ``Exception ignored in ObjectRef.__del__``): the run stops
     with exit 130 and a checkpoint, instead of training to the end."""
-    real = marl.build_modules
+    real = torchrl_backend.build_modules
 
     class Handle:
         def __del__(self):
@@ -143,7 +143,7 @@ def test_sigint_during_start_up_is_not_swallowed(tmp_path, monkeypatch, capsys):
         del h  # the signal arrives inside __del__
         return real(*args, **kw)
 
-    monkeypatch.setattr(marl, "build_modules", build_modules)
+    monkeypatch.setattr(torchrl_backend, "build_modules", build_modules)
     out = tmp_path / "run"
     assert train(out, "--timesteps", "160") == 130
     assert not (out / "final_model.pt").exists()
@@ -163,7 +163,7 @@ def test_interrupt_before_the_first_iteration_leaves_a_reusable_folder(
     """Two SIGINTs (the second stops at once) while the trainer is built, after config.yaml
     was written: nothing was trained, the folder is as before, and the same command runs
     (today: a rerun was refused while --resume said there was no checkpoint)."""
-    real = marl.build_modules
+    real = torchrl_backend.build_modules
 
     def build_modules(*args, **kw):
         assert (out / "config.yaml").is_file()  # written before the trainer is built
@@ -172,7 +172,7 @@ def test_interrupt_before_the_first_iteration_leaves_a_reusable_folder(
         return real(*args, **kw)
 
     out = tmp_path / "run"
-    monkeypatch.setattr(marl, "build_modules", build_modules)
+    monkeypatch.setattr(torchrl_backend, "build_modules", build_modules)
     assert train(out, "--timesteps", "32") == 130
     err = capsys.readouterr().err
     assert "nothing was trained" in err and "run the same command again" in err

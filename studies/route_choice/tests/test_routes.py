@@ -301,11 +301,10 @@ def p_path_mid(p, k: int) -> np.ndarray:
 
 
 def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_path):
-    from coopnav_env.training.cli import main
-    from coopnav_env.training.route_learning import arrays_to_episodes, episodes_to_arrays
+    from studies.route_choice.route_learning import arrays_to_episodes, episodes_to_arrays, main
 
     out = tmp_path / "run"
-    argv = ["train-routes", "--episodes", "8", "--block", "4", "--jobs", "1"]
+    argv = ["--episodes", "8", "--block", "4", "--jobs", "1"]
     argv += ["--first-seed", "0", "--out", str(out)]
     assert main(argv) == 0
     summary = json.loads((out / "run.json").read_text())
@@ -331,11 +330,11 @@ def test_train_routes_smoke_collects_fits_refuses_to_overwrite_and_resumes(tmp_p
     with np.load(part / "episodes.npz") as d:
         assert all(np.array_equal(d[k], arrays[k], equal_nan=True) for k in arrays)
     # another run's folder is refused
-    assert main([*argv[:5], "--first-seed", "10", "--out", str(part)]) == 2
-    assert main([*argv[:5], "--first-seed", "999999", "--out", str(tmp_path / "x")]) == 2
+    assert main([*argv[:4], "--first-seed", "10", "--out", str(part)]) == 2
+    assert main([*argv[:4], "--first-seed", "999999", "--out", str(tmp_path / "x")]) == 2
     # a base that cannot choose routes, or a bad turn limit, fails before anything is written
     for bad in (["--base", "random"], ["--max-turns", "12"]):
-        assert main([*argv[:5], *bad, "--out", str(tmp_path / "y")]) == 2
+        assert main([*argv[:4], *bad, "--out", str(tmp_path / "y")]) == 2
         assert not (tmp_path / "y").exists()
 
 
@@ -361,7 +360,11 @@ def test_best_sky_route_is_ceiling_on_the_route_with_the_fewest_poor_geometry_po
 
 
 def test_study_accepts_train_routes_runs(tmp_path):
-    from coopnav_env.training.marl_study import parse_runs, run_env, run_policy_name
+    from studies.learning_in_default_setting.learning_study import (
+        parse_runs,
+        run_env,
+        run_policy_name,
+    )
 
     run = tmp_path / "r"
     run.mkdir()
@@ -408,7 +411,7 @@ def test_route_features_for_any_column_spacing(spacing):
 
 
 def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean():
-    from coopnav_env.training.route_learning import (
+    from studies.route_choice.route_learning import (
         arrays_to_episodes,
         collect_episode,
         episodes_to_arrays,
@@ -431,10 +434,10 @@ def test_collect_episode_with_noise_replicates_keeps_each_flight_and_their_mean(
 
 
 def test_train_routes_with_noise_replicates_learns_from_the_mean_of_the_flights(tmp_path):
-    from coopnav_env.training.cli import main
+    from studies.route_choice.route_learning import main
 
     out = tmp_path / "run"
-    argv = ["train-routes", "--episodes", "8", "--jobs", "1", "--first-seed", "0"]
+    argv = ["--episodes", "8", "--jobs", "1", "--first-seed", "0"]
     assert main([*argv, "--noise-replicates", "2", "--out", str(out)]) == 0
     summary = json.loads((out / "run.json").read_text())
     assert summary["settings"]["noise_replicates"] == 2

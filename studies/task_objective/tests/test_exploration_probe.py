@@ -73,7 +73,9 @@ class _FixedGaussian:
     def __init__(self, rho: float, held: int) -> None:
         from coopnav_env.agents.marl_nets import MARLSettings
 
-        self.settings = MARLSettings(noise_correlation=rho, noise_correlated_decisions=held)
+        self.settings = MARLSettings()
+        # the noise an earlier coopnav trained with, as its checkpoints record it
+        self.recorded_settings = {"noise_correlation": rho, "noise_correlated_decisions": held}
         self.loc = np.array([0.2, -0.1, 0.0, 0.3, 0.5], dtype=np.float32)  # speed entry per UAV
 
     def reset(self, seed=None) -> None:

@@ -9,7 +9,11 @@ import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.training.marl_study import EpisodeResult, behaviour_descriptors, summarise
+from studies.learning_in_default_setting.learning_study import (
+    EpisodeResult,
+    behaviour_descriptors,
+    summarise,
+)
 
 
 def test_descriptors_of_a_known_formation() -> None:
@@ -94,7 +98,7 @@ def test_summary_ranks_by_the_chosen_score() -> None:
 
 
 def test_study_command_writes_its_report(tmp_path) -> None:
-    from coopnav_env.training.marl_study import main
+    from studies.learning_in_default_setting.learning_study import main
 
     out = tmp_path / "study"
     rc = main(
@@ -138,8 +142,15 @@ def test_study_command_writes_its_report(tmp_path) -> None:
 def test_runs_entries_are_checked(tmp_path) -> None:
     """``coopnav study --runs``: malformed entries, a name given twice and a folder without a
     model are errors that name the problem, raised before anything is flown."""
-    from coopnav_env.training.marl_study import main as study_main
-    from coopnav_env.training.marl_study import parse_named_lists
+    import argparse
+
+    from studies.learning_in_default_setting import learning_study as ls
+    from studies.learning_in_default_setting.learning_study import parse_named_lists
+
+    def study_main(argv):  # the script without its one-line error messages: the exceptions
+        parser = argparse.ArgumentParser()
+        ls.add_arguments(parser)
+        return ls.run(parser.parse_args(argv))
 
     assert parse_named_lists(["m=a,b", "n=c"], "--x", "F") == {"m": ["a", "b"], "n": ["c"]}
     # a policy's own options stay with it; a bare name after them is the next entry
@@ -160,3 +171,32 @@ def test_runs_entries_are_checked(tmp_path) -> None:
     with pytest.raises(ValueError, match=r"has none of final_model\.pt, final_model\.zip, route"):
         study_main(["--runs", f"m={tmp_path / 'missing'}", *out])
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--planner", "spread"], "--planner must"),
+        (["--planner-episodes", "0", "--runs", "a=,"], "--runs a=, names nothing after"),
+        (["--planner-episodes", "0", "--reps", "0"], "--reps must be >= 1, got 0"),
+        (
+            ["--planner-episodes", "0", "--runs", "a={tmp}/listrun"],
+            "listrun/run.json must hold a JSON object, got a list",
+        ),
+    ],
+)
+def test_bad_options_are_one_line_errors_before_flying(tmp_path, capsys, extra, message) -> None:
+    """(Formerly ``coopnav study`` refusals; the last two once ended in an internal error
+    after flying every episode.) Should one pass validation after all, the study flies one
+    episode of one heuristic."""
+    from studies.learning_in_default_setting.learning_study import main as study_main
+
+    (tmp_path / "listrun").mkdir()
+    (tmp_path / "listrun" / "final_model.zip").write_bytes(b"PK")
+    (tmp_path / "listrun" / "run.json").write_text("[1, 2]\n")
+    argv = ["--out", str(tmp_path / "study"), "--heuristics", "formation", "--episodes", "1"]
+    argv += [e.replace("{tmp}", str(tmp_path)) for e in extra]
+    assert study_main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("learning_study.py: error: ") and message in err, err
+    assert err.count("\n") == 1

@@ -1,4 +1,4 @@
-"""The BenchMARL task of ``coopnav_env.benchmarl_task``.
+"""The BenchMARL task of ``coopnav_env.training.benchmarl_backend``.
 
 BenchMARL lives in a venv of its own (the ``benchmarl`` extra: it pins ``torchrl<0.12``), so
 the tests that need it skip where it is not installed (``pytest.importorskip("benchmarl")``),
@@ -14,14 +14,15 @@ import sys
 
 import pytest
 
-MODULE = "coopnav_env.benchmarl_task"
+MODULE = "coopnav_env.training.benchmarl_backend"
 HAS_BENCHMARL = importlib.util.find_spec("benchmarl") is not None
 SMALL = {"n_uavs": 3, "max_steps": 10, "nav_team_weight": 1.0, "obs_agent_index": True}
 
 
 @pytest.fixture
 def task_module():
-    """``coopnav_env.benchmarl_task`` (the test skips without BenchMARL), one torch thread."""
+    """``coopnav_env.training.benchmarl_backend`` (the test skips without BenchMARL), one torch
+    thread."""
     pytest.importorskip("benchmarl")
     import torch
 

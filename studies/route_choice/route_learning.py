@@ -1,4 +1,6 @@
-"""``coopnav train-routes``: learn which route to fly from flown episodes.
+"""Learn which route to fly from flown episodes: the route models of this study.
+
+``python studies/route_choice/route_learning.py --help`` (formerly ``coopnav train-routes``).
 
 A learned *route model* (:class:`studies.route_choice.routes.RouteModel`) scores the equally short
 street routes of an episode by the satellites the city map predicts along them and picks the one it
@@ -27,7 +29,8 @@ present) is never overwritten.
 
 Example (the study's training set of seed 0, about 6 minutes on 2 cores)::
 
-    coopnav train-routes --seed 0 --episodes 1000 --env-set preset=urban_nlos_3dma \\
+    python studies/route_choice/route_learning.py --seed 0 --episodes 1000 \\
+        --env-set preset=urban_nlos_3dma \\
         dead_reckoning_noise=true max_fix_sigma_m=8 --out runs/routes/s0
 """
 
@@ -36,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -45,7 +49,7 @@ import numpy as np
 
 TRAIN_SEED_BASE = 500_000
 """Reset seed of the first training episode of ``--seed 0``; seed ``k`` starts
-``TRAIN_SEED_STRIDE * k`` later. Below the held-out range (``coopnav study``'s 1,000,000)."""
+``TRAIN_SEED_STRIDE * k`` later. Below the held-out range (reset seeds from 1,000,000)."""
 TRAIN_SEED_STRIDE = 100_000
 
 
@@ -235,7 +239,7 @@ def _read_run_json(path: Path) -> dict[str, Any]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``coopnav train-routes``."""
+    """Arguments of the script (:func:`main`)."""
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = __doc__.split("\n\n", 1)[1] if __doc__ else None
     parser.add_argument(
@@ -449,3 +453,25 @@ def _collect_and_fit(
         f"cross-validated choice {cv:+.3f} m against the mean route; saved {model_path}"
     )
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse the arguments (:func:`add_arguments`) and :func:`run`; returns the exit status
+    (2, with a one-line message, for a bad setting or output folder)."""
+    parser = argparse.ArgumentParser(
+        prog="python studies/route_choice/route_learning.py",
+        description=(__doc__ or "").split("\n\n")[0],
+    )
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    from coopnav_env.training.cli import usage_errors
+
+    try:
+        return int(run(args) or 0)
+    except usage_errors() as exc:  # a bad setting or folder: one line, exit status 2
+        print(f"route_learning.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

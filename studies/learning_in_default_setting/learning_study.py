@@ -1,7 +1,9 @@
 """The learning study: learned swarms against every heuristic and a privileged planner.
 
-``coopnav study`` writes a study's report (Markdown, JSON, figures) from training runs into
-``--out`` (default ``runs/study``; the committed ones are under ``studies/``), a folder of its
+``python studies/learning_in_default_setting/learning_study.py --help`` (formerly ``coopnav
+study``; the learning studies, route choice and split choice use it) writes a study's report
+(Markdown, JSON, figures) from training runs into ``--out`` (default ``runs/study``; the
+committed ones are under ``studies/``), a folder of its
 own that it claims before flying anything
 (:func:`coopnav_env.training.files.claim_output_folder`):
 
@@ -493,7 +495,7 @@ def _fmt_iv(d: Mapping[str, float], nd: int = 2) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``coopnav study``."""
+    """Arguments of the script (:func:`main`)."""
     parser.add_argument(
         "--runs",
         nargs="+",
@@ -693,7 +695,7 @@ def run_env(run: Path) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``coopnav study``: fly, summarise, write ``report.md``, ``report.json`` and figures."""
+    """Fly, summarise, write ``report.md``, ``report.json`` and figures."""
     t0 = time.perf_counter()
     for option, value, least in (
         ("--reps", args.reps, 1),
@@ -721,7 +723,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     # --out is claimed (locked, checked, recorded) before any episode is flown
     with claim_output_folder(
-        out, "coopnav study", settings, outputs=STUDY_OUTPUTS, overwrite=args.overwrite
+        out, STUDY_COMMAND, settings, outputs=STUDY_OUTPUTS, overwrite=args.overwrite
     ) as claim:
         claim.finish(_fly_and_report(args, groups, env_kwargs, seeds, units, out, t0))
     print(f"wrote {out / 'report.md'}", file=sys.stderr)
@@ -748,7 +750,11 @@ STUDY_OUTPUTS = (
     "errors.png",
     "trajectories.png",
 )
-"""The files ``coopnav study`` writes into its ``--out``."""
+"""The files the study writes into its ``--out``."""
+
+STUDY_COMMAND = "learning_study.py"
+"""The command a study's ``--out`` is claimed for
+(:func:`coopnav_env.training.files.claim_output_folder`)."""
 
 
 def _fly_and_report(
@@ -811,7 +817,7 @@ def _fly_and_report(
         "headroom": headroom,
         "runs": runs_info,
         "figures": figs,
-        "command": "coopnav study " + " ".join(sys.argv[2:]),
+        "command": f"python {Path(sys.argv[0]).name} " + " ".join(sys.argv[1:]),
         "wall_s": time.perf_counter() - t0,
     }
     atomic_write_text(out / "report.json", json.dumps(jsonable(data), indent=1, sort_keys=True))
@@ -958,12 +964,22 @@ def report_markdown(data: Mapping[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``coopnav study`` from the command line
-    (``python -m coopnav_env.training.marl_study``)."""
-    parser = argparse.ArgumentParser(prog="coopnav study", description=__doc__.split("\n")[0])
+    """Parse the arguments (:func:`add_arguments`) and :func:`run`; returns the exit status
+    (2, with a one-line message, for a bad setting or output folder)."""
+    parser = argparse.ArgumentParser(
+        prog="python studies/learning_in_default_setting/learning_study.py",
+        description=(__doc__ or "").split("\n")[0],
+    )
     add_arguments(parser)
-    return run(parser.parse_args(argv))
+    args = parser.parse_args(argv)
+    from coopnav_env.training.cli import usage_errors
+
+    try:
+        return int(run(args) or 0)
+    except usage_errors() as exc:  # a bad setting or folder: one line, exit status 2
+        print(f"learning_study.py: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
 
 
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
+if __name__ == "__main__":
+    sys.exit(main())
