@@ -4,7 +4,7 @@ A policy is any class with the ``coopnav_env.agents.base.Policy`` protocol: a ``
 ``reset(seed)`` and ``act(observations) -> actions`` over the PettingZoo dicts of the UAVs
 still flying. ``coopnav_env.agents.register_policy`` gives it a name, and
 ``coopnav_env.training.evaluate.evaluate`` flies it on the same held-out episodes as
-``formation`` (same cities, satellites and noise), with the same statistics as ``coopnav
+``column`` (same cities, satellites and noise), with the same statistics as ``coopnav
 evaluate``. Run it::
 
     python examples/evaluate_own_policy.py --episodes 4 --out runs/own_eval
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     # held-out reset seeds, as `coopnav evaluate` uses them (training stays below 1,000,000)
     seeds = [1_000_000 + i for i in range(args.episodes)]
     report = evaluate(
-        ["formation", "wall_shy", "wall_shy@altitude_m=15"],
+        ["column", "wall_shy", "wall_shy@altitude_m=15"],
         seeds,
         {"max_steps": args.max_steps},
         out=args.out,

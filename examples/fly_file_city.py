@@ -11,7 +11,7 @@ episode, or given as latitude/longitude. Run it::
 
 The two lines that fly your own city with the command line tool::
 
-    coopnav evaluate --policies formation wide --episodes 5 --env-set city=geojson:my.geojson \\
+    coopnav evaluate --policies column wide_column --episodes 5 --env-set city=geojson:my.geojson \\
         --out eval_my_city
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v1
 from coopnav_env.agents import make_policy
 
 
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--start", type=_lat_lon, default=None, help="start LAT,LON [deg]")
     parser.add_argument("--goal", type=_lat_lon, default=None, help="goal LAT,LON [deg]")
     parser.add_argument(
-        "--policies", nargs="+", default=["formation", "wide"], help="heuristics to fly"
+        "--policies", nargs="+", default=["column", "wide_column"], help="heuristics to fly"
     )
     parser.add_argument("--episodes", type=int, default=1, help="episodes per policy")
     parser.add_argument("--max-steps", type=int, default=200, help="steps per episode")
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
     for name in args.policies:
-        env = urban_canyon_v0.parallel_env(**settings)
+        env = urban_canyon_v1.parallel_env(**settings)
         if name == args.policies[0]:
             print(f"city {args.city}: origin {env.config.lat_deg:.6f}, {env.config.lon_deg:.6f}")
         policy = make_policy(name, env)

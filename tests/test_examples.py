@@ -33,11 +33,11 @@ CASES = {
     ),
     "fly_file_city.py": (
         ["--max-steps", "15", "--out", "{tmp}/frames"],
-        ["formation episode 0 (335 buildings): 15 steps", "frame written to"],
+        ["column episode 0 (335 buildings): 15 steps", "frame written to"],
     ),
     "evaluate_own_policy.py": (
         ["--episodes", "1", "--max-steps", "15", "--out", "{tmp}/eval"],
-        ["| formation |", "| wall_shy |", "| wall_shy@altitude_m=15 |"],
+        ["| column |", "| wall_shy |", "| wall_shy@altitude_m=15 |"],
     ),
 }
 
