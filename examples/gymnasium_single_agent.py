@@ -1,4 +1,4 @@
-"""One Gymnasium agent commands the whole swarm: ``gymnasium.make("coopnav/UrbanCanyonSwarm-v0")``.
+"""One Gymnasium agent commands the whole swarm: ``gymnasium.make("coopnav/UrbanCanyonSwarm-v1")``.
 
 ``import coopnav_env`` registers the id. The observation stacks every UAV's observation
 (``obs.reshape(n_uavs, obs_dim)``: one row per UAV, ``uav_0`` first), the action every UAV's
@@ -15,7 +15,7 @@ import argparse
 import gymnasium
 import numpy as np
 
-import coopnav_env  # registers coopnav/UrbanCanyonSwarm-v0
+import coopnav_env  # registers coopnav/UrbanCanyonSwarm-v1 (coopnav_env.GYM_ENV_ID)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,4 +1,4 @@
-"""Fly ``urban_canyon_v0`` with your own loop over the PettingZoo parallel API.
+"""Fly ``urban_canyon_v1`` with your own loop over the PettingZoo parallel API.
 
 A hand-written controller steers every UAV toward its next route waypoint at a chosen altitude.
 It reads the observation by name (``coopnav_env.envs.obs_layout``), not by index, so it keeps
@@ -13,7 +13,7 @@ import argparse
 
 import numpy as np
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v1
 from coopnav_env.envs import obs_layout
 
 
@@ -34,14 +34,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     # max_cycles is the conventional PettingZoo name of max_steps; both are accepted
-    env = urban_canyon_v0.parallel_env(n_uavs=5, max_cycles=args.max_steps)
+    env = urban_canyon_v1.parallel_env(n_uavs=5, max_cycles=args.max_steps)
     layout = obs_layout(env.config)  # what each entry of an observation means
     waypoint, altitude = layout["next_waypoint"], layout["altitude"]
     v_max = env.config.kinematics.max_speed_mps
 
     for episode in range(args.episodes):
         obs, infos = env.reset(seed=args.seed + episode)
-        total, errors, steps = 0.0, [], 0
+        score, errors, steps = 0.0, [], 0
         while env.agents:  # the episode ends for every UAV at once
             actions = {}
             for agent in env.agents:
@@ -51,12 +51,12 @@ def main(argv: list[str] | None = None) -> int:
                 velocity = np.array([*horizontal, 0.6 * climb])  # [m/s]
                 actions[agent] = np.clip(velocity / v_max, -1.0, 1.0).astype(np.float32)
             obs, rewards, terminations, _, infos = env.step(actions)
-            total += sum(rewards.values())
+            score += sum(rewards.values()) / len(rewards)  # the return, mean over UAVs
             errors += [info["nav_error_m"] for info in infos.values()]
             steps += 1
         how = "terminated: goal or crash" if any(terminations.values()) else "truncated"
         print(
-            f"episode {episode}: {steps} steps ({how}), swarm return {total:.1f}, "
+            f"episode {episode}: {steps} steps ({how}), score {score:.3f}, "
             f"mean 3-D navigation error {np.mean(errors):.2f} m"
         )
     env.close()

@@ -1,7 +1,7 @@
 """Train Stable-Baselines3 PPO from scratch on the Gymnasium view of the swarm.
 
 One policy sees every UAV's observation and commands the whole swarm
-(``coopnav/UrbanCanyonSwarm-v0``). SB3's own vector environment reports ``max_steps``
+(``coopnav/UrbanCanyonSwarm-v1``). SB3's own vector environment reports ``max_steps``
 truncation to PPO as a truncation, so value bootstrapping is right. Torch runs with one thread
 per process: on a 2-core machine its default thread pool made the same 2,560 PPO steps take
 50 s instead of 3.7 s. Run it (the default 10,240 steps took 13 s on a 2-core VM)::
@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 
-import coopnav_env  # registers coopnav/UrbanCanyonSwarm-v0
+import coopnav_env  # registers coopnav/UrbanCanyonSwarm-v1 (coopnav_env.GYM_ENV_ID)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         total += reward
         steps += 1
         done = terminated or truncated
-    print(f"evaluation episode: {steps} steps, mean reward per UAV and step {total / steps:.3f}")
+    # the reward is the UAVs' mean (reward="mean"): the episode's return is its score
+    print(f"evaluation episode: {steps} steps, score {total:.3f}")
     assert np.isfinite(total)
 
     if args.save is not None:  # write to a temporary name, then rename into place

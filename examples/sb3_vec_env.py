@@ -1,7 +1,7 @@
 """Train SB3 PPO with one policy shared by every UAV, on coopnav's seeded vector environment.
 
 ``coopnav_env.training.vec_env.urban_canyon_vec_env`` turns ``n_copies`` swarms of
-``urban_canyon_v0`` into a Stable-Baselines3 ``VecEnv`` with one slot per UAV (parameter
+``urban_canyon_v1`` into a Stable-Baselines3 ``VecEnv`` with one slot per UAV (parameter
 sharing, as ``coopnav train``).
 Unlike PettingZoo's published SuperSuit recipe it works with ``PPO(..., seed=0)`` (the same
 seed gives the same episodes and weights) and reports the episode length limit to PPO as
@@ -26,7 +26,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecMonitor
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v1
 from coopnav_env.training.vec_env import VEC_ENV_KINDS, urban_canyon_vec_env
 
 
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     # one evaluation episode of the shared policy on the PettingZoo env, a held-out seed
-    env = urban_canyon_v0.parallel_env(**env_kwargs)
+    env = urban_canyon_v1.parallel_env(**env_kwargs)
     obs, _ = env.reset(seed=1_000_000 + args.seed)
     errors = []
     while env.agents:

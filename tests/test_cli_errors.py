@@ -161,9 +161,9 @@ CASES: list[tuple[str, list[str], int, str]] = [
 @pytest.fixture
 def files(tmp_path):
     """The files the invocations name: malformed YAML/JSON, a file, damaged checkpoints."""
-    (tmp_path / "bad.yaml").write_text("urban_canyon_v0: [unclosed\n  timesteps: 3\n")
+    (tmp_path / "bad.yaml").write_text("urban_canyon_v1: [unclosed\n  timesteps: 3\n")
     (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
-    (tmp_path / "section.yaml").write_text("urban_canyon_v0: [1, 2]\n")
+    (tmp_path / "section.yaml").write_text("urban_canyon_v1: [1, 2]\n")
     (tmp_path / "list.json").write_text("[1, 2]\n")
     (tmp_path / "afile").write_text("x")
     (tmp_path / "empty.zip").write_bytes(b"")

@@ -215,7 +215,7 @@ class AlignmentReport:
 def alignment(
     policies: Sequence[str],
     seeds: Sequence[int],
-    settings: Sequence[str] = ("v0", "v1"),
+    settings: Sequence[str] = ("v1",),
     gammas: Sequence[float] = DEFAULT_GAMMAS,
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = False,
@@ -334,8 +334,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--settings",
         nargs="+",
-        default=["v0", "v1"],
-        help="reward settings: v0 (urban_canyon_v0's per-step reward), v1 (the score)",
+        default=["v1"],
+        help="reward settings: v1 (urban_canyon_v1, the score; default), v0 (the legacy "
+        "urban_canyon_v0's per-step reward)",
     )
     p.add_argument(
         "--env-set",

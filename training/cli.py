@@ -33,7 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "train": (
         "coopnav_env.training.train",
-        "train a shared policy on urban_canyon_v0 or v1 (SB3 PPO, RLlib, or TorchRL MAPPO/IPPO)",
+        "train a shared policy on urban_canyon_v1 (SB3 PPO, RLlib, or TorchRL MAPPO/IPPO)",
     ),
     "evaluate": (
         "coopnav_env.training.evaluate_cli",
@@ -97,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="coopnav",
         description=(
             "Cooperative GNSS navigation for UAV swarms in urban canyons: navigation demo, "
-            "paper reproduction, PPO training and evaluation on the urban_canyon_v0 environment."
+            "paper reproduction, PPO training and evaluation on the urban_canyon_v1 environment."
         ),
     )
     from coopnav_env import __version__

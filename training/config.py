@@ -50,7 +50,7 @@ from types import ModuleType
 from typing import Any
 
 from coopnav_env.envs.config import ExperimentalSetting
-from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
+from coopnav_env.training.envs import BATCHED_ENV_IDS, DEFAULT_ENV_ID, EVAL_SEED_START
 
 __all__ = [
     "BACKENDS",
@@ -281,7 +281,7 @@ class TrainConfig:
     ----------
     out : str
         Output directory (created).
-    env_id : str, default "urban_canyon_v0"
+    env_id : str, default "urban_canyon_v1"
         A module ``coopnav_env.<env_id>`` with a ``parallel_env`` function, or
         ``"package.module:callable"`` returning a PettingZoo ParallelEnv (used by the tests).
     timesteps : int, default 1_000_000
@@ -296,10 +296,10 @@ class TrainConfig:
     vec_env : {"auto", "supersuit", "batched"}, default "auto"
         How the swarm copies become one SB3 vector environment
         (:func:`~coopnav_env.training.vec_env.make_vec_env`): SuperSuit's per-agent adapters (any
-        environment, worker processes allowed), or ``urban_canyon_v0``'s batched vector
-        environment (one process; the same observations, rewards and seeding bit for bit, so
-        the same training). ``"auto"`` takes the batched one where it applies
-        (``urban_canyon_v0`` with ``num_cpus`` 0 or 1), SuperSuit otherwise
+        environment, worker processes allowed), or the batched vector environment of
+        ``urban_canyon_v1`` and ``urban_canyon_v0`` (one process; the same observations,
+        rewards and seeding bit for bit, so the same training). ``"auto"`` takes the batched
+        one where it applies (those environments with ``num_cpus`` 0 or 1), SuperSuit otherwise
         (:meth:`vec_env_kind`); ``benchmarks/bench_env.py`` measures both (the batched one
         steps 64 copies about 1.5x as fast; see ``docs/performance.md``).
     checkpoint_freq : int, default 50_000
@@ -490,11 +490,12 @@ class TrainConfig:
 
     def vec_env_kind(self) -> str:
         """The vector environment the SB3 backend builds: ``vec_env``, with ``"auto"``
-        resolved to ``"batched"`` for ``urban_canyon_v0`` in one process (``num_cpus`` 0 or
-        1), and to ``"supersuit"`` otherwise (another environment, worker processes)."""
+        resolved to ``"batched"`` for ``urban_canyon_v1`` and ``urban_canyon_v0`` in one
+        process (``num_cpus`` 0 or 1), and to ``"supersuit"`` otherwise (another environment,
+        worker processes)."""
         if self.vec_env != "auto":
             return self.vec_env
-        batched = self.env_id == DEFAULT_ENV_ID and self.num_cpus <= 1
+        batched = self.env_id in BATCHED_ENV_IDS and self.num_cpus <= 1
         return "batched" if batched else "supersuit"
 
     def to_dict(self) -> dict[str, Any]:

@@ -19,14 +19,20 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 __all__ = [
+    "BATCHED_ENV_IDS",
     "DEFAULT_ENV_ID",
     "EVAL_SEED_START",
     "heldout_seeds",
     "make_env_fn",
 ]
 
-DEFAULT_ENV_ID: str = "urban_canyon_v0"
-"""The environment of ``coopnav train`` and ``coopnav evaluate`` unless told otherwise."""
+DEFAULT_ENV_ID: str = "urban_canyon_v1"
+"""The environment of ``coopnav train`` and ``coopnav evaluate`` unless told otherwise.
+
+``urban_canyon_v0`` is legacy: its studies name it with ``--env-id urban_canyon_v0``."""
+
+BATCHED_ENV_IDS: tuple[str, ...] = ("urban_canyon_v1", "urban_canyon_v0")
+"""The environments whose swarm copies the SB3 backend steps as one batch (``vec_env=auto``)."""
 
 EVAL_SEED_START: int = 1_000_000
 """First held-out evaluation seed. Training reset seeds are ``< EVAL_SEED_START``."""

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
-from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
+from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START, make_env_fn
 from coopnav_env.training.files import (
     atomic_path,
     atomic_write_text,
@@ -406,13 +406,22 @@ class Report:
         se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else math.nan
         return float(d.mean()), se, int(d.size)
 
+    def return_is_score(self) -> bool:
+        """Whether the episode return is the task's score (``urban_canyon_v1`` with its own
+        reward); the table then titles that column "score"."""
+        scheme = self.env_kwargs.get("reward_scheme", "navigated_distance")
+        return self.env_id == "urban_canyon_v1" and scheme == "navigated_distance"
+
     def to_markdown(self) -> str:
-        """The summary table in GitHub Markdown."""
+        """The summary table in GitHub Markdown (the return column titled "score" where the
+        return is the score, :meth:`return_is_score`)."""
         integrity = any(
             math.isfinite(getattr(s, f)) for s in self.stats for f in _INTEGRITY_COLUMNS
         )
         table = [c for c in _TABLE if integrity or c[1] not in _INTEGRITY_COLUMNS]
         head = [t for t, _, _ in table]
+        if self.return_is_score():
+            head = ["score" if t == "return" else t for t in head]
         rows = [[_fmt(getattr(s, f), fmt) for _, f, fmt in table] for s in self.stats]
         lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
         lines += ["| " + " | ".join(r) + " |" for r in rows]
@@ -561,7 +570,7 @@ def evaluate(
     env_kwargs: Mapping[str, Any] | None = None,
     out: str | Path | None = None,
     *,
-    env_id: str = "urban_canyon_v0",
+    env_id: str = DEFAULT_ENV_ID,
     plots: bool = True,
     verbose: bool = False,
     env_source: str = "",
@@ -580,7 +589,7 @@ def evaluate(
         Environment settings (must match those a PPO policy was trained with).
     out : path or None
         Directory for the report files and plots; None writes nothing.
-    env_id : str, default "urban_canyon_v0"
+    env_id : str, default "urban_canyon_v1"
         As in :class:`coopnav_env.training.config.TrainConfig`.
     plots : bool, default True
         Write the CDF and trajectory plots (needs matplotlib).

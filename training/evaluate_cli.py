@@ -25,7 +25,12 @@ from typing import Any
 from coopnav_env.agents import action_frame_of
 from coopnav_env.training.compile_notice import compile_notice, warm_up_env
 from coopnav_env.training.config import apply_overrides, parse_settings_yaml
-from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds, make_env_fn
+from coopnav_env.training.envs import (
+    DEFAULT_ENV_ID,
+    EVAL_SEED_START,
+    heldout_seeds,
+    make_env_fn,
+)
 from coopnav_env.training.evaluate import DEFAULT_EPISODES, evaluate
 from coopnav_env.training.files import claim_output_folder, jsonable
 
@@ -101,7 +106,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--env-id",
         default=None,
         help="environment (default: the one a trained policy's run was trained in, else "
-        "urban_canyon_v0)",
+        "urban_canyon_v1)",
     )
     parser.add_argument(
         "--train-config",
@@ -195,7 +200,7 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
             source = "NO config.yaml of the trained policy's run: maybe not its training settings"
         else:
             source = ""
-    env_id = args.env_id or trained.get("env_id") or "urban_canyon_v0"
+    env_id = args.env_id or trained.get("env_id") or DEFAULT_ENV_ID
     env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
     if args.n_uavs is not None:
         env["n_uavs"] = args.n_uavs

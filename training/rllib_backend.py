@@ -66,7 +66,7 @@ from pathlib import Path
 from typing import Any
 
 from coopnav_env.training.config import TrainConfig
-from coopnav_env.training.envs import EVAL_SEED_START, make_env_fn
+from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START, make_env_fn
 from coopnav_env.training.files import atomic_path, write_json, write_yaml
 from coopnav_env.training.runs import (
     ProgressLog,
@@ -248,7 +248,7 @@ def make_rllib_env(env_config: Mapping[str, Any]) -> Any:
     """An RLlib ``MultiAgentEnv`` for ``{"env_id": ..., "env_kwargs": {...}}`` (env creator)."""
     from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 
-    env_id = str(env_config.get("env_id", "urban_canyon_v0"))
+    env_id = str(env_config.get("env_id", DEFAULT_ENV_ID))
     env = ParallelPettingZooEnv(make_env_fn(env_id, dict(env_config.get("env_kwargs") or {}))())
     # RLlib resets env runner i's vector env with seed + i, and gymnasium's vector env gives its
     # copy j seed + i + j: with E > 1 copies per runner, copy j + 1 of runner i and copy j of

@@ -77,8 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--vec-env",
         choices=VEC_ENVS,
         default=None,
-        help="vector environment: auto (default: batched for urban_canyon_v0 in one process, "
-        "else supersuit), supersuit, or batched (urban_canyon_v0 only)",
+        help="vector environment: auto (default: batched for urban_canyon_v1 or v0 in one "
+        "process, else supersuit), supersuit, or batched (urban_canyon_v1 or v0 only)",
     )
     parser.add_argument(
         "--checkpoint-freq",

@@ -379,9 +379,9 @@ def urban_canyon_vec_env(
     num_cpus: int = 1,
     **env_kwargs: Any,
 ) -> SeededVecEnv | BatchedVecEnv:
-    """The parameter-sharing SB3 vector env of ``n_copies`` ``urban_canyon_v0`` swarms.
+    """The parameter-sharing SB3 vector env of ``n_copies`` ``urban_canyon_v1`` swarms.
 
-    The entry point for training ``urban_canyon_v0`` with Stable-Baselines3 from your own
+    The entry point for training ``urban_canyon_v1`` with Stable-Baselines3 from your own
     script: ``PPO("MlpPolicy", urban_canyon_vec_env(2, n_uavs=3), seed=0)`` works and
     repeats, and time-limit truncation reaches PPO as ``TimeLimit.truncated`` (see
     :func:`make_vec_env`, which this calls, and the module docstring).
@@ -397,7 +397,7 @@ def urban_canyon_vec_env(
     num_cpus : int, default 1
         Worker processes of the ``"supersuit"`` kind (0 or 1: this process).
     **env_kwargs
-        Settings of ``urban_canyon_v0.parallel_env`` (:class:`coopnav_env.envs.config.
+        Settings of ``urban_canyon_v1.parallel_env`` (:class:`coopnav_env.envs.config.
         UrbanCanyonConfig`), e.g. ``n_uavs=3, max_steps=100``; an unknown or bad one raises
         ``ValueError`` naming it when the first swarm is built.
 
@@ -405,6 +405,6 @@ def urban_canyon_vec_env(
     -------
     SeededVecEnv or BatchedVecEnv
     """
-    from coopnav_env.training.envs import make_env_fn
+    from coopnav_env.training.envs import DEFAULT_ENV_ID, make_env_fn
 
-    return make_vec_env(make_env_fn("urban_canyon_v0", env_kwargs), n_copies, num_cpus, kind=kind)
+    return make_vec_env(make_env_fn(DEFAULT_ENV_ID, env_kwargs), n_copies, num_cpus, kind=kind)

@@ -52,13 +52,17 @@ V1_DEFAULTS: dict[str, Any] = {
     "progress_reward_weight": 0.0,
     "separation_penalty": 0.0,
     "contact_penalty": 0.0,
+    "crash_free_steps": 3,
 }
-"""The settings in which ``urban_canyon_v1`` differs from ``urban_canyon_v0``: its reward.
+"""The settings in which ``urban_canyon_v1`` differs from ``urban_canyon_v0``: its reward, and
+a crash-free start of 3 steps.
 
 ``goal_bonus=1``: arriving is worth as much as the whole route flown at zero error, so a swarm
 that arrives scores above one that does not, except one that arrives with nearly no
 navigation (quality below the shortfall of the other). ``collision_penalty=1``: a crash
 forfeits the rest of the route and the bonus, and costs 1 more, so crashing never pays.
+``crash_free_steps=3``: every episode lasts at least 4 steps (PettingZoo's ``max_cycles_test``
+flies random actions for ``max_cycles=4`` and counts on it).
 """
 
 
@@ -79,6 +83,12 @@ class UrbanCanyonConfig(ScenarioConfig):
         name PettingZoo's own environments, its ``max_cycles_test`` and BenchMARL use, is
         accepted as an alias by :func:`make_config` (and so by ``parallel_env(...)``), and
         :attr:`max_cycles` reads it.
+    crash_free_steps : int, default 0
+        A crash-free start: in the first ``crash_free_steps`` steps of an episode a UAV whose
+        move would touch a building is stopped where it was, with zero velocity (as on a
+        crash), but the episode goes on: no ``collided`` flag, no collision penalty. So no
+        episode ends before step ``crash_free_steps + 1`` (but by arriving). In [0, 100];
+        0 (v0) leaves every step as it was; ``urban_canyon_v1`` uses 3.
     obs_neighbours : int, default 4
         Neighbour slots ``K`` in each observation (nearest first, padded), in [0, 64].
     obs_sky_azimuths : int, default 8
@@ -206,6 +216,7 @@ class UrbanCanyonConfig(ScenarioConfig):
     """
 
     max_steps: int = 200
+    crash_free_steps: int = 0
     obs_neighbours: int = 4
     obs_sky_azimuths: int = 8
     obs_sigma_max_m: float = 20.0
@@ -239,6 +250,7 @@ class UrbanCanyonConfig(ScenarioConfig):
         super().__post_init__()
         o = type(self).__name__
         _check_int(o, "max_steps", self.max_steps, 1, 100_000)
+        _check_int(o, "crash_free_steps", self.crash_free_steps, 0, 100)
         _check_int(o, "obs_neighbours", self.obs_neighbours, 0, 64)
         _check_int(o, "obs_sky_azimuths", self.obs_sky_azimuths, 1, 72)
         _check_real(o, "obs_sigma_max_m", self.obs_sigma_max_m, 0.0, 1e4, lo_open=True)
@@ -472,7 +484,7 @@ def make_config(config: UrbanCanyonConfig | None = None, **overrides: Any) -> Ur
     unknown = sorted(set(overrides) - set(valid))
     if unknown:
         raise ValueError(
-            f"unknown urban_canyon_v0 argument(s) {unknown}; valid arguments are "
+            f"unknown urban_canyon argument(s) {unknown}; valid arguments are "
             f"render_mode, config, preset, {', '.join(valid)} (and max_cycles, an alias of "
             "max_steps)"
         )

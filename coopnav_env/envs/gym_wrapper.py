@@ -1,14 +1,15 @@
-"""A single-agent Gymnasium view of ``urban_canyon_v0``: one agent commands the whole swarm.
+"""A single-agent Gymnasium view of ``urban_canyon_v1``: one agent commands the whole swarm.
 
-:class:`UrbanCanyonSwarmEnv` wraps the PettingZoo parallel environment so that single-agent
+:class:`UrbanCanyonSwarmV1Env` wraps the PettingZoo parallel environment so that single-agent
 code (``gymnasium.make``, Stable-Baselines3, any Gymnasium-compatible trainer) can drive the
 swarm with one policy. It is registered with Gymnasium when :mod:`coopnav_env` is imported, as
-:data:`GYM_ENV_ID`::
+:data:`GYM_ENV_ID`; :class:`UrbanCanyonSwarmEnv` is the same view of the legacy
+``urban_canyon_v0`` (:data:`GYM_ENV_ID_V0`, warns once per process)::
 
     import gymnasium
     import coopnav_env  # registers the id
 
-    env = gymnasium.make("coopnav/UrbanCanyonSwarm-v0", n_uavs=3, reward="sum")
+    env = gymnasium.make("coopnav/UrbanCanyonSwarm-v1", n_uavs=3, reward="sum")
     obs, info = env.reset(seed=0)
 
 Spaces (``N = n_uavs``, ``D = obs_dim = 20 + 2A + 4K`` plus the optional blocks of
@@ -31,7 +32,7 @@ Episode end: ``terminated`` when the swarm episode terminates (a crash, or the w
 the goal area), ``truncated`` when it is truncated at ``max_steps`` (alias ``max_cycles``); the
 wrapper does not add a ``TimeLimit`` of its own.
 
-Departed agents: ``urban_canyon_v0`` ends the episode for every UAV at once (a crash
+Departed agents: ``urban_canyon_v1`` (as v0) ends the episode for every UAV at once (a crash
 terminates everyone), so today every row is always filled. Should an agent leave
 ``env.agents`` while the others fly on (PettingZoo allows it), the stack keeps its fixed size:
 the agent's row holds its final observation at the step it leaves, then zeros (zero lies inside
@@ -54,13 +55,14 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from coopnav_env import GYM_ENV_ID, GYM_ENV_ID_V1
+from coopnav_env import GYM_ENV_ID, GYM_ENV_ID_V0, GYM_ENV_ID_V1
 from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.observation_layout import ObsLayout, obs_layout
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv, UrbanCanyonV1Env
 
 __all__ = [
     "GYM_ENV_ID",
+    "GYM_ENV_ID_V0",
     "GYM_ENV_ID_V1",
     "REWARD_MODES",
     "UrbanCanyonSwarmEnv",
@@ -72,7 +74,8 @@ REWARD_MODES: tuple[str, ...] = ("mean", "sum")
 
 
 class UrbanCanyonSwarmEnv(gymnasium.Env):
-    """``urban_canyon_v0`` as one Gymnasium agent that commands every UAV (see module doc).
+    """The legacy ``urban_canyon_v0`` as one Gymnasium agent that commands every UAV (see
+    module doc); :class:`UrbanCanyonSwarmV1Env` is the same view of ``urban_canyon_v1``.
 
     Parameters
     ----------
@@ -84,7 +87,7 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
         Complete configuration; default ``UrbanCanyonConfig()``.
     **fields
         Any :class:`~coopnav_env.envs.UrbanCanyonConfig` field (and ``max_cycles``), as for
-        ``urban_canyon_v0.parallel_env``; an unknown name raises ``ValueError``.
+        ``parallel_env`` of the environment's module; an unknown name raises ``ValueError``.
 
     Attributes
     ----------
@@ -99,7 +102,7 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
         "render_fps": UrbanCanyonEnv.metadata["render_fps"],
     }
     parallel_class: ClassVar[type[UrbanCanyonEnv]] = UrbanCanyonEnv
-    """The PettingZoo environment underneath (``urban_canyon_v0``'s)."""
+    """The PettingZoo environment underneath (``urban_canyon_v0``'s here, legacy)."""
 
     def __init__(
         self,
@@ -110,6 +113,10 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
     ) -> None:
         if reward not in REWARD_MODES:
             raise ValueError(f"reward must be one of {REWARD_MODES}, got {reward!r}")
+        if self.parallel_class is UrbanCanyonEnv:
+            from coopnav_env.urban_canyon_v0 import warn_legacy
+
+            warn_legacy()
         self.par_env = self.parallel_class(config=config, render_mode=render_mode, **fields)
         self.config: UrbanCanyonConfig = self.par_env.config
         self.render_mode = render_mode
@@ -194,7 +201,8 @@ class UrbanCanyonSwarmEnv(gymnasium.Env):
 
 
 class UrbanCanyonSwarmV1Env(UrbanCanyonSwarmEnv):
-    """``urban_canyon_v1`` as one Gymnasium agent (``coopnav/UrbanCanyonSwarm-v1``).
+    """``urban_canyon_v1`` as one Gymnasium agent (``coopnav/UrbanCanyonSwarm-v1``, the
+    default id :data:`GYM_ENV_ID`).
 
     As :class:`UrbanCanyonSwarmEnv` over :class:`~coopnav_env.envs.urban_canyon.
     UrbanCanyonV1Env`: with ``reward="mean"`` (the default) the undiscounted return of an

@@ -1,4 +1,4 @@
-"""Frames of ``urban_canyon_v0``: city map, swarm close-up with error ellipses, sky plot.
+"""Frames of ``urban_canyon_v1`` (and v0): city map, swarm close-up with error ellipses, sky plot.
 
 matplotlib is imported inside the functions only (an optional dependency, ``coopnav[plot]``).
 A frame has four panels:
@@ -18,6 +18,7 @@ A frame has four panels:
 
 from __future__ import annotations
 
+import datetime
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,7 @@ import numpy as np
 from coopnav_env.constants import SYSTEMS
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
-__all__ = ["close_window", "render_frame", "show_frame"]
+__all__ = ["close_window", "gnss_time_text", "render_frame", "show_frame"]
 
 SYSTEM_COLOURS = {"GPS": "#1f77b4", "BDS": "#d62728"}
 SOURCE_COLOURS = {
@@ -49,6 +50,34 @@ def _ellipse_2sigma(cov_en: np.ndarray) -> tuple[float, float, float]:
     return 4.0 * float(np.sqrt(lam[1])), 4.0 * float(np.sqrt(lam[0])), angle
 
 
+def gnss_time_text(constellation: Any, t_s: float) -> str:
+    """The GNSS time of an epoch as the frame's title shows it.
+
+    Parameters
+    ----------
+    constellation : Constellation or BroadcastConstellation
+        The world's satellites. A sky from a navigation file
+        (:class:`~coopnav_env.gnss.rinex.BroadcastConstellation`) knows the date: its time is
+        shown as the UTC time of day (GPS time less the leap seconds), ``"GNSS 08:00:47 UTC"``.
+    t_s : float
+        The epoch's GNSS time ``t_s`` [s] (from the start of the file's coverage for a file
+        sky; of the nominal constellation's clock otherwise, shown as ``"GNSS t = 115247 s"``).
+    """
+    reference_gps_s = getattr(constellation, "reference_gps_s", None)
+    if reference_gps_s is None:
+        return f"GNSS t = {t_s:.0f} s"
+    from coopnav_env.gnss.rinex import gps_seconds
+
+    gps_s = float(reference_gps_s) + float(t_s)
+    naive = _GPS_EPOCH + datetime.timedelta(seconds=gps_s)  # GPS time read as if it were UTC
+    leap_s = gps_seconds(naive) - gps_s  # GPS - UTC at that date
+    utc = naive - datetime.timedelta(seconds=leap_s)
+    return f"GNSS {utc:%H:%M:%S} UTC"
+
+
+_GPS_EPOCH = datetime.datetime(1980, 1, 6, tzinfo=datetime.timezone.utc)
+
+
 def render_frame(
     world: UrbanWorld,
     epoch: Epoch,
@@ -58,6 +87,7 @@ def render_frame(
     step: int = 0,
     max_steps: int | None = None,
     size_px: tuple[int, int] = (1280, 640),
+    env_name: str = "urban_canyon",
 ) -> np.ndarray:
     """Draw one epoch.
 
@@ -75,6 +105,11 @@ def render_frame(
         Shown in the title.
     size_px : (int, int)
         Width and height of the frame [pixel].
+    env_name : str
+        The environment's id, first in the title (``metadata["name"]``, e.g.
+        ``"urban_canyon_v1"``). The title then shows the GNSS time: the UTC time of day for
+        a sky from a navigation file (``constellation="rinex:..."``, :func:`gnss_time_text`),
+        else the seconds of the nominal constellation's clock.
 
     Returns
     -------
@@ -118,7 +153,8 @@ def render_frame(
     fig.text(
         0.012,
         0.972,
-        f"urban_canyon_v0  ·  {city} city  ·  {n} UAVs  ·  {steps}  ·  GNSS t = {epoch.t_s:.0f} s",
+        f"{env_name}  ·  {city} city  ·  {n} UAVs  ·  {steps}  ·  "
+        f"{gnss_time_text(world.constellation, epoch.t_s)}",
         fontsize=11,
         weight="bold",
         va="center",

@@ -20,6 +20,7 @@ true position error, 3 entries
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
@@ -345,6 +346,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 cfg,
             )
         ep = self.world.step(cmd, self._rng)
+        if self._steps < cfg.crash_free_steps and ep.collided.any():
+            # the crash-free start: the world stopped the UAV, the episode goes on
+            ep = dataclasses.replace(ep, collided=np.zeros_like(ep.collided))
+            self.world.last = ep
         self._epoch = ep
         self._steps += 1
         if self.render_mode is not None:
@@ -838,6 +843,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             step=self._steps,
             max_steps=self.config.max_steps,
             size_px=(self.config.render_width_px, self.config.render_height_px),
+            env_name=self.metadata["name"],
         )
         if self.render_mode == "human":
             self._window = show_frame(frame, self._window, self.metadata["render_fps"])

@@ -1,4 +1,5 @@
-"""The Gymnasium single-agent view of urban_canyon_v0 (coopnav/UrbanCanyonSwarm-v0)."""
+"""The Gymnasium single-agent view of urban_canyon_v1 (coopnav/UrbanCanyonSwarm-v1, the default
+id) and of the legacy urban_canyon_v0 (coopnav/UrbanCanyonSwarm-v0)."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 
-from coopnav_env import GYM_ENV_ID, GYM_ENV_ID_V1, urban_canyon_v0
-from coopnav_env.envs.gym_wrapper import UrbanCanyonSwarmEnv
+from coopnav_env import GYM_ENV_ID, GYM_ENV_ID_V0, GYM_ENV_ID_V1, urban_canyon_v1
+from coopnav_env.envs.gym_wrapper import UrbanCanyonSwarmEnv, UrbanCanyonSwarmV1Env
+from coopnav_env.urban_canyon_v0 import LEGACY_WARNING
 
 
 def _episode(env, seed: int, action_seed: int, steps: int = 400) -> list:
@@ -34,9 +36,12 @@ def _episode(env, seed: int, action_seed: int, steps: int = 400) -> list:
 def test_registered_on_import_without_heavy_imports() -> None:
     code = (
         "import sys, gymnasium, coopnav_env\n"
+        "assert coopnav_env.GYM_ENV_ID == 'coopnav/UrbanCanyonSwarm-v1'\n"
         "assert coopnav_env.GYM_ENV_ID in gymnasium.registry\n"
         "spec = gymnasium.spec(coopnav_env.GYM_ENV_ID)\n"
-        "assert spec.entry_point == 'coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv'\n"
+        "assert spec.entry_point == 'coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmV1Env'\n"
+        "legacy = gymnasium.spec(coopnav_env.GYM_ENV_ID_V0)\n"
+        "assert legacy.entry_point == 'coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv'\n"
         "assert spec.max_episode_steps is None\n"  # the env truncates itself
         "heavy = [m for m in ('numba', 'pettingzoo', 'coopnav_env.envs') if m in sys.modules]\n"
         "assert not heavy, heavy\n"
@@ -50,7 +55,7 @@ def test_registered_on_import_without_heavy_imports() -> None:
 
 def test_gymnasium_env_checker_passes() -> None:
     env = gymnasium.make(GYM_ENV_ID)
-    assert isinstance(env.unwrapped, UrbanCanyonSwarmEnv)
+    assert isinstance(env.unwrapped, UrbanCanyonSwarmV1Env)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         gym_check_env(env)
@@ -61,15 +66,16 @@ def test_gymnasium_env_checker_passes() -> None:
     assert len(messages) == 1
 
 
-@pytest.mark.parametrize("env_id", [GYM_ENV_ID, GYM_ENV_ID_V1])
+@pytest.mark.parametrize("env_id", [GYM_ENV_ID_V0, GYM_ENV_ID_V1])
 def test_stable_baselines3_env_checker_passes(env_id: str) -> None:
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sb3_check_env(gymnasium.make(env_id, n_uavs=3), warn=True)
-    messages = [str(w.message) for w in caught]
-    if env_id == GYM_ENV_ID:  # Gymnasium's own note that v1 supersedes v0, and nothing else
+    # (the legacy warning of v0 comes once per process: whether here depends on test order)
+    messages = [str(w.message) for w in caught if str(w.message) != LEGACY_WARNING]
+    if env_id == GYM_ENV_ID_V0:  # Gymnasium's own note that v1 supersedes v0, and nothing else
         assert len(messages) == 1 and "out of date" in messages[0] and "v1" in messages[0]
     else:
         assert messages == []
@@ -93,7 +99,7 @@ def test_spaces_and_kwargs_are_forwarded() -> None:
         _, _, terminated, truncated, info = env.step(np.zeros(9, dtype=np.float32))
         assert not terminated and truncated == (step == 6)
     assert not info["active"].any()
-    with pytest.raises(ValueError, match="unknown urban_canyon_v0 argument"):
+    with pytest.raises(ValueError, match="unknown urban_canyon argument"):
         gymnasium.make(GYM_ENV_ID, n_drones=3)
     with pytest.raises(ValueError, match=r"reward must be one of \('mean', 'sum'\)"):
         gymnasium.make(GYM_ENV_ID, reward="max")
@@ -107,7 +113,7 @@ def test_same_seed_same_episode_and_equal_to_the_pettingzoo_episode() -> None:
     assert pickle.dumps(ep_a[0]) != pickle.dumps(_episode(b, seed=8, action_seed=1)[0])
 
     # the same episode through the PettingZoo API: stacked observations, mean reward
-    par = urban_canyon_v0.parallel_env(max_steps=60)
+    par = urban_canyon_v1.parallel_env(max_steps=60)
     rng = np.random.default_rng(1)
     obs, _ = par.reset(seed=7)
     agents = par.possible_agents
@@ -119,7 +125,7 @@ def test_same_seed_same_episode_and_equal_to_the_pettingzoo_episode() -> None:
         assert np.array_equal(per_agent, [rewards[x] for x in agents])
         assert reward_g == pytest.approx(np.mean(per_agent), rel=1e-12)
         assert (term_g, trunc_g) == (any(terms.values()), any(truncs.values()))
-    assert not par.agents and len(ep_a) > 10  # 11 steps, ended by a crash (terminated)
+    assert not par.agents and len(ep_a) > 10  # ended by a crash (terminated)
 
 
 def test_sum_reward_and_infos() -> None:
@@ -138,7 +144,7 @@ def test_sum_reward_and_infos() -> None:
 
 class _DepartingStub:
     """A PettingZoo-style parallel env in which ``uav_1`` leaves after the first step while the
-    others fly on (urban_canyon_v0 never does this; PettingZoo allows it)."""
+    others fly on (urban_canyon_v1 never does this; PettingZoo allows it)."""
 
     def __init__(self) -> None:
         self.possible_agents = ["uav_0", "uav_1", "uav_2"]
@@ -189,3 +195,22 @@ def test_rgb_array_render_is_the_pettingzoo_frame() -> None:
     frame = env.render()
     assert frame.shape == (640, 1280, 3) and frame.dtype == np.uint8
     env.close()
+
+
+def test_the_legacy_v0_id_warns_once_per_process() -> None:
+    """Making ``coopnav/UrbanCanyonSwarm-v0`` warns (FutureWarning) the first time only; v1
+    never does."""
+    code = (
+        "import warnings, gymnasium, coopnav_env\n"
+        "from coopnav_env.urban_canyon_v0 import LEGACY_WARNING\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        "    gymnasium.make(coopnav_env.GYM_ENV_ID, n_uavs=2)\n"
+        "    assert not [w for w in caught if w.category is FutureWarning], caught\n"
+        "    gymnasium.make(coopnav_env.GYM_ENV_ID_V0, n_uavs=2)\n"
+        "    gymnasium.make(coopnav_env.GYM_ENV_ID_V0, n_uavs=2)\n"
+        "legacy = [w for w in caught if str(w.message) == LEGACY_WARNING]\n"
+        "assert len(legacy) == 1 and legacy[0].category is FutureWarning, caught\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr

@@ -1,5 +1,6 @@
 """The PettingZoo environment urban_canyon_v0: API, spaces, determinism, pickling, vector
-wrappers, rewards, errors and rendering."""
+wrappers, rewards, errors and rendering; PettingZoo's API tests and full heuristic episodes of
+urban_canyon_v1 too."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v0, urban_canyon_v1
 from coopnav_env.envs import REWARD_TERMS, UrbanCanyonConfig, UrbanCanyonEnv, config_field_names
 from coopnav_env.envs.urban_canyon import INFO_KEYS, NO_FIX_ERROR_M, fix_error_m
 from coopnav_env.nav import NavStatus
@@ -56,8 +57,39 @@ def _checker(env):
 # ---- PettingZoo's own tests ---------------------------------------------------------------------
 
 
-def test_parallel_api() -> None:
-    parallel_api_test(urban_canyon_v0.parallel_env(), num_cycles=300)
+@pytest.mark.parametrize("module", [urban_canyon_v1, urban_canyon_v0], ids=["v1", "v0"])
+def test_parallel_api(module) -> None:
+    parallel_api_test(module.parallel_env(), num_cycles=300)
+
+
+@pytest.mark.parametrize(("seed", "max_steps"), [(0, 200), (1, 200), (4, 40)])
+def test_full_v1_episodes_flown_by_the_column_heuristic(seed: int, max_steps: int) -> None:
+    """Random actions crash within a few steps, so PettingZoo's own tests above never see a
+    long episode: here the ``column`` heuristic flies whole v1 episodes, to the goal (at the
+    default length) or to truncation (40 steps), every observation inside its space, the
+    infos finite, and the return the score's size (at most 2: route plus goal bonus)."""
+    from coopnav_env.agents import make_policy
+
+    env = urban_canyon_v1.parallel_env(max_steps=max_steps)
+    policy = make_policy("column", env)
+    check = _checker(env)
+    obs, _ = env.reset(seed=seed)
+    policy.reset(seed=seed)
+    check(obs)
+    steps, score = 0, 0.0
+    while env.agents:
+        obs, rewards, terms, truncs, infos = env.step(policy.act(obs))
+        steps += 1
+        check(obs)
+        score += float(np.mean(list(rewards.values())))
+        assert all(math.isfinite(i["nav_error_m"]) for i in infos.values())
+        assert not any(i["collided"] for i in infos.values())
+    if max_steps == 200:  # arrived: every UAV in the goal area, terminated well before the limit
+        assert all(terms.values()) and not any(truncs.values()) and 30 < steps < max_steps
+        assert all(i["in_goal"] for i in infos.values()) and 1.0 < score <= 2.0
+    else:  # truncated at the limit, on the way
+        assert all(truncs.values()) and not any(terms.values()) and steps == max_steps
+        assert 0.0 < score < 1.0
 
 
 def test_parallel_seed() -> None:
@@ -431,7 +463,7 @@ def test_team_credit_mixes_the_navigation_term_with_the_swarm_mean() -> None:
         ({"obs_neighbours": 100}, r"obs_neighbours must be an integer in \[0, 64\]"),
         ({"render_sky_uav": 5}, r"render_sky_uav must be an integer in \[-1, 4\]"),
         ({"render_mode": "ascii"}, r"render_mode must be None or one of"),
-        ({"n_drones": 3}, r"unknown urban_canyon_v0 argument\(s\) \['n_drones'\].*n_uavs"),
+        ({"n_drones": 3}, r"unknown urban_canyon argument\(s\) \['n_drones'\].*n_uavs"),
     ],
 )
 def test_bad_configuration_raises(kwargs, match) -> None:

@@ -18,7 +18,7 @@ from coopnav_env.training.runs import recorded_config
 from coopnav_env.training.train import config_from_args
 
 SECTION = """\
-urban_canyon_v0:
+urban_canyon_v1:
   timesteps: 64
   progress_bar: no
   env:

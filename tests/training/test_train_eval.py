@@ -141,7 +141,7 @@ def test_overrides_parse_yaml_values_and_nest():
 
 def test_packaged_config_is_valid():
     cfg = TrainConfig.from_dict({**load_config(), "out": "x"})
-    assert cfg.env_id == "urban_canyon_v0" and cfg.timesteps > 0 and "n_steps" in cfg.ppo
+    assert cfg.env_id == "urban_canyon_v1" and cfg.timesteps > 0 and "n_steps" in cfg.ppo
 
 
 def test_cli_flags_override_yaml(tmp_path):
@@ -429,9 +429,9 @@ def test_urban_evaluation_is_deterministic():
 
 @needs_env
 def test_urban_bad_env_setting_is_a_clear_error(tmp_path):
-    with pytest.raises(ValueError, match="unknown urban_canyon_v0 argument"):
+    with pytest.raises(ValueError, match="unknown urban_canyon argument"):
         train(urban_cfg(tmp_path, env={"n_uav": 3}))
-    with pytest.raises(ValueError, match="unknown urban_canyon_v0 argument"):
+    with pytest.raises(ValueError, match="unknown urban_canyon argument"):
         evaluate(["random"], heldout_seeds(1), {"bogus": 1}, None)
 
 
