@@ -57,9 +57,11 @@ RESUME_KEYS: tuple[str, ...] = (
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
-"""The shipped TorchRL actors (``<algorithm>_<seed>`` folders, ``final_model.pt`` holds the actor
-only), trained for ``studies/learning_in_default_setting`` and
-``studies/learning_under_degraded_navigation``."""
+"""The shipped TorchRL actors, one folder ``<algorithm>_<name>`` each (``final_model.pt`` holds
+the actor only, ``config.yaml`` and ``run.json`` its training run): ``mappo:pretrained/<name>``
+flies ``mappo_<name>``, e.g. ``mappo:pretrained/route_s0`` the policy of training seed 0 of the
+packaged configuration ``mappo_route``, ``mappo:pretrained/route_scratch_s0`` that of
+``mappo_route_scratch``."""
 
 
 def resolve_marl_checkpoint(path: str | Path, algorithm: str = "mappo") -> Path:
