@@ -606,6 +606,18 @@ def test_shipped_policies_load_and_fly(name) -> None:
         make_policy("mappo:pretrained/s9", env)
 
 
+def test_the_recipe_policies_are_named_by_their_folder() -> None:
+    from coopnav_env.agents.marl_policy import resolve_marl_checkpoint
+
+    for k in range(3):
+        for name in (f"route_s{k}", f"route_scratch_s{k}"):
+            path = resolve_marl_checkpoint(f"pretrained/{name}", "mappo")
+            assert path.name == "final_model.pt" and path.parent.name == f"mappo_{name}"
+            assert (path.parent / "config.yaml").is_file()  # evaluate flies it in its run's env
+    with pytest.raises(FileNotFoundError, match=r"shipped: .*mappo:pretrained/route_scratch_s2"):
+        resolve_marl_checkpoint("pretrained/s9", "mappo")
+
+
 def test_train_and_evaluate_with_satellite_sectors(tmp_path) -> None:
     """``--env-set obs_satellite_sectors=true``: the actor's input grows by the 2 A entries,
     the run records the setting, evaluation rebuilds that environment, and the policy refuses
