@@ -56,28 +56,32 @@ RESUME_KEYS: tuple[str, ...] = (
 
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
-"""The shipped TorchRL actors (``<algorithm>_<seed>`` folders, ``final_model.pt`` holds the actor
-only), trained for ``studies/learning_in_default_setting`` and
-``studies/learning_under_degraded_navigation``."""
+"""The shipped TorchRL actors, one folder ``<algorithm>_<name>`` each (``final_model.pt`` holds
+the actor only, ``config.yaml`` and ``run.json`` its training run): ``mappo:pretrained/<name>``
+flies ``mappo_<name>``, e.g. ``mappo:pretrained/route_s0`` the policy of training seed 0 of the
+packaged configuration ``mappo_route``, ``mappo:pretrained/route_scratch_s0`` that of
+``mappo_route_scratch``."""
 
 
 def resolve_marl_checkpoint(path: str | Path, algorithm: str = "mappo") -> Path:
     """The checkpoint file of ``path``: the file itself, or ``final_model.pt`` of a run folder.
 
-    ``pretrained`` names the shipped policy of training seed 0 of ``algorithm``
-    (``agents/pretrained/<algorithm>_s0``), ``pretrained/s<k>`` the one of seed ``k``.
+    ``pretrained/<name>`` names the shipped policy in the folder ``<algorithm>_<name>`` of
+    :data:`PRETRAINED_DIR` (``mappo:pretrained/route_s0``: ``mappo_route_s0``), and
+    ``pretrained`` alone that of ``pretrained/s0``.
     """
     text = str(path)
     if text == "pretrained" or text.startswith("pretrained/"):
         seed = text.partition("/")[2] or "s0"
         folder = PRETRAINED_DIR / f"{algorithm}_{seed}"
         if not folder.is_dir():
-            have = (
-                sorted(p.name for p in PRETRAINED_DIR.glob("*_s*"))
-                if PRETRAINED_DIR.is_dir()
-                else []
+            have = sorted(
+                f"{algorithm}:pretrained/{p.parent.name.removeprefix(algorithm + '_')}"
+                for p in PRETRAINED_DIR.glob(f"{algorithm}_*/final_model.pt")
             )
-            raise FileNotFoundError(f"no shipped policy {algorithm}:{text}; shipped: {have}")
+            raise FileNotFoundError(
+                f"no shipped policy {algorithm}:{text}; shipped: {', '.join(have) or 'none'}"
+            )
         path = folder
     p = Path(path)
     if p.is_dir():

@@ -14,7 +14,17 @@ in training: ``coopnav train`` keeps its reset seeds below
   once, which ends the episode), the UAV goal rate (UAVs that entered the goal area at some
   step), collisions (episodes ended by a crash), satellites received per UAV and by the UAV
   with its neighbours, the error of the estimate each UAV actually used (cooperative, else
-  standalone, else dead reckoning), episode return and length.
+  standalone, else dead reckoning), episode return and length;
+* what the swarm flew like: the cruise spacing, the mean distance of a UAV to its nearest
+  neighbour over the middle 60 % of an episode's steps (:data:`CRUISE`, leaving out the start
+  lattice and the closing at the goal).
+
+Several policies can be pooled as one *method* (one policy per training seed): a method's row
+summarises all their episodes. Given a baseline and a reference (``gap``), the report also
+gives every policy's and method's mean return (in ``urban_canyon_v1`` the score) with its 95 %
+bootstrap interval, and the share of the reference's margin over the baseline that it closes
+(:func:`coopnav_env.training.stats.gap_closed`), a method's training seeds averaged per
+episode.
 
 Outputs in ``--out DIR``: ``report.json``, ``report.csv``, ``report.md`` (the table printed on
 the terminal, under a header naming the environment settings and where they came from),
@@ -54,14 +64,19 @@ from coopnav_env.training.files import (
     jsonable,
     write_json,
 )
+from coopnav_env.training.stats import Interval, bootstrap_mean_interval, gap_closed
 
 __all__ = [
+    "CRUISE",
     "DEFAULT_EPISODES",
     "EVAL_SEED_START",
     "EpisodeRecord",
+    "GapRow",
     "PolicyStats",
     "Report",
+    "check_methods_and_gap",
     "clustered_se",
+    "cruise_spacing_m",
     "evaluate",
     "run_episode",
 ]
@@ -71,6 +86,45 @@ DEFAULT_EPISODES: int = 20
 
 ERROR_THRESHOLD_M: float = 3.0
 """Threshold of the availability statistic P(3-D error < 3 m) (the paper's Figure 8)."""
+
+CRUISE: tuple[float, float] = (0.2, 0.8)
+"""The share of an episode's steps that counts as the cruise (start and end left out)."""
+
+BOOTSTRAP_REPS: int = 2000
+"""Bootstrap replicates of the intervals of the gap table."""
+
+
+def cruise_spacing_m(pos_enu_m: np.ndarray | None, cruise: tuple[float, float] = CRUISE) -> float:
+    """Mean distance of a UAV to its nearest neighbour during the cruise of one episode [m].
+
+    Parameters
+    ----------
+    pos_enu_m : ndarray, shape (T + 1, N, 3), or None
+        True positions from the reset on (:attr:`EpisodeRecord.pos_enu_m`).
+    cruise : (float, float)
+        The first and last share of the steps that count (:data:`CRUISE`): the positions
+        from step ``round(cruise[0] T)`` (at least 1) to step ``round(cruise[1] T)`` (at least
+        the one after the first), both included.
+
+    Returns
+    -------
+    float
+        The mean over those steps and over UAVs of the distance to the nearest other UAV
+        (crashed UAVs keep their last position); NaN without positions or with one UAV.
+    """
+    if pos_enu_m is None:
+        return math.nan
+    pos = np.asarray(pos_enu_m, dtype=float)
+    if pos.ndim != 3 or pos.shape[2] != 3:
+        raise ValueError(f"pos_enu_m must have shape (T + 1, N, 3), got {pos.shape}")
+    if pos.shape[1] < 2 or pos.shape[0] < 2:
+        return math.nan
+    t0, t1 = (round(f * (len(pos) - 1)) for f in cruise)
+    part = pos[max(t0, 1) : max(t1, t0 + 1) + 1]
+    d = np.linalg.norm(part[:, :, None, :] - part[:, None, :, :], axis=-1)
+    n = d.shape[1]
+    d[:, np.arange(n), np.arange(n)] = np.inf
+    return float(d.min(axis=2).mean())
 
 
 # --------------------------------------------------------------------------------------------
@@ -156,6 +210,7 @@ class PolicyStats:
     availability: float = math.nan
     misleading_rate: float = math.nan
     alert_limit_m: float = math.nan
+    cruise_spacing_m: float = math.nan
 
     @classmethod
     def from_episodes(
@@ -167,7 +222,9 @@ class PolicyStats:
     ) -> PolicyStats:
         """Aggregate episode records.
 
-        With integrity monitoring (records with ``hpl_m``): ``availability`` is the share of
+        ``cruise_spacing_m`` is the mean over episodes of :func:`cruise_spacing_m` (NaN where
+        an episode has no positions). With integrity monitoring (records with ``hpl_m``):
+        ``availability`` is the share of
         UAV-steps whose horizontal protection level is within ``alert_limit_m``, and
         ``misleading_rate`` the share whose true horizontal error exceeds the protection
         level (:func:`coopnav_env.nav.integrity_rates`); NaN without integrity.
@@ -207,6 +264,7 @@ class PolicyStats:
             length_mean=float(np.mean([e.length for e in eps])),
             wall_s=round(float(wall_s), 3),
             **_integrity_stats(eps, alert_limit_m),
+            cruise_spacing_m=float(np.mean([cruise_spacing_m(e.pos_enu_m) for e in eps])),
         )
 
 
@@ -269,6 +327,7 @@ def _episode_summary(e: EpisodeRecord) -> dict[str, Any]:
         "collided": bool(e.collided),
         "length": int(e.length),
         "return": float(e.episode_return),
+        "cruise_spacing_m": cruise_spacing_m(e.pos_enu_m),
     }
 
 
@@ -307,11 +366,45 @@ _TABLE: tuple[tuple[str, str, str], ...] = (
     ("sats/UAV", "n_sats_mean", "{:.1f}"),
     ("return", "return_mean", "{:.3f}"),  # urban_canyon_v1: the task's score
     ("steps", "length_mean", "{:.1f}"),
+    ("cruise spacing [m]", "cruise_spacing_m", "{:.1f}"),
     ("availability", "availability", "{:.3f}"),
     ("MI rate", "misleading_rate", "{:.4f}"),
 )
 _INTEGRITY_COLUMNS = ("availability", "misleading_rate")
 """Shown only when some policy was evaluated with integrity monitoring on."""
+
+
+@dataclass
+class GapRow:
+    """A policy's (or a method's) share of the gap between a baseline and a reference.
+
+    Attributes
+    ----------
+    name : str
+        The policy, or the method (several policies pooled).
+    policies : list of str
+        The policies whose episodes it averages per episode (the policy itself for one).
+    return_mean : Interval
+        Mean episode return (in ``urban_canyon_v1``, the score) with its 95 % bootstrap
+        interval (:func:`coopnav_env.training.stats.bootstrap_mean_interval`).
+    gap_closed : Interval
+        Share of the baseline-to-reference gap closed, with its paired 95 % bootstrap
+        interval (:func:`coopnav_env.training.stats.gap_closed`).
+    """
+
+    name: str
+    policies: list[str]
+    return_mean: Interval
+    gap_closed: Interval
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable form."""
+        return {
+            "name": self.name,
+            "policies": list(self.policies),
+            "return": self.return_mean.as_dict(),
+            "gap_closed": self.gap_closed.as_dict(),
+        }
 
 
 @dataclass
@@ -331,6 +424,16 @@ class Report:
         What was written (empty when ``out`` was None).
     env_source : str
         Where the environment settings came from (in words; "" when not said).
+    methods : dict of str to list of str
+        Methods: a name and the policies pooled under it (empty: none).
+    method_stats : list of PolicyStats
+        One per method, over all episodes of its policies, in the order of :attr:`methods`.
+    gap : (str, str) or None
+        The baseline and the reference of :attr:`gap_rows` (None: no gap table).
+    gap_rows : list of GapRow
+        Every policy, then every method.
+    own_frame : dict of str to str
+        Heuristics flown in their own action frame instead of ``env_kwargs``' (name -> frame).
     """
 
     stats: list[PolicyStats]
@@ -340,6 +443,11 @@ class Report:
     episodes: dict[str, list[EpisodeRecord]] = field(default_factory=dict, repr=False)
     files: dict[str, Path] = field(default_factory=dict)
     env_source: str = ""
+    methods: dict[str, list[str]] = field(default_factory=dict)
+    method_stats: list[PolicyStats] = field(default_factory=list)
+    gap: tuple[str, str] | None = None
+    gap_rows: list[GapRow] = field(default_factory=list)
+    own_frame: dict[str, str] = field(default_factory=dict)
 
     def header(self) -> str:
         """The environment and episodes the table was measured on (printed above it).
@@ -351,21 +459,26 @@ class Report:
         seeds = self.seeds
         span = f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
         source = f"; {self.env_source}" if self.env_source else ""
+        own = ""
+        if self.own_frame:
+            flown = ", ".join(f"`{n}` with action_frame={f!r}" for n, f in self.own_frame.items())
+            own = f" Heuristics in the frame they command: {flown}."
         return (
             f"Environment `{self.env_id}`, settings `{json.dumps(jsonable(self.env_kwargs))}` "
             f"(all others at their defaults{source}); {len(seeds)} held-out episodes (reset "
-            f"seeds {span})."
+            f"seeds {span}).{own}"
         )
 
     def __getitem__(self, policy: str) -> PolicyStats:
-        for s in self.stats:
+        """The stats of a policy or of a method."""
+        for s in [*self.stats, *self.method_stats]:
             if s.policy == policy:
                 return s
         raise KeyError(policy)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable summary (NaN written as null)."""
-        return {
+        out = {
             "env_id": self.env_id,
             "env_kwargs": jsonable(self.env_kwargs),
             "env_source": self.env_source,
@@ -377,6 +490,20 @@ class Report:
                 for name, eps in self.episodes.items()
             },
         }
+        if self.own_frame:
+            out["own_frame"] = dict(self.own_frame)
+        if self.methods:
+            out["methods"] = {
+                name: {"policies": list(members), "stats": jsonable(asdict(s))}
+                for (name, members), s in zip(self.methods.items(), self.method_stats)
+            }
+        if self.gap is not None:
+            out["gap"] = {
+                "baseline": self.gap[0],
+                "reference": self.gap[1],
+                "rows": [jsonable(r.to_dict()) for r in self.gap_rows],
+            }
+        return out
 
     def paired_difference(self, policy: str, reference: str) -> tuple[float, float, int]:
         """Mean cooperative error of ``policy`` minus ``reference``, paired by episode seed.
@@ -413,18 +540,43 @@ class Report:
         return self.env_id == "urban_canyon_v1" and scheme == "navigated_distance"
 
     def to_markdown(self) -> str:
-        """The summary table in GitHub Markdown (the return column titled "score" where the
-        return is the score, :meth:`return_is_score`)."""
-        integrity = any(
-            math.isfinite(getattr(s, f)) for s in self.stats for f in _INTEGRITY_COLUMNS
-        )
+        """The summary table in GitHub Markdown: a row per policy, then one per method (its
+        policies' episodes together, named ``NAME (K policies)``); the return column is titled
+        "score" where the return is the score (:meth:`return_is_score`)."""
+        every = [*self.stats, *self.method_stats]
+        integrity = any(math.isfinite(getattr(s, f)) for s in every for f in _INTEGRITY_COLUMNS)
         table = [c for c in _TABLE if integrity or c[1] not in _INTEGRITY_COLUMNS]
         head = [t for t, _, _ in table]
         if self.return_is_score():
             head = ["score" if t == "return" else t for t in head]
         rows = [[_fmt(getattr(s, f), fmt) for _, f, fmt in table] for s in self.stats]
+        for (name, members), s in zip(self.methods.items(), self.method_stats):
+            row = [_fmt(getattr(s, f), fmt) for _, f, fmt in table[1:]]
+            rows.append([f"{name} ({len(members)} policies)", *row])
         lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
         lines += ["| " + " | ".join(r) + " |" for r in rows]
+        return "\n".join(lines)
+
+    def gap_markdown(self) -> str:
+        """The gap table in GitHub Markdown ("" without a gap): every policy's and method's
+        mean return with its 95 % interval and the share of the gap it closes."""
+        if self.gap is None:
+            return ""
+        base, ref = self.gap
+
+        def iv(x: Interval, fmt: str) -> str:
+            return f"{x.value:{fmt}} [{x.low:{fmt}}, {x.high:{fmt}}]"
+
+        lines = [
+            f"Share of the gap from `{base}` (0) to `{ref}` (1) closed; a method's policies "
+            "averaged per episode; 95 % bootstrap intervals over the episodes, paired.",
+            "",
+            "| policy | return [95 % CI] | gap closed [95 % CI] |",
+            "|---|---|---|",
+        ]
+        for r in self.gap_rows:
+            name = f"{r.name} ({len(r.policies)} policies)" if r.name in self.methods else r.name
+            lines.append(f"| {name} | {iv(r.return_mean, '.3f')} | {iv(r.gap_closed, '.2f')} |")
         return "\n".join(lines)
 
 
@@ -574,6 +726,9 @@ def evaluate(
     plots: bool = True,
     verbose: bool = False,
     env_source: str = "",
+    methods: Mapping[str, Sequence[str]] | None = None,
+    gap: Sequence[str] | None = None,
+    bootstrap_reps: int = BOOTSTRAP_REPS,
 ) -> Report:
     """Evaluate named policies on the same held-out episodes.
 
@@ -598,6 +753,20 @@ def evaluate(
     env_source : str, default ""
         Where ``env_kwargs`` came from, in words, for the report's header
         (:meth:`Report.header`).
+    methods : mapping of str to sequence of str, optional
+        Methods: a name and the policies of ``policies`` pooled under it (e.g. one per
+        training seed); each gets a row over all their episodes. Default: none.
+    gap : (str, str), optional
+        A baseline and a reference, each a policy or a method: the report's gap table
+        (:meth:`Report.gap_markdown`) gives every policy's and method's share of the gap
+        between them. Default: none.
+    bootstrap_reps : int, default :data:`BOOTSTRAP_REPS`
+        Bootstrap replicates of the gap table's intervals.
+
+    A heuristic that commands another action frame than ``env_kwargs`` sets (the column
+    heuristics command velocities, a policy trained in the route frame route set-points) is
+    flown with ``action_frame`` set to its own frame (:func:`coopnav_env.agents.action_frame_of`),
+    every other setting as given; the report names it (:attr:`Report.own_frame`).
 
     Returns
     -------
@@ -606,7 +775,9 @@ def evaluate(
     Raises
     ------
     ValueError
-        No policy, no seed, a duplicated or unknown policy name, bad env settings.
+        No policy, no seed, a duplicated or unknown policy name, bad env settings; a method
+        without policies, with a policy not in ``policies`` or named like a policy; a gap
+        whose ends are not two different policies or methods.
     FileNotFoundError
         A ``ppo:<path>`` checkpoint does not exist.
     """
@@ -620,10 +791,17 @@ def evaluate(
         raise ValueError("give at least one evaluation seed")
     if len(set(policies)) != len(policies):
         raise ValueError(f"policy names must be unique, got {policies}")
+    groups, gap_ends = check_methods_and_gap(policies, methods, gap)
     env_kwargs = dict(env_kwargs or {})
     if out is not None:
         ensure_folder(out)  # before any episode runs
-    envs = {name: _make_env(env_id, env_kwargs) for name in policies}
+    own_frame = _own_frames(policies, env_kwargs)
+    envs = {
+        name: _make_env(env_id, {**env_kwargs, "action_frame": own_frame[name]})
+        if name in own_frame
+        else _make_env(env_id, env_kwargs)
+        for name in policies
+    }
     made = {}
     for name in policies:
         try:
@@ -645,12 +823,140 @@ def evaluate(
         if verbose:
             print(f"  {name}: {len(eps)} episodes in {wall:.1f} s", file=sys.stderr)
 
-    report = Report(stats, seeds, env_kwargs, env_id, records, env_source=env_source)
+    method_stats = [
+        PolicyStats.from_episodes(
+            name,
+            [e for p in members for e in records[p]],
+            sum(s.wall_s for s in stats if s.policy in members),
+            _alert_limit_m(envs[members[0]]),
+        )
+        for name, members in groups.items()
+    ]
+    report = Report(
+        stats,
+        seeds,
+        env_kwargs,
+        env_id,
+        records,
+        env_source=env_source,
+        methods=groups,
+        method_stats=method_stats,
+        own_frame=own_frame,
+    )
+    if gap_ends is not None:
+        report.gap = gap_ends
+        report.gap_rows = _gap_rows(records, policies, groups, gap_ends, bootstrap_reps)
     if out is not None:
         _write(report, Path(out), envs[policies[0]], plots)
     for env in envs.values():
         env.close()
     return report
+
+
+def check_methods_and_gap(
+    policies: Sequence[str],
+    methods: Mapping[str, Sequence[str]] | None,
+    gap: Sequence[str] | None,
+) -> tuple[dict[str, list[str]], tuple[str, str] | None]:
+    """``(methods, gap)`` as :func:`evaluate` takes them, checked against ``policies``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`evaluate` does for a bad method or gap (so that a command line can refuse
+        them before any work).
+    """
+    groups = _check_methods(methods or {}, policies)
+    return groups, _check_gap(gap, policies, groups)
+
+
+def _check_methods(
+    methods: Mapping[str, Sequence[str]], policies: Sequence[str]
+) -> dict[str, list[str]]:
+    """``methods`` as a dict of lists, checked against ``policies`` (``ValueError``)."""
+    out: dict[str, list[str]] = {}
+    for name, members in methods.items():
+        if not isinstance(name, str) or not name.strip():
+            raise ValueError(f"a method needs a name, got {name!r}")
+        if name in policies:
+            raise ValueError(
+                f"method {name!r} is named like a policy it would be confused with; "
+                "give the method another name"
+            )
+        members = [members] if isinstance(members, str) else list(members)
+        if not members:
+            raise ValueError(f"method {name!r} has no policies; give at least one")
+        missing = [p for p in members if p not in policies]
+        if missing:
+            raise ValueError(
+                f"method {name!r} pools {missing}, which are not among the policies "
+                f"evaluated {list(policies)}; evaluate them too"
+            )
+        if len(set(members)) != len(members):
+            raise ValueError(f"method {name!r} names a policy twice: {members}")
+        out[name] = members
+    return out
+
+
+def _check_gap(
+    gap: Sequence[str] | None, policies: Sequence[str], methods: Mapping[str, Sequence[str]]
+) -> tuple[str, str] | None:
+    """``gap`` as ``(baseline, reference)``, each a policy or a method (``ValueError``)."""
+    if gap is None:
+        return None
+    ends = [gap] if isinstance(gap, str) else list(gap)
+    if len(ends) != 2:
+        raise ValueError(f"gap takes a baseline and a reference, two names, got {ends}")
+    known = [*policies, *methods]
+    for role, name in zip(("baseline", "reference"), ends):
+        if name not in known:
+            raise ValueError(
+                f"the gap's {role} {name!r} is neither a policy evaluated nor a method; "
+                f"choose one of {known}"
+            )
+    if ends[0] == ends[1]:
+        raise ValueError(
+            f"the gap's baseline and reference are both {ends[0]!r}; give two different ones"
+        )
+    return ends[0], ends[1]
+
+
+def _own_frames(policies: Sequence[str], env_kwargs: Mapping[str, Any]) -> dict[str, str]:
+    """Heuristics that command another action frame than ``env_kwargs`` sets -> their frame."""
+    from coopnav_env.agents import action_frame_of
+
+    frame = env_kwargs.get("action_frame", "velocity")
+    out = {}
+    for name in policies:
+        own = action_frame_of(name)
+        if own is not None and own != frame:
+            out[name] = own
+    return out
+
+
+def _gap_rows(
+    records: Mapping[str, Sequence[EpisodeRecord]],
+    policies: Sequence[str],
+    methods: Mapping[str, Sequence[str]],
+    gap: tuple[str, str],
+    reps: int,
+) -> list[GapRow]:
+    """A :class:`GapRow` for every policy, then every method (their policies averaged per
+    episode)."""
+    groups = {name: [name] for name in policies} | {m: list(ps) for m, ps in methods.items()}
+
+    def returns(members: Sequence[str]) -> np.ndarray:
+        return np.array([[e.episode_return for e in records[p]] for p in members], dtype=float)
+
+    base, ref = returns(groups[gap[0]]), returns(groups[gap[1]])
+    rows = []
+    for name, members in groups.items():
+        scores = returns(members)
+        mean = bootstrap_mean_interval(scores.mean(axis=0), reps, np.random.default_rng(0))
+        rows.append(
+            GapRow(name, list(members), Interval(*mean), gap_closed(scores, base, ref, reps))
+        )
+    return rows
 
 
 # --------------------------------------------------------------------------------------------
@@ -668,7 +974,7 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
     table = io.StringIO(newline="")
     w = csv.writer(table)
     w.writerow(names)
-    for s in report.stats:
+    for s in [*report.stats, *report.method_stats]:
         w.writerow([_csv_cell(getattr(s, k)) for k in names])
     atomic_write_text(files["csv"], table.getvalue())
     files["md"] = out / "report.md"
@@ -713,4 +1019,6 @@ def _markdown_document(report: Report) -> str:
         report.to_markdown(),
         "",
     ]
+    if report.gap is not None:
+        lines += [report.gap_markdown(), ""]
     return "\n".join(lines)

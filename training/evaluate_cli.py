@@ -31,7 +31,7 @@ from coopnav_env.training.envs import (
     heldout_seeds,
     make_env_fn,
 )
-from coopnav_env.training.evaluate import DEFAULT_EPISODES, evaluate
+from coopnav_env.training.evaluate import DEFAULT_EPISODES, check_methods_and_gap, evaluate
 from coopnav_env.training.files import claim_output_folder, jsonable
 
 EVALUATE_OUTPUTS = (
@@ -47,6 +47,7 @@ EVALUATE_OUTPUTS = (
 __all__ = [
     "TRAINED_KINDS",
     "add_arguments",
+    "parse_methods",
     "reward_settings",
     "run",
     "train_config_of_policies",
@@ -138,6 +139,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-plots", action="store_true", help="skip the PNG plots (default: plots are made)"
     )
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        default=[],
+        metavar="NAME=POLICY[,POLICY...]",
+        help="pool policies (e.g. one per training seed) as one method with a row of its own; "
+        "its policies are evaluated too, e.g. "
+        "mappo_route=mappo:pretrained/route_s0,mappo:pretrained/route_s1 (default: none)",
+    )
+    parser.add_argument(
+        "--gap",
+        nargs=2,
+        default=None,
+        metavar=("BASELINE", "REFERENCE"),
+        help="add a table of every policy's and method's share of the gap from BASELINE to "
+        "REFERENCE (each a policy or a --methods name), with paired 95 %% bootstrap intervals "
+        "(default: none)",
+    )
+
+
+def parse_methods(items: Sequence[str]) -> dict[str, list[str]]:
+    """``--methods`` items, ``NAME=POLICY[,POLICY...]``, as ``{NAME: [POLICY, ...]}``.
+
+    Raises
+    ------
+    ValueError
+        An item without ``=``, a name or a policy, or a name given twice.
+    """
+    methods: dict[str, list[str]] = {}
+    for item in items:
+        name, eq, listed = item.partition("=")
+        members = [p.strip() for p in listed.split(",") if p.strip()]
+        if not eq or not name.strip() or not members:
+            raise ValueError(
+                f"--methods {item!r} must look like NAME=POLICY[,POLICY...], e.g. "
+                "mappo_route=mappo:pretrained/route_s0,mappo:pretrained/route_s1"
+            )
+        if name.strip() in methods:
+            raise ValueError(f"--methods names {name.strip()!r} twice; give each method once")
+        methods[name.strip()] = members
+    return methods
 
 
 def _read_train_config(path: Path) -> dict[str, Any]:
@@ -301,6 +343,12 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Run ``coopnav evaluate``; returns the exit status (errors: see
     :mod:`coopnav_env.training.cli`)."""
+    methods = parse_methods(getattr(args, "methods", None) or [])
+    gap = getattr(args, "gap", None)
+    listed = list(args.policies)
+    members = [p for ps in methods.values() for p in ps if p not in listed]
+    args.policies = list(dict.fromkeys([*listed, *members]))  # a method's policies fly too
+    check_methods_and_gap(args.policies, methods, gap)  # refused before any work
     seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
     if min(seeds) < 0:
         raise ValueError(f"--seeds must be >= 0, got {min(seeds)}")
@@ -315,6 +363,10 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:  # --out is claimed (locked, checked, recorded) before any work
         settings = {"policies": args.policies, "seeds": seeds, "env_id": env_id}
         settings |= {"env": env_kwargs, "plots": not args.no_plots}
+        if methods:
+            settings["methods"] = methods
+        if gap is not None:
+            settings["gap"] = list(gap)
         claim = claim_output_folder(
             args.out,
             "coopnav evaluate",
@@ -334,12 +386,17 @@ def run(args: argparse.Namespace) -> int:
             plots=not args.no_plots,
             verbose=True,
             env_source=source,
+            methods=methods,
+            gap=gap,
         )
         if folder is not None:
             folder.finish(report.files.values())
     print(report.header())
     print()
     print(report.to_markdown())
+    if report.gap is not None:
+        print()
+        print(report.gap_markdown())
     if report.files:
         print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))
     return 0

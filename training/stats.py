@@ -11,8 +11,9 @@ itself does not import beside the ``arch`` and ``pandas`` releases that pip reso
 (``TypeError: deprecate_kwarg()``), so the few lines it needs are here, tested against a
 direct formulation (``tests/training/test_stats.py``).
 
-Paired comparisons (:func:`paired_difference`) resample the same episodes for both policies,
-so that the episode-to-episode variation (city, route, satellites) cancels.
+Paired comparisons (:func:`paired_difference`, :func:`gap_closed`) resample the same
+episodes for every policy compared, so that the episode-to-episode variation (city, route,
+satellites) cancels.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 __all__ = [
     "Interval",
     "bootstrap_mean_interval",
+    "gap_closed",
     "interquartile_mean",
     "paired_difference",
     "stratified_bootstrap_ci",
@@ -158,3 +160,74 @@ def bootstrap_mean_interval(
     boot = [rng.choice(d, d.size).mean() for _ in range(reps)]
     lo, hi = np.percentile(boot, [2.5, 97.5])
     return float(np.mean(d)), float(lo), float(hi)
+
+
+def gap_closed(
+    method: np.ndarray,
+    baseline: np.ndarray,
+    reference: np.ndarray,
+    reps: int = 2000,
+    seed: int = 0,
+) -> Interval:
+    """Share of the gap from ``baseline`` to ``reference`` that ``method`` closes, with a paired
+    bootstrap interval.
+
+    The estimate is ``(mean(method) - mean(baseline)) / (mean(reference) - mean(baseline))``
+    over the episodes: 0 scores as the baseline, 1 as the reference, above 1 beyond it. Each
+    of the ``reps`` replicates resamples the episodes with replacement, the same episodes for
+    all three (pairing), and the interval is the 2.5 and 97.5 percentiles of the replicates.
+
+    Parameters
+    ----------
+    method, baseline, reference : ndarray, shape (episodes,) or (runs, episodes)
+        Per-episode scores on the same episodes, in the same order; a matrix holds one row per
+        training run, averaged per episode first (the runs are not resampled, as in the
+        comparison of methods that pools training seeds per episode).
+    reps : int
+        Bootstrap replicates (at least 1).
+    seed : int
+        Seed of the resampling generator (results are deterministic).
+
+    Raises
+    ------
+    ValueError
+        Arrays of other shapes or episode counts, non-finite scores, fewer than 1 replicate,
+        or a baseline and reference with the same mean score (no gap to close).
+    """
+
+    def episodes(x: np.ndarray, name: str) -> np.ndarray:
+        a = np.asarray(x, dtype=float)
+        if a.ndim == 1:
+            a = a[None, :]
+        if a.ndim != 2 or a.shape[0] < 1 or a.shape[1] < 1:
+            raise ValueError(
+                f"{name} must be per-episode scores, shape (episodes,) or (runs, episodes), "
+                f"got shape {np.shape(x)}"
+            )
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} scores must be finite")
+        return a.mean(axis=0)
+
+    m = episodes(method, "method")
+    b = episodes(baseline, "baseline")
+    r = episodes(reference, "reference")
+    if not (m.size == b.size == r.size):
+        raise ValueError(
+            f"method, baseline and reference must cover the same episodes, got {m.size}, "
+            f"{b.size} and {r.size}"
+        )
+    if int(reps) < 1:
+        raise ValueError(f"reps must be at least 1, got {reps}")
+    gap = r.mean() - b.mean()
+    if gap == 0.0:
+        raise ValueError(
+            "the baseline and the reference have the same mean score on these episodes: there "
+            "is no gap to close; choose a reference that scores differently"
+        )
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, m.size, size=(int(reps), m.size))
+    mb, bb, rb = m[idx].mean(axis=1), b[idx].mean(axis=1), r[idx].mean(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        boots = (mb - bb) / (rb - bb)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return Interval(float((m.mean() - b.mean()) / gap), float(lo), float(hi))

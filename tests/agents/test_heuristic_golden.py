@@ -79,9 +79,25 @@ CASES: tuple[tuple[str, str, tuple[int, ...], int], ...] = (
     ),
     ("guarded_column@ceiling_margin_m=-10", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
     ("mappo:pretrained", "default", _DEFAULT_SEEDS[:2], _STEPS),
-    ("mappo:{pretrained}/mappo_nlos_ceiling_s0", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
+    ("mappo:{degraded_study}/mappo_nlos_ceiling_s0", "urban_nlos_3dma", _NLOS_SEEDS, _STEPS),
 )
-"""The golden cases; ``{pretrained}`` in a name stands for the folder of the shipped models."""
+"""The golden cases; ``{degraded_study}`` in a name stands for the policies folder of
+``studies/learning_under_degraded_navigation`` (:data:`PLACEHOLDERS`)."""
+
+PLACEHOLDERS: dict[str, Path] = {
+    "{degraded_study}": Path(__file__).resolve().parents[2]
+    / "studies"
+    / "learning_under_degraded_navigation"
+    / "policies",
+}
+"""The folders that placeholders in a case's policy name stand for."""
+
+
+def policy_of_case(name: str) -> str:
+    """A case's policy name with its placeholders (:data:`PLACEHOLDERS`) filled in."""
+    for placeholder, folder in PLACEHOLDERS.items():
+        name = name.replace(placeholder, str(folder))
+    return name
 
 
 def case_key(policy: str, env_name: str, seed: int) -> str:
@@ -103,11 +119,10 @@ def fly(policy_name: str, env_name: str, seed: int, steps: int) -> np.ndarray:
     every step's actions (uint64, one per step flown)."""
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
-    from coopnav_env.agents.marl_policy import PRETRAINED_DIR
 
     env = urban_canyon_v0.parallel_env(**ENVIRONMENTS[env_name])
     try:
-        policy = make_policy(policy_name.replace("{pretrained}", str(PRETRAINED_DIR)), env)
+        policy = make_policy(policy_of_case(policy_name), env)
         obs, _ = env.reset(seed=seed)
         policy.reset(seed=seed)
         hashes = []

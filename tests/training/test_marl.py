@@ -6,6 +6,7 @@ import dataclasses
 import itertools
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -404,16 +405,21 @@ def test_export_policy_from_a_checkpoint_takes_the_runs_config_only(tmp_path) ->
     make_policy(f"ippo:{tmp_path / 'early'}", urban_canyon_v0.parallel_env())
 
 
+REPO = Path(__file__).resolve().parents[2]
+DEGRADED_STUDY_POLICIES = REPO / "studies" / "learning_under_degraded_navigation" / "policies"
+"""Residual policies of a study (trained under degraded navigation), flown by their folder."""
+
+
 @pytest.mark.parametrize(
     "name",
     [
         "mappo:pretrained",
         "mappo:pretrained/s2",
         "ippo:pretrained/s1",
-        "mappo:pretrained/nlos_s2",
-        "ippo:pretrained/nlos_s1",
-        "mappo:pretrained/nlos_ceiling_s2",
-        "mappo:pretrained/nlos_ceiling_lowstd_s1",
+        f"mappo:{DEGRADED_STUDY_POLICIES / 'mappo_nlos_s2'}",
+        f"ippo:{DEGRADED_STUDY_POLICIES / 'ippo_nlos_s1'}",
+        f"mappo:{DEGRADED_STUDY_POLICIES / 'mappo_nlos_ceiling_s2'}",
+        f"mappo:{DEGRADED_STUDY_POLICIES / 'mappo_nlos_ceiling_lowstd_s1'}",
     ],
 )
 def test_shipped_policies_load_and_fly(name) -> None:
@@ -426,6 +432,18 @@ def test_shipped_policies_load_and_fly(name) -> None:
     assert all(np.all(np.abs(v) <= 1.0) for v in acts.values())
     with pytest.raises(FileNotFoundError, match="shipped"):
         make_policy("mappo:pretrained/s9", env)
+
+
+def test_the_recipe_policies_are_named_by_their_folder() -> None:
+    from coopnav_env.agents.marl_policy import resolve_marl_checkpoint
+
+    for k in range(3):
+        for name in (f"route_s{k}", f"route_scratch_s{k}"):
+            path = resolve_marl_checkpoint(f"pretrained/{name}", "mappo")
+            assert path.name == "final_model.pt" and path.parent.name == f"mappo_{name}"
+            assert (path.parent / "config.yaml").is_file()  # evaluate flies it in its run's env
+    with pytest.raises(FileNotFoundError, match=r"shipped: .*mappo:pretrained/route_scratch_s2"):
+        resolve_marl_checkpoint("pretrained/s9", "mappo")
 
 
 def test_train_and_evaluate_with_satellite_sectors(tmp_path) -> None:
@@ -484,7 +502,7 @@ def test_action_distribution_is_the_gaussian_whose_mean_the_policy_flies(tmp_pat
     env = urban_canyon_v1.parallel_env(
         action_frame="route", nav_team_weight=1.0, obs_agent_index=True
     )
-    policy = make_policy("mappo:pretrained/v1_route_s0", env)
+    policy = make_policy("mappo:pretrained/route_s0", env)
     obs, _ = env.reset(seed=1_000_001)
     policy.reset(1_000_001)
     loc, scale = policy.action_distribution(obs)

@@ -82,3 +82,40 @@ def test_methods_are_compared_pairwise_on_the_same_episodes(tmp_path) -> None:
     want = np.mean([x["score"] - y["score"] for x, y in zip(eps["sky_column"], eps["wide_column"])])
     assert d["score_a_minus_b"][0] == pytest.approx(want, abs=1e-12)
     assert "`a` - `b`" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("policy", ["formation", "mappo:pretrained/route_s0"])
+def test_coopnav_evaluate_gives_this_scripts_spacing_and_score(policy) -> None:
+    """The cruise spacing and score of ``coopnav evaluate``
+    (:mod:`coopnav_env.training.evaluate`) are this script's, episode by episode, to the bit
+    (torch on one thread in both)."""
+    pytest.importorskip("torch")
+    from coopnav_env.training.evaluate import cruise_spacing_m, evaluate
+
+    seeds = [1_000_100, 1_000_101]
+    want = cl.fly(policy, seeds)
+    with cl.one_torch_thread():
+        report = evaluate(
+            [policy], seeds, cl.env_settings_of(policy), env_id="urban_canyon_v1", plots=False
+        )
+    for got, w in zip(report.episodes[policy], want):
+        assert cruise_spacing_m(got.pos_enu_m) == w["cruise_spacing_m"]
+        assert got.episode_return == w["score"] and float(got.length) == w["steps"]
+    assert report[policy].cruise_spacing_m == pytest.approx(
+        np.mean([w["cruise_spacing_m"] for w in want]), rel=1e-12
+    )
+
+
+def test_coopnav_evaluates_intervals_are_this_scripts() -> None:
+    """The gap closed and the score interval of ``coopnav evaluate``'s gap table
+    (:func:`coopnav_env.training.stats.gap_closed`,
+    :func:`~coopnav_env.training.stats.bootstrap_mean_interval`) are this script's."""
+    from coopnav_env.training.stats import bootstrap_mean_interval, gap_closed
+
+    rng = np.random.default_rng(5)
+    base, ref = rng.normal(1.45, 0.2, 60), rng.normal(1.8, 0.02, 60)
+    runs = rng.normal(1.75, 0.05, (3, 60))
+    got = gap_closed(runs, base, ref, reps=400)
+    assert [got.value, got.low, got.high] == cl._gap_closed(runs.mean(axis=0), base, ref, 400)
+    mean = bootstrap_mean_interval(runs.mean(axis=0), 400, np.random.default_rng(0))
+    assert list(mean) == cl._mean_ci(runs.mean(axis=0), 400)

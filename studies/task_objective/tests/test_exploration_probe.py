@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.stats import norm
 
 from studies.task_objective import exploration_probe as ep
+
+# the route-frame policy of this study (its policies/ folder), by absolute path
+ROUTE_POLICY = f"mappo:{Path(__file__).resolve().parents[1] / 'policies' / 'mappo_v1_route_s0'}"
 
 
 def test_log10_normal_cdf_matches_the_normal_distribution_and_its_far_tail() -> None:
@@ -43,7 +47,7 @@ def test_the_chance_under_correlated_noise_matches_the_multivariate_normal() -> 
 
 def test_probe_reports_the_chance_of_a_held_back_start(tmp_path) -> None:
     out = tmp_path / "probe"
-    args = ["--policies", "mappo:pretrained/v1_route_s0", "--episodes", "2"]
+    args = ["--policies", ROUTE_POLICY, "--episodes", "2"]
     args += ["--hold-s", "4", "--out", str(out)]
     assert ep.main(args) == 0
     (row,) = json.loads((out / "report.json").read_text())["policies"]

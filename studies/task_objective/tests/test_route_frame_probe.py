@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from studies.task_objective import route_frame_probe as rp
+
+# the route-frame policy of this study (its policies/ folder), by absolute path
+ROUTE_POLICY = f"mappo:{Path(__file__).resolve().parents[1] / 'policies' / 'mappo_v1_route_s0'}"
 
 
 class _Constant:
@@ -53,7 +57,7 @@ def test_a_held_start_holds_uav_k_for_k_slots_then_lets_the_policy_fly() -> None
 
 def test_probe_writes_both_parts_and_the_overrides_do_what_they_say(tmp_path) -> None:
     out = tmp_path / "probe"
-    args = ["--policies", "mappo:pretrained/v1_route_s0", "--altitudes", "30"]
+    args = ["--policies", ROUTE_POLICY, "--altitudes", "30"]
     args += ["--steps", "0,1.5", "--episodes", "2", "--reps", "50", "--out", str(out)]
     assert rp.main(args) == 0
     report = json.loads((out / "report.json").read_text())

@@ -1,9 +1,10 @@
 """The shipped v1 policies give back the committed comparison without training.
 
 The comparison reports of this study (``learned_*/report.json``) keep every policy's
-per-episode figures; flying the shipped policies (``agents/pretrained/mappo_v1_*``,
-``ippo_v1_*`` and the models under ``policies/``) on a report's first episodes must give the
-same figures, to the bit.
+per-episode figures; flying the policies the package ships (``mappo:pretrained/...``) and the
+models under ``policies/`` on a report's first episodes must give the same figures, to the
+bit. A policy that has moved since its report was written is flown from where it is now and
+compared with the figures the report stored under its name of then.
 """
 
 from __future__ import annotations
@@ -39,19 +40,31 @@ SHIPPED = (
 )
 
 
-ROUTE_SHIPPED = (
-    "mappo:pretrained/v1_route_s0",
-    "mappo:pretrained/v1_route_s1",
-    "mappo:pretrained/v1_route_s2",
-    "mappo:studies/task_objective/policies/mappo_route_6m_s0",
-    "ippo:pretrained/v1_route_s0",
-)
+ROUTE_SHIPPED = ("mappo:studies/task_objective/policies/mappo_route_6m_s0",)
+
+MOVED = {
+    f"{kind}:pretrained/v1_route_s{k}": f"{kind}:{POLICIES}/{kind}_v1_route_s{k}"
+    for kind, k in (("mappo", 0), ("mappo", 1), ("mappo", 2), ("ippo", 0))
+}
+"""Policies this study's reports name by their earlier place in the package -> where they are."""
+
+RECIPE = {
+    f"mappo:pretrained/route_s{k}": f"mappo:{POLICIES}/mappo_route_hold_unweighted_bc_8m_s{k}"
+    for k in range(3)
+} | {
+    f"mappo:pretrained/route_scratch_s{k}": f"mappo:{POLICIES}/mappo_route_hold_unweighted_8m_s{k}"
+    for k in range(3)
+}
+"""The shipped recipe policies (``coopnav train --config mappo_route``, ``mappo_route_scratch``)
+-> the study's runs they are copies of, whose episodes ``learned_route_hold`` stores."""
 
 
 @pytest.mark.parametrize(
     ("report_path", "policy"),
     [(REPORT, p) for p in SHIPPED]
     + [(ROUTE_REPORT, p) for p in ROUTE_SHIPPED]
+    + [(ROUTE_REPORT, (stored, now)) for stored, now in MOVED.items()]
+    + [(HOLD_REPORT, (stored, shipped)) for shipped, stored in RECIPE.items()]
     + [(BRAKE_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_4m_s2")]
     + [(BRAKE_8M_REPORT, "mappo:studies/task_objective/policies/mappo_route_brake_8m_s0")]
     + [(REPEAT_REPORT, "mappo:studies/task_objective/policies/mappo_route_repeat4_bc_4m_s0")]
@@ -63,17 +76,20 @@ ROUTE_SHIPPED = (
     + [(HOLD_REPORT, f"mappo:{POLICIES}/mappo_route_hold_unweighted_bc_8m_s0")]
     + [(HOLD_REPORT, f"mappo:{POLICIES}/mappo_route_hold_importance_bc_4m_s2")]
     + [(HOLD_IPPO_REPORT, f"ippo:{POLICIES}/ippo_route_hold_unweighted_bc_4m_s1")],
+    ids=lambda v: v.parent.name if isinstance(v, Path) else v[1] if isinstance(v, tuple) else v,
 )
 def test_a_shipped_policy_flies_the_reports_episodes_again(
     report_path, policy, monkeypatch
 ) -> None:
-    if policy.startswith("ppo:"):
+    """``policy``: a name in the report, or (name in the report, name to fly it by now)."""
+    stored_name, flown_name = policy if isinstance(policy, tuple) else (policy, policy)
+    if flown_name.startswith("ppo:"):
         pytest.importorskip("stable_baselines3")
     else:
         pytest.importorskip("torch")
     monkeypatch.chdir(STUDY.parents[1])  # the models' paths are relative to the repository
     report = json.loads(report_path.read_text())
-    stored = report["episodes_per_policy"][policy][:2]
-    flown = cl.fly(policy, [e["seed"] for e in stored])
+    stored = report["episodes_per_policy"][stored_name][:2]
+    flown = cl.fly(flown_name, [e["seed"] for e in stored])
     for got, want in zip(flown, stored):
         assert got == want

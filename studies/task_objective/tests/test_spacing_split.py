@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from studies.task_objective import compare_learned as cl
 from studies.task_objective import spacing_split as ss
+
+# the route-frame policy of this study (its policies/ folder), by absolute path
+ROUTE_POLICY = f"mappo:{Path(__file__).resolve().parents[1] / 'policies' / 'mappo_v1_route_s0'}"
 
 
 def test_nearest_distances_split_height_from_the_horizontal() -> None:
@@ -21,7 +25,7 @@ def test_nearest_distances_split_height_from_the_horizontal() -> None:
 
 def test_probe_gives_compare_learned_s_spacing_and_a_horizontal_part(tmp_path) -> None:
     out = tmp_path / "split"
-    policy = "mappo:pretrained/v1_route_s0"
+    policy = ROUTE_POLICY
     assert (
         ss.main(
             ["--policies", policy, "--episodes", "2", "--seed-start", "1000100", "--out", str(out)]
