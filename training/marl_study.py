@@ -432,7 +432,7 @@ def plot_trajectories(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
+    from matplotlib.patches import Polygon, Rectangle
 
     from coopnav_env import urban_canyon_v0
 
@@ -449,8 +449,14 @@ def plot_trajectories(
     for j, name in enumerate(names):
         pos = flights[name]
         ax = axes[0, j]
-        for lo, hi in zip(b.min_m, b.max_m):
-            ax.add_patch(Rectangle(lo[:2], *(hi[:2] - lo[:2]), color="0.75", zorder=0, lw=0))
+        if hasattr(b, "rings_m"):  # a file city's footprints (holes in white)
+            for rings in b.rings_m:
+                ax.add_patch(Polygon(rings[0], closed=True, color="0.75", zorder=0, lw=0))
+                for hole in rings[1:]:
+                    ax.add_patch(Polygon(hole, closed=True, color="white", zorder=0, lw=0))
+        else:
+            for lo, hi in zip(b.min_m, b.max_m):
+                ax.add_patch(Rectangle(lo[:2], *(hi[:2] - lo[:2]), color="0.75", zorder=0, lw=0))
         xy = np.asarray(world.route_xy_m)
         ax.plot(xy[:, 0], xy[:, 1], "k:", lw=0.8, label="street route")
         for i in range(pos.shape[1]):
