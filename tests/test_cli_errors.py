@@ -323,3 +323,42 @@ def test_evaluate_accepts_env_set_integrity_off(capsys):
     assert _run([*argv, "--episodes", "1"]) == 2
     err = capsys.readouterr().err
     assert "got False" not in err and "unknown policy 'nope'" in err, err  # env built
+
+
+# --------------------------------------------------------------------------------------------
+# issue 45, finding 2: Ctrl-C at start-up (the subcommands' imports) ends in one line
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("command", ["train", "evaluate"])
+def test_an_interrupt_while_starting_ends_in_one_line(monkeypatch, capsys, command):
+    """SIGINT while the subcommands' modules are imported: status 130, one line."""
+    import importlib
+
+    from coopnav_env.training import cli
+
+    real = importlib.import_module
+
+    def interrupted(name, *args, **kwargs):
+        if name == cli.COMMANDS[command][0]:
+            raise KeyboardInterrupt
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(cli.importlib, "import_module", interrupted)
+    assert main([command, "--help"]) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.strip() == "coopnav: interrupted while starting; nothing was done", err
+
+
+def test_an_interrupt_in_a_command_ends_in_one_line(monkeypatch, capsys):
+    """SIGINT while ``coopnav evaluate`` runs (before it wrote anything): 130 and one line."""
+    from coopnav_env.training import evaluate_cli
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(evaluate_cli, "run", interrupted)
+    assert main(["evaluate", "--policies", "random"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip() == "coopnav evaluate: interrupted", err
