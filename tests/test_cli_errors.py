@@ -184,6 +184,14 @@ CASES: list[tuple[str, list[str], int, str]] = [
         2,
         "routes_npz_keys/episodes.npz lacks 'route', 'features'",
     ),
+    # issue 45, finding 5: an --env-id that cannot apply is refused, naming the run's
+    ("env-id-empty", ["train", "--env-id", ""], 2, "--env-id is empty"),
+    (
+        "resume-other-env-id",
+        ["train", "--resume", "latest", "--env-id", "urban_canyon_v1", "--out", "{tmp}/v0run"],
+        2,
+        "holds a run of urban_canyon_v0 (its config.yaml), which --resume continues in",
+    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -197,6 +205,9 @@ def files(tmp_path):
     (tmp_path / "section.yaml").write_text("urban_canyon_v0: [1, 2]\n")
     (tmp_path / "list.json").write_text("[1, 2]\n")
     (tmp_path / "afile").write_text("x")
+    (tmp_path / "v0run").mkdir()  # a run of urban_canyon_v0 (its settings as recorded)
+    v0_settings = {"env_id": "urban_canyon_v0", "env": {"nav_reward": "sigma"}, "timesteps": 64}
+    (tmp_path / "v0run" / "config.yaml").write_text(yaml.safe_dump(v0_settings))
     (tmp_path / "empty.zip").write_bytes(b"")
     with zipfile.ZipFile(tmp_path / "corrupt.zip", "w") as z:  # SB3's layout, broken weights
         z.writestr("data", "{}")

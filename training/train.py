@@ -176,8 +176,20 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     (:func:`coopnav_env.training.runs.recorded_config`), so that a resumed run continues under
     its own settings and its own ``timesteps`` unless a flag or ``--set`` changes one.
     """
+    if args.env_id is not None and not args.env_id.strip():
+        raise ValueError(
+            f"--env-id is empty; give an environment id (e.g. {DEFAULT_ENV_ID}) or leave "
+            "--env-id out"
+        )
     recorded = recorded_config(args.out) if args.resume is not None else None
     if recorded is not None:
+        run_env_id = recorded.get("env_id") or DEFAULT_ENV_ID
+        if args.env_id is not None and args.env_id != run_env_id:
+            raise ValueError(
+                f"--env-id {args.env_id}: {args.out} holds a run of {run_env_id} (its "
+                f"config.yaml), which --resume continues in {run_env_id}; leave --env-id out, "
+                f"or train {args.env_id} in another --out"
+            )
         names = {f.name for f in dataclasses.fields(TrainConfig)}
         base = {
             k: v for k, v in recorded.items() if k in names and k not in ("resume", "overwrite")
