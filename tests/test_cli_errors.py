@@ -26,6 +26,8 @@ TOY_SECTION = TOY_TRAINING
 _STUDY = ["--out", "{tmp}/study", "--heuristics", "formation", "--episodes", "1"]
 _STUDY += ["--planner-episodes", "0"]
 
+_V1 = "urban_canyon_v1"
+
 #: (id, argv with {tmp} placeholders, exit status, message fragment)
 CASES: list[tuple[str, list[str], int, str]] = [
     # configuration files and --set / --env-set values
@@ -184,13 +186,26 @@ CASES: list[tuple[str, list[str], int, str]] = [
         2,
         "routes_npz_keys/episodes.npz lacks 'route', 'features'",
     ),
-    # issue 45, finding 5: an --env-id that cannot apply is refused, naming the run's
+    # issue 45, findings 4 and 5: an --env-id that cannot apply is refused, naming the run's
     ("env-id-empty", ["train", "--env-id", ""], 2, "--env-id is empty"),
+    ("eval-env-id-empty", ["evaluate", "--policies", "random", "--env-id", ""], 2, "is empty"),
     (
         "resume-other-env-id",
         ["train", "--resume", "latest", "--env-id", "urban_canyon_v1", "--out", "{tmp}/v0run"],
         2,
         "holds a run of urban_canyon_v0 (its config.yaml), which --resume continues in",
+    ),
+    (
+        "eval-other-env-id",
+        ["evaluate", "--policies", "ppo:{tmp}/v0run/final_model.zip", "--env-id", _V1],
+        2,
+        "the policies' training run is a run of urban_canyon_v0",
+    ),
+    (
+        "eval-train-config-other-env-id",
+        ["evaluate", "--train-config", "{tmp}/v0run/config.yaml", "--env-id", "urban_canyon_v1"],
+        2,
+        "v0run/config.yaml says env_id: urban_canyon_v0); evaluate them in urban_canyon_v0",
     ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
