@@ -207,6 +207,14 @@ CASES: list[tuple[str, list[str], int, str]] = [
         2,
         "v0run/config.yaml says env_id: urban_canyon_v0); evaluate them in urban_canyon_v0",
     ),
+    # issue 45, finding 6: a backend's section given for another backend is refused
+    (
+        "torchrl-set-with-sb3",
+        ["train", "--set", "torchrl.start_hold_decisions=-1"],
+        2,
+        "--set torchrl.start_hold_decisions=-1: torchrl.* settings apply to --backend torchrl",
+    ),
+    ("rllib-set-with-sb3", ["train", "--set", "rllib.num_env_runners=2"], 2, "--backend rllib"),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -388,3 +396,15 @@ def test_an_interrupt_in_a_command_ends_in_one_line(monkeypatch, capsys):
     assert main(["evaluate", "--policies", "random"]) == 130
     err = capsys.readouterr().err
     assert err.strip() == "coopnav evaluate: interrupted", err
+
+
+def test_start_hold_decisions_must_leave_decisions_to_learn(files, capsys):
+    """issue 45, finding 6: holding every decision of an episode learns nothing."""
+    pytest.importorskip("torchrl")
+    argv = ["train", "--backend", "torchrl", "--env-id", "urban_canyon_v1"]
+    argv += ["--set", "env.action_frame=route", "--set", "torchrl.start_hold_decisions=1000000"]
+    argv += ["--set", "torchrl.pretrain=null", "--out", str(files / "hold")]
+    assert _run(_argv(argv, files)) == 2
+    err = capsys.readouterr().err
+    assert "torchrl.start_hold_decisions must be < the decisions of an episode" in err, err
+    assert "got 1000000" in err and not (files / "hold").exists()

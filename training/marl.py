@@ -1117,7 +1117,15 @@ def check(cfg: TrainConfig) -> None:
         ) from exc
     from coopnav_env.envs import make_config
 
-    make_config(**env_kwargs)  # environment settings
+    env_config = make_config(**env_kwargs)  # environment settings
+    decisions = -(-env_config.max_steps // settings.action_repeat)  # of a whole episode
+    if settings.start_hold_decisions >= decisions:
+        raise ValueError(
+            f"torchrl.start_hold_decisions must be < the decisions of an episode, {decisions} "
+            f"(env.max_steps {env_config.max_steps} / torchrl.action_repeat "
+            f"{settings.action_repeat}), got {settings.start_hold_decisions}: that many would hold "
+            "every decision, and nothing would be learned"
+        )
     check_pretrain(cfg, settings, env_kwargs)
     if settings.residual_base is not None:
         from coopnav_env.agents import POLICY_NAMES

@@ -25,6 +25,7 @@ from coopnav_env.training.config import (
     TrainConfig,
     apply_overrides,
     backend_module,
+    check_backend_settings,
     check_replaced_settings,
     load_config,
 )
@@ -221,6 +222,14 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     data.update({k: v for k, v in flags.items() if v is not None})
     if args.backend is not None:
         data["backend"] = args.backend
+    backend = data.get("backend", "sb3")
+    for item in args.overrides:  # a backend's own section, given for another backend
+        section = item.partition("=")[0].split(".")[0].strip()
+        if section in ("torchrl", "rllib") and section != backend:
+            raise ValueError(
+                f"--set {item}: {section}.* settings apply to --backend {section} only, and "
+                f"this run trains with --backend {backend}; add --backend {section} or drop it"
+            )
     rllib_flags = {"num_env_runners": args.num_env_runners, "address": args.address}
     given = {k: v for k, v in rllib_flags.items() if v is not None}
     if given and data.get("backend", "sb3") != "rllib":
@@ -255,6 +264,7 @@ def run(args: argparse.Namespace) -> int:
     messages and exit statuses (2 for a usage error, 130/143 after an interrupt).
     """
     cfg = config_from_args(args)
+    check_backend_settings(cfg)  # the backend's own settings, before the minute of compiling
     with compile_notice("about a minute", prefix="coopnav train"):
         warm_up_env(make_env_fn(cfg.env_id, cfg.env))
     final = backend_module(cfg.backend).train(cfg)
