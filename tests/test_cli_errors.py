@@ -215,6 +215,25 @@ CASES: list[tuple[str, list[str], int, str]] = [
         "--set torchrl.start_hold_decisions=-1: torchrl.* settings apply to --backend torchrl",
     ),
     ("rllib-set-with-sb3", ["train", "--set", "rllib.num_env_runners=2"], 2, "--backend rllib"),
+    # issue 45, finding 10: duplicates and an option larger than the set it takes from
+    (
+        "alignment-policy-twice",
+        ["alignment", "--policies", "formation", "formation", "sky", "--out", "{tmp}/al"],
+        2,
+        "--policies: 'formation' given twice",
+    ),
+    (
+        "alignment-setting-twice",
+        ["alignment", "--policies", "random", "formation", "sky", "--settings", "v1", "v1"],
+        2,
+        "--settings: 'v1' given twice",
+    ),
+    (
+        "study-planner-episodes-more",
+        ["study", *_STUDY[:4], "--episodes", "2", "--planner-episodes", "5"],
+        2,
+        "--planner-episodes 5 must be <= --episodes 2",
+    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]

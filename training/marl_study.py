@@ -706,6 +706,11 @@ def run(args: argparse.Namespace) -> int:
     ):
         if value < least:
             raise ValueError(f"{option} must be >= {least}, got {value}")
+    if args.planner_episodes > args.episodes:
+        raise ValueError(
+            f"--planner-episodes {args.planner_episodes} must be <= --episodes "
+            f"{args.episodes}: the planner flies the first episodes of the set"
+        )
     groups = parse_runs(args.runs)
     env_kwargs: dict[str, Any] = {}
     first = next(iter(groups.values()), [])
