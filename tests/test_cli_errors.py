@@ -234,6 +234,13 @@ CASES: list[tuple[str, list[str], int, str]] = [
         2,
         "--planner-episodes 5 must be <= --episodes 2",
     ),
+    # issue 45, finding 7: a file city (one route) is refused before any episode is collected
+    (
+        "routes-file-city",
+        ["train-routes", "--episodes", "5", "--env-set", "city=geojson:sample"],
+        2,
+        "city=geojson:sample: a city read from a file has one route",
+    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -283,6 +290,8 @@ def _argv(template: list[str], tmp) -> list[str]:
             argv += ["--config", str(tmp / "toy.yaml"), "--env-id", TOY]
         else:
             argv.append(item.replace("{tmp}", str(tmp)))
+    if argv[0] == "train-routes" and "--out" not in argv:
+        argv += ["--out", str(tmp / "routes")]
     if argv[0] == "train":
         if "--out" not in argv:
             argv += ["--out", str(tmp / "run")]
