@@ -1271,7 +1271,8 @@ def train(cfg: TrainConfig) -> Path:
             wrote_config = write_yaml(out / "config.yaml", resolved)
         else:
             resolved["resume"] = str(resume_path)
-            write_yaml(out / f"config_resumed_at_{int(resume['agent_steps'])}.yaml", resolved)
+            wrote_config = out / f"config_resumed_at_{int(resume['agent_steps'])}.yaml"
+            wrote_config = write_yaml(wrote_config, resolved)
         try:
             return train_marl(
                 out,
@@ -1284,6 +1285,12 @@ def train(cfg: TrainConfig) -> Path:
                 progress=cfg.progress_bar,
                 pretrain=pretrain,
             )
+        except _NotResumable as exc:  # refused before training: leave the folder as it was
+            _remove_start_of_run(out, wrote_config)
+            raise ValueError(
+                f"cannot resume from {resume_path}: {exc}; give a checkpoint that `coopnav "
+                "train` wrote with these settings, or start a new run without --resume"
+            ) from None
         except _NothingTrained:
             if resume is None and wrote_config is not None:
                 _remove_start_of_run(out, wrote_config)
@@ -1299,6 +1306,10 @@ def train(cfg: TrainConfig) -> Path:
                     file=sys.stderr,
                 )
             raise
+
+
+class _NotResumable(ValueError):
+    """The checkpoint to resume from does not load into the trainer (nothing was trained)."""
 
 
 class _NothingTrained(KeyboardInterrupt):
@@ -1401,7 +1412,10 @@ def train_marl(
             try:
                 built = MARLTrainer(settings, env_kwargs, seed, env_seed=env_seed)
                 if resume is not None:
-                    built.load_state_dict(resume)
+                    try:
+                        built.load_state_dict(resume)
+                    except ValueError as exc:
+                        raise _NotResumable(str(exc)) from exc
                 elif pretrain is not None:
                     print(
                         f"behaviour-cloning warm start: {pretrain.episodes} episodes of the "
