@@ -529,9 +529,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--planner-episodes",
         type=int,
-        default=20,
-        help="episodes of the privileged planner, the first ones of the set; 0 skips it "
-        "(default: %(default)s)",
+        default=None,
+        help="episodes of the privileged planner, the first ones of the set, at most "
+        "--episodes; 0 skips it (default: 20, or --episodes if fewer)",
     )
     parser.add_argument(
         "--planner",
@@ -579,6 +579,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1,
         help="worker processes flying policies (default: %(default)s)",
     )
+
+
+PLANNER_EPISODES = 20
+"""Episodes of the privileged planner without ``--planner-episodes`` (fewer with fewer
+``--episodes``)."""
 
 
 def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str, list[str]]:
@@ -699,6 +704,8 @@ def run_env(run: Path) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """``coopnav study``: fly, summarise, write ``report.md``, ``report.json`` and figures."""
     t0 = time.perf_counter()
+    if args.planner_episodes is None:
+        args.planner_episodes = min(PLANNER_EPISODES, args.episodes)
     for option, value, least in (
         ("--reps", args.reps, 1),
         ("--jobs", args.jobs, 1),
