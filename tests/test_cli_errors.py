@@ -23,6 +23,8 @@ TOY = TOY_ENV_ID
 TOY_SECTION = TOY_TRAINING
 
 
+_V1 = "urban_canyon_v1"
+
 #: (id, argv with {tmp} placeholders, exit status, message fragment)
 CASES: list[tuple[str, list[str], int, str]] = [
     # configuration files and --set / --env-set values
@@ -153,6 +155,48 @@ CASES: list[tuple[str, list[str], int, str]] = [
     ("demo-dt-0", ["demo", "--dt", "0"], 2, "--dt"),
     ("demo-seed-neg", ["demo", "--seed", "-1"], 2, "--seed"),
     ("demo-epochs-abc", ["demo", "--epochs", "abc"], 2, "invalid int value"),
+    # issue 45, findings 4 and 5: an --env-id that cannot apply is refused, naming the run's
+    ("env-id-empty", ["train", "--env-id", ""], 2, "--env-id is empty"),
+    ("eval-env-id-empty", ["evaluate", "--policies", "random", "--env-id", ""], 2, "is empty"),
+    (
+        "resume-other-env-id",
+        ["train", "--resume", "latest", "--env-id", "urban_canyon_v1", "--out", "{tmp}/v0run"],
+        2,
+        "holds a run of urban_canyon_v0 (its config.yaml), which --resume continues in",
+    ),
+    (
+        "eval-other-env-id",
+        ["evaluate", "--policies", "ppo:{tmp}/v0run/final_model.zip", "--env-id", _V1],
+        2,
+        "the policies' training run is a run of urban_canyon_v0",
+    ),
+    (
+        "eval-train-config-other-env-id",
+        ["evaluate", "--train-config", "{tmp}/v0run/config.yaml", "--env-id", "urban_canyon_v1"],
+        2,
+        "v0run/config.yaml says env_id: urban_canyon_v0); evaluate them in urban_canyon_v0",
+    ),
+    # issue 45, finding 6: a backend's section given for another backend is refused
+    (
+        "torchrl-set-with-sb3",
+        ["train", "--set", "torchrl.start_hold_decisions=-1"],
+        2,
+        "--set torchrl.start_hold_decisions=-1: torchrl.* settings apply to --backend torchrl",
+    ),
+    ("rllib-set-with-sb3", ["train", "--set", "rllib.num_env_runners=2"], 2, "--backend rllib"),
+    # issue 45, finding 10: duplicates and an option larger than the set it takes from
+    (
+        "alignment-policy-twice",
+        ["alignment", "--policies", "column", "column", "sky_column", "--out", "{tmp}/al"],
+        2,
+        "--policies: 'column' given twice",
+    ),
+    (
+        "alignment-setting-twice",
+        ["alignment", "--policies", "random", "column", "sky_column", "--settings", "v1", "v1"],
+        2,
+        "--settings: 'v1' given twice",
+    ),
     # the command itself
     ("no-such-command", ["fly"], 2, "invalid choice"),
 ]
@@ -166,6 +210,9 @@ def files(tmp_path):
     (tmp_path / "section.yaml").write_text("urban_canyon_v1: [1, 2]\n")
     (tmp_path / "list.json").write_text("[1, 2]\n")
     (tmp_path / "afile").write_text("x")
+    (tmp_path / "v0run").mkdir()  # a run of urban_canyon_v0 (its settings as recorded)
+    v0_settings = {"env_id": "urban_canyon_v0", "env": {"nav_reward": "sigma"}, "timesteps": 64}
+    (tmp_path / "v0run" / "config.yaml").write_text(yaml.safe_dump(v0_settings))
     (tmp_path / "empty.zip").write_bytes(b"")
     with zipfile.ZipFile(tmp_path / "corrupt.zip", "w") as z:  # SB3's layout, broken weights
         z.writestr("data", "{}")
@@ -199,6 +246,8 @@ def _argv(template: list[str], tmp) -> list[str]:
             argv += ["--config", str(tmp / "toy.yaml"), "--env-id", TOY]
         else:
             argv.append(item.replace("{tmp}", str(tmp)))
+    if argv[0] == "train-routes" and "--out" not in argv:
+        argv += ["--out", str(tmp / "routes")]
     if argv[0] == "train":
         if "--out" not in argv:
             argv += ["--out", str(tmp / "run")]
@@ -292,3 +341,54 @@ def test_evaluate_accepts_env_set_integrity_off(capsys):
     assert _run([*argv, "--episodes", "1"]) == 2
     err = capsys.readouterr().err
     assert "got False" not in err and "unknown policy 'nope'" in err, err  # env built
+
+
+# --------------------------------------------------------------------------------------------
+# issue 45, finding 2: Ctrl-C at start-up (the subcommands' imports) ends in one line
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("command", ["train", "evaluate"])
+def test_an_interrupt_while_starting_ends_in_one_line(monkeypatch, capsys, command):
+    """SIGINT while the subcommands' modules are imported: status 130, one line."""
+    import importlib
+
+    from coopnav_env.training import cli
+
+    real = importlib.import_module
+
+    def interrupted(name, *args, **kwargs):
+        if name == cli.COMMANDS[command][0]:
+            raise KeyboardInterrupt
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(cli.importlib, "import_module", interrupted)
+    assert main([command, "--help"]) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.strip() == "coopnav: interrupted while starting; nothing was done", err
+
+
+def test_an_interrupt_in_a_command_ends_in_one_line(monkeypatch, capsys):
+    """SIGINT while ``coopnav evaluate`` runs (before it wrote anything): 130 and one line."""
+    from coopnav_env.training import evaluate_cli
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(evaluate_cli, "run", interrupted)
+    assert main(["evaluate", "--policies", "random"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip() == "coopnav evaluate: interrupted", err
+
+
+def test_start_hold_decisions_must_leave_decisions_to_learn(files, capsys):
+    """issue 45, finding 6: holding every decision of an episode learns nothing."""
+    pytest.importorskip("torchrl")
+    argv = ["train", "--backend", "torchrl", "--env-id", "urban_canyon_v1"]
+    argv += ["--set", "env.action_frame=route", "--set", "torchrl.start_hold_decisions=1000000"]
+    argv += ["--set", "torchrl.pretrain=null", "--out", str(files / "hold")]
+    assert _run(_argv(argv, files)) == 2
+    err = capsys.readouterr().err
+    assert "torchrl.start_hold_decisions must be < the decisions of an episode" in err, err
+    assert "got 1000000" in err and not (files / "hold").exists()

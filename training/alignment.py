@@ -247,6 +247,10 @@ def alignment(
     from coopnav_env.envs.config import V1_DEFAULTS
 
     policies, seeds = list(policies), [int(s) for s in seeds]
+    for option, given in (("--policies", policies), ("--settings", list(settings))):
+        twice = sorted({x for x in given if given.count(x) > 1})
+        if twice:
+            raise ValueError(f"{option}: {', '.join(map(repr, twice))} given twice; name each once")
     if len(policies) < 3:
         raise ValueError(f"alignment needs at least 3 policies to rank, got {policies}")
     unknown = [s for s in settings if s not in REWARD_SETTINGS]

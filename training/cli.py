@@ -7,8 +7,10 @@ Each subcommand lives in its own module that defines ``add_arguments(parser)`` a
 Errors never end in a traceback unless asked for (:func:`main`): a usage error (a bad
 setting, a missing file, malformed YAML or JSON, an unusable output folder, a checkpoint that
 does not load, a missing optional dependency) prints one line ``coopnav CMD: error: ...`` and
-exits 2; a failure of the system (a full disk, a file-size limit) exits 1; an interrupt exits
-130 (SIGINT) or 143 (SIGTERM). ``--debug`` (or ``COOPNAV_DEBUG=1``) shows the traceback.
+exits 2; a failure of the system (a full disk, a file-size limit) exits 1; an interrupt, at
+any moment after the ``coopnav_env`` package is imported (the subcommands' imports included),
+prints one line and exits 130 (SIGINT) or 143 (SIGTERM). ``--debug`` (or ``COOPNAV_DEBUG=1``)
+shows the traceback.
 """
 
 from __future__ import annotations
@@ -118,8 +120,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``coopnav`` console script; returns the exit status."""
-    parser = build_parser()
+    """Entry point of the ``coopnav`` console script; returns the exit status.
+
+    An interrupt while the subcommands' modules are imported (start-up, before any command
+    runs) prints one line and returns 128 + the signal number, as one during a command does.
+    """
+    try:
+        parser = build_parser()
+    except KeyboardInterrupt as exc:
+        if os.environ.get(DEBUG_ENV, "") not in ("", "0"):
+            traceback.print_exc()
+        print("\ncoopnav: interrupted while starting; nothing was done", file=sys.stderr)
+        return 128 + int(getattr(exc, "signum", signal.SIGINT))
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
         parser.print_help()
@@ -132,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as exc:
         if debug:
             traceback.print_exc()
+        print(f"\n{where}: interrupted", file=sys.stderr)
         return 128 + int(getattr(exc, "signum", signal.SIGINT))
     except usage_errors() as exc:
         if debug:

@@ -227,6 +227,8 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
     trained policy, then flags; warns on stderr about a trained policy without its run's
     settings (see :func:`_warn_untracked`)."""
     trained: dict[str, Any] = {}
+    if args.env_id is not None and not args.env_id.strip():
+        raise ValueError("--env-id is empty; give an environment id or leave --env-id out")
     if args.train_config:
         p = Path(args.train_config)
         if not p.is_file():
@@ -242,6 +244,13 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
             source = "NO config.yaml of the trained policy's run: maybe not its training settings"
         else:
             source = ""
+    run_env_id = trained.get("env_id")
+    if args.env_id is not None and run_env_id is not None and args.env_id != run_env_id:
+        raise ValueError(
+            f"--env-id {args.env_id}: the policies' training run is a run of {run_env_id} "
+            f"({source.removeprefix('from ')} says env_id: {run_env_id}); evaluate them in "
+            f"{run_env_id} (leave --env-id out)"
+        )
     env_id = args.env_id or trained.get("env_id") or DEFAULT_ENV_ID
     env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
     if args.n_uavs is not None:

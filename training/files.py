@@ -359,7 +359,9 @@ def claim_output_folder(
     Replaced outputs stay until the command finishes (each new file replaces its namesake
     atomically, and :meth:`OutputClaim.finish` removes the rest), so a command that fails
     or is interrupted leaves the earlier versions in place; its claim (``status:
-    running``) lets the same command with the same settings take the folder again.
+    running``) lets the same command with the same settings take the folder again. A command
+    refused inside the block (a :data:`REFUSALS` error) before it wrote anything leaves the
+    folder as it found it: the earlier claim back (or none), the folders it created removed.
 
     Parameters
     ----------
@@ -374,66 +376,128 @@ def claim_output_folder(
     overwrite : bool
         The command's ``--overwrite``.
     """
+    out = Path(out)
+    created = [p for p in (out, *out.parents) if not p.exists()]  # deepest first
     out = ensure_folder(out)
     wanted = json.loads(json.dumps(jsonable(settings)))
-    with folder_lock(out):
-        entries = sorted(p for p in out.iterdir() if not p.name.startswith("."))
-        training = sorted({p for pat in TRAINING_RUN_FILES for p in out.glob(pat)})
-        if training:
-            raise ValueError(
-                f"{out} holds a training run ({_names(training)}); `{command}` writes into a "
-                "folder of its own (--overwrite never removes a training run): choose another "
-                "--out"
+    lock_found = (out / LOCK_NAME).exists()
+    untouched = True  # nothing written into out but the claim
+    try:
+        with folder_lock(out):
+            found = _entries_state(out)
+            with _claim_locked(out, command, wanted, outputs, overwrite) as claim:
+                try:
+                    yield claim
+                except REFUSALS:
+                    untouched = _entries_state(out, skip=(CLAIM_NAME,)) == {
+                        k: v for k, v in found.items() if k != CLAIM_NAME
+                    }
+                    if untouched:  # refused before writing anything: the old claim back
+                        _restore_claim(out, found.get(CLAIM_NAME))
+                    raise
+    except REFUSALS:
+        if untouched and not lock_found:
+            (out / LOCK_NAME).unlink(missing_ok=True)
+        if untouched:  # the folders ensure_folder created, empty again
+            for folder in created:
+                try:
+                    folder.rmdir()
+                except OSError:
+                    break
+        raise
+
+
+REFUSALS: tuple[type[BaseException], ...] = (
+    ValueError,
+    TypeError,
+    LookupError,
+    FileNotFoundError,
+    ImportError,
+)
+"""Errors that refuse a command's settings (usage errors): raised inside
+:func:`claim_output_folder` before anything is written, they leave ``--out`` as it was."""
+
+
+def _entries_state(out: Path, skip: Sequence[str] = ()) -> dict[str, Any]:
+    """Name -> (size, mtime, the bytes of the claim) of ``out``'s entries (not the lock)."""
+    state: dict[str, Any] = {}
+    for p in out.iterdir():
+        if p.name == LOCK_NAME or p.name in skip:
+            continue
+        st = p.lstat()
+        state[p.name] = (st.st_size, st.st_mtime_ns)
+        if p.name == CLAIM_NAME and p.is_file():
+            state[p.name] = p.read_bytes()
+    return state
+
+
+def _restore_claim(out: Path, old: Any) -> None:
+    if isinstance(old, bytes):
+        atomic_write_text(out / CLAIM_NAME, old.decode())
+    else:
+        (out / CLAIM_NAME).unlink(missing_ok=True)
+
+
+@contextmanager
+def _claim_locked(
+    out: Path, command: str, wanted: Any, outputs: Sequence[str], overwrite: bool
+) -> Iterator[OutputClaim]:
+    """:func:`claim_output_folder` in the locked folder ``out``."""
+    entries = sorted(p for p in out.iterdir() if not p.name.startswith("."))
+    training = sorted({p for pat in TRAINING_RUN_FILES for p in out.glob(pat)})
+    if training:
+        raise ValueError(
+            f"{out} holds a training run ({_names(training)}); `{command}` writes into a "
+            "folder of its own (--overwrite never removes a training run): choose another "
+            "--out"
+        )
+    claim_path = out / CLAIM_NAME
+    how = "choose another --out, or replace them with --overwrite"
+    replacing: set[str] = set()
+    if claim_path.is_file():
+        record = _read_claim(claim_path)
+        owner = record["command"]
+        if owner != command:
+            problem = f"{out} holds the outputs of `{owner}` ({CLAIM_NAME})"
+        elif record.get("settings") != wanted:
+            old = record.get("settings")
+            keys = sorted(
+                k
+                for k in set(old or {}) | set(wanted or {})
+                if not isinstance(old, dict)
+                or not isinstance(wanted, dict)
+                or old.get(k) != wanted.get(k)
             )
-        claim_path = out / CLAIM_NAME
-        how = "choose another --out, or replace them with --overwrite"
-        replacing: set[str] = set()
-        if claim_path.is_file():
-            record = _read_claim(claim_path)
-            owner = record["command"]
-            if owner != command:
-                problem = f"{out} holds the outputs of `{owner}` ({CLAIM_NAME})"
-            elif record.get("settings") != wanted:
-                old = record.get("settings")
-                keys = sorted(
-                    k
-                    for k in set(old or {}) | set(wanted or {})
-                    if not isinstance(old, dict)
-                    or not isinstance(wanted, dict)
-                    or old.get(k) != wanted.get(k)
-                )
-                problem = f"{out} holds a `{command}` result of other settings ({', '.join(keys)})"
-            elif record.get("status") == "finished":
-                problem = (
-                    f"{out} holds the finished result of `{command}` with these settings "
-                    "(a rerun could change it)"
-                )
-            else:
-                problem = None  # the same command, interrupted: take it again
-            # what the claim's command wrote or may have written (before an interrupt), and
-            # what it was itself replacing
-            replacing = {str(n) for n in record.get("replacing") or []}
-            if problem is not None:
-                if not overwrite:
-                    raise ValueError(f"{problem}; {how}")
-                replacing |= {str(n) for n in record.get("outputs") or []}
-                patterns = [str(g) for g in record.get("patterns") or []]
-                replacing |= {p.name for pat in patterns for p in out.glob(pat)}
-                print(
-                    f"{command}: --overwrite: replacing {owner}'s outputs in {out}",
-                    file=sys.stderr,
-                )
-        elif entries:
+            problem = f"{out} holds a `{command}` result of other settings ({', '.join(keys)})"
+        elif record.get("status") == "finished":
+            problem = (
+                f"{out} holds the finished result of `{command}` with these settings "
+                "(a rerun could change it)"
+            )
+        else:
+            problem = None  # the same command, interrupted: take it again
+        # what the claim's command wrote or may have written (before an interrupt), and
+        # what it was itself replacing
+        replacing = {str(n) for n in record.get("replacing") or []}
+        if problem is not None:
             if not overwrite:
-                raise ValueError(
-                    f"{out} already holds files of no `{command}` run ({_names(entries)}); {how}"
-                )
-            replacing = {p.name for pat in outputs for p in out.glob(pat)}
+                raise ValueError(f"{problem}; {how}")
+            replacing |= {str(n) for n in record.get("outputs") or []}
+            patterns = [str(g) for g in record.get("patterns") or []]
+            replacing |= {p.name for pat in patterns for p in out.glob(pat)}
             print(
-                f"{command}: --overwrite: replacing the earlier outputs in {out}", file=sys.stderr
+                f"{command}: --overwrite: replacing {owner}'s outputs in {out}",
+                file=sys.stderr,
             )
-        # names only: nothing outside the folder is ever removed
-        replacing = {n for n in replacing if n and "/" not in n and n not in (".", "..")}
-        claim = OutputClaim(out, command, wanted, outputs, replacing - {CLAIM_NAME})
-        claim._write("running", [])
-        yield claim
+    elif entries:
+        if not overwrite:
+            raise ValueError(
+                f"{out} already holds files of no `{command}` run ({_names(entries)}); {how}"
+            )
+        replacing = {p.name for pat in outputs for p in out.glob(pat)}
+        print(f"{command}: --overwrite: replacing the earlier outputs in {out}", file=sys.stderr)
+    # names only: nothing outside the folder is ever removed
+    replacing = {n for n in replacing if n and "/" not in n and n not in (".", "..")}
+    claim = OutputClaim(out, command, wanted, outputs, replacing - {CLAIM_NAME})
+    claim._write("running", [])
+    yield claim

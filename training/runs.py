@@ -598,28 +598,45 @@ def open_run(cfg: TrainConfig) -> Iterator[RunState]:
         ``cfg.overwrite`` and ``cfg.resume`` say).
     """
     out = Path(cfg.out)
-    with interrupts_raise():
-        ensure_folder(out)
-        with _folder_lock(out):
-            _refuse_another_command(out)
-            outputs = run_outputs(out)
-            if cfg.resume is not None:
-                backend = recorded_backend(out)
-                if backend is not None and backend != cfg.backend:
-                    raise RunFolderError(
-                        f"cannot resume {out} with --backend {cfg.backend}: the run there was "
-                        f"trained with --backend {backend}; resume it with --backend {backend}, "
-                        "or choose another --out"
-                    )
-            if cfg.resume is None and outputs:
-                if not cfg.overwrite:
-                    raise RunFolderError(
-                        f"{_describe(outputs, out)}; continue it with --resume latest, replace "
-                        "it with --overwrite, or choose another --out"
-                    )
-                _remove(outputs)
-                print(
-                    f"coopnav train: --overwrite: removed the earlier run's outputs in {out}",
-                    file=sys.stderr,
-                )
-            yield RunState(out, finished_run(out) if cfg.resume is not None else None)
+    created = [p for p in (out, *out.parents) if not p.exists()]  # deepest first
+    try:
+        with interrupts_raise():
+            ensure_folder(out)
+            with _folder_lock(out):
+                yield from _open_locked_run(cfg, out)
+    except (ValueError, TypeError, LookupError, FileNotFoundError, ImportError):
+        # refused (a usage error) with nothing left in the folders it created: remove them
+        if created and out.is_dir() and {p.name for p in out.iterdir()} <= {LOCK_NAME}:
+            (out / LOCK_NAME).unlink(missing_ok=True)
+            for folder in created:
+                try:
+                    folder.rmdir()
+                except OSError:
+                    break
+        raise
+
+
+def _open_locked_run(cfg: TrainConfig, out: Path) -> Iterator[RunState]:
+    """:func:`open_run` in the locked folder ``out``."""
+    _refuse_another_command(out)
+    outputs = run_outputs(out)
+    if cfg.resume is not None:
+        backend = recorded_backend(out)
+        if backend is not None and backend != cfg.backend:
+            raise RunFolderError(
+                f"cannot resume {out} with --backend {cfg.backend}: the run there was "
+                f"trained with --backend {backend}; resume it with --backend {backend}, "
+                "or choose another --out"
+            )
+    if cfg.resume is None and outputs:
+        if not cfg.overwrite:
+            raise RunFolderError(
+                f"{_describe(outputs, out)}; continue it with --resume latest, replace "
+                "it with --overwrite, or choose another --out"
+            )
+        _remove(outputs)
+        print(
+            f"coopnav train: --overwrite: removed the earlier run's outputs in {out}",
+            file=sys.stderr,
+        )
+    yield RunState(out, finished_run(out) if cfg.resume is not None else None)

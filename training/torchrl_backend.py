@@ -1028,7 +1028,15 @@ def check(cfg: TrainConfig) -> None:
         ) from exc
     from coopnav_env.envs import make_config
 
-    make_config(**env_kwargs)  # environment settings
+    env_config = make_config(**env_kwargs)  # environment settings
+    decisions = -(-env_config.max_steps // settings.action_repeat)  # of a whole episode
+    if settings.start_hold_decisions >= decisions:
+        raise ValueError(
+            f"torchrl.start_hold_decisions must be < the decisions of an episode, {decisions} "
+            f"(env.max_steps {env_config.max_steps} / torchrl.action_repeat "
+            f"{settings.action_repeat}), got {settings.start_hold_decisions}: that many would hold "
+            "every decision, and nothing would be learned"
+        )
     check_pretrain(cfg, settings, env_kwargs)
     if settings.residual_base is not None:
         from coopnav_env.agents import POLICY_NAMES
@@ -1174,7 +1182,8 @@ def train(cfg: TrainConfig) -> Path:
             wrote_config = write_yaml(out / "config.yaml", resolved)
         else:
             resolved["resume"] = str(resume_path)
-            write_yaml(out / f"config_resumed_at_{int(resume['agent_steps'])}.yaml", resolved)
+            wrote_config = out / f"config_resumed_at_{int(resume['agent_steps'])}.yaml"
+            wrote_config = write_yaml(wrote_config, resolved)
         try:
             return train_marl(
                 out,
@@ -1187,6 +1196,12 @@ def train(cfg: TrainConfig) -> Path:
                 progress=cfg.progress_bar,
                 pretrain=pretrain,
             )
+        except _NotResumable as exc:  # refused before training: leave the folder as it was
+            _remove_start_of_run(out, wrote_config)
+            raise ValueError(
+                f"cannot resume from {resume_path}: {exc}; give a checkpoint that `coopnav "
+                "train` wrote with these settings, or start a new run without --resume"
+            ) from None
         except _NothingTrained:
             if resume is None and wrote_config is not None:
                 _remove_start_of_run(out, wrote_config)
@@ -1202,6 +1217,10 @@ def train(cfg: TrainConfig) -> Path:
                     file=sys.stderr,
                 )
             raise
+
+
+class _NotResumable(ValueError):
+    """The checkpoint to resume from does not load into the trainer (nothing was trained)."""
 
 
 class _NothingTrained(KeyboardInterrupt):
@@ -1304,7 +1323,10 @@ def train_marl(
             try:
                 built = MARLTrainer(settings, env_kwargs, seed, env_seed=env_seed)
                 if resume is not None:
-                    built.load_state_dict(resume)
+                    try:
+                        built.load_state_dict(resume)
+                    except ValueError as exc:
+                        raise _NotResumable(str(exc)) from exc
                 elif pretrain is not None:
                     print(
                         f"behaviour-cloning warm start: {pretrain.episodes} episodes of the "

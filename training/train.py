@@ -24,6 +24,7 @@ from coopnav_env.training.config import (
     TrainConfig,
     apply_overrides,
     backend_module,
+    check_backend_settings,
     check_replaced_settings,
     load_config,
     named_configs,
@@ -180,8 +181,20 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     (:func:`coopnav_env.training.runs.recorded_config`), so that a resumed run continues under
     its own settings and its own ``timesteps`` unless a flag or ``--set`` changes one.
     """
+    if args.env_id is not None and not args.env_id.strip():
+        raise ValueError(
+            f"--env-id is empty; give an environment id (e.g. {DEFAULT_ENV_ID}) or leave "
+            "--env-id out"
+        )
     recorded = recorded_config(args.out) if args.resume is not None else None
     if recorded is not None:
+        run_env_id = recorded.get("env_id") or DEFAULT_ENV_ID
+        if args.env_id is not None and args.env_id != run_env_id:
+            raise ValueError(
+                f"--env-id {args.env_id}: {args.out} holds a run of {run_env_id} (its "
+                f"config.yaml), which --resume continues in {run_env_id}; leave --env-id out, "
+                f"or train {args.env_id} in another --out"
+            )
         names = {f.name for f in dataclasses.fields(TrainConfig)}
         base = {
             k: v for k, v in recorded.items() if k in names and k not in ("resume", "overwrite")
@@ -213,6 +226,14 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     data.update({k: v for k, v in flags.items() if v is not None})
     if args.backend is not None:
         data["backend"] = args.backend
+    backend = data.get("backend", "sb3")
+    for item in args.overrides:  # a backend's own section, given for another backend
+        section = item.partition("=")[0].split(".")[0].strip()
+        if section in ("torchrl", "rllib") and section != backend:
+            raise ValueError(
+                f"--set {item}: {section}.* settings apply to --backend {section} only, and "
+                f"this run trains with --backend {backend}; add --backend {section} or drop it"
+            )
     rllib_flags = {"num_env_runners": args.num_env_runners, "address": args.address}
     given = {k: v for k, v in rllib_flags.items() if v is not None}
     if given and data.get("backend", "sb3") != "rllib":
@@ -247,6 +268,7 @@ def run(args: argparse.Namespace) -> int:
     messages and exit statuses (2 for a usage error, 130/143 after an interrupt).
     """
     cfg = config_from_args(args)
+    check_backend_settings(cfg)  # the backend's own settings, before the minute of compiling
     with compile_notice("about a minute", prefix="coopnav train"):
         warm_up_env(make_env_fn(cfg.env_id, cfg.env))
     final = backend_module(cfg.backend).train(cfg)

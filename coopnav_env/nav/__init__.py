@@ -18,15 +18,18 @@ from coopnav_env.nav.integrity import (
 )
 from coopnav_env.nav.types import (
     PLAUSIBLE_RADIUS_M,
+    WEAK_GEOMETRY_SIGMA_M,
     GnssObservations,
     NavStatus,
     RelativePositions,
     VirtualPoint,
+    weak_geometry,
 )
 from coopnav_env.nav.wls import StandaloneSolution, pdop, solve_standalone
 
 __all__ = [
     "PLAUSIBLE_RADIUS_M",
+    "WEAK_GEOMETRY_SIGMA_M",
     "CooperativeSolution",
     "GnssObservations",
     "IntegrityRates",
@@ -45,4 +48,5 @@ __all__ = [
     "solve_cooperative_samples",
     "solve_master_slave",
     "solve_standalone",
+    "weak_geometry",
 ]

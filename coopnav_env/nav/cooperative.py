@@ -90,6 +90,7 @@ from coopnav_env.nav.types import (
     check_iteration,
     check_plausible_radius,
     initial_positions,
+    weak_geometry,
 )
 from coopnav_env.nav.wls import (
     StandaloneSolution,
@@ -159,6 +160,13 @@ class CooperativeSolution:
         """Boolean mask of UAVs with a valid cooperative fix."""
         return self.status == NavStatus.OK
 
+    @property
+    def weak_geometry(self) -> np.ndarray:
+        """Boolean mask of OK fixes on ill-conditioned geometry: predicted 3-D standard
+        deviation above :data:`~coopnav_env.nav.types.WEAK_GEOMETRY_SIGMA_M`
+        (:func:`~coopnav_env.nav.types.weak_geometry`; call it for another limit)."""
+        return weak_geometry(self.status, self.cov_ecef_m2)
+
 
 @dataclass(frozen=True)
 class MasterSlaveSolution:
@@ -184,6 +192,13 @@ class MasterSlaveSolution:
     def ok(self) -> np.ndarray:
         """Boolean mask of UAVs with a valid fix."""
         return self.status == NavStatus.OK
+
+    @property
+    def weak_geometry(self) -> np.ndarray:
+        """Boolean mask of OK fixes on ill-conditioned geometry: predicted 3-D standard
+        deviation above :data:`~coopnav_env.nav.types.WEAK_GEOMETRY_SIGMA_M`
+        (:func:`~coopnav_env.nav.types.weak_geometry`; call it for another limit)."""
+        return weak_geometry(self.status, self.cov_ecef_m2)
 
 
 # --------------------------------------------------------------------------------------------

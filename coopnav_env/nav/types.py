@@ -18,12 +18,14 @@ from coopnav_env.constants import SYSTEMS
 
 __all__ = [
     "PLAUSIBLE_RADIUS_M",
+    "WEAK_GEOMETRY_SIGMA_M",
     "GnssObservations",
     "NavStatus",
     "RelativePositions",
     "VirtualPoint",
     "check_iteration",
     "initial_positions",
+    "weak_geometry",
 ]
 
 
@@ -33,11 +35,13 @@ class NavStatus(IntEnum):
     Attributes
     ----------
     OK
-        A valid fix with its covariance: the solver converged on enough measurements. It
-        says nothing of their consistency unless an integrity monitor tested the residuals
-        (:mod:`coopnav_env.nav.integrity`; the environment's ``integrity`` setting): without
-        one, a fix that uses a faulty pseudorange (a 1 km outlier) is OK too, its error far
-        beyond its covariance.
+        A valid fix with its covariance: the solver converged on enough measurements. On
+        ill-conditioned geometry (a near-singular normal matrix) it can be far from the truth,
+        its covariance as large: test :func:`weak_geometry` (the solutions' ``weak_geometry``
+        property). It says nothing of the measurements' consistency unless an integrity
+        monitor tested the residuals (:mod:`coopnav_env.nav.integrity`; the environment's
+        ``integrity`` setting): without one, a fix that uses a faulty pseudorange (a 1 km
+        outlier) is OK too, its error far beyond its covariance.
     TOO_FEW_SATELLITES
         Fewer usable measurements than unknowns (standalone needs ``3 + N_const``; the
         cooperative DDT needs one satellite at the centroid UAV, SDT ``3 + N_const`` there).
@@ -77,6 +81,54 @@ class NavStatus(IntEnum):
 #: Default range of geocentric distance [m] of a plausible fix of a UAV: from 6,300 km (below
 #: the polar radius 6,356.8 km by a margin) to 6,500 km (about 120 km above the equator).
 PLAUSIBLE_RADIUS_M: tuple[float, float] = (6.3e6, 6.5e6)
+
+
+#: Default limit [m] of :func:`weak_geometry`: an OK fix whose predicted 3-D standard deviation
+#: ``sqrt(trace(cov))`` is larger has converged on ill-conditioned geometry (satellites in a
+#: narrow cone, a near-singular normal matrix) and may lie far from the truth.
+WEAK_GEOMETRY_SIGMA_M: float = 100.0
+
+
+def weak_geometry(
+    status: Any, cov_ecef_m2: Any, limit_m: float = WEAK_GEOMETRY_SIGMA_M
+) -> np.ndarray:
+    """Which OK fixes converged on ill-conditioned geometry: their predicted 3-D standard
+    deviation ``sqrt(trace(cov_ecef_m2))`` exceeds ``limit_m``.
+
+    ``NavStatus.OK`` says that the solver converged; when the satellites lie in a narrow cone
+    the normal matrix is near-singular (still below the solvers' singular limit), the fix
+    can be hundreds of metres to kilometres from the truth, and its covariance says so. The
+    solvers' results expose this test as their ``weak_geometry`` property.
+
+    Parameters
+    ----------
+    status : array_like of int, shape (n,)
+        :class:`NavStatus` of each fix.
+    cov_ecef_m2 : array_like, shape (n, 3, 3)
+        Position covariance of each fix [m^2] (NaN where there is none).
+    limit_m : float, default :data:`WEAK_GEOMETRY_SIGMA_M`
+        Largest predicted 3-D standard deviation [m] of a fix of usable geometry, > 0.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True for OK fixes above the limit; False for the others (not OK fixes included).
+
+    Raises
+    ------
+    ValueError
+        ``limit_m`` is not a finite number > 0.
+    """
+    if isinstance(limit_m, bool) or not (isinstance(limit_m, (int, float, np.number))):
+        raise ValueError(f"limit_m must be a finite number > 0, got {limit_m!r}")
+    if not 0.0 < float(limit_m) < np.inf:
+        raise ValueError(f"limit_m must be a finite number > 0, got {limit_m!r}")
+    status = np.asarray(status)
+    cov = np.asarray(cov_ecef_m2, dtype=float)
+    trace = np.trace(cov, axis1=-2, axis2=-1)
+    with np.errstate(invalid="ignore"):
+        large = ~(trace <= float(limit_m) ** 2)  # NaN or inf covariance of an OK fix: weak
+    return (status == NavStatus.OK) & large
 
 
 def check_iteration(max_iter: Any, tol_m: Any) -> int:

@@ -21,6 +21,7 @@ from coopnav_env.nav.types import (
     check_plausible_radius,
     implausible_radius,
     initial_positions,
+    weak_geometry,
 )
 
 __all__ = ["StandaloneSolution", "pdop", "solve_standalone"]
@@ -95,6 +96,13 @@ class StandaloneSolution:
     def ok(self) -> np.ndarray:
         """Boolean mask of receivers with a valid fix (status OK, no other status)."""
         return self.status == NavStatus.OK
+
+    @property
+    def weak_geometry(self) -> np.ndarray:
+        """Boolean mask of OK fixes on ill-conditioned geometry: predicted 3-D standard
+        deviation above :data:`~coopnav_env.nav.types.WEAK_GEOMETRY_SIGMA_M`
+        (:func:`~coopnav_env.nav.types.weak_geometry`; call it for another limit)."""
+        return weak_geometry(self.status, self.cov_ecef_m2)
 
 
 def _safe_inverse(info: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

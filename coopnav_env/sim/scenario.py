@@ -99,6 +99,7 @@ from __future__ import annotations
 import datetime
 import functools
 import math
+import warnings
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from typing import Any, Literal
@@ -648,6 +649,25 @@ def _check_city_file_settings(cfg: ScenarioConfig, o: str) -> None:
                 f"{o}.{name}=({lat}, {lon}) lies {why} of {city.source} (at East "
                 f"{xy[0]:.1f} m, North {xy[1]:.1f} m of its origin)"
             )
+    if len(ends) == 2:
+        start_xy = city.lat_lon_to_xy(*ends["city_start_lat_lon"])
+        goal_xy = city.lat_lon_to_xy(*ends["city_goal_lat_lon"])
+        apart_m = float(np.hypot(*(goal_xy - start_xy)))
+        if apart_m <= cfg.goal_radius_m:
+            raise ValueError(
+                f"{o}.city_goal_lat_lon={ends['city_goal_lat_lon']} is {apart_m:.1f} m from "
+                f"city_start_lat_lon={ends['city_start_lat_lon']}, within goal_radius_m "
+                f"{cfg.goal_radius_m:g}: every episode would end at its first step; give a goal "
+                "farther from the start"
+            )
+    x0, x1, y0, y1 = city.extent_m
+    if "city_goal_lat_lon" not in ends and math.hypot(x1 - x0, y1 - y0) < cfg.goal_distance_min_m:
+        raise ValueError(
+            f"{o}.goal_distance_min_m={cfg.goal_distance_min_m:g} is more than the "
+            f"{math.hypot(x1 - x0, y1 - y0):.0f} m across {city.source}: no goal can be that "
+            "far from the start; lower goal_distance_min_m, give city_goal_lat_lon, or use a "
+            "larger city"
+        )
 
 
 def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
@@ -916,6 +936,13 @@ def _file_city_start_goal(
         centre = pos[:, :2].mean(axis=0)
         dist = np.hypot(*(cand[1:] - centre).T)
         ok = dist >= cfg.goal_distance_min_m
+        if not np.any(ok):
+            warnings.warn(
+                f"{city.source}: no free point is goal_distance_min_m from this start; the goal "
+                "is the farthest one drawn, nearer than goal_distance_min_m (lower it, or give "
+                "city_goal_lat_lon)",
+                stacklevel=2,
+            )
         pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
         goal = np.r_[cand[1 + pick], cfg.start_altitude_m]
     return pos, goal

@@ -436,7 +436,7 @@ def plot_trajectories(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
+    from matplotlib.patches import Polygon, Rectangle
 
     from coopnav_env import urban_canyon_v0
 
@@ -453,8 +453,14 @@ def plot_trajectories(
     for j, name in enumerate(names):
         pos = flights[name]
         ax = axes[0, j]
-        for lo, hi in zip(b.min_m, b.max_m):
-            ax.add_patch(Rectangle(lo[:2], *(hi[:2] - lo[:2]), color="0.75", zorder=0, lw=0))
+        if hasattr(b, "rings_m"):  # a file city's footprints (holes in white)
+            for rings in b.rings_m:
+                ax.add_patch(Polygon(rings[0], closed=True, color="0.75", zorder=0, lw=0))
+                for hole in rings[1:]:
+                    ax.add_patch(Polygon(hole, closed=True, color="white", zorder=0, lw=0))
+        else:
+            for lo, hi in zip(b.min_m, b.max_m):
+                ax.add_patch(Rectangle(lo[:2], *(hi[:2] - lo[:2]), color="0.75", zorder=0, lw=0))
         xy = np.asarray(world.route_xy_m)
         ax.plot(xy[:, 0], xy[:, 1], "k:", lw=0.8, label="street route")
         for i in range(pos.shape[1]):
@@ -527,9 +533,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--planner-episodes",
         type=int,
-        default=20,
-        help="episodes of the privileged planner, the first ones of the set; 0 skips it "
-        "(default: %(default)s)",
+        default=None,
+        help="episodes of the privileged planner, the first ones of the set, at most "
+        "--episodes; 0 skips it (default: 20, or --episodes if fewer)",
     )
     parser.add_argument(
         "--planner",
@@ -577,6 +583,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=1,
         help="worker processes flying policies (default: %(default)s)",
     )
+
+
+PLANNER_EPISODES = 20
+"""Episodes of the privileged planner without ``--planner-episodes`` (fewer with fewer
+``--episodes``)."""
 
 
 def parse_named_lists(items: Sequence[str], option: str, form: str) -> dict[str, list[str]]:
@@ -697,6 +708,8 @@ def run_env(run: Path) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Fly, summarise, write ``report.md``, ``report.json`` and figures."""
     t0 = time.perf_counter()
+    if args.planner_episodes is None:
+        args.planner_episodes = min(PLANNER_EPISODES, args.episodes)
     for option, value, least in (
         ("--reps", args.reps, 1),
         ("--jobs", args.jobs, 1),
@@ -704,6 +717,11 @@ def run(args: argparse.Namespace) -> int:
     ):
         if value < least:
             raise ValueError(f"{option} must be >= {least}, got {value}")
+    if args.planner_episodes > args.episodes:
+        raise ValueError(
+            f"--planner-episodes {args.planner_episodes} must be <= --episodes "
+            f"{args.episodes}: the planner flies the first episodes of the set"
+        )
     groups = parse_runs(args.runs)
     env_kwargs: dict[str, Any] = {}
     first = next(iter(groups.values()), [])

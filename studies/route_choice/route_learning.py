@@ -304,6 +304,7 @@ def run(args: argparse.Namespace) -> int:
     """Collect (resumably), fit and save; prints the cross-validated choice."""
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
+    from coopnav_env.sim.file_city import FileCity
     from coopnav_env.training.files import ensure_folder, folder_lock
     from studies.route_choice.routes import ROUTE_FEATURES
 
@@ -328,7 +329,15 @@ def run(args: argparse.Namespace) -> int:
     env_kwargs = env_kwargs_from_overrides(args.env_set)
     # a column heuristic that can choose routes, with a valid --max-turns (fails early)
     probe = _with_option(args.base, f"route_choice='los_mean',route_max_turns={args.max_turns}")
-    make_policy(probe, urban_canyon_v0.parallel_env(**env_kwargs))
+    env = urban_canyon_v0.parallel_env(**env_kwargs)
+    make_policy(probe, env)
+    env.reset(seed=first)
+    if isinstance(env.unwrapped.world.city, FileCity):  # before any episode is collected
+        raise ValueError(
+            f"--env-set city={env_kwargs.get('city')}: a city read from a file has one route "
+            "from start to goal (through its free space), so there is no route to choose "
+            "between; route learning needs a grid city (leave city out, or give a grid city)"
+        )
     out = Path(args.out)
     settings = {
         "env": env_kwargs,

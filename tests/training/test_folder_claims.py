@@ -411,3 +411,48 @@ def test_alignment_claims_its_folder(tmp_path, capsys, no_flights, no_alignment_
     assert main([*ALIGNMENT, "--out", str(trained), "--overwrite"]) == 2
     assert "holds a training run" in capsys.readouterr().err
     assert _files(trained) == {"final_model.zip": b"x"} and len(no_alignment_flights) == 1
+
+
+# --------------------------------------------------------------------------------------------
+# issue 45, finding 3: a command refused before it wrote anything leaves --out as it was
+# --------------------------------------------------------------------------------------------
+
+
+def _tree(root: Path) -> dict[str, bytes | None]:
+    return {
+        str(p.relative_to(root)): (p.read_bytes() if p.is_file() else None)
+        for p in sorted(root.rglob("*"))
+    }
+
+
+@pytest.mark.parametrize(
+    "refused",
+    [
+        ["evaluate", "--policies", "bogus", "--episodes", "1", "--no-plots"],
+        ["study", "--heuristics", "bogus", "--episodes", "1", "--planner-episodes", "0"],
+        ["alignment", "--policies", "bogus", "formation", "--episodes", "1"],
+    ],
+    ids=["evaluate", "study", "alignment"],
+)
+def test_a_refused_command_leaves_no_claim(tmp_path, capsys, refused):
+    """A refused policy name: no folder (nor its parents), and a present folder unchanged."""
+    out = tmp_path / "new" / "out"
+    assert main([*refused, "--out", str(out)]) == 2
+    assert "bogus" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+    # a folder that holds a finished result of other settings keeps its claim as it was
+    study = tmp_path / "study"
+    study.mkdir()
+    record = {"command": "coopnav study", "settings": {"a": 1}, "status": "finished"}
+    (study / CLAIM_NAME).write_text(json.dumps(record))
+    (study / "report.md").write_text("# study\n")
+    before = _tree(study)
+    assert main([*refused, "--out", str(study), "--overwrite"]) == 2
+    assert _tree(study) == before
+
+
+def test_a_refused_evaluation_does_not_block_the_next_one(tmp_path, capsys):
+    out = tmp_path / "F"
+    assert main([*EVALUATE[:2], "bogus", *EVALUATE[3:], "--out", str(out)]) == 2
+    assert main([*EVALUATE, "--out", str(out)]) == 0, capsys.readouterr().err
+    assert json.loads((out / CLAIM_NAME).read_text())["status"] == "finished"

@@ -179,6 +179,7 @@ def test_runs_entries_are_checked(tmp_path) -> None:
         (["--planner", "spread"], "--planner must"),
         (["--planner-episodes", "0", "--runs", "a=,"], "--runs a=, names nothing after"),
         (["--planner-episodes", "0", "--reps", "0"], "--reps must be >= 1, got 0"),
+        (["--planner-episodes", "5"], "--planner-episodes 5 must be <= --episodes 1"),
         (
             ["--planner-episodes", "0", "--runs", "a={tmp}/listrun"],
             "listrun/run.json must hold a JSON object, got a list",
@@ -194,7 +195,7 @@ def test_bad_options_are_one_line_errors_before_flying(tmp_path, capsys, extra, 
     (tmp_path / "listrun").mkdir()
     (tmp_path / "listrun" / "final_model.zip").write_bytes(b"PK")
     (tmp_path / "listrun" / "run.json").write_text("[1, 2]\n")
-    argv = ["--out", str(tmp_path / "study"), "--heuristics", "formation", "--episodes", "1"]
+    argv = ["--out", str(tmp_path / "study"), "--heuristics", "column", "--episodes", "1"]
     argv += [e.replace("{tmp}", str(tmp_path)) for e in extra]
     assert study_main(argv) == 2
     err = capsys.readouterr().err

@@ -23,7 +23,7 @@ def settings():
 
     return {
         "env": {},
-        "base": "ceiling",
+        "base": "ceiling_column",
         "first_seed": 500_000,
         "episodes": 5,
         "max_turns": 3,
@@ -50,6 +50,16 @@ def test_damaged_run_folders_are_refused_with_one_line(tmp_path, capsys, setting
         err = capsys.readouterr().err
         assert err.startswith("route_learning.py: error: ") and message in err, err
         assert err.count("\n") == 1  # one line, no traceback
+
+
+def test_a_file_city_is_refused_before_collecting(tmp_path, capsys) -> None:
+    """A city read from a file has one route: nothing to choose, said before any episode."""
+    argv = ["--episodes", "5", "--jobs", "1", "--out", str(tmp_path / "routes")]
+    argv += ["--env-set", "city=geojson:sample"]
+    assert route_learning.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "city=geojson:sample: a city read from a file has one route" in err, err
+    assert not (tmp_path / "routes" / "episodes.npz").exists()
 
 
 def test_the_script_has_help(capsys) -> None:
