@@ -99,6 +99,7 @@ from __future__ import annotations
 import datetime
 import functools
 import math
+import warnings
 from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from typing import Any, Literal
@@ -124,7 +125,12 @@ from coopnav_env.gnss.errors import (
     _range_azimuth_elevation,
     _simulate_pseudoranges,
 )
-from coopnav_env.gnss.rinex import load_broadcast_constellation
+from coopnav_env.gnss.rinex import (
+    FEW_SATELLITES_FRACTION,
+    MIN_SATELLITES,
+    RinexWarning,
+    load_broadcast_constellation,
+)
 from coopnav_env.nav import (
     CooperativeSolution,
     GnssObservations,
@@ -679,6 +685,19 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
         )
     horizon = cfg.episode_horizon_s()
     lo, hi = sky.coverage_s
+    view = _sky_view(cfg, sky)
+    where = f"({cfg.lat_deg:g}, {cfg.lon_deg:g})"
+    if view.seen_fraction < FEW_SATELLITES_FRACTION:
+        warnings.warn(
+            f"{o}.constellation={spec!r}: at the origin {where} on average "
+            f"{view.visible_mean:.1f} satellites with a valid ephemeris are above the "
+            f"{cfg.elevation_mask_deg:g} deg cut-off, of {view.above_mean:.1f} of the file's "
+            f"satellites above it ({view.seen_fraction:.0%}): the file holds what its "
+            "station tracked. Fly near the station (lat_deg, lon_deg) or use a merged "
+            "broadcast file (BRDC...MN.rnx)",
+            RinexWarning,
+            stacklevel=4,
+        )
     if start is None:
         if cfg.t0_random_s != 0.0:
             raise ValueError(
@@ -690,6 +709,15 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
             raise ValueError(
                 f"{o}.constellation={spec!r}: an episode spans {horizon:g} s but the file "
                 f"covers only {hi - lo:g} s ({sky.coverage_text()})"
+            )
+        if view.room_s(horizon) <= 0.0:
+            raise ValueError(
+                f"{o}.constellation={spec!r}: no {horizon:g} s of the file (an episode) in "
+                f"which every system has a valid ephemeris and at least {MIN_SATELLITES} "
+                f"satellites are above the {cfg.elevation_mask_deg:g} deg cut-off at {where} "
+                f"(usable: {view.spans_text(sky.reference_gps_s)}; coverage "
+                f"{sky.coverage_text()}); fly near the file's station or give "
+                "constellation_start"
             )
         return
     try:
@@ -719,17 +747,28 @@ def world_constellation(cfg: ScenarioConfig) -> Any:
     return load_broadcast_constellation(cfg.constellation[6:].strip(), cfg.systems)
 
 
+def _sky_view(cfg: ScenarioConfig, sky: Any) -> Any:
+    """What the origin sees of a RINEX sky (:meth:`BroadcastConstellation.visibility`)."""
+    return sky.visibility(
+        cfg.lat_deg, cfg.lon_deg, cfg.alt_m, cfg.elevation_mask_deg, MIN_SATELLITES
+    )
+
+
 def episode_start_s(cfg: ScenarioConfig, sky: Any, rng: np.random.Generator) -> float:
     """GNSS time ``t_s`` of an episode's first epoch (draws from ``rng`` only when random).
 
     Nominal sky: ``t0_s + U(0, t0_random_s)``. RINEX sky: ``constellation_start`` plus
-    ``U(0, t0_random_s)``, or without a start, uniform in the coverage less the episode.
+    ``U(0, t0_random_s)``, or without a start, uniform over the times at which a whole
+    episode fits inside the file's usable spans at the origin
+    (:meth:`~coopnav_env.gnss.rinex.BroadcastConstellation.visibility`: every system a valid
+    ephemeris, at least 4 satellites above the cut-off).
     """
     if cfg.constellation == "nominal":
         return cfg.t0_s + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
     if cfg.constellation_start is None:
-        lo, hi = sky.coverage_s
-        return lo + rng.uniform(0.0, hi - lo - cfg.episode_horizon_s())
+        view = _sky_view(cfg, sky)
+        horizon = cfg.episode_horizon_s()
+        return view.start_s(horizon, rng.uniform(0.0, view.room_s(horizon)))
     t = sky.t_s_of(cfg.constellation_start)
     return t + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
 

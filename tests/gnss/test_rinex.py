@@ -348,11 +348,11 @@ def test_unhealthy_ephemerides_are_dropped_and_counted(tmp_path) -> None:
             HEADER,
             r"line 4: record of G05: eccentricity 1.5",
         ),
-        (GPS_RECORD, HEADER.replace("     3.04", "     2.11"), r"line 1: RINEX version 2.11"),
+        (GPS_RECORD, HEADER.replace("     3.04", "     4.00"), r"line 1: RINEX version 4.0 is"),
         (GPS_RECORD, HEADER.replace("N: GNSS", "O: GNSS"), r"line 1: file type 'O'"),
         (GPS_RECORD, HEADER.replace("M: MIXED", "Q: WHAT?"), r"unknown satellite system 'Q'"),
         (GPS_RECORD, HEADER.replace("END OF HEADER", "COMMENT      "), r"no 'END OF HEADER'"),
-        (GLONASS_RECORD, HEADER, r"no healthy GPS or BeiDou ephemeris .*'R': 1"),
+        (GLONASS_RECORD, HEADER, r"no usable GPS or BeiDou ephemeris .*'R': 1"),
     ],
 )
 def test_bad_files_name_the_file_the_line_and_the_problem(tmp_path, body, header, match) -> None:
@@ -365,7 +365,7 @@ def test_missing_file_and_missing_system(tmp_path) -> None:
     with pytest.raises(ValueError, match=r"'.*nowhere.rnx' does not exist"):
         load_broadcast_constellation(str(tmp_path / "nowhere.rnx"))
     nav = read_rinex_nav(_write(tmp_path, GPS_RECORD))
-    with pytest.raises(ValueError, match=r"nav.rnx: no healthy BDS ephemeris"):
+    with pytest.raises(ValueError, match=r"nav.rnx: no usable BDS ephemeris"):
         BroadcastConstellation.from_navigation(nav, ("GPS", "BDS"))
 
 
