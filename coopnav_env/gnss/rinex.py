@@ -92,6 +92,7 @@ __all__ = [
     "NavigationFile",
     "RinexWarning",
     "SkyVisibility",
+    "clear_caches",
     "gps_seconds",
     "load_broadcast_constellation",
     "read_rinex_nav",
@@ -617,7 +618,7 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
     def reject(rec: _Record, reason: str, message: str) -> None:
         key = (_KEPT_SYSTEMS[rec.prn[0]], reason)
         rejected[key] = rejected.get(key, 0) + 1
-        first_of.setdefault(key, message)
+        first_of.setdefault(key, message.removeprefix(f"{name}, "))
 
     kept: list[_Record] = []
     for rec in records:
@@ -658,8 +659,8 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
         )
     if rejected and warn:
         warnings.warn(
-            f"{name}: left out {sum(rejected.values())} of {n_records} GPS and BeiDou records "
-            f"(the other records of the file are used): {summary}",
+            f"{name}: left out {sum(rejected.values())} of {n_records} GPS and BeiDou records, "
+            f"used the others: {summary}",
             RinexWarning,
             stacklevel=2,
         )
@@ -1230,7 +1231,20 @@ def _propagate(pick, system, is_geo, ref_gps, t_rel, what: str) -> NDArray[np.fl
 def _cached_sky(
     path: str, mtime_ns: int, size: int, systems: tuple[str, ...]
 ) -> BroadcastConstellation:
-    return BroadcastConstellation.from_navigation(read_rinex_nav(path), systems)
+    return BroadcastConstellation.from_navigation(_cached_nav(path, mtime_ns, size), systems)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_nav(path: str, mtime_ns: int, size: int) -> NavigationFile:
+    """The file read once (and its records' warning given once) for every ``systems``."""
+    return read_rinex_nav(path)
+
+
+def clear_caches() -> None:
+    """Forget the files read and the skies built from them (a file read again warns again)."""
+    _cached_sky.cache_clear()
+    _cached_nav.cache_clear()
+    _visibility.cache_clear()
 
 
 def resolve_nav_path(spec: str) -> Path:
