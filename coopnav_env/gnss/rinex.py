@@ -1,19 +1,28 @@
-"""Satellite orbits and clocks from a RINEX 3 navigation file (GPS LNAV, BeiDou D1/D2).
+"""Satellite orbits and clocks from a RINEX navigation file (GPS LNAV, BeiDou D1/D2).
 
 Reading
 -------
-:func:`read_rinex_nav` parses a RINEX 3.00-3.05 navigation file (``N`` type, system ``G``,
-``C`` or ``M`` for mixed) with numpy only: the header (version, file type, satellite system,
-``END OF HEADER``), then each record's epoch line and its broadcast-orbit lines. Fields are
-fixed-width (19 characters each, four per orbit line after four blanks, three after the epoch
-of the first line), so numbers that run together (``1.0D-05-2.0D-07``) are read correctly;
-``D``, ``d`` and ``E`` exponents are accepted. GPS (``G``) and BeiDou (``C``) records are kept
-(8 lines each); GLONASS (``R``), SBAS (``S``), Galileo (``E``), QZSS (``J``) and NavIC (``I``)
-records (an epoch line and its indented orbit lines, however many the version gives) are
-skipped and counted (:attr:`NavigationFile.skipped`). Any other system letter, a record cut
-short, or a field that is not a number raises ``ValueError`` naming the file, the line number
-and what is wrong.
-Unhealthy ephemerides (GPS SV health or BeiDou SatH1 not 0) are dropped and counted.
+:func:`read_rinex_nav` parses, with numpy only, a RINEX 3.00-3.05 navigation file (``N`` type,
+system ``G``, ``C`` or ``M`` for mixed) or a RINEX 2.00-2.11 GPS navigation file (``N``),
+plain or gzip-compressed (recognised by its content): the header (version, file type,
+satellite system, ``END OF HEADER``), then each record's epoch line and its broadcast-orbit
+lines. Fields are fixed-width (19 characters each, four per orbit line after four blanks in
+RINEX 3 and three in RINEX 2, three after the epoch of the first line), so numbers that run
+together (``1.0D-05-2.0D-07``) are read correctly; ``D``, ``d`` and ``E`` exponents are
+accepted. GPS (``G``) and BeiDou (``C``) records are kept (8 lines each); GLONASS (``R``),
+SBAS (``S``), Galileo (``E``), QZSS (``J``) and NavIC (``I``) records (an epoch line and its
+indented orbit lines, however many the version gives) are skipped and counted
+(:attr:`NavigationFile.skipped`). Any other system letter, a bad epoch, or a record cut
+short raises ``ValueError`` naming the file, the line number and what is wrong.
+
+A GPS or BeiDou record that cannot be used is left out, not the file, checked in this order:
+the satellite flags itself unhealthy (GPS SV health or BeiDou SatH1 not 0); a field is blank
+or not a number; the orbit is implausible (``sqrt(A)`` outside 4,472-7,071 m^0.5, a
+semi-major axis of 20,000-50,000 km; eccentricity outside [0, 0.5)); ``toe`` lies outside the
+week; the week number is not an integer or disagrees with the record's epoch. The records left
+out are counted by system and reason (:attr:`NavigationFile.rejected`) and named in one
+:class:`RinexWarning` per file. Of repeated broadcasts of one ephemeris (same satellite and
+``toe``), the newest (latest transmission time) is kept.
 
 Propagation
 -----------
@@ -40,13 +49,20 @@ Time and validity
 -----------------
 A :class:`BroadcastConstellation` measures time ``t_s`` in seconds after its
 ``reference_gps_s`` (GPS seconds, since 1980-01-06 00:00:00 GPST), the start of the file's
-coverage rounded down to a whole second. For each satellite it uses the ephemeris with the
-``toe`` closest to ``t`` among those valid at ``t`` (``|t - toe| <= validity``: half the GPS
-fit interval, at least 2 h; 1 h for BeiDou, whose ephemerides are refreshed hourly); of two
-equally close, the later ``toe``. A satellite with no valid ephemeris at ``t`` (a gap in the
-file) has NaN position and clock: it is not broadcasting. The file's coverage is the span in
-which every included system has at least one valid ephemeris; a time outside it raises
-``ValueError`` naming the time and the coverage.
+coverage rounded down to a whole second. Each ephemeris is used only inside its fit interval,
+``|t - toe| <= validity``: half the GPS record's fit interval (its last field, in hours; at
+least 4 h, the value of a blank or 0 field); 1 h for BeiDou, whose ephemerides are refreshed
+hourly. Of the ephemerides of a satellite valid at ``t``, the one with the nearest ``toe`` is
+used (of two equally near, the later ``toe``), as RTKLIB's ``seleph`` does. A satellite with no
+valid ephemeris at ``t`` (a gap in the file) has NaN position and clock: it is not
+broadcasting. :attr:`BroadcastConstellation.valid_spans_gps_s` are the spans in which every
+included system has at least one valid ephemeris; the coverage runs from the first to the
+last of them, and a time outside it raises ``ValueError`` naming the time and the coverage.
+:meth:`BroadcastConstellation.visibility` says what a place sees over the coverage (sampled
+every 30 s): the usable spans, in which every system has a valid ephemeris and at least
+:data:`MIN_SATELLITES` satellites are above the cut-off, and how many of the file's
+satellites above the cut-off have a valid ephemeris there (a station's file holds the
+satellites the station tracked: far from it, few).
 
 References
 ----------
@@ -303,14 +319,14 @@ class RinexWarning(UserWarning):
 
 @dataclass(frozen=True, eq=False)
 class NavigationFile:
-    """The GPS and BeiDou broadcast ephemerides of one RINEX 3 navigation file.
+    """The GPS and BeiDou broadcast ephemerides of one RINEX navigation file.
 
     Attributes
     ----------
     path : str
         The file read.
     version : float
-        RINEX version (3.00-3.05).
+        RINEX version (2.00-2.11 or 3.00-3.05).
     file_system : str
         Satellite system of the header (``G``, ``C`` or ``M``; others are accepted but give
         no ephemerides).
@@ -1255,7 +1271,7 @@ def resolve_nav_path(spec: str) -> Path:
 def load_broadcast_constellation(
     path: str | os.PathLike[str], systems: tuple[str, ...] = SYSTEMS
 ) -> BroadcastConstellation:
-    """The sky of a RINEX 3 navigation file (cached per file content and ``systems``).
+    """The sky of a RINEX navigation file (cached per file content and ``systems``).
 
     Parameters
     ----------

@@ -308,7 +308,8 @@ class ScenarioConfig:
     constellation : str, default "nominal"
         Where the satellites come from. ``"nominal"``: the nominal circular-orbit
         constellations (:func:`~coopnav_env.gnss.default_constellation`). ``"rinex:PATH"``:
-        the broadcast ephemerides of a RINEX 3 navigation file
+        the broadcast ephemerides of a RINEX navigation file (RINEX 3, or RINEX 2 GPS; plain
+        or gzip-compressed)
         (:class:`~coopnav_env.gnss.rinex.BroadcastConstellation`, the satellites of
         ``systems`` in it; ``"rinex:sample"``: the one-day GPS + BeiDou file shipped with the
         package). The file is read and checked here: a missing or bad file, or a time outside
@@ -317,8 +318,11 @@ class ScenarioConfig:
         be 0, and the start of an episode is set by ``constellation_start``.
     constellation_start : str, float or None, default None
         Only with ``constellation="rinex:..."``. ``None``: each episode starts at a time drawn
-        uniformly from the episode generator inside the file's coverage (leaving room for the
-        whole episode); ``t0_random_s`` must then be 0. A UTC time as an ISO 8601 string
+        uniformly from the episode generator among those at which the whole episode lies in
+        the file's usable spans at the origin (every system a valid ephemeris, at least 4
+        satellites above the cut-off:
+        :meth:`~coopnav_env.gnss.rinex.BroadcastConstellation.visibility`);
+        ``t0_random_s`` must then be 0. A UTC time as an ISO 8601 string
         (``"2026-12-03T06:00:00Z"``) or GPS seconds (since 1980-01-06): every episode starts
         there, plus ``U(0, t0_random_s)``; the start, spread and episode must lie inside the
         coverage.
@@ -668,7 +672,7 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
         return
     if not isinstance(spec, str) or not spec.startswith("rinex:") or not spec[6:].strip():
         raise ValueError(
-            f"{o}.constellation must be 'nominal' or 'rinex:PATH' (a RINEX 3 navigation file; "
+            f"{o}.constellation must be 'nominal' or 'rinex:PATH' (a RINEX navigation file; "
             f"'rinex:sample' for the shipped one), got {spec!r}"
         )
     try:
