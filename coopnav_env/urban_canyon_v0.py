@@ -429,7 +429,8 @@ one-day GPS + BeiDou file shipped with the package (made from the nominal orbits
 `constellation_start` sets the first epoch: a UTC ISO time (`"2026-12-03T06:00:00Z"`) or GPS
 seconds, plus `U(0, t0_random_s)`; None draws it per episode, from the episode's generator,
 among the times at which the whole episode lies in the file's usable spans at the origin
-(every system with a valid ephemeris, at least 4 satellites above the cut-off). `t0_s` must
+(every system with a valid ephemeris, at least 4 satellites above the cut-off; a given start
+whose episode leaves them gives a `RinexWarning`). `t0_s` must
 be 0 (`t_s` counts from the start of the coverage). Each ephemeris is used within its fit
 interval (GPS: the record's, at least 4 h; BeiDou: 1 h either side of `toe`), the one with
 the nearest `toe`. The file is read and checked when the environment is made: unhealthy or

@@ -325,7 +325,7 @@ class ScenarioConfig:
         ``t0_random_s`` must then be 0. A UTC time as an ISO 8601 string
         (``"2026-12-03T06:00:00Z"``) or GPS seconds (since 1980-01-06): every episode starts
         there, plus ``U(0, t0_random_s)``; the start, spread and episode must lie inside the
-        coverage.
+        coverage (an episode that leaves the usable spans is flown with a ``RinexWarning``).
     elevation_mask_deg : float, default 10.0
         Elevation cut-off [deg], in [0, 60].
     max_sats : int or None, default None
@@ -735,6 +735,16 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
             f"({cfg.t0_random_s:g} s) and the episode ({horizon:g} s) reach t_s {t_end:g} s, "
             f"outside the validity of the ephemerides in {sky.source}: its coverage is "
             f"{sky.coverage_text()}"
+        )
+    if cfg.t0_random_s == 0.0 and not any(a <= t_start and t_end <= b for a, b in view.spans_s):
+        warnings.warn(
+            f"{o}.constellation_start={start!r}: the episode (t_s {t_start:g} to {t_end:g} s) "
+            f"leaves the file's usable spans at the origin {where}, where every system has a "
+            f"valid ephemeris and at least {MIN_SATELLITES} satellites are above the "
+            f"{cfg.elevation_mask_deg:g} deg cut-off (usable: "
+            f"{view.spans_text(sky.reference_gps_s)})",
+            RinexWarning,
+            stacklevel=4,
         )
 
 

@@ -284,3 +284,17 @@ def test_gps_only_on_a_mixed_station_file_with_bad_beidou_records() -> None:
     assert sky.n_sv == 31 and all(p.startswith("G") for p in sky.prn)
     env.reset(seed=3)
     assert len(env.world.last.sv_index) >= 4
+
+
+def test_a_given_start_outside_the_usable_spans_warns() -> None:
+    make = lambda start: urban_canyon_v0.parallel_env(  # noqa: E731
+        constellation=f"rinex:{ELKO}", constellation_start=start, **AT_ELKO
+    )
+    # 20:00:14 to 21:00:14 GPST no BeiDou ephemeris is valid
+    env, messages = _rinex_warnings(lambda: make("2018-07-29T20:20:00Z"))
+    gap = [m for m in messages if "leaves the file's usable spans" in m]
+    assert len(gap) == 1 and "2018-07-29T20:00:14 GPST, 2018-07-29T21:00:14 GPST" in gap[0]
+    env.reset(seed=0)  # flown as asked
+    assert not np.any(env.world.constellation.system[env.world.last.sv_index] == 1)
+    _, messages = _rinex_warnings(lambda: make("2018-07-29T12:00:00Z"))
+    assert not [m for m in messages if "usable spans" in m]
