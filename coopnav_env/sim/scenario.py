@@ -736,9 +736,9 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
             f"outside the validity of the ephemerides in {sky.source}: its coverage is "
             f"{sky.coverage_text()}"
         )
-    if cfg.t0_random_s == 0.0 and not any(a <= t_start and t_end <= b for a, b in view.spans_s):
+    if not any(a <= t_start and t_end <= b for a, b in view.spans_s):
         warnings.warn(
-            f"{o}.constellation_start={start!r}: the episode (t_s {t_start:g} to {t_end:g} s) "
+            f"{o}.constellation_start={start!r}: the episodes (t_s {t_start:g} to {t_end:g} s) "
             f"leaves the file's usable spans at the origin {where}, where every system has a "
             f"valid ephemeris and at least {MIN_SATELLITES} satellites are above the "
             f"{cfg.elevation_mask_deg:g} deg cut-off (usable: "
