@@ -714,7 +714,7 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
                 f"{o}.constellation={spec!r}: an episode spans {horizon:g} s but the file "
                 f"covers only {hi - lo:g} s ({sky.coverage_text()})"
             )
-        if view.room_s(horizon) <= 0.0:
+        if not any(b - a >= horizon for a, b in view.spans_s):
             raise ValueError(
                 f"{o}.constellation={spec!r}: no {horizon:g} s of the file (an episode) in "
                 f"which every system has a valid ephemeris and at least {MIN_SATELLITES} "
@@ -739,7 +739,7 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
     if not any(a <= t_start and t_end <= b for a, b in view.spans_s):
         warnings.warn(
             f"{o}.constellation_start={start!r}: the episodes (t_s {t_start:g} to {t_end:g} s) "
-            f"leaves the file's usable spans at the origin {where}, where every system has a "
+            f"leave the file's usable spans at the origin {where}, where every system has a "
             f"valid ephemeris and at least {MIN_SATELLITES} satellites are above the "
             f"{cfg.elevation_mask_deg:g} deg cut-off (usable: "
             f"{view.spans_text(sky.reference_gps_s)})",

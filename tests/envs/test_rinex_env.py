@@ -292,9 +292,20 @@ def test_a_given_start_outside_the_usable_spans_warns() -> None:
     )
     # 20:00:14 to 21:00:14 GPST no BeiDou ephemeris is valid
     env, messages = _rinex_warnings(lambda: make("2018-07-29T20:20:00Z"))
-    gap = [m for m in messages if "leaves the file's usable spans" in m]
+    gap = [m for m in messages if "leave the file's usable spans" in m]
     assert len(gap) == 1 and "2018-07-29T20:00:14 GPST, 2018-07-29T21:00:14 GPST" in gap[0]
     env.reset(seed=0)  # flown as asked
     assert not np.any(env.world.constellation.system[env.world.last.sv_index] == 1)
     _, messages = _rinex_warnings(lambda: make("2018-07-29T12:00:00Z"))
     assert not [m for m in messages if "usable spans" in m]
+
+
+def test_a_file_with_no_usable_stretch_is_refused(tmp_path) -> None:
+    lines = SAMPLE_NAV_PATH.read_text().splitlines(keepends=True)
+    end = next(k for k, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    body = [lines[k : k + 8] for k in range(end, len(lines), 8)]
+    kept = [r for r in body if r[0][:3] in ("G01", "G02", "G03")]  # 3 satellites
+    path = tmp_path / "three.rnx"
+    path.write_text("".join(lines[:end] + [x for r in kept for x in r]))
+    with pytest.raises(ValueError, match=r"no 200 s of the file \(an episode\) in which every"):
+        urban_canyon_v0.parallel_env(constellation=f"rinex:{path}", systems=("GPS",))
