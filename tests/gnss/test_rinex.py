@@ -581,3 +581,31 @@ def test_visibility_of_a_station_file_near_and_far() -> None:
     # the sample sky: one span, the whole coverage
     sample = load_broadcast_constellation("sample")
     assert sample.visibility(31.23, 121.47).spans_s == (sample.coverage_s,)
+
+
+def test_a_rinex_2_record_reads_as_its_rinex_3_twin(tmp_path) -> None:
+    """The same record in RINEX 2.11 layout (I2 PRN, two-digit year, F5.1 seconds, 3-blank
+    orbit lines, numbers without a leading zero) and in RINEX 3.04."""
+    lines = GPS_RECORD.splitlines()
+    epoch = " 5 26 12  3  2  0  0.0" + lines[0][23:]
+    orbit = ["   " + line[4:] for line in lines[1:]]
+    orbit[0] = orbit[0].replace(" 1.700000000000D+01", "  .170000000000D+02")
+    header2 = (
+        "     2.11           N: GPS NAV DATA                         RINEX VERSION / TYPE\n"
+        "                                                            END OF HEADER\n"
+    )
+    two = tmp_path / "nav.26n"
+    two.write_text(header2 + "\n".join([epoch, *orbit]) + "\n")
+    nav2 = read_rinex_nav(two)
+    nav3 = read_rinex_nav(_write(tmp_path, GPS_RECORD))
+    assert nav2.version == 2.11 and nav2.file_system == "G" and nav2.prn == ("G05",)
+    assert nav2.toc_gps_s[0] == nav3.toc_gps_s[0] and nav2.toe_gps_s[0] == nav3.toe_gps_s[0]
+    for f, v in nav3.elements.items():
+        np.testing.assert_array_equal(nav2.elements[f], v, err_msg=f)
+    glonass = header2.replace("N: GPS NAV DATA        ", "G: GLONASS NAV DATA    ")
+    two.write_text(glonass + "\n".join([epoch, *orbit]) + "\n")
+    with pytest.raises(ValueError, match=r"file type 'G' .*GLONASS navigation files are not"):
+        read_rinex_nav(two)
+    two.write_text(header2 + epoch.replace(" 26 12", " 26 13") + "\n" + "\n".join(orbit) + "\n")
+    with pytest.raises(ValueError, match=r"nav.26n, line 3: epoch \(columns 3-22\)"):
+        read_rinex_nav(two)
