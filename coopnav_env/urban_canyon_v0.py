@@ -419,18 +419,26 @@ observations [m].
 
 ## A sky from a RINEX file
 
-`constellation="rinex:PATH"` flies the satellites of a RINEX 3 navigation file (GPS LNAV and
-BeiDou D1/D2, GEO and IGSO included; those of `systems`) instead of the nominal constellations,
-propagated as IS-GPS-200 and the BeiDou B1I ICD specify (`coopnav_env.gnss.rinex`);
-`"rinex:sample"` is a one-day GPS + BeiDou file shipped with the package (made from the
-nominal orbits). `constellation_start` sets the first epoch: a UTC ISO time
-(`"2026-12-03T06:00:00Z"`) or GPS seconds, plus `U(0, t0_random_s)`; None draws it per
-episode, from the episode's generator, anywhere in the file's coverage that leaves room for
-`max_steps` epochs. `t0_s` must be 0 (`t_s` counts from the start of the coverage). The file
-is read and checked when the environment is made: a missing or malformed file (the message
-names the file and line), or a start outside the ephemerides' validity, raises `ValueError`.
-On the command line: `coopnav evaluate ... --env-set constellation=rinex:my_nav.rnx
---env-set constellation_start=2026-12-03T06:00:00Z`.
+`constellation="rinex:PATH"` flies the satellites of a RINEX navigation file (RINEX 3 mixed,
+GPS or BeiDou, or RINEX 2 GPS; plain or gzip-compressed: GPS LNAV and BeiDou D1/D2, GEO and
+IGSO included; those of `systems`) instead of the nominal constellations, propagated as
+IS-GPS-200 and the BeiDou B1I ICD specify (`coopnav_env.gnss.rinex`); `"rinex:sample"` is a
+one-day GPS + BeiDou file shipped with the package (made from the nominal orbits).
+`constellation_start` sets the first epoch: a UTC ISO time (`"2026-12-03T06:00:00Z"`) or GPS
+seconds, plus `U(0, t0_random_s)`; None draws it per episode, from the episode's generator,
+among the times at which the whole episode lies in the file's usable spans at the origin
+(every system with a valid ephemeris, at least 4 satellites above the cut-off; a given start
+whose episode leaves them gives a `RinexWarning`). `t0_s` must
+be 0 (`t_s` counts from the start of the coverage). Each ephemeris is used within its fit
+interval (GPS: the record's, at least 4 h; BeiDou: 1 h either side of `toe`), the one with
+the nearest `toe`. The file is read and checked when the environment is made: unhealthy or
+implausible records are left out with one `RinexWarning` counting them by system and reason;
+a malformed file (the message names the file and line), or a start outside the ephemerides'
+validity, raises `ValueError`. A station's file holds the satellites that station tracked:
+flown far from it, the origin sees few of them, and a `RinexWarning` says so (fly at the
+station's `lat_deg`, `lon_deg`, or use a merged broadcast file). On the command line:
+`coopnav evaluate ... --env-set constellation=rinex:my_nav.rnx.gz --env-set
+constellation_start=2026-12-03T06:00:00Z`.
 
 ## A city from a GeoJSON file
 

@@ -1,19 +1,28 @@
-"""Satellite orbits and clocks from a RINEX 3 navigation file (GPS LNAV, BeiDou D1/D2).
+"""Satellite orbits and clocks from a RINEX navigation file (GPS LNAV, BeiDou D1/D2).
 
 Reading
 -------
-:func:`read_rinex_nav` parses a RINEX 3.00-3.05 navigation file (``N`` type, system ``G``,
-``C`` or ``M`` for mixed) with numpy only: the header (version, file type, satellite system,
-``END OF HEADER``), then each record's epoch line and its broadcast-orbit lines. Fields are
-fixed-width (19 characters each, four per orbit line after four blanks, three after the epoch
-of the first line), so numbers that run together (``1.0D-05-2.0D-07``) are read correctly;
-``D``, ``d`` and ``E`` exponents are accepted. GPS (``G``) and BeiDou (``C``) records are kept
-(8 lines each); GLONASS (``R``), SBAS (``S``), Galileo (``E``), QZSS (``J``) and NavIC (``I``)
-records (an epoch line and its indented orbit lines, however many the version gives) are
-skipped and counted (:attr:`NavigationFile.skipped`). Any other system letter, a record cut
-short, or a field that is not a number raises ``ValueError`` naming the file, the line number
-and what is wrong.
-Unhealthy ephemerides (GPS SV health or BeiDou SatH1 not 0) are dropped and counted.
+:func:`read_rinex_nav` parses, with numpy only, a RINEX 3.00-3.05 navigation file (``N`` type,
+system ``G``, ``C`` or ``M`` for mixed) or a RINEX 2.00-2.11 GPS navigation file (``N``),
+plain or gzip-compressed (recognised by its content): the header (version, file type,
+satellite system, ``END OF HEADER``), then each record's epoch line and its broadcast-orbit
+lines. Fields are fixed-width (19 characters each, four per orbit line after four blanks in
+RINEX 3 and three in RINEX 2, three after the epoch of the first line), so numbers that run
+together (``1.0D-05-2.0D-07``) are read correctly; ``D``, ``d`` and ``E`` exponents are
+accepted. GPS (``G``) and BeiDou (``C``) records are kept (8 lines each); GLONASS (``R``),
+SBAS (``S``), Galileo (``E``), QZSS (``J``) and NavIC (``I``) records (an epoch line and its
+indented orbit lines, however many the version gives) are skipped and counted
+(:attr:`NavigationFile.skipped`). Any other system letter, a bad epoch, or a record cut
+short raises ``ValueError`` naming the file, the line number and what is wrong.
+
+A GPS or BeiDou record that cannot be used is left out, not the file, checked in this order:
+the satellite flags itself unhealthy (GPS SV health or BeiDou SatH1 not 0); a field is blank
+or not a number; the orbit is implausible (``sqrt(A)`` outside 4,472-7,071 m^0.5, a
+semi-major axis of 20,000-50,000 km; eccentricity outside [0, 0.5)); ``toe`` lies outside the
+week; the week number is not an integer or disagrees with the record's epoch. The records left
+out are counted by system and reason (:attr:`NavigationFile.rejected`) and named in one
+:class:`RinexWarning` per file. Of repeated broadcasts of one ephemeris (same satellite and
+``toe``), the newest (latest transmission time) is kept.
 
 Propagation
 -----------
@@ -40,13 +49,20 @@ Time and validity
 -----------------
 A :class:`BroadcastConstellation` measures time ``t_s`` in seconds after its
 ``reference_gps_s`` (GPS seconds, since 1980-01-06 00:00:00 GPST), the start of the file's
-coverage rounded down to a whole second. For each satellite it uses the ephemeris with the
-``toe`` closest to ``t`` among those valid at ``t`` (``|t - toe| <= validity``: half the GPS
-fit interval, at least 2 h; 1 h for BeiDou, whose ephemerides are refreshed hourly); of two
-equally close, the later ``toe``. A satellite with no valid ephemeris at ``t`` (a gap in the
-file) has NaN position and clock: it is not broadcasting. The file's coverage is the span in
-which every included system has at least one valid ephemeris; a time outside it raises
-``ValueError`` naming the time and the coverage.
+coverage rounded down to a whole second. Each ephemeris is used only inside its fit interval,
+``|t - toe| <= validity``: half the GPS record's fit interval (its last field, in hours; at
+least 4 h, the value of a blank or 0 field); 1 h for BeiDou, whose ephemerides are refreshed
+hourly. Of the ephemerides of a satellite valid at ``t``, the one with the nearest ``toe`` is
+used (of two equally near, the later ``toe``), as RTKLIB's ``seleph`` does. A satellite with no
+valid ephemeris at ``t`` (a gap in the file) has NaN position and clock: it is not
+broadcasting. :attr:`BroadcastConstellation.valid_spans_gps_s` are the spans in which every
+included system has at least one valid ephemeris; the coverage runs from the first to the
+last of them, and a time outside it raises ``ValueError`` naming the time and the coverage.
+:meth:`BroadcastConstellation.visibility` says what a place sees over the coverage (sampled
+every 30 s): the usable spans, in which every system has a valid ephemeris and at least
+:data:`MIN_SATELLITES` satellites are above the cut-off, and how many of the file's
+satellites above the cut-off have a valid ephemeris there (a station's file holds the
+satellites the station tracked: far from it, few).
 
 References
 ----------
@@ -60,8 +76,11 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import gzip
 import hashlib
 import os
+import warnings
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -71,6 +90,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from coopnav_env.constants import SPEED_OF_LIGHT_MPS, SYSTEMS
 from coopnav_env.gnss._validate import as_float_array, as_index_array, readonly
+from coopnav_env.gnss.frames import azimuth_elevation, geodetic_to_ecef
 
 __all__ = [
     "BDS_GEO_PRNS",
@@ -78,12 +98,17 @@ __all__ = [
     "BDS_OMEGA_E_RADPS",
     "BDS_VALIDITY_S",
     "BDT_MINUS_GPST_S",
+    "FEW_SATELLITES_FRACTION",
     "GPS_MU_M3PS2",
     "GPS_OMEGA_E_RADPS",
     "GPS_VALIDITY_S",
+    "MIN_SATELLITES",
     "SAMPLE_NAV_PATH",
     "BroadcastConstellation",
     "NavigationFile",
+    "RinexWarning",
+    "SkyVisibility",
+    "clear_caches",
     "gps_seconds",
     "load_broadcast_constellation",
     "read_rinex_nav",
@@ -112,6 +137,13 @@ BDS_VALIDITY_S: float = 3600.0
 
 BDS_GEO_PRNS: frozenset[int] = frozenset((1, 2, 3, 4, 5, 59, 60, 61, 62, 63))
 """BeiDou PRNs of geostationary satellites (C01-C05, C59-C63), propagated as GEO."""
+
+MIN_SATELLITES: int = 4
+"""Satellites with a valid ephemeris needed above the cut-off for a time to be usable."""
+
+FEW_SATELLITES_FRACTION: float = 0.5
+"""Below this :attr:`SkyVisibility.seen_fraction`, a place sees few of a file's satellites
+(the environment warns: the file's station is far away)."""
 
 SAMPLE_NAV_PATH: Path = Path(__file__).resolve().parent.parent / "data" / "sample_nav.rnx"
 """The sample mixed GPS + BeiDou navigation file shipped with the package (one day, made by
@@ -151,6 +183,7 @@ _LEAP_SECONDS: tuple[tuple[_dt.date, int], ...] = tuple(
     )
 )
 
+_SQRT_A_RANGE = (float(np.sqrt(20e6)), float(np.sqrt(50e6)))  # semi-major axis 20,000-50,000 km
 _KEPT_SYSTEMS = {"G": "GPS", "C": "BDS"}
 _SKIPPED_SYSTEMS = frozenset("RSEJI")
 _HEADER_SYSTEMS = {"G", "C", "R", "E", "J", "I", "S", "M"}
@@ -280,16 +313,20 @@ def _gps_iso(t_gps_s: float) -> str:
 # --------------------------------------------------------------------------------------------
 
 
+class RinexWarning(UserWarning):
+    """A navigation file read with records left out, or flown where it sees few satellites."""
+
+
 @dataclass(frozen=True, eq=False)
 class NavigationFile:
-    """The GPS and BeiDou broadcast ephemerides of one RINEX 3 navigation file.
+    """The GPS and BeiDou broadcast ephemerides of one RINEX navigation file.
 
     Attributes
     ----------
     path : str
         The file read.
     version : float
-        RINEX version (3.00-3.05).
+        RINEX version (2.00-2.11 or 3.00-3.05).
     file_system : str
         Satellite system of the header (``G``, ``C`` or ``M``; others are accepted but give
         no ephemerides).
@@ -310,8 +347,12 @@ class NavigationFile:
         Records of other systems skipped, by system letter.
     unhealthy : int
         GPS or BeiDou ephemerides dropped because the satellite flagged itself unhealthy.
+    rejected : dict of (str, str) to int
+        GPS and BeiDou records left out, by ``(system, reason)``: ``"unhealthy"``,
+        ``"unreadable field"``, ``"implausible sqrt(A)"``, ``"implausible eccentricity"``,
+        ``"toe outside the week"``, ``"bad week number"``, ``"week disagrees with epoch"``.
     digest : str
-        SHA-256 of the file's bytes (identifies the sky in caches).
+        SHA-256 of the file's (decompressed) bytes (identifies the sky in caches).
     """
 
     path: str
@@ -324,6 +365,7 @@ class NavigationFile:
     elements: dict[str, NDArray[np.float64]]
     skipped: dict[str, int]
     unhealthy: int
+    rejected: dict[tuple[str, str], int]
     digest: str
 
     @property
@@ -332,32 +374,38 @@ class NavigationFile:
         return len(self.prn)
 
 
+class _BadValue(ValueError):
+    """A field of a record that cannot be read (the record is left out, not the file)."""
+
+
 def _field(text: str, start: int, where: str, name: str, required: bool) -> float:
     raw = text[start : start + 19].strip()
     if not raw:
         if required:
-            raise ValueError(f"{where}: field {name!r} (columns {start + 1}-{start + 19}) is blank")
+            raise _BadValue(f"{where}: field {name!r} (columns {start + 1}-{start + 19}) is blank")
         return float("nan")
     try:
         value = float(raw.replace("D", "E").replace("d", "e"))
     except ValueError:
-        raise ValueError(
+        raise _BadValue(
             f"{where}: field {name!r} (columns {start + 1}-{start + 19}) is not a number: {raw!r}"
         ) from None
     if not np.isfinite(value):
-        raise ValueError(f"{where}: field {name!r} is not finite: {raw!r}")
+        raise _BadValue(f"{where}: field {name!r} is not finite: {raw!r}")
     return value
 
 
-def _epoch_gps_s(line: str, where: str, system: str) -> float:
-    """``toc`` of an epoch line (``A1,I2.2,1X,I4,5(1X,I2.2)``) in GPS seconds."""
+def _calendar_gps_s(fields: tuple[str, ...], where: str, system: str, cols: str) -> float:
+    """GPS seconds of a record's epoch (year, month, day, hour, minute, second as text)."""
     try:
-        year = int(line[4:8])
-        month, day, hour, minute, sec = (int(line[k : k + 2]) for k in (9, 12, 15, 18, 21))
-        when = _dt.datetime(year, month, day, hour, minute, sec)
+        year, month, day, hour, minute = (int(x) for x in fields[:5])
+        sec = float(fields[5])
+        if year < 100:  # RINEX 2: two-digit years, 80-99 -> 1980-1999
+            year += 1900 if year >= 80 else 2000
+        when = _dt.datetime(year, month, day, hour, minute) + _dt.timedelta(seconds=sec)
     except ValueError:
         raise ValueError(
-            f"{where}: epoch (columns 5-23) is not 'YYYY MM DD hh mm ss': {line[4:23]!r}"
+            f"{where}: epoch (columns {cols}) is not 'YYYY MM DD hh mm ss': {' '.join(fields)!r}"
         ) from None
     seconds = (when - _GPS_EPOCH.replace(tzinfo=None)).total_seconds()
     if system == "C":  # the epoch of a BeiDou record is in BDT
@@ -365,9 +413,25 @@ def _epoch_gps_s(line: str, where: str, system: str) -> float:
     return seconds
 
 
+def _decode(raw: bytes, name: str) -> bytes:
+    """The bytes of a navigation file, gzip-compressed ones decompressed."""
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            return gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as exc:
+            raise ValueError(f"{name}: gzip data is corrupt or cut short ({exc})") from None
+    for magic, kind in ((b"\x1f\x9d", "Unix compress (.Z)"), (b"BZh", "bzip2"), (b"PK", "zip")):
+        if raw[: len(magic)] == magic:
+            raise ValueError(
+                f"{name}: the file is {kind}-compressed; decompress it first (gzip files, "
+                "'.gz', are read directly)"
+            )
+    return raw
+
+
 def _read_header(lines: list[str], name: str) -> tuple[float, str, int]:
     if not lines:
-        raise ValueError(f"{name}: empty file, expected a RINEX 3 navigation header")
+        raise ValueError(f"{name}: empty file, expected a RINEX navigation header")
     first = lines[0]
     if first[60:80].strip() != "RINEX VERSION / TYPE":
         raise ValueError(
@@ -378,19 +442,30 @@ def _read_header(lines: list[str], name: str) -> tuple[float, str, int]:
         version = float(first[0:9])
     except ValueError:
         raise ValueError(f"{name}, line 1: RINEX version {first[0:9]!r} is not a number") from None
-    if not 3.0 <= version < 3.06:
+    if 2.0 <= version < 2.12:
+        kind = first[20:21]
+        if kind != "N":
+            what = {"G": "GLONASS", "H": "SBAS"}.get(kind)
+            raise ValueError(
+                f"{name}, line 1: file type {kind!r} is not 'N' (a RINEX 2 GPS navigation file)"
+                + (f"; {what} navigation files are not read" if what else "")
+            )
+        file_system = "G"
+    elif 3.0 <= version < 3.06:
+        if first[20:21] != "N":
+            raise ValueError(
+                f"{name}, line 1: file type {first[20:21]!r} is not 'N' (a navigation file)"
+            )
+        file_system = first[40:41]
+        if file_system not in _HEADER_SYSTEMS:
+            raise ValueError(
+                f"{name}, line 1: unknown satellite system {file_system!r} (expected one of "
+                f"{sorted(_HEADER_SYSTEMS)})"
+            )
+    else:
         raise ValueError(
-            f"{name}, line 1: RINEX version {version} is not supported (3.00-3.05 are)"
-        )
-    if first[20:21] != "N":
-        raise ValueError(
-            f"{name}, line 1: file type {first[20:21]!r} is not 'N' (a navigation file)"
-        )
-    file_system = first[40:41]
-    if file_system not in _HEADER_SYSTEMS:
-        raise ValueError(
-            f"{name}, line 1: unknown satellite system {file_system!r} (expected one of "
-            f"{sorted(_HEADER_SYSTEMS)})"
+            f"{name}, line 1: RINEX version {version} is not supported (2.00-2.11 GPS and "
+            "3.00-3.05 are)"
         )
     for k, line in enumerate(lines[1:], start=1):
         if line[60:80].strip() == "END OF HEADER":
@@ -398,13 +473,130 @@ def _read_header(lines: list[str], name: str) -> tuple[float, str, int]:
     raise ValueError(f"{name}: no 'END OF HEADER' line")
 
 
-def read_rinex_nav(path: str | os.PathLike[str]) -> NavigationFile:
-    """Read the GPS and BeiDou ephemerides of a RINEX 3 navigation file.
+@dataclass
+class _Record:
+    """One GPS or BeiDou record as read, before the per-record checks."""
+
+    prn: str
+    line: int  # 1-based line of its epoch line
+    toc_gps_s: float
+    values: list[float]
+    bad_field: str | None  # why a field could not be read, if one could not
+
+
+def _read_records(
+    lines: list[str], body: int, name: str, rinex2: bool
+) -> tuple[list[_Record], dict[str, int]]:
+    """The GPS and BeiDou records after the header (structure checked, values not yet)."""
+    # RINEX 3: 'A1,I2.2,1X,I4,5(1X,I2.2)' epoch, 3 fields from column 24, orbit lines 4X,4D19.12
+    # RINEX 2: 'I2,5(1X,I2),F5.1' epoch, 3 fields from column 23, orbit lines 3X,4D19.12
+    first_field, indent = (22, 3) if rinex2 else (23, 4)
+    records: list[_Record] = []
+    skipped: dict[str, int] = {}
+    k, n_lines = body, len(lines)
+    while k < n_lines:
+        line = lines[k]
+        if not line.strip():
+            k += 1
+            continue
+        where = f"{name}, line {k + 1}"
+        if rinex2:
+            letter, number_text = "G", line[0:2]
+        else:
+            letter, number_text = line[0], line[1:3]
+            if letter in _SKIPPED_SYSTEMS:  # the epoch line and its indented orbit lines
+                skipped[letter] = skipped.get(letter, 0) + 1
+                k += 1
+                while k < n_lines and lines[k][:4] == "    " and lines[k].strip():
+                    k += 1
+                continue
+            if letter not in _KEPT_SYSTEMS:
+                raise ValueError(
+                    f"{where}: unknown satellite system {letter!r} at the start of a record "
+                    f"(expected G, C, R, E, J, I or S): {line.rstrip()!r}"
+                )
+        try:
+            number = int(number_text)
+        except ValueError:
+            raise ValueError(
+                f"{where}: satellite number {number_text!r} is not an integer"
+            ) from None
+        if not 1 <= number <= 63:
+            raise ValueError(f"{where}: satellite number {number} outside 1-63")
+        prn = f"{letter}{number:02d}"
+        if k + 7 >= n_lines:
+            raise ValueError(
+                f"{where}: record of {prn} cut short: expected 7 broadcast orbit lines, the "
+                f"file has {n_lines - k - 1}"
+            )
+        if rinex2:
+            epoch = (*(line[c : c + 3] for c in (2, 5, 8, 11, 14)), line[17:22])
+            toc = _calendar_gps_s(epoch, where, letter, "3-22")
+        else:
+            epoch = (line[4:8], *(line[c : c + 2] for c in (9, 12, 15, 18, 21)))
+            toc = _calendar_gps_s(epoch, where, letter, "5-23")
+        cells = [(line, first_field + 19 * j, _FIELDS[j], where) for j in range(3)]
+        for m in range(1, 8):
+            orbit = lines[k + m]
+            owhere = f"{name}, line {k + m + 1}"
+            if orbit[:indent].strip():
+                raise ValueError(
+                    f"{owhere}: broadcast orbit line {m} of {prn} must start with {indent} "
+                    f"blanks, got {orbit[:indent]!r} (record cut short?)"
+                )
+            for j in range(2 if m == 7 else 4):
+                cells.append((orbit, indent + 19 * j, _FIELDS[3 + 4 * (m - 1) + j], owhere))
+        values: list[float] = []
+        bad: str | None = None
+        for text, start, fname, at in cells:
+            try:
+                values.append(_field(text, start, at, fname, fname in _REQUIRED))
+            except _BadValue as exc:
+                values.append(float("nan"))
+                bad = bad or str(exc)
+        values.extend([float("nan")] * (len(_FIELDS) - len(values)))
+        records.append(_Record(prn, k + 1, toc, values, bad))
+        k += 8
+    return records, skipped
+
+
+def _record_problem(el: dict[str, float], where: str) -> tuple[str, str] | None:
+    """The reason and message that leave a readable record out, or None for a plausible one."""
+    sqrt_a = el["sqrt_a_sqrtm"]
+    if not _SQRT_A_RANGE[0] <= sqrt_a <= _SQRT_A_RANGE[1]:
+        return "implausible sqrt(A)", (
+            f"{where}: sqrt(A) = {sqrt_a} m^0.5 is not a plausible orbit (semi-major axis "
+            f"{sqrt_a * sqrt_a / 1e3:.0f} km; {_SQRT_A_RANGE[0] ** 2 / 1e3:.0f}-"
+            f"{_SQRT_A_RANGE[1] ** 2 / 1e3:.0f} km expected)"
+        )
+    if not 0.0 <= el["ecc"] < 0.5:
+        return "implausible eccentricity", f"{where}: eccentricity {el['ecc']} outside [0, 0.5)"
+    if not 0.0 <= el["toe_sow"] < SECONDS_PER_WEEK:
+        return "toe outside the week", (
+            f"{where}: toe {el['toe_sow']} s outside the week [0, 604800)"
+        )
+    if not (el["week"] >= 0.0 and float(el["week"]).is_integer()):
+        return "bad week number", f"{where}: week {el['week']} is not a non-negative integer"
+    return None
+
+
+def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> NavigationFile:
+    """Read the GPS and BeiDou ephemerides of a RINEX navigation file.
+
+    A record that cannot be used is left out, not the file: a satellite that flags itself
+    unhealthy (checked first), a field that is not a number, an implausible orbit
+    (``sqrt(A)`` outside 4,472-7,071 m^0.5, eccentricity outside [0, 0.5)), a ``toe``
+    outside the week, or a week number that disagrees with the record's epoch. The records
+    left out are counted by system and reason (:attr:`NavigationFile.rejected`) and named in
+    one warning per file.
 
     Parameters
     ----------
     path : str or path-like
-        A RINEX 3.00-3.05 navigation file (``N``), uncompressed.
+        A RINEX 3.00-3.05 navigation file (``N``; mixed, GPS or BeiDou) or a RINEX 2.00-2.11
+        GPS navigation file, plain or gzip-compressed (read by its content, whatever its name).
+    warn : bool, default True
+        Emit a :class:`RinexWarning` naming the records left out, if any.
 
     Returns
     -------
@@ -413,10 +605,11 @@ def read_rinex_nav(path: str | os.PathLike[str]) -> NavigationFile:
     Raises
     ------
     ValueError
-        The file is missing or unreadable, the header is not a RINEX 3 navigation header, a
-        record has an unknown system letter, is cut short or has a bad field (the message
-        names the file, the line number and the problem), a week field disagrees with its
-        epoch, or the file holds no healthy GPS or BeiDou ephemeris.
+        The file is missing or unreadable, compressed otherwise than with gzip, the header is
+        not a RINEX 2 GPS or RINEX 3 navigation header, a record has an unknown system letter,
+        a bad epoch or is cut short (the message names the file, the line number and the
+        problem), or the file holds no usable GPS or BeiDou ephemeris (the message says why
+        each record was left out).
     """
     p = Path(path)
     name = str(path)
@@ -424,149 +617,116 @@ def read_rinex_nav(path: str | os.PathLike[str]) -> NavigationFile:
         raw = p.read_bytes()
     except OSError as exc:
         raise ValueError(f"cannot read RINEX navigation file {name}: {exc.strerror}") from None
+    raw = _decode(raw, name)
     try:
         text = raw.decode("ascii")
     except UnicodeDecodeError as exc:
         raise ValueError(
-            f"{name}: not an ASCII text file (byte {exc.start}); compressed files must be "
-            "uncompressed first"
+            f"{name}: not an ASCII text file (byte {exc.start}); a RINEX navigation file, "
+            "plain or gzip-compressed, was expected"
         ) from None
     lines = text.splitlines()
     version, file_system, body = _read_header(lines, name)
-    rows: list[list[float]] = []
-    prns: list[str] = []
-    systems: list[int] = []
-    tocs: list[float] = []
-    skipped: dict[str, int] = {}
-    unhealthy = 0
-    k = body
-    n_lines = len(lines)
-    while k < n_lines:
-        line = lines[k]
-        if not line.strip():
-            k += 1
-            continue
-        where = f"{name}, line {k + 1}"
-        letter = line[0]
-        if letter in _SKIPPED_SYSTEMS:  # the epoch line and its indented orbit lines
-            skipped[letter] = skipped.get(letter, 0) + 1
-            k += 1
-            while k < n_lines and lines[k][:4] == "    " and lines[k].strip():
-                k += 1
-            continue
-        if letter not in _KEPT_SYSTEMS:
-            raise ValueError(
-                f"{where}: unknown satellite system {letter!r} at the start of a record "
-                f"(expected G, C, R, E, J, I or S): {line.rstrip()!r}"
-            )
-        try:
-            number = int(line[1:3])
-        except ValueError:
-            raise ValueError(f"{where}: satellite number {line[1:3]!r} is not an integer") from None
-        if not 1 <= number <= 63:
-            raise ValueError(f"{where}: satellite number {number} outside 1-63")
-        if k + 7 >= n_lines:
-            raise ValueError(
-                f"{where}: record of {letter}{number:02d} cut short: expected 7 broadcast "
-                f"orbit lines, the file has {n_lines - k - 1}"
-            )
-        toc = _epoch_gps_s(line, where, letter)
-        values = [
-            _field(line, 23 + 19 * j, where, _FIELDS[j], _FIELDS[j] in _REQUIRED) for j in range(3)
-        ]
-        for m in range(1, 8):
-            orbit = lines[k + m]
-            owhere = f"{name}, line {k + m + 1}"
-            if orbit[:4].strip():
-                raise ValueError(
-                    f"{owhere}: broadcast orbit line {m} of {letter}{number:02d} must start "
-                    f"with 4 blanks, got {orbit[:4]!r} (record cut short?)"
-                )
-            n_here = 2 if m == 7 else 4
-            for j in range(n_here):
-                fname = _FIELDS[3 + 4 * (m - 1) + j]
-                values.append(_field(orbit, 4 + 19 * j, owhere, fname, fname in _REQUIRED))
-        values.extend([float("nan")] * (len(_FIELDS) - len(values)))
-        el = dict(zip(_FIELDS, values, strict=True))
-        _check_elements(el, f"{where}: record of {letter}{number:02d}")
-        k += 8
-        if el["health"] != 0.0 and np.isfinite(el["health"]):
-            unhealthy += 1
-            continue
-        rows.append(values)
-        prns.append(f"{letter}{number:02d}")
-        systems.append(SYSTEMS.index(_KEPT_SYSTEMS[letter]))
-        tocs.append(toc)
-    if not rows:
-        raise ValueError(
-            f"{name}: no healthy GPS or BeiDou ephemeris (skipped records by system: {skipped}, "
-            f"unhealthy: {unhealthy})"
+    records, skipped = _read_records(lines, body, name, rinex2=version < 3.0)
+    rejected: dict[tuple[str, str], int] = {}
+    first_of: dict[tuple[str, str], str] = {}
+
+    def reject(rec: _Record, reason: str, message: str) -> None:
+        key = (_KEPT_SYSTEMS[rec.prn[0]], reason)
+        rejected[key] = rejected.get(key, 0) + 1
+        first_of.setdefault(key, message.removeprefix(f"{name}, "))
+
+    kept: list[_Record] = []
+    for rec in records:
+        el = dict(zip(_FIELDS, rec.values, strict=True))
+        where = f"{name}, line {rec.line}: record of {rec.prn}"
+        health = el["health"]
+        if np.isfinite(health) and health != 0.0:  # the health flag first
+            reject(rec, "unhealthy", f"{where}: health {health:g}")
+        elif rec.bad_field is not None:
+            reject(rec, "unreadable field", rec.bad_field)
+        elif (problem := _record_problem(el, where)) is not None:
+            reject(rec, *problem)
+        else:
+            kept.append(rec)
+    system = np.asarray([SYSTEMS.index(_KEPT_SYSTEMS[r.prn[0]]) for r in kept], dtype=np.intp)
+    toc_gps = np.asarray([r.toc_gps_s for r in kept], dtype=np.float64)
+    table = np.asarray([r.values for r in kept], dtype=np.float64).reshape(-1, len(_FIELDS))
+    toe_gps, week_ok = _resolve_toe(
+        table[:, _FIELDS.index("toe_sow")], table[:, _FIELDS.index("week")], system, toc_gps
+    )
+    for j in np.flatnonzero(~week_ok):
+        rec = kept[j]
+        reject(
+            rec,
+            "week disagrees with epoch",
+            f"{name}, line {rec.line}: record of {rec.prn}: week "
+            f"{int(table[j, _FIELDS.index('week')])} disagrees with its epoch",
         )
-    table = np.asarray(rows, dtype=np.float64)
-    elements = {f: readonly(table[:, j].copy()) for j, f in enumerate(_FIELDS)}
-    system = np.asarray(systems, dtype=np.intp)
-    toc_gps = np.asarray(tocs, dtype=np.float64)
-    toe_gps = _resolve_toe(elements, system, toc_gps, prns, name)
+    n_records = len(records)
+    summary = "; ".join(
+        f"{s} {reason}: {n} (first: {first_of[(s, reason)]})"
+        for (s, reason), n in sorted(rejected.items())
+    )
+    if not np.any(week_ok):
+        raise ValueError(
+            f"{name}: no usable GPS or BeiDou ephemeris (records of other systems skipped: "
+            f"{skipped}; GPS and BeiDou records left out: {summary or 'none'})"
+        )
+    if rejected and warn:
+        warnings.warn(
+            f"{name}: left out {sum(rejected.values())} of {n_records} GPS and BeiDou records, "
+            f"used the others: {summary}",
+            RinexWarning,
+            stacklevel=2,
+        )
+    sel = np.flatnonzero(week_ok)
+    kept = [kept[j] for j in sel]
+    system, toc_gps, table, toe_gps = system[sel], toc_gps[sel], table[sel], toe_gps[sel]
+    elements = {f: table[:, j].copy() for j, f in enumerate(_FIELDS)}
     toc_scale = toc_gps - np.where(system == SYSTEMS.index("BDS"), _BDT_EPOCH_GPS_S, 0.0)
-    elements["toc_sow"] = readonly(np.mod(toc_scale, SECONDS_PER_WEEK))
-    # drop repeated broadcasts of one ephemeris (same satellite and toe): keep the first
-    keys: dict[tuple[str, float], int] = {}
-    keep = []
+    elements["toc_sow"] = np.mod(toc_scale, SECONDS_PER_WEEK)
+    # one ephemeris per satellite and toe: of repeated broadcasts, the newest (the latest
+    # transmission time; of equal ones, the last in the file)
+    prns = [r.prn for r in kept]
+    transmit = np.nan_to_num(elements["transmit_sow"], nan=-np.inf)
+    newest: dict[tuple[str, float], int] = {}
     for j, (prn, toe) in enumerate(zip(prns, toe_gps.tolist(), strict=True)):
-        if (prn, toe) not in keys:
-            keys[(prn, toe)] = j
-            keep.append(j)
-    sel = np.asarray(keep, dtype=np.intp)
+        old = newest.get((prn, toe))
+        if old is None or transmit[j] >= transmit[old]:
+            newest[(prn, toe)] = j
+    keep = np.asarray(sorted(newest.values()), dtype=np.intp)
     return NavigationFile(
         path=name,
         version=version,
         file_system=file_system,
-        system=readonly(system[sel]),
+        system=readonly(system[keep]),
         prn=tuple(prns[j] for j in keep),
-        toc_gps_s=readonly(toc_gps[sel]),
-        toe_gps_s=readonly(toe_gps[sel]),
-        elements={f: readonly(v[sel]) for f, v in elements.items()},
+        toc_gps_s=readonly(toc_gps[keep]),
+        toe_gps_s=readonly(toe_gps[keep]),
+        elements={f: readonly(v[keep]) for f, v in elements.items()},
         skipped=skipped,
-        unhealthy=unhealthy,
+        unhealthy=sum(n for (_, reason), n in rejected.items() if reason == "unhealthy"),
+        rejected=dict(sorted(rejected.items())),
         digest=hashlib.sha256(raw).hexdigest(),
     )
 
 
-def _check_elements(el: dict[str, float], where: str) -> None:
-    if not el["sqrt_a_sqrtm"] > 2000.0:  # sqrt of 4,000 km: below any orbit
-        raise ValueError(f"{where}: sqrt(A) = {el['sqrt_a_sqrtm']} m^0.5 is not a plausible orbit")
-    if not 0.0 <= el["ecc"] < 0.5:
-        raise ValueError(f"{where}: eccentricity {el['ecc']} outside [0, 0.5)")
-    if not 0.0 <= el["toe_sow"] < SECONDS_PER_WEEK:
-        raise ValueError(f"{where}: toe {el['toe_sow']} s outside the week [0, 604800)")
-    if not (el["week"] >= 0.0 and float(el["week"]).is_integer()):
-        raise ValueError(f"{where}: week {el['week']} is not a non-negative integer")
-
-
 def _resolve_toe(
-    elements: dict[str, NDArray[np.float64]],
+    toe_sow: NDArray[np.float64],
+    field_week: NDArray[np.float64],
     system: NDArray[np.intp],
     toc_gps: NDArray[np.float64],
-    prns: list[str],
-    name: str,
-) -> NDArray[np.float64]:
-    """``toe`` in GPS seconds: the week that puts it nearest its ``toc``, checked against the
-    week field (continuous, or modulo 1024 as some writers give GPS weeks)."""
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """``toe`` in GPS seconds: the week that puts it nearest its ``toc``; and whether the week
+    field agrees (continuous, or modulo 1024 as some writers give GPS weeks)."""
     is_bds = system == SYSTEMS.index("BDS")
     week_start = np.where(is_bds, _BDT_EPOCH_GPS_S, 0.0)  # week 0 of the record's time scale
     toc_scale = toc_gps - week_start  # toc in the record's own time scale
-    toe_sow = elements["toe_sow"]
     week = np.round((toc_scale - toe_sow) / SECONDS_PER_WEEK)
-    field_week = elements["week"]
     diff = (week - field_week) % 1024.0
-    bad = ~((diff <= 1.0) | (diff >= 1023.0))
-    if np.any(bad):
-        j = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"{name}: ephemeris {j + 1} of {prns[j]}: week {int(field_week[j])} disagrees with "
-            f"its epoch (week {int(week[j])} of its time scale)"
-        )
-    return week_start + week * SECONDS_PER_WEEK + toe_sow
+    ok = (diff <= 1.0) | (diff >= 1023.0)
+    return week_start + week * SECONDS_PER_WEEK + toe_sow, ok
 
 
 # --------------------------------------------------------------------------------------------
@@ -592,8 +752,12 @@ class BroadcastConstellation:
     reference_gps_s : float
         GPS seconds of ``t_s = 0``: the start of the coverage, a whole second.
     coverage_gps_s : tuple of float
-        ``(start, end)`` in GPS seconds: the span in which every included system has a
-        valid ephemeris.
+        ``(start, end)`` in GPS seconds: from the first to the last time at which every
+        included system has a valid ephemeris (there may be gaps inside:
+        ``valid_spans_gps_s``).
+    valid_spans_gps_s : tuple of (float, float)
+        The spans, in GPS seconds and in order, in which every included system has at least
+        one satellite with a valid ephemeris.
     toe_gps_s : ndarray, shape (n_sv, n_max)
         ``toe`` of each satellite's ephemerides in GPS seconds, latest first, NaN padded.
     validity_s : ndarray, shape (n_sv, n_max)
@@ -612,6 +776,7 @@ class BroadcastConstellation:
     prn: tuple[str, ...]
     reference_gps_s: float
     coverage_gps_s: tuple[float, float]
+    valid_spans_gps_s: tuple[tuple[float, float], ...]
     toe_gps_s: NDArray[np.float64]
     validity_s: NDArray[np.float64]
     elements: dict[str, NDArray[np.float64]]
@@ -639,24 +804,22 @@ class BroadcastConstellation:
         if not systems or len(set(systems)) != len(systems):
             raise ValueError(f"systems must name distinct systems of {SYSTEMS}, got {systems!r}")
         sat_rows: list[tuple[int, str, NDArray[np.intp]]] = []
-        spans = []
         fit_h = nav.elements["fit_or_aodc"]
         validity = np.where(
             nav.system == SYSTEMS.index("GPS"),
             np.maximum(GPS_VALIDITY_S, np.nan_to_num(fit_h, nan=0.0) * 1800.0),
             BDS_VALIDITY_S,
         )
+        valid_spans: list[tuple[float, float]] | None = None
         for s in systems:
             idx = SYSTEMS.index(s)
             rows = np.flatnonzero(nav.system == idx)
             if rows.size == 0:
-                raise ValueError(f"{nav.path}: no healthy {s} ephemeris in the file")
-            spans.append(
-                (
-                    float(np.min(nav.toe_gps_s[rows] - validity[rows])),
-                    float(np.max(nav.toe_gps_s[rows] + validity[rows])),
-                )
+                raise ValueError(f"{nav.path}: no usable {s} ephemeris in the file")
+            mine_spans = _union(
+                nav.toe_gps_s[rows] - validity[rows], nav.toe_gps_s[rows] + validity[rows]
             )
+            valid_spans = mine_spans if valid_spans is None else _intersect(valid_spans, mine_spans)
             prns = sorted({nav.prn[j] for j in rows})
             for prn in prns:
                 mine = np.asarray([j for j in rows if nav.prn[j] == prn], dtype=np.intp)
@@ -672,13 +835,12 @@ class BroadcastConstellation:
             valid[i, : rows.size] = validity[rows]
             for f, v in nav.elements.items():
                 els[f][i, : rows.size] = v[rows]
-        start = max(a for a, _ in spans)
-        end = min(b for _, b in spans)
-        if not end > start:
+        if not valid_spans:
             raise ValueError(
-                f"{nav.path}: the ephemerides of {systems} do not overlap in time "
-                f"(spans {[(_gps_iso(a), _gps_iso(b)) for a, b in spans]})"
+                f"{nav.path}: the ephemerides of {systems} do not overlap in time (no time at "
+                "which every system has a valid ephemeris)"
             )
+        start, end = valid_spans[0][0], valid_spans[-1][1]
         prn = tuple(p for _, p, _ in sat_rows)
         is_geo = np.asarray([p[0] == "C" and int(p[1:]) in BDS_GEO_PRNS for p in prn])
         digest = hashlib.sha256((nav.digest + ",".join(systems)).encode()).hexdigest()
@@ -687,6 +849,7 @@ class BroadcastConstellation:
             prn=prn,
             reference_gps_s=float(np.floor(start)),
             coverage_gps_s=(start, end),
+            valid_spans_gps_s=tuple(valid_spans),
             toe_gps_s=readonly(toe),
             validity_s=readonly(valid),
             elements={f: readonly(v) for f, v in els.items()},
@@ -791,6 +954,43 @@ class BroadcastConstellation:
         """
         return self._state(t_s, "clock")
 
+    def visibility(
+        self,
+        lat_deg: float,
+        lon_deg: float,
+        alt_m: float = 0.0,
+        elevation_mask_deg: float = 10.0,
+        min_sats: int = 4,
+    ) -> SkyVisibility:
+        """What a receiver at a place sees of this sky over the coverage (cached).
+
+        Sampled every 30 s from the start to the end of the coverage (the end included).
+        A time is usable when every included system has at least one satellite with a valid
+        ephemeris and at least ``min_sats`` satellites with a valid ephemeris are above
+        ``elevation_mask_deg`` at the place.
+
+        Parameters
+        ----------
+        lat_deg, lon_deg, alt_m : float
+            The place (WGS 84) [deg, deg, m].
+        elevation_mask_deg : float, default 10.0
+            Elevation cut-off [deg].
+        min_sats : int, default 4
+            Satellites needed above the cut-off.
+
+        Returns
+        -------
+        SkyVisibility
+        """
+        return _visibility(
+            self,
+            float(lat_deg),
+            float(lon_deg),
+            float(alt_m),
+            float(elevation_mask_deg),
+            int(min_sats),
+        )
+
     def subset(self, mask_or_indices: ArrayLike) -> BroadcastConstellation:
         """The same sky restricted to a selection of satellites (order kept, no repeats).
 
@@ -810,6 +1010,7 @@ class BroadcastConstellation:
             prn=tuple(self.prn[j] for j in idx),
             reference_gps_s=self.reference_gps_s,
             coverage_gps_s=self.coverage_gps_s,
+            valid_spans_gps_s=self.valid_spans_gps_s,
             toe_gps_s=readonly(self.toe_gps_s[idx]),
             validity_s=readonly(self.validity_s[idx]),
             elements={f: readonly(v[idx]) for f, v in self.elements.items()},
@@ -819,6 +1020,162 @@ class BroadcastConstellation:
                 (self.digest + ",".join(map(str, idx.tolist()))).encode()
             ).hexdigest(),
         )
+
+
+def _union(lo: NDArray[np.float64], hi: NDArray[np.float64]) -> list[tuple[float, float]]:
+    """The union of the intervals ``[lo_i, hi_i]`` as sorted disjoint intervals."""
+    out: list[tuple[float, float]] = []
+    for a, b in sorted(zip(lo.tolist(), hi.tolist(), strict=True)):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
+
+
+def _intersect(
+    x: list[tuple[float, float]], y: list[tuple[float, float]]
+) -> list[tuple[float, float]]:
+    """The intersection of two sorted lists of disjoint intervals (empty pieces dropped)."""
+    out, i, j = [], 0, 0
+    while i < len(x) and j < len(y):
+        a, b = max(x[i][0], y[j][0]), min(x[i][1], y[j][1])
+        if b > a:
+            out.append((a, b))
+        if x[i][1] < y[j][1]:
+            i += 1
+        else:
+            j += 1
+    return out
+
+
+@dataclass(frozen=True)
+class SkyVisibility:
+    """What a place sees of a :class:`BroadcastConstellation` (from
+    :meth:`BroadcastConstellation.visibility`).
+
+    Attributes
+    ----------
+    spans_s : tuple of (float, float)
+        The usable spans as ``t_s``, in order: every included system has a satellite with a
+        valid ephemeris and at least ``min_sats`` satellites with a valid ephemeris are above
+        the cut-off (sampled every 30 s; the spans' ends are sample times or the ends of
+        :attr:`BroadcastConstellation.valid_spans_gps_s`).
+    visible_mean : float
+        Mean number of satellites with a valid ephemeris above the cut-off, over the samples in
+        which every system has a valid ephemeris.
+    above_mean : float
+        Mean number of the file's satellites above the cut-off at the same samples, whether
+        their ephemeris is valid then or not (each propagated from its nearest ``toe``).
+    """
+
+    spans_s: tuple[tuple[float, float], ...]
+    visible_mean: float
+    above_mean: float
+
+    @property
+    def seen_fraction(self) -> float:
+        """``visible_mean / above_mean``: near 1 where the file's station saw what the place
+        sees, low far from it (a station's file holds the satellites it tracked)."""
+        return self.visible_mean / self.above_mean if self.above_mean > 0 else 0.0
+
+    def room_s(self, duration_s: float) -> float:
+        """Total time at which a window of ``duration_s`` seconds can start inside a span."""
+        return float(sum(max(0.0, b - a - duration_s) for a, b in self.spans_s))
+
+    def start_s(self, duration_s: float, u: float) -> float:
+        """The start of a window of ``duration_s`` seconds, ``u`` seconds into the room the
+        spans leave (``0 <= u <= room_s(duration_s)``): spans one after the other."""
+        last = None
+        for a, b in self.spans_s:
+            room = b - a - duration_s
+            if room < 0.0:
+                continue
+            if u <= room:
+                return a + u
+            u -= room
+            last = b - duration_s
+        if last is None:
+            raise ValueError(f"no usable span holds {duration_s:g} s")
+        return last
+
+    def spans_text(self, reference_gps_s: float, limit: int = 4) -> str:
+        """The spans for messages (GPST), at most ``limit`` of them."""
+        if not self.spans_s:
+            return "none"
+        parts = [
+            f"{_gps_iso(a + reference_gps_s)} to {_gps_iso(b + reference_gps_s)}"
+            for a, b in self.spans_s[:limit]
+        ]
+        more = len(self.spans_s) - limit
+        return ", ".join(parts) + (f" and {more} more" if more > 0 else "")
+
+
+_VISIBILITY_STEP_S = 30.0
+
+
+@functools.lru_cache(maxsize=64)
+def _visibility(
+    sky: BroadcastConstellation,
+    lat_deg: float,
+    lon_deg: float,
+    alt_m: float,
+    mask_deg: float,
+    min_sats: int,
+) -> SkyVisibility:
+    lo, hi = sky.coverage_s
+    t = np.arange(lo, hi, _VISIBILITY_STEP_S)
+    t = np.append(t[t < hi], hi)
+    origin = geodetic_to_ecef(lat_deg, lon_deg, alt_m)[None]
+    rows = np.arange(sky.n_sv)[None, :]
+    systems = sorted(set(sky.system.tolist()))
+    ok, n_visible, n_above = (np.zeros(t.size, dtype=bool), np.zeros(t.size), np.zeros(t.size))
+    sys_ok = np.zeros(t.size, dtype=bool)
+    for c in range(0, t.size, 256):
+        tt = t[c : c + 256]
+        col, has = sky._select(tt)
+        dt = np.abs((sky.reference_gps_s - sky.toe_gps_s)[None] + tt[:, None, None])
+        nearest = np.argmin(np.where(np.isnan(dt), np.inf, dt), axis=2)
+        above = []
+        for cols in (col, nearest):
+
+            def pick(name: str, cols=cols) -> NDArray[np.float64]:
+                return sky.elements[name][rows, cols]
+
+            pos = _propagate(
+                pick,
+                sky.system[None, :],
+                sky.is_geo[None, :],
+                sky.reference_gps_s,
+                tt[:, None],
+                "position",
+            )
+            _, el = azimuth_elevation(origin, pos.reshape(-1, 3))
+            above.append(el.reshape(tt.size, sky.n_sv) > mask_deg)
+        visible = above[0] & has
+        every = np.all([has[:, sky.system == s].any(axis=1) for s in systems], axis=0)
+        sys_ok[c : c + tt.size] = every
+        n_visible[c : c + tt.size] = visible.sum(axis=1)
+        n_above[c : c + tt.size] = above[1].sum(axis=1)
+        ok[c : c + tt.size] = every & (visible.sum(axis=1) >= min_sats)
+    runs: list[tuple[float, float]] = []
+    idx = np.flatnonzero(ok)
+    if idx.size:
+        breaks = np.flatnonzero(np.diff(idx) > 1)
+        for a, b in zip(
+            np.concatenate([[idx[0]], idx[breaks + 1]]),
+            np.concatenate([idx[breaks], [idx[-1]]]),
+            strict=True,
+        ):
+            runs.append((float(t[a]), float(t[b])))
+    valid = [(a - sky.reference_gps_s, b - sky.reference_gps_s) for a, b in sky.valid_spans_gps_s]
+    spans = tuple(_intersect(runs, valid))
+    n = max(int(sys_ok.sum()), 1)
+    return SkyVisibility(
+        spans_s=spans,
+        visible_mean=float(n_visible[sys_ok].sum() / n),
+        above_mean=float(n_above[sys_ok].sum() / n),
+    )
 
 
 def _wrap_half_week(dt: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -890,7 +1247,20 @@ def _propagate(pick, system, is_geo, ref_gps, t_rel, what: str) -> NDArray[np.fl
 def _cached_sky(
     path: str, mtime_ns: int, size: int, systems: tuple[str, ...]
 ) -> BroadcastConstellation:
-    return BroadcastConstellation.from_navigation(read_rinex_nav(path), systems)
+    return BroadcastConstellation.from_navigation(_cached_nav(path, mtime_ns, size), systems)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_nav(path: str, mtime_ns: int, size: int) -> NavigationFile:
+    """The file read once (and its records' warning given once) for every ``systems``."""
+    return read_rinex_nav(path)
+
+
+def clear_caches() -> None:
+    """Forget the files read and the skies built from them (a file read again warns again)."""
+    _cached_sky.cache_clear()
+    _cached_nav.cache_clear()
+    _visibility.cache_clear()
 
 
 def resolve_nav_path(spec: str) -> Path:
@@ -901,7 +1271,7 @@ def resolve_nav_path(spec: str) -> Path:
 def load_broadcast_constellation(
     path: str | os.PathLike[str], systems: tuple[str, ...] = SYSTEMS
 ) -> BroadcastConstellation:
-    """The sky of a RINEX 3 navigation file (cached per file content and ``systems``).
+    """The sky of a RINEX navigation file (cached per file content and ``systems``).
 
     Parameters
     ----------

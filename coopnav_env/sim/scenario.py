@@ -125,7 +125,12 @@ from coopnav_env.gnss.errors import (
     _range_azimuth_elevation,
     _simulate_pseudoranges,
 )
-from coopnav_env.gnss.rinex import load_broadcast_constellation
+from coopnav_env.gnss.rinex import (
+    FEW_SATELLITES_FRACTION,
+    MIN_SATELLITES,
+    RinexWarning,
+    load_broadcast_constellation,
+)
 from coopnav_env.nav import (
     CooperativeSolution,
     GnssObservations,
@@ -303,7 +308,8 @@ class ScenarioConfig:
     constellation : str, default "nominal"
         Where the satellites come from. ``"nominal"``: the nominal circular-orbit
         constellations (:func:`~coopnav_env.gnss.default_constellation`). ``"rinex:PATH"``:
-        the broadcast ephemerides of a RINEX 3 navigation file
+        the broadcast ephemerides of a RINEX navigation file (RINEX 3, or RINEX 2 GPS; plain
+        or gzip-compressed)
         (:class:`~coopnav_env.gnss.rinex.BroadcastConstellation`, the satellites of
         ``systems`` in it; ``"rinex:sample"``: the one-day GPS + BeiDou file shipped with the
         package). The file is read and checked here: a missing or bad file, or a time outside
@@ -312,11 +318,14 @@ class ScenarioConfig:
         be 0, and the start of an episode is set by ``constellation_start``.
     constellation_start : str, float or None, default None
         Only with ``constellation="rinex:..."``. ``None``: each episode starts at a time drawn
-        uniformly from the episode generator inside the file's coverage (leaving room for the
-        whole episode); ``t0_random_s`` must then be 0. A UTC time as an ISO 8601 string
+        uniformly from the episode generator among those at which the whole episode lies in
+        the file's usable spans at the origin (every system a valid ephemeris, at least 4
+        satellites above the cut-off:
+        :meth:`~coopnav_env.gnss.rinex.BroadcastConstellation.visibility`);
+        ``t0_random_s`` must then be 0. A UTC time as an ISO 8601 string
         (``"2026-12-03T06:00:00Z"``) or GPS seconds (since 1980-01-06): every episode starts
         there, plus ``U(0, t0_random_s)``; the start, spread and episode must lie inside the
-        coverage.
+        coverage (an episode that leaves the usable spans is flown with a ``RinexWarning``).
     elevation_mask_deg : float, default 10.0
         Elevation cut-off [deg], in [0, 60].
     max_sats : int or None, default None
@@ -682,7 +691,7 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
         return
     if not isinstance(spec, str) or not spec.startswith("rinex:") or not spec[6:].strip():
         raise ValueError(
-            f"{o}.constellation must be 'nominal' or 'rinex:PATH' (a RINEX 3 navigation file; "
+            f"{o}.constellation must be 'nominal' or 'rinex:PATH' (a RINEX navigation file; "
             f"'rinex:sample' for the shipped one), got {spec!r}"
         )
     try:
@@ -699,6 +708,19 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
         )
     horizon = cfg.episode_horizon_s()
     lo, hi = sky.coverage_s
+    view = _sky_view(cfg, sky)
+    where = f"({cfg.lat_deg:g}, {cfg.lon_deg:g})"
+    if view.seen_fraction < FEW_SATELLITES_FRACTION:
+        warnings.warn(
+            f"{o}.constellation={spec!r}: at the origin {where} on average "
+            f"{view.visible_mean:.1f} satellites with a valid ephemeris are above the "
+            f"{cfg.elevation_mask_deg:g} deg cut-off, of {view.above_mean:.1f} of the file's "
+            f"satellites above it ({view.seen_fraction:.0%}): the file holds what its "
+            "station tracked. Fly near the station (lat_deg, lon_deg) or use a merged "
+            "broadcast file (BRDC...MN.rnx)",
+            RinexWarning,
+            stacklevel=4,
+        )
     if start is None:
         if cfg.t0_random_s != 0.0:
             raise ValueError(
@@ -710,6 +732,15 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
             raise ValueError(
                 f"{o}.constellation={spec!r}: an episode spans {horizon:g} s but the file "
                 f"covers only {hi - lo:g} s ({sky.coverage_text()})"
+            )
+        if not any(b - a >= horizon for a, b in view.spans_s):
+            raise ValueError(
+                f"{o}.constellation={spec!r}: no {horizon:g} s of the file (an episode) in "
+                f"which every system has a valid ephemeris and at least {MIN_SATELLITES} "
+                f"satellites are above the {cfg.elevation_mask_deg:g} deg cut-off at {where} "
+                f"(usable: {view.spans_text(sky.reference_gps_s)}; coverage "
+                f"{sky.coverage_text()}); fly near the file's station or give "
+                "constellation_start"
             )
         return
     try:
@@ -723,6 +754,16 @@ def _check_sky_settings(cfg: ScenarioConfig, o: str) -> None:
             f"({cfg.t0_random_s:g} s) and the episode ({horizon:g} s) reach t_s {t_end:g} s, "
             f"outside the validity of the ephemerides in {sky.source}: its coverage is "
             f"{sky.coverage_text()}"
+        )
+    if not any(a <= t_start and t_end <= b for a, b in view.spans_s):
+        warnings.warn(
+            f"{o}.constellation_start={start!r}: the episodes (t_s {t_start:g} to {t_end:g} s) "
+            f"leave the file's usable spans at the origin {where}, where every system has a "
+            f"valid ephemeris and at least {MIN_SATELLITES} satellites are above the "
+            f"{cfg.elevation_mask_deg:g} deg cut-off (usable: "
+            f"{view.spans_text(sky.reference_gps_s)})",
+            RinexWarning,
+            stacklevel=4,
         )
 
 
@@ -739,17 +780,28 @@ def world_constellation(cfg: ScenarioConfig) -> Any:
     return load_broadcast_constellation(cfg.constellation[6:].strip(), cfg.systems)
 
 
+def _sky_view(cfg: ScenarioConfig, sky: Any) -> Any:
+    """What the origin sees of a RINEX sky (:meth:`BroadcastConstellation.visibility`)."""
+    return sky.visibility(
+        cfg.lat_deg, cfg.lon_deg, cfg.alt_m, cfg.elevation_mask_deg, MIN_SATELLITES
+    )
+
+
 def episode_start_s(cfg: ScenarioConfig, sky: Any, rng: np.random.Generator) -> float:
     """GNSS time ``t_s`` of an episode's first epoch (draws from ``rng`` only when random).
 
     Nominal sky: ``t0_s + U(0, t0_random_s)``. RINEX sky: ``constellation_start`` plus
-    ``U(0, t0_random_s)``, or without a start, uniform in the coverage less the episode.
+    ``U(0, t0_random_s)``, or without a start, uniform over the times at which a whole
+    episode fits inside the file's usable spans at the origin
+    (:meth:`~coopnav_env.gnss.rinex.BroadcastConstellation.visibility`: every system a valid
+    ephemeris, at least 4 satellites above the cut-off).
     """
     if cfg.constellation == "nominal":
         return cfg.t0_s + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
     if cfg.constellation_start is None:
-        lo, hi = sky.coverage_s
-        return lo + rng.uniform(0.0, hi - lo - cfg.episode_horizon_s())
+        view = _sky_view(cfg, sky)
+        horizon = cfg.episode_horizon_s()
+        return view.start_s(horizon, rng.uniform(0.0, view.room_s(horizon)))
     t = sky.t_s_of(cfg.constellation_start)
     return t + (rng.uniform(0.0, cfg.t0_random_s) if cfg.t0_random_s else 0.0)
 

@@ -6,6 +6,7 @@ import datetime as dt
 import pickle
 import shutil
 import warnings
+from pathlib import Path
 
 import gymnasium
 import numpy as np
@@ -15,7 +16,12 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from coopnav_env import GYM_ENV_ID, urban_canyon_v0
 from coopnav_env.envs import make_config
-from coopnav_env.gnss.rinex import SAMPLE_NAV_PATH, BroadcastConstellation
+from coopnav_env.gnss.rinex import (
+    SAMPLE_NAV_PATH,
+    BroadcastConstellation,
+    RinexWarning,
+    clear_caches,
+)
 from coopnav_env.sim.scenario import ScenarioConfig, UrbanWorld
 
 SKY = {"constellation": "rinex:sample"}
@@ -187,3 +193,119 @@ def test_evaluate_command_line_flies_a_rinex_sky(tmp_path) -> None:
     assert main(args) == 0
     assert (out / "report.json").is_file()
     assert "rinex:" in (out / "report.json").read_text()
+
+
+# --------------------------------------------------------------------------------------------
+# a real station's file
+# --------------------------------------------------------------------------------------------
+
+ELKO = (
+    Path(__file__).resolve().parents[1] / "gnss" / "data" / "ELKO00USA_R_20182100000_01D_MN.rnx.gz"
+)
+AT_ELKO = {"lat_deg": 40.91, "lon_deg": -115.74, "alt_m": 1600.0}  # the station
+
+
+def _rinex_warnings(call):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = call()
+    return out, [str(w.message) for w in caught if issubclass(w.category, RinexWarning)]
+
+
+def test_a_station_file_flies_where_it_is_valid() -> None:
+    """Bad records left out with one warning; 20 episodes without a start time all start in
+    the file's usable spans, with 4 or more satellites per UAV in the open and a cooperative
+    fix on most steps."""
+    clear_caches()
+    make = lambda: urban_canyon_v0.parallel_env(  # noqa: E731
+        constellation=f"rinex:{ELKO}", max_steps=20, **AT_ELKO
+    )
+    env, messages = _rinex_warnings(make)
+    assert len(messages) == 1 and "left out 63 of 331 GPS and BeiDou records" in messages[0]
+    sky = env.world.constellation
+    spans = sky.visibility(40.91, -115.74, 1600.0, 10.0).spans_s
+    horizon = env.config.max_steps * env.config.dt_s
+    starts, fixes, steps = [], 0, 0
+    for seed in range(20):
+        _, infos = env.reset(seed=seed)
+        t0 = env.world.t_s
+        starts.append(t0)
+        assert any(a <= t0 and t0 + horizon <= b for a, b in spans), t0
+        assert len(env.world.last.sv_index) >= 4  # above the cut-off at the origin
+        assert all(infos[a]["n_sats_open_sky"] >= 4 for a in env.agents)
+        while env.agents:
+            _, _, _, _, infos = env.step({a: np.zeros(3) for a in env.agents})
+            for a in infos:
+                fixes += bool(infos[a]["coop_fix"])
+                steps += 1
+    # a station's sky is thinner than the nominal one (about 10 satellites in the open)
+    assert len(set(starts)) == 20 and fixes >= 0.6 * steps, (fixes, steps)
+    # the day of the file: 2018-07-29 (GPST), and the evening before
+    days = {
+        str(dt.datetime(1980, 1, 6) + dt.timedelta(seconds=t + sky.reference_gps_s))[:10]
+        for t in starts
+    }
+    assert days <= {"2018-07-28", "2018-07-29"}
+
+
+def test_a_station_file_far_from_the_origin_warns() -> None:
+    env, messages = _rinex_warnings(
+        lambda: urban_canyon_v0.parallel_env(constellation=f"rinex:{ELKO}", max_steps=20)
+    )
+    far = [m for m in messages if "Fly near the station" in m]
+    assert (
+        far
+        and "at the origin (31.0252, 121.434)" in far[0]
+        and "the file holds what its station" in far[0]
+    )
+    # every episode still starts where 4 satellites are above the cut-off
+    for seed in range(5):
+        env.reset(seed=seed)
+        assert len(env.world.last.sv_index) >= 4
+    _, messages = _rinex_warnings(
+        lambda: urban_canyon_v0.parallel_env(constellation=f"rinex:{ELKO}", max_steps=20, **AT_ELKO)
+    )
+    assert not [m for m in messages if "Fly near the station" in m]
+
+
+def test_gps_only_on_a_mixed_station_file_with_bad_beidou_records() -> None:
+    clear_caches()
+    env, messages = _rinex_warnings(
+        lambda: urban_canyon_v0.parallel_env(
+            constellation=f"rinex:{ELKO}", systems=("GPS",), max_steps=20, **AT_ELKO
+        )
+    )
+    assert len(messages) == 1  # the file's BeiDou records are checked too
+    _, messages = _rinex_warnings(  # the file is read once for every choice of systems
+        lambda: urban_canyon_v0.parallel_env(constellation=f"rinex:{ELKO}", **AT_ELKO)
+    )
+    assert not messages
+    sky = env.world.constellation
+    assert sky.n_sv == 31 and all(p.startswith("G") for p in sky.prn)
+    env.reset(seed=3)
+    assert len(env.world.last.sv_index) >= 4
+
+
+def test_a_given_start_outside_the_usable_spans_warns() -> None:
+    make = lambda start: urban_canyon_v0.parallel_env(  # noqa: E731
+        constellation=f"rinex:{ELKO}", constellation_start=start, **AT_ELKO
+    )
+    # 20:00:14 to 21:00:14 GPST no BeiDou ephemeris is valid
+    env, messages = _rinex_warnings(lambda: make("2018-07-29T20:20:00Z"))
+    gap = [m for m in messages if "leave the file's usable spans" in m]
+    assert len(gap) == 1 and "2018-07-29T20:00:14 GPST, 2018-07-29T21:00:14 GPST" in gap[0]
+    env.reset(seed=0)  # flown as asked
+    assert not np.any(env.world.constellation.system[env.world.last.sv_index] == 1)
+    _, messages = _rinex_warnings(lambda: make("2018-07-29T12:00:00Z"))
+    assert not [m for m in messages if "usable spans" in m]
+
+
+def test_a_file_with_no_usable_stretch_is_refused(tmp_path) -> None:
+    lines = SAMPLE_NAV_PATH.read_text().splitlines(keepends=True)
+    end = next(k for k, line in enumerate(lines) if "END OF HEADER" in line) + 1
+    body = [lines[k : k + 8] for k in range(end, len(lines), 8)]
+    kept = [r for r in body if r[0][:3] in ("G01", "G02", "G03")]  # 3 satellites
+    path = tmp_path / "three.rnx"
+    path.write_text("".join(lines[:end] + [x for r in kept for x in r]))
+    with pytest.raises(ValueError, match=r"no 200 s of the file \(an episode\) in which every"):
+        urban_canyon_v0.parallel_env(constellation=f"rinex:{path}", systems=("GPS",))

@@ -10,8 +10,10 @@ equation by fixed-point iteration, the GEO rotation as explicit matrices.
 from __future__ import annotations
 
 import datetime as dt
+import gzip
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +23,7 @@ from coopnav_env.gnss.frames import ecef_to_geodetic
 from coopnav_env.gnss.rinex import (
     SAMPLE_NAV_PATH,
     BroadcastConstellation,
+    RinexWarning,
     gps_seconds,
     load_broadcast_constellation,
     read_rinex_nav,
@@ -317,7 +320,8 @@ def test_unhealthy_ephemerides_are_dropped_and_counted(tmp_path) -> None:
         "     2.000000000000D+00 0.000000000000D+00-5",
         "     2.000000000000D+00 6.300000000000D+01-5",
     )
-    nav = read_rinex_nav(_write(tmp_path, sick + GPS_RECORD.replace("G05", "G07")))
+    with pytest.warns(RinexWarning, match=r"left out 1 of 2 .*GPS unhealthy: 1 .*G05: health 63"):
+        nav = read_rinex_nav(_write(tmp_path, sick + GPS_RECORD.replace("G05", "G07")))
     assert nav.unhealthy == 1 and nav.prn == ("G07",)
 
 
@@ -348,11 +352,11 @@ def test_unhealthy_ephemerides_are_dropped_and_counted(tmp_path) -> None:
             HEADER,
             r"line 4: record of G05: eccentricity 1.5",
         ),
-        (GPS_RECORD, HEADER.replace("     3.04", "     2.11"), r"line 1: RINEX version 2.11"),
+        (GPS_RECORD, HEADER.replace("     3.04", "     4.00"), r"line 1: RINEX version 4.0 is"),
         (GPS_RECORD, HEADER.replace("N: GNSS", "O: GNSS"), r"line 1: file type 'O'"),
         (GPS_RECORD, HEADER.replace("M: MIXED", "Q: WHAT?"), r"unknown satellite system 'Q'"),
         (GPS_RECORD, HEADER.replace("END OF HEADER", "COMMENT      "), r"no 'END OF HEADER'"),
-        (GLONASS_RECORD, HEADER, r"no healthy GPS or BeiDou ephemeris .*'R': 1"),
+        (GLONASS_RECORD, HEADER, r"no usable GPS or BeiDou ephemeris .*'R': 1"),
     ],
 )
 def test_bad_files_name_the_file_the_line_and_the_problem(tmp_path, body, header, match) -> None:
@@ -365,7 +369,7 @@ def test_missing_file_and_missing_system(tmp_path) -> None:
     with pytest.raises(ValueError, match=r"'.*nowhere.rnx' does not exist"):
         load_broadcast_constellation(str(tmp_path / "nowhere.rnx"))
     nav = read_rinex_nav(_write(tmp_path, GPS_RECORD))
-    with pytest.raises(ValueError, match=r"nav.rnx: no healthy BDS ephemeris"):
+    with pytest.raises(ValueError, match=r"nav.rnx: no usable BDS ephemeris"):
         BroadcastConstellation.from_navigation(nav, ("GPS", "BDS"))
 
 
@@ -378,3 +382,230 @@ def test_beidou_epochs_are_bdt(tmp_path) -> None:
     assert nav.toc_gps_s[0] == days * 86400 + 2 * 3600 + 14
     assert nav.toe_gps_s[0] == BDT0_GPS_S + 1091 * 604800 + 352800.0
     assert nav.toe_gps_s[0] == nav.toc_gps_s[0]
+
+
+# --------------------------------------------------------------------------------------------
+# real files, bad records, fit intervals
+# --------------------------------------------------------------------------------------------
+
+DATA = Path(__file__).resolve().parent / "data"
+ELKO = DATA / "ELKO00USA_R_20182100000_01D_MN.rnx.gz"  # RINEX 3.03 mixed, one IGS station
+BRDC_211 = DATA / "brdc2420.18n.gz"  # RINEX 2.11 GPS, IGS merged broadcast file
+
+
+def _rinex_warnings(call):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = call()
+    return out, [str(w.message) for w in caught if issubclass(w.category, RinexWarning)]
+
+
+def test_a_station_file_with_bad_records_loads_with_one_warning() -> None:
+    nav, messages = _rinex_warnings(lambda: read_rinex_nav(ELKO))
+    assert nav.version == 3.03 and nav.file_system == "M"
+    assert nav.skipped == {"R": 494, "E": 1293}
+    # the health flag is checked first: the C16 record with sqrt(A) = 1991.78 is unhealthy
+    assert nav.rejected == {("BDS", "unhealthy"): 55, ("GPS", "unhealthy"): 8}
+    assert len(messages) == 1
+    assert "left out 63 of 331 GPS and BeiDou records" in messages[0]
+    assert "BDS unhealthy: 55" in messages[0] and "GPS unhealthy: 8" in messages[0]
+    assert nav.n_eph > 200 and "C16" not in nav.prn and "G04" not in nav.prn
+    assert np.all(nav.elements["health"] == 0.0)
+    for systems in (("GPS",), ("GPS", "BDS"), ("BDS",)):
+        sky = BroadcastConstellation.from_navigation(nav, systems)
+        assert {p[0] for p in sky.prn} == {{"GPS": "G", "BDS": "C"}[s] for s in systems}
+
+
+def test_an_implausible_healthy_record_is_left_out_not_the_file(tmp_path) -> None:
+    lines = gzip.decompress(ELKO.read_bytes()).decode().splitlines(keepends=True)
+    rec = 14674  # line 14675: C16 with sqrt(A) = 1991.78 m^0.5 and health 1
+    assert lines[rec].startswith("C16 2018 07 31") and "1.991780391693E+03" in lines[rec + 2]
+    assert lines[rec + 6][23:42] == " 1.000000000000E+00"  # SatH1
+    lines[rec + 6] = lines[rec + 6][:23] + " 0.000000000000E+00" + lines[rec + 6][42:]
+    path = tmp_path / "elko.rnx"
+    path.write_text("".join(lines))
+    nav, messages = _rinex_warnings(lambda: read_rinex_nav(path))
+    assert nav.rejected[("BDS", "implausible sqrt(A)")] == 1
+    assert nav.rejected[("BDS", "unhealthy")] == 54
+    assert len(messages) == 1
+    assert "BDS implausible sqrt(A): 1 (first: " in messages[0]
+    assert "line 14675: record of C16: sqrt(A) = 1991.780391693 m^0.5" in messages[0]
+    gps = BroadcastConstellation.from_navigation(nav, ("GPS",))
+    assert gps.n_sv == 31
+
+
+def test_a_file_of_bad_records_only_says_why_each_was_left_out(tmp_path) -> None:
+    sick = GPS_RECORD.replace(
+        "     2.000000000000D+00 0.000000000000D+00-5",
+        "     2.000000000000D+00 6.300000000000D+01-5",
+    )
+    bad_a = GPS_RECORD.replace("G05", "G07").replace("5.153700000000D+03", "1.991780000000D+03")
+    with pytest.raises(ValueError, match=r"no usable GPS or BeiDou ephemeris") as info:
+        read_rinex_nav(_write(tmp_path, sick + bad_a))
+    assert "GPS implausible sqrt(A): 1 (first: " in str(info.value)
+    assert "GPS unhealthy: 1 (first: " in str(info.value) and "line 4: record of G05" in str(
+        info.value
+    )
+
+
+def _gps_record(prn: str, hour: int, fit_h: float, day: int = 3) -> str:
+    """GPS_RECORD with toc = toe at ``hour`` of 2026-12-``day`` and the given fit interval."""
+    toe = (day - 3 + 4) * 86400 + hour * 3600  # 2026-12-03 is a Thursday (day 4 of the week)
+    lines = GPS_RECORD.replace("G05", prn).splitlines(keepends=True)
+    lines[0] = lines[0].replace("2026 12 03 02", f"2026 12 {day:02d} {hour:02d}")
+    lines[3] = f"     {toe:.12E}".replace("E+0", "D+0") + lines[3][23:]
+    lines[7] = lines[7][:23] + f" {fit_h:.12E}".replace("E+0", "D+0").replace("E-0", "D-0")
+    return "".join(lines) + "\n"
+
+
+def test_each_ephemeris_is_used_only_inside_its_fit_interval(tmp_path) -> None:
+    """Hand-computed: which record each time uses, and the gaps."""
+    body = (
+        _gps_record("G05", 2, 4.0)  # A: fit 4 h -> 00:00-04:00
+        + _gps_record("G05", 4, 0.0)  # B: fit field 0 -> 4 h -> 02:00-06:00
+        + _gps_record("G05", 10, 8.0)  # C: fit 8 h -> 06:00-14:00
+        + _gps_record("G05", 20, 4.0)  # D: 18:00-22:00; 14:00-18:00 no valid record
+    )
+    nav = read_rinex_nav(_write(tmp_path, body))
+    assert nav.n_eph == 4 and list(nav.elements["fit_or_aodc"]) == [4.0, 0.0, 8.0, 4.0]
+    sky = BroadcastConstellation.from_navigation(nav, ("GPS",))
+    day0 = nav.toe_gps_s[0] - 2 * 3600  # 2026-12-03 00:00 GPST
+    hour = 3600.0
+    assert sky.coverage_gps_s == (day0, day0 + 22 * hour)
+    assert sky.valid_spans_gps_s == ((day0, day0 + 14 * hour), (day0 + 18 * hour, day0 + 22 * hour))
+    cases = {  # hours after 00:00 -> record (index in the file), None: no valid record
+        0.0: 0,
+        0.5: 0,
+        2.98: 0,  # A's toe is nearer
+        3.0: 1,  # equally near A and B: the later toe
+        3.02: 1,
+        5.99: 1,
+        6.0: 1,  # B (2 h from its toe) nearer than C (4 h)
+        6.01: 2,  # B has expired
+        13.99: 2,
+        14.0: 2,
+        14.01: None,
+        16.0: None,
+        17.99: None,
+        18.0: 3,
+        22.0: 3,
+    }
+    for h, j in cases.items():
+        t_gps = day0 + h * hour
+        pos = sky.positions_ecef(t_gps - sky.reference_gps_s)[0]
+        if j is None:
+            assert np.all(np.isnan(pos)), h
+            continue
+        want, _ = _oracle_state(nav, j, t_gps)
+        assert np.linalg.norm(pos - want) < 1e-3, h
+        others = [k for k in range(4) if k != j]
+        assert all(np.linalg.norm(pos - _oracle_state(nav, k, t_gps)[0]) > 1.0 for k in others)
+
+
+def test_beidou_ephemerides_are_valid_one_hour_either_side_and_the_newest_repeat_is_kept(
+    tmp_path,
+) -> None:
+    bds = GPS_RECORD.replace("G05", "C23").replace(" 2.447000000000D+03", " 1.091000000000D+03")
+    again = bds.replace("3.456000000000D+05 4.0", "3.457000000000D+05 4.0").replace(
+        "-1.000000000000D+00\n", "-1.100000000000D+00\n", 1
+    )  # the same toe broadcast again later, another mean anomaly
+    nav = read_rinex_nav(_write(tmp_path, bds + again))
+    assert nav.n_eph == 1 and nav.elements["m0_rad"][0] == -1.1  # the later broadcast
+    sky = BroadcastConstellation.from_navigation(nav, ("BDS",))
+    toe = float(nav.toe_gps_s[0])
+    assert sky.coverage_gps_s == (toe - 3600.0, toe + 3600.0)
+    with pytest.raises(ValueError, match="outside the validity"):
+        sky.positions_ecef(toe + 3601.0 - sky.reference_gps_s)
+
+
+def test_rinex_2_and_gzip_files_are_read_directly(tmp_path) -> None:
+    nav_gz, messages = _rinex_warnings(lambda: read_rinex_nav(BRDC_211))
+    assert nav_gz.version == 2.11 and nav_gz.file_system == "G"
+    assert nav_gz.rejected == {("GPS", "unhealthy"): 1} and len(messages) == 1
+    plain = tmp_path / "brdc2420.18n"
+    plain.write_bytes(gzip.decompress(BRDC_211.read_bytes()))
+    nav = read_rinex_nav(plain, warn=False)
+    assert nav.prn == nav_gz.prn and nav.digest == nav_gz.digest
+    for f, v in nav.elements.items():
+        np.testing.assert_array_equal(v, nav_gz.elements[f])
+    # the first record: ' 2 18  8 29 22  0  0.0 1.349905505776D-05...', toe 338400 s, week 2016
+    j = nav.prn.index("G02")
+    assert nav.toc_gps_s[j] == (dt.date(2018, 8, 29) - dt.date(1980, 1, 6)).days * 86400 + 22 * 3600
+    assert nav.toe_gps_s[j] == 2016 * 604800 + 338400.0
+    assert nav.elements["af0_s"][j] == 1.349905505776e-05
+    assert nav.elements["sqrt_a_sqrtm"][j] == 5.153796899796e03
+    sky = BroadcastConstellation.from_navigation(nav, ("GPS",))
+    t_gps = float(nav.toe_gps_s[j]) + 1234.5
+    want, want_clk = _oracle_state(nav, _oracle_pick(nav, "G02", t_gps), t_gps)
+    i = sky.prn.index("G02")
+    assert np.linalg.norm(sky.positions_ecef(t_gps - sky.reference_gps_s)[i] - want) < 1e-3
+    assert abs(sky.clock_offsets_s(t_gps - sky.reference_gps_s)[i] - want_clk) < 1e-12
+    r = np.linalg.norm(sky.positions_ecef(np.arange(*sky.coverage_s, 3600.0)), axis=-1)
+    assert np.nanmax(np.abs(r - 26_560e3)) < 800e3  # e up to 0.02
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        (b"\x1f\x9d\x90junk", r"Unix compress \(\.Z\)-compressed; decompress it first"),
+        (b"\x1f\x8b\x08\x00cut", r"gzip data is corrupt or cut short"),
+        (b"BZh91AY&SY", r"bzip2-compressed"),
+    ],
+)
+def test_other_compressions_are_named(tmp_path, data, match) -> None:
+    path = tmp_path / "nav.rnx.Z"
+    path.write_bytes(data)
+    with pytest.raises(ValueError, match=match):
+        read_rinex_nav(path)
+
+
+def test_visibility_of_a_station_file_near_and_far() -> None:
+    nav = read_rinex_nav(ELKO, warn=False)
+    sky = BroadcastConstellation.from_navigation(nav)
+    near = sky.visibility(40.91, -115.74, 1600.0, 10.0)
+    far = sky.visibility(31.23, 121.47, 0.0, 10.0)  # Shanghai
+    assert near.seen_fraction > 0.9 > 0.5 > far.seen_fraction
+    assert near.visible_mean > 9.0 and far.visible_mean < 6.0
+    # BeiDou has no valid ephemeris from 22:00 to 23:00 (hours after the coverage's start)
+    assert [(a, b) for a, b in near.spans_s] == [(0.0, 22 * 3600.0), (23 * 3600.0, 26 * 3600.0)]
+    assert len(far.spans_s) > 3  # gaps with fewer than 4 satellites above 10 deg
+    t = np.concatenate([np.arange(a, b, 600.0) for a, b in far.spans_s])
+    pos = sky.positions_ecef(t)
+    from coopnav_env.gnss.frames import azimuth_elevation, geodetic_to_ecef
+
+    origin = geodetic_to_ecef(31.23, 121.47, 0.0)[None]
+    for k in range(t.size):
+        ok = np.isfinite(pos[k, :, 0])
+        _, el = azimuth_elevation(origin, pos[k, ok])
+        assert np.sum(el > 10.0) >= 4, t[k]
+    # the sample sky: one span, the whole coverage
+    sample = load_broadcast_constellation("sample")
+    assert sample.visibility(31.23, 121.47).spans_s == (sample.coverage_s,)
+
+
+def test_a_rinex_2_record_reads_as_its_rinex_3_twin(tmp_path) -> None:
+    """The same record in RINEX 2.11 layout (I2 PRN, two-digit year, F5.1 seconds, 3-blank
+    orbit lines, numbers without a leading zero) and in RINEX 3.04."""
+    lines = GPS_RECORD.splitlines()
+    epoch = " 5 26 12  3  2  0  0.0" + lines[0][23:]
+    orbit = ["   " + line[4:] for line in lines[1:]]
+    orbit[0] = orbit[0].replace(" 1.700000000000D+01", "  .170000000000D+02")
+    header2 = (
+        "     2.11           N: GPS NAV DATA                         RINEX VERSION / TYPE\n"
+        "                                                            END OF HEADER\n"
+    )
+    two = tmp_path / "nav.26n"
+    two.write_text(header2 + "\n".join([epoch, *orbit]) + "\n")
+    nav2 = read_rinex_nav(two)
+    nav3 = read_rinex_nav(_write(tmp_path, GPS_RECORD))
+    assert nav2.version == 2.11 and nav2.file_system == "G" and nav2.prn == ("G05",)
+    assert nav2.toc_gps_s[0] == nav3.toc_gps_s[0] and nav2.toe_gps_s[0] == nav3.toe_gps_s[0]
+    for f, v in nav3.elements.items():
+        np.testing.assert_array_equal(nav2.elements[f], v, err_msg=f)
+    glonass = header2.replace("N: GPS NAV DATA        ", "G: GLONASS NAV DATA    ")
+    two.write_text(glonass + "\n".join([epoch, *orbit]) + "\n")
+    with pytest.raises(ValueError, match=r"file type 'G' .*GLONASS navigation files are not"):
+        read_rinex_nav(two)
+    two.write_text(header2 + epoch.replace(" 26 12", " 26 13") + "\n" + "\n".join(orbit) + "\n")
+    with pytest.raises(ValueError, match=r"nav.26n, line 3: epoch \(columns 3-22\)"):
+        read_rinex_nav(two)
