@@ -51,6 +51,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "coopnav_env.training.marl_study",
         "the learning study: learned swarms vs heuristics and a privileged planner, with CIs",
     ),
+    "city": (
+        "coopnav_env.training.city_cli",
+        "cities from OpenStreetMap or GeoJSON: convert into a checked GeoJSON city",
+    ),
 }
 
 DEBUG_ENV: str = "COOPNAV_DEBUG"
