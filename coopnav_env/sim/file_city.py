@@ -84,12 +84,15 @@ A file city has no street grid. Its free space is a grid of square cells
 (``grid_resolution_m``, default 5 m) whose centres lie outside every footprint and at least
 ``clearance_m`` (default 3 m) from every wall; buildings count as obstacles whatever their
 height. Cells are 8-connected (a diagonal step needs both of its orthogonal neighbours free).
-Start and goal points are drawn in the largest connected piece of free space; a route is the
-A* cheapest path between the cells of its ends, where a cell nearer a wall than
-:data:`PREFERRED_CLEARANCE_M` (10 m) costs more to cross (the route keeps to the middle of the
-streets), shortened by keeping only the waypoints it cannot cut (a straight leg crosses
-reachable cells only, none nearer a wall than the path it replaces or 10 m, by an exact grid
-traversal).
+Start and goal points are drawn in the largest connected piece of the built-up free space:
+on streets between buildings, where walls lie within :data:`BUILT_UP_RADIUS_M` (80 m)
+in at least 4 of 8 directions, not in the open margin around the footprints, over water or in
+a wide park. A route is the A* cheapest path between the cells of its ends, where a cell
+nearer a wall than :data:`PREFERRED_CLEARANCE_M` (10 m) costs more to cross (the route keeps
+to the middle of the streets) and a cell outside the built-up area costs 21 times as much as
+one in a street's middle (the route keeps inside it where it can), shortened by keeping only
+the waypoints it cannot cut (a straight leg crosses reachable cells only, none nearer a wall,
+or outside the built-up area, than the path it replaces or 10 m, by an exact grid traversal).
 """
 
 from __future__ import annotations
@@ -167,6 +170,12 @@ PREFERRED_CLEARANCE_M: float = 10.0
 more to cross (up to 5 times), and a shortcut may not pass nearer a wall than the path it
 replaces or this (so that a column of UAVs a few metres either side of the route clears the
 corners)."""
+BUILT_UP_RADIUS_M: float = 80.0
+"""A free cell is in the built-up area when a wall lies within this distance [m] in at least
+:data:`BUILT_UP_MIN_DIRECTIONS` of 8 directions (45 deg apart)."""
+BUILT_UP_MIN_DIRECTIONS: int = 4
+"""See :data:`BUILT_UP_RADIUS_M`: on a street between buildings walls lie on both sides and on
+the diagonals; at the edge of the map, over water or in a wide park, on one side at most."""
 EXTENT_MARGIN_M: float = 20.0
 """Open ground around the footprints' bounding box, inside the city's extent [m]."""
 
@@ -1147,6 +1156,10 @@ class FileCity(City):
         East/North of the free-space cell centres [m].
     free : ndarray of bool, shape (n_y, n_x)
         Free cells (outside footprints, clearance kept).
+    built_up : ndarray of bool, shape (n_y, n_x)
+        Reachable cells in the built-up area (:data:`BUILT_UP_RADIUS_M`), its largest
+        8-connected piece: where starts and goals are drawn, and where routes keep where
+        they can (without any, starts and goals are drawn in every reachable cell).
     reachable : ndarray of bool, shape (n_y, n_x)
         Free cells of the largest 8-connected piece of free space (where starts and goals are
         drawn).
@@ -1173,6 +1186,7 @@ class FileCity(City):
     n_default_height: int = 0
     clearance_grid_m: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     report: CityReport | None = None
+    built_up: BoolArray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
 
     @property
     def resolution_m(self) -> float:
@@ -1223,10 +1237,10 @@ class FileCity(City):
         altitude_m: float = 10.0,
         margin_m: float = 2.0,
     ) -> FloatArray:
-        """Uniformly random points ``(n, 3)`` [m] in the reachable free space (a random
-        reachable cell, then uniformly within ``resolution / 2 - margin`` of its centre, at
-        ``altitude_m``). ``margin_m`` is clipped to ``[0, resolution / 2]``."""
-        rows, cols = np.nonzero(self.reachable)
+        """Uniformly random points ``(n, 3)`` [m] in the built-up reachable free space (a
+        random cell of :attr:`built_up`, then uniformly within ``resolution / 2 - margin`` of
+        its centre, at ``altitude_m``). ``margin_m`` is clipped to ``[0, resolution / 2]``."""
+        rows, cols = np.nonzero(self.built_up if np.any(self.built_up) else self.reachable)
         k = rng.integers(0, rows.size, size=int(n))
         half = max(self.resolution_m / 2.0 - max(float(margin_m), 0.0), 0.0)
         jitter = rng.uniform(-half, half, size=(int(n), 2))
@@ -1234,10 +1248,18 @@ class FileCity(City):
         y = self.grid_y_m[rows[k]] + jitter[:, 1]
         return np.stack([x, y, np.full(int(n), float(altitude_m))], axis=1)
 
-    def _segment_free(self, a: FloatArray, b: FloatArray, min_clear_m: float = 0.0) -> bool:
+    def _segment_free(
+        self,
+        a: FloatArray,
+        b: FloatArray,
+        min_clear_m: float = 0.0,
+        clear_grid_m: FloatArray | None = None,
+    ) -> bool:
         """Whether the straight leg ``a -> b`` crosses reachable cells with a clearance of at
         least ``min_clear_m`` only (every cell it passes through, by a grid traversal; a leg
-        through a cell corner checks both cells beside it)."""
+        through a cell corner checks both cells beside it); the clearances are
+        ``clear_grid_m`` (default :attr:`clearance_grid_m`)."""
+        grid = self.clearance_grid_m if clear_grid_m is None else clear_grid_m
         res = self.resolution_m
         u0 = (a[0] - self.grid_x_m[0]) / res + 0.5
         v0 = (a[1] - self.grid_y_m[0]) / res + 0.5
@@ -1258,7 +1280,7 @@ class FileCity(City):
                 0 <= ci < nx
                 and 0 <= cj < ny
                 and bool(self.reachable[cj, ci])
-                and self.clearance_grid_m[cj, ci] >= min_clear_m
+                and grid[cj, ci] >= min_clear_m
             )
 
         for _ in range(abs(i_end - i) + abs(j_end - j) + 2):
@@ -1321,15 +1343,21 @@ class FileCity(City):
                 head, s = [s], self.nearest_free_xy(s)
             else:
                 tail, g = [g], self.nearest_free_xy(g)
-        cells = _astar(self.reachable, self.clearance_grid_m, self._cell(s), self._cell(g))
+        # outside the built-up area a cell costs 21 times a street's middle (a wall's side: 5)
+        # and a shortcut may cross it only where the path does
+        grid = cost = self.clearance_grid_m
+        if np.any(self.built_up):
+            grid = np.where(self.built_up, grid, 0.0)
+            cost = np.where(self.built_up, grid, -4.0 * PREFERRED_CLEARANCE_M)
+        cells = _astar(self.reachable, cost, self._cell(s), self._cell(g))
         pts = [s] + [np.array([self.grid_x_m[c], self.grid_y_m[r]]) for r, c in cells[1:-1]] + [g]
-        clear = np.array([self.clearance_grid_m[r, c] for r, c in cells])
+        clear = np.array([grid[r, c] for r, c in cells])
         out = [pts[0]]
         i = 0
         while i < len(pts) - 1:  # keep the farthest waypoint reachable in a straight leg
             j = len(pts) - 1
             while j > i + 1 and not self._segment_free(
-                pts[i], pts[j], min(float(clear[i : j + 1].min()), PREFERRED_CLEARANCE_M)
+                pts[i], pts[j], min(float(clear[i : j + 1].min()), PREFERRED_CLEARANCE_M), grid
             ):
                 j -= 1
             out.append(pts[j])
@@ -1504,6 +1532,13 @@ def _load_cached(
     reach = _largest_component(free)
     if not np.any(reach):
         raise CityFileError(f"city file {path}: no free space between the buildings")
+    rows, cols = np.nonzero(reach)
+    cells = np.column_stack([xs[cols], ys[rows], np.full(rows.size, 0.5)])
+    _, wall_m = buildings.sky_and_walls(cells, np.arange(0.0, 360.0, 45.0))
+    near = np.sum(wall_m <= BUILT_UP_RADIUS_M, axis=1) >= BUILT_UP_MIN_DIRECTIONS
+    built = np.zeros_like(reach)
+    built[rows[near], cols[near]] = True
+    built = _largest_component(built)  # routes between its cells need not leave it
     city = FileCity(
         buildings=buildings,  # type: ignore[arg-type]
         extent_m=(float(x0), float(x1), float(y0), float(y1)),
@@ -1516,6 +1551,7 @@ def _load_cached(
         grid_y_m=_readonly(ys),
         free=_readonly(free),
         reachable=_readonly(reach),
+        built_up=_readonly(built),
         origin=org,
         source=path,
         n_default_height=report.n_default_height,

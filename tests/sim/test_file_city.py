@@ -23,6 +23,7 @@ building, ``|roof - height at entry|``, is below 1e-6 m or its ground track pass
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -708,3 +709,35 @@ def test_bounding_box_keeps_the_footprints_inside(tmp_path: Path) -> None:
 def test_height_settings_are_checked(kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         fc.load_file_city(helsinki_geojson_path(), **kwargs)
+
+
+@pytest.mark.parametrize("source", ["sample", "helsinki"])
+def test_starts_goals_and_routes_stay_in_the_built_up_area(source: str) -> None:
+    path = fc.sample_city_path() if source == "sample" else helsinki_geojson_path()
+    city = fc.load_file_city(path, warn=False)
+    assert 0 < city.built_up.sum() < city.reachable.sum()
+    assert not np.any(city.built_up & ~city.reachable)
+    rng = np.random.default_rng(5)
+    pts = city.random_street_points(rng, 400, altitude_m=0.5)  # below every roof
+    _, wall_m = city.buildings.sky_and_walls(pts, np.arange(0.0, 360.0, 45.0))
+    # cell centres qualify; a point half a cell away may see a wall's edge on another side
+    near = np.sum(wall_m <= fc.BUILT_UP_RADIUS_M + city.resolution_m, axis=1)
+    assert np.mean(near >= fc.BUILT_UP_MIN_DIRECTIONS) > 0.95 and near.min() >= 2
+    bb = city.buildings.bbox_m  # never in the open margin around the footprints
+    lo, hi = bb[:, :2].min(axis=0), bb[:, 2:].max(axis=0)
+    assert np.all((pts[:, :2] >= lo) & (pts[:, :2] <= hi))
+    plain = dataclasses.replace(city, built_up=np.zeros_like(city.built_up))
+
+    def inside_share(c: fc.FileCity, a: np.ndarray, b: np.ndarray) -> float:
+        route = c.free_space_route(a, b)
+        if c is city:  # without the built-up area, a route may run along the map's edge
+            assert np.all((route >= lo - c.resolution_m) & (route <= hi + c.resolution_m))
+        legs = np.linspace(route[:-1], route[1:], 20).reshape(-1, 2)
+        rows = np.round((legs[:, 1] - c.grid_y_m[0]) / c.resolution_m).astype(int)
+        cols = np.round((legs[:, 0] - c.grid_x_m[0]) / c.resolution_m).astype(int)
+        return float(city.built_up[rows, cols].mean())
+
+    # routes keep inside the footprints' extent, and in the built-up area more than without it
+    kept = [inside_share(city, pts[k, :2], pts[k + 1, :2]) for k in range(0, 40, 2)]
+    base = [inside_share(plain, pts[k, :2], pts[k + 1, :2]) for k in range(0, 40, 2)]
+    assert np.mean(kept) > 0.85 and np.mean(kept) >= np.mean(base)
