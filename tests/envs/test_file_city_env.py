@@ -271,3 +271,40 @@ def test_env_set_takes_lat_lon_tuples_as_users_write_them(brackets: str) -> None
     written = f"{brackets[0]}{lat}, {lon}{brackets[1]}"
     kwargs = apply_overrides({}, ["city=geojson:sample", f"city_goal_lat_lon={written}"])
     assert make_config(**kwargs).city_goal_lat_lon == (lat, lon)
+
+
+def test_the_route_frame_flies_a_file_city_with_the_room_of_each_leg() -> None:
+    from coopnav_env import urban_canyon_v1
+    from coopnav_env.envs.urban_canyon import route_frame_command, route_offset_room_m
+    from coopnav_env.sim.osm_city import helsinki_geojson_path
+
+    env = urban_canyon_v1.parallel_env(
+        city=f"geojson:{helsinki_geojson_path()}", action_frame="route", n_uavs=3
+    )
+    env.reset(seed=2)  # a file city has no single street width: no refusal
+    city, route, cfg = env.world.city, env.world.route_xy_m, env.config
+    cap = env._route_offset_cap_m
+    assert cap.shape == (route.shape[0],)
+    assert np.all((cap >= 0.0) & (cap <= cfg.route_offset_max_m))
+    for i in range(1, route.shape[0]):  # the offset keeps the UAV's radius + 1 m off the walls
+        pts = np.linspace(route[i - 1], route[i], 50)
+        _, wall_m = city.buildings.sky_and_walls(
+            np.column_stack([pts, np.full(50, 1.0)]), np.arange(0.0, 360.0, 15.0)
+        )
+        assert cap[i] + cfg.kinematics.uav_radius_m + 1.0 <= wall_m.min() + city.resolution_m
+    assert np.all(route_offset_room_m(city, route, cfg) == cap)
+    # the command aims at most cap[wp] to the side of the leg
+    est = np.column_stack([route[[1, 1, 1]], np.full(3, 15.0)])
+    wp = np.array([1, 1, 1])
+    act = np.array([[1.0, 1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+    free = route_frame_command(act, est, wp, route, cfg)
+    capped = route_frame_command(act, est, wp, route, cfg, offset_max_m=cap[wp])
+    assert np.allclose(capped[2], free[2])  # no offset asked: the same command
+    if cap[1] < cfg.route_offset_max_m:
+        assert not np.allclose(capped[0], free[0])
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        obs, *_ = env.step({a: rng.uniform(-1.0, 1.0, 3) for a in env.agents})
+        if not env.agents:
+            break
+    assert all(np.all(np.isfinite(o)) for o in obs.values())
