@@ -45,6 +45,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "coopnav_env.training.alignment",
         "does a reward rank policies as the task's score does? (return, discounted return)",
     ),
+    "city": (
+        "coopnav_env.training.city_cli",
+        "cities from OpenStreetMap or GeoJSON: convert into a checked GeoJSON city",
+    ),
 }
 
 DEBUG_ENV: str = "COOPNAV_DEBUG"

@@ -685,7 +685,8 @@ def env_word_settings() -> dict[str, tuple[str, ...]]:
 def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str, Any]:
     """Apply ``key=value`` overrides with dotted keys (``ppo.learning_rate=1e-4``).
 
-    Values are parsed as YAML (``3``, ``1e-4``, ``true``, ``[64, 64]``, ``null``). Nested
+    Values are parsed as YAML (``3``, ``1e-4``, ``true``, ``[64, 64]``, ``null``); a tuple
+    as Python writes it, ``(60.17, 24.94)``, reads as the list ``[60.17, 24.94]``. Nested
     mappings are created as needed; the input is not modified. An environment setting that
     takes a word (:func:`env_word_settings`: ``integrity``, ``nlos_exclusion``, ...; a key of
     its own or under ``env.``) gets the text as typed where YAML 1.1 would read a boolean:
@@ -703,6 +704,9 @@ def apply_overrides(config: Mapping[str, Any], items: Sequence[str]) -> dict[str
         if not sep or not key or any(not part for part in key.split(".")):
             raise ValueError(f"override {item!r} must look like key=value (dotted keys allowed)")
         value = parse_yaml(raw, f"the value of {item!r}") if raw.strip() else ""
+        if isinstance(value, str) and re.fullmatch(r"\(.*\)", value.strip(), flags=re.S):
+            # a tuple as Python writes it, "(60.17, 24.94)": the list YAML writes "[...]"
+            value = parse_yaml(f"[{value.strip()[1:-1]}]", f"the value of {item!r}")
         parts = key.split(".")
         if isinstance(value, bool) and parts[-1] in env_word_settings():
             if len(parts) == 1 or parts[-2] == "env":  # an environment setting

@@ -37,6 +37,7 @@ from coopnav_env.envs.config import V1_DEFAULTS, UrbanCanyonConfig, make_config
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import city as _city
 from coopnav_env.sim.city import _ray_directions
+from coopnav_env.sim.file_city import FileCity
 from coopnav_env.sim.route import remaining_route_m
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
@@ -52,6 +53,7 @@ __all__ = [
     "parallel_env",
     "parallel_env_v1",
     "route_frame_command",
+    "route_offset_room_m",
 ]
 
 _USE_KERNEL = True
@@ -250,8 +252,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.agents = self.possible_agents[:]
         self._steps = 0
         self._epoch = self.world.reset(self._rng)
+        self._route_offset_cap_m = None
         if self.config.action_frame == "route":
-            _check_route_offset(self.config, float(self.world.city.street_width_m))
+            if isinstance(self.world.city, FileCity):  # no single street width: the route's
+                self._route_offset_cap_m = route_offset_room_m(
+                    self.world.city, self.world.route_xy_m, self.config
+                )
+            else:
+                _check_route_offset(self.config, float(self.world.city.street_width_m))
         self._city_scale_m = _city_scale_m(self.world)
         # the observation kernel's scales (the city scale changes with the city)
         cfg = self.config
@@ -338,12 +346,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         cfg = self.config
         prev = self._epoch
         if cfg.action_frame == "route":
+            cap = getattr(self, "_route_offset_cap_m", None)
             cmd = route_frame_command(
                 cmd,
                 prev.nav_pos_enu_m,
                 prev.next_waypoint,
                 self.world.route_xy_m,
                 cfg,
+                offset_max_m=None if cap is None else cap[prev.next_waypoint],
             )
         ep = self.world.step(cmd, self._rng)
         if self._steps < cfg.crash_free_steps and ep.collided.any():
@@ -997,12 +1007,38 @@ def _check_route_offset(cfg: UrbanCanyonConfig, street_width_m: float) -> None:
         )
 
 
+def route_offset_room_m(
+    city: FileCity, route_xy_m: np.ndarray, cfg: UrbanCanyonConfig
+) -> np.ndarray:
+    """Largest route-frame offset [m] on each leg of a file city's route, ``(k,)``: leg ``i``
+    ends at waypoint ``i`` (leg 0: the way to the first waypoint, its clearance there). It is
+    ``route_offset_max_m``, or less where the free space is narrower: the smallest distance to
+    a wall of the free-space cells along the leg
+    (:attr:`~coopnav_env.sim.file_city.FileCity.clearance_grid_m`, sampled every metre) less
+    the UAV radius and 1 m, at least 0."""
+    route = np.asarray(route_xy_m, dtype=np.float64).reshape(-1, 2)
+    res = city.resolution_m
+    ny, nx = city.clearance_grid_m.shape
+    room = np.empty(route.shape[0])
+    for i in range(route.shape[0]):
+        a = route[max(i - 1, 0)]
+        b = route[i]
+        n = max(int(np.ceil(np.linalg.norm(b - a))), 1) + 1
+        pts = np.linspace(a, b, n)
+        col = np.clip(np.floor((pts[:, 0] - city.grid_x_m[0]) / res + 0.5), 0, nx - 1)
+        row = np.clip(np.floor((pts[:, 1] - city.grid_y_m[0]) / res + 0.5), 0, ny - 1)
+        room[i] = city.clearance_grid_m[row.astype(np.int64), col.astype(np.int64)].min()
+    room -= cfg.kinematics.uav_radius_m + 1.0
+    return np.clip(room, 0.0, cfg.route_offset_max_m)
+
+
 def route_frame_command(
     action: np.ndarray,
     est_enu_m: np.ndarray,
     next_waypoint: np.ndarray,
     route_xy_m: np.ndarray,
     cfg: UrbanCanyonConfig,
+    offset_max_m: np.ndarray | None = None,
 ) -> np.ndarray:
     """The velocity command of route-frame set-points (``action_frame="route"``).
 
@@ -1018,14 +1054,18 @@ def route_frame_command(
     route_xy_m : ndarray, shape (k, 2)
         The street route's waypoints [m].
     cfg : UrbanCanyonConfig
+    offset_max_m : ndarray, shape (N,), optional
+        Each UAV's largest offset [m] in place of ``route_offset_max_m`` (a file city: the
+        room on the UAV's leg, :func:`route_offset_room_m`).
 
     Returns
     -------
     ndarray, shape (N, 3)
         The velocity command, fractions of ``max_speed_mps`` in ``[-1, 1]``: the `waypoint`
         follower's autopilot with set-points. Horizontally, from the estimated position
-        toward the next waypoint moved ``o = a1 * route_offset_max_m`` to the left of the leg
-        that ends there (before the first waypoint: of the way to it), at the speed
+        toward the next waypoint moved ``o = a1 * route_offset_max_m`` (or ``offset_max_m``)
+        to the left of the leg that ends there (before the first waypoint: of the way to it),
+        at the speed
         ``(a0 + 1) / 2 * max_speed_mps``, at most ``1 + 0.6 d`` m/s at ``d`` m from that
         point (with ``route_turn_brake_mps2 = b > 0``, also at most ``1 + sqrt(2 b (d - 3))``
         m/s before a turn). Vertically ``0.6 (h - h_est)`` toward ``h`` from ``altitude_min_m``
@@ -1046,7 +1086,8 @@ def route_frame_command(
     norm = np.linalg.norm(leg, axis=1)
     tangent = np.where((norm > 1e-9)[:, None], leg / np.maximum(norm, 1e-9)[:, None], 0.0)
     left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
-    aim = target + left * (act[:, 1] * cfg.route_offset_max_m)[:, None] - est[:, :2]
+    o_max = cfg.route_offset_max_m if offset_max_m is None else np.asarray(offset_max_m)
+    aim = target + left * (act[:, 1] * o_max)[:, None] - est[:, :2]
     speed = (act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps
     # braking for the route's turns: before every waypoint but the last
     brake = np.where(wp < route.shape[0] - 1, cfg.route_turn_brake_mps2, 0.0)

@@ -1,4 +1,5 @@
-"""A city from a file: building footprints from GeoJSON, extruded to their roof heights.
+"""A city from a file: building footprints from GeoJSON or OpenStreetMap, extruded to their
+roof heights.
 
 What it reads
 -------------
@@ -6,15 +7,45 @@ A GeoJSON ``FeatureCollection`` (RFC 7946: WGS 84 longitude/latitude in degrees)
 features are ``Polygon`` or ``MultiPolygon`` building footprints, the form OpenStreetMap
 extracts and the open building datasets are shared in. Each polygon of a ``MultiPolygon``
 becomes its own building; interior rings (courtyards) are kept. Other geometry types
-(points, lines) are skipped and counted. The roof height of a feature comes from, in order:
+(points, lines) are skipped and counted. OpenStreetMap ``.osm``/``.osm.pbf`` files
+(``osm:PATH``) are read into such features by :mod:`coopnav_env.sim.osm_city` and then
+checked here in the same way. A ``bbox`` ``(south, west, north, east)`` [deg] keeps the
+features whose footprint's vertex mean lies inside. The roof height of a feature comes from,
+in order:
 
 1. ``properties["height"]``: metres, a number or a string such as ``"12"``, ``"12 m"`` or
    ``"40 ft"`` (feet are converted);
 2. ``properties["building:levels"]`` times ``storey_height_m`` (default
-   :data:`STOREY_HEIGHT_M`, 3.0 m per storey);
-3. ``default_height_m`` (the environment uses :data:`DEFAULT_HEIGHT_M`, 10 m), counted in
-   :attr:`FileCity.n_default_height` and reported in one warning; with
-   ``default_height_m=None`` a feature without a height is an error.
+   :data:`STOREY_HEIGHT_M`, 3.0 m per storey, in :data:`STOREY_HEIGHT_RANGE_M`); ``"5.5"``
+   reads as 5.5 storeys;
+3. ``default_height_m`` (the environment uses :data:`DEFAULT_HEIGHT_M`, 10 m, in
+   :data:`DEFAULT_HEIGHT_RANGE_M`), counted in :attr:`FileCity.n_default_height` and reported
+   in one warning (which says so when most buildings got it); with ``default_height_m=None``
+   a feature without a height is an error.
+
+A list (``"5;6"``, OpenStreetMap's separator) or a range (``"5-6"``) of heights or levels
+reads as its largest value: the tallest part of a building is what blocks a satellite.
+
+Repairs
+-------
+With ``repair=True`` (the default) what can be repaired is, and one warning counts it
+(:class:`CityReport`): an open ring is closed; a ring that crosses or touches itself, or runs
+through a vertex twice, is made valid with shapely's ``make_valid`` (the ``geo`` extra; without
+shapely such a file raises saying to install it), each polygon of the result becoming a
+building; a footprint with nothing left (an exterior of fewer than 3 distinct vertices, no area
+after repair) is dropped; an unreadable ``height`` or ``building:levels`` is read as missing.
+Repeated consecutive vertices are merged in every case. With ``repair=False`` every bad
+feature is listed, with its id and what is wrong, in one error.
+
+Coordinates
+-----------
+Positions must be WGS 84 longitude/latitude degrees. A declared ``crs`` member (the 2008
+GeoJSON draft) other than WGS 84 (``CRS84``, ``EPSG:4326``) is refused; so are positions out of
+range (saying whether they look projected, in metres, or swapped), footprints spanning more
+than :data:`MAX_SPAN_M`, and footprints whose corners are square only with latitude and
+longitude swapped (most buildings are rectangular; swapping the axes scales them unequally by
+the cosines of two different latitudes and skews their corners: a file is refused when at least
+30 % of its corners are right angles swapped and three times fewer as written).
 
 Frames
 ------
@@ -28,12 +59,12 @@ neglected. Every vertex farther than ``max_origin_distance_m`` from the origin i
 
 Errors
 ------
-A bad file raises :class:`CityFileError` (a ``ValueError``) naming the file, the feature
-(index and ``id`` when it has one), the ring and what is wrong: not JSON, not a
-FeatureCollection, an unsupported geometry, non-finite or out-of-range coordinates, an open
-ring (first position differs from the last), a ring with fewer than 3 distinct vertices, a
-self-intersecting ring, a point beyond ``max_origin_distance_m``, no height (with no default)
-or an unreadable height.
+A bad file raises :class:`CityFileError` (a ``ValueError``) naming the file, and every bad
+feature (index and ``id`` when it has one), ring and what is wrong: not JSON, not a
+FeatureCollection, non-numeric or non-finite coordinates, coordinates that are not WGS 84
+degrees (above), a point beyond ``max_origin_distance_m``, no height (with no default); without
+``repair`` also an open ring (first position differs from the last), a ring with fewer than 3
+distinct vertices, a self-intersecting ring and an unreadable height.
 
 Geometry
 --------
@@ -53,12 +84,15 @@ A file city has no street grid. Its free space is a grid of square cells
 (``grid_resolution_m``, default 5 m) whose centres lie outside every footprint and at least
 ``clearance_m`` (default 3 m) from every wall; buildings count as obstacles whatever their
 height. Cells are 8-connected (a diagonal step needs both of its orthogonal neighbours free).
-Start and goal points are drawn in the largest connected piece of free space; a route is the
-A* cheapest path between the cells of its ends, where a cell nearer a wall than
-:data:`PREFERRED_CLEARANCE_M` (10 m) costs more to cross (the route keeps to the middle of the
-streets), shortened by keeping only the waypoints it cannot cut (a straight leg crosses
-reachable cells only, none nearer a wall than the path it replaces or 10 m, by an exact grid
-traversal).
+Start and goal points are drawn in the largest connected piece of the built-up free space:
+on streets between buildings, where walls lie within :data:`BUILT_UP_RADIUS_M` (80 m)
+in at least 4 of 8 directions, not in the open margin around the footprints, over water or in
+a wide park. A route is the A* cheapest path between the cells of its ends, where a cell
+nearer a wall than :data:`PREFERRED_CLEARANCE_M` (10 m) costs more to cross (the route keeps
+to the middle of the streets) and a cell outside the built-up area costs 21 times as much as
+one in a street's middle (the route keeps inside it where it can), shortened by keeping only
+the waypoints it cannot cut (a straight leg crosses reachable cells only, none nearer a wall,
+or outside the built-up area, than the path it replaces or 10 m, by an exact grid traversal).
 """
 
 from __future__ import annotations
@@ -84,15 +118,21 @@ from coopnav_env.sim.city import City, SkyDirections, _as_points, _ray_direction
 __all__ = [
     "CLEARANCE_M",
     "DEFAULT_HEIGHT_M",
+    "DEFAULT_HEIGHT_RANGE_M",
     "GEOJSON_PREFIX",
     "GRID_RESOLUTION_M",
     "MAX_ORIGIN_DISTANCE_M",
+    "OSM_PREFIX",
+    "OSM_SUFFIXES",
     "PREFERRED_CLEARANCE_M",
     "STOREY_HEIGHT_M",
+    "STOREY_HEIGHT_RANGE_M",
     "CityFileError",
+    "CityReport",
     "ExtrudedBuildings",
     "FileCity",
     "load_file_city",
+    "read_city_footprints",
     "read_geojson_footprints",
     "sample_city_geojson",
     "sample_city_path",
@@ -104,12 +144,23 @@ BoolArray = NDArray[np.bool_]
 
 GEOJSON_PREFIX: str = "geojson:"
 """Prefix of the environment's ``city`` setting that names a GeoJSON file."""
+OSM_PREFIX: str = "osm:"
+"""Prefix of the environment's ``city`` setting that names an OpenStreetMap file."""
+OSM_SUFFIXES: tuple[str, ...] = (".osm", ".osm.pbf", ".pbf", ".osm.bz2", ".osm.gz")
+"""File names read as OpenStreetMap data (:mod:`coopnav_env.sim.osm_city`)."""
 STOREY_HEIGHT_M: float = 3.0
 """Height of one storey [m] for features with ``building:levels`` but no ``height``."""
+STOREY_HEIGHT_RANGE_M: tuple[float, float] = (2.0, 10.0)
+"""Allowed ``storey_height_m`` [m]."""
 DEFAULT_HEIGHT_M: float = 10.0
 """Roof height [m] the environment gives a feature with neither ``height`` nor levels."""
+DEFAULT_HEIGHT_RANGE_M: tuple[float, float] = (1.0, 500.0)
+"""Allowed ``default_height_m`` [m]."""
 MAX_ORIGIN_DISTANCE_M: float = 10_000.0
 """Default farthest a footprint vertex may lie from the origin [m] (the flat-ground limit)."""
+MAX_SPAN_M: float = 100_000.0
+"""Widest extent a city file's footprints may have [m]: wider means coordinates that are not
+degrees (metres, another unit) or footprints of places far apart, and is refused as such."""
 GRID_RESOLUTION_M: float = 5.0
 """Default cell size of the free-space grid [m]."""
 CLEARANCE_M: float = 3.0
@@ -119,6 +170,12 @@ PREFERRED_CLEARANCE_M: float = 10.0
 more to cross (up to 5 times), and a shortcut may not pass nearer a wall than the path it
 replaces or this (so that a column of UAVs a few metres either side of the route clears the
 corners)."""
+BUILT_UP_RADIUS_M: float = 80.0
+"""A free cell is in the built-up area when a wall lies within this distance [m] in at least
+:data:`BUILT_UP_MIN_DIRECTIONS` of 8 directions (45 deg apart)."""
+BUILT_UP_MIN_DIRECTIONS: int = 4
+"""See :data:`BUILT_UP_RADIUS_M`: on a street between buildings walls lie on both sides and on
+the diagonals; at the edge of the map, over water or in a wide park, on one side at most."""
 EXTENT_MARGIN_M: float = 20.0
 """Open ground around the footprints' bounding box, inside the city's extent [m]."""
 
@@ -261,22 +318,49 @@ class ExtrudedBuildings:
 # reading GeoJSON
 # --------------------------------------------------------------------------------------------
 
-_HEIGHT_RE = re.compile(
-    r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*(m|metres|meters|ft|feet|')?\s*$"
+_NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_UNIT = r"(m|metres|meters|ft|feet|')?"
+_HEIGHT_RE = re.compile(rf"^\s*({_NUMBER})\s*{_UNIT}\s*$")
+_RANGE_RE = re.compile(rf"^\s*({_NUMBER})\s*(?:-|–|to)\s*({_NUMBER})\s*{_UNIT}\s*$")
+
+_WGS84_CRS_NAMES = (
+    "urn:ogc:def:crs:ogc:1.3:crs84",
+    "urn:ogc:def:crs:ogc::crs84",
+    "ogc:crs84",
+    "crs84",
+    "urn:ogc:def:crs:epsg::4326",
+    "urn:ogc:def:crs:epsg:4326",
+    "epsg:4326",
 )
+"""Names of a GeoJSON ``crs`` member (the 2008 GeoJSON draft) that mean WGS 84 degrees."""
 
 
 def _parse_height(value: Any, where: str, key: str) -> float:
-    """A positive height in metres from a number or a string such as ``"12 m"``."""
+    """A positive height in metres (or a number of storeys) from a number or a string.
+
+    Strings read: ``"12"``, ``"12 m"``, ``"40 ft"``, ``"5.5"``; a list ``"5;6"`` or a range
+    ``"5-6"`` gives its largest value (the tallest part is what blocks a satellite)."""
     if isinstance(value, bool):
         raise CityFileError(f"{where}: {key} {value!r} is not a height")
     if isinstance(value, (int, float)):
         h = float(value)
     elif isinstance(value, str):
-        m = _HEIGHT_RE.match(value)
-        if m is None:
-            raise CityFileError(f"{where}: cannot read {key} {value!r} (expected e.g. '12 m')")
-        h = float(m.group(1)) * (0.3048 if m.group(2) in ("ft", "feet", "'") else 1.0)
+        values = []
+        for part in value.split(";"):
+            m = _HEIGHT_RE.match(part)
+            if m is not None:
+                nums, unit = [m.group(1)], m.group(2)
+            else:
+                m = _RANGE_RE.match(part)
+                if m is None:
+                    raise CityFileError(
+                        f"{where}: cannot read {key} {value!r} (expected e.g. '12 m', '5;6' or "
+                        "'5-6')"
+                    )
+                nums, unit = [m.group(1), m.group(2)], m.group(3)
+            scale = 0.3048 if unit in ("ft", "feet", "'") else 1.0
+            values += [float(v) * scale for v in nums]
+        h = max(values)
     else:
         raise CityFileError(f"{where}: {key} {value!r} is not a number or a string")
     if not (math.isfinite(h) and h > 0.0):
@@ -285,19 +369,25 @@ def _parse_height(value: Any, where: str, key: str) -> float:
 
 
 def _feature_height(
-    props: dict[str, Any], where: str, storey_m: float, default_m: float | None
-) -> tuple[float, bool]:
-    """Roof height of a feature and whether the default was used."""
-    if props.get("height") is not None:
-        return _parse_height(props["height"], where, "height"), False
-    if props.get("building:levels") is not None:
-        levels = _parse_height(props["building:levels"], where, "building:levels")
-        return levels * storey_m, False
-    if default_m is None:
-        raise CityFileError(
-            f"{where}: no height (neither 'height' nor 'building:levels') and no default height"
-        )
-    return default_m, True
+    props: dict[str, Any], where: str, storey_m: float, default_m: float | None, lenient: bool
+) -> tuple[float | None, str, list[str]]:
+    """Roof height of a feature, where it came from (``"height"``, ``"building:levels"`` or
+    ``"default"``) and the unreadable values met on the way. ``lenient``: an unreadable value
+    is skipped (the next source is tried); otherwise it raises. The height is None when no
+    source gives one and there is no default."""
+    unreadable: list[str] = []
+    for key in ("height", "building:levels"):
+        if props.get(key) is None:
+            continue
+        try:
+            h = _parse_height(props[key], where, key)
+        except CityFileError as exc:
+            if not lenient:
+                raise
+            unreadable.append(str(exc)[len(where) + 2 :])
+            continue
+        return (h if key == "height" else h * storey_m), key, unreadable
+    return default_m, "default", unreadable
 
 
 def _segments_cross(p: FloatArray, q: FloatArray) -> bool:
@@ -332,16 +422,131 @@ def _segments_cross(p: FloatArray, q: FloatArray) -> bool:
 
 
 @dataclass(frozen=True)
+class CityReport:
+    """What reading a city file found (:attr:`FileCity.report`, ``coopnav city convert``).
+
+    Attributes
+    ----------
+    source : str
+        The file read.
+    n_features : int
+        Polygon and MultiPolygon features (OSM: building ways and relations) read.
+    n_buildings : int
+        Buildings kept (one per polygon; a repaired footprint may give several).
+    n_height : int
+        Buildings whose roof came from ``height``.
+    n_levels : int
+        Buildings whose roof came from ``building:levels`` x the storey height.
+    n_default_height : int
+        Buildings that got the default height (no readable ``height`` or levels).
+    n_unreadable_height : int
+        Features with a ``height`` or ``building:levels`` that could not be read (skipped,
+        with ``repair``).
+    n_repaired : int
+        Features whose rings were repaired (closed, or made valid by shapely ``make_valid``).
+    n_dropped : int
+        Features with nothing left to build (a ring of fewer than 3 distinct vertices, or no
+        area after repair).
+    n_skipped : int
+        Features of another geometry type (points, lines).
+    n_outside_bbox : int
+        Features outside the bounding box.
+    n_incomplete : int
+        OSM only: ways with nodes missing from the extract and relations that could not be
+        assembled into areas (cut by the extract's edge, or broken).
+    default_height_m : float or None
+        The default roof height used [m].
+    unreadable_examples : tuple of str
+        Up to 5 unreadable values, naming their features.
+    """
+
+    source: str
+    n_features: int = 0
+    n_buildings: int = 0
+    n_height: int = 0
+    n_levels: int = 0
+    n_default_height: int = 0
+    n_unreadable_height: int = 0
+    n_repaired: int = 0
+    n_dropped: int = 0
+    n_skipped: int = 0
+    n_outside_bbox: int = 0
+    n_incomplete: int = 0
+    default_height_m: float | None = DEFAULT_HEIGHT_M
+    unreadable_examples: tuple[str, ...] = ()
+
+    def lines(self) -> list[str]:
+        """The report as lines of text (what ``coopnav city convert`` prints)."""
+        out = [
+            f"buildings: {self.n_buildings} (from "
+            f"{self.n_features - self.n_outside_bbox - self.n_dropped} footprint features)",
+            f"heights known: {self.n_height + self.n_levels} ({self.n_height} from 'height', "
+            f"{self.n_levels} from 'building:levels'); defaulted: {self.n_default_height} "
+            f"(default height {self.default_height_m} m)",
+            f"rings repaired: {self.n_repaired} features; dropped: {self.n_dropped} "
+            "(nothing left to build)",
+        ]
+        if self.n_unreadable_height:
+            out.append(
+                f"unreadable heights skipped: {self.n_unreadable_height} "
+                f"(e.g. {'; '.join(self.unreadable_examples[:2])})"
+            )
+        if self.n_outside_bbox:
+            out.append(f"outside the bounding box: {self.n_outside_bbox} features")
+        if self.n_incomplete:
+            out.append(
+                f"incomplete in the extract: {self.n_incomplete} ways or relations (nodes "
+                "missing, or a multipolygon that could not be assembled)"
+            )
+        if self.n_skipped:
+            out.append(f"other geometries skipped: {self.n_skipped}")
+        return out
+
+    def warnings(self) -> list[str]:
+        """One message per thing a user should know: repairs, drops, unreadable and default
+        heights (most buildings defaulted: a stronger message)."""
+        name = f"city file {self.source}"
+        out = []
+        if self.n_repaired or self.n_dropped:
+            out.append(
+                f"{name}: {self.n_repaired} features with invalid rings repaired (closed, or "
+                f"made valid with shapely make_valid), {self.n_dropped} dropped with nothing "
+                "left to build; repair=False (city_repair=False) lists them as an error instead"
+            )
+        if self.n_unreadable_height:
+            out.append(
+                f"{name}: {self.n_unreadable_height} features have an unreadable height or "
+                f"building:levels, read as missing: {'; '.join(self.unreadable_examples)}"
+            )
+        if self.n_default_height:
+            msg = (
+                f"{name}: {self.n_default_height} of {self.n_buildings} buildings have neither "
+                f"'height' nor 'building:levels'; they get the default height "
+                f"{self.default_height_m} m"
+            )
+            if 2 * self.n_default_height > self.n_buildings:
+                msg += (
+                    ": most of the city's heights are this default, so its line of sight "
+                    "depends on it; set default_height_m (the environment's "
+                    "city_default_height_m) to a typical roof height of the place"
+                )
+            out.append(msg)
+        return out
+
+
+@dataclass(frozen=True)
 class _Footprints:
     rings_lonlat: list[list[FloatArray]]  # per building, rings (k, 2) lon/lat, not closed
     heights_m: list[float]
     ids: list[str]
-    n_default_height: int
-    n_skipped: int
+    sources: list[str]  # per building: "height", "building:levels" or "default"
+    report: CityReport
+    names: list[str]  # per building: the feature's id (or "feature i"), "part k" of a split
 
 
-def _read_lonlat(path: Path, storey_m: float, default_m: float | None) -> _Footprints:
-    """Parse and check the GeoJSON file's polygons in lon/lat (errors name the feature)."""
+def _geojson_features(path: Path) -> list[Any]:
+    """The ``features`` of a GeoJSON FeatureCollection in WGS 84 degrees (a declared other
+    CRS is refused)."""
     name = str(path)
     if not path.is_file():
         raise CityFileError(f"city file {name}: no such file")
@@ -351,20 +556,176 @@ def _read_lonlat(path: Path, storey_m: float, default_m: float | None) -> _Footp
         raise CityFileError(f"city file {name}: not readable GeoJSON ({exc})") from None
     if not isinstance(doc, dict) or doc.get("type") != "FeatureCollection":
         raise CityFileError(f"city file {name}: expected a GeoJSON FeatureCollection")
+    crs = doc.get("crs")
+    if crs is not None:
+        crs_name = crs.get("properties", {}).get("name") if isinstance(crs, dict) else None
+        if not (isinstance(crs_name, str) and crs_name.strip().lower() in _WGS84_CRS_NAMES):
+            raise CityFileError(
+                f"city file {name}: declares the coordinate reference system {crs_name or crs!r}; "
+                "a city file must be in WGS 84 longitude/latitude degrees (RFC 7946): reproject "
+                "it, e.g. `ogr2ogr -t_srs EPSG:4326 out.geojson in.geojson`"
+            )
     feats = doc.get("features")
     if not isinstance(feats, list):
         raise CityFileError(f"city file {name}: 'features' must be a list")
-    out = _Footprints([], [], [], 0, 0)
-    n_default = n_skipped = 0
+    return feats
+
+
+def _check_range(name: str, rings: list[FloatArray]) -> None:
+    """Refuse positions out of longitude/latitude range, saying whether they look projected
+    (metres) or swapped."""
+    allv = np.concatenate(rings)
+    bad_lon = np.abs(allv[:, 0]) > 180.0
+    bad_lat = np.abs(allv[:, 1]) > 90.0
+    if np.any(bad_lon | bad_lat):
+        x, y = allv[int(np.argmax(bad_lon | bad_lat))]
+        if np.all(np.abs(allv) <= 180.0) and np.all(np.abs(allv[:, 0]) <= 90.0):
+            why = (
+                "latitude and longitude look swapped (a GeoJSON position is [longitude, latitude])"
+            )
+        else:
+            why = (
+                "these look like projected coordinates (metres, e.g. UTM or Web Mercator), not "
+                "WGS 84 degrees: reproject the file (e.g. `ogr2ogr -t_srs EPSG:4326 out.geojson "
+                "in.geojson`)"
+            )
+        raise CityFileError(
+            f"city file {name}: position [{x:.6g}, {y:.6g}] is out of longitude/latitude "
+            f"range; {why}"
+        )
+
+
+def _check_place(name: str, rings: list[FloatArray], max_span_m: float) -> None:
+    """Refuse coordinates that are not the longitude/latitude degrees of one place: an
+    implausible extent, or footprints whose corners are square only when latitude and
+    longitude are swapped (:func:`_square_corner_share`)."""
+    allv = np.concatenate(rings)
+    lat_mid = math.radians(float(allv[:, 1].mean()))
+    span_e = float(np.ptp(allv[:, 0])) * 111_320.0 * math.cos(lat_mid)
+    span_n = float(np.ptp(allv[:, 1])) * 110_574.0
+    if max(span_e, span_n) > max_span_m:
+        raise CityFileError(
+            f"city file {name}: the footprints span {span_e / 1000:.0f} km east-west and "
+            f"{span_n / 1000:.0f} km north-south, an implausible extent for one city (more "
+            f"than {max_span_m / 1000:.0f} km): coordinates in metres or another unit instead "
+            "of degrees, or footprints of places far apart?"
+        )
+    as_read, n_corners = _square_corner_share(rings, swap=False)
+    swapped, _ = _square_corner_share(rings, swap=True)
+    if n_corners >= 20 and swapped >= 0.3 and swapped >= 3.0 * as_read:
+        raise CityFileError(
+            f"city file {name}: latitude and longitude look swapped: {swapped:.0%} of the "
+            f"footprints' corners are right angles with the two swapped, {as_read:.0%} as "
+            "written (a GeoJSON position is [longitude, latitude]); swap them"
+        )
+
+
+def _square_corner_share(rings: list[FloatArray], swap: bool) -> tuple[float, int]:
+    """Share of ring corners (turns of more than 10 deg) within 2 deg of a right angle, in a
+    local equirectangular frame, and the number of corners; ``swap`` reads each position as
+    ``[lat, lon]``. Buildings are mostly rectangular; swapping the two axes of a file scales
+    them unequally (by the cosines of two different latitudes) and skews their corners."""
+    rs = [r[:, ::-1] for r in rings] if swap else rings
+    allv = np.concatenate(rs)
+    if np.any(np.abs(allv[:, 1]) > 90.0):
+        return 0.0, 0
+    c = math.cos(math.radians(float(allv[:, 1].mean())))
+    n = right = 0
+    for r in rs:
+        xy = np.column_stack([r[:, 0] * c, r[:, 1]])
+        a = np.roll(xy, 1, axis=0) - xy
+        b = np.roll(xy, -1, axis=0) - xy
+        na, nb = np.hypot(a[:, 0], a[:, 1]), np.hypot(b[:, 0], b[:, 1])
+        ok = (na > 0) & (nb > 0)
+        cosang = np.sum(a[ok] * b[ok], axis=1) / (na[ok] * nb[ok])
+        ang = np.degrees(np.arccos(np.clip(cosang, -1.0, 1.0)))
+        corner = ang < 170.0
+        n += int(corner.sum())
+        right += int(np.sum(np.abs(ang[corner] - 90.0) < 2.0))
+    return right / max(n, 1), n
+
+
+def _shapely_for_repair(name: str, n_invalid: int, first: str) -> Any:
+    """shapely, or an error saying how to get it (or to list the bad features instead)."""
+    try:
+        import shapely
+    except ImportError:
+        raise CityFileError(
+            f"city file {name}: {n_invalid} features have invalid rings (the first: {first}); "
+            "repairing them needs shapely: `pip install 'coopnav[geo]'` (or pass repair=False, "
+            "city_repair=False, to list every one)"
+        ) from None
+    return shapely
+
+
+def _repair_polygon(shapely: Any, rings: list[FloatArray]) -> list[list[FloatArray]]:
+    """The valid polygons (rings, not closed) of ``make_valid`` of an exterior and its holes
+    (in degrees); parts without area (lines, points, slivers under 0.01 m^2) are dropped."""
+    poly = shapely.Polygon(rings[0], [h for h in rings[1:]])
+    fixed = shapely.make_valid(poly)
+    parts, stack = [], [fixed]
+    while stack:
+        g = stack.pop()
+        if g.geom_type == "Polygon":
+            parts.append(g)
+        elif hasattr(g, "geoms"):
+            stack.extend(g.geoms)
+    min_area_deg2 = 1e-2 / (111_000.0**2)
+    out = []
+    for g in sorted(parts, key=lambda g: (g.bounds[0], g.bounds[1])):
+        if g.is_empty or g.area < min_area_deg2:
+            continue
+        out.append(
+            [np.asarray(g.exterior.coords)[:-1, :2]]
+            + [np.asarray(h.coords)[:-1, :2] for h in g.interiors]
+        )
+    return out
+
+
+def _ring_problem(arr: FloatArray) -> str | None:
+    """Why a ring (not closed, consecutive repeats removed) is invalid, or None."""
+    distinct = np.unique(arr, axis=0).shape[0]
+    if distinct < 3:
+        return f"fewer than 3 distinct vertices ({distinct})"
+    if distinct != arr.shape[0] or _segments_cross(arr, np.roll(arr, -1, axis=0)):
+        return "self-intersecting ring"
+    return None
+
+
+def _read_lonlat(
+    path: Path,
+    storey_m: float,
+    default_m: float | None,
+    *,
+    repair: bool = True,
+    bbox: tuple[float, float, float, float] | None = None,
+    features: list[Any] | None = None,
+    n_incomplete: int = 0,
+    max_span_m: float = MAX_SPAN_M,
+) -> _Footprints:
+    """Parse and check the polygons of a GeoJSON file (or of ``features`` read from it by
+    another reader) in lon/lat. Problems that cannot be repaired, or every problem without
+    ``repair``, are listed together in one :class:`CityFileError`."""
+    name = str(path)
+    feats = _geojson_features(path) if features is None else features
+    problems: list[str] = []
+    # parse every feature: (where, height, source, [polygon: [ring arrays]], open ring seen)
+    parsed: list[tuple[str, float | None, str, list[list[FloatArray]], bool]] = []
+    feature_names: dict[str, str] = {}  # where -> the feature's own id, or "feature i"
+    n_skipped = n_unreadable = n_outside = 0
+    unreadable: list[str] = []
     for i, feat in enumerate(feats):
         fid = feat.get("id") if isinstance(feat, dict) else None
-        where = f"city file {name}, feature {i}" + (f" (id {fid!r})" if fid is not None else "")
+        where = f"feature {i}" + (f" (id {fid!r})" if fid is not None else "")
+        feature_names[where] = f"feature {i}" if fid is None else str(fid)
         if not isinstance(feat, dict) or feat.get("type") != "Feature":
-            raise CityFileError(f"{where}: not a GeoJSON Feature")
+            problems.append(f"{where}: not a GeoJSON Feature")
+            continue
         geom = feat.get("geometry")
         props = feat.get("properties") or {}
         if not isinstance(props, dict):
-            raise CityFileError(f"{where}: 'properties' must be an object")
+            problems.append(f"{where}: 'properties' must be an object")
+            continue
         gtype = geom.get("type") if isinstance(geom, dict) else None
         if gtype not in ("Polygon", "MultiPolygon"):
             n_skipped += 1
@@ -372,44 +733,290 @@ def _read_lonlat(path: Path, storey_m: float, default_m: float | None) -> _Footp
         coords = geom.get("coordinates")
         polys = [coords] if gtype == "Polygon" else coords
         if not isinstance(polys, list) or not polys:
-            raise CityFileError(f"{where}: empty {gtype} coordinates")
-        height, defaulted = _feature_height(props, where, storey_m, default_m)
-        n_default += int(defaulted)
+            problems.append(f"{where}: empty {gtype} coordinates")
+            continue
+        try:
+            height, source, bad = _feature_height(props, where, storey_m, default_m, repair)
+        except CityFileError as exc:
+            problems.append(str(exc))
+            continue
+        if bad:
+            n_unreadable += 1
+            unreadable += [f"{where}: {b}" for b in bad]
+        if height is None:
+            why = f" ({'; '.join(bad)})" if bad else ""
+            problems.append(
+                f"{where}: no height (neither 'height' nor 'building:levels' readable{why}) and "
+                "no default height"
+            )
+            continue
+        arrays: list[list[FloatArray]] = []
+        opened = False
         for pi, poly in enumerate(polys):
             pw = where if gtype == "Polygon" else f"{where}, polygon {pi}"
             if not isinstance(poly, list) or not poly:
-                raise CityFileError(f"{pw}: a polygon needs at least an exterior ring")
+                problems.append(f"{pw}: a polygon needs at least an exterior ring")
+                break
             rings = []
             for ri, ring in enumerate(poly):
                 rw = f"{pw}, ring {ri}"
                 try:
                     arr = np.array(ring, dtype=np.float64)
                 except (TypeError, ValueError):
-                    raise CityFileError(f"{rw}: coordinates are not numbers") from None
-                if arr.ndim != 2 or arr.shape[1] < 2:
-                    raise CityFileError(f"{rw}: positions must be [lon, lat] pairs")
+                    problems.append(f"{rw}: coordinates are not numbers")
+                    break
+                if arr.ndim != 2 or arr.shape[0] < 1 or arr.shape[1] < 2:
+                    problems.append(f"{rw}: positions must be [lon, lat] pairs")
+                    break
                 arr = arr[:, :2]
                 if not np.all(np.isfinite(arr)):
-                    raise CityFileError(f"{rw}: non-finite coordinates")
-                if np.any(np.abs(arr[:, 1]) > 90.0) or np.any(np.abs(arr[:, 0]) > 180.0):
-                    raise CityFileError(f"{rw}: longitude/latitude out of range")
+                    problems.append(f"{rw}: non-finite coordinates")
+                    break
                 if arr.shape[0] < 2 or not np.array_equal(arr[0], arr[-1]):
-                    raise CityFileError(
-                        f"{rw}: open ring (the last position must repeat the first)"
-                    )
-                arr = arr[:-1]
-                distinct = np.unique(arr, axis=0).shape[0]
-                if distinct < 3:
-                    raise CityFileError(f"{rw}: fewer than 3 distinct vertices ({distinct})")
-                if distinct != arr.shape[0] or _segments_cross(arr, np.roll(arr, -1, axis=0)):
-                    raise CityFileError(f"{rw}: self-intersecting ring")
+                    opened = True
+                    if not repair:
+                        problems.append(
+                            f"{rw}: open ring (the last position must repeat the first)"
+                        )
+                        break
+                else:
+                    arr = arr[:-1]
+                keep = np.ones(arr.shape[0], dtype=bool)  # consecutive repeats: one vertex
+                keep[1:] = np.any(arr[1:] != arr[:-1], axis=1)
+                arr = arr[keep]
+                if arr.shape[0] > 1 and np.array_equal(arr[0], arr[-1]):
+                    arr = arr[:-1]
                 rings.append(arr)
-            out.rings_lonlat.append(rings)
-            out.heights_m.append(height)
-            out.ids.append(where[len(f"city file {name}, ") :])
-    if not out.rings_lonlat:
-        raise CityFileError(f"city file {name}: no Polygon or MultiPolygon feature")
-    return _Footprints(out.rings_lonlat, out.heights_m, out.ids, n_default, n_skipped)
+            else:
+                arrays.append(rings)
+                continue
+            break
+        else:
+            parsed.append((where, height, source, arrays, opened))
+    if parsed:
+        _check_range(name, [r for p in parsed for poly in p[3] for r in poly])
+    if bbox is not None:
+        south, west, north, east = bbox
+        inside = []
+        for item in parsed:
+            c = np.concatenate([poly[0] for poly in item[3]]).mean(axis=0)
+            if west <= c[0] <= east and south <= c[1] <= north:
+                inside.append(item)
+        n_outside = len(parsed) - len(inside)
+        parsed = inside
+    if parsed:
+        _check_place(name, [r for p in parsed for poly in p[3] for r in poly], max_span_m)
+    # ring validity: repair, or list
+    invalid: list[tuple[int, int, str]] = []  # (feature item, polygon, why)
+    for k, (where, _, _, arrays, _) in enumerate(parsed):
+        for pi, rings in enumerate(arrays):
+            for ri, arr in enumerate(rings):
+                why = _ring_problem(arr)
+                if why is not None:
+                    poly = "" if len(arrays) == 1 else f", polygon {pi}"
+                    invalid.append((k, pi, f"{where}{poly}, ring {ri}: {why}"))
+                    break
+    if not repair:
+        problems += [why for _, _, why in invalid]
+    if problems:
+        raise CityFileError(
+            f"city file {name}: {len(problems)} feature problem(s), every one listed:\n  "
+            + "\n  ".join(problems)
+        )
+    repaired = {k for k, (*_, opened) in enumerate(parsed) if opened}
+    fixed: dict[tuple[int, int], list[list[FloatArray]]] = {}
+    if invalid:
+        shapely = _shapely_for_repair(name, len({k for k, _, _ in invalid}), invalid[0][2])
+        for k, pi, _ in invalid:
+            rings = parsed[k][3][pi]
+            ok = [r for r in rings[1:] if np.unique(r, axis=0).shape[0] >= 3]
+            if np.unique(rings[0], axis=0).shape[0] < 3:
+                fixed[(k, pi)] = []
+            else:
+                fixed[(k, pi)] = _repair_polygon(shapely, [rings[0], *ok])
+            repaired.add(k)
+    out_rings: list[list[FloatArray]] = []
+    heights: list[float] = []
+    ids: list[str] = []
+    sources: list[str] = []
+    names: list[str] = []
+    n_dropped = 0
+    counts = {"height": 0, "building:levels": 0, "default": 0}
+    for k, (where, height, source, arrays, _) in enumerate(parsed):
+        polys: list[list[FloatArray]] = []
+        for pi, rings in enumerate(arrays):
+            polys += fixed.get((k, pi), [rings])
+        if not polys:
+            n_dropped += 1
+            repaired.discard(k)
+            continue
+        for part, rings in enumerate(polys):
+            out_rings.append(rings)
+            heights.append(float(height))  # type: ignore[arg-type]
+            ids.append(where)
+            sources.append(source)
+            names.append(feature_names[where] + (f" part {part + 1}" if len(polys) > 1 else ""))
+            counts[source] += 1
+    if not out_rings:
+        raise CityFileError(
+            f"city file {name}: no Polygon or MultiPolygon feature"
+            + (" inside the bounding box" if n_outside else "")
+            + (f" left after repair ({n_dropped} dropped)" if n_dropped else "")
+        )
+    report = CityReport(
+        source=name,
+        n_features=len(parsed) + n_outside,
+        n_buildings=len(out_rings),
+        n_height=counts["height"],
+        n_levels=counts["building:levels"],
+        n_default_height=counts["default"],
+        n_unreadable_height=n_unreadable,
+        n_repaired=len(repaired),
+        n_dropped=n_dropped,
+        n_skipped=n_skipped,
+        n_outside_bbox=n_outside,
+        n_incomplete=n_incomplete,
+        default_height_m=default_m,
+        unreadable_examples=tuple(unreadable[:5]),
+    )
+    return _Footprints(out_rings, heights, ids, sources, report, names)
+
+
+def _check_bbox(bbox: Any) -> tuple[float, float, float, float] | None:
+    """``(south, west, north, east)`` [deg] as floats, checked; None passes."""
+    if bbox is None:
+        return None
+    try:
+        box = tuple(float(v) for v in bbox)
+    except (TypeError, ValueError):
+        box = ()
+    if not (
+        len(box) == 4
+        and all(math.isfinite(v) for v in box)
+        and -90.0 <= box[0] < box[2] <= 90.0
+        and -180.0 <= box[1] < box[3] <= 180.0
+    ):
+        raise ValueError(
+            "bbox must be (south_deg, west_deg, north_deg, east_deg) with south < north in "
+            f"[-90, 90] and west < east in [-180, 180], got {bbox!r}"
+        )
+    return box  # type: ignore[return-value]
+
+
+def _check_heights(storey_height_m: float, default_height_m: float | None) -> None:
+    """Validate the storey and default heights (ValueError naming the bad one)."""
+    if not (
+        isinstance(storey_height_m, (int, float))
+        and math.isfinite(storey_height_m)
+        and STOREY_HEIGHT_RANGE_M[0] <= storey_height_m <= STOREY_HEIGHT_RANGE_M[1]
+    ):
+        raise ValueError(
+            f"storey_height_m must be in [{STOREY_HEIGHT_RANGE_M[0]:g}, "
+            f"{STOREY_HEIGHT_RANGE_M[1]:g}] m, got {storey_height_m!r}"
+        )
+    if default_height_m is not None and not (
+        isinstance(default_height_m, (int, float))
+        and math.isfinite(default_height_m)
+        and DEFAULT_HEIGHT_RANGE_M[0] <= default_height_m <= DEFAULT_HEIGHT_RANGE_M[1]
+    ):
+        raise ValueError(
+            f"default_height_m must be None or in [{DEFAULT_HEIGHT_RANGE_M[0]:g}, "
+            f"{DEFAULT_HEIGHT_RANGE_M[1]:g}] m, got {default_height_m!r}"
+        )
+
+
+def read_city_footprints(
+    path: str | os.PathLike[str],
+    *,
+    storey_height_m: float = STOREY_HEIGHT_M,
+    default_height_m: float | None = DEFAULT_HEIGHT_M,
+    repair: bool = True,
+    bbox: tuple[float, float, float, float] | None = None,
+) -> tuple[list[dict[str, Any]], CityReport]:
+    """The checked (and, with ``repair``, repaired) building footprints of a city file as
+    GeoJSON features in WGS 84 degrees, and what reading found.
+
+    Parameters
+    ----------
+    path : path-like
+        A GeoJSON file, or an OpenStreetMap file (``.osm``, ``.osm.pbf``; as
+        ``osm:PATH`` or by its suffix; needs the ``osm`` extra: :mod:`coopnav_env.sim.osm_city`).
+    storey_height_m, default_height_m, repair, bbox
+        As for :func:`read_geojson_footprints`.
+
+    Returns
+    -------
+    features : list of dict
+        One ``Polygon`` feature per building, its ``id`` the source feature, its properties
+        ``height`` [m] when the source gave one, else ``building:levels`` (the number read),
+        else none (the reader of the file gives the default).
+    report : CityReport
+    """
+    fp = _read_source(path, storey_height_m, default_height_m, repair, bbox)
+    feats = []
+    for rings, h, fid, source in zip(fp.rings_lonlat, fp.heights_m, fp.names, fp.sources):
+        props: dict[str, Any] = {"building": "yes"}
+        if source == "height":
+            props["height"] = _plain_number(h)
+        elif source == "building:levels":
+            props["building:levels"] = _plain_number(h / storey_height_m)
+        coords = [[*np.round(r, 7).tolist(), np.round(r[0], 7).tolist()] for r in rings]
+        feats.append(
+            {
+                "type": "Feature",
+                "id": fid,
+                "properties": props,
+                "geometry": {"type": "Polygon", "coordinates": coords},
+            }
+        )
+    return feats, fp.report
+
+
+def _plain_number(x: float) -> float | int:
+    """``x`` rounded to 3 decimals, an int when whole (``5`` rather than ``5.0``)."""
+    r = round(float(x), 3)
+    return int(r) if r.is_integer() else r
+
+
+def _read_source(
+    path: str | os.PathLike[str],
+    storey_height_m: float,
+    default_height_m: float | None,
+    repair: bool,
+    bbox: Any,
+    max_span_m: float = MAX_SPAN_M,
+) -> _Footprints:
+    """:func:`_read_lonlat` of a GeoJSON or OSM file (by prefix or suffix), settings checked."""
+    _check_heights(storey_height_m, default_height_m)
+    box = _check_bbox(bbox)
+    text = os.fspath(path)
+    is_osm = text.startswith(OSM_PREFIX) or text.lower().endswith(OSM_SUFFIXES)
+    for prefix in (GEOJSON_PREFIX, OSM_PREFIX):
+        if text.startswith(prefix):
+            text = text[len(prefix) :]
+    p = Path(text).expanduser()
+    if not is_osm:
+        return _read_lonlat(
+            p,
+            float(storey_height_m),
+            default_height_m,
+            repair=repair,
+            bbox=box,
+            max_span_m=max_span_m,
+        )
+    from coopnav_env.sim.osm_city import read_osm_buildings
+
+    feats, n_incomplete = read_osm_buildings(p)
+    return _read_lonlat(
+        p,
+        float(storey_height_m),
+        default_height_m,
+        repair=repair,
+        bbox=box,
+        features=feats,
+        n_incomplete=n_incomplete,
+        max_span_m=max_span_m,
+    )
 
 
 def read_geojson_footprints(
@@ -420,24 +1027,34 @@ def read_geojson_footprints(
     storey_height_m: float = STOREY_HEIGHT_M,
     default_height_m: float | None = DEFAULT_HEIGHT_M,
     max_origin_distance_m: float = MAX_ORIGIN_DISTANCE_M,
+    repair: bool = True,
+    bbox: tuple[float, float, float, float] | None = None,
 ) -> tuple[ExtrudedBuildings, tuple[float, float, float], int]:
-    """Read building footprints from a GeoJSON file into the ENU frame of an origin.
+    """Read building footprints from a city file into the ENU frame of an origin.
 
     Parameters
     ----------
     path : path-like
-        The GeoJSON FeatureCollection (module docstring).
+        The GeoJSON FeatureCollection (module docstring), or an OpenStreetMap file
+        (``osm:PATH`` or a ``.osm``/``.osm.pbf`` suffix: :mod:`coopnav_env.sim.osm_city`).
     origin_lat_lon : (float, float), optional
         Geodetic origin of the ENU frame [deg]; default: the mean latitude and longitude of
         all footprint vertices.
     alt_m : float, default 0.0
         Ellipsoidal height of the origin (the ground) [m].
     storey_height_m : float, default :data:`STOREY_HEIGHT_M`
-        Metres per ``building:levels`` storey, > 0.
+        Metres per ``building:levels`` storey, in :data:`STOREY_HEIGHT_RANGE_M`.
     default_height_m : float or None, default :data:`DEFAULT_HEIGHT_M`
-        Height of a feature without ``height`` or levels [m]; None: such a feature is an error.
+        Height of a feature without a readable ``height`` or levels [m], in
+        :data:`DEFAULT_HEIGHT_RANGE_M`; None: such a feature is an error.
     max_origin_distance_m : float, default :data:`MAX_ORIGIN_DISTANCE_M`
         Farthest a vertex may lie from the origin (horizontally) [m].
+    repair : bool, default True
+        Repair what can be repaired (module docstring, "Repairs") and warn with the counts;
+        False: every bad feature is listed in one :class:`CityFileError`.
+    bbox : (float, float, float, float), optional
+        ``(south, west, north, east)`` [deg]: only features whose footprint's vertex mean lies
+        inside are read.
 
     Returns
     -------
@@ -452,14 +1069,42 @@ def read_geojson_footprints(
     CityFileError
         Naming the file, the feature and what is wrong.
     """
-    p = Path(path)
-    if not (math.isfinite(storey_height_m) and storey_height_m > 0.0):
-        raise ValueError(f"storey_height_m must be finite and > 0, got {storey_height_m!r}")
-    if default_height_m is not None and not (
-        math.isfinite(default_height_m) and default_height_m > 0.0
-    ):
-        raise ValueError(f"default_height_m must be None or > 0, got {default_height_m!r}")
-    fp = _read_lonlat(p, float(storey_height_m), default_height_m)
+    buildings, origin, report = _read_buildings(
+        path,
+        origin_lat_lon=origin_lat_lon,
+        alt_m=alt_m,
+        storey_height_m=storey_height_m,
+        default_height_m=default_height_m,
+        max_origin_distance_m=max_origin_distance_m,
+        repair=repair,
+        bbox=bbox,
+    )
+    for msg in report.warnings():
+        warnings.warn(msg, stacklevel=2)
+    return buildings, origin, report.n_default_height
+
+
+def _read_buildings(
+    path: str | os.PathLike[str],
+    *,
+    origin_lat_lon: tuple[float, float] | None,
+    alt_m: float,
+    storey_height_m: float,
+    default_height_m: float | None,
+    max_origin_distance_m: float,
+    repair: bool,
+    bbox: Any,
+) -> tuple[ExtrudedBuildings, tuple[float, float, float], CityReport]:
+    """:func:`read_geojson_footprints` without its warnings, with the whole report."""
+    fp = _read_source(
+        path,
+        storey_height_m,
+        default_height_m,
+        repair,
+        bbox,
+        max_span_m=max(MAX_SPAN_M, 2.0 * float(max_origin_distance_m)),
+    )
+    p = fp.report.source
     if origin_lat_lon is None:
         allv = np.concatenate([r for rings in fp.rings_lonlat for r in rings])
         lat0, lon0 = float(allv[:, 1].mean()), float(allv[:, 0].mean())
@@ -486,7 +1131,7 @@ def read_geojson_footprints(
             conv.append(enu)
         rings_enu.append(conv)
     buildings = ExtrudedBuildings.from_rings(rings_enu, fp.heights_m, fp.ids)
-    return buildings, (lat0, lon0, float(alt_m)), fp.n_default_height
+    return buildings, (lat0, lon0, float(alt_m)), fp.report
 
 
 # --------------------------------------------------------------------------------------------
@@ -511,6 +1156,10 @@ class FileCity(City):
         East/North of the free-space cell centres [m].
     free : ndarray of bool, shape (n_y, n_x)
         Free cells (outside footprints, clearance kept).
+    built_up : ndarray of bool, shape (n_y, n_x)
+        Reachable cells in the built-up area (:data:`BUILT_UP_RADIUS_M`), its largest
+        8-connected piece: where starts and goals are drawn, and where routes keep where
+        they can (without any, starts and goals are drawn in every reachable cell).
     reachable : ndarray of bool, shape (n_y, n_x)
         Free cells of the largest 8-connected piece of free space (where starts and goals are
         drawn).
@@ -520,6 +1169,8 @@ class FileCity(City):
         The file read.
     n_default_height : int
         Buildings that got the default height.
+    report : CityReport or None
+        What reading the file found (heights known and defaulted, rings repaired, ...).
     clearance_grid_m : ndarray, shape (n_y, n_x)
         Distance from each cell centre to the nearest wall [m], capped at
         :data:`PREFERRED_CLEARANCE_M` or the clearance, whichever is larger (0 inside a
@@ -534,6 +1185,8 @@ class FileCity(City):
     source: str = ""
     n_default_height: int = 0
     clearance_grid_m: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    report: CityReport | None = None
+    built_up: BoolArray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
 
     @property
     def resolution_m(self) -> float:
@@ -584,10 +1237,10 @@ class FileCity(City):
         altitude_m: float = 10.0,
         margin_m: float = 2.0,
     ) -> FloatArray:
-        """Uniformly random points ``(n, 3)`` [m] in the reachable free space (a random
-        reachable cell, then uniformly within ``resolution / 2 - margin`` of its centre, at
-        ``altitude_m``). ``margin_m`` is clipped to ``[0, resolution / 2]``."""
-        rows, cols = np.nonzero(self.reachable)
+        """Uniformly random points ``(n, 3)`` [m] in the built-up reachable free space (a
+        random cell of :attr:`built_up`, then uniformly within ``resolution / 2 - margin`` of
+        its centre, at ``altitude_m``). ``margin_m`` is clipped to ``[0, resolution / 2]``."""
+        rows, cols = np.nonzero(self.built_up if np.any(self.built_up) else self.reachable)
         k = rng.integers(0, rows.size, size=int(n))
         half = max(self.resolution_m / 2.0 - max(float(margin_m), 0.0), 0.0)
         jitter = rng.uniform(-half, half, size=(int(n), 2))
@@ -595,10 +1248,18 @@ class FileCity(City):
         y = self.grid_y_m[rows[k]] + jitter[:, 1]
         return np.stack([x, y, np.full(int(n), float(altitude_m))], axis=1)
 
-    def _segment_free(self, a: FloatArray, b: FloatArray, min_clear_m: float = 0.0) -> bool:
+    def _segment_free(
+        self,
+        a: FloatArray,
+        b: FloatArray,
+        min_clear_m: float = 0.0,
+        clear_grid_m: FloatArray | None = None,
+    ) -> bool:
         """Whether the straight leg ``a -> b`` crosses reachable cells with a clearance of at
         least ``min_clear_m`` only (every cell it passes through, by a grid traversal; a leg
-        through a cell corner checks both cells beside it)."""
+        through a cell corner checks both cells beside it); the clearances are
+        ``clear_grid_m`` (default :attr:`clearance_grid_m`)."""
+        grid = self.clearance_grid_m if clear_grid_m is None else clear_grid_m
         res = self.resolution_m
         u0 = (a[0] - self.grid_x_m[0]) / res + 0.5
         v0 = (a[1] - self.grid_y_m[0]) / res + 0.5
@@ -619,7 +1280,7 @@ class FileCity(City):
                 0 <= ci < nx
                 and 0 <= cj < ny
                 and bool(self.reachable[cj, ci])
-                and self.clearance_grid_m[cj, ci] >= min_clear_m
+                and grid[cj, ci] >= min_clear_m
             )
 
         for _ in range(abs(i_end - i) + abs(j_end - j) + 2):
@@ -682,15 +1343,21 @@ class FileCity(City):
                 head, s = [s], self.nearest_free_xy(s)
             else:
                 tail, g = [g], self.nearest_free_xy(g)
-        cells = _astar(self.reachable, self.clearance_grid_m, self._cell(s), self._cell(g))
+        # outside the built-up area a cell costs 21 times a street's middle (a wall's side: 5)
+        # and a shortcut may cross it only where the path does
+        grid = cost = self.clearance_grid_m
+        if np.any(self.built_up):
+            grid = np.where(self.built_up, grid, 0.0)
+            cost = np.where(self.built_up, grid, -4.0 * PREFERRED_CLEARANCE_M)
+        cells = _astar(self.reachable, cost, self._cell(s), self._cell(g))
         pts = [s] + [np.array([self.grid_x_m[c], self.grid_y_m[r]]) for r, c in cells[1:-1]] + [g]
-        clear = np.array([self.clearance_grid_m[r, c] for r, c in cells])
+        clear = np.array([grid[r, c] for r, c in cells])
         out = [pts[0]]
         i = 0
         while i < len(pts) - 1:  # keep the farthest waypoint reachable in a straight leg
             j = len(pts) - 1
             while j > i + 1 and not self._segment_free(
-                pts[i], pts[j], min(float(clear[i : j + 1].min()), PREFERRED_CLEARANCE_M)
+                pts[i], pts[j], min(float(clear[i : j + 1].min()), PREFERRED_CLEARANCE_M), grid
             ):
                 j -= 1
             out.append(pts[j])
@@ -759,6 +1426,9 @@ def load_file_city(
     grid_resolution_m: float = GRID_RESOLUTION_M,
     clearance_m: float = CLEARANCE_M,
     default_height_m: float | None = DEFAULT_HEIGHT_M,
+    storey_height_m: float = STOREY_HEIGHT_M,
+    repair: bool = True,
+    bbox: tuple[float, float, float, float] | None = None,
     warn: bool = True,
 ) -> FileCity:
     """Read a city file into a :class:`FileCity` (cached per file version and arguments).
@@ -766,7 +1436,9 @@ def load_file_city(
     Parameters
     ----------
     spec : str or path-like
-        The GeoJSON file, with or without the ``geojson:`` prefix.
+        The GeoJSON file, with or without the ``geojson:`` prefix, or an OpenStreetMap file
+        as ``osm:PATH`` (``.osm``, ``.osm.pbf``; :mod:`coopnav_env.sim.osm_city`, the ``osm``
+        extra).
     origin_lat_lon : (float, float), optional
         Origin of the ENU frame [deg]; default: the footprints' centroid.
     alt_m : float, default 0.0
@@ -775,10 +1447,11 @@ def load_file_city(
         Free-space cell size, in [0.5, 100] [m].
     clearance_m : float, default :data:`CLEARANCE_M`
         Distance kept from walls by the free space, in [0, 100] [m].
-    default_height_m : float or None, default :data:`DEFAULT_HEIGHT_M`
+    default_height_m, storey_height_m, repair, bbox
         As for :func:`read_geojson_footprints`.
     warn : bool, default True
-        Warn how many buildings got the default height (once per file version and process).
+        Warn what reading found (repairs, unreadable and default heights; once per file
+        version, settings and process).
 
     Raises
     ------
@@ -786,8 +1459,10 @@ def load_file_city(
         A bad file (naming it, the feature and the problem), or a file without free space.
     """
     text = os.fspath(spec)
-    if text.startswith(GEOJSON_PREFIX):
-        text = text[len(GEOJSON_PREFIX) :]
+    prefix = OSM_PREFIX if text.startswith(OSM_PREFIX) else ""
+    for pre in (GEOJSON_PREFIX, OSM_PREFIX):
+        if text.startswith(pre):
+            text = text[len(pre) :]
     p = Path(text).expanduser().resolve()
     if not p.is_file():
         raise CityFileError(f"city file {text}: no such file")
@@ -795,31 +1470,31 @@ def load_file_city(
         raise ValueError(f"grid_resolution_m must be in [0.5, 100], got {grid_resolution_m!r}")
     if not 0.0 <= float(clearance_m) <= 100.0:
         raise ValueError(f"clearance_m must be in [0, 100], got {clearance_m!r}")
+    _check_heights(storey_height_m, default_height_m)
+    box = _check_bbox(bbox)
     st = p.stat()
     origin = None if origin_lat_lon is None else tuple(float(v) for v in origin_lat_lon)
-    city, n_def = _load_cached(
-        str(p),
+    settings = (default_height_m, float(storey_height_m), bool(repair), box)
+    city = _load_cached(
+        prefix + str(p),
         st.st_mtime_ns,
         st.st_size,
         origin,
         float(alt_m),
         float(grid_resolution_m),
         float(clearance_m),
-        default_height_m,
+        settings,
     )
-    key = (str(p), st.st_mtime_ns, default_height_m)
-    if warn and n_def and key not in _WARNED:
+    key = (str(p), st.st_mtime_ns, settings)
+    if warn and key not in _WARNED and city.report is not None:
         _WARNED.add(key)
-        warnings.warn(
-            f"city file {p}: {n_def} of {city.buildings.n} buildings have neither 'height' nor "
-            f"'building:levels'; they get the default height {default_height_m} m",
-            stacklevel=2,
-        )
+        for msg in city.report.warnings():
+            warnings.warn(msg, stacklevel=2)
     return city
 
 
-_WARNED: set[tuple[str, int, float | None]] = set()
-"""Files whose default heights were already reported (one warning per file version)."""
+_WARNED: set[tuple[Any, ...]] = set()
+"""Files (and reading settings) already reported (one set of warnings per file version)."""
 
 
 @functools.lru_cache(maxsize=16)
@@ -831,11 +1506,20 @@ def _load_cached(
     alt_m: float,
     res: float,
     clearance: float,
-    default_height_m: float | None,
-) -> tuple[FileCity, int]:
-    buildings, org, n_def = read_geojson_footprints(
-        path, origin_lat_lon=origin, alt_m=alt_m, default_height_m=default_height_m
+    settings: tuple[Any, ...],
+) -> FileCity:
+    default_height_m, storey_height_m, repair, box = settings
+    buildings, org, report = _read_buildings(
+        path,
+        origin_lat_lon=origin,
+        alt_m=alt_m,
+        storey_height_m=storey_height_m,
+        default_height_m=default_height_m,
+        max_origin_distance_m=MAX_ORIGIN_DISTANCE_M,
+        repair=repair,
+        bbox=box,
     )
+    path = path.removeprefix(OSM_PREFIX)
     bb = buildings.bbox_m
     x0, y0 = bb[:, 0].min() - EXTENT_MARGIN_M, bb[:, 1].min() - EXTENT_MARGIN_M
     x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
@@ -848,6 +1532,13 @@ def _load_cached(
     reach = _largest_component(free)
     if not np.any(reach):
         raise CityFileError(f"city file {path}: no free space between the buildings")
+    rows, cols = np.nonzero(reach)
+    cells = np.column_stack([xs[cols], ys[rows], np.full(rows.size, 0.5)])
+    _, wall_m = buildings.sky_and_walls(cells, np.arange(0.0, 360.0, 45.0))
+    near = np.sum(wall_m <= BUILT_UP_RADIUS_M, axis=1) >= BUILT_UP_MIN_DIRECTIONS
+    built = np.zeros_like(reach)
+    built[rows[near], cols[near]] = True
+    built = _largest_component(built)  # routes between its cells need not leave it
     city = FileCity(
         buildings=buildings,  # type: ignore[arg-type]
         extent_m=(float(x0), float(x1), float(y0), float(y1)),
@@ -860,12 +1551,14 @@ def _load_cached(
         grid_y_m=_readonly(ys),
         free=_readonly(free),
         reachable=_readonly(reach),
+        built_up=_readonly(built),
         origin=org,
         source=path,
-        n_default_height=n_def,
+        n_default_height=report.n_default_height,
         clearance_grid_m=_readonly(clear),
+        report=report,
     )
-    return city, n_def
+    return city
 
 
 # --------------------------------------------------------------------------------------------

@@ -165,8 +165,13 @@ from coopnav_env.sim.city import (
 )
 from coopnav_env.sim.file_city import (
     CLEARANCE_M,
+    DEFAULT_HEIGHT_M,
     GEOJSON_PREFIX,
+    OSM_PREFIX,
+    STOREY_HEIGHT_M,
     FileCity,
+    _check_bbox,
+    _check_heights,
     load_file_city,
     sample_city_path,
 )
@@ -275,7 +280,7 @@ class ScenarioConfig:
     ----------
     n_uavs : int, default 5
         Number of UAVs, in [1, 256].
-    city : {"grid", "canyon"} or "geojson:PATH", default "grid"
+    city : {"grid", "canyon"}, "geojson:PATH" or "osm:PATH", default "grid"
         ``"grid"``: a random street grid with open squares (:func:`generate_city` with
         ``city_config``). ``"canyon"``: the paper's single straight canyon (Section 4.1,
         :func:`canyon_city` with the ``canyon_*`` fields). ``"geojson:PATH"``: the building
@@ -283,7 +288,9 @@ class ScenarioConfig:
         ``height``, else ``building:levels`` x 3 m, else 10 m; the same city every episode;
         start, goal and route in its free space), read and checked on construction (a bad
         file raises naming it, the feature and the problem); ``"geojson:sample"``: the sample
-        city shipped with the package.
+        city shipped with the package. ``"osm:PATH"``: the buildings of an OpenStreetMap
+        ``.osm``/``.osm.pbf`` file (:mod:`coopnav_env.sim.osm_city`, the ``osm`` extra);
+        ``"osm:helsinki"``: the real extract shipped with the package.
     city_config : CityConfig, default CityConfig()
         Street grid parameters (``city="grid"`` only): 6 x 6 blocks of 60 m, 20 m streets,
         roofs 10-150 m (mean 45 m), 10 % open squares; 500 m x 500 m.
@@ -432,6 +439,18 @@ class ScenarioConfig:
         ``(lat_deg, lon_deg)`` of every episode; None: drawn per episode in the free space.
         A point inside a building, or not in the reachable free space, is refused on
         construction.
+    city_bbox : (float, float, float, float) or None, default None
+        With a file city: ``(south, west, north, east)`` [deg]; only the buildings whose
+        footprint's vertex mean lies inside are read.
+    city_repair : bool, default True
+        With a file city: invalid rings are repaired (shapely ``make_valid``) and unreadable
+        heights read as missing, with one warning counting them; False: every bad feature is
+        listed in one error.
+    city_default_height_m : float, default 10.0
+        With a file city: the roof height of a building without ``height`` or
+        ``building:levels``, in [1, 500] [m] (a warning says how many got it).
+    city_storey_height_m : float, default 3.0
+        With a file city: metres per ``building:levels`` storey, in [2, 10].
     """
 
     n_uavs: int = 5
@@ -481,6 +500,10 @@ class ScenarioConfig:
     city_origin: Literal["file", "config"] = "file"
     city_start_lat_lon: tuple[float, float] | None = None
     city_goal_lat_lon: tuple[float, float] | None = None
+    city_bbox: tuple[float, float, float, float] | None = None
+    city_repair: bool = True
+    city_default_height_m: float = DEFAULT_HEIGHT_M
+    city_storey_height_m: float = STOREY_HEIGHT_M
 
     def __post_init__(self) -> None:
         o = type(self).__name__
@@ -488,8 +511,9 @@ class ScenarioConfig:
         _check_int(o, "n_uavs", self.n_uavs, 1, 256)
         if not _is_file_city(self.city) and self.city not in ("grid", "canyon"):
             raise ValueError(
-                f"{o}.city must be one of ('grid', 'canyon') or 'geojson:PATH' (a GeoJSON file "
-                f"of building footprints; 'geojson:sample' for the shipped one), got "
+                f"{o}.city must be one of ('grid', 'canyon'), 'geojson:PATH' (a GeoJSON file "
+                f"of building footprints; 'geojson:sample' for the shipped one) or 'osm:PATH' "
+                f"(an OpenStreetMap .osm/.osm.pbf file; 'osm:helsinki' for the shipped one), got "
                 f"{self.city!r}"
             )
         setv(
@@ -600,16 +624,34 @@ class ScenarioConfig:
 
 
 def _is_file_city(spec: Any) -> bool:
-    """Whether a ``city`` setting names a file (``"geojson:..."``)."""
-    return isinstance(spec, str) and spec.startswith(GEOJSON_PREFIX)
+    """Whether a ``city`` setting names a file (``"geojson:..."`` or ``"osm:..."``)."""
+    return isinstance(spec, str) and spec.startswith((GEOJSON_PREFIX, OSM_PREFIX))
 
 
 def _file_city(cfg: ScenarioConfig, *, warn: bool = False) -> FileCity:
-    """The city of ``cfg.city = "geojson:PATH"`` (read once per file version)."""
-    spec = cfg.city[len(GEOJSON_PREFIX) :]
-    path = sample_city_path() if spec == "sample" else spec
+    """The city of ``cfg.city = "geojson:PATH"`` or ``"osm:PATH"`` (read once per file
+    version and reading settings)."""
+    if cfg.city.startswith(OSM_PREFIX):
+        spec = cfg.city[len(OSM_PREFIX) :]
+        if spec == "helsinki":
+            from coopnav_env.sim.osm_city import helsinki_osm_path
+
+            spec = str(helsinki_osm_path())
+        path = OSM_PREFIX + spec
+    else:
+        spec = cfg.city[len(GEOJSON_PREFIX) :]
+        path = str(sample_city_path()) if spec == "sample" else spec
     origin = None if cfg.city_origin == "file" else (cfg.lat_deg, cfg.lon_deg)
-    return load_file_city(path, origin_lat_lon=origin, alt_m=cfg.alt_m, warn=warn)
+    return load_file_city(
+        path,
+        origin_lat_lon=origin,
+        alt_m=cfg.alt_m,
+        default_height_m=cfg.city_default_height_m,
+        storey_height_m=cfg.city_storey_height_m,
+        repair=cfg.city_repair,
+        bbox=cfg.city_bbox,
+        warn=warn,
+    )
 
 
 def _check_city_file_settings(cfg: ScenarioConfig, o: str) -> None:
@@ -630,12 +672,32 @@ def _check_city_file_settings(cfg: ScenarioConfig, o: str) -> None:
             raise ValueError(f"{o}.{name} must be (lat_deg, lon_deg), got {value!r}")
         setv(cfg, name, pair)
         ends[name] = pair  # type: ignore[assignment]
+    try:
+        setv(cfg, "city_bbox", _check_bbox(cfg.city_bbox))
+        _check_heights(cfg.city_storey_height_m, cfg.city_default_height_m)
+    except ValueError as exc:
+        raise ValueError(f"{o}.city_{exc}") from None
+    if not isinstance(cfg.city_repair, bool):
+        raise ValueError(f"{o}.city_repair must be True or False, got {cfg.city_repair!r}")
     if not _is_file_city(cfg.city):
-        if cfg.city_origin != "file" or ends:
-            name = next(iter(ends), "city_origin")
-            raise ValueError(f"{o}.{name} needs city='geojson:PATH', got city={cfg.city!r}")
+        changed = [
+            name
+            for name, default in (
+                ("city_origin", "file"),
+                ("city_bbox", None),
+                ("city_repair", True),
+                ("city_default_height_m", DEFAULT_HEIGHT_M),
+                ("city_storey_height_m", STOREY_HEIGHT_M),
+            )
+            if getattr(cfg, name) != default
+        ]
+        if changed or ends:
+            name = next(iter(ends), changed[0] if changed else "city_origin")
+            raise ValueError(
+                f"{o}.{name} needs city='geojson:PATH' or 'osm:PATH', got city={cfg.city!r}"
+            )
         return
-    if not cfg.city[len(GEOJSON_PREFIX) :].strip():
+    if not cfg.city.partition(":")[2].strip():
         raise ValueError(f"{o}.city={cfg.city!r} names no file")
     try:
         city = _file_city(cfg, warn=True)

@@ -1,4 +1,4 @@
-"""The environment on a city read from a GeoJSON file (``city="geojson:..."``)."""
+"""The environment on a city read from a file (``city="geojson:..."``, ``city="osm:..."``)."""
 
 from __future__ import annotations
 
@@ -120,10 +120,12 @@ def test_origin_from_the_config_and_bad_files(tmp_path: Path) -> None:
         "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [0, 1e-4], [1e-4, 0], [0, 0]]]},
     }
     bad.write_text(json.dumps({"type": "FeatureCollection", "features": [feat]}))
-    with pytest.raises(ValueError, match=r"bad\.geojson, feature 0 \(id 'w7'\).*'high'"):
-        urban_canyon_v0.parallel_env(city=f"geojson:{bad}")
-    with pytest.raises(ValueError, match=r"\('grid', 'canyon'\) or 'geojson:PATH'"):
-        make_config(city="osm:x")
+    with pytest.raises(
+        ValueError, match=r"(?s)bad\.geojson: 1 feature problem.*feature 0 \(id 'w7'\).*'high'"
+    ):
+        urban_canyon_v0.parallel_env(city=f"geojson:{bad}", city_repair=False)
+    with pytest.raises(ValueError, match=r"\('grid', 'canyon'\), 'geojson:PATH' .* or 'osm:PATH'"):
+        make_config(city="osmx:x")
 
 
 @pytest.mark.parametrize("name", ["formation", "wide"])
@@ -209,3 +211,100 @@ def test_map_aided_exclusion_and_map_line_of_sight_run_on_polygons() -> None:
     assert ep.received.sum() > 0 and (ep.map_excluded is not None)
     los = env.world.map_line_of_sight(env.world.pos_enu_m)  # the route choice's prediction
     assert los.shape == ep.received.shape and los.any()
+
+
+# ---- real cities: OpenStreetMap input, reading settings, tuples as users write them -------
+
+
+def test_an_osm_extract_flies_directly() -> None:
+    pytest.importorskip("osmium")
+    box = (60.166, 24.938, 60.174, 24.950)
+    env = urban_canyon_v0.parallel_env(
+        city="osm:helsinki", city_bbox=box, city_default_height_m=20.0, n_uavs=3
+    )
+    _, infos = env.reset(seed=1)
+    city = env.world.city
+    assert isinstance(city, FileCity) and city.buildings.n == 183
+    assert city.report.n_default_height == 122
+    assert np.all(city.buildings.heights_m[city.buildings.heights_m != 20.0] > 0)
+    assert abs(env.config.lat_deg - 60.170) < 0.005 and abs(env.config.lon_deg - 24.944) < 0.005
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        obs, rewards, _, _, infos = env.step({a: rng.uniform(-0.5, 0.5, 3) for a in env.agents})
+    assert len(obs) == 3
+    assert all(np.all(np.isfinite(o)) for o in obs.values())
+    assert all(np.isfinite(r) for r in rewards.values())
+    assert all(infos[a]["n_sats"] >= 4 for a in infos)
+
+
+def test_reading_settings_change_the_city_and_are_checked() -> None:
+    from coopnav_env.sim.osm_city import helsinki_geojson_path
+
+    city = f"geojson:{helsinki_geojson_path()}"
+    tall = make_config(city=city, city_default_height_m=40.0, city_storey_height_m=4.0)
+    low = make_config(city=city)
+    from coopnav_env.sim.scenario import make_city
+
+    rng = np.random.default_rng(0)
+    h_tall = make_city(tall, rng).buildings.heights_m
+    h_low = make_city(low, rng).buildings.heights_m
+    defaulted = h_low == 10.0
+    assert np.all(h_tall[defaulted] == 40.0) and np.all(h_tall[~defaulted] >= h_low[~defaulted])
+    with pytest.raises(ValueError, match=r"city_storey_height_m must be in \[2, 10\] m"):
+        make_config(city=city, city_storey_height_m=0.5)
+    with pytest.raises(ValueError, match=r"city_default_height_m must be None or in \[1, 500\]"):
+        make_config(city=city, city_default_height_m=-1.0)
+    with pytest.raises(ValueError, match=r"city_bbox must be \(south_deg, west_deg"):
+        make_config(city=city, city_bbox=(60.2, 24.9, 60.1))
+    with pytest.raises(ValueError, match="city_default_height_m needs city='geojson:PATH'"):
+        make_config(city="grid", city_default_height_m=20.0)
+    with pytest.raises(ValueError, match="city_repair must be True or False"):
+        make_config(city=city, city_repair="yes")
+
+
+@pytest.mark.parametrize("brackets", ["()", "[]"])
+def test_env_set_takes_lat_lon_tuples_as_users_write_them(brackets: str) -> None:
+    from coopnav_env.training.config import apply_overrides
+
+    city = load_file_city(sample_city_path(), alt_m=make_config(**CITY).alt_m, warn=False)
+    lat, lon = (round(v, 6) for v in city.xy_to_lat_lon(city.nearest_free_xy([0.0, 0.0])))
+    written = f"{brackets[0]}{lat}, {lon}{brackets[1]}"
+    kwargs = apply_overrides({}, ["city=geojson:sample", f"city_goal_lat_lon={written}"])
+    assert make_config(**kwargs).city_goal_lat_lon == (lat, lon)
+
+
+def test_the_route_frame_flies_a_file_city_with_the_room_of_each_leg() -> None:
+    from coopnav_env import urban_canyon_v1
+    from coopnav_env.envs.urban_canyon import route_frame_command, route_offset_room_m
+    from coopnav_env.sim.osm_city import helsinki_geojson_path
+
+    env = urban_canyon_v1.parallel_env(
+        city=f"geojson:{helsinki_geojson_path()}", action_frame="route", n_uavs=3
+    )
+    env.reset(seed=2)  # a file city has no single street width: no refusal
+    city, route, cfg = env.world.city, env.world.route_xy_m, env.config
+    cap = env._route_offset_cap_m
+    assert cap.shape == (route.shape[0],)
+    assert np.all((cap >= 0.0) & (cap <= cfg.route_offset_max_m))
+    for i in range(1, route.shape[0]):  # the offset keeps the UAV's radius + 1 m off the walls
+        pts = np.linspace(route[i - 1], route[i], 50)
+        _, wall_m = city.buildings.sky_and_walls(
+            np.column_stack([pts, np.full(50, 1.0)]), np.arange(0.0, 360.0, 15.0)
+        )
+        assert cap[i] + cfg.kinematics.uav_radius_m + 1.0 <= wall_m.min() + city.resolution_m
+    assert np.all(route_offset_room_m(city, route, cfg) == cap)
+    # the command aims at most cap[wp] to the side of the leg
+    est = np.column_stack([route[[1, 1, 1]], np.full(3, 15.0)])
+    wp = np.array([1, 1, 1])
+    act = np.array([[1.0, 1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+    free = route_frame_command(act, est, wp, route, cfg)
+    capped = route_frame_command(act, est, wp, route, cfg, offset_max_m=cap[wp])
+    assert np.allclose(capped[2], free[2])  # no offset asked: the same command
+    if cap[1] < cfg.route_offset_max_m:
+        assert not np.allclose(capped[0], free[0])
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        obs, *_ = env.step({a: rng.uniform(-1.0, 1.0, 3) for a in env.agents})
+        if not env.agents:
+            break
+    assert all(np.all(np.isfinite(o)) for o in obs.values())

@@ -23,9 +23,11 @@ building, ``|roof - height at entry|``, is below 1e-6 m or its ground track pass
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
+import sys
 import warnings
 from pathlib import Path
 
@@ -40,8 +42,12 @@ from coopnav_env.sim.city import (
     sky_and_walls,
     wall_distance_m,
 )
+from coopnav_env.sim.osm_city import helsinki_geojson_path
 
 GRAZE_M = 1e-6
+
+# the shipped real city's heights are mostly unknown: its warning is tested where it matters
+pytestmark = pytest.mark.filterwarnings("ignore:.*get the default height")
 
 
 @pytest.fixture(scope="module")
@@ -396,7 +402,7 @@ def test_default_height_is_counted_and_warned(tmp_path: Path) -> None:
             ),
             "non-finite",
         ),
-        (_feat(_square(lat=95.0), {"height": 5}), "out of range"),
+        (_feat(_square(lat=95.0), {"height": 5}), "out of longitude/latitude range"),
         (_feat([_square()], {"height": 5}, fid=None, kind="MultiPolygon"), None),
     ],
 )
@@ -407,7 +413,7 @@ def test_bad_features_name_file_feature_and_problem(tmp_path: Path, feature, mat
         assert b.n == 1 and b.feature_ids == ("feature 0",)
         return
     with pytest.raises(fc.CityFileError, match=match) as info:
-        fc.read_geojson_footprints(p, default_height_m=None)
+        fc.read_geojson_footprints(p, default_height_m=None, repair=False)
     assert str(p) in str(info.value)
 
 
@@ -475,3 +481,263 @@ def test_route_refuses_an_end_inside_a_building(city: fc.FileCity) -> None:
     free = city.random_street_points(rng, 1)[0, :2]
     with pytest.raises(ValueError, match=r"route goal .* not in the reachable free space"):
         city.free_space_route(free, inside)
+
+
+# ---- real footprints (OpenStreetMap, central Helsinki): repairs, heights, coordinates ------
+
+
+def _real_doc() -> dict:
+    """The shipped real city (183 buildings of central Helsinki, (c) OpenStreetMap
+    contributors, ODbL 1.0) as a GeoJSON dict."""
+    return json.loads(helsinki_geojson_path().read_text(encoding="utf-8"))
+
+
+def _write_doc(tmp_path: Path, doc: dict, name: str = "real.geojson") -> Path:
+    p = tmp_path / name
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def test_real_city_reads_and_warns_that_most_heights_are_defaulted() -> None:
+    path = helsinki_geojson_path()
+    with pytest.warns(UserWarning, match=r"122 of 183 buildings .*most of the city's heights"):
+        b, origin, n_def = fc.read_geojson_footprints(path)
+    assert b.n == 183 and n_def == 122
+    assert abs(origin[0] - 60.170) < 0.01 and abs(origin[1] - 24.944) < 0.01
+    defaulted = b.heights_m == fc.DEFAULT_HEIGHT_M
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        b25, _, _ = fc.read_geojson_footprints(path, default_height_m=25.0, storey_height_m=3.5)
+    assert np.all(b25.heights_m[defaulted] == 25.0)
+    feats = _real_doc()["features"]
+    levels = np.array([f["properties"].get("building:levels", 0.0) for f in feats], dtype=float)
+    has_levels = np.array(["height" not in f["properties"] for f in feats]) & (levels > 0)
+    assert has_levels.sum() == 58
+    assert np.allclose(b25.heights_m[has_levels], 3.5 * levels[has_levels])
+    # a few known heights: no warning about the default, and the report says so
+    few = fc.load_file_city(path, warn=False).report
+    assert (few.n_height, few.n_levels, few.n_default_height) == (3, 58, 122)
+
+
+@pytest.mark.parametrize(
+    "value, expected_m",
+    [("5;6", 18.0), ("6;5", 18.0), ("5-6", 18.0), ("5 - 6", 18.0), ("5.5", 16.5), (4, 12.0)],
+)
+def test_levels_lists_ranges_and_decimals_on_real_footprints(
+    tmp_path: Path, value, expected_m: float
+) -> None:
+    doc = _real_doc()
+    doc["features"][0]["properties"] = {"building": "yes", "building:levels": value}
+    b, _, _ = fc.read_geojson_footprints(_write_doc(tmp_path, doc), default_height_m=30.0)
+    assert b.heights_m[0] == pytest.approx(expected_m)
+
+
+def test_heights_lists_and_unreadable_values() -> None:
+    assert fc._parse_height("12;15 m", "f", "height") == 15.0
+    assert fc._parse_height("30-40 ft", "f", "height") == pytest.approx(12.192)
+    with pytest.raises(fc.CityFileError, match=r"cannot read height '12;tall'"):
+        fc._parse_height("12;tall", "f", "height")
+
+
+def test_unreadable_heights_are_read_as_missing_with_repair_and_listed_without(
+    tmp_path: Path,
+) -> None:
+    doc = _real_doc()
+    doc["features"][0]["properties"] = {"height": "tall", "building:levels": "5"}
+    doc["features"][1]["properties"] = {"building:levels": "ground floor"}
+    p = _write_doc(tmp_path, doc)
+    with pytest.warns(UserWarning, match=r"2 features have an unreadable height.*'tall'"):
+        b, _, _ = fc.read_geojson_footprints(p, default_height_m=30.0)
+    assert b.heights_m[0] == 15.0 and b.heights_m[1] == 30.0
+    with pytest.raises(fc.CityFileError, match=r"2 feature problem\(s\)") as info:
+        fc.read_geojson_footprints(p, repair=False)
+    msg = str(info.value)
+    assert "cannot read height 'tall'" in msg and "cannot read building:levels" in msg
+
+
+def _damage(doc: dict) -> list[str]:
+    """Damage four real footprints the ways OpenStreetMap's validators flag them (a
+    self-intersecting way, an unclosed way, a way through one node twice, a way of two nodes);
+    returns their ids."""
+    shapely = pytest.importorskip("shapely")
+    feats = doc["features"]
+    picked = []
+    for f in feats:  # the first footprints that a swap of two vertices makes self-intersecting
+        ring = f["geometry"]["coordinates"][0]
+        if len(f["geometry"]["coordinates"]) == 1 and len(ring) >= 6:
+            bent = [ring[0], ring[2], ring[1], *ring[3:]]
+            if not shapely.Polygon(bent).is_valid:
+                picked.append(f)
+        if len(picked) == 4:
+            break
+    a, b, c, d = picked
+    ra = a["geometry"]["coordinates"][0]
+    a["geometry"]["coordinates"][0] = [ra[0], ra[2], ra[1], *ra[3:]]
+    b["geometry"]["coordinates"][0] = b["geometry"]["coordinates"][0][:-1]
+    rc = c["geometry"]["coordinates"][0]
+    c["geometry"]["coordinates"][0] = [*rc[:3], rc[0], *rc[3:]]
+    rd = d["geometry"]["coordinates"][0]
+    d["geometry"]["coordinates"][0] = [rd[0], rd[1], rd[0]]
+    return [f["id"] for f in picked]
+
+
+def test_invalid_real_rings_are_repaired_with_one_warning(tmp_path: Path) -> None:
+    shapely = pytest.importorskip("shapely")
+    doc = _real_doc()
+    ids = _damage(doc)
+    p = _write_doc(tmp_path, doc)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        city = fc.load_file_city(p)
+    about_rings = [w for w in caught if "invalid rings" in str(w.message)]
+    assert len(about_rings) == 1
+    assert "3 features with invalid rings repaired" in str(about_rings[0].message)
+    assert "1 dropped" in str(about_rings[0].message)
+    report = city.report
+    assert (report.n_repaired, report.n_dropped) == (3, 1)
+    b = city.buildings
+    assert not any(ids[3] in fid for fid in b.feature_ids)  # the two-node way: nothing to build
+    assert b.n >= 182
+    for k in range(b.n):  # every footprint kept is a valid polygon
+        rings = b.rings_m[k]
+        assert shapely.Polygon(rings[0], rings[1:]).is_valid, b.feature_ids[k]
+    # the repaired self-intersecting way keeps its area inside its original outline
+    orig = next(f for f in _real_doc()["features"] if f["id"] == ids[0])
+    ring = np.array(orig["geometry"]["coordinates"][0])
+    xy = np.array([city.lat_lon_to_xy(lat, lon) for lon, lat in ring])
+    outline = shapely.Polygon(xy).buffer(0.01)
+    parts = [k for k in range(b.n) if ids[0] in b.feature_ids[k]]
+    assert parts and all(outline.contains(shapely.Polygon(b.rings_m[k][0])) for k in parts)
+
+
+def test_without_repair_every_bad_real_feature_is_listed_in_one_error(tmp_path: Path) -> None:
+    doc = _real_doc()
+    ids = _damage(doc)
+    p = _write_doc(tmp_path, doc)
+    with pytest.raises(fc.CityFileError, match=r"4 feature problem\(s\), every one listed") as e:
+        fc.load_file_city(p, repair=False)
+    lines = str(e.value).splitlines()[1:]
+    assert len(lines) == 4
+    for fid, why in zip(
+        ids,
+        ["self-intersecting ring", "open ring", "self-intersecting ring", "fewer than 3 distinct"],
+    ):
+        assert any(f"(id '{fid}')" in line and why in line for line in lines), (fid, why)
+
+
+def test_repair_without_shapely_says_to_install_the_extra(tmp_path: Path, monkeypatch) -> None:
+    doc = _real_doc()
+    _damage(doc)
+    p = _write_doc(tmp_path, doc)
+    monkeypatch.setitem(sys.modules, "shapely", None)
+    with pytest.raises(fc.CityFileError, match=r"needs shapely: `pip install 'coopnav\[geo\]'`"):
+        fc.read_geojson_footprints(p)
+
+
+def test_swapped_latitude_and_longitude_are_refused(tmp_path: Path) -> None:
+    doc = _real_doc()
+    for f in doc["features"]:
+        f["geometry"]["coordinates"] = [
+            [[lat, lon] for lon, lat in ring] for ring in f["geometry"]["coordinates"]
+        ]
+    with pytest.raises(fc.CityFileError, match=r"latitude and longitude look swapped: \d+%"):
+        fc.read_geojson_footprints(_write_doc(tmp_path, doc))
+    # a place whose longitude is beyond 90 deg: swapped, it is out of range
+    sample = fc.sample_city_geojson(n_blocks=2)
+    for f in sample["features"]:
+        f["geometry"]["coordinates"] = [
+            [[lat, lon] for lon, lat in ring] for ring in f["geometry"]["coordinates"]
+        ]
+    with pytest.raises(fc.CityFileError, match=r"out of longitude/latitude range; .*swapped"):
+        fc.read_geojson_footprints(_write_doc(tmp_path, sample, "s.geojson"))
+    # as written, neither file is refused
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert fc.read_geojson_footprints(helsinki_geojson_path())[0].n == 183
+
+
+def test_projected_coordinates_and_other_crs_are_refused(tmp_path: Path) -> None:
+    doc = _real_doc()
+    lat0, lon0 = 60.17, 24.944
+    for f in doc["features"]:  # metres east and north, offset as a national grid would be
+        f["geometry"]["coordinates"] = [
+            [
+                [385_000.0 + (lon - lon0) * 55_500.0, 6_672_000.0 + (lat - lat0) * 111_400.0]
+                for lon, lat in ring
+            ]
+            for ring in f["geometry"]["coordinates"]
+        ]
+    with pytest.raises(fc.CityFileError, match=r"look like projected coordinates \(metres"):
+        fc.read_geojson_footprints(_write_doc(tmp_path, doc))
+    doc = _real_doc()
+    doc["crs"] = {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::3067"}}
+    with pytest.raises(fc.CityFileError, match=r"declares the coordinate reference system .*3067"):
+        fc.read_geojson_footprints(_write_doc(tmp_path, doc))
+    doc["crs"] = {"type": "name", "properties": {"name": "urn:ogc:def:crs:OGC:1.3:CRS84"}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert fc.read_geojson_footprints(_write_doc(tmp_path, doc))[0].n == 183
+    far = [_feat(_square(24.94, 60.17), {"height": 5}), _feat(_square(27.0, 60.17), {"height": 5})]
+    with pytest.raises(fc.CityFileError, match=r"span 114 km east-west .* implausible extent"):
+        fc.read_geojson_footprints(_write(tmp_path, far))
+
+
+def test_bounding_box_keeps_the_footprints_inside(tmp_path: Path) -> None:
+    box = (60.168, 24.940, 60.171, 24.946)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        city = fc.load_file_city(helsinki_geojson_path(), bbox=box)
+    assert 10 < city.buildings.n < 183
+    assert city.report.n_outside_bbox + city.buildings.n == 183
+    for rings in city.buildings.rings_m:
+        lat, lon = city.xy_to_lat_lon(rings[0].mean(axis=0))
+        assert box[0] - 1e-4 <= lat <= box[2] + 1e-4 and box[1] - 1e-4 <= lon <= box[3] + 1e-4
+    with pytest.raises(fc.CityFileError, match="no Polygon or MultiPolygon feature inside the"):
+        fc.read_geojson_footprints(helsinki_geojson_path(), bbox=(10.0, 10.0, 11.0, 11.0))
+    with pytest.raises(ValueError, match=r"bbox must be \(south_deg, west_deg, north_deg"):
+        fc.load_file_city(helsinki_geojson_path(), bbox=(60.2, 24.9, 60.1, 25.0))
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"storey_height_m": 1.0}, r"storey_height_m must be in \[2, 10\] m, got 1.0"),
+        ({"default_height_m": 0.5}, r"default_height_m must be None or in \[1, 500\] m"),
+        ({"default_height_m": float("nan")}, "default_height_m must be None or in"),
+    ],
+)
+def test_height_settings_are_checked(kwargs: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        fc.load_file_city(helsinki_geojson_path(), **kwargs)
+
+
+@pytest.mark.parametrize("source", ["sample", "helsinki"])
+def test_starts_goals_and_routes_stay_in_the_built_up_area(source: str) -> None:
+    path = fc.sample_city_path() if source == "sample" else helsinki_geojson_path()
+    city = fc.load_file_city(path, warn=False)
+    assert 0 < city.built_up.sum() < city.reachable.sum()
+    assert not np.any(city.built_up & ~city.reachable)
+    rng = np.random.default_rng(5)
+    pts = city.random_street_points(rng, 400, altitude_m=0.5)  # below every roof
+    _, wall_m = city.buildings.sky_and_walls(pts, np.arange(0.0, 360.0, 45.0))
+    # cell centres qualify; a point half a cell away may see a wall's edge on another side
+    near = np.sum(wall_m <= fc.BUILT_UP_RADIUS_M + city.resolution_m, axis=1)
+    assert np.mean(near >= fc.BUILT_UP_MIN_DIRECTIONS) > 0.95 and near.min() >= 2
+    bb = city.buildings.bbox_m  # never in the open margin around the footprints
+    lo, hi = bb[:, :2].min(axis=0), bb[:, 2:].max(axis=0)
+    assert np.all((pts[:, :2] >= lo) & (pts[:, :2] <= hi))
+    plain = dataclasses.replace(city, built_up=np.zeros_like(city.built_up))
+
+    def inside_share(c: fc.FileCity, a: np.ndarray, b: np.ndarray) -> float:
+        route = c.free_space_route(a, b)
+        if c is city:  # without the built-up area, a route may run along the map's edge
+            assert np.all((route >= lo - c.resolution_m) & (route <= hi + c.resolution_m))
+        legs = np.linspace(route[:-1], route[1:], 20).reshape(-1, 2)
+        rows = np.round((legs[:, 1] - c.grid_y_m[0]) / c.resolution_m).astype(int)
+        cols = np.round((legs[:, 0] - c.grid_x_m[0]) / c.resolution_m).astype(int)
+        return float(city.built_up[rows, cols].mean())
+
+    # routes keep inside the footprints' extent, and in the built-up area more than without it
+    kept = [inside_share(city, pts[k, :2], pts[k + 1, :2]) for k in range(0, 40, 2)]
+    base = [inside_share(plain, pts[k, :2], pts[k + 1, :2]) for k in range(0, 40, 2)]
+    assert np.mean(kept) > 0.85 and np.mean(kept) >= np.mean(base)
