@@ -225,9 +225,12 @@ class MARLPolicy:
                     "this checkpoint is a residual policy: pass make_base "
                     "(coopnav_env.agents.make_policy)"
                 )
-            self._base = make_base(
-                self.settings.residual_base, env, **self.settings.residual_base_kwargs
-            )
+            from coopnav_env.agents.heuristics import COLUMN_ALIASES
+
+            # a checkpoint records its base under the name it was trained with: an earlier
+            # name of a column is its current one (the user typed neither, so no warning)
+            base = COLUMN_ALIASES.get(self.settings.residual_base, self.settings.residual_base)
+            self._base = make_base(base, env, **self.settings.residual_base_kwargs)
         self._held: np.ndarray | None = None  # the actor's output, held for action_repeat
         self._since = 0  # steps it has been held
 

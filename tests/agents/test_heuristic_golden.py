@@ -4,7 +4,9 @@ Each case flies a policy name accepted by :func:`coopnav_env.agents.make_policy`
 heuristics, some with ``@`` options, and a residual MARL policy over a column) for a few
 short episodes in the default environment and under realistic urban reception, and compares a
 hash of every step's actions (agent names and float32 commands) with the ones stored in
-``heuristic_golden.npz``. (The studies' own policies built on the column heuristics have
+``heuristic_golden.npz``; the residual MARL policy's episodes are stored as its actions and
+compared within :data:`TORCH_ACTION_ATOL` (torch's CPU kernels round differently on other
+processors). (The studies' own policies built on the column heuristics have
 golden episodes of their own in their studies' tests, flown by :func:`fly`.)
 
 The stored hashes are what the policies did when the file was written; a change to a policy,
@@ -114,9 +116,27 @@ def step_hash(actions: dict[str, np.ndarray]) -> np.uint64:
     return np.frombuffer(h.digest()[:8], dtype=np.uint64)[0]
 
 
+#: policies whose actions come out of torch networks: torch's CPU kernels may sum in another
+#: order on another processor (its vector instructions), so their episodes are stored as the
+#: actions themselves and compared within :data:`TORCH_ACTION_ATOL` instead of by hash
+_TORCH_PREFIXES = ("mappo:", "ippo:")
+
+TORCH_ACTION_ATOL: float = 1e-4
+"""Largest difference of a torch policy's action entry (in ``[-1, 1]``) from the stored one:
+a float32 network differs by a few units in the last place (about 1e-7) between processors,
+which the closed loop can grow over 60 steps; a changed policy, observation or environment
+moves actions by far more."""
+
+
+def is_torch_case(policy_name: str) -> bool:
+    """Whether a case's policy is a torch network (:data:`_TORCH_PREFIXES`)."""
+    return policy_name.startswith(_TORCH_PREFIXES)
+
+
 def fly(policy_name: str, env_name: str, seed: int, steps: int) -> np.ndarray:
-    """Fly ``policy_name`` for at most ``steps`` steps from reset seed ``seed``; the hash of
-    every step's actions (uint64, one per step flown)."""
+    """Fly ``policy_name`` for at most ``steps`` steps from reset seed ``seed``: the hash of
+    every step's actions (uint64, one per step flown), or for a torch policy
+    (:func:`is_torch_case`) the actions themselves (float32, ``(steps, n_uavs * 3)``)."""
     from coopnav_env import urban_canyon_v0
     from coopnav_env.agents import make_policy
 
@@ -130,10 +150,15 @@ def fly(policy_name: str, env_name: str, seed: int, steps: int) -> np.ndarray:
             if not env.agents:
                 break
             actions = policy.act(obs)
-            hashes.append(step_hash(actions))
+            if is_torch_case(policy_name):
+                hashes.append(np.concatenate([np.asarray(a, np.float32) for a in actions.values()]))
+            else:
+                hashes.append(step_hash(actions))
             obs, *_ = env.step(actions)
     finally:
         env.close()
+    if is_torch_case(policy_name):
+        return np.asarray(hashes, dtype=np.float32)
     return np.asarray(hashes, dtype=np.uint64)
 
 
@@ -167,7 +192,7 @@ def _stored() -> dict[str, np.ndarray]:
 
 
 #: slow cases (torch): with ``-m slow`` only
-_SLOW_PREFIXES = ("mappo:",)
+_SLOW_PREFIXES = _TORCH_PREFIXES
 
 
 def _params() -> list[Any]:
@@ -183,7 +208,7 @@ def _params() -> list[Any]:
 
 @pytest.mark.skipif(not HAS_ENV, reason="coopnav_env.urban_canyon_v0 not available")
 @pytest.mark.parametrize("case", _params())
-def test_actions_are_bit_identical_to_the_golden_episodes(case) -> None:
+def test_actions_match_the_golden_episodes(case) -> None:
     policy, env_name, seeds, steps = case
     if policy.startswith("mappo:") and not HAS_TORCH:
         pytest.skip("the residual MARL policy needs torch")
@@ -192,6 +217,10 @@ def test_actions_are_bit_identical_to_the_golden_episodes(case) -> None:
         want = stored[case_key(policy, env_name, seed)]
         got = fly(policy, env_name, seed, steps)
         assert want.size > 0
+        if is_torch_case(policy):
+            assert got.shape == want.shape, f"{policy!r}, seed {seed}: flew {got.shape} steps"
+            np.testing.assert_allclose(got, want, rtol=0, atol=TORCH_ACTION_ATOL)
+            continue
         if got.shape != want.shape or not np.array_equal(got, want):
             n = min(got.size, want.size)
             diff = np.flatnonzero(got[:n] != want[:n])

@@ -30,6 +30,15 @@ NOISE_SPEED_REPORT = STUDY / "learned_route_noise_start_speed" / "report.json"
 HOLD_REPORT = STUDY / "learned_route_hold" / "report.json"
 HOLD_IPPO_REPORT = STUDY / "learned_route_hold_ippo" / "report.json"
 POLICIES = "studies/task_objective/policies"
+
+REL_TOLERANCE = 1e-5
+"""Relative difference allowed in a flown episode's real-valued figures. The policies are
+float32 torch networks, whose CPU kernels may round differently on another processor (their
+vector instructions set the order of summation): an action moves by about 1e-7 and the closed
+loop carries that into the figures (seen: 4e-7 relative in the cruise spacing of an 82-step
+episode). A policy that flies differently moves them by far more."""
+EXACT = ("seed", "goal", "collided", "steps")
+"""The figures that must agree exactly."""
 SHIPPED = (
     "mappo:pretrained/v1_s0",
     "mappo:pretrained/v1_s1",
@@ -91,5 +100,8 @@ def test_a_shipped_policy_flies_the_reports_episodes_again(
     report = json.loads(report_path.read_text())
     stored = report["episodes_per_policy"][stored_name][:2]
     flown = cl.fly(flown_name, [e["seed"] for e in stored])
+    assert len(flown) == len(stored)
     for got, want in zip(flown, stored):
-        assert got == want
+        assert set(got) == set(want)
+        assert {k: got[k] for k in EXACT if k in got} == {k: want[k] for k in EXACT if k in want}
+        assert got == pytest.approx(want, rel=REL_TOLERANCE, abs=1e-9)
