@@ -172,7 +172,8 @@ def test_action_frame_of_names_the_frame_each_policy_flies_in() -> None:
 
 def test_evaluate_flies_route_frame_heuristics_in_their_frame(tmp_path) -> None:
     """``coopnav evaluate --policies setpoints`` needs no ``--env-set action_frame=route``;
-    a velocity heuristic beside it keeps the environment's default and is refused by name."""
+    a velocity heuristic beside it flies the environment's default frame, the report says
+    which policy flew in a frame of its own."""
     import argparse
     import json
 
@@ -187,6 +188,9 @@ def test_evaluate_flies_route_frame_heuristics_in_their_frame(tmp_path) -> None:
     assert ev.run(args) == 0
     data = json.loads((out / "report.json").read_text())
     assert data["env_kwargs"] == {"max_steps": 4, "action_frame": "route"}
-    mixed = parser.parse_args(["--policies", "setpoints", "waypoint", *common])
-    with pytest.raises(ValueError, match="needs action_frame='route'"):
-        ev.run(mixed)
+    both = tmp_path / "both"
+    mixed = parser.parse_args(["--policies", "setpoints", "waypoint", "--out", str(both), *common])
+    assert ev.run(mixed) == 0
+    data = json.loads((both / "report.json").read_text())
+    assert data["env_kwargs"] == {"max_steps": 4}
+    assert data["own_frame"] == {"setpoints": "route"}

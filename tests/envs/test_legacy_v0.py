@@ -24,10 +24,7 @@ LEGACY_IDS = {"urban_canyon_v0", "coopnav/UrbanCanyonSwarm-v0"}
 #: modules that fly v0 without being told to, and why that is allowed (not a default)
 IMPORTS_ALLOWED = {
     # BenchMARL's legacy task URBAN_CANYON_V0 beside URBAN_CANYON_V1: the user names it
-    "coopnav_env/benchmarl_task.py",
-    # study code (`coopnav study`, `coopnav train-routes`) that leaves the library (issue 44)
-    "training/marl_study.py",
-    "training/route_learning.py",
+    "training/benchmarl_backend.py",
 }
 
 
