@@ -292,11 +292,17 @@ itself, `env(...)` is `pettingzoo.utils.parallel_to_aec(parallel_env(...))` (AEC
 
 `n_uavs` (5): number of UAVs, in [1, 256].
 
-`city` (`"grid"`): `"grid"`, a random street grid, `"canyon"`, the paper's canyon, or
-`"geojson:PATH"`, building footprints from a file (section "A city from a GeoJSON file").
+`city` (`"grid"`): `"grid"`, a random street grid, `"canyon"`, the paper's canyon,
+`"geojson:PATH"`, building footprints from a file (section "A city from a GeoJSON file"), or
+`"osm:PATH"`, an OpenStreetMap extract (`docs/cities.md`).
 
 `city_origin`, `city_start_lat_lon`, `city_goal_lat_lon` (`"file"`, None, None): the file
 city's geodetic origin and fixed start and goal (same section).
+
+`city_bbox`, `city_repair`, `city_default_height_m`, `city_storey_height_m` (None, True, 10,
+3): how a file city is read: only the buildings inside a `(south, west, north, east)`
+box; invalid footprints repaired with a warning (False: listed in one error); the roof height
+of a building without `height` or `building:levels`; metres per storey (`docs/cities.md`).
 
 `city_config` (`CityConfig()`): the grid: 6 x 6 blocks of 60 m, 20 m streets, roofs 10-150 m
 (mean 45 m), 10 % of the blocks open squares; 500 m x 500 m.

@@ -430,14 +430,20 @@ def _tree(root: Path) -> dict[str, bytes | None]:
     [
         ["evaluate", "--policies", "bogus", "--episodes", "1", "--no-plots"],
         ["study", "--heuristics", "bogus", "--episodes", "1", "--planner-episodes", "0"],
-        ["alignment", "--policies", "bogus", "formation", "--episodes", "1"],
+        ["alignment", "--policies", "bogus", "column", "--episodes", "1"],
     ],
     ids=["evaluate", "study", "alignment"],
 )
 def test_a_refused_command_leaves_no_claim(tmp_path, capsys, refused):
-    """A refused policy name: no folder (nor its parents), and a present folder unchanged."""
+    """A refused policy name: no folder (nor its parents), and a present folder unchanged
+    (``study``: the learning study's script)."""
+    if refused[0] == "study":
+        refused = refused[1:]
+        run = learning_study.main
+    else:
+        run = main
     out = tmp_path / "new" / "out"
-    assert main([*refused, "--out", str(out)]) == 2
+    assert run([*refused, "--out", str(out)]) == 2
     assert "bogus" in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
     # a folder that holds a finished result of other settings keeps its claim as it was
@@ -447,7 +453,7 @@ def test_a_refused_command_leaves_no_claim(tmp_path, capsys, refused):
     (study / CLAIM_NAME).write_text(json.dumps(record))
     (study / "report.md").write_text("# study\n")
     before = _tree(study)
-    assert main([*refused, "--out", str(study), "--overwrite"]) == 2
+    assert run([*refused, "--out", str(study), "--overwrite"]) == 2
     assert _tree(study) == before
 
 

@@ -26,6 +26,7 @@ from coopnav_env.training.torchrl_backend import MARLTrainer  # noqa: E402
 from tests.fly_alike import assert_fly_alike  # noqa: E402
 
 SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--no-progress"]
+V0 = ["--env-id", "urban_canyon_v0"]  # tests of v0's torchrl section (a residual over a column)
 
 
 @pytest.fixture(autouse=True)
@@ -451,7 +452,7 @@ def test_train_and_evaluate_with_satellite_sectors(tmp_path) -> None:
     the run records the setting, evaluation rebuilds that environment, and the policy refuses
     an environment without the option."""
     out = tmp_path / "run"
-    args = ["train", "--backend", "torchrl", "--algorithm", "mappo", "--out", str(out)]
+    args = ["train", "--backend", "torchrl", "--algorithm", "mappo", *V0, "--out", str(out)]
     env_set = ["--env-set", "obs_satellite_sectors=true"]
     assert main([*args, "--timesteps", "80", *env_set, *SMALL]) == 0
     run = json.loads((out / "run.json").read_text())
@@ -484,7 +485,7 @@ def test_command_line_env_settings_win_over_the_backends_env_block(tmp_path) -> 
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    base = ["--backend", "torchrl", "--out", str(tmp_path / "run")]
+    base = ["--backend", "torchrl", *V0, "--out", str(tmp_path / "run")]
     _, env = settings_of(config_from_args(parser.parse_args(base)))
     assert env["collision_penalty"] == 250.0 and env["nav_reward_weight"] == 1.0  # the block
     args = parser.parse_args(
@@ -527,7 +528,7 @@ def test_resuming_a_run_trained_with_a_removed_switch_is_refused(tmp_path, capsy
     from coopnav_env.agents.marl_nets import load_marl_checkpoint
 
     out = tmp_path / "run"
-    args = ["train", "--backend", "torchrl", "--algorithm", "ippo", "--out", str(out)]
+    args = ["train", "--backend", "torchrl", "--algorithm", "ippo", *V0, "--out", str(out)]
     assert main([*args, "--timesteps", "160", "--checkpoint-freq", "0", *SMALL]) == 0
     d = load_marl_checkpoint(out / "final_model.pt")
     d["settings"] |= {"noise_correlation": 0.9, "noise_centred_entries": [0]}

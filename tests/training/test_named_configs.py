@@ -17,6 +17,7 @@ import pytest
 import yaml
 
 from coopnav_env.agents.marl_nets import REMOVED_SETTINGS, MARLSettings
+from coopnav_env.envs.config import V1_DEFAULTS
 from coopnav_env.training import train
 from coopnav_env.training.config import (
     CONFIG_DIR,
@@ -72,8 +73,10 @@ def test_a_named_configuration_resolves_to_the_settings_of_its_committed_run(
     assert cfg.torchrl == _without_removed(recorded["torchrl"])
     settings, env_kwargs = settings_of(cfg)
     assert dataclasses.asdict(settings) == _without_removed(run["settings"])
-    # the environment it trains in, as config.yaml and run.json record it
-    assert env_kwargs == recorded["env"] == run["env"]
+    # the environment it trains in, as config.yaml and run.json record it, with v1's
+    # crash-free start (V1_DEFAULTS), which v1 gained after these runs were trained
+    assert recorded["env"] == run["env"] and "crash_free_steps" not in run["env"]
+    assert env_kwargs == {**recorded["env"], "crash_free_steps": V1_DEFAULTS["crash_free_steps"]}
     # the warm start (or none)
     warm = pretrain_of(cfg)
     if run["warm_start"] is None:

@@ -28,6 +28,8 @@ from coopnav_env.training.cli import main  # noqa: E402
 TINY = [
     "--backend",
     "torchrl",
+    "--env-id",  # the safety checks were written against v0's torchrl section (no warm start)
+    "urban_canyon_v0",
     "--env-set",
     "n_uavs=2",
     "--set",
