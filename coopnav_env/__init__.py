@@ -12,9 +12,9 @@ Importing the package registers the Gymnasium ids :data:`GYM_ENV_ID`
 (``"coopnav/UrbanCanyonSwarm-v1"``, :class:`coopnav_env.envs.gym_wrapper.UrbanCanyonSwarmV1Env`:
 one agent commands the whole swarm of ``urban_canyon_v1``) and the legacy
 :data:`GYM_ENV_ID_V0` (``"coopnav/UrbanCanyonSwarm-v0"``, the view of ``urban_canyon_v0``), so
-``gymnasium.make(GYM_ENV_ID, **fields)`` works after ``import coopnav_env``. The registration
-names the entry point as a string: nothing but Gymnasium's registry is imported until the
-environment is made.
+``gymnasium.make(GYM_ENV_ID, **fields)`` works after ``import coopnav_env``. The ids are
+registered when Gymnasium is imported (at once if it already is), with the entry point named as
+a string: ``import coopnav_env`` itself imports neither Gymnasium nor the environment.
 """
 
 __version__ = "0.1.0"
@@ -42,7 +42,45 @@ def _register_gymnasium_envs() -> None:
         register(id=GYM_ENV_ID_V0, entry_point="coopnav_env.envs.gym_wrapper:UrbanCanyonSwarmEnv")
 
 
-_register_gymnasium_envs()
+class _RegisterWhenGymnasiumLoads:
+    """A meta-path finder that registers the ids (:func:`_register_gymnasium_envs`) right after
+    ``gymnasium`` is first imported, and then leaves ``sys.meta_path``.
+
+    ``import coopnav_env`` thus does not import Gymnasium (a fifth of a second; the ``coopnav``
+    command starts handling Ctrl-C sooner), and ``gymnasium.make(GYM_ENV_ID)`` still works
+    after ``import coopnav_env`` in either order.
+    """
+
+    def find_spec(self, name, path=None, target=None):  # noqa: ANN001, ANN201
+        if name != "gymnasium":
+            return None
+        import importlib.util
+        import sys
+
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+            return spec
+        run_module = spec.loader.exec_module
+
+        def exec_module(module):  # noqa: ANN001, ANN202
+            run_module(module)
+            _register_gymnasium_envs()
+
+        spec.loader.exec_module = exec_module  # type: ignore[method-assign]
+        return spec
+
+
+def _register_when_gymnasium_loads() -> None:
+    import sys
+
+    if "gymnasium" in sys.modules:
+        _register_gymnasium_envs()
+    elif not any(isinstance(f, _RegisterWhenGymnasiumLoads) for f in sys.meta_path):
+        sys.meta_path.insert(0, _RegisterWhenGymnasiumLoads())
+
+
+_register_when_gymnasium_loads()
 
 
 def _install_old_names() -> None:

@@ -53,6 +53,23 @@ def test_registered_on_import_without_heavy_imports() -> None:
     assert res.returncode == 0, res.stderr
 
 
+def test_import_does_not_load_gymnasium_and_registers_when_it_loads() -> None:
+    """``import coopnav_env`` leaves Gymnasium unloaded; importing it afterwards (directly or
+    through PettingZoo) registers both ids, and the v1 id makes an environment."""
+    code = (
+        "import sys, coopnav_env\n"
+        "assert 'gymnasium' not in sys.modules\n"
+        "import pettingzoo.utils\n"  # loads gymnasium on the way
+        "import gymnasium\n"
+        "assert coopnav_env.GYM_ENV_ID in gymnasium.registry\n"
+        "assert coopnav_env.GYM_ENV_ID_V0 in gymnasium.registry\n"
+        "env = gymnasium.make(coopnav_env.GYM_ENV_ID, n_uavs=2)\n"
+        "assert env.reset(seed=0)[0].shape == (2 * 52,)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+
+
 def test_gymnasium_env_checker_passes() -> None:
     env = gymnasium.make(GYM_ENV_ID)
     assert isinstance(env.unwrapped, UrbanCanyonSwarmV1Env)
