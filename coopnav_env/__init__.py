@@ -51,7 +51,7 @@ class _RegisterWhenGymnasiumLoads:
     after ``import coopnav_env`` in either order.
     """
 
-    def find_spec(self, name, path=None, target=None):  # noqa: ANN001, ANN201
+    def find_spec(self, name: str, path: object = None, target: object = None) -> object:
         if name != "gymnasium":
             return None
         import importlib.util
@@ -63,7 +63,7 @@ class _RegisterWhenGymnasiumLoads:
             return spec
         run_module = spec.loader.exec_module
 
-        def exec_module(module):  # noqa: ANN001, ANN202
+        def exec_module(module: object) -> None:
             run_module(module)
             _register_gymnasium_envs()
 

@@ -143,10 +143,6 @@ LIBRARY_ROOTS = ("coopnav_env", "reproduction")
 REACH_CHECKED = ("agents", "training")
 """Folders whose every module must be reached from the library (:func:`unreached_modules`)."""
 
-PUBLIC_HELPERS = ("coopnav_env.training.parallel",)
-"""Modules of ``REACH_CHECKED`` that are public API for users' own scripts (documented in the
-changelog and docs) though no library module imports them: roots of the reach check."""
-
 
 def deprecated_paths(mods: dict[str, Path]) -> set[str]:
     """The modules that are an earlier import path of another, kept for one release: their
@@ -228,7 +224,7 @@ def test_every_agents_and_training_module_is_reached_from_the_library():
     )
     assert "coopnav_env.training.cli" in cli and "coopnav_env.training.train" in cli
     roots = library | packages | {m for m in cli if m in graph}
-    roots |= set(PUBLIC_HELPERS) | deprecated_paths(mods)
+    roots |= deprecated_paths(mods)
     assert "coopnav_env.training.marl" in deprecated_paths(mods)
     assert unreached_modules(graph, roots, checked) == []
 

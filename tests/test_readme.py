@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-README_MAX_CHARS = 12_000
+README_MAX_CHARS = 10_000
 
 
 def _readme() -> str:
@@ -59,7 +59,7 @@ def test_torch_requirement_admits_the_cpu_build():
     assert lo <= (2, 13, 0) < hi
 
 
-def test_readme_is_a_front_page_of_at_most_12000_characters():
+def test_readme_is_a_front_page_of_at_most_10000_characters():
     assert len(_readme()) <= README_MAX_CHARS, len(_readme())
 
 
@@ -82,70 +82,79 @@ def _tables(section: str) -> list[list[str]]:
     return tables
 
 
+def _cells(row: str) -> list[str]:
+    return [c.strip() for c in row.strip().strip("|").split("|")][1:]
+
+
 def _numeric_rows(section: str, table: int = 0) -> list[str]:
     rows = _tables(section)[table]
+    number = r"-?\d+(\.\d+)?( \[-?\d+\.\d+, -?\d+\.\d+\])?"
     for row in rows:
-        cells = [c.strip() for c in row.strip().strip("|").split("|")][1:]
-        assert cells and all(re.fullmatch(r"\d+\.\d+", c) for c in cells), row
+        cells = _cells(row)
+        assert cells and all(re.fullmatch(number, c) for c in cells), row
     return rows
 
 
-def test_results_name_the_command_that_gives_them():
-    """Every number of the results table comes from the command the section names, and the
-    quick start's table from the evaluation of the first README command."""
-    section = _section("Results")
-    command = re.search(r"```text\n(coopnav alignment .*?)\n```", section, re.S)
+RESULTS_REPORT = ROOT / "studies/task_objective/shipped_recipe/report.json"
+"""What the Results section's command writes (committed)."""
+
+
+def _results_command() -> str:
+    command = re.search(r"```text\n(coopnav evaluate .*?)\n```", _section("Results"), re.S)
     assert command is not None
-    assert "--out studies/task_objective/alignment" in command.group(1)
-    assert len(_numeric_rows(section)) >= 4
+    return command.group(1)
+
+
+def test_results_name_the_command_that_gives_them():
+    """The Results table comes from the command the section names, which writes the committed
+    report; the quick start's table from the evaluation of the first README command."""
+    command = _results_command()
+    assert f"--out {RESULTS_REPORT.parent.relative_to(ROOT)} " in command + " "
+    assert "--episodes 100 --seed-start 1000100" in command
+    assert len(_numeric_rows(_section("Results"))) >= 4
     quick = _section("Quick start: train and evaluate")
     evaluate = next(c for c in _readme_commands()[0].split(" && ") if c.startswith("coopnav eval"))
     assert evaluate in quick
     assert len(_numeric_rows(quick)) >= 4
 
 
-def test_results_are_the_committed_alignment_report():
-    """The Results table quotes studies/task_objective/alignment/report.json to the digit."""
-    report = json.loads((ROOT / "studies/task_objective/alignment/report.json").read_text())
-    rows = {r["policy"]: r for r in report["rows"]}
-    section = _section("Results")
-    for line in _numeric_rows(section):
+def test_results_are_the_committed_report_of_the_shipped_policies():
+    """Every row of the Results table quotes the committed report to the digit: a method row
+    pools the shipped policies the command names (one per training seed)."""
+    report = json.loads(RESULTS_REPORT.read_text())
+    command = _results_command()
+    gap = {r["name"]: r for r in report["gap"]["rows"]}
+    stats = {p["policy"]: p for p in report["policies"]}
+    stats |= {name: m["stats"] for name, m in report["methods"].items()}
+    for name, method in report["methods"].items():
+        assert f"{name}={','.join(method['policies'])}" in command
+        assert all(p.startswith("mappo:pretrained/") for p in method["policies"])
+    for line in _numeric_rows(_section("Results")):
         name = re.search(r"`([^`]+)`", line).group(1)
-        row = rows[name]
-        cells = [c.strip() for c in line.strip().strip("|").split("|")][1:]
-        assert cells[0] == f"{row['score']:.3f}"
-        assert cells[1] == f"{row['nav_error_m']:.2f}"
-        assert cells[2] == f"{row['goal_rate']:.3f}"
-        assert cells[3] == f"{row['v0:disc@0.99']:.1f}"
+        g, st = gap[name], stats[name]
+        r, c = g["return"], g["gap_closed"]
+        closed = f"{c['value']:.2f}"
+        if c["low"] != c["high"]:
+            closed += f" [{c['low']:.2f}, {c['high']:.2f}]"
+        assert _cells(line) == [
+            f"{r['value']:.3f} [{r['low']:.3f}, {r['high']:.3f}]",
+            closed,
+            f"{st['goal_rate']:.3f}",
+            f"{st['cruise_spacing_m']:.1f}",
+        ], name
 
 
-def test_learned_results_are_the_committed_comparison_of_the_shipped_policies():
-    """The learned table quotes studies/task_objective/learned_v1_by_backend/report.json (the
-    shipped policies) to the digit, and names the command that gives those rows."""
-    report = json.loads(
-        (ROOT / "studies/task_objective/learned_v1_by_backend/report.json").read_text()
-    )
-    rows = {r["name"]: r for r in report["rows"]}
-    section = _section("Results")
-    command = re.search(r"```text\n(python studies/task_objective/compare_learned.py .*?)\n```",
-                        section, re.S)  # fmt: skip
-    assert command is not None
-    assert "--episodes 100 --seed-start 1000100" in command.group(1)
-    table = _tables(section)[1]
-    assert len(table) >= 4
-    for line in table:
-        name = re.search(r"`([^`]+)`", line).group(1)
-        row = rows[name]
-        for policy in row["policies"]:
-            assert policy in command.group(1)  # the shipped policies, not training runs
-        cells = [c.strip() for c in line.strip().strip("|").split("|")][1:]
-        s = row["score"]
-        assert cells == [
-            f"{s[0]:.3f}",
-            f"{s[1]:.3f}-{s[2]:.3f}",
-            f"{row['goal']:.2f}",
-            f"{row['cruise_spacing_m']:.1f}",
-        ]
+def test_the_quick_start_table_names_its_columns_from_the_report():
+    """The quick start's table has the score with its parts: error, goal rate, collisions."""
+    header = next(r for r in _section("Quick start: train and evaluate").splitlines() if
+                  r.startswith("| policy"))  # fmt: skip
+    assert [h.strip() for h in header.strip("|").split("|")] == [
+        "policy",
+        "score",
+        "mean cooperative 3-D error [m]",
+        "goal rate",
+        "collisions",
+    ]
 
 
 def test_readme_names_the_installed_namespace_only():

@@ -559,7 +559,8 @@ class Report:
 
     def gap_markdown(self) -> str:
         """The gap table in GitHub Markdown ("" without a gap): every policy's and method's
-        mean return with its 95 % interval and the share of the gap it closes."""
+        mean return (titled "score" where it is, :meth:`return_is_score`) with its 95 %
+        interval and the share of the gap it closes."""
         if self.gap is None:
             return ""
         base, ref = self.gap
@@ -571,7 +572,8 @@ class Report:
             f"Share of the gap from `{base}` (0) to `{ref}` (1) closed; a method's policies "
             "averaged per episode; 95 % bootstrap intervals over the episodes, paired.",
             "",
-            "| policy | return [95 % CI] | gap closed [95 % CI] |",
+            f"| policy | {'score' if self.return_is_score() else 'return'} [95 % CI] "
+            "| gap closed [95 % CI] |",
             "|---|---|---|",
         ]
         for r in self.gap_rows:

@@ -80,7 +80,7 @@ def collect(
     progress: bool = False,
 ) -> np.ndarray:
     """``(episodes, arms, replicates, 2)``: each flight's mean ``nav`` error and goal (0/1)."""
-    from coopnav_env.training.parallel import map_seeds
+    from studies.route_choice.parallel import map_seeds
 
     return np.stack(
         map_seeds(

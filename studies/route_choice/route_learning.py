@@ -146,8 +146,8 @@ def collect(
     progress: bool = False,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order;
-    :func:`coopnav_env.training.parallel.map_seeds`, with a progress bar when ``progress``)."""
-    from coopnav_env.training.parallel import map_seeds
+    :func:`studies.route_choice.parallel.map_seeds`, with a progress bar when ``progress``)."""
+    from studies.route_choice.parallel import map_seeds
 
     if isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")

@@ -125,7 +125,7 @@ def collect(
     progress: bool = False,
 ) -> list[dict[str, np.ndarray]]:
     """:func:`collect_episode` for every seed, in ``jobs`` worker processes (seed order)."""
-    from coopnav_env.training.parallel import map_seeds
+    from studies.route_choice.parallel import map_seeds
 
     return map_seeds(
         _chunk, (env_kwargs, base, replicates), seeds, jobs=jobs, desc="splits", progress=progress

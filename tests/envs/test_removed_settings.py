@@ -20,7 +20,5 @@ def test_a_removed_setting_is_refused_naming_it(name) -> None:
 
 
 def test_a_typo_is_still_an_unknown_argument() -> None:
-    with pytest.raises(
-        ValueError, match=r"unknown urban_canyon argument\(s\) \['obs_lookahed'\]"
-    ):
+    with pytest.raises(ValueError, match=r"unknown urban_canyon argument\(s\) \['obs_lookahed'\]"):
         make_config(obs_lookahed=True)

@@ -1,13 +1,13 @@
 """Per-seed work in worker processes, in seed order, with a progress bar.
 
-The data-collection commands (``route_learning.py`` and ``route_choice.py`` of
-``studies/route_choice``,
-``split_choice.py``, ``arm_choice.py``) fly thousands of episodes, one independent job per
-reset seed. :func:`map_seeds` hands the seeds to ``jobs`` worker processes in small blocks
-(one environment per block), shows a progress bar over the episodes and returns the results
-in the order of the seeds. The result of a seed never depends on the block it was flown in or
-on the number of workers: every episode is fixed by its reset seed (and reset options), so
-``jobs=1`` and ``jobs=2`` give the same results, bit for bit.
+The data-collection scripts of the studies (``route_learning.py`` and ``route_choice.py`` here,
+``studies/split_choice/split_choice.py``, ``studies/choice_headroom/arm_choice.py``) fly
+thousands of episodes, one independent job per reset seed. :func:`map_seeds` hands the seeds
+to ``jobs`` worker processes in small blocks (one environment per block), shows a progress
+bar over the episodes and returns the results in the order of the seeds. The result of a seed
+never depends on the block it was flown in or on the number of workers: every episode is fixed
+by its reset seed (and reset options), so ``jobs=1`` and ``jobs=2`` give the same results,
+bit for bit.
 """
 
 from __future__ import annotations
