@@ -38,6 +38,9 @@ from typing import Any
 
 import numpy as np
 
+# run as a script: the repository root on the path, for the `studies` package
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
 from coopnav_env.training.config import apply_overrides
 from coopnav_env.training.envs import EVAL_SEED_START, heldout_seeds
 from coopnav_env.training.eval_plots import distance_along_route, save_figure, short_label

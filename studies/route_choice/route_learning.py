@@ -47,6 +47,9 @@ from typing import Any
 
 import numpy as np
 
+# run as a script: the repository root on the path, for the `studies` package
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
 TRAIN_SEED_BASE = 500_000
 """Reset seed of the first training episode of ``--seed 0``; seed ``k`` starts
 ``TRAIN_SEED_STRIDE * k`` later. Below the held-out range (reset seeds from 1,000,000)."""

@@ -31,6 +31,9 @@ from typing import Any
 
 import numpy as np
 
+# run as a script: the repository root on the path, for the `studies` package
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
 CRUISE = (0.2, 0.8)
 """The share of an episode's steps that counts as the cruise (start and end left out)."""
 
