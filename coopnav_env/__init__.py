@@ -19,6 +19,35 @@ a string: ``import coopnav_env`` itself imports neither Gymnasium nor the enviro
 
 __version__ = "0.1.0"
 
+
+def _quiet_interrupt_while_the_command_loads() -> None:
+    """Run as the ``coopnav`` command, an interrupt (Ctrl-C) that arrives while the package
+    loads ends with one line and status 130 instead of a traceback; the command's own handling
+    (:func:`coopnav_env.training.cli.main`) takes over once it runs. Imported as a library (any
+    other program), nothing changes."""
+    import os
+    import signal
+    import sys
+
+    argv = getattr(sys, "argv", None) or [""]
+    if os.path.splitext(os.path.basename(str(argv[0])))[0] != "coopnav":
+        return
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return
+
+    def coopnav_interrupted_while_loading(signum: int, frame: object) -> None:
+        sys.stderr.write("\ncoopnav: interrupted while starting; nothing was done\n")
+        sys.stderr.flush()
+        os._exit(128 + signum)
+
+    try:
+        signal.signal(signal.SIGINT, coopnav_interrupted_while_loading)
+    except ValueError:  # not the main thread: leave the interpreter's handling
+        pass
+
+
+_quiet_interrupt_while_the_command_loads()
+
 GYM_ENV_ID = "coopnav/UrbanCanyonSwarm-v1"
 """Gymnasium id of the single-agent swarm environment, ``urban_canyon_v1`` (registered on
 import)."""

@@ -10,7 +10,11 @@ training.
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +22,8 @@ import yaml
 
 from coopnav_env.training.cli import main
 from tests.training.toy_env import TOY_ENV_ID, TOY_TRAINING
+
+ROOT = Path(__file__).resolve().parents[1]
 
 TOY = TOY_ENV_ID
 TOY_SECTION = TOY_TRAINING
@@ -392,3 +398,42 @@ def test_start_hold_decisions_must_leave_decisions_to_learn(files, capsys):
     err = capsys.readouterr().err
     assert "torchrl.start_hold_decisions must be < the decisions of an episode" in err, err
     assert "got 1000000" in err and not (files / "hold").exists()
+
+
+def _python(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT
+    )
+
+
+def test_an_interrupt_while_the_command_loads_the_package_is_one_line():
+    """As the ``coopnav`` command, Ctrl-C while ``coopnav_env`` loads (before ``main`` runs)
+    ends with one line and status 130; ``main`` then restores Python's own handling."""
+    loading = (
+        "import os, signal, sys, time\n"
+        "sys.argv[0] = '/venv/bin/coopnav'\n"
+        "import coopnav_env\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "time.sleep(30)\n"
+    )
+    res = _python(loading)
+    assert res.returncode == 128 + signal.SIGINT, res.stderr
+    assert res.stderr.strip() == "coopnav: interrupted while starting; nothing was done"
+    after = (
+        "import signal, sys\n"
+        "sys.argv[0] = 'coopnav'\n"
+        "from coopnav_env.training.cli import main\n"
+        "main([])\n"
+        "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
+    )
+    assert _python(after).returncode == 0
+
+
+def test_importing_the_library_leaves_the_interrupt_handler_alone():
+    code = (
+        "import signal\n"
+        "import coopnav_env, coopnav_env.training.cli\n"
+        "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
+    )
+    res = _python(code)
+    assert res.returncode == 0, res.stderr

@@ -129,6 +129,10 @@ def main(argv: list[str] | None = None) -> int:
     An interrupt while the subcommands' modules are imported (start-up, before any command
     runs) prints one line and returns 128 + the signal number, as one during a command does.
     """
+    if getattr(signal.getsignal(signal.SIGINT), "__name__", "") == (
+        "coopnav_interrupted_while_loading"  # the package's, while it loaded: ours from here
+    ):
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         parser = build_parser()
     except KeyboardInterrupt as exc:
