@@ -209,20 +209,25 @@ def test_studies_are_not_installed():
     assert "studies" in data["tool"]["pytest"]["ini_options"]["testpaths"]
 
 
-def readme_sections(text: str) -> list[str]:
-    """The level-2 headings of a Markdown page, lower case, in order (code blocks skipped)."""
-    heads, fenced = [], False
+def unfenced_lines(text: str) -> list[str]:
+    """The lines of a Markdown page outside its code blocks (the fences left out too)."""
+    out, fenced = [], False
     for line in text.splitlines():
         if line.startswith("```"):
             fenced = not fenced
-        elif not fenced and line.startswith("## "):
-            heads.append(line[3:].strip().lower())
-    return heads
+        elif not fenced:
+            out.append(line)
+    return out
+
+
+def readme_sections(text: str) -> list[str]:
+    """The level-2 headings of a Markdown page, lower case, in order (code blocks skipped)."""
+    return [x[3:].strip().lower() for x in unfenced_lines(text) if x.startswith("## ")]
 
 
 def readme_section(text: str, name: str) -> str:
     """The body of the level-2 section ``name`` (lower case) of a Markdown page, up to the next
-    level-2 heading (code blocks skipped); ``""`` if there is none."""
+    level-2 heading (headings inside code blocks do not count); ``""`` if there is none."""
     body, inside, fenced = [], False, False
     for line in text.splitlines():
         if line.startswith("```"):
@@ -290,8 +295,9 @@ def test_the_scripts_the_study_pages_run_exist():
 
 def _slugs(path: Path) -> set[str]:
     """GitHub's anchors of the headings of a Markdown page (code blocks skipped)."""
-    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
-    heads = re.findall(r"^#{1,6} (.+)$", text, re.M)
+    heads = [
+        m.group(1) for x in unfenced_lines(path.read_text()) if (m := re.match(r"#{1,6} (.+)$", x))
+    ]
     return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-") for h in heads}
 
 
