@@ -914,7 +914,7 @@ class WaypointPolicy:
     ``cruise_speed_mps``, slowing down within a few metres of it, and a proportional term holds
     ``altitude_m`` (from the estimated altitude, the ``altitude`` field). No map, no
     neighbours, no walls. ``coopnav train`` can start PPO from a behaviour-cloned copy of it
-    (``pretrain`` in ``training/configs/ppo.yaml``).
+    (``pretrain`` in ``training/configs/sb3.yaml``).
 
     Parameters
     ----------

@@ -106,9 +106,9 @@ Learners discount. Discounting at `gamma` pays a reward `t` steps ahead `gamma**
 worth, so the goal bonus of a trip 20 steps longer is worth `gamma**20` as much (0.82 at
 `gamma = 0.99`): a loss of the size of the differences in navigation quality the score ranks,
 which makes a discounted learner prefer a shorter trip again. The training configurations of
-v1 (`training/configs/ppo.yaml`, section `urban_canyon_v1`) use the discount under which
-`coopnav alignment` finds the discounted return ranking a family of policies as the score
-does (`studies/task_objective`).
+v1 (`training/configs/sb3.yaml` and `torchrl.yaml`, sections `urban_canyon_v1`) use the
+discount under which `coopnav alignment` finds the discounted return ranking a family of
+policies as the score does (`studies/task_objective`).
 
 ## Arguments
 
