@@ -149,6 +149,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "mappo_route=mappo:pretrained/route_s0,mappo:pretrained/route_s1 (default: none)",
     )
     parser.add_argument(
+        "--suite",
+        default=None,
+        metavar="NAME",
+        help="fly the policies on every city of a suite instead of one environment: 'real' "
+        "(real OpenStreetMap places under a real GPS sky, coopnav_env.sim.real_suite); one "
+        "report folder per city in --out, plus summary.md/summary.json; trained policies fly "
+        "their run's settings, the suite's city and sky replacing the run's; not with "
+        "--methods, --gap, --train-config, --env-id, --city or --n-uavs (default: none)",
+    )
+    parser.add_argument(
         "--gap",
         nargs=2,
         default=None,
@@ -352,6 +362,8 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Run ``coopnav evaluate``; returns the exit status (errors: see
     :mod:`coopnav_env.training.cli`)."""
+    if getattr(args, "suite", None) is not None:
+        return _run_suite(args)
     methods = parse_methods(getattr(args, "methods", None) or [])
     gap = getattr(args, "gap", None)
     listed = list(args.policies)
@@ -408,4 +420,56 @@ def run(args: argparse.Namespace) -> int:
         print(report.gap_markdown())
     if report.files:
         print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))
+    return 0
+
+
+def _run_suite(args: argparse.Namespace) -> int:
+    """``coopnav evaluate --suite NAME``: :func:`coopnav_env.training.suite.evaluate_suite`."""
+    from coopnav_env.training.suite import evaluate_suite, suite_outputs
+
+    refused = [
+        flag
+        for flag, value in (
+            ("--methods", args.methods),
+            ("--gap", args.gap),
+            ("--train-config", args.train_config),
+            ("--env-id", args.env_id),
+            ("--city", args.city),
+            ("--n-uavs", args.n_uavs),
+        )
+        if value
+    ]
+    if refused:
+        raise ValueError(
+            f"--suite {args.suite} sets the city, sky and environment itself: leave out "
+            f"{', '.join(refused)} (change a setting of every city with --env-set KEY=VALUE)"
+        )
+    outputs = suite_outputs(args.suite)  # an unknown suite is refused here, before any work
+    seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
+    if min(seeds) < EVAL_SEED_START:
+        raise ValueError(
+            f"--seeds must be >= {EVAL_SEED_START} with --suite (seeds below may have been seen "
+            f"in training), got {min(seeds)}"
+        )
+    overrides = apply_overrides({}, args.env_overrides)
+    claim = contextlib.nullcontext(None)
+    if args.out is not None:
+        settings = {"suite": args.suite, "policies": args.policies, "seeds": seeds}
+        settings["env_set"] = overrides
+        claim = claim_output_folder(
+            args.out, "coopnav evaluate", settings, outputs=outputs, overwrite=args.overwrite
+        )
+    with claim as folder:
+        with compile_notice("about a minute", prefix="coopnav evaluate"):
+            warm_up_env(make_env_fn(DEFAULT_ENV_ID, {}))
+        report = evaluate_suite(
+            args.policies, seeds, args.suite, args.out, overrides=overrides, verbose=True
+        )
+        if folder is not None:
+            folder.finish(report.files)
+    print(report.header())
+    print()
+    print(report.to_markdown())
+    if report.files:
+        print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files))
     return 0
