@@ -8,17 +8,18 @@ character:
 ========================  ==============================================================
 ``monaco_ville``          a dense old town: Monaco-Ville, the old town on its rock, narrow
                           lanes between four-storey houses (``osm:monaco``)
-``monte_carlo``           a high-rise district: Monte Carlo, Monaco, towers of up to
-                          111 m above the casino and the harbour (``osm:monaco``)
-``helsinki_centre``       wide avenues: the centre of Helsinki, blocks of five to eight
-                          storeys along wide streets, esplanades and squares
-                          (``osm:helsinki``)
+``monte_carlo``           a high-rise district: Monte Carlo, Monaco, east of the casino,
+                          towers of up to 81 m (``osm:monaco``)
+``helsinki_centre``       wide avenues: the centre of Helsinki, city blocks along wide
+                          streets, the Esplanadi and squares (``osm:helsinki``)
 ========================  ==============================================================
 
 What every city of the suite shares:
 
 * **Buildings** are the file's buildings whose footprint's vertex mean lies in the box
-  (``city_bbox``), repaired as :mod:`coopnav_env.sim.file_city` does by default.
+  (``city_bbox``), repaired as :mod:`coopnav_env.sim.file_city` does by default. Each box
+  is about 600 m across, the size of the default grid city (500 m and its margin), so that
+  a route fits the task's 200 steps as on a grid.
 * **Heights** come from ``height``, else ``building:levels`` x 3 m; a building with neither
   gets ``city_default_height_m``, which is, for each city, the median roof height of the
   buildings in its box that have one, rounded to the metre (halves up).
@@ -109,16 +110,16 @@ REAL_SUITE: tuple[SuiteCity, ...] = (
         place="Monte Carlo, Monaco",
         character="high-rise district",
         osm="monaco",
-        bbox=(43.7370, 7.4230, 43.7450, 7.4330),
-        default_height_m=17.0,
+        bbox=(43.7395, 7.4265, 43.7450, 7.4340),
+        default_height_m=21.0,
     ),
     SuiteCity(
         name="helsinki_centre",
         place="Helsinki centre, Finland",
         character="wide avenues",
         osm="helsinki",
-        bbox=(60.166, 24.938, 60.174, 24.950),
-        default_height_m=12.0,
+        bbox=(60.1665, 24.9410, 60.1720, 24.9520),
+        default_height_m=10.0,
     ),
 )
 """The real-city suite (see the module docstring)."""
