@@ -7,7 +7,9 @@ Parses the flags, finds the environment to evaluate in and calls
 model or one or two folders up (:func:`train_config_of_policies`); else the environment's
 defaults; ``--env-set``, ``--n-uavs`` and ``--city`` then change it. A trained policy flown
 without its run's settings gets a warning on stderr naming the settings used instead.
-The library API (:func:`~coopnav_env.training.evaluate.evaluate`,
+``--suite NAME`` flies the policies on every city of a suite instead
+(:func:`coopnav_env.training.suite.evaluate_suite`). The library API
+(:func:`~coopnav_env.training.evaluate.evaluate`,
 :func:`~coopnav_env.training.evaluate.run_episode`, the report) stays in
 :mod:`coopnav_env.training.evaluate`.
 """
