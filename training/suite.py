@@ -29,6 +29,7 @@ from coopnav_env.sim.real_suite import SuiteCity, suite_cities
 from coopnav_env.training.envs import DEFAULT_ENV_ID
 from coopnav_env.training.evaluate import PolicyStats, Report, evaluate, write_report
 from coopnav_env.training.files import atomic_write_text, jsonable, write_json
+from coopnav_env.training.run_configs import train_config_of_policies
 
 __all__ = ["SUITE_COLUMNS", "SuiteReport", "evaluate_suite", "suite_outputs"]
 
@@ -126,8 +127,6 @@ def _fmt(value: Any, fmt: str) -> str:
 
 def _run_settings(policy: str) -> tuple[str, dict[str, Any]]:
     """(env id, env settings) of the training run a trained policy came from ({} for others)."""
-    from coopnav_env.training.evaluate_cli import train_config_of_policies
-
     found = train_config_of_policies([policy])
     return str(found.get("env_id") or DEFAULT_ENV_ID), dict(found.get("env") or {})
 
