@@ -154,10 +154,10 @@ def _city_report(
     stats = {s.policy: s for r in reports for s in r.stats}
     episodes = {k: v for r in reports for k, v in r.episodes.items()}
     own = {k: v for r in reports for k, v in r.own_frame.items()}
-    n = load_file_city(
+    n = load_file_city(  # as flown: --env-set may change the box or the default height
         f"osm:{resolve_osm_path(city.osm)}",
-        bbox=city.bbox,
-        default_height_m=city.default_height_m,
+        bbox=base.get("city_bbox", city.bbox),
+        default_height_m=base.get("city_default_height_m", city.default_height_m),
         warn=False,
     ).buildings.n
     trained = [
