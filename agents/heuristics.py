@@ -76,12 +76,14 @@ import numpy as np
 from coopnav_env.envs.autopilot import pursuit_velocity
 from coopnav_env.envs.observation_layout import obs_layout
 from coopnav_env.nav import pdop
+from coopnav_env.sim.file_city import FileCity
 from coopnav_env.sim.route import Polyline, extend_route, street_route, street_routes
 
 __all__ = [
     "COLUMN_ALIASES",
     "COLUMN_OPTIONS",
     "COLUMN_PRESETS",
+    "FILE_CITY_FULL_TURN_DEG",
     "ROUTE_CHOICES",
     "SETPOINT_OPTIONS",
     "WAYPOINT_OPTIONS",
@@ -103,6 +105,11 @@ __all__ = [
     "street_route",
     "waypoint_policy",
 ]
+
+
+FILE_CITY_FULL_TURN_DEG: float = 60.0
+"""The turn [deg] from which a vertex of a file city's route is a full corner for the column
+(``ColumnPolicy(full_turn_deg="auto")``); a smaller bend slows it less."""
 
 
 def _world_of(env: Any) -> Any:
@@ -285,6 +292,13 @@ class ColumnPolicy:
     hold_contact : bool, default False
         The head of the column stops while any UAV has no neighbour in relative-sensing
         range, until contact is back.
+    full_turn_deg : float, None or "auto", default "auto"
+        How the column slows at a vertex of its route. With a value in (0, 180] [deg], a
+        vertex is a full corner (``turn_speed_mps``) where the route turns by this angle or
+        more, and a bend of a smaller angle ``a`` is taken at ``turn_speed_mps + (cruise -
+        turn_speed_mps) (1 - a / full_turn_deg)`` (:func:`v_corner_at`); the A* routes of a
+        file city bend at every angle. None: every vertex is a full corner. ``"auto"``: 60 deg
+        on a file city's route, None on a grid's (whose routes turn at right angles).
     """
 
     name = "column"
@@ -309,6 +323,7 @@ class ColumnPolicy:
         smoothing: float = 0.7,
         ceiling_margin_m: float | None = None,
         hold_contact: bool = False,
+        full_turn_deg: float | str | None = "auto",
     ):
         given = {k: v for k, v in locals().items() if k not in ("self", "env", "__class__")}
         self.env = env
@@ -368,6 +383,11 @@ class ColumnPolicy:
         if not isinstance(s["hold_contact"], (bool, np.bool_)):
             raise ValueError(f"hold_contact must be True or False, got {s['hold_contact']!r}")
         self.hold_contact = bool(s["hold_contact"])
+        full_turn = s["full_turn_deg"]
+        if full_turn is not None and full_turn != "auto":
+            full_turn = _number("full_turn_deg", full_turn, 0.0, 180.0, lo_open=True, unit=" deg")
+        self.full_turn_deg = full_turn
+        self._full_turn_now: float | None = None  # full_turn_deg resolved for the route flown
         self._index = {a: i for i, a in enumerate(self.base.possible_agents)}
         self.layout = obs_layout(cfg)
         self._walls = self.layout["wall_distance"]
@@ -423,6 +443,8 @@ class ColumnPolicy:
         state.setdefault("ceiling_margin_m", None)
         state.setdefault("smoothing", 0.7)
         state.setdefault("hold_contact", sky)
+        state.setdefault("full_turn_deg", None)  # pickled before bends: every vertex a corner
+        state.setdefault("_full_turn_now", None)
         if "_offset" not in state and "_index" in state:
             state["_offset"] = np.zeros(len(state["_index"]))
         self.__dict__.update(state)
@@ -645,12 +667,13 @@ class ColumnPolicy:
         """Apply a path operation per UAV on its own sub-column's path.
 
         ``op``: ``project`` (xy, lo, hi), ``tangent`` (s), ``point`` (s) or ``corner`` (s,
-        v_turn, brake, vmax: :func:`v_corner_at`); array arguments are per UAV, row for row
-        with ``groups``. One path (no split): one call on the whole arrays."""
+        v_turn, brake, vmax: :func:`v_corner_at`, with the full turn of the route flown);
+        array arguments are per UAV, row for row with ``groups``. One path (no split): one
+        call on the whole arrays."""
 
         def call(path: Polyline, *a: Any) -> np.ndarray:
             if op == "corner":
-                return v_corner_at(path, *a)
+                return v_corner_at(path, *a, full_turn_deg=self._full_turn_now)
             return getattr(path, op)(*a)
 
         if len(self._paths) == 1:
@@ -672,6 +695,10 @@ class ColumnPolicy:
     def _plan(self, est: np.ndarray, idx: np.ndarray, city: Any, goal: np.ndarray) -> None:
         n = len(self._index)
         self._n = n
+        full_turn = self.full_turn_deg
+        if full_turn == "auto":
+            full_turn = FILE_CITY_FULL_TURN_DEG if isinstance(city, FileCity) else None
+        self._full_turn_now = full_turn
         centre = est[:, :2].mean(axis=0)
         routes = self.choose_routes(city, centre, goal[:2])
         if len(routes) not in (1, 2):
@@ -718,16 +745,37 @@ class ColumnPolicy:
 
 
 def v_corner_at(
-    path: Polyline, s: np.ndarray, v_turn: float, brake: float, vmax: float
+    path: Polyline,
+    s: np.ndarray,
+    v_turn: float,
+    brake: float,
+    vmax: float,
+    full_turn_deg: float | None = None,
 ) -> np.ndarray:
-    """Speed limit before the next corner, at most ``vmax``.
+    """Speed limit before the corners ahead, at most ``vmax``.
 
-    ``v_turn + sqrt(2 brake (d - 3 m))`` at an arc length ``d`` before the corner: the 3 m
-    margin accounts for the step of travel before the next command (``dt = 1 s``).
+    ``v_c + sqrt(2 brake (d - 3 m))`` at an arc length ``d`` before a vertex whose speed is
+    ``v_c``, the smallest over the vertices ahead: the 3 m margin accounts for the step of
+    travel before the next command (``dt = 1 s``). With ``full_turn_deg`` None every interior
+    vertex is a corner, ``v_c = v_turn`` (then the next one binds). With a value, a vertex
+    where the route turns by ``a >= full_turn_deg`` is a corner and a bend of ``a`` below it
+    gets ``v_c = v_turn + (vmax - v_turn) (1 - a / full_turn_deg)``.
     """
-    d = path.distance_to_corner(np.maximum(s, 0.0))
-    d = np.where(np.isfinite(d), np.maximum(d - 3.0, 0.0), 1e9)
-    return np.minimum(vmax, v_turn + np.sqrt(2.0 * brake * d))
+    if full_turn_deg is None:
+        d = path.distance_to_corner(np.maximum(s, 0.0))
+        d = np.where(np.isfinite(d), np.maximum(d - 3.0, 0.0), 1e9)
+        return np.minimum(vmax, v_turn + np.sqrt(2.0 * brake * d))
+    s = np.maximum(np.asarray(s, dtype=float), 0.0)
+    corners = path.s[1:-1]
+    if corners.size == 0:
+        return np.full(s.shape, float(vmax))
+    cos_turn = np.clip(np.sum(path.seg_dir[:-1] * path.seg_dir[1:], axis=1), -1.0, 1.0)
+    share = np.minimum(np.degrees(np.arccos(cos_turn)) / full_turn_deg, 1.0)
+    v_c = v_turn + max(vmax - v_turn, 0.0) * (1.0 - share)
+    ahead = corners[None, :] - s.reshape(-1, 1)
+    ahead = np.where(ahead >= -1e-9, np.maximum(ahead - 3.0, 0.0), np.inf)
+    v = np.min(v_c[None, :] + np.sqrt(2.0 * brake * ahead), axis=1)
+    return np.minimum(vmax, v).reshape(s.shape)
 
 
 def _tail_holds(s: Mapping[str, Any], n_uavs: int) -> float:

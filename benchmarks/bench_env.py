@@ -35,6 +35,14 @@ machines):
    temporary file), hovering (200-step episodes) and with the ``column`` heuristic flying
    its route, in alternating rounds; the ratio is the cost of a file-city step over a
    grid-city step.
+8. **Real cities under a real sky**: the same at N = 5 on the default grid city (nominal
+   GPS + BeiDou sky) and on real OpenStreetMap cities under the shipped IGS GPS sky
+   (``rinex:igs_brdc``): every city of the real-city suite
+   (:data:`coopnav_env.sim.real_suite.REAL_SUITE`) and a box of the shipped Monaco extract of
+   about 950 buildings; the ratios are the cost of a real-city step over a grid-city step
+   measured in the same run, with the grid city's own sky and under the same real sky (the
+   grid replays the same epochs every episode, whose sky it caches; a file sky starts each
+   episode at a new time). Needs pyosmium (the ``osm`` extra).
 
 Usage::
 
@@ -69,7 +77,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from coopnav_env import urban_canyon_v0
 
-SECTIONS = ("compare", "stages", "memory", "scaling", "batched", "train", "file_city")
+SECTIONS = (
+    "compare",
+    "stages",
+    "memory",
+    "scaling",
+    "batched",
+    "train",
+    "file_city",
+    "real_city",
+)
 
 # --------------------------------------------------------------------------------------------
 # environments under test
@@ -730,6 +747,55 @@ def section_file_city(args, out: dict) -> None:
 
 
 # --------------------------------------------------------------------------------------------
+# 8. real cities under a real sky
+# --------------------------------------------------------------------------------------------
+
+MONACO_LARGE_BBOX: tuple[float, float, float, float] = (43.7280, 7.4150, 43.7460, 7.4350)
+"""A box of the shipped Monaco extract with about 950 buildings (section 8)."""
+
+
+def section_real_city(args, out: dict) -> None:
+    import warnings
+
+    from coopnav_env.sim.real_suite import REAL_SUITE, SUITE_SKY, SUITE_SYSTEMS
+
+    print("\n== 8. real cities under a real sky vs the grid city, N = 5 (steps/s) ==")
+    if not have("osmium"):
+        print("   skipped: needs pyosmium (pip install -e '.[osm]')")
+        return
+    sky = {"constellation": SUITE_SKY, "systems": SUITE_SYSTEMS}
+    cities = [(c.name, c.env_settings()) for c in REAL_SUITE]
+    large = {"city": "osm:monaco", "city_bbox": MONACO_LARGE_BBOX, "city_default_height_m": 15.0}
+    cities.append(("monaco_large", large | sky))
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the buildings without a height, the sky's records
+        for name, kw in cities:
+            probe = make_urban(5, **kw)
+            probe.reset(seed=0)
+            n_buildings = probe.world.city.buildings.n
+            for label, stepper in (
+                ("hover", lambda **k: HoverStepper(make_urban(5, **k)).run),
+                ("column", lambda **k: PolicyStepper(make_urban(5, **k), "column").run),
+            ):
+                fns = {"grid": stepper(), "grid_sky": stepper(**sky), "real": stepper(**kw)}
+                best = side_by_side(fns, args.seconds, args.rounds)
+                ratio = best["grid"] / best["real"]
+                city_ratio = best["grid_sky"] / best["real"]
+                print(
+                    f"   {name:>15} ({n_buildings:4d} buildings) {label:>6}: grid city "
+                    f"{best['grid']:7.1f}, under the real sky {best['grid_sky']:7.1f}, real city "
+                    f"{best['real']:7.1f}; a real-city step costs {ratio:.2f}x a grid-city "
+                    f"step, {city_ratio:.2f}x under the same sky"
+                )
+                rows.append(
+                    {"city": name, "buildings": n_buildings, "actions": label, **best}
+                    | {"cost_ratio": ratio, "cost_ratio_same_sky": city_ratio}
+                )
+    out["real_city"] = rows
+
+
+# --------------------------------------------------------------------------------------------
 # main
 # --------------------------------------------------------------------------------------------
 
@@ -796,6 +862,7 @@ def main(argv: list[str] | None = None) -> int:
         "batched": section_batched,
         "train": section_train,
         "file_city": section_file_city,
+        "real_city": section_real_city,
     }
     for name in SECTIONS:
         if name in args.sections:

@@ -79,6 +79,7 @@ __all__ = [
     "cruise_spacing_m",
     "evaluate",
     "run_episode",
+    "write_report",
 ]
 
 DEFAULT_EPISODES: int = 20
@@ -1001,6 +1002,12 @@ def _write(report: Report, out: Path, env: Any, plots: bool) -> None:
             path = out / f"trajectories_{_slug(name)}.png"
             if plot_trajectories(env, eps[0], path, title=f"{labels[name]}, seed {eps[0].seed}"):
                 files[f"trajectories:{name}"] = path
+
+
+def write_report(report: Report, out: str | Path) -> None:
+    """Write ``report``'s files (``report.json``, ``report.csv``, ``report.md``,
+    ``errors.npz``; no plots) into the folder ``out``, recording them in ``report.files``."""
+    _write(report, Path(out), None, plots=False)
 
 
 def _csv_cell(v: Any) -> Any:

@@ -4,10 +4,13 @@ Parses the flags, finds the environment to evaluate in and calls
 :func:`coopnav_env.training.evaluate.evaluate`. The environment is, in order: the
 ``config.yaml`` named by ``--train-config``; else the one of the run a trained policy
 (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/``torchrl:`` ...) came from, found beside the
-model or one or two folders up (:func:`train_config_of_policies`); else the environment's
+model or one or two folders up
+(:func:`~coopnav_env.training.run_configs.train_config_of_policies`); else the environment's
 defaults; ``--env-set``, ``--n-uavs`` and ``--city`` then change it. A trained policy flown
 without its run's settings gets a warning on stderr naming the settings used instead.
-The library API (:func:`~coopnav_env.training.evaluate.evaluate`,
+``--suite NAME`` flies the policies on every city of a suite instead
+(:func:`coopnav_env.training.suite.evaluate_suite`). The library API
+(:func:`~coopnav_env.training.evaluate.evaluate`,
 :func:`~coopnav_env.training.evaluate.run_episode`, the report) stays in
 :mod:`coopnav_env.training.evaluate`.
 """
@@ -24,7 +27,7 @@ from typing import Any
 
 from coopnav_env.agents import action_frame_of
 from coopnav_env.training.compile_notice import compile_notice, warm_up_env
-from coopnav_env.training.config import apply_overrides, parse_settings_yaml
+from coopnav_env.training.config import apply_overrides
 from coopnav_env.training.envs import (
     DEFAULT_ENV_ID,
     EVAL_SEED_START,
@@ -33,6 +36,13 @@ from coopnav_env.training.envs import (
 )
 from coopnav_env.training.evaluate import DEFAULT_EPISODES, check_methods_and_gap, evaluate
 from coopnav_env.training.files import claim_output_folder, jsonable
+from coopnav_env.training.run_configs import (
+    TRAINED_KINDS,
+    config_of_policy,
+    is_trained,
+    read_train_config,
+    train_config_of_policies,
+)
 
 EVALUATE_OUTPUTS = (
     "report.json",
@@ -149,6 +159,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "mappo_route=mappo:pretrained/route_s0,mappo:pretrained/route_s1 (default: none)",
     )
     parser.add_argument(
+        "--suite",
+        default=None,
+        metavar="NAME",
+        help="fly the policies on every city of a suite instead of one environment: 'real' "
+        "(real OpenStreetMap places under a real GPS sky, coopnav_env.sim.real_suite); one "
+        "report folder per city in --out, plus summary.md/summary.json; trained policies fly "
+        "their run's settings, the suite's city and sky replacing the run's; not with "
+        "--methods, --gap, --train-config, --env-id, --city or --n-uavs (default: none)",
+    )
+    parser.add_argument(
         "--gap",
         nargs=2,
         default=None,
@@ -182,46 +202,6 @@ def parse_methods(items: Sequence[str]) -> dict[str, list[str]]:
     return methods
 
 
-def _read_train_config(path: Path) -> dict[str, Any]:
-    data = parse_settings_yaml(path.read_text(), f"training config {path}") or {}
-    if not isinstance(data, Mapping):
-        raise ValueError(f"training config {path} must be a mapping of settings")
-    return dict(data)
-
-
-TRAINED_KINDS: tuple[str, ...] = ("ppo", "rllib", "mappo", "ippo", "torchrl")
-"""Policy prefixes of trained policies, whose run folder records their environment."""
-
-
-def _is_trained(name: str) -> bool:
-    """Whether a policy name is a trained policy, ``KIND:PATH`` (KIND in TRAINED_KINDS)."""
-    kind, sep, _ = name.partition(":")
-    return bool(sep) and kind in TRAINED_KINDS
-
-
-def _config_of_policy(name: str) -> Path | None:
-    """The ``config.yaml`` of the run a trained policy came from (None: not found, or the
-    policy is not a trained one): beside the model, or one or two folders up (for a shipped
-    TorchRL policy, ``mappo:pretrained/...``, in its folder under ``agents/pretrained``)."""
-    if not _is_trained(name):
-        return None
-    kind, _, path = name.partition(":")
-    model = Path(path)
-    shipped = path == "pretrained" or path.startswith("pretrained/")
-    if kind in ("mappo", "ippo", "torchrl") and shipped:
-        from coopnav_env.agents.marl_policy import resolve_marl_checkpoint
-
-        try:  # a shipped policy: its folder under agents/pretrained
-            model = resolve_marl_checkpoint(path, "ippo" if kind == "ippo" else "mappo")
-        except FileNotFoundError:
-            return None
-    for folder in (model, model.parent, model.parent.parent):
-        cfg = folder / "config.yaml"
-        if cfg.is_file():
-            return cfg
-    return None
-
-
 def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
     """(env id, env kwargs, where they came from): ``--train-config``, else the run of a
     trained policy, then flags; warns on stderr about a trained policy without its run's
@@ -233,14 +213,14 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
         p = Path(args.train_config)
         if not p.is_file():
             raise FileNotFoundError(f"training config not found: {p}")
-        trained = _read_train_config(p)
+        trained = read_train_config(p)
         source = f"from --train-config {p}"
     else:
         trained = train_config_of_policies(args.policies)
-        found = [c for c in map(_config_of_policy, args.policies) if c is not None]
+        found = [c for c in map(config_of_policy, args.policies) if c is not None]
         if found:
             source = f"from {found[0]}"
-        elif any(map(_is_trained, args.policies)):
+        elif any(map(is_trained, args.policies)):
             source = "NO config.yaml of the trained policy's run: maybe not its training settings"
         else:
             source = ""
@@ -280,7 +260,7 @@ def _warn_untracked(
     settings used, and the reward settings they resolve to where the environment has a
     ``config`` (``urban_canyon_v0``).
     """
-    missing = [n for n in policies if _is_trained(n) and _config_of_policy(n) is None]
+    missing = [n for n in policies if is_trained(n) and config_of_policy(n) is None]
     if not missing:
         return
     where = "the other policy's run settings" if have_config else "the environment's defaults"
@@ -322,36 +302,11 @@ def reward_settings(env_id: str, env_kwargs: Mapping[str, Any]) -> str:
     return ", ".join(f"{k}={v!r}" for k, v in values)
 
 
-def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
-    """The training configuration a trained policy (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/
-    ``torchrl:``) came from.
-
-    ``coopnav train`` writes ``config.yaml`` into its output directory; a model at
-    ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
-    in the environment it was trained in unless told otherwise (empty if none is found; then
-    ``coopnav evaluate`` warns on stderr).
-    Trained policies from runs with different environment settings raise ``ValueError``.
-    """
-    found: dict[str, Any] | None = None
-    for name in policies:
-        cfg = _config_of_policy(name)
-        if cfg is None:
-            continue
-        data = _read_train_config(cfg)
-        key = (data.get("env_id"), data.get("env") or {})
-        if found is not None and key != (found.get("env_id"), found.get("env") or {}):
-            raise ValueError(
-                "the PPO policies were trained in different environments "
-                f"({found.get('env')} vs {data.get('env')}); pass --train-config or "
-                "--env-set explicitly"
-            )
-        found = data
-    return found or {}
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``coopnav evaluate``; returns the exit status (errors: see
     :mod:`coopnav_env.training.cli`)."""
+    if getattr(args, "suite", None) is not None:
+        return _run_suite(args)
     methods = parse_methods(getattr(args, "methods", None) or [])
     gap = getattr(args, "gap", None)
     listed = list(args.policies)
@@ -408,4 +363,56 @@ def run(args: argparse.Namespace) -> int:
         print(report.gap_markdown())
     if report.files:
         print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files.values()))
+    return 0
+
+
+def _run_suite(args: argparse.Namespace) -> int:
+    """``coopnav evaluate --suite NAME``: :func:`coopnav_env.training.suite.evaluate_suite`."""
+    from coopnav_env.training.suite import evaluate_suite, suite_outputs
+
+    refused = [
+        flag
+        for flag, value in (
+            ("--methods", args.methods),
+            ("--gap", args.gap),
+            ("--train-config", args.train_config),
+            ("--env-id", args.env_id),
+            ("--city", args.city),
+            ("--n-uavs", args.n_uavs),
+        )
+        if value
+    ]
+    if refused:
+        raise ValueError(
+            f"--suite {args.suite} sets the city, sky and environment itself: leave out "
+            f"{', '.join(refused)} (change a setting of every city with --env-set KEY=VALUE)"
+        )
+    outputs = suite_outputs(args.suite)  # an unknown suite is refused here, before any work
+    seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
+    if min(seeds) < EVAL_SEED_START:
+        raise ValueError(
+            f"--seeds must be >= {EVAL_SEED_START} with --suite (seeds below may have been seen "
+            f"in training), got {min(seeds)}"
+        )
+    overrides = apply_overrides({}, args.env_overrides)
+    claim = contextlib.nullcontext(None)
+    if args.out is not None:
+        settings = {"suite": args.suite, "policies": args.policies, "seeds": seeds}
+        settings["env_set"] = overrides
+        claim = claim_output_folder(
+            args.out, "coopnav evaluate", settings, outputs=outputs, overwrite=args.overwrite
+        )
+    with claim as folder:
+        with compile_notice("about a minute", prefix="coopnav evaluate"):
+            warm_up_env(make_env_fn(DEFAULT_ENV_ID, {}))
+        report = evaluate_suite(
+            args.policies, seeds, args.suite, args.out, overrides=overrides, verbose=True
+        )
+        if folder is not None:
+            folder.finish(report.files)
+    print(report.header())
+    print()
+    print(report.to_markdown())
+    if report.files:
+        print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files))
     return 0

@@ -104,6 +104,7 @@ __all__ = [
     "GPS_VALIDITY_S",
     "MIN_SATELLITES",
     "SAMPLE_NAV_PATH",
+    "SHIPPED_NAV_PATHS",
     "BroadcastConstellation",
     "NavigationFile",
     "RinexWarning",
@@ -148,6 +149,15 @@ FEW_SATELLITES_FRACTION: float = 0.5
 SAMPLE_NAV_PATH: Path = Path(__file__).resolve().parent.parent / "data" / "sample_nav.rnx"
 """The sample mixed GPS + BeiDou navigation file shipped with the package (one day, made by
 ``coopnav_env/data/make_sample_nav.py`` from the nominal constellations)."""
+
+SHIPPED_NAV_PATHS: dict[str, Path] = {
+    "sample": SAMPLE_NAV_PATH,
+    "igs_brdc": SAMPLE_NAV_PATH.with_name("brdc2420.18n.gz"),
+}
+"""Navigation files shipped with the package, by the name a ``rinex:`` setting gives them:
+``"sample"`` (:data:`SAMPLE_NAV_PATH`) and ``"igs_brdc"``, a real one: the IGS merged
+broadcast GPS ephemerides (RINEX 2.11, gzip) of 2018-08-30, 6 h of every GPS satellite, usable
+anywhere on Earth (source and licence in ``coopnav_env/data/NOTICE-navigation.md``)."""
 
 SECONDS_PER_WEEK: float = 604_800.0
 _HALF_WEEK_S = 302_400.0
@@ -1264,8 +1274,10 @@ def clear_caches() -> None:
 
 
 def resolve_nav_path(spec: str) -> Path:
-    """The file a ``rinex:`` setting names: ``"sample"`` is :data:`SAMPLE_NAV_PATH`."""
-    return SAMPLE_NAV_PATH if spec == "sample" else Path(spec).expanduser()
+    """The file a ``rinex:`` setting names: a name of :data:`SHIPPED_NAV_PATHS` (``"sample"``,
+    ``"igs_brdc"``) is the shipped file, anything else a path."""
+    shipped = SHIPPED_NAV_PATHS.get(spec)
+    return shipped if shipped is not None else Path(spec).expanduser()
 
 
 def load_broadcast_constellation(
@@ -1276,7 +1288,8 @@ def load_broadcast_constellation(
     Parameters
     ----------
     path : str or path-like
-        The navigation file; ``"sample"``: the one shipped with the package.
+        The navigation file; a name of :data:`SHIPPED_NAV_PATHS` (``"sample"``, ``"igs_brdc"``):
+        the one shipped with the package.
     systems : tuple of str, optional
         Systems to keep, in this order (names from ``SYSTEMS``).
 

