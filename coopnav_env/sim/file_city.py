@@ -131,6 +131,7 @@ __all__ = [
     "CityReport",
     "ExtrudedBuildings",
     "FileCity",
+    "city_from_buildings",
     "load_file_city",
     "read_city_footprints",
     "read_geojson_footprints",
@@ -1519,10 +1520,57 @@ def _load_cached(
         repair=repair,
         bbox=box,
     )
-    path = path.removeprefix(OSM_PREFIX)
+    return city_from_buildings(
+        buildings,
+        origin=org,
+        grid_resolution_m=res,
+        clearance_m=clearance,
+        source=path.removeprefix(OSM_PREFIX),
+        report=report,
+    )
+
+
+def city_from_buildings(
+    buildings: ExtrudedBuildings,
+    *,
+    origin: tuple[float, float, float],
+    grid_resolution_m: float = GRID_RESOLUTION_M,
+    clearance_m: float = CLEARANCE_M,
+    extent_m: tuple[float, float, float, float] | None = None,
+    source: str = "",
+    report: CityReport | None = None,
+) -> FileCity:
+    """A :class:`FileCity` of extruded buildings in a local frame: the free-space grid, the
+    reachable and built-up cells (module docstring), as a city file's.
+
+    Parameters
+    ----------
+    buildings : ExtrudedBuildings
+        The buildings, East/North [m] in the frame of ``origin``.
+    origin : (float, float, float)
+        ``(lat_deg, lon_deg, alt_m)`` of the frame.
+    grid_resolution_m, clearance_m : float
+        Free-space cell size and the distance kept from walls [m].
+    extent_m : (x0, x1, y0, y1), optional
+        The city's extent [m]; default: the footprints' bounding box widened by
+        :data:`EXTENT_MARGIN_M` on every side.
+    source : str
+        What the city came from (named in messages).
+    report : CityReport, optional
+        What reading a file found.
+
+    Raises
+    ------
+    CityFileError
+        No free space between the buildings.
+    """
+    res, clearance = float(grid_resolution_m), float(clearance_m)
     bb = buildings.bbox_m
-    x0, y0 = bb[:, 0].min() - EXTENT_MARGIN_M, bb[:, 1].min() - EXTENT_MARGIN_M
-    x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
+    if extent_m is None:
+        x0, y0 = bb[:, 0].min() - EXTENT_MARGIN_M, bb[:, 1].min() - EXTENT_MARGIN_M
+        x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
+    else:
+        x0, x1, y0, y1 = (float(v) for v in extent_m)
     xs = x0 + res / 2.0 + res * np.arange(max(int((x1 - x0) // res), 1))
     ys = y0 + res / 2.0 + res * np.arange(max(int((y1 - y0) // res), 1))
     clear = _pk.wall_clearance(
@@ -1531,7 +1579,7 @@ def _load_cached(
     free = clear >= clearance
     reach = _largest_component(free)
     if not np.any(reach):
-        raise CityFileError(f"city file {path}: no free space between the buildings")
+        raise CityFileError(f"city file {source}: no free space between the buildings")
     rows, cols = np.nonzero(reach)
     cells = np.column_stack([xs[cols], ys[rows], np.full(rows.size, 0.5)])
     _, wall_m = buildings.sky_and_walls(cells, np.arange(0.0, 360.0, 45.0))
@@ -1552,9 +1600,9 @@ def _load_cached(
         free=_readonly(free),
         reachable=_readonly(reach),
         built_up=_readonly(built),
-        origin=org,
-        source=path,
-        n_default_height=report.n_default_height,
+        origin=origin,
+        source=source,
+        n_default_height=0 if report is None else report.n_default_height,
         clearance_grid_m=_readonly(clear),
         report=report,
     )
