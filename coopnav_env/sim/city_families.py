@@ -23,18 +23,19 @@ The families (:data:`FAMILIES`)
     lots of 120-400 m^2; roofs of 3-6 storeys (3.2 m each, up to 1.5 m more for the roof); one
     block in fourteen a small square.
 ``high_rise``
-    A street grid turned by a random angle, blocks 70-110 m apart between streets 22-36 m
-    wide; one to four towers per block, 2-6 m apart and set back 1-3 m; roofs heavy-tailed
-    (Pareto, shape 1.5, above 20 m, median near 32 m, capped at 300 m); one block in ten a
-    plaza.
+    A street grid turned by a random angle, street centres 70-110 m apart, streets 22-36 m
+    wide; one to four towers per block, 2-6 m apart and set back 1-3 m, those under
+    150 m^2 left out; roofs heavy-tailed (Pareto, shape 1.5, above 20 m, median near 32 m,
+    capped at 300 m); one block in twelve a plaza.
 ``avenues``
-    A turned street grid (blocks 55-90 m, streets 14-20 m), every third line a boulevard
-    35-50 m wide, and two diagonal avenues 20-30 m wide through the middle third of the
-    square; lots of 300-1000 m^2; roofs normal around 24 m (12-45 m).
+    A turned street grid (street centres 70-105 m apart, streets 14-20 m), every third line
+    a boulevard 35-50 m wide, and two diagonal avenues 20-30 m wide through the middle third
+    of the square; lots of 300-1000 m^2; roofs normal around 24 m (12-45 m); one block in
+    twenty open.
 ``courtyards``
-    Perimeter blocks on a turned grid (blocks 65-95 m, streets 16-24 m): each block one
-    building with a chamfered outline (corners cut 6-12 m) and an inner yard (a hole) 11-16 m
-    behind the street wall; roofs 15-27 m; one block in ten a park.
+    Perimeter blocks on a turned grid (street centres 81-119 m apart, streets 16-24 m): each
+    block one building with a chamfered outline (corners cut 6-12 m) and an inner yard (a
+    hole) 11-16 m behind the street wall; roofs 15-27 m; one block in ten a park.
 
 The geometry is pure numpy: blocks are convex pieces of the square cut by streets (straight
 lines with a width, or the bisectors of Voronoi seeds), lots are convex pieces of the blocks,
@@ -244,19 +245,25 @@ def _voronoi_blocks(rng: np.random.Generator, spacing_m: float, width_of: Any) -
     widths = width_of(rng, m * m).reshape(m, m)
     widths = np.triu(widths, 1)
     widths = widths + widths.T
+    w_max = float(widths.max())
     square = _area_square()
     blocks = []
     for i in range(m):
         d = seeds - seeds[i]
         dist = np.hypot(d[:, 0], d[:, 1])
         cell = square
+        reach = float(np.max(np.hypot(*(cell - seeds[i]).T)))
         for j in np.argsort(dist)[1:]:
-            if dist[j] > 3.0 * spacing_m:  # beyond every neighbour (jitter <= 0.4 spacing)
+            if dist[j] / 2.0 - w_max / 2.0 > reach:  # this and every farther street misses
                 break
             n = d[j] / dist[j]
-            cell = _clip(cell, n, float(n @ (seeds[i] + seeds[j]) / 2.0) - widths[i, j] / 2.0)
-            if cell.shape[0] == 0:
+            cut = _clip(cell, n, float(n @ (seeds[i] + seeds[j]) / 2.0) - widths[i, j] / 2.0)
+            if cut.shape[0] == 0:
+                cell = cut
                 break
+            if cut is not cell:
+                cell = cut
+                reach = float(np.max(np.hypot(*(cell - seeds[i]).T)))
         if _area(cell) >= _MIN_BLOCK_AREA_M2:
             blocks.append(cell)
     return blocks
