@@ -1530,6 +1530,38 @@ def _load_cached(
     )
 
 
+def _walls_within(
+    buildings: ExtrudedBuildings, cells: FloatArray, radius_m: float, tile_m: float = 100.0
+) -> NDArray[np.int64]:
+    """How many of 8 directions (45 deg apart) from each point ``(n, 3)`` meet a wall within
+    ``radius_m`` (:meth:`ExtrudedBuildings.sky_and_walls`), ``(n,)``. The points are taken a
+    tile of ``tile_m`` at a time, against the buildings whose bounding box comes within
+    ``radius_m`` of the tile's points: a wall within the radius belongs to one of them, and the
+    distance to it is the same number, so the counts are those of all buildings at once."""
+    dirs = _ray_directions(np.arange(0.0, 360.0, 45.0))
+    out = np.zeros(cells.shape[0], dtype=np.int64)
+    bb, es = buildings.bbox_m, buildings.edge_start
+    _, tile = np.unique(np.floor(cells[:, :2] / tile_m), axis=0, return_inverse=True)
+    tile = tile.reshape(-1)
+    for k in range(int(tile.max()) + 1 if tile.size else 0):
+        sel = np.nonzero(tile == k)[0]
+        pts = np.ascontiguousarray(cells[sel])
+        lo, hi = pts[:, :2].min(axis=0) - radius_m, pts[:, :2].max(axis=0) + radius_m
+        sub = np.nonzero(
+            (bb[:, 2] >= lo[0]) & (bb[:, 0] <= hi[0]) & (bb[:, 3] >= lo[1]) & (bb[:, 1] <= hi[1])
+        )[0]
+        if sub.size == 0:
+            continue
+        n_edges = es[sub + 1] - es[sub]
+        start = np.r_[0, np.cumsum(n_edges)].astype(np.int64)
+        idx = np.repeat(es[sub] - start[:-1], n_edges) + np.arange(start[-1])
+        _, dist = _pk.sky_and_walls(
+            pts, dirs, buildings.edges_m[idx], start, buildings.heights_m[sub], bb[sub]
+        )
+        out[sel] = np.sum(dist <= radius_m, axis=1)
+    return out
+
+
 def city_from_buildings(
     buildings: ExtrudedBuildings,
     *,
@@ -1582,8 +1614,7 @@ def city_from_buildings(
         raise CityFileError(f"city file {source}: no free space between the buildings")
     rows, cols = np.nonzero(reach)
     cells = np.column_stack([xs[cols], ys[rows], np.full(rows.size, 0.5)])
-    _, wall_m = buildings.sky_and_walls(cells, np.arange(0.0, 360.0, 45.0))
-    near = np.sum(wall_m <= BUILT_UP_RADIUS_M, axis=1) >= BUILT_UP_MIN_DIRECTIONS
+    near = _walls_within(buildings, cells, BUILT_UP_RADIUS_M) >= BUILT_UP_MIN_DIRECTIONS
     built = np.zeros_like(reach)
     built[rows[near], cols[near]] = True
     built = _largest_component(built)  # routes between its cells need not leave it
