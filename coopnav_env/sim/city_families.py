@@ -99,26 +99,28 @@ _MIN_BLOCK_AREA_M2 = 150.0
 def _clip(poly: FloatArray, n: FloatArray, c: float) -> FloatArray:
     """The part of convex ``poly`` where ``n . p <= c`` (Sutherland-Hodgman, one half-plane:
     each vertex inside is kept, followed by the crossing of its edge where the edge leaves or
-    enters)."""
+    enters). Plain floats: the polygons have a handful of vertices."""
     if poly.shape[0] == 0:
         return poly
-    s = poly @ n - c
-    inside = s <= 0.0
-    if inside.all():
+    nx, ny = float(n[0]), float(n[1])
+    pts = poly.tolist()
+    s = [x * nx + y * ny - c for x, y in pts]
+    if max(s) <= 0.0:
         return poly
-    if not inside.any():
+    if min(s) > 0.0:
         return poly[:0]
-    k = poly.shape[0]
-    nxt = np.concatenate((poly[1:], poly[:1]))
-    s_nxt = np.concatenate((s[1:], s[:1]))
-    crosses = inside != (s_nxt <= 0.0)
-    t = np.divide(s, s - s_nxt, out=np.zeros(k), where=crosses)
-    pts = np.empty((k, 2, 2))
-    pts[:, 0] = poly
-    pts[:, 1] = poly + t[:, None] * (nxt - poly)
-    keep = np.empty((k, 2), dtype=bool)
-    keep[:, 0], keep[:, 1] = inside, crosses
-    return pts[keep]
+    out = []
+    k = len(pts)
+    for i in range(k):
+        j = i + 1 if i + 1 < k else 0
+        si, sj = s[i], s[j]
+        if si <= 0.0:
+            out.append(pts[i])
+        if (si <= 0.0) != (sj <= 0.0):
+            t = si / (si - sj)
+            (xi, yi), (xj, yj) = pts[i], pts[j]
+            out.append([xi + t * (xj - xi), yi + t * (yj - yi)])
+    return np.array(out, dtype=np.float64).reshape(-1, 2)
 
 
 def _area(poly: FloatArray) -> float:
