@@ -100,3 +100,20 @@ def test_statistics_measure_the_grid_city_streets() -> None:
     assert 0.0 < low.built_share < 1.0 and low.street_width_m < tall.street_width_m
     table = statistics_table([grid, low]).splitlines()
     assert len(table) == 4 and table[2].startswith("| grid | ")
+
+
+def test_the_tiled_built_up_count_equals_asking_every_building() -> None:
+    from coopnav_env.sim.file_city import BUILT_UP_RADIUS_M, _walls_within, load_file_city
+    from coopnav_env.sim.osm_city import helsinki_geojson_path
+
+    for city in (
+        load_file_city(helsinki_geojson_path(), warn=False),
+        family_city("old_town", np.random.default_rng(5)),
+    ):
+        rows, cols = np.nonzero(city.reachable)
+        cells = np.column_stack([city.grid_x_m[cols], city.grid_y_m[rows], np.full(rows.size, 0.5)])
+        _, wall_m = city.buildings.sky_and_walls(cells, np.arange(0.0, 360.0, 45.0))
+        every = np.sum(wall_m <= BUILT_UP_RADIUS_M, axis=1)
+        tiled = _walls_within(city.buildings, cells, BUILT_UP_RADIUS_M)
+        np.testing.assert_array_equal(tiled, every)
+        assert 0 < np.count_nonzero(every >= 4) < every.size
