@@ -293,8 +293,9 @@ itself, `env(...)` is `pettingzoo.utils.parallel_to_aec(parallel_env(...))` (AEC
 `n_uavs` (5): number of UAVs, in [1, 256].
 
 `city` (`"grid"`): `"grid"`, a random street grid, `"canyon"`, the paper's canyon,
-`"geojson:PATH"`, building footprints from a file (section "A city from a GeoJSON file"), or
-`"osm:PATH"`, an OpenStreetMap extract (`docs/cities.md`).
+`"geojson:PATH"`, building footprints from a file (section "A city from a GeoJSON file"),
+`"osm:PATH"`, an OpenStreetMap extract (`docs/cities.md`), or `"family:NAME"`, a city
+generated per episode of a family (`docs/city_families.md`).
 
 `city_origin`, `city_start_lat_lon`, `city_goal_lat_lon` (`"file"`, None, None): the file
 city's geodetic origin and fixed start and goal (same section).

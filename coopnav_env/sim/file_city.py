@@ -132,6 +132,7 @@ __all__ = [
     "CityReport",
     "ExtrudedBuildings",
     "FileCity",
+    "city_from_buildings",
     "load_file_city",
     "read_city_footprints",
     "read_geojson_footprints",
@@ -1471,10 +1472,89 @@ def _load_cached(
         repair=repair,
         bbox=box,
     )
-    path = path.removeprefix(OSM_PREFIX)
+    return city_from_buildings(
+        buildings,
+        origin=org,
+        grid_resolution_m=res,
+        clearance_m=clearance,
+        source=path.removeprefix(OSM_PREFIX),
+        report=report,
+    )
+
+
+def _walls_within(
+    buildings: ExtrudedBuildings, cells: FloatArray, radius_m: float, tile_m: float = 100.0
+) -> NDArray[np.int64]:
+    """How many of 8 directions (45 deg apart) from each point ``(n, 3)`` meet a wall within
+    ``radius_m`` (:meth:`ExtrudedBuildings.sky_and_walls`), ``(n,)``. The points are taken a
+    tile of ``tile_m`` at a time, against the buildings whose bounding box comes within
+    ``radius_m`` of the tile's points: a wall within the radius belongs to one of them, and the
+    distance to it is the same number, so the counts are those of all buildings at once."""
+    dirs = _ray_directions(np.arange(0.0, 360.0, 45.0))
+    out = np.zeros(cells.shape[0], dtype=np.int64)
+    bb, es = buildings.bbox_m, buildings.edge_start
+    _, tile = np.unique(np.floor(cells[:, :2] / tile_m), axis=0, return_inverse=True)
+    tile = tile.reshape(-1)
+    for k in range(int(tile.max()) + 1 if tile.size else 0):
+        sel = np.nonzero(tile == k)[0]
+        pts = np.ascontiguousarray(cells[sel])
+        lo, hi = pts[:, :2].min(axis=0) - radius_m, pts[:, :2].max(axis=0) + radius_m
+        sub = np.nonzero(
+            (bb[:, 2] >= lo[0]) & (bb[:, 0] <= hi[0]) & (bb[:, 3] >= lo[1]) & (bb[:, 1] <= hi[1])
+        )[0]
+        if sub.size == 0:
+            continue
+        n_edges = es[sub + 1] - es[sub]
+        start = np.r_[0, np.cumsum(n_edges)].astype(np.int64)
+        idx = np.repeat(es[sub] - start[:-1], n_edges) + np.arange(start[-1])
+        _, dist = _pk.sky_and_walls(
+            pts, dirs, buildings.edges_m[idx], start, buildings.heights_m[sub], bb[sub]
+        )
+        out[sel] = np.sum(dist <= radius_m, axis=1)
+    return out
+
+
+def city_from_buildings(
+    buildings: ExtrudedBuildings,
+    *,
+    origin: tuple[float, float, float],
+    grid_resolution_m: float = GRID_RESOLUTION_M,
+    clearance_m: float = CLEARANCE_M,
+    extent_m: tuple[float, float, float, float] | None = None,
+    source: str = "",
+    report: CityReport | None = None,
+) -> FileCity:
+    """A :class:`FileCity` of extruded buildings in a local frame: the free-space grid, the
+    reachable and built-up cells (module docstring), as a city file's.
+
+    Parameters
+    ----------
+    buildings : ExtrudedBuildings
+        The buildings, East/North [m] in the frame of ``origin``.
+    origin : (float, float, float)
+        ``(lat_deg, lon_deg, alt_m)`` of the frame.
+    grid_resolution_m, clearance_m : float
+        Free-space cell size and the distance kept from walls [m].
+    extent_m : (x0, x1, y0, y1), optional
+        The city's extent [m]; default: the footprints' bounding box widened by
+        :data:`EXTENT_MARGIN_M` on every side.
+    source : str
+        What the city came from (named in messages).
+    report : CityReport, optional
+        What reading a file found.
+
+    Raises
+    ------
+    CityFileError
+        No free space between the buildings.
+    """
+    res, clearance = float(grid_resolution_m), float(clearance_m)
     bb = buildings.bbox_m
-    x0, y0 = bb[:, 0].min() - EXTENT_MARGIN_M, bb[:, 1].min() - EXTENT_MARGIN_M
-    x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
+    if extent_m is None:
+        x0, y0 = bb[:, 0].min() - EXTENT_MARGIN_M, bb[:, 1].min() - EXTENT_MARGIN_M
+        x1, y1 = bb[:, 2].max() + EXTENT_MARGIN_M, bb[:, 3].max() + EXTENT_MARGIN_M
+    else:
+        x0, x1, y0, y1 = (float(v) for v in extent_m)
     xs = x0 + res / 2.0 + res * np.arange(max(int((x1 - x0) // res), 1))
     ys = y0 + res / 2.0 + res * np.arange(max(int((y1 - y0) // res), 1))
     clear = _pk.wall_clearance(
@@ -1483,11 +1563,10 @@ def _load_cached(
     free = clear >= clearance
     reach = _largest_component(free)
     if not np.any(reach):
-        raise CityFileError(f"city file {path}: no free space between the buildings")
+        raise CityFileError(f"city file {source}: no free space between the buildings")
     rows, cols = np.nonzero(reach)
     cells = np.column_stack([xs[cols], ys[rows], np.full(rows.size, 0.5)])
-    _, wall_m = buildings.sky_and_walls(cells, np.arange(0.0, 360.0, 45.0))
-    near = np.sum(wall_m <= BUILT_UP_RADIUS_M, axis=1) >= BUILT_UP_MIN_DIRECTIONS
+    near = _walls_within(buildings, cells, BUILT_UP_RADIUS_M) >= BUILT_UP_MIN_DIRECTIONS
     built = np.zeros_like(reach)
     built[rows[near], cols[near]] = True
     built = _largest_component(built)  # routes between its cells need not leave it
@@ -1504,9 +1583,9 @@ def _load_cached(
         free=_readonly(free),
         reachable=_readonly(reach),
         built_up=_readonly(built),
-        origin=org,
-        source=path,
-        n_default_height=report.n_default_height,
+        origin=origin,
+        source=source,
+        n_default_height=0 if report is None else report.n_default_height,
         clearance_grid_m=_readonly(clear),
         report=report,
     )

@@ -163,6 +163,12 @@ from coopnav_env.sim.city import (
     is_inside_building,
     sky_directions,
 )
+from coopnav_env.sim.city_families import (
+    FAMILIES,
+    FAMILY_PREFIX,
+    family_name,
+    seeded_family_city,
+)
 from coopnav_env.sim.file_city import (
     CLEARANCE_M,
     DEFAULT_HEIGHT_M,
@@ -280,7 +286,7 @@ class ScenarioConfig:
     ----------
     n_uavs : int, default 5
         Number of UAVs, in [1, 256].
-    city : {"grid", "canyon"}, "geojson:PATH" or "osm:PATH", default "grid"
+    city : {"grid", "canyon"}, "geojson:PATH", "osm:PATH" or "family:NAME", default "grid"
         ``"grid"``: a random street grid with open squares (:func:`generate_city` with
         ``city_config``). ``"canyon"``: the paper's single straight canyon (Section 4.1,
         :func:`canyon_city` with the ``canyon_*`` fields). ``"geojson:PATH"``: the building
@@ -291,13 +297,16 @@ class ScenarioConfig:
         city shipped with the package. ``"osm:PATH"``: the buildings of an OpenStreetMap
         ``.osm``/``.osm.pbf`` file (:mod:`coopnav_env.sim.osm_city`, the ``osm`` extra);
         ``"osm:helsinki"``, ``"osm:monaco"``: the real extracts shipped with the package
-        (:data:`~coopnav_env.sim.osm_city.SHIPPED_OSM_PATHS`).
+        (:data:`~coopnav_env.sim.osm_city.SHIPPED_OSM_PATHS`). ``"family:NAME"``: a
+        generated city of a family (:mod:`coopnav_env.sim.city_families`: ``irregular``,
+        ``old_town``, ``high_rise``, ``avenues``, ``courtyards``), flown as a file city, new
+        every episode unless ``city_seed`` is set.
     city_config : CityConfig, default CityConfig()
         Street grid parameters (``city="grid"`` only): 6 x 6 blocks of 60 m, 20 m streets,
         roofs 10-150 m (mean 45 m), 10 % open squares; 500 m x 500 m.
     city_seed : int or None, default None
-        ``None``: a new grid city is drawn from the episode generator at every reset (domain
-        randomisation). An int in [0, 2**63): the same city in every episode.
+        ``None``: a new grid or family city is drawn from the episode generator at every reset
+        (domain randomisation). An int in [0, 2**63): the same city in every episode.
     canyon_h_over_d : float, default sqrt(3)
         ``h/d`` of the canyon at its reference altitude of 15 m (Eq. 25), in (0, 100].
     canyon_street_width_m : float, default 20.0
@@ -512,12 +521,17 @@ class ScenarioConfig:
         o = type(self).__name__
         setv = object.__setattr__
         _check_int(o, "n_uavs", self.n_uavs, 1, 256)
-        if not _is_file_city(self.city) and self.city not in ("grid", "canyon"):
+        if _is_family_city(self.city):
+            try:
+                family_name(self.city)
+            except ValueError as exc:
+                raise ValueError(f"{o}.city={self.city!r}: {exc}") from None
+        elif not _is_file_city(self.city) and self.city not in ("grid", "canyon"):
             raise ValueError(
                 f"{o}.city must be one of ('grid', 'canyon'), 'geojson:PATH' (a GeoJSON file "
                 f"of building footprints; 'geojson:sample' for the shipped one) or 'osm:PATH' "
-                f"(an OpenStreetMap .osm/.osm.pbf file; 'osm:helsinki' for the shipped one), got "
-                f"{self.city!r}"
+                f"(an OpenStreetMap .osm/.osm.pbf file; 'osm:helsinki' for the shipped one), or "
+                f"'family:NAME' (a generated city; {', '.join(FAMILIES)}), got {self.city!r}"
             )
         setv(
             self, "city_config", _coerce_sub_config(o, "city_config", self.city_config, CityConfig)
@@ -629,6 +643,11 @@ class ScenarioConfig:
 def _is_file_city(spec: Any) -> bool:
     """Whether a ``city`` setting names a file (``"geojson:..."`` or ``"osm:..."``)."""
     return isinstance(spec, str) and spec.startswith((GEOJSON_PREFIX, OSM_PREFIX))
+
+
+def _is_family_city(spec: Any) -> bool:
+    """Whether a ``city`` setting names a generated city family (``"family:NAME"``)."""
+    return isinstance(spec, str) and spec.startswith(FAMILY_PREFIX)
 
 
 def _file_city(cfg: ScenarioConfig, *, warn: bool = False) -> FileCity:
@@ -877,9 +896,18 @@ def make_city(config: ScenarioConfig, rng: np.random.Generator) -> City:
     the same generated city every time (its own generator, ``rng`` untouched); without:
     :func:`generate_city` drawing from ``rng``. ``city="geojson:PATH"``: the file's city
     (:func:`~coopnav_env.sim.file_city.load_file_city`, cached; ``rng`` untouched).
+    ``city="family:NAME"``: :func:`~coopnav_env.sim.city_families.seeded_family_city` of
+    ``city_seed``, or without it of a city seed drawn from ``rng`` (one draw; a city is built
+    once per process and seed, so that episodes repeated on the same seeds reuse it).
     """
     if _is_file_city(config.city):
         return _file_city(config)
+    if _is_family_city(config.city):
+        name, origin = family_name(config.city), (config.lat_deg, config.lon_deg, config.alt_m)
+        seed = config.city_seed
+        if seed is None:  # one draw: the episode's city seed (a city is built once per seed)
+            seed = int(rng.integers(0, 2**63 - 1))
+        return seeded_family_city(name, seed, origin)
     if config.city == "canyon":
         return canyon_city(
             h_over_d=config.canyon_h_over_d,
