@@ -28,7 +28,7 @@ copy's ``(N, S)`` block contiguous).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from coopnav_env.envs import _kernels as _env_kernels
 from coopnav_env.gnss import _kernels as _gnss_kernels
@@ -113,8 +113,10 @@ def _motion_one(
     avail[k] = a
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def motion_sight_relative(
+    k0,  # the copies k0 <= k < k1 of the batch
+    k1,
     pos0,  # (K, N, 3) true positions before the step
     vel0,  # (K, N, 3)
     cmd,  # (K, N, 3) clipped commands
@@ -134,21 +136,18 @@ def motion_sight_relative(
     z,  # (K, L_max) standard normal draws of the epoch
     sensing,  # (3,) relative sensing sigma0, sigma per metre, max range
     los_off,  # (K + 1,) offsets of the line-of-sight blocks in the flat buffer
+    pos1,  # outputs: (K, N, 3)
+    vel1,  # (K, N, 3)
+    hit,  # (K, N) bool
+    sep,  # (K, N) bool
+    los_flat,  # (los_off[K],) bool
+    rel,  # (K, N, N, 3)
+    var,  # (K, N, N)
+    avail,  # (K, N, N) bool
 ):
-    """Motion, line of sight and relative sensing of every swarm (see the module docstring).
-
-    Returns ``pos1, vel1, hit, sep, los_flat, rel, var, avail``.
-    """
-    n_copies, n = pos0.shape[0], pos0.shape[1]
-    pos1 = np.empty((n_copies, n, 3))
-    vel1 = np.empty((n_copies, n, 3))
-    hit = np.empty((n_copies, n), dtype=np.bool_)
-    sep = np.empty((n_copies, n), dtype=np.bool_)
-    los_flat = np.empty(los_off[n_copies], dtype=np.bool_)
-    rel = np.empty((n_copies, n, n, 3))
-    var = np.empty((n_copies, n, n))
-    avail = np.empty((n_copies, n, n), dtype=np.bool_)
-    for k in prange(n_copies):
+    """Motion, line of sight and relative sensing of the copies ``k0 <= k < k1`` (see the
+    module docstring), written into the output arrays."""
+    for k in range(k0, k1):
         _motion_one(
             k,
             pos0,
@@ -179,7 +178,6 @@ def motion_sight_relative(
             var,
             avail,
         )
-    return pos1, vel1, hit, sep, los_flat, rel, var, avail
 
 
 @njit(cache=True)
@@ -404,8 +402,10 @@ def _navigate_one(
     walls[k] = w
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def navigation_reward_sensors(
+    k0,  # the copies k0 <= k < k1 of the batch
+    k1,
     shared,  # bool: one shared centroid per swarm (else one per UAV)
     rx_ecef,  # (K, N, 3) true positions in ECEF
     sky_row,  # (K,)
@@ -450,41 +450,39 @@ def navigation_reward_sensors(
     n_b,
     wgs,  # (5,) WGS84 a, b, f, e2, e'2
     n_bowring,
+    outputs,  # the arrays written (NAVIGATION_OUTPUTS, in order)
 ):
-    """Navigation, reward terms and skyline / wall sensors of every swarm (module docstring).
-
-    Returns ``sa_status, n_iter (K, 2), sa_pos, sa_cov, co_pos, co_cov, co_status, source,
-    nav_pos, nav_cov, sa_rej, co_rej, next_wp, n_swarm, n_sats, centroid_uav,
-    out_of_contact, terms (K, 6, N), in_goal, ends (K, 2: crash, reached), tan_max, walls,
-    bad_geometry (K,)``.
-    """
-    n_copies, n = pos1.shape[0], pos1.shape[1]
-    n_az = rays.shape[0]
-    i64 = np.int64
-    sa_status = np.empty((n_copies, n), dtype=i64)
-    n_iter = np.empty((n_copies, 2), dtype=i64)
-    sa_pos = np.empty((n_copies, n, 3))
-    sa_cov = np.empty((n_copies, n, 3, 3))
-    co_pos = np.empty((n_copies, n, 3))
-    co_cov = np.empty((n_copies, n, 3, 3))
-    co_status = np.empty((n_copies, n), dtype=i64)
-    source = np.empty((n_copies, n), dtype=i64)
-    nav_pos = np.empty((n_copies, n, 3))
-    nav_cov = np.empty((n_copies, n, 3, 3))
-    sa_rej = np.empty((n_copies, n), dtype=np.bool_)
-    co_rej = np.empty((n_copies, n), dtype=np.bool_)
-    wp_out = np.empty((n_copies, n), dtype=i64)
-    n_swarm = np.empty((n_copies, n), dtype=i64)
-    n_sats = np.empty((n_copies, n), dtype=i64)
-    centroid_uav = np.empty(n_copies, dtype=i64)
-    out_of_contact = np.empty((n_copies, n), dtype=np.bool_)
-    terms = np.empty((n_copies, 6, n))
-    in_goal = np.empty((n_copies, n), dtype=np.bool_)
-    ends = np.empty((n_copies, 2), dtype=np.bool_)
-    tan_max = np.empty((n_copies, n, n_az))
-    walls = np.empty((n_copies, n, n_az))
-    bad_geometry = np.zeros(n_copies, dtype=np.bool_)
-    for k in prange(n_copies):
+    """Navigation, reward terms and skyline / wall sensors of the copies ``k0 <= k < k1``
+    (module docstring), written into ``outputs``: ``sa_status, n_iter (K, 2), sa_pos, sa_cov,
+    co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej, next_wp, n_swarm,
+    n_sats, centroid_uav, out_of_contact, terms (K, 6, N), in_goal, ends (K, 2: crash,
+    reached), tan_max, walls, bad_geometry (K,)``."""
+    (
+        sa_status,
+        n_iter,
+        sa_pos,
+        sa_cov,
+        co_pos,
+        co_cov,
+        co_status,
+        source,
+        nav_pos,
+        nav_cov,
+        sa_rej,
+        co_rej,
+        wp_out,
+        n_swarm,
+        n_sats,
+        centroid_uav,
+        out_of_contact,
+        terms,
+        in_goal,
+        ends,
+        tan_max,
+        walls,
+        bad_geometry,
+    ) = outputs
+    for k in range(k0, k1):
         _navigate_one(
             k,
             shared,
@@ -555,31 +553,6 @@ def navigation_reward_sensors(
             walls,
             bad_geometry,
         )
-    return (
-        sa_status,
-        n_iter,
-        sa_pos,
-        sa_cov,
-        co_pos,
-        co_cov,
-        co_status,
-        source,
-        nav_pos,
-        nav_cov,
-        sa_rej,
-        co_rej,
-        wp_out,
-        n_swarm,
-        n_sats,
-        centroid_uav,
-        out_of_contact,
-        terms,
-        in_goal,
-        ends,
-        tan_max,
-        walls,
-        bad_geometry,
-    )
 
 
 @njit(cache=True)
@@ -640,8 +613,10 @@ def _observe_one(
     )
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def observations_infos(
+    k0,  # the copies k0 <= k < k1 of the batch
+    k1,
     nav_pos,  # (K, N, 3)
     goal,  # (K, 3)
     vel,  # (K, N, 3)
@@ -666,12 +641,11 @@ def observations_infos(
     pos,  # (K, N, 3) true positions
     co_pos,
     sa_pos,
+    obs,  # outputs: (K, N, obs_dim) float32
+    floats,  # (K, 8, N)
 ):
-    """Observations ``(K, N, obs_dim)`` float32 and the infos' real numbers ``(K, 8, N)``."""
-    n_copies, n = nav_pos.shape[0], nav_pos.shape[1]
-    obs = np.empty((n_copies, n, low.shape[0]), dtype=np.float32)
-    floats = np.empty((n_copies, 8, n))
-    for k in prange(n_copies):
+    """Observations and the infos' real numbers of the copies ``k0 <= k < k1``."""
+    for k in range(k0, k1):
         _observe_one(
             k,
             nav_pos,
@@ -701,4 +675,3 @@ def observations_infos(
             obs,
             floats,
         )
-    return obs, floats

@@ -36,7 +36,9 @@ not the physics.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -284,7 +286,17 @@ class BatchedUrbanCanyonEnv:
         np.cumsum(n * n_sv, out=los_off[1:])
         tab = self._skies
         rs = cfg.relative_sensing
-        pos1, vel1, hit, sep, los_flat, rel, var, avail = _batched_kernels.motion_sight_relative(
+        pos1 = np.empty((n_copies, n, 3))
+        vel1 = np.empty((n_copies, n, 3))
+        hit = np.empty((n_copies, n), dtype=bool)
+        sep = np.empty((n_copies, n), dtype=bool)
+        los_flat = np.empty(int(los_off[-1]), dtype=bool)
+        rel = np.empty((n_copies, n, n, 3))
+        var = np.empty((n_copies, n, n))
+        avail = np.empty((n_copies, n, n), dtype=bool)
+        _run_chunks(
+            _batched_kernels.motion_sight_relative,
+            n_copies,
             st.pos,
             st.vel,
             cmd,
@@ -304,6 +316,14 @@ class BatchedUrbanCanyonEnv:
             z,
             np.array([rs.sigma0_m, rs.sigma_per_m, rs.max_range_m], dtype=np.float64),
             los_off,
+            pos1,
+            vel1,
+            hit,
+            sep,
+            los_flat,
+            rel,
+            var,
+            avail,
         )
         # the rotations to ECEF stay numpy matmuls (their rounding is numpy's, as one copy's)
         origin, rot = world0.origin_ecef_m, world0.rot_enu
@@ -316,31 +336,10 @@ class BatchedUrbanCanyonEnv:
         gate = cfg.max_fix_sigma_m
         check, r_lo, r_hi = _radius_args(PLAUSIBLE_RADIUS_M)
         shared = cfg.centroid_mode == "shared" or n == 1
-        (
-            sa_status,
-            n_iter,
-            sa_pos,
-            sa_cov,
-            co_pos,
-            co_cov,
-            co_status,
-            source,
-            nav_pos,
-            nav_cov,
-            sa_rej,
-            co_rej,
-            wp,
-            n_swarm,
-            n_sats,
-            centroid_uav,
-            out_of_contact,
-            terms,
-            in_goal,
-            ends,
-            tan_max,
-            walls,
-            bad_geometry,
-        ) = _batched_kernels.navigation_reward_sensors(
+        outputs = _navigation_outputs(n_copies, n, envs[0]._rays.shape[0])
+        _run_chunks(
+            _batched_kernels.navigation_reward_sensors,
+            n_copies,
             shared,
             rx_ecef,
             row,
@@ -387,7 +386,33 @@ class BatchedUrbanCanyonEnv:
             st.n_b,
             _WGS84,
             _N_BOWRING_ITER,
+            outputs,
         )
+        (
+            sa_status,
+            n_iter,
+            sa_pos,
+            sa_cov,
+            co_pos,
+            co_cov,
+            co_status,
+            source,
+            nav_pos,
+            nav_cov,
+            sa_rej,
+            co_rej,
+            wp,
+            n_swarm,
+            n_sats,
+            centroid_uav,
+            out_of_contact,
+            terms,
+            in_goal,
+            ends,
+            tan_max,
+            walls,
+            bad_geometry,
+        ) = outputs
         if bad_geometry.any():
             raise ValueError(
                 "a receiver is at the Earth's centre or on a satellite (copies "
@@ -395,7 +420,11 @@ class BatchedUrbanCanyonEnv:
             )
         sky_deg = np.degrees(np.arctan(tan_max))
         steps = st.steps + 1
-        obs, _floats = _batched_kernels.observations_infos(
+        obs = np.empty((n_copies, n, self.obs_dim), dtype=np.float32)
+        floats = np.empty((n_copies, 8, n))
+        _run_chunks(
+            _batched_kernels.observations_infos,
+            n_copies,
             nav_pos,
             st.goal,
             vel1,
@@ -420,6 +449,8 @@ class BatchedUrbanCanyonEnv:
             pos1,
             co_pos,
             sa_pos,
+            obs,
+            floats,
         )
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c = pos1.copy(), vel1.copy(), wp.copy()
@@ -506,6 +537,72 @@ class BatchedUrbanCanyonEnv:
         """Close every copy."""
         for e in self.envs:
             e.close()
+
+
+def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, ...]:
+    """The arrays :func:`coopnav_env.envs._batched_kernels.navigation_reward_sensors` fills."""
+    k, i64 = n_copies, np.int64
+    return (
+        np.empty((k, n), dtype=i64),  # sa_status
+        np.empty((k, 2), dtype=i64),  # n_iter
+        np.empty((k, n, 3)),  # sa_pos
+        np.empty((k, n, 3, 3)),  # sa_cov
+        np.empty((k, n, 3)),  # co_pos
+        np.empty((k, n, 3, 3)),  # co_cov
+        np.empty((k, n), dtype=i64),  # co_status
+        np.empty((k, n), dtype=i64),  # source
+        np.empty((k, n, 3)),  # nav_pos
+        np.empty((k, n, 3, 3)),  # nav_cov
+        np.empty((k, n), dtype=bool),  # sa_rej
+        np.empty((k, n), dtype=bool),  # co_rej
+        np.empty((k, n), dtype=i64),  # next_wp
+        np.empty((k, n), dtype=i64),  # n_swarm
+        np.empty((k, n), dtype=i64),  # n_sats
+        np.empty(k, dtype=i64),  # centroid_uav
+        np.empty((k, n), dtype=bool),  # out_of_contact
+        np.empty((k, 6, n)),  # terms
+        np.empty((k, n), dtype=bool),  # in_goal
+        np.empty((k, 2), dtype=bool),  # ends
+        np.empty((k, n, n_az)),  # tan_max
+        np.empty((k, n, n_az)),  # walls
+        np.zeros(k, dtype=bool),  # bad_geometry
+    )
+
+
+MIN_COPIES_PER_THREAD = 4
+"""Fewest copies a thread of the fused step takes (fewer: the thread costs more than it saves)."""
+
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def _threads() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
+    """``kernel(k0, k1, *args)`` over the copies split into contiguous chunks, one per thread.
+
+    The kernels release the GIL (``nogil``) and write disjoint rows of their outputs, so the
+    chunks run in parallel on the available cores; each copy's arithmetic is the same in any
+    chunk. Threads rather than numba's ``parallel=True``: the OpenMP threading layer numba
+    picks by default competes with PyTorch's own OpenMP pool in one process (a trainer's),
+    and slowed both severalfold in the benchmark.
+    """
+    n_chunks = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
+    if n_chunks == 1:
+        kernel(0, n_copies, *args)
+        return
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(max_workers=_threads()))
+    bounds = np.linspace(0, n_copies, n_chunks + 1).astype(int).tolist()
+    futures = [_POOL[0].submit(kernel, bounds[i], bounds[i + 1], *args) for i in range(1, n_chunks)]
+    kernel(bounds[0], bounds[1], *args)  # the first chunk in this thread
+    for f in futures:
+        f.result()
 
 
 _WGS84 = np.array([WGS84_A_M, WGS84_B_M, WGS84_F, WGS84_E2, _EP2], dtype=np.float64)
