@@ -85,3 +85,66 @@ def test_bad_use_raises() -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=2)
     with pytest.raises(ValueError, match="distinct"):
         BatchedUrbanCanyonEnv.from_envs([env, env])
+
+
+def _step_alongside(batch, single, steps: int, seed: int, scale: float = 1.0) -> list[int]:
+    """Step ``batch`` and the separate environments ``single`` with the same random commands;
+    assert every output equal bit for bit (and each copy's ``state()``); return the steps at
+    which episodes ended."""
+    k_copies, n = batch.n_copies, batch.n_agents
+    obs, infos = batch.reset(seed=seed)
+    for k, env in enumerate(single):
+        o, i = env.reset(seed=seed + k)
+        assert obs[k].tobytes() == np.stack([o[a] for a in env.possible_agents]).tobytes()
+        assert _same(infos[k], i)
+    rng = np.random.default_rng(seed)
+    end_steps = []
+    for step in range(steps):
+        act = rng.uniform(-scale, scale, (k_copies, n, 3))
+        obs, rew, term, trunc, infos, final = batch.step(act)
+        for k, env in enumerate(single):
+            agents = env.possible_agents
+            o, r, te, tr, i = env.step({a: act[k, j] for j, a in enumerate(agents)})
+            assert final[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+            assert rew[k].tobytes() == np.array([r[a] for a in agents]).tobytes()
+            assert term[k] == te[agents[0]] and trunc[k] == tr[agents[0]]
+            assert _same(infos[k], i)
+            if not env.agents:
+                end_steps.append(step)
+                o, _ = env.reset()
+            assert obs[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+            assert batch.envs[k].state().tobytes() == env.state().tobytes()
+    return end_steps
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"n_uavs": 5, "max_steps": 9},  # one centroid per UAV
+        {"n_uavs": 12, "max_steps": 5},  # one shared centroid (centroid="auto", N >= 11)
+        {"n_uavs": 1, "max_steps": 4},
+    ],
+)
+def test_fused_step_copies_equal_batch_of_one(settings) -> None:
+    # copy k of K = 8 (the fused step: all copies in one set of compiled calls, in threads)
+    # equals the parallel environment reset with seed + k, bit for bit, across episodes
+    # that end at different steps (crashes of random commands and truncations)
+    k_copies = 8
+    batch = BatchedUrbanCanyonEnv(k_copies, **settings)
+    assert batch._fused
+    single = [urban_canyon_v0.parallel_env(**settings) for _ in range(k_copies)]
+    end_steps = _step_alongside(batch, single, steps=14, seed=21)
+    assert batch._state is not None  # the fused step ran
+    assert len(set(end_steps)) >= 3  # episodes ended at several different steps
+    # a batch of one is the same episode as copy 0 of the batch of eight
+    one = BatchedUrbanCanyonEnv(1, **settings)
+    assert _step_alongside(one, single[:1], steps=10, seed=21) is not None
+
+
+def test_settings_outside_the_fused_step_step_copy_by_copy() -> None:
+    settings = {"n_uavs": 3, "max_steps": 6, "nlos_probability": 0.3}
+    batch = BatchedUrbanCanyonEnv(4, **settings)
+    assert not batch._fused
+    single = [urban_canyon_v0.parallel_env(**settings) for _ in range(4)]
+    assert _step_alongside(batch, single, steps=8, seed=3)
+    assert batch._state is None
