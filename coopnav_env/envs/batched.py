@@ -36,6 +36,7 @@ not the physics.
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -584,23 +585,31 @@ def _threads() -> int:
 
 
 def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
-    """``kernel(k0, k1, *args)`` over the copies split into contiguous chunks, one per thread.
+    """``kernel(k0, k1, *args)`` over contiguous chunks of the copies, on every core.
 
-    The kernels release the GIL (``nogil``) and write disjoint rows of their outputs, so the
-    chunks run in parallel on the available cores; each copy's arithmetic is the same in any
-    chunk. Threads rather than numba's ``parallel=True``: the OpenMP threading layer numba
-    picks by default competes with PyTorch's own OpenMP pool in one process (a trainer's),
-    and slowed both severalfold in the benchmark.
+    The kernels release the GIL (``nogil``) and write disjoint rows of their outputs, so
+    chunks run in parallel; each copy's arithmetic is the same in any chunk. This thread and
+    the pool's threads take the chunks one after another from a shared counter (a core that
+    another process holds takes fewer). Threads rather than numba's ``parallel=True``: the
+    OpenMP threading layer numba picks by default competes with PyTorch's own OpenMP pool in
+    one process (a trainer's), which slowed both severalfold in the benchmark.
     """
-    n_chunks = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
-    if n_chunks == 1:
+    threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
+    if threads == 1:
         kernel(0, n_copies, *args)
         return
     if not _POOL:
-        _POOL.append(ThreadPoolExecutor(max_workers=_threads()))
+        _POOL.append(ThreadPoolExecutor(max_workers=max(1, _threads() - 1)))
+    n_chunks = min(4 * threads, max(1, n_copies // MIN_COPIES_PER_THREAD))
     bounds = np.linspace(0, n_copies, n_chunks + 1).astype(int).tolist()
-    futures = [_POOL[0].submit(kernel, bounds[i], bounds[i + 1], *args) for i in range(1, n_chunks)]
-    kernel(bounds[0], bounds[1], *args)  # the first chunk in this thread
+    counter = itertools.count()  # next() is atomic under the GIL
+
+    def work() -> None:
+        while (i := next(counter)) < n_chunks:
+            kernel(bounds[i], bounds[i + 1], *args)
+
+    futures = [_POOL[0].submit(work) for _ in range(threads - 1)]
+    work()
     for f in futures:
         f.result()
 
