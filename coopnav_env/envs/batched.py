@@ -49,7 +49,12 @@ from coopnav_env.constants import SYSTEMS, WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84
 from coopnav_env.envs import _batched_kernels
 from coopnav_env.envs import urban_canyon as _urban_canyon
 from coopnav_env.envs.config import UrbanCanyonConfig
-from coopnav_env.envs.urban_canyon import REWARD_TERMS, UrbanCanyonEnv, _team_mix
+from coopnav_env.envs.urban_canyon import (
+    INFO_KEYS,
+    NO_FIX_ERROR_M,
+    UrbanCanyonEnv,
+    _team_mix,
+)
 from coopnav_env.gnss.errors import _iono_factors
 from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
@@ -459,7 +464,6 @@ class BatchedUrbanCanyonEnv:
         rewards = np.empty((n_copies, n))
         terminated = np.zeros(n_copies, dtype=bool)
         truncated = np.zeros(n_copies, dtype=bool)
-        infos = []
         navigated = cfg.reward_scheme == "navigated_distance"
         for k, e in enumerate(envs):
             w = e.world
@@ -517,7 +521,14 @@ class BatchedUrbanCanyonEnv:
             rewards[k] = stacked.sum(axis=0)
             terminated[k] = crash or reached
             truncated[k] = (e._steps >= cfg.max_steps) and not terminated[k]
-            infos.append(e._infos(dict(zip(REWARD_TERMS, stacked)), in_goal[k]))
+        infos = _step_infos(
+            self.possible_agents,
+            floats,
+            (n_sats, n_swarm, n_sv, co_status, sa_status, source, wp_c),
+            (co_rej, sa_rej, in_goal, hit, sep, out_of_contact),
+            terms,
+            steps,
+        )
         final_obs = obs
         out = self._obs
         out[:] = obs
@@ -538,6 +549,56 @@ class BatchedUrbanCanyonEnv:
         """Close every copy."""
         for e in self.envs:
             e.close()
+
+
+def _step_infos(
+    agents: list[str],
+    floats: np.ndarray,
+    ints: tuple[np.ndarray, ...],
+    flags: tuple[np.ndarray, ...],
+    terms: np.ndarray,
+    steps: np.ndarray,
+) -> list[dict[str, dict[str, Any]]]:
+    """Every copy's step infos, as ``UrbanCanyonEnv._infos`` builds one copy's (same keys in
+    the same order, the same Python numbers), from ``(K, ...)`` arrays: the real numbers of
+    :func:`coopnav_env.envs._kernels.info_floats` ``(K, 8, N)``; the satellites received,
+    by the swarm, above the mask ``(K,)``, the statuses, sources and next waypoints; the
+    rejection, goal, collision, separation and contact flags; the reward terms
+    ``(K, 6, N)``; the episode steps ``(K,)``."""
+    n = floats.shape[2]
+    fixes = np.isfinite(floats[:, 1:3])
+    floats[:, 1:3] = np.where(fixes, floats[:, 1:3], NO_FIX_ERROR_M)
+    n_sats, n_swarm, n_open, co_status, sa_status, source, wp = ints
+    real = floats.tolist()
+    fix = fixes.tolist()
+    cols_int = [a.tolist() for a in (n_sats, n_swarm, co_status, sa_status, source, wp)]
+    cols_flag = [np.asarray(a, dtype=bool).tolist() for a in flags]
+    reward = terms.tolist()
+    open_sky = n_open.tolist()
+    step = steps.tolist()
+    keys = INFO_KEYS
+    out = []
+    for k, (r, fx, rw) in enumerate(zip(real, fix, reward)):
+        ci = [c[k] for c in cols_int]
+        cf = [c[k] for c in cols_flag]
+        cols = (
+            *r[:3],
+            *fx,
+            *r[3:7],
+            ci[0],
+            ci[1],
+            [open_sky[k]] * n,
+            ci[2],
+            ci[3],
+            ci[4],
+            r[7],
+            ci[5],
+            *cf,
+            *rw,
+            [step[k]] * n,
+        )
+        out.append({a: dict(zip(keys, row)) for a, row in zip(agents, zip(*cols))})
+    return out
 
 
 def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, ...]:
