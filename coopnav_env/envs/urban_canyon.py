@@ -337,6 +337,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         the reward terms and the in-goal flags. It does not change :attr:`agents` and does not
         render.
         """
+        from coopnav_env.envs._fused import step_one  # (the fused step imports this module)
+
+        fused = step_one(self, cmd)
+        if fused is not None:  # the step of BatchedUrbanCanyonEnv, as a batch of one
+            return fused
         cfg = self.config
         prev = self._epoch
         if cfg.action_frame == "route":

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import BatchedUrbanCanyonEnv
+from coopnav_env.envs import BatchedUrbanCanyonEnv, _fused
+from coopnav_env.envs._fused import fused_settings
+from coopnav_env.sim.scenario import Epoch
 
 SETTINGS = {"n_uavs": 4, "max_steps": 6}
 
@@ -131,10 +134,10 @@ def test_fused_step_copies_equal_batch_of_one(settings) -> None:
     # that end at different steps (crashes of random commands and truncations)
     k_copies = 8
     batch = BatchedUrbanCanyonEnv(k_copies, **settings)
-    assert batch._fused
+    assert fused_settings(batch.config)
     single = [urban_canyon_v0.parallel_env(**settings) for _ in range(k_copies)]
     end_steps = _step_alongside(batch, single, steps=14, seed=21)
-    assert batch._state is not None  # the fused step ran
+    assert batch._fused_step.state is not None  # the fused step ran
     assert len(set(end_steps)) >= 3  # episodes ended at several different steps
     # a batch of one is the same episode as copy 0 of the batch of eight
     one = BatchedUrbanCanyonEnv(1, **settings)
@@ -144,7 +147,52 @@ def test_fused_step_copies_equal_batch_of_one(settings) -> None:
 def test_settings_outside_the_fused_step_step_copy_by_copy() -> None:
     settings = {"n_uavs": 3, "max_steps": 6, "nlos_probability": 0.3}
     batch = BatchedUrbanCanyonEnv(4, **settings)
-    assert not batch._fused
+    assert not fused_settings(batch.config)
     single = [urban_canyon_v0.parallel_env(**settings) for _ in range(4)]
     assert _step_alongside(batch, single, steps=8, seed=3)
-    assert batch._state is None
+    assert batch._fused_step.state is None
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"n_uavs": 5, "max_steps": 12},
+        {"n_uavs": 12, "max_steps": 6},
+        {"n_uavs": 4, "max_steps": 10, "nav_reward": "sigma", "nav_team_weight": 0.5},
+    ],
+)
+def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
+    # the parallel environment steps as a batch of one (coopnav_env.envs._fused); the same
+    # episodes through UrbanWorld.step (the fused step off) are equal bit for bit
+    def run(fused: bool) -> list:
+        if not fused:
+            monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
+        env = urban_canyon_v0.parallel_env(**settings)
+        obs, _ = env.reset(seed=8)
+        rng = np.random.default_rng(4)
+        out = [obs]
+        for _ in range(30):
+            act = {a: rng.uniform(-1.0, 1.0, 3) for a in env.agents}
+            out.append(env.step(act))
+            out.append(env.world.last)
+            if not env.agents:
+                out.append(env.reset()[0])
+        monkeypatch.undo()
+        return out
+
+    fused, world = run(True), run(False)
+    assert len(fused) == len(world)
+    for a, b in zip(fused, world, strict=True):
+        if isinstance(b, Epoch):
+            for f in dataclasses.fields(b):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                assert np.asarray(x).tobytes() == np.asarray(y).tobytes(), f.name
+                assert np.asarray(x).dtype == np.asarray(y).dtype, f.name
+        elif isinstance(b, tuple):
+            obs_a, rew_a, te_a, tr_a, inf_a = a
+            obs_b, rew_b, te_b, tr_b, inf_b = b
+            assert all(obs_a[k].tobytes() == obs_b[k].tobytes() for k in obs_b)
+            assert rew_a == rew_b and te_a == te_b and tr_a == tr_b
+            assert _same(inf_a, inf_b)
+        else:
+            assert all(a[k].tobytes() == b[k].tobytes() for k in b)
