@@ -300,6 +300,7 @@ KERNEL_MODULES = (
     "coopnav_env.gnss._kernels",
     "coopnav_env.nav._kernels",
     "coopnav_env.envs._kernels",
+    "coopnav_env.envs._batched_kernels",
 )
 
 

@@ -15,23 +15,28 @@ settings, bit for bit: ``reset(seed=s)`` resets copy ``k`` with ``s + k`` (a seq
 one seed per copy; ``None`` continues each copy's generator, drawing it from OS entropy the
 first time), every later episode of a copy continues that copy's generator (what a separate
 environment does on ``reset()`` without a seed, and what SuperSuit's vector wrappers do), and
-each step runs the parallel environment's own array core (``UrbanCanyonEnv._step_arrays``:
-world step, rewards, observations). ``tests/envs/test_batched.py`` checks observations,
-rewards, terminations, truncations and infos against separate environments over episodes
-that end at different steps.
+every step of a copy is the step of a separate environment: the parallel environment steps
+as a batch of one through the same fused step (:mod:`coopnav_env.envs._fused`).
+``tests/envs/test_batched.py`` checks observations, rewards, terminations, truncations, infos
+and states against separate environments over episodes that end at different steps, and the
+fused step against ``UrbanWorld.step``.
 
 What is batched and what is not
 -------------------------------
-The action checks and clipping, the reward, termination and observation buffers are single
-``(K, ...)`` numpy operations. The world step of each copy -- satellites, line of sight,
-pseudoranges, the standalone and cooperative navigation solvers, the skyline and wall
-sensors -- still runs copy by copy: the copies see different satellites (their episodes
-start at different times) and different cities, and stacking their solver problems would
-change the floating-point summation order of the solvers (padding to a common satellite
-count changes numpy's pairwise sums and LAPACK's blocking), so the episodes would no longer
-be those of separate environments. What the batching removes is the per-agent dictionary
-plumbing of PettingZoo and SuperSuit (observations, rewards, actions and flags per agent),
-not the physics.
+With the default measurement chain (no NLOS draws, no dead-reckoning noise, no channel limit,
+no map exclusion, no integrity monitoring, the exact covariance, velocity commands, the base
+observation: :func:`coopnav_env.envs._fused.fused_settings`), a step of all K copies is three
+compiled calls over the copies (:mod:`coopnav_env.envs._batched_kernels`: motion, line of
+sight and relative sensing; pseudoranges, both solvers, the estimate selection, waypoints,
+reward terms and the skyline and wall sensors; observations and the infos' numbers), run in
+chunks of copies on every core, with the rotations to ECEF and the skyline's ``arctan`` as
+numpy calls on the ``(K, ...)`` arrays between them. Each copy keeps its own city, satellites
+(its own GNSS time), solver problems and generator (one draw call per copy per step, in the
+order of ``UrbanWorld``); no problem is padded or stacked with another copy's, so its
+arithmetic does not depend on K. Still once per copy in Python: those draws, the copy's
+``Epoch`` and world attributes (what ``envs[k]`` shows), the infos dictionaries and the
+automatic resets (``UrbanCanyonEnv._reset_arrays``: a new city, route, formation and the
+first epoch). Other settings step copy by copy through ``UrbanCanyonEnv._step_arrays``.
 """
 
 from __future__ import annotations
