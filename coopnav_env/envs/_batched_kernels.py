@@ -65,11 +65,12 @@ def _motion_one(
     rel,
     var,
     avail,
+    n_rx,
 ):
     n = pos0.shape[1]
     nb = n_b[k]
-    lo = b_lo[k, :nb]
-    hi = b_hi[k, :nb]
+    lo = np.ascontiguousarray(b_lo[k, :nb])
+    hi = np.ascontiguousarray(b_hi[k, :nb])
     p1, v1, h, s = _sim_kernels.world_motion(
         pos0[k],
         vel0[k],
@@ -94,12 +95,22 @@ def _motion_one(
     ns = n_sv[k]
     nu = n_up[k]
     vis = _sim_kernels.line_of_sight(
-        p1, lo, hi, sky_up[row, :ns], sky_order[row, :nu], sky_cot[row, :nu], sky_hdir[row, :nu]
+        p1,
+        lo,
+        hi,
+        np.ascontiguousarray(sky_up[row, :ns]),
+        np.ascontiguousarray(sky_order[row, :nu]),
+        np.ascontiguousarray(sky_cot[row, :nu]),
+        np.ascontiguousarray(sky_hdir[row, :nu]),
     )
     off = los_off[k]
     for i in range(n):
+        c = 0
         for j in range(ns):
             los_flat[off + i * ns + j] = vis[i, j]
+            if vis[i, j]:
+                c += 1
+        n_rx[k, i] = c
     # the draws of the epoch: pseudoranges (S + N S), then relative sensing (N (N - 1) / 2, 3)
     m = n * (n - 1) // 2
     start = ns + n * ns
@@ -144,6 +155,7 @@ def motion_sight_relative(
     rel,  # (K, N, N, 3)
     var,  # (K, N, N)
     avail,  # (K, N, N) bool
+    n_rx,  # (K, N) int64 satellites in line of sight of each UAV
 ):
     """Motion, line of sight and relative sensing of the copies ``k0 <= k < k1`` (see the
     module docstring), written into the output arrays."""
@@ -177,6 +189,7 @@ def motion_sight_relative(
             rel,
             var,
             avail,
+            n_rx,
         )
 
 
@@ -254,8 +267,8 @@ def _navigate_one(
     n = rx_ecef.shape[1]
     row = sky_row[k]
     ns = n_sv[k]
-    sv = sky_sv[row, :ns]
-    system = sky_sys[row, :ns]
+    sv = np.ascontiguousarray(sky_sv[row, :ns])
+    system = np.ascontiguousarray(sky_sys[row, :ns])
     off = los_off[k]
     received = np.empty((n, ns), dtype=np.bool_)
     for i in range(n):
@@ -289,7 +302,7 @@ def _navigate_one(
         rel_b = np.empty((1, n, 3))
         var_b = np.empty((1, n))
         avail_b = np.empty((1, n), dtype=np.bool_)
-        rel_b[0] = rel_ecef[k, a]
+        rel_b[0] = rel_ecef[k, 0]  # the centroid row only
         var_b[0] = var[k, a]
         avail_b[0] = av[a]
         cen = np.array([a], dtype=np.int64)
@@ -310,8 +323,8 @@ def _navigate_one(
         x0_co = x0[k]
         centroid_uav[k] = -1
     nr = n_route[k]
-    r_k = route[k, :nr]
-    t_k = tail[k, :nr]
+    r_k = np.ascontiguousarray(route[k, :nr])
+    t_k = np.ascontiguousarray(tail[k, :nr])
     s_status, s_iter, c_iter, sel, wp, nsw, _used = _sim_kernels.epoch_navigation(
         range_m,
         el_deg,
@@ -397,7 +410,9 @@ def _navigate_one(
     ends[k, 0] = crash
     ends[k, 1] = reached
     nb = n_b[k]
-    tm, w = _sim_kernels.sky_and_walls(pos1[k], rays, b_lo[k, :nb], b_hi[k, :nb])
+    tm, w = _sim_kernels.sky_and_walls(
+        pos1[k], rays, np.ascontiguousarray(b_lo[k, :nb]), np.ascontiguousarray(b_hi[k, :nb])
+    )
     tan_max[k] = tm
     walls[k] = w
 
@@ -420,7 +435,7 @@ def navigation_reward_sensors(
     model,  # (3,) sigma URE, troposphere (1/0), differential (1/0)
     n_sys,
     x0,  # (K, N, 3) ECEF predicted positions
-    rel_ecef,  # (K, N, N, 3) measured relative positions in ECEF
+    rel_ecef,  # (K, N, N, 3) measured relative positions in ECEF ((K, 1, N, 3): shared)
     var,  # (K, N, N)
     avail,  # (K, N, N) bool
     ddt,
@@ -597,8 +612,8 @@ def _observe_one(
         sky_deg[k],
         rel[k],
         avail[k],
-        route[k, :nr],
-        tail[k, :nr],
+        np.ascontiguousarray(route[k, :nr]),
+        np.ascontiguousarray(tail[k, :nr]),
         wp[k],
         source[k],
         walls[k],

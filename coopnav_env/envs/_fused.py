@@ -21,7 +21,9 @@ the last fused step (a reset, a step through the other path, an assignment to it
 
 from __future__ import annotations
 
+import functools
 import itertools
+import operator
 import os
 import weakref
 from concurrent.futures import ThreadPoolExecutor
@@ -73,7 +75,7 @@ class FusedStep:
         stale = [
             k
             for k, (e, seen) in enumerate(zip(envs, self._seen))
-            if e._steps != st.steps[k] or any(a is not b for a, b in zip(_fingerprint(e), seen))
+            if e._steps != st.steps[k] or any(map(operator.is_not, _fingerprint(e), seen))
         ]
         if stale:
             st.own()  # copies first: the worlds and epochs keep the arrays they view
@@ -112,7 +114,6 @@ class FusedStep:
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         np.cumsum(n * n_sv, out=los_off[1:])
         tab = self.skies
-        rs = cfg.relative_sensing
         pos1 = np.empty((n_copies, n, 3))
         vel1 = np.empty((n_copies, n, 3))
         hit = np.empty((n_copies, n), dtype=bool)
@@ -121,6 +122,7 @@ class FusedStep:
         rel = np.empty((n_copies, n, n, 3))
         var = np.empty((n_copies, n, n))
         avail = np.empty((n_copies, n, n), dtype=bool)
+        n_rx = np.empty((n_copies, n), dtype=np.int64)
         _run_chunks(
             _batched_kernels.motion_sight_relative,
             n_copies,
@@ -141,7 +143,7 @@ class FusedStep:
             tab.hdir,
             n_up,
             z,
-            np.array([rs.sigma0_m, rs.sigma_per_m, rs.max_range_m], dtype=np.float64),
+            st.sensing,
             los_off,
             pos1,
             vel1,
@@ -151,18 +153,21 @@ class FusedStep:
             rel,
             var,
             avail,
+            n_rx,
         )
         # the rotations to ECEF stay numpy matmuls (their rounding is numpy's, as one copy's)
         origin, rot = world0.origin_ecef_m, world0.rot_enu
         rx_ecef = origin + pos1 @ rot
         pred = st.nav_pos + vel1 * dt  # warm start: the previous estimates moved
         x0 = origin + pred @ rot
-        rel_ecef = rel @ rot
+        shared = cfg.centroid_mode == "shared" or n == 1
+        if shared:  # only the centroid's row: the UAV receiving the most (the first of equals)
+            centroid = n_rx.argmax(axis=1)
+            rel_ecef = (rel[np.arange(n_copies), centroid] @ rot)[:, None]
+        else:
+            rel_ecef = rel @ rot
         dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * 1.0
         model = cfg.error_model
-        gate = cfg.max_fix_sigma_m
-        check, r_lo, r_hi = _radius_args(PLAUSIBLE_RADIUS_M)
-        shared = cfg.centroid_mode == "shared" or n == 1
         outputs = _navigation_outputs(n_copies, n, envs[0]._rays.shape[0])
         _run_chunks(
             _batched_kernels.navigation_reward_sensors,
@@ -178,9 +183,7 @@ class FusedStep:
             st.clock,
             _iono_factors(model),
             z,
-            np.array(
-                [model.sigma_ure_m, float(bool(model.tropo)), float(bool(model.differential))]
-            ),
+            st.model,
             len(SYSTEMS),
             x0,
             rel_ecef,
@@ -188,8 +191,8 @@ class FusedStep:
             avail,
             cfg.transfer == "ddt",
             int(cfg.nav_max_iter),
-            np.array([float(check), r_lo, r_hi]),
-            np.array([float(gate is not None), float(gate) ** 2 if gate is not None else 0.0]),
+            st.radius,
+            st.gate,
             origin,
             rot,
             pred,
@@ -440,8 +443,9 @@ MIN_COPIES_PER_THREAD = 4
 _POOL: list[ThreadPoolExecutor] = []
 
 
+@functools.cache
 def _threads() -> int:
-    """The CPU cores this process may run on."""
+    """The CPU cores this process may run on (when first asked)."""
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
@@ -656,6 +660,16 @@ class _SwarmArrays:
                 kin.min_separation_m,
             ],
             dtype=np.float64,
+        )
+        rs, model, gate = cfg.relative_sensing, cfg.error_model, cfg.max_fix_sigma_m
+        check, r_lo, r_hi = _radius_args(PLAUSIBLE_RADIUS_M)
+        self.sensing = np.array([rs.sigma0_m, rs.sigma_per_m, rs.max_range_m], dtype=np.float64)
+        self.model = np.array(
+            [model.sigma_ure_m, float(bool(model.tropo)), float(bool(model.differential))]
+        )
+        self.radius = np.array([float(check), r_lo, r_hi])
+        self.gate = np.array(
+            [float(gate is not None), float(gate) ** 2 if gate is not None else 0.0]
         )
         w0 = envs[0].world
         self.pos = np.empty((k_n, n, 3))
