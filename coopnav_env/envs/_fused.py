@@ -440,7 +440,9 @@ def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, .
 MIN_COPIES_PER_THREAD = 4
 """Fewest copies a thread of the fused step takes (fewer: the thread costs more than it saves)."""
 
-_POOL: list[ThreadPoolExecutor] = []
+_POOL: list = []
+"""The process id and the thread pool it made (a forked child, whose copy has no threads,
+makes its own)."""
 
 
 @functools.cache
@@ -466,8 +468,8 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     if threads == 1:
         kernel(0, n_copies, *args)
         return
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(max_workers=max(1, _threads() - 1)))
+    if not _POOL or _POOL[0] != os.getpid():  # none yet, or a forked child's copy
+        _POOL[:] = [os.getpid(), ThreadPoolExecutor(max_workers=max(1, _threads() - 1))]
     n_chunks = min(4 * threads, max(1, n_copies // MIN_COPIES_PER_THREAD))
     bounds = np.linspace(0, n_copies, n_chunks + 1).astype(int).tolist()
     counter = itertools.count()  # next() is atomic under the GIL
@@ -476,7 +478,7 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
         while (i := next(counter)) < n_chunks:
             kernel(bounds[i], bounds[i + 1], *args)
 
-    futures = [_POOL[0].submit(work) for _ in range(threads - 1)]
+    futures = [_POOL[1].submit(work) for _ in range(threads - 1)]
     work()
     for f in futures:
         f.result()

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import multiprocessing
+import os
 
 import numpy as np
 import pytest
@@ -196,3 +198,25 @@ def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
             assert _same(inf_a, inf_b)
         else:
             assert all(a[k].tobytes() == b[k].tobytes() for k in b)
+
+
+def _step_in_child(batch, queue) -> None:
+    obs, *_ = batch.step(np.zeros((batch.n_copies, batch.n_agents, 3)))
+    queue.put(obs.copy())
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_fused_step_runs_in_a_forked_child() -> None:
+    # the parent's thread pool has no threads in a forked child: the child makes its own
+    batch = BatchedUrbanCanyonEnv(16, n_uavs=3)
+    batch.reset(seed=2)
+    batch.step(np.zeros((16, 3, 3)))
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_step_in_child, args=(batch, queue))
+    child.start()
+    obs_child = queue.get(timeout=120)
+    child.join(timeout=60)
+    obs, *_ = batch.step(np.zeros((16, 3, 3)))  # the same step in the parent
+    assert child.exitcode == 0
+    assert obs_child.tobytes() == obs.tobytes()
