@@ -42,6 +42,7 @@ def _motion_one(
     vel0,
     cmd,
     motion,
+    moving,
     fence_lo,
     fence_hi,
     b_lo,
@@ -71,22 +72,28 @@ def _motion_one(
     nb = n_b[k]
     lo = np.ascontiguousarray(b_lo[k, :nb])
     hi = np.ascontiguousarray(b_hi[k, :nb])
-    p1, v1, h, s = _sim_kernels.world_motion(
-        pos0[k],
-        vel0[k],
-        cmd[k],
-        motion[0],
-        motion[1],
-        motion[2],
-        motion[3],
-        motion[4],
-        fence_lo[k],
-        fence_hi[k],
-        lo,
-        hi,
-        motion[5],
-        motion[6],
-    )
+    if moving:
+        p1, v1, h, s = _sim_kernels.world_motion(
+            pos0[k],
+            vel0[k],
+            cmd[k],
+            motion[0],
+            motion[1],
+            motion[2],
+            motion[3],
+            motion[4],
+            fence_lo[k],
+            fence_hi[k],
+            lo,
+            hi,
+            motion[5],
+            motion[6],
+        )
+    else:  # the first epoch of an episode: where the swarm starts, no collision test
+        p1 = pos0[k].copy()
+        v1 = vel0[k].copy()
+        h = np.zeros(n, dtype=np.bool_)
+        s = np.zeros(n, dtype=np.bool_)
     pos1[k] = p1
     vel1[k] = v1
     hit[k] = h
@@ -132,6 +139,7 @@ def motion_sight_relative(
     vel0,  # (K, N, 3)
     cmd,  # (K, N, 3) clipped commands
     motion,  # (7,) max speed, max dv, dt, altitude min, altitude max, radius, min separation
+    moving,  # bool: False at an episode's first epoch (the swarm stays where it starts)
     fence_lo,  # (K, 2)
     fence_hi,  # (K, 2)
     b_lo,  # (K, B_max, 3) building boxes
@@ -166,6 +174,7 @@ def motion_sight_relative(
             vel0,
             cmd,
             motion,
+            moving,
             fence_lo,
             fence_hi,
             b_lo,

@@ -94,13 +94,32 @@ class FusedStep:
         """
         if not self._load(envs):
             return None
+        out = self._epochs(envs, cmd, self.state, cold=False)
+        if out is not None:
+            self._seen = [_fingerprint(e) for e in envs]
+        return out
+
+    def first_epochs(self, envs: list[UrbanCanyonEnv]) -> bool:
+        """The first epoch of each copy's episode, after ``UrbanCanyonEnv._begin_reset`` and
+        ``UrbanWorld._begin_episode`` (what ``UrbanWorld.reset`` computes after them: the
+        swarm where it starts, navigation cold-started from the launch positions); sets each
+        world's and environment's epoch. False, with nothing changed, if a copy cannot take
+        it (then reset it as usual)."""
+        worlds = [e.world for e in envs]
+        if not all(_fused_world(w, cold=True) for w in worlds):
+            return False
+        n = envs[0].config.n_uavs
+        cmd = np.zeros((len(envs), n, 3))
+        return self._epochs(envs, cmd, _SwarmArrays(envs), cold=True) is not None
+
+    def _epochs(self, envs: list[UrbanCanyonEnv], cmd: np.ndarray, st: Any, cold: bool):
+        """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``."""
         cfg = envs[0].config
-        st = self.state
         n_copies, n = len(envs), cfg.n_uavs
         world0 = envs[0].world
         dt = cfg.dt_s
         # the epoch's sky of each copy (its own time)
-        t_new = [e.world.t_s + dt for e in envs]
+        t_new = [e.world.t_s if cold else e.world.t_s + dt for e in envs]
         rows = self.skies.rows(world0, t_new)
         if rows is None:  # a sky whose satellites are not grouped by constellation
             return None
@@ -130,6 +149,7 @@ class FusedStep:
             st.vel,
             cmd,
             st.motion,
+            not cold,
             st.fence_lo,
             st.fence_hi,
             st.b_lo,
@@ -158,7 +178,9 @@ class FusedStep:
         # the rotations to ECEF stay numpy matmuls (their rounding is numpy's, as one copy's)
         origin, rot = world0.origin_ecef_m, world0.rot_enu
         rx_ecef = origin + pos1 @ rot
-        pred = st.nav_pos + vel1 * dt  # warm start: the previous estimates moved
+        # warm start: the previous estimates moved; at an episode's first epoch, the launch
+        # positions
+        pred = st.nav_pos if cold else st.nav_pos + vel1 * dt
         x0 = origin + pred @ rot
         shared = cfg.centroid_mode == "shared" or n == 1
         if shared:  # only the centroid's row: the UAV receiving the most (the first of equals)
@@ -166,7 +188,7 @@ class FusedStep:
             rel_ecef = (rel[np.arange(n_copies), centroid] @ rot)[:, None]
         else:
             rel_ecef = rel @ rot
-        dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * 1.0
+        dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (0.0 if cold else 1.0)
         model = cfg.error_model
         outputs = _navigation_outputs(n_copies, n, envs[0]._rays.shape[0])
         _run_chunks(
@@ -248,6 +270,9 @@ class FusedStep:
                 "a receiver is at the Earth's centre or on a satellite (copies "
                 f"{np.flatnonzero(bad_geometry).tolist()})"
             )
+        if cold:
+            self._first_epochs(envs, st, t_new, skies, n_sv, los_off, los_flat, outputs, rel, avail)
+            return ()
         sky_deg = np.degrees(np.arctan(tan_max))
         steps = st.steps + 1
         obs = np.empty((n_copies, n, cfg.obs_dim), dtype=np.float32)
@@ -346,7 +371,6 @@ class FusedStep:
             terminated[k] = crash or reached
             truncated[k] = (e._steps >= cfg.max_steps) and not terminated[k]
         st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps)
-        self._seen = [_fingerprint(e) for e in envs]
         info_parts = (
             floats,
             (n_sats, n_swarm, n_sv, co_status, sa_status, source, wp_c),
@@ -355,6 +379,81 @@ class FusedStep:
             steps,
         )
         return obs, rewards, terminated, truncated, terms, in_goal, info_parts
+
+    @staticmethod
+    def _first_epochs(envs, st, t_s, skies, n_sv, los_off, los_flat, outputs, rel, avail) -> None:
+        """The worlds and epochs after :meth:`first_epochs`' kernels (``UrbanWorld._epoch``
+        at a reset: collisions and separation not tested, the positions unchanged)."""
+        (
+            sa_status,
+            n_iter,
+            sa_pos,
+            sa_cov,
+            co_pos,
+            co_cov,
+            co_status,
+            source,
+            nav_pos,
+            nav_cov,
+            sa_rej,
+            co_rej,
+            wp,
+            n_swarm,
+            n_sats,
+            centroid_uav,
+            out_of_contact,
+            *_rest,
+        ) = outputs
+        n = rel.shape[1]
+        nlos = np.zeros(los_flat.shape[0], dtype=bool)
+        wp_c, goal_c = wp.copy(), st.goal.copy()
+        for k, e in enumerate(envs):
+            w = e.world
+            sky = skies[k]
+            a, b = los_off[k], los_off[k + 1]
+            los = los_flat[a:b].reshape(n, n_sv[k])
+            w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
+            w._warm = True
+            no = np.zeros(n, dtype=bool)
+            ep = Epoch(
+                t_s=float(t_s[k]),
+                pos_enu_m=w.pos_enu_m.copy(),
+                vel_enu_mps=w.vel_enu_mps.copy(),
+                goal_enu_m=goal_c[k],
+                sv_az_deg=sky.az,
+                sv_el_deg=sky.el,
+                system=sky.system,
+                sv_index=sky.sv_index,
+                los=los,
+                received=los,
+                nlos=nlos[a:b].reshape(n, n_sv[k]),
+                n_above_mask=int(n_sv[k]),
+                n_sats=n_sats[k],
+                n_sats_swarm=n_swarm[k],
+                rel_enu_m=rel[k],
+                rel_available=avail[k],
+                standalone_pos_enu_m=sa_pos[k],
+                standalone_cov_enu_m2=sa_cov[k],
+                standalone_status=sa_status[k],
+                coop_pos_enu_m=co_pos[k],
+                coop_cov_enu_m2=co_cov[k],
+                coop_status=co_status[k],
+                nav_pos_enu_m=nav_pos[k],
+                nav_cov_enu_m2=nav_cov[k],
+                nav_source=source[k],
+                centroid_uav=int(centroid_uav[k]),
+                collided=no,
+                separation_violation=no.copy(),
+                out_of_contact=out_of_contact[k],
+                n_iter_standalone=int(n_iter[k, 0]),
+                n_iter_coop=int(n_iter[k, 1]),
+                standalone_rejected=sa_rej[k],
+                coop_rejected=co_rej[k],
+                next_waypoint=wp_c[k],
+                map_excluded=None,
+            )
+            w.last = ep
+            e._epoch = ep
 
 
 def step_infos(
@@ -484,6 +583,9 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
         f.result()
 
 
+_N_OBS_PARAMS = 9
+"""Entries of ``UrbanCanyonEnv._obs_params`` (the observation kernel's scales)."""
+
 _WGS84 = np.array([WGS84_A_M, WGS84_B_M, WGS84_F, WGS84_E2, _EP2], dtype=np.float64)
 
 
@@ -514,13 +616,14 @@ def fused_settings(cfg: UrbanCanyonConfig) -> bool:
     )
 
 
-def _fused_world(world: Any) -> bool:
+def _fused_world(world: Any, cold: bool = False) -> bool:
     """Whether a copy's world can take the fused step: box buildings (not a file city's
-    polygons), its own constellation (the cached sky) and a warm-started navigation."""
+    polygons), its own constellation (the cached sky) and a warm-started navigation (with
+    ``cold``: an episode begun, before its first epoch)."""
     return (
         isinstance(world.city.buildings, Buildings)
         and world.constellation is world.__dict__.get("_cached_constellation")
-        and bool(world._warm)
+        and bool(world._warm) is not cold
     )
 
 
@@ -683,7 +786,7 @@ class _SwarmArrays:
         self.goal = np.empty((k_n, 3))
         self.fence_lo = np.empty((k_n, 2))
         self.fence_hi = np.empty((k_n, 2))
-        self.obs_params = np.empty((k_n, envs[0]._obs_params.shape[0]))
+        self.obs_params = np.zeros((k_n, _N_OBS_PARAMS))
         self.steps = np.empty(k_n, dtype=np.int64)
         self.n_b = np.zeros(k_n, dtype=np.int64)
         self.n_route = np.zeros(k_n, dtype=np.int64)
@@ -723,7 +826,9 @@ class _SwarmArrays:
         x0, x1, y0, y1 = w.city.extent_m
         self.fence_lo[k] = (x0 + r, y0 + r)
         self.fence_hi[k] = (x1 - r, y1 - r)
-        self.obs_params[k] = env._obs_params
+        params = env.__dict__.get("_obs_params")  # none before an environment's first reset
+        if params is not None:
+            self.obs_params[k] = params
         self.steps[k] = env._steps
         b = w.city.buildings
         nb = b.min_m.shape[0]

@@ -217,10 +217,24 @@ class BatchedUrbanCanyonEnv:
         final_obs = obs
         obs = self._obs
         obs[:] = final_obs
-        for k in np.flatnonzero(terminated | truncated).tolist():
-            # automatic reset: the next episode continues the copy's generator
-            obs[k] = self.envs[k]._reset_arrays(None)
+        self._reset_copies(np.flatnonzero(terminated | truncated).tolist())
         return obs, rewards, terminated, truncated, infos, final_obs
+
+    def _reset_copies(self, done: list[int]) -> None:
+        """Automatic reset of the copies ``done`` (the next episode continues each copy's
+        generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs of all of them in
+        the fused step's compiled calls (else each world's own)."""
+        if not done:
+            return
+        envs = [self.envs[k] for k in done]
+        for e in envs:
+            e._begin_reset(None)
+            e.world._begin_episode(e._rng)
+        if not self._fused_step.first_epochs(envs):
+            for e in envs:
+                e._epoch = e.world._first_epoch(e._rng)
+        for k, e in zip(done, envs):
+            self._obs[k] = e._finish_reset()
 
     def _step_copies(
         self, cmd: np.ndarray

@@ -245,13 +245,22 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
     def _reset_arrays(self, seed: int | None) -> np.ndarray:
         """Reset (as :meth:`reset`) and return the observations as one ``(N, obs_dim)`` array."""
+        self._begin_reset(seed)
+        self._epoch = self.world.reset(self._rng)
+        return self._finish_reset()
+
+    def _begin_reset(self, seed: int | None) -> None:
+        """:meth:`_reset_arrays` before the world's reset: the generator, agents, step count."""
         if seed is not None:
             self._rng = np.random.default_rng(self.check_seed(seed))
         elif self._rng is None:
             self._rng = np.random.default_rng()
         self.agents = self.possible_agents[:]
         self._steps = 0
-        self._epoch = self.world.reset(self._rng)
+
+    def _finish_reset(self) -> np.ndarray:
+        """:meth:`_reset_arrays` after the world's first epoch (``_epoch``): the episode's
+        scales and route lengths, and the observations."""
         if self.config.action_frame == "route":
             _check_route_offset(self.config, float(self.world.city.street_width_m))
         self._city_scale_m = _city_scale_m(self.world)
