@@ -14,9 +14,12 @@ draws, no dead-reckoning noise, no channel limit, no map exclusion, no integrity
 monitoring, the exact covariance, velocity commands, the base observation) on worlds of box
 buildings; with other settings, or a world it cannot take (a file city's polygons, a
 replaced constellation, a sky whose satellites are not grouped by constellation), the
-callers step through ``UrbanWorld.step`` as before. Resets stay the copies' own
-(``UrbanCanyonEnv._reset_arrays``): the state arrays reload a copy whose world changed since
-the last fused step (a reset, a step through the other path, an assignment to its world).
+callers step through ``UrbanWorld.step`` as before. A reset begins in the copy's own
+Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
+route); the batched environment then computes the first epochs of all the copies it resets
+at a step in the same kernels (:meth:`FusedStep.first_epochs`). The state arrays reload a copy
+whose world changed since the last fused step (a reset, a step through the other path, an
+assignment to its world).
 """
 
 from __future__ import annotations

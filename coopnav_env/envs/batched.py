@@ -35,8 +35,9 @@ numpy calls on the ``(K, ...)`` arrays between them. Each copy keeps its own cit
 order of ``UrbanWorld``); no problem is padded or stacked with another copy's, so its
 arithmetic does not depend on K. Still once per copy in Python: those draws, the copy's
 ``Epoch`` and world attributes (what ``envs[k]`` shows), the infos dictionaries and the
-automatic resets (``UrbanCanyonEnv._reset_arrays``: a new city, route, formation and the
-first epoch). Other settings step copy by copy through ``UrbanCanyonEnv._step_arrays``.
+start of each automatic reset (a new city, formation and route); the first epochs of the
+copies reset at a step are again the compiled calls over all of them. Other settings step
+copy by copy through ``UrbanCanyonEnv._step_arrays``.
 """
 
 from __future__ import annotations
