@@ -134,7 +134,7 @@ class FusedStep:
         for k, e in enumerate(envs):
             z[k, : n_draws[k]] = e._rng.standard_normal(n_draws[k])
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
-        np.cumsum(n * n_sv, out=los_off[1:])
+        los_off[1:] = (n * n_sv).cumsum()
         tab = self.skies
         pos1 = np.empty((n_copies, n, 3))
         vel1 = np.empty((n_copies, n, 3))
@@ -192,7 +192,6 @@ class FusedStep:
         else:
             rel_ecef = rel @ rot
         dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (0.0 if cold else 1.0)
-        model = cfg.error_model
         outputs = _navigation_outputs(n_copies, n, envs[0]._rays.shape[0])
         _run_chunks(
             _batched_kernels.navigation_reward_sensors,
@@ -206,7 +205,7 @@ class FusedStep:
             los_flat,
             los_off,
             st.clock,
-            _iono_factors(model),
+            st.iono,
             z,
             st.model,
             len(SYSTEMS),
@@ -598,6 +597,26 @@ def fused_settings(cfg: UrbanCanyonConfig) -> bool:
     limit, no map exclusion, no integrity monitoring), velocity commands and the base
     observation, with every compiled kernel on. Other settings step copy by copy."""
     return (
+        _fused_config(cfg)
+        and _scenario._fused_path_on()
+        and _urban_canyon._USE_KERNEL
+        and _city._USE_KERNEL
+    )
+
+
+_FUSED_CONFIGS: dict[int, tuple[Any, bool]] = {}
+"""``id(config) -> (config, answer)`` of :func:`_fused_config` (a configuration's hash
+covers every field, slower than the answer; the entry keeps the object, so its id stays
+its own)."""
+
+
+def _fused_config(cfg: UrbanCanyonConfig) -> bool:
+    """The settings part of :func:`fused_settings` (remembered per configuration object:
+    configurations are frozen)."""
+    hit = _FUSED_CONFIGS.get(id(cfg))
+    if hit is not None and hit[0] is cfg:
+        return hit[1]
+    ok = (
         cfg.nlos_probability == 0.0
         and not cfg.dead_reckoning_noise
         and cfg.max_sats is None
@@ -613,10 +632,11 @@ def fused_settings(cfg: UrbanCanyonConfig) -> bool:
             or cfg.obs_true_error
             or cfg.obs_agent_index
         )
-        and _scenario._fused_path_on()
-        and _urban_canyon._USE_KERNEL
-        and _city._USE_KERNEL
     )
+    if len(_FUSED_CONFIGS) >= 256:  # configurations made in a loop: start again
+        _FUSED_CONFIGS.clear()
+    _FUSED_CONFIGS[id(cfg)] = (cfg, ok)
+    return ok
 
 
 def _fused_world(world: Any, cold: bool = False) -> bool:
@@ -776,6 +796,7 @@ class _SwarmArrays:
             [model.sigma_ure_m, float(bool(model.tropo)), float(bool(model.differential))]
         )
         self.radius = np.array([float(check), r_lo, r_hi])
+        self.iono = _iono_factors(model)
         self.gate = np.array(
             [float(gate is not None), float(gate) ** 2 if gate is not None else 0.0]
         )
