@@ -251,6 +251,17 @@ def section_compare(args, out: dict) -> None:
 
 STAGES: tuple[tuple[str, str, str], ...] = (
     # (label, module, attribute); a method is "Class.method"
+    # the fused step (the environment's steps with the default settings, a batch of one):
+    # motion, line of sight and relative sensing; the navigation with the reward terms and
+    # the skyline and wall sensors; the observations
+    ("fused motion+sight", "coopnav_env.envs._batched_kernels", "motion_sight_relative"),
+    (
+        "fused nav+reward",
+        "coopnav_env.envs._batched_kernels",
+        "navigation_reward_sensors",
+    ),
+    ("fused observations", "coopnav_env.envs._batched_kernels", "observations_infos"),
+    # the resets' first epoch, and the other settings' steps:
     # the default path: pseudoranges, both solvers, the estimate selection and the waypoints
     # of an epoch in one compiled call (UrbanWorld._navigate_fused)
     ("pseudorange+solvers", "coopnav_env.sim._kernels", "epoch_navigation"),
@@ -268,7 +279,12 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("relative sensing", "coopnav_env.sim.scenario", "_measure_relative"),
     ("relative sensing", "coopnav_env.sim.scenario", "UrbanWorld._relative_ecef"),
 )
-NAV = ("pseudorange+solvers", "cooperative solver", "standalone solver")
+NAV = (
+    "pseudorange+solvers",
+    "cooperative solver",
+    "standalone solver",
+    "fused nav+reward",
+)
 
 
 @contextlib.contextmanager
@@ -317,6 +333,7 @@ KERNEL_MODULES = (
     "coopnav_env.gnss._kernels",
     "coopnav_env.nav._kernels",
     "coopnav_env.envs._kernels",
+    "coopnav_env.envs._batched_kernels",
 )
 
 

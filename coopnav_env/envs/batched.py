@@ -15,23 +15,29 @@ settings, bit for bit: ``reset(seed=s)`` resets copy ``k`` with ``s + k`` (a seq
 one seed per copy; ``None`` continues each copy's generator, drawing it from OS entropy the
 first time), every later episode of a copy continues that copy's generator (what a separate
 environment does on ``reset()`` without a seed, and what SuperSuit's vector wrappers do), and
-each step runs the parallel environment's own array core (``UrbanCanyonEnv._step_arrays``:
-world step, rewards, observations). ``tests/envs/test_batched.py`` checks observations,
-rewards, terminations, truncations and infos against separate environments over episodes
-that end at different steps.
+every step of a copy is the step of a separate environment: the parallel environment steps
+as a batch of one through the same fused step (:mod:`coopnav_env.envs._fused`).
+``tests/envs/test_batched.py`` checks observations, rewards, terminations, truncations, infos
+and states against separate environments over episodes that end at different steps, and the
+fused step against ``UrbanWorld.step``.
 
 What is batched and what is not
 -------------------------------
-The action checks and clipping, the reward, termination and observation buffers are single
-``(K, ...)`` numpy operations. The world step of each copy -- satellites, line of sight,
-pseudoranges, the standalone and cooperative navigation solvers, the skyline and wall
-sensors -- still runs copy by copy: the copies see different satellites (their episodes
-start at different times) and different cities, and stacking their solver problems would
-change the floating-point summation order of the solvers (padding to a common satellite
-count changes numpy's pairwise sums and LAPACK's blocking), so the episodes would no longer
-be those of separate environments. What the batching removes is the per-agent dictionary
-plumbing of PettingZoo and SuperSuit (observations, rewards, actions and flags per agent),
-not the physics.
+With the default measurement chain (no NLOS draws, no dead-reckoning noise, no channel limit,
+no map exclusion, no integrity monitoring, the exact covariance, velocity commands, the base
+observation: :func:`coopnav_env.envs._fused.fused_settings`), a step of all K copies is three
+compiled calls over the copies (:mod:`coopnav_env.envs._batched_kernels`: motion, line of
+sight and relative sensing; pseudoranges, both solvers, the estimate selection, waypoints,
+reward terms and the skyline and wall sensors; observations and the infos' numbers), run in
+chunks of copies on every core, with the rotations to ECEF and the skyline's ``arctan`` as
+numpy calls on the ``(K, ...)`` arrays between them. Each copy keeps its own city, satellites
+(its own GNSS time), solver problems and generator (one draw call per copy per step, in the
+order of ``UrbanWorld``); no problem is padded or stacked with another copy's, so its
+arithmetic does not depend on K. Still once per copy in Python: those draws, the copy's
+``Epoch`` and world attributes (what ``envs[k]`` shows), the infos dictionaries and the
+start of each automatic reset (a new city, formation and route); the first epochs of the
+copies reset at a step are again the compiled calls over all of them. Other settings step
+copy by copy through ``UrbanCanyonEnv._step_arrays``.
 """
 
 from __future__ import annotations
@@ -42,6 +48,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from coopnav_env.envs._fused import FusedStep, fused_settings, step_infos
 from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv
 
@@ -118,6 +125,7 @@ class BatchedUrbanCanyonEnv:
         self.possible_agents = list(envs[0].possible_agents)
         self._obs = np.zeros((self.n_copies, self.n_agents, self.obs_dim), dtype=np.float32)
         self._needs_reset = True
+        self._fused_step = FusedStep()
 
     # ---- episodes ---------------------------------------------------------------------------
 
@@ -202,6 +210,37 @@ class BatchedUrbanCanyonEnv:
         if self._needs_reset:
             raise ValueError("step() called before reset(): call reset() first")
         cmd = self._actions(actions)
+        out = self._fused_step.run(self.envs, cmd) if fused_settings(self.config) else None
+        if out is None:
+            return self._step_copies(cmd)
+        obs, rewards, terminated, truncated, _terms, _in_goal, parts = out
+        infos = step_infos(self.possible_agents, *parts)
+        final_obs = obs
+        obs = self._obs
+        obs[:] = final_obs
+        self._reset_copies(np.flatnonzero(terminated | truncated).tolist())
+        return obs, rewards, terminated, truncated, infos, final_obs
+
+    def _reset_copies(self, done: list[int]) -> None:
+        """Automatic reset of the copies ``done`` (the next episode continues each copy's
+        generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs of all of them in
+        the fused step's compiled calls (else each world's own)."""
+        if not done:
+            return
+        envs = [self.envs[k] for k in done]
+        for e in envs:
+            e._begin_reset(None)
+            e.world._begin_episode(e._rng)
+        if not self._fused_step.first_epochs(envs):
+            for e in envs:
+                e._epoch = e.world._first_epoch(e._rng)
+        for k, e in zip(done, envs):
+            self._obs[k] = e._finish_reset()
+
+    def _step_copies(
+        self, cmd: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[dict[str, dict]], np.ndarray]:
+        """:meth:`step` copy by copy through ``UrbanCanyonEnv._step_arrays`` (any settings)."""
         k_n = (self.n_copies, self.n_agents)
         rewards = np.empty(k_n)
         terminated = np.zeros(self.n_copies, dtype=bool)
@@ -219,6 +258,8 @@ class BatchedUrbanCanyonEnv:
             # automatic reset: the next episode continues the copy's generator
             obs[k] = self.envs[k]._reset_arrays(None)
         return obs, rewards, terminated, truncated, infos, final_obs
+
+    # ---- the fused step -----------------------------------------------------------------------
 
     def close(self) -> None:
         """Close every copy."""

@@ -245,14 +245,23 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
     def _reset_arrays(self, seed: int | None) -> np.ndarray:
         """Reset (as :meth:`reset`) and return the observations as one ``(N, obs_dim)`` array."""
+        self._begin_reset(seed)
+        self._epoch = self.world.reset(self._rng)
+        return self._finish_reset()
+
+    def _begin_reset(self, seed: int | None) -> None:
+        """:meth:`_reset_arrays` before the world's reset: the generator, agents, step count."""
         if seed is not None:
             self._rng = np.random.default_rng(self.check_seed(seed))
         elif self._rng is None:
             self._rng = np.random.default_rng()
         self.agents = self.possible_agents[:]
         self._steps = 0
-        self._epoch = self.world.reset(self._rng)
         self._route_offset_cap_m = None
+
+    def _finish_reset(self) -> np.ndarray:
+        """:meth:`_reset_arrays` after the world's first epoch (``_epoch``): the episode's
+        scales and route lengths, and the observations."""
         if self.config.action_frame == "route":
             if isinstance(self.world.city, FileCity):  # no single street width: the route's
                 self._route_offset_cap_m = route_offset_room_m(
@@ -343,6 +352,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         the reward terms and the in-goal flags. It does not change :attr:`agents` and does not
         render.
         """
+        from coopnav_env.envs._fused import step_one  # (the fused step imports this module)
+
+        fused = step_one(self, cmd)
+        if fused is not None:  # the step of BatchedUrbanCanyonEnv, as a batch of one
+            return fused
         cfg = self.config
         prev = self._epoch
         if cfg.action_frame == "route":

@@ -1483,6 +1483,22 @@ class UrbanWorld:
         Epoch
             The first epoch (cold-started solvers).
         """
+        self._begin_episode(rng, start_pos_enu_m, goal_enu_m)
+        return self._first_epoch(rng)
+
+    def _first_epoch(self, rng: np.random.Generator) -> Epoch:
+        """:meth:`reset` after :meth:`_begin_episode`: the episode's first epoch."""
+        zeros = np.zeros(self.config.n_uavs, dtype=bool)
+        self.last = self._epoch(rng, zeros, zeros)
+        return self.last
+
+    def _begin_episode(
+        self,
+        rng: np.random.Generator,
+        start_pos_enu_m: ArrayLike | None = None,
+        goal_enu_m: ArrayLike | None = None,
+    ) -> None:
+        """:meth:`reset` up to its first epoch: city, clocks, formation, goal, route, priors."""
         cfg = self.config
         n = cfg.n_uavs
         self.city = self.fixed_city if self.fixed_city is not None else make_city(cfg, rng)
@@ -1507,9 +1523,6 @@ class UrbanWorld:
             np.eye(3) * cfg.start_prior_sigma_m**2, (n, 3, 3)
         ).copy()
         self._warm = False
-        zeros = np.zeros(n, dtype=bool)
-        self.last = self._epoch(rng, zeros, zeros)
-        return self.last
 
     def _street_start_goal(
         self,

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import multiprocessing
+import os
 
 import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import BatchedUrbanCanyonEnv
+from coopnav_env.envs import BatchedUrbanCanyonEnv, _fused
+from coopnav_env.envs._fused import fused_settings
+from coopnav_env.sim.scenario import Epoch
 
 SETTINGS = {"n_uavs": 4, "max_steps": 6}
 
@@ -85,3 +90,133 @@ def test_bad_use_raises() -> None:
     env = urban_canyon_v0.parallel_env(n_uavs=2)
     with pytest.raises(ValueError, match="distinct"):
         BatchedUrbanCanyonEnv.from_envs([env, env])
+
+
+def _step_alongside(batch, single, steps: int, seed: int, scale: float = 1.0) -> list[int]:
+    """Step ``batch`` and the separate environments ``single`` with the same random commands;
+    assert every output equal bit for bit (and each copy's ``state()``); return the steps at
+    which episodes ended."""
+    k_copies, n = batch.n_copies, batch.n_agents
+    obs, infos = batch.reset(seed=seed)
+    for k, env in enumerate(single):
+        o, i = env.reset(seed=seed + k)
+        assert obs[k].tobytes() == np.stack([o[a] for a in env.possible_agents]).tobytes()
+        assert _same(infos[k], i)
+    rng = np.random.default_rng(seed)
+    end_steps = []
+    for step in range(steps):
+        act = rng.uniform(-scale, scale, (k_copies, n, 3))
+        obs, rew, term, trunc, infos, final = batch.step(act)
+        for k, env in enumerate(single):
+            agents = env.possible_agents
+            o, r, te, tr, i = env.step({a: act[k, j] for j, a in enumerate(agents)})
+            assert final[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+            assert rew[k].tobytes() == np.array([r[a] for a in agents]).tobytes()
+            assert term[k] == te[agents[0]] and trunc[k] == tr[agents[0]]
+            assert _same(infos[k], i)
+            if not env.agents:
+                end_steps.append(step)
+                o, _ = env.reset()
+            assert obs[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+            assert batch.envs[k].state().tobytes() == env.state().tobytes()
+    return end_steps
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"n_uavs": 5, "max_steps": 9},  # one centroid per UAV
+        {"n_uavs": 12, "max_steps": 5},  # one shared centroid (centroid="auto", N >= 11)
+        {"n_uavs": 1, "max_steps": 4},
+    ],
+)
+def test_fused_step_copies_equal_batch_of_one(settings) -> None:
+    # copy k of K = 8 (the fused step: all copies in one set of compiled calls, in threads)
+    # equals the parallel environment reset with seed + k, bit for bit, across episodes
+    # that end at different steps (crashes of random commands and truncations)
+    k_copies = 8
+    batch = BatchedUrbanCanyonEnv(k_copies, **settings)
+    assert fused_settings(batch.config)
+    single = [urban_canyon_v0.parallel_env(**settings) for _ in range(k_copies)]
+    end_steps = _step_alongside(batch, single, steps=14, seed=21)
+    assert batch._fused_step.state is not None  # the fused step ran
+    assert len(set(end_steps)) >= 3  # episodes ended at several different steps
+    # a batch of one is the same episode as copy 0 of the batch of eight
+    one = BatchedUrbanCanyonEnv(1, **settings)
+    assert _step_alongside(one, single[:1], steps=10, seed=21) is not None
+
+
+def test_settings_outside_the_fused_step_step_copy_by_copy() -> None:
+    settings = {"n_uavs": 3, "max_steps": 6, "nlos_probability": 0.3}
+    batch = BatchedUrbanCanyonEnv(4, **settings)
+    assert not fused_settings(batch.config)
+    single = [urban_canyon_v0.parallel_env(**settings) for _ in range(4)]
+    assert _step_alongside(batch, single, steps=8, seed=3)
+    assert batch._fused_step.state is None
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"n_uavs": 5, "max_steps": 12},
+        {"n_uavs": 12, "max_steps": 6},
+        {"n_uavs": 4, "max_steps": 10, "nav_reward": "sigma", "nav_team_weight": 0.5},
+    ],
+)
+def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
+    # the parallel environment steps as a batch of one (coopnav_env.envs._fused); the same
+    # episodes through UrbanWorld.step (the fused step off) are equal bit for bit
+    def run(fused: bool) -> list:
+        if not fused:
+            monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
+        env = urban_canyon_v0.parallel_env(**settings)
+        obs, _ = env.reset(seed=8)
+        rng = np.random.default_rng(4)
+        out = [obs]
+        for _ in range(30):
+            act = {a: rng.uniform(-1.0, 1.0, 3) for a in env.agents}
+            out.append(env.step(act))
+            out.append(env.world.last)
+            if not env.agents:
+                out.append(env.reset()[0])
+        monkeypatch.undo()
+        return out
+
+    fused, world = run(True), run(False)
+    assert len(fused) == len(world)
+    for a, b in zip(fused, world, strict=True):
+        if isinstance(b, Epoch):
+            for f in dataclasses.fields(b):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                assert np.asarray(x).tobytes() == np.asarray(y).tobytes(), f.name
+                assert np.asarray(x).dtype == np.asarray(y).dtype, f.name
+        elif isinstance(b, tuple):
+            obs_a, rew_a, te_a, tr_a, inf_a = a
+            obs_b, rew_b, te_b, tr_b, inf_b = b
+            assert all(obs_a[k].tobytes() == obs_b[k].tobytes() for k in obs_b)
+            assert rew_a == rew_b and te_a == te_b and tr_a == tr_b
+            assert _same(inf_a, inf_b)
+        else:
+            assert all(a[k].tobytes() == b[k].tobytes() for k in b)
+
+
+def _step_in_child(batch, queue) -> None:
+    obs, *_ = batch.step(np.zeros((batch.n_copies, batch.n_agents, 3)))
+    queue.put(obs.copy())
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_fused_step_runs_in_a_forked_child() -> None:
+    # the parent's thread pool has no threads in a forked child: the child makes its own
+    batch = BatchedUrbanCanyonEnv(16, n_uavs=3)
+    batch.reset(seed=2)
+    batch.step(np.zeros((16, 3, 3)))
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_step_in_child, args=(batch, queue))
+    child.start()
+    obs_child = queue.get(timeout=120)
+    child.join(timeout=60)
+    obs, *_ = batch.step(np.zeros((16, 3, 3)))  # the same step in the parent
+    assert child.exitcode == 0
+    assert obs_child.tobytes() == obs.tobytes()

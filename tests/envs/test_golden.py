@@ -27,6 +27,10 @@ are bit-identical to their numpy formulations.
 Unchanged (fourth session of 2026-11-30) by the world's cooperative solve in one compiled call
 and then the whole navigation of an epoch in one (``UrbanWorld._navigate_fused``): the same
 kernels on the same arguments; the test below runs the episodes both ways.
+
+Unchanged by the fused step of every swarm of a batch (``coopnav_env.envs._fused``, which the
+parallel environment takes as a batch of one): the same kernels on each swarm's own slices,
+its draws in the same order, the rotations still numpy matmuls.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import urban_canyon
+from coopnav_env.envs import _fused, urban_canyon
 from coopnav_env.gnss import errors
 from coopnav_env.nav import cooperative, wls
 from coopnav_env.sim import city, route, scenario, swarm
@@ -60,6 +64,8 @@ def test_fused_epoch_equals_the_modular_kernels(monkeypatch, name, kwargs, steps
     """The one-call navigation of an epoch (``UrbanWorld._navigate_fused``) against the same
     kernels called one by one from Python (``_navigate``): the same episodes, bit for bit
     (self and shared centroids, DDT and SDT, NLOS biases and the channel limit)."""
+    # the world's own steps (the environment's fused step of every copy off)
+    monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
     calls = count_fused_calls(monkeypatch)
     short = min(steps, 60)
     fast = episode_digest(kwargs, short, seed)

@@ -103,27 +103,27 @@ def test_progress_csv_keeps_every_iteration_over_interrupts_and_resumes(tmp_path
 
 
 def test_sigint_inside_a_compiled_call_is_taken_after_it(tmp_path, monkeypatch, capsys):
-    """SIGINT while a world step runs its compiled (numba) kernels (motion, then
-    ``epoch_navigation``): the step completes, the interrupt is taken after it, a checkpoint
-    is saved and the run resumes (today the interrupt raised inside the call: ``SystemError:
-    CPUDispatcher(...)``, no checkpoint)."""
-    from coopnav_env.sim.scenario import UrbanWorld
+    """SIGINT as a step of the swarms starts its compiled (numba) kernels (the batched
+    environment's step, its kernels in threads): the step completes, the interrupt is taken
+    after it, a checkpoint is saved and the run resumes (once the interrupt raised inside
+    the call: ``SystemError: CPUDispatcher(...)``, no checkpoint)."""
+    from coopnav_env.envs import BatchedUrbanCanyonEnv
 
-    real = UrbanWorld.step
+    real = BatchedUrbanCanyonEnv.step
     calls = {"started": 0, "finished": 0}
 
-    def compiled_call(self, cmd, rng):
+    def compiled_call(self, actions):
         calls["started"] += 1
-        if calls["started"] == 40:
-            os.kill(os.getpid(), signal.SIGINT)  # lands while the compiled calls run
-        result = real(self, cmd, rng)
+        if calls["started"] == 10:
+            os.kill(os.getpid(), signal.SIGINT)  # lands as the compiled calls start
+        result = real(self, actions)
         calls["finished"] += 1
         return result
 
-    monkeypatch.setattr(UrbanWorld, "step", compiled_call)
+    monkeypatch.setattr(BatchedUrbanCanyonEnv, "step", compiled_call)
     out = tmp_path / "run"
     assert train(out, "--timesteps", "160") == 130
-    assert calls["started"] >= 40 and calls["finished"] == calls["started"]
+    assert calls["started"] >= 10 and calls["finished"] == calls["started"]
     err = capsys.readouterr().err
     assert "interrupted: saved the policy after" in err and "--resume latest" in err
     monkeypatch.undo()

@@ -1,0 +1,879 @@
+"""The fused step: ``K`` swarms of ``urban_canyon_v0`` advanced by compiled calls over them all.
+
+:class:`FusedStep` is the step of :class:`coopnav_env.envs.BatchedUrbanCanyonEnv` and, as a
+batch of one, of the parallel environment :class:`coopnav_env.envs.UrbanCanyonEnv`
+(:func:`step_one`): each copy draws from its own generator, in the order of
+``UrbanWorld._navigate_fused``, and runs the kernels of :mod:`coopnav_env.envs.
+_batched_kernels` on its own slices of ``(K, ...)`` arrays, with the rotations to ECEF and
+the skyline's ``arctan`` as numpy calls on those arrays. A copy's arithmetic does not depend
+on ``K`` or on the other copies, so copy ``k`` of a batch is the episode of a batch of one,
+that is of a separate environment, bit for bit.
+
+It computes the settings of :func:`fused_settings` (the default measurement chain: no NLOS
+draws, no dead-reckoning noise, no channel limit, no map exclusion, no integrity
+monitoring, the exact covariance, velocity commands, the base observation) on worlds of box
+buildings; with other settings, or a world it cannot take (a file city's polygons, a
+replaced constellation, a sky whose satellites are not grouped by constellation), the
+callers step through ``UrbanWorld.step`` as before. A reset begins in the copy's own
+Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
+route); the batched environment then computes the first epochs of all the copies it resets
+at a step in the same kernels (:meth:`FusedStep.first_epochs`). The state arrays reload a copy
+whose world changed since the last fused step (a reset, a step through the other path, an
+assignment to its world).
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import operator
+import os
+import weakref
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from coopnav_env.constants import SYSTEMS, WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84_F
+from coopnav_env.envs import _batched_kernels
+from coopnav_env.envs import urban_canyon as _urban_canyon
+from coopnav_env.envs.config import UrbanCanyonConfig
+from coopnav_env.envs.urban_canyon import (
+    INFO_KEYS,
+    NO_FIX_ERROR_M,
+    REWARD_TERMS,
+    UrbanCanyonEnv,
+    _team_mix,
+)
+from coopnav_env.gnss.errors import _iono_factors
+from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
+from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
+from coopnav_env.nav.wls import _radius_args
+from coopnav_env.sim import city as _city
+from coopnav_env.sim import scenario as _scenario
+from coopnav_env.sim.city import Buildings
+from coopnav_env.sim.scenario import Epoch
+
+
+class FusedStep:
+    """The fused step of a fixed list of copies (its state arrays and table of skies).
+
+    :meth:`run` advances every copy by one epoch, or returns None (nothing changed) when one
+    of them cannot take the fused step now.
+    """
+
+    def __init__(self) -> None:
+        self.skies = _SkyTable()
+        self.state: _SwarmArrays | None = None
+        self._seen: list[tuple] = []
+
+    def _load(self, envs: list[UrbanCanyonEnv]) -> bool:
+        """Make the state arrays those of the copies' worlds; False if one cannot be taken."""
+        if not all(_fused_world(e.world) for e in envs):
+            return False
+        st = self.state
+        if st is None or len(self._seen) != len(envs):
+            self.state = _SwarmArrays(envs)
+            return True
+        stale = [
+            k
+            for k, (e, seen) in enumerate(zip(envs, self._seen))
+            if e._steps != st.steps[k] or any(map(operator.is_not, _fingerprint(e), seen))
+        ]
+        if stale:
+            st.own()  # copies first: the worlds and epochs keep the arrays they view
+            for k in stale:
+                st.load(k, envs[k])
+        return True
+
+    def run(self, envs: list[UrbanCanyonEnv], cmd: np.ndarray):
+        """One epoch of every copy with the clipped commands ``cmd`` ``(K, N, 3)``.
+
+        Updates each copy's world, epoch and step count as ``UrbanCanyonEnv._step_arrays``
+        does, and returns ``obs (K, N, obs_dim) float32, rewards (K, N), terminated (K,),
+        truncated (K,), terms (K, 6, N), in_goal (K, N)`` and the parts of the infos
+        (:func:`step_infos`); or None, with nothing changed, if a copy cannot take the fused
+        step now.
+        """
+        if not self._load(envs):
+            return None
+        out = self._epochs(envs, cmd, self.state, cold=False)
+        if out is not None:
+            self._seen = [_fingerprint(e) for e in envs]
+        return out
+
+    def first_epochs(self, envs: list[UrbanCanyonEnv]) -> bool:
+        """The first epoch of each copy's episode, after ``UrbanCanyonEnv._begin_reset`` and
+        ``UrbanWorld._begin_episode`` (what ``UrbanWorld.reset`` computes after them: the
+        swarm where it starts, navigation cold-started from the launch positions); sets each
+        world's and environment's epoch. False, with nothing changed, if a copy cannot take
+        it (then reset it as usual)."""
+        worlds = [e.world for e in envs]
+        if not all(_fused_world(w, cold=True) for w in worlds):
+            return False
+        n = envs[0].config.n_uavs
+        cmd = np.zeros((len(envs), n, 3))
+        return self._epochs(envs, cmd, _SwarmArrays(envs), cold=True) is not None
+
+    def _epochs(self, envs: list[UrbanCanyonEnv], cmd: np.ndarray, st: Any, cold: bool):
+        """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``."""
+        cfg = envs[0].config
+        n_copies, n = len(envs), cfg.n_uavs
+        world0 = envs[0].world
+        dt = cfg.dt_s
+        # the epoch's sky of each copy (its own time)
+        t_new = [e.world.t_s if cold else e.world.t_s + dt for e in envs]
+        rows = self.skies.rows(world0, t_new)
+        if rows is None:  # a sky whose satellites are not grouped by constellation
+            return None
+        skies, row, n_sv, n_up = rows
+        # each copy's draws in the order of UrbanWorld._navigate_fused: pseudoranges
+        # (S + N S), relative sensing (N (N - 1) / 2 x 3), as one call per copy
+        n_draws = n_sv * (1 + n) + 3 * (n * (n - 1) // 2)
+        z = np.empty((n_copies, int(n_draws.max())))
+        for k, e in enumerate(envs):
+            z[k, : n_draws[k]] = e._rng.standard_normal(n_draws[k])
+        los_off = np.zeros(n_copies + 1, dtype=np.int64)
+        los_off[1:] = (n * n_sv).cumsum()
+        tab = self.skies
+        pos1 = np.empty((n_copies, n, 3))
+        vel1 = np.empty((n_copies, n, 3))
+        hit = np.empty((n_copies, n), dtype=bool)
+        sep = np.empty((n_copies, n), dtype=bool)
+        los_flat = np.empty(int(los_off[-1]), dtype=bool)
+        rel = np.empty((n_copies, n, n, 3))
+        var = np.empty((n_copies, n, n))
+        avail = np.empty((n_copies, n, n), dtype=bool)
+        n_rx = np.empty((n_copies, n), dtype=np.int64)
+        _run_chunks(
+            _batched_kernels.motion_sight_relative,
+            n_copies,
+            st.pos,
+            st.vel,
+            cmd,
+            st.motion,
+            not cold,
+            st.fence_lo,
+            st.fence_hi,
+            st.b_lo,
+            st.b_hi,
+            st.n_b,
+            row,
+            n_sv,
+            tab.up,
+            tab.order,
+            tab.cot,
+            tab.hdir,
+            n_up,
+            z,
+            st.sensing,
+            los_off,
+            pos1,
+            vel1,
+            hit,
+            sep,
+            los_flat,
+            rel,
+            var,
+            avail,
+            n_rx,
+        )
+        # the rotations to ECEF stay numpy matmuls (their rounding is numpy's, as one copy's)
+        origin, rot = world0.origin_ecef_m, world0.rot_enu
+        rx_ecef = origin + pos1 @ rot
+        # warm start: the previous estimates moved; at an episode's first epoch, the launch
+        # positions
+        pred = st.nav_pos if cold else st.nav_pos + vel1 * dt
+        x0 = origin + pred @ rot
+        shared = cfg.centroid_mode == "shared" or n == 1
+        if shared:  # only the centroid's row: the UAV receiving the most (the first of equals)
+            centroid = n_rx.argmax(axis=1)
+            rel_ecef = (rel[np.arange(n_copies), centroid] @ rot)[:, None]
+        else:
+            rel_ecef = rel @ rot
+        dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (0.0 if cold else 1.0)
+        outputs = _navigation_outputs(n_copies, n, envs[0]._rays.shape[0])
+        _run_chunks(
+            _batched_kernels.navigation_reward_sensors,
+            n_copies,
+            shared,
+            rx_ecef,
+            row,
+            n_sv,
+            tab.sv,
+            tab.system,
+            los_flat,
+            los_off,
+            st.clock,
+            st.iono,
+            z,
+            st.model,
+            len(SYSTEMS),
+            x0,
+            rel_ecef,
+            var,
+            avail,
+            cfg.transfer == "ddt",
+            int(cfg.nav_max_iter),
+            st.radius,
+            st.gate,
+            origin,
+            rot,
+            pred,
+            st.nav_cov,
+            float(dr_var),
+            st.route,
+            st.tail,
+            st.n_route,
+            st.wp,
+            float(cfg.route_reach_m),
+            st.pos,
+            pos1,
+            st.goal,
+            hit,
+            sep,
+            cfg.nav_reward == "sigma",
+            envs[0]._reward_params,
+            envs[0]._rays,
+            st.b_lo,
+            st.b_hi,
+            st.n_b,
+            _WGS84,
+            _N_BOWRING_ITER,
+            outputs,
+        )
+        (
+            sa_status,
+            n_iter,
+            sa_pos,
+            sa_cov,
+            co_pos,
+            co_cov,
+            co_status,
+            source,
+            nav_pos,
+            nav_cov,
+            sa_rej,
+            co_rej,
+            wp,
+            n_swarm,
+            n_sats,
+            centroid_uav,
+            out_of_contact,
+            terms,
+            in_goal,
+            ends,
+            tan_max,
+            walls,
+            bad_geometry,
+        ) = outputs
+        if bad_geometry.any():
+            raise ValueError(
+                "a receiver is at the Earth's centre or on a satellite (copies "
+                f"{np.flatnonzero(bad_geometry).tolist()})"
+            )
+        if cold:
+            self._first_epochs(envs, st, t_new, skies, n_sv, los_off, los_flat, outputs, rel, avail)
+            return ()
+        sky_deg = np.degrees(np.arctan(tan_max))
+        steps = st.steps + 1
+        obs = np.empty((n_copies, n, cfg.obs_dim), dtype=np.float32)
+        floats = np.empty((n_copies, 8, n))
+        _run_chunks(
+            _batched_kernels.observations_infos,
+            n_copies,
+            nav_pos,
+            st.goal,
+            vel1,
+            nav_cov,
+            n_sats,
+            n_swarm,
+            n_sv,
+            sky_deg,
+            rel,
+            avail,
+            st.route,
+            st.tail,
+            st.n_route,
+            wp,
+            source,
+            walls,
+            steps,
+            st.obs_params,
+            cfg.obs_neighbours,
+            envs[0]._obs_low,
+            envs[0]._obs_high,
+            pos1,
+            co_pos,
+            sa_pos,
+            obs,
+            floats,
+        )
+        # the copies' worlds and epochs (what their own step would have left)
+        pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
+        nlos = np.zeros(los_flat.shape[0], dtype=bool)
+        rewards = np.empty((n_copies, n))
+        terminated = np.zeros(n_copies, dtype=bool)
+        truncated = np.zeros(n_copies, dtype=bool)
+        navigated = cfg.reward_scheme == "navigated_distance"
+        for k, e in enumerate(envs):
+            w = e.world
+            sky = skies[k]
+            a, b = los_off[k], los_off[k + 1]
+            los = los_flat[a:b].reshape(n, n_sv[k])
+            w.pos_enu_m, w.vel_enu_mps, w.t_s = pos1[k], vel1[k], t_new[k]
+            w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
+            ep = Epoch(
+                t_s=float(t_new[k]),
+                pos_enu_m=pos_c[k],
+                vel_enu_mps=vel_c[k],
+                goal_enu_m=goal_c[k],
+                sv_az_deg=sky.az,
+                sv_el_deg=sky.el,
+                system=sky.system,
+                sv_index=sky.sv_index,
+                los=los,
+                received=los,
+                nlos=nlos[a:b].reshape(n, n_sv[k]),
+                n_above_mask=int(n_sv[k]),
+                n_sats=n_sats[k],
+                n_sats_swarm=n_swarm[k],
+                rel_enu_m=rel[k],
+                rel_available=avail[k],
+                standalone_pos_enu_m=sa_pos[k],
+                standalone_cov_enu_m2=sa_cov[k],
+                standalone_status=sa_status[k],
+                coop_pos_enu_m=co_pos[k],
+                coop_cov_enu_m2=co_cov[k],
+                coop_status=co_status[k],
+                nav_pos_enu_m=nav_pos[k],
+                nav_cov_enu_m2=nav_cov[k],
+                nav_source=source[k],
+                centroid_uav=int(centroid_uav[k]),
+                collided=hit[k],
+                separation_violation=sep[k],
+                out_of_contact=out_of_contact[k],
+                n_iter_standalone=int(n_iter[k, 0]),
+                n_iter_coop=int(n_iter[k, 1]),
+                standalone_rejected=sa_rej[k],
+                coop_rejected=co_rej[k],
+                next_waypoint=wp_c[k],
+                map_excluded=None,
+            )
+            w.last = ep
+            e._epoch = ep
+            e._steps += 1
+            stacked = terms[k]
+            crash, reached = bool(ends[k, 0]), bool(ends[k, 1])
+            if navigated:
+                stacked[0], stacked[1] = e._navigated_distance(ep, reached)
+            if cfg.nav_team_weight > 0.0:
+                stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
+            rewards[k] = stacked.sum(axis=0)
+            terminated[k] = crash or reached
+            truncated[k] = (e._steps >= cfg.max_steps) and not terminated[k]
+        st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps)
+        info_parts = (
+            floats,
+            (n_sats, n_swarm, n_sv, co_status, sa_status, source, wp_c),
+            (co_rej, sa_rej, in_goal, hit, sep, out_of_contact),
+            terms,
+            steps,
+        )
+        return obs, rewards, terminated, truncated, terms, in_goal, info_parts
+
+    @staticmethod
+    def _first_epochs(envs, st, t_s, skies, n_sv, los_off, los_flat, outputs, rel, avail) -> None:
+        """The worlds and epochs after :meth:`first_epochs`' kernels (``UrbanWorld._epoch``
+        at a reset: collisions and separation not tested, the positions unchanged)."""
+        (
+            sa_status,
+            n_iter,
+            sa_pos,
+            sa_cov,
+            co_pos,
+            co_cov,
+            co_status,
+            source,
+            nav_pos,
+            nav_cov,
+            sa_rej,
+            co_rej,
+            wp,
+            n_swarm,
+            n_sats,
+            centroid_uav,
+            out_of_contact,
+            *_rest,
+        ) = outputs
+        n = rel.shape[1]
+        nlos = np.zeros(los_flat.shape[0], dtype=bool)
+        wp_c, goal_c = wp.copy(), st.goal.copy()
+        for k, e in enumerate(envs):
+            w = e.world
+            sky = skies[k]
+            a, b = los_off[k], los_off[k + 1]
+            los = los_flat[a:b].reshape(n, n_sv[k])
+            w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
+            w._warm = True
+            no = np.zeros(n, dtype=bool)
+            ep = Epoch(
+                t_s=float(t_s[k]),
+                pos_enu_m=w.pos_enu_m.copy(),
+                vel_enu_mps=w.vel_enu_mps.copy(),
+                goal_enu_m=goal_c[k],
+                sv_az_deg=sky.az,
+                sv_el_deg=sky.el,
+                system=sky.system,
+                sv_index=sky.sv_index,
+                los=los,
+                received=los,
+                nlos=nlos[a:b].reshape(n, n_sv[k]),
+                n_above_mask=int(n_sv[k]),
+                n_sats=n_sats[k],
+                n_sats_swarm=n_swarm[k],
+                rel_enu_m=rel[k],
+                rel_available=avail[k],
+                standalone_pos_enu_m=sa_pos[k],
+                standalone_cov_enu_m2=sa_cov[k],
+                standalone_status=sa_status[k],
+                coop_pos_enu_m=co_pos[k],
+                coop_cov_enu_m2=co_cov[k],
+                coop_status=co_status[k],
+                nav_pos_enu_m=nav_pos[k],
+                nav_cov_enu_m2=nav_cov[k],
+                nav_source=source[k],
+                centroid_uav=int(centroid_uav[k]),
+                collided=no,
+                separation_violation=no.copy(),
+                out_of_contact=out_of_contact[k],
+                n_iter_standalone=int(n_iter[k, 0]),
+                n_iter_coop=int(n_iter[k, 1]),
+                standalone_rejected=sa_rej[k],
+                coop_rejected=co_rej[k],
+                next_waypoint=wp_c[k],
+                map_excluded=None,
+            )
+            w.last = ep
+            e._epoch = ep
+
+
+def step_infos(
+    agents: list[str],
+    floats: np.ndarray,
+    ints: tuple[np.ndarray, ...],
+    flags: tuple[np.ndarray, ...],
+    terms: np.ndarray,
+    steps: np.ndarray,
+) -> list[dict[str, dict[str, Any]]]:
+    """Every copy's step infos, as ``UrbanCanyonEnv._infos`` builds one copy's (same keys in
+    the same order, the same Python numbers), from ``(K, ...)`` arrays: the real numbers of
+    :func:`coopnav_env.envs._kernels.info_floats` ``(K, 8, N)``; the satellites received,
+    by the swarm, above the mask ``(K,)``, the statuses, sources and next waypoints; the
+    rejection, goal, collision, separation and contact flags; the reward terms
+    ``(K, 6, N)``; the episode steps ``(K,)``."""
+    n = floats.shape[2]
+    fixes = np.isfinite(floats[:, 1:3])
+    floats[:, 1:3] = np.where(fixes, floats[:, 1:3], NO_FIX_ERROR_M)
+    n_sats, n_swarm, n_open, co_status, sa_status, source, wp = ints
+    real = floats.tolist()
+    fix = fixes.tolist()
+    cols_int = [a.tolist() for a in (n_sats, n_swarm, co_status, sa_status, source, wp)]
+    cols_flag = [np.asarray(a, dtype=bool).tolist() for a in flags]
+    reward = terms.tolist()
+    open_sky = n_open.tolist()
+    step = steps.tolist()
+    keys = INFO_KEYS
+    out = []
+    for k, (r, fx, rw) in enumerate(zip(real, fix, reward)):
+        ci = [c[k] for c in cols_int]
+        cf = [c[k] for c in cols_flag]
+        cols = (
+            *r[:3],
+            *fx,
+            *r[3:7],
+            ci[0],
+            ci[1],
+            [open_sky[k]] * n,
+            ci[2],
+            ci[3],
+            ci[4],
+            r[7],
+            ci[5],
+            *cf,
+            *rw,
+            [step[k]] * n,
+        )
+        out.append({a: dict(zip(keys, row)) for a, row in zip(agents, zip(*cols))})
+    return out
+
+
+def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, ...]:
+    """The arrays :func:`coopnav_env.envs._batched_kernels.navigation_reward_sensors` fills."""
+    k, i64 = n_copies, np.int64
+    return (
+        np.empty((k, n), dtype=i64),  # sa_status
+        np.empty((k, 2), dtype=i64),  # n_iter
+        np.empty((k, n, 3)),  # sa_pos
+        np.empty((k, n, 3, 3)),  # sa_cov
+        np.empty((k, n, 3)),  # co_pos
+        np.empty((k, n, 3, 3)),  # co_cov
+        np.empty((k, n), dtype=i64),  # co_status
+        np.empty((k, n), dtype=i64),  # source
+        np.empty((k, n, 3)),  # nav_pos
+        np.empty((k, n, 3, 3)),  # nav_cov
+        np.empty((k, n), dtype=bool),  # sa_rej
+        np.empty((k, n), dtype=bool),  # co_rej
+        np.empty((k, n), dtype=i64),  # next_wp
+        np.empty((k, n), dtype=i64),  # n_swarm
+        np.empty((k, n), dtype=i64),  # n_sats
+        np.empty(k, dtype=i64),  # centroid_uav
+        np.empty((k, n), dtype=bool),  # out_of_contact
+        np.empty((k, 6, n)),  # terms
+        np.empty((k, n), dtype=bool),  # in_goal
+        np.empty((k, 2), dtype=bool),  # ends
+        np.empty((k, n, n_az)),  # tan_max
+        np.empty((k, n, n_az)),  # walls
+        np.zeros(k, dtype=bool),  # bad_geometry
+    )
+
+
+MIN_COPIES_PER_THREAD = 4
+"""Fewest copies a thread of the fused step takes (fewer: the thread costs more than it saves)."""
+
+_POOL: list = []
+"""The process id and the thread pool it made (a forked child, whose copy has no threads,
+makes its own)."""
+
+
+@functools.cache
+def _threads() -> int:
+    """The CPU cores this process may run on (when first asked)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
+    """``kernel(k0, k1, *args)`` over contiguous chunks of the copies, on every core.
+
+    The kernels release the GIL (``nogil``) and write disjoint rows of their outputs, so
+    chunks run in parallel; each copy's arithmetic is the same in any chunk. This thread and
+    the pool's threads take the chunks one after another from a shared counter (a core that
+    another process holds takes fewer). Threads rather than numba's ``parallel=True``: the
+    OpenMP threading layer numba picks by default competes with PyTorch's own OpenMP pool in
+    one process (a trainer's), which slowed both severalfold in the benchmark.
+    """
+    threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
+    if threads == 1:
+        kernel(0, n_copies, *args)
+        return
+    if not _POOL or _POOL[0] != os.getpid():  # none yet, or a forked child's copy
+        _POOL[:] = [os.getpid(), ThreadPoolExecutor(max_workers=max(1, _threads() - 1))]
+    n_chunks = min(4 * threads, max(1, n_copies // MIN_COPIES_PER_THREAD))
+    bounds = np.linspace(0, n_copies, n_chunks + 1).astype(int).tolist()
+    counter = itertools.count()  # next() is atomic under the GIL
+
+    def work() -> None:
+        while (i := next(counter)) < n_chunks:
+            kernel(bounds[i], bounds[i + 1], *args)
+
+    futures = [_POOL[1].submit(work) for _ in range(threads - 1)]
+    work()
+    for f in futures:
+        f.result()
+
+
+_N_OBS_PARAMS = 9
+"""Entries of ``UrbanCanyonEnv._obs_params`` (the observation kernel's scales)."""
+
+_WGS84 = np.array([WGS84_A_M, WGS84_B_M, WGS84_F, WGS84_E2, _EP2], dtype=np.float64)
+
+
+def fused_settings(cfg: UrbanCanyonConfig) -> bool:
+    """Whether the settings are those the fused step computes: the default measurement and
+    navigation chain (exact covariance, no NLOS draws, no dead-reckoning noise, no channel
+    limit, no map exclusion, no integrity monitoring), velocity commands and the base
+    observation, with every compiled kernel on. Other settings step copy by copy."""
+    return (
+        _fused_config(cfg)
+        and _scenario._fused_path_on()
+        and _urban_canyon._USE_KERNEL
+        and _city._USE_KERNEL
+    )
+
+
+_FUSED_CONFIGS: dict[int, tuple[Any, bool]] = {}
+"""``id(config) -> (config, answer)`` of :func:`_fused_config` (a configuration's hash
+covers every field, slower than the answer; the entry keeps the object, so its id stays
+its own)."""
+
+
+def _fused_config(cfg: UrbanCanyonConfig) -> bool:
+    """The settings part of :func:`fused_settings` (remembered per configuration object:
+    configurations are frozen)."""
+    hit = _FUSED_CONFIGS.get(id(cfg))
+    if hit is not None and hit[0] is cfg:
+        return hit[1]
+    ok = (
+        cfg.nlos_probability == 0.0
+        and not cfg.dead_reckoning_noise
+        and cfg.max_sats is None
+        and cfg.nlos_exclusion == "off"
+        and cfg.integrity == "off"
+        and cfg.covariance == "exact"
+        and cfg.action_frame == "velocity"
+        and not (
+            cfg.obs_protection_level
+            or cfg.obs_satellite_sectors
+            or cfg.obs_lookahead
+            or cfg.obs_candidate_sky
+            or cfg.obs_true_error
+            or cfg.obs_agent_index
+        )
+    )
+    if len(_FUSED_CONFIGS) >= 256:  # configurations made in a loop: start again
+        _FUSED_CONFIGS.clear()
+    _FUSED_CONFIGS[id(cfg)] = (cfg, ok)
+    return ok
+
+
+def _fused_world(world: Any, cold: bool = False) -> bool:
+    """Whether a copy's world can take the fused step: box buildings (not a file city's
+    polygons), its own constellation (the cached sky) and a warm-started navigation (with
+    ``cold``: an episode begun, before its first epoch)."""
+    return (
+        isinstance(world.city.buildings, Buildings)
+        and world.constellation is world.__dict__.get("_cached_constellation")
+        and bool(world._warm) is not cold
+    )
+
+
+class _SkyTable:
+    """The skies of the copies' epochs as padded rows ``(T, S_max, ...)`` for the kernels.
+
+    A row per GNSS time met (``UrbanWorld._sky``, itself cached); at most ``max_rows`` rows
+    (the table starts again when full: with random start times few rows repeat).
+    """
+
+    def __init__(self, max_rows: int = 4096) -> None:
+        self.max_rows = int(max_rows)
+        self._index: dict[float, int] = {}
+        self._skies: list[Any] = []
+        self._alloc(16, 1)
+
+    def _alloc(self, n_rows: int, s_max: int) -> None:
+        self.sv = np.zeros((n_rows, s_max, 3))
+        self.system = np.zeros((n_rows, s_max), dtype=np.int64)
+        self.up = np.zeros((n_rows, s_max), dtype=bool)
+        self.order = np.zeros((n_rows, s_max), dtype=np.int64)
+        self.cot = np.zeros((n_rows, s_max))
+        self.hdir = np.zeros((n_rows, s_max, 2))
+        self.n_sv = np.zeros(n_rows, dtype=np.int64)
+        self.n_up = np.zeros(n_rows, dtype=np.int64)
+
+    def _grow(self, n_rows: int, s_max: int) -> None:
+        old = (self.sv, self.system, self.up, self.order, self.cot, self.hdir, self.n_sv, self.n_up)
+        used, s_old = len(self._skies), self.sv.shape[1]
+        self._alloc(n_rows, s_max)
+        new = (self.sv, self.system, self.up, self.order, self.cot, self.hdir, self.n_sv, self.n_up)
+        for dst, src in zip(new, old):
+            if src.ndim == 1:
+                dst[:used] = src[:used]
+            else:
+                dst[:used, :s_old] = src[:used]
+
+    def _add(self, sky: Any) -> int:
+        i = len(self._skies)
+        s, d = sky.sv_index.shape[0], sky.directions
+        n_up = d.cot_s.shape[0]
+        if i >= self.sv.shape[0] or s > self.sv.shape[1]:
+            self._grow(
+                max(self.sv.shape[0], 2 * i if i >= self.sv.shape[0] else i + 1),
+                max(s, self.sv.shape[1]),
+            )
+        self.sv[i, :s] = sky.sv_ecef
+        self.system[i, :s] = sky.system_idx
+        self.up[i, :s] = d.up
+        self.order[i, :n_up] = d.order
+        self.cot[i, :n_up] = d.cot_s
+        self.hdir[i, :n_up] = d.h_dir
+        self.n_sv[i], self.n_up[i] = s, n_up
+        self._skies.append(sky)
+        return i
+
+    def rows(self, world: Any, times: list[float]):
+        """``(skies, row, n_sv, n_up)`` of the epochs at ``times`` (one per copy), or None
+        where a sky's satellites are not grouped by constellation (the fused navigation
+        needs them grouped)."""
+        if len(self._index) + len(times) > self.max_rows:
+            self._index.clear()
+            self._skies.clear()
+        index = self._index
+        row = np.empty(len(times), dtype=np.int64)
+        for k, t in enumerate(times):
+            i = index.get(t)
+            if i is None:
+                sky = world._sky(t)
+                if not sky.grouped:
+                    return None
+                i = index[t] = self._add(sky)
+            row[k] = i
+        skies = [self._skies[i] for i in row.tolist()]
+        return skies, row, self.n_sv[row], self.n_up[row]
+
+
+def _fingerprint(env: UrbanCanyonEnv) -> tuple:
+    """The objects of a copy's state that its world replaces when the state changes other
+    than by a fused step (compared by identity)."""
+    w = env.world
+    return (
+        w.pos_enu_m,
+        w.vel_enu_mps,
+        w.nav_pos_enu_m,
+        w.nav_cov_enu_m2,
+        w.next_wp,
+        w.clock_bias_m,
+        w.goal_enu_m,
+        w.route_xy_m,
+        w.city,
+        env._obs_params,
+    )
+
+
+_ONE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""The fused step of each parallel environment that took one (a batch of one)."""
+
+
+def step_one(env: UrbanCanyonEnv, cmd: np.ndarray):
+    """``UrbanCanyonEnv._step_arrays`` as a batch of one (the batched environment's step),
+    or None where the settings or the world are outside the fused step."""
+    if not fused_settings(env.config):
+        return None
+    fused = _ONE.get(env)
+    if fused is None:
+        fused = _ONE[env] = FusedStep()
+    out = fused.run([env], np.ascontiguousarray(cmd, dtype=np.float64)[None])
+    if out is None:
+        return None
+    obs, rewards, terminated, truncated, terms, in_goal, _parts = out
+    if env.render_mode is not None:
+        env._trail.append(env._epoch.pos_enu_m)
+        env._trail = env._trail[-60:]
+    terms_d = dict(zip(REWARD_TERMS, terms[0]))
+    return obs[0], rewards[0], bool(terminated[0]), bool(truncated[0]), terms_d, in_goal[0]
+
+
+class _SwarmArrays:
+    """The state of every copy as ``(K, ...)`` arrays, loaded from the copies' worlds.
+
+    Buildings and routes are padded to the largest copy (``n_b``, ``n_route`` give each
+    copy's count); :meth:`advance` takes the arrays of a step, :meth:`load` reloads one copy
+    after its reset (after :meth:`own`, which copies the arrays the epochs share).
+    """
+
+    def __init__(self, envs: list[UrbanCanyonEnv]) -> None:
+        cfg = envs[0].config
+        kin = cfg.kinematics
+        k_n, n = len(envs), cfg.n_uavs
+        self.motion = np.array(
+            [
+                kin.max_speed_mps,
+                kin.max_accel_mps2 * kin.dt_s,
+                kin.dt_s,
+                kin.altitude_min_m,
+                kin.altitude_max_m,
+                kin.uav_radius_m,
+                kin.min_separation_m,
+            ],
+            dtype=np.float64,
+        )
+        rs, model, gate = cfg.relative_sensing, cfg.error_model, cfg.max_fix_sigma_m
+        check, r_lo, r_hi = _radius_args(PLAUSIBLE_RADIUS_M)
+        self.sensing = np.array([rs.sigma0_m, rs.sigma_per_m, rs.max_range_m], dtype=np.float64)
+        self.model = np.array(
+            [model.sigma_ure_m, float(bool(model.tropo)), float(bool(model.differential))]
+        )
+        self.radius = np.array([float(check), r_lo, r_hi])
+        self.iono = _iono_factors(model)
+        self.gate = np.array(
+            [float(gate is not None), float(gate) ** 2 if gate is not None else 0.0]
+        )
+        w0 = envs[0].world
+        self.pos = np.empty((k_n, n, 3))
+        self.vel = np.empty((k_n, n, 3))
+        self.nav_pos = np.empty((k_n, n, 3))
+        self.nav_cov = np.empty((k_n, n, 3, 3))
+        self.wp = np.empty((k_n, n), dtype=np.int64)
+        self.clock = np.empty((k_n, *w0.clock_bias_m.shape))
+        self.goal = np.empty((k_n, 3))
+        self.fence_lo = np.empty((k_n, 2))
+        self.fence_hi = np.empty((k_n, 2))
+        self.obs_params = np.zeros((k_n, _N_OBS_PARAMS))
+        self.steps = np.empty(k_n, dtype=np.int64)
+        self.n_b = np.zeros(k_n, dtype=np.int64)
+        self.n_route = np.zeros(k_n, dtype=np.int64)
+        b_max = max(e.world.city.buildings.min_m.shape[0] for e in envs)
+        r_max = max(e.world.route_xy_m.shape[0] for e in envs)
+        self.b_lo = np.zeros((k_n, max(b_max, 1), 3))
+        self.b_hi = np.zeros((k_n, max(b_max, 1), 3))
+        self.route = np.zeros((k_n, r_max, 2))
+        self.tail = np.zeros((k_n, r_max))
+        for k, e in enumerate(envs):
+            self.load(k, e)
+
+    def own(self) -> None:
+        """Copy the arrays that the copies' worlds and epochs share, before :meth:`load`."""
+        self.pos = self.pos.copy()
+        self.vel = self.vel.copy()
+        self.nav_pos = self.nav_pos.copy()
+        self.nav_cov = self.nav_cov.copy()
+        self.wp = self.wp.copy()
+
+    def advance(self, pos, vel, nav_pos, nav_cov, wp, steps) -> None:
+        """Take the state after a fused step (the arrays the worlds now view)."""
+        self.pos, self.vel, self.nav_pos, self.nav_cov, self.wp = pos, vel, nav_pos, nav_cov, wp
+        self.steps = steps
+
+    def load(self, k: int, env: UrbanCanyonEnv) -> None:
+        """Copy ``k``'s state from its environment (after a reset)."""
+        w = env.world
+        r = env.config.kinematics.uav_radius_m
+        self.pos[k] = w.pos_enu_m
+        self.vel[k] = w.vel_enu_mps
+        self.nav_pos[k] = w.nav_pos_enu_m
+        self.nav_cov[k] = w.nav_cov_enu_m2
+        self.wp[k] = w.next_wp
+        self.clock[k] = w.clock_bias_m
+        self.goal[k] = w.goal_enu_m
+        x0, x1, y0, y1 = w.city.extent_m
+        self.fence_lo[k] = (x0 + r, y0 + r)
+        self.fence_hi[k] = (x1 - r, y1 - r)
+        params = env.__dict__.get("_obs_params")  # none before an environment's first reset
+        if params is not None:
+            self.obs_params[k] = params
+        self.steps[k] = env._steps
+        b = w.city.buildings
+        nb = b.min_m.shape[0]
+        if nb > self.b_lo.shape[1]:
+            self.b_lo = _pad(self.b_lo, nb)
+            self.b_hi = _pad(self.b_hi, nb)
+        self.b_lo[k, :nb] = b.min_m
+        self.b_hi[k, :nb] = b.max_m
+        self.n_b[k] = nb
+        route, tail = w.route_xy_m, w.route_tail_m
+        nr = route.shape[0]
+        if nr > self.route.shape[1]:
+            self.route = _pad(self.route, nr)
+            self.tail = _pad(self.tail, nr)
+        self.route[k, :nr] = route
+        self.tail[k, :nr] = tail
+        self.n_route[k] = nr
+
+
+def _pad(a: np.ndarray, size: int) -> np.ndarray:
+    """``a`` with its second axis grown to at least ``size`` (zeros; room for more)."""
+    out = np.zeros((a.shape[0], max(size, 2 * a.shape[1]), *a.shape[2:]), dtype=a.dtype)
+    out[:, : a.shape[1]] = a
+    return out
