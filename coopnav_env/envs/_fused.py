@@ -178,6 +178,10 @@ class FusedStep:
             avail,
             n_rx,
         )
+        if not cold and cfg.crash_free_steps > 0:
+            # the crash-free start (UrbanCanyonEnv._step_arrays): a UAV stopped by a wall in
+            # the episode's first steps is not a collision, and the episode goes on
+            hit[st.steps < cfg.crash_free_steps] = False
         # the rotations to ECEF stay numpy matmuls (their rounding is numpy's, as one copy's)
         origin, rot = world0.origin_ecef_m, world0.rot_enu
         rx_ecef = origin + pos1 @ rot
@@ -627,8 +631,6 @@ def _fused_config(cfg: UrbanCanyonConfig) -> bool:
         and not (
             cfg.obs_protection_level
             or cfg.obs_satellite_sectors
-            or cfg.obs_lookahead
-            or cfg.obs_candidate_sky
             or cfg.obs_true_error
             or cfg.obs_agent_index
         )

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v0, urban_canyon_v1
 from coopnav_env.envs import BatchedUrbanCanyonEnv, _fused
 from coopnav_env.envs._fused import fused_settings
 from coopnav_env.sim.scenario import Epoch
@@ -161,6 +161,8 @@ def test_settings_outside_the_fused_step_step_copy_by_copy() -> None:
         {"n_uavs": 5, "max_steps": 12},
         {"n_uavs": 12, "max_steps": 6},
         {"n_uavs": 4, "max_steps": 10, "nav_reward": "sigma", "nav_team_weight": 0.5},
+        {"v1": True, "n_uavs": 5, "max_steps": 12},  # v1's crash-free start
+        {"v1": True, "n_uavs": 5, "max_steps": 12, "crash_free_steps": 8},
     ],
 )
 def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
@@ -169,7 +171,9 @@ def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
     def run(fused: bool) -> list:
         if not fused:
             monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
-        env = urban_canyon_v0.parallel_env(**settings)
+        fields = dict(settings)
+        module = urban_canyon_v1 if fields.pop("v1", False) else urban_canyon_v0
+        env = module.parallel_env(**fields)
         obs, _ = env.reset(seed=8)
         rng = np.random.default_rng(4)
         out = [obs]
