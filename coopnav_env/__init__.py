@@ -24,13 +24,16 @@ def _quiet_interrupt_while_the_command_loads() -> None:
     """Run as the ``coopnav`` command, an interrupt (Ctrl-C) that arrives while the package
     loads ends with one line and status 130 instead of a traceback; the command's own handling
     (:func:`coopnav_env.training.cli.main`) takes over once it runs. Imported as a library (any
-    other program), nothing changes."""
+    other program, or a worker process the command started), nothing changes."""
     import os
     import signal
     import sys
 
     argv = getattr(sys, "argv", None) or [""]
     if os.path.splitext(os.path.basename(str(argv[0])))[0] != "coopnav":
+        return
+    mp = sys.modules.get("multiprocessing")  # a spawned worker has the command's argv too
+    if mp is not None and mp.parent_process() is not None:
         return
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return

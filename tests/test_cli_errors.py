@@ -13,6 +13,7 @@ import json
 import signal
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -427,6 +428,28 @@ def test_an_interrupt_while_the_command_loads_the_package_is_one_line():
         "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
     )
     assert _python(after).returncode == 0
+
+
+def test_a_worker_process_of_the_command_keeps_python_s_interrupt_handling():
+    """A worker that ``multiprocessing`` spawns gets the command's ``sys.argv``; importing the
+    package there leaves SIGINT to Python (the command's parent handles the interrupt)."""
+    code = (
+        "import multiprocessing as mp, signal, sys\n"
+        "def handler_is_python_s():\n"
+        "    import coopnav_env\n"
+        "    return signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
+        "if __name__ == '__main__':\n"
+        "    sys.argv[0] = 'coopnav'\n"
+        "    with mp.get_context('spawn').Pool(1) as pool:\n"
+        "        assert pool.apply(handler_is_python_s)\n"
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "worker_probe.py"
+        path.write_text(code)
+        res = subprocess.run(
+            [sys.executable, str(path)], capture_output=True, text=True, timeout=300, cwd=ROOT
+        )
+    assert res.returncode == 0, res.stderr
 
 
 def test_importing_the_library_leaves_the_interrupt_handler_alone():
