@@ -72,6 +72,11 @@ OUTPUTS: tuple[str, ...] = ("report.json", "report.md")
 REWARD_SETTINGS: dict[str, str] = {"v0": "urban_canyon_v0", "v1": "urban_canyon_v1"}
 """Named reward settings: the environment whose default reward each names."""
 
+WORLD_SETTINGS_OF_V1: tuple[str, ...] = ("crash_free_steps",)
+"""Fields of :data:`coopnav_env.envs.config.V1_DEFAULTS` that set the world, not the reward:
+every reward setting is flown with v1's values of them (unless ``env_kwargs`` gives its own),
+so that the settings compared differ in their reward only."""
+
 
 def discounted_return(rewards: Sequence[float] | np.ndarray, gamma: float) -> float:
     """``sum_t gamma**t * rewards[t]`` (``t`` from 0)."""
@@ -261,13 +266,15 @@ def alignment(
     bad = [g for g in gammas if not (0.0 < float(g) <= 1.0)]
     if bad:
         raise ValueError(f"discounts must be in (0, 1], got {bad}")
-    reward_fields = sorted(set(env_kwargs or {}) & (set(V1_DEFAULTS) | {"nav_reward_cap_m"}))
+    reward = set(V1_DEFAULTS).difference(WORLD_SETTINGS_OF_V1) | {"nav_reward_cap_m"}
+    reward_fields = sorted(set(env_kwargs or {}) & reward)
     if reward_fields:
         raise ValueError(
             f"env settings {reward_fields} change the reward; the settings compared are "
             f"{list(REWARD_SETTINGS)} (env_kwargs are for the world only)"
         )
     settings = list(dict.fromkeys(["v1", *settings]))
+    world = {f: V1_DEFAULTS[f] for f in WORLD_SETTINGS_OF_V1} | dict(env_kwargs or {})
     gammas = [float(g) for g in gammas]
     bar = None
     if progress:
@@ -278,7 +285,7 @@ def alignment(
     for name in policies:
         flown = {}
         for s in settings:
-            flown[s] = fly(name, REWARD_SETTINGS[s], seeds, env_kwargs)
+            flown[s] = fly(name, REWARD_SETTINGS[s], seeds, world)
             if bar is not None:
                 bar.update()
         ref = flown["v1"]

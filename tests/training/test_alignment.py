@@ -78,3 +78,16 @@ def test_cli_writes_the_report(tmp_path, capsys) -> None:
     # an existing report is not overwritten without --overwrite
     assert main([*args, "--out", str(out)]) == 2
     assert "--overwrite" in capsys.readouterr().err
+
+
+def test_reward_settings_are_flown_in_v1_s_world() -> None:
+    """v1's crash-free start is part of the world, not of the reward: a policy whose UAV meets
+    a wall in the first steps (the fast clump, seed 1000031) flies the same under v0's reward
+    as under v1's, so the settings compare rewards of the same flights."""
+    clump = "column@cruise_speed_mps=10,spacing_m=3"
+    v0 = al.fly(clump, "urban_canyon_v0", [1000031], {})[0]
+    v1 = al.fly(clump, "urban_canyon_v1", [1000031], {})[0]
+    assert not np.array_equal(v0.error_trace, v1.error_trace)  # the worlds differ by default
+    al.alignment([clump, "column", "sky_column"], [1000031], ["v0", "v1"], [1.0])  # no refusal
+    with pytest.raises(ValueError, match=r"\['goal_bonus'\] change the reward"):
+        al.alignment([clump, "column", "sky_column"], [1], ["v0"], [1.0], {"goal_bonus": 2.0})
