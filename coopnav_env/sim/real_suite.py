@@ -34,18 +34,26 @@ Everything else is at the environment's defaults. ``coopnav evaluate --suite rea
 policies on every city of the suite (:mod:`coopnav_env.training.suite`); the data's sources
 and licences are in ``coopnav_env/data/NOTICE-openstreetmap.md`` and
 ``coopnav_env/data/NOTICE-navigation.md``.
+
+:data:`FAMILY_SUITE` (``coopnav evaluate --suite families``) is its generated counterpart: one
+:class:`GeneratedSuiteCity` per family of :mod:`coopnav_env.sim.city_families`, a new city
+of the family in every episode (its seed drawn from the episode's reset seed, so held-out
+reset seeds fly cities that no training episode had), under the environment's default sky.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 __all__ = [
+    "FAMILY_SUITE",
     "REAL_SUITE",
     "SUITES",
     "SUITE_SKY",
     "SUITE_SYSTEMS",
+    "GeneratedSuiteCity",
     "SuiteCity",
     "suite_cities",
 ]
@@ -95,6 +103,66 @@ class SuiteCity:
             "systems": SUITE_SYSTEMS,
         }
 
+    def buildings_flown(self, settings: Mapping[str, Any], seeds: Sequence[int]) -> float:
+        """Buildings of the city flown with ``settings`` (the box and the default height may
+        be changed there); the same in every episode, whatever the ``seeds``."""
+        from coopnav_env.sim.file_city import load_file_city
+        from coopnav_env.sim.osm_city import resolve_osm_path
+
+        return float(
+            load_file_city(
+                f"osm:{resolve_osm_path(self.osm)}",
+                bbox=settings.get("city_bbox", self.bbox),
+                default_height_m=settings.get("city_default_height_m", self.default_height_m),
+                warn=False,
+            ).buildings.n
+        )
+
+
+@dataclass(frozen=True)
+class GeneratedSuiteCity:
+    """One family of generated cities in a suite: a new city of the family every episode.
+
+    Attributes
+    ----------
+    name : str
+        Identifier (a folder name of ``coopnav evaluate --suite``'s output).
+    family : str
+        The family, a key of :data:`~coopnav_env.sim.city_families.FAMILIES`.
+    character : str
+        What kind of place it is.
+    """
+
+    name: str
+    family: str
+    character: str
+
+    @property
+    def place(self) -> str:
+        """Where it is, in words: a generated city of its family, new every episode."""
+        return f"generated '{self.family}' cities, a new one every episode"
+
+    def env_settings(self) -> dict[str, Any]:
+        """The environment settings that fly this family under the environment's own sky
+        (keyword arguments of ``urban_canyon_v1.parallel_env``; all others at their defaults).
+        Each episode draws its city's seed from its reset seed, so that held-out reset
+        seeds fly cities no training episode (reset seeds below
+        ``coopnav_env.training.envs.EVAL_SEED_START``) had."""
+        return {"city": f"family:{self.family}"}
+
+    def buildings_flown(self, settings: Mapping[str, Any], seeds: Sequence[int]) -> float:
+        """Mean number of buildings of the cities of the episodes ``seeds`` flown with
+        ``settings`` (each city built once per process and seed, as the episodes build it)."""
+        import coopnav_env.urban_canyon_v1 as v1
+
+        env = v1.parallel_env(**{**self.env_settings(), **settings})
+        counts = []
+        for seed in seeds:
+            env.reset(seed=int(seed))
+            counts.append(env.world.city.buildings.n)
+        env.close()
+        return float(sum(counts) / len(counts))
+
 
 REAL_SUITE: tuple[SuiteCity, ...] = (
     SuiteCity(
@@ -124,11 +192,24 @@ REAL_SUITE: tuple[SuiteCity, ...] = (
 )
 """The real-city suite (see the module docstring)."""
 
-SUITES: dict[str, tuple[SuiteCity, ...]] = {"real": REAL_SUITE}
+FAMILY_SUITE: tuple[GeneratedSuiteCity, ...] = (
+    GeneratedSuiteCity("irregular", "irregular", "irregular blocks, mixed heights"),
+    GeneratedSuiteCity("old_town", "old_town", "low old town, lanes and small squares"),
+    GeneratedSuiteCity("high_rise", "high_rise", "high-rise centre, wide streets"),
+    GeneratedSuiteCity("avenues", "avenues", "wide and diagonal avenues"),
+    GeneratedSuiteCity("courtyards", "courtyards", "perimeter blocks with inner yards"),
+)
+"""The generated-city suite: one entry per family of :mod:`coopnav_env.sim.city_families`,
+flown under the environment's default sky (GPS and BeiDou)."""
+
+SUITES: dict[str, tuple[SuiteCity | GeneratedSuiteCity, ...]] = {
+    "real": REAL_SUITE,
+    "families": FAMILY_SUITE,
+}
 """Suites by the name ``coopnav evaluate --suite`` takes."""
 
 
-def suite_cities(name: str) -> tuple[SuiteCity, ...]:
+def suite_cities(name: str) -> tuple[SuiteCity | GeneratedSuiteCity, ...]:
     """The cities of the suite called ``name`` (a key of :data:`SUITES`).
 
     Raises
