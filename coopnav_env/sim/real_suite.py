@@ -38,7 +38,8 @@ and licences are in ``coopnav_env/data/NOTICE-openstreetmap.md`` and
 :data:`FAMILY_SUITE` (``coopnav evaluate --suite families``) is its generated counterpart: one
 :class:`GeneratedSuiteCity` per family of :mod:`coopnav_env.sim.city_families`, a new city
 of the family in every episode (its seed drawn from the episode's reset seed, so held-out
-reset seeds fly cities that no training episode had), under the environment's default sky.
+reset seeds fly cities that no training episode had), under the environment's default sky;
+:data:`GRID_SUITE` (``--suite grid``) the environment's own random street grids the same way.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ from typing import Any
 
 __all__ = [
     "FAMILY_SUITE",
+    "GRID_SUITE",
     "REAL_SUITE",
     "SUITES",
     "SUITE_SKY",
@@ -121,34 +123,35 @@ class SuiteCity:
 
 @dataclass(frozen=True)
 class GeneratedSuiteCity:
-    """One family of generated cities in a suite: a new city of the family every episode.
+    """Generated cities of one kind in a suite: a new city every episode.
 
     Attributes
     ----------
     name : str
         Identifier (a folder name of ``coopnav evaluate --suite``'s output).
-    family : str
-        The family, a key of :data:`~coopnav_env.sim.city_families.FAMILIES`.
+    city : str
+        The environment's ``city`` setting: ``"grid"`` (random street grids) or
+        ``"family:NAME"`` (:mod:`coopnav_env.sim.city_families`).
     character : str
         What kind of place it is.
     """
 
     name: str
-    family: str
+    city: str
     character: str
 
     @property
     def place(self) -> str:
-        """Where it is, in words: a generated city of its family, new every episode."""
-        return f"generated '{self.family}' cities, a new one every episode"
+        """Where it is, in words: a generated city of its kind, new every episode."""
+        return f"a new generated city (`{self.city}`) every episode"
 
     def env_settings(self) -> dict[str, Any]:
-        """The environment settings that fly this family under the environment's own sky
+        """The environment settings that fly these cities under the environment's own sky
         (keyword arguments of ``urban_canyon_v1.parallel_env``; all others at their defaults).
-        Each episode draws its city's seed from its reset seed, so that held-out reset
-        seeds fly cities no training episode (reset seeds below
+        Each episode draws its city from its reset seed, so that held-out reset seeds fly
+        cities no training episode (reset seeds below
         ``coopnav_env.training.envs.EVAL_SEED_START``) had."""
-        return {"city": f"family:{self.family}"}
+        return {"city": self.city}
 
     def buildings_flown(self, settings: Mapping[str, Any], seeds: Sequence[int]) -> float:
         """Mean number of buildings of the cities of the episodes ``seeds`` flown with
@@ -193,18 +196,25 @@ REAL_SUITE: tuple[SuiteCity, ...] = (
 """The real-city suite (see the module docstring)."""
 
 FAMILY_SUITE: tuple[GeneratedSuiteCity, ...] = (
-    GeneratedSuiteCity("irregular", "irregular", "irregular blocks, mixed heights"),
-    GeneratedSuiteCity("old_town", "old_town", "low old town, lanes and small squares"),
-    GeneratedSuiteCity("high_rise", "high_rise", "high-rise centre, wide streets"),
-    GeneratedSuiteCity("avenues", "avenues", "wide and diagonal avenues"),
-    GeneratedSuiteCity("courtyards", "courtyards", "perimeter blocks with inner yards"),
+    GeneratedSuiteCity("irregular", "family:irregular", "irregular blocks, mixed heights"),
+    GeneratedSuiteCity("old_town", "family:old_town", "low old town, lanes, small squares"),
+    GeneratedSuiteCity("high_rise", "family:high_rise", "high-rise centre, wide streets"),
+    GeneratedSuiteCity("avenues", "family:avenues", "wide and diagonal avenues"),
+    GeneratedSuiteCity("courtyards", "family:courtyards", "perimeter blocks, inner yards"),
 )
 """The generated-city suite: one entry per family of :mod:`coopnav_env.sim.city_families`,
 flown under the environment's default sky (GPS and BeiDou)."""
 
+GRID_SUITE: tuple[GeneratedSuiteCity, ...] = (
+    GeneratedSuiteCity("grid", "grid", "random street grid, the training city"),
+)
+"""The environment's own random street grids (the city policies are trained in), under its
+default sky, as a suite: held-out grids beside the other suites, with the same references."""
+
 SUITES: dict[str, tuple[SuiteCity | GeneratedSuiteCity, ...]] = {
     "real": REAL_SUITE,
     "families": FAMILY_SUITE,
+    "grid": GRID_SUITE,
 }
 """Suites by the name ``coopnav evaluate --suite`` takes."""
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from coopnav_env.sim.city_families import FAMILIES
-from coopnav_env.sim.real_suite import FAMILY_SUITE, SUITES
+from coopnav_env.sim.real_suite import FAMILY_SUITE, GRID_SUITE, SUITES
 from coopnav_env.training import suite as suite_module
 from coopnav_env.training.cli import main
 from coopnav_env.training.envs import EVAL_SEED_START
@@ -34,13 +34,14 @@ def _run(argv: list[str]) -> int:
 
 def test_the_family_suite_has_every_family_once():
     assert SUITES["families"] is FAMILY_SUITE
-    assert sorted(c.family for c in FAMILY_SUITE) == sorted(FAMILIES)
-    for c in FAMILY_SUITE:
-        assert c.env_settings() == {"city": f"family:{c.family}"}
+    assert sorted(c.city for c in FAMILY_SUITE) == sorted(f"family:{f}" for f in FAMILIES)
+    for c in (*FAMILY_SUITE, *GRID_SUITE):
+        assert c.env_settings() == {"city": c.city}
+    assert GRID_SUITE[0].env_settings() == {"city": "grid"}  # the environment's default
 
 
 def test_every_held_out_episode_flies_a_new_city():
-    old_town = next(c for c in FAMILY_SUITE if c.family == "old_town")
+    old_town = next(c for c in FAMILY_SUITE if c.city == "family:old_town")
     counts = [old_town.buildings_flown({}, [s]) for s in SEEDS]
     assert counts[0] != counts[1]  # two episodes, two cities
     assert old_town.buildings_flown({}, SEEDS) == pytest.approx(sum(counts) / 2)
@@ -53,7 +54,7 @@ def test_the_tuning_episodes_are_never_held_out():
 @pytest.fixture
 def one_family(monkeypatch):
     """The families suite cut to its cheapest family (``courtyards``), for time."""
-    city = next(c for c in FAMILY_SUITE if c.family == "courtyards")
+    city = next(c for c in FAMILY_SUITE if c.city == "family:courtyards")
     monkeypatch.setattr(suite_module, "suite_cities", lambda name: (city,))
     return city
 
