@@ -163,10 +163,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="NAME",
         help="fly the policies on every city of a suite instead of one environment: 'real' "
-        "(real OpenStreetMap places under a real GPS sky, coopnav_env.sim.real_suite); one "
-        "report folder per city in --out, plus summary.md/summary.json; trained policies fly "
-        "their run's settings, the suite's city and sky replacing the run's; not with "
-        "--methods, --gap, --train-config, --env-id, --city or --n-uavs (default: none)",
+        "(real OpenStreetMap places under a real GPS sky) or 'families' (a new generated city "
+        "of each family every episode; coopnav_env.sim.real_suite); one report folder per "
+        "city in --out, plus summary.md/summary.json; trained policies fly their run's "
+        "settings, the suite's city and sky replacing the run's; not with --methods, --gap, "
+        "--train-config, --env-id, --city or --n-uavs (default: none)",
+    )
+    parser.add_argument(
+        "--per-city-rule",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --suite: add the row 'per_city_column', in each city the column preset "
+        "with the best mean score on N tuning episodes of that city (reset seeds from "
+        "900000, never held out) (default: 0, no such row)",
+    )
+    parser.add_argument(
+        "--compare",
+        default=None,
+        metavar="POLICY",
+        help="with --suite: every other row's paired score difference from POLICY (a flown "
+        "policy or per_city_column) in each city, with 95 %% bootstrap intervals; written "
+        "as comparison.md (default: none)",
     )
     parser.add_argument(
         "--gap",
@@ -307,6 +325,16 @@ def run(args: argparse.Namespace) -> int:
     :mod:`coopnav_env.training.cli`)."""
     if getattr(args, "suite", None) is not None:
         return _run_suite(args)
+    suite_only = [
+        flag
+        for flag, value in (
+            ("--per-city-rule", getattr(args, "per_city_rule", 0)),
+            ("--compare", getattr(args, "compare", None)),
+        )
+        if value
+    ]
+    if suite_only:
+        raise ValueError(f"{', '.join(suite_only)} need --suite NAME (e.g. --suite families)")
     methods = parse_methods(getattr(args, "methods", None) or [])
     gap = getattr(args, "gap", None)
     listed = list(args.policies)
@@ -387,7 +415,8 @@ def _run_suite(args: argparse.Namespace) -> int:
             f"--suite {args.suite} sets the city, sky and environment itself: leave out "
             f"{', '.join(refused)} (change a setting of every city with --env-set KEY=VALUE)"
         )
-    outputs = suite_outputs(args.suite)  # an unknown suite is refused here, before any work
+    # an unknown suite is refused here, before any work
+    outputs = suite_outputs(args.suite, compare=args.compare is not None)
     seeds = args.seeds if args.seeds else heldout_seeds(args.episodes, args.seed_start)
     if min(seeds) < EVAL_SEED_START:
         raise ValueError(
@@ -398,6 +427,7 @@ def _run_suite(args: argparse.Namespace) -> int:
     claim = contextlib.nullcontext(None)
     if args.out is not None:
         settings = {"suite": args.suite, "policies": args.policies, "seeds": seeds}
+        settings |= {"per_city_rule": args.per_city_rule, "compare": args.compare}
         settings["env_set"] = overrides
         claim = claim_output_folder(
             args.out, "coopnav evaluate", settings, outputs=outputs, overwrite=args.overwrite
@@ -406,13 +436,23 @@ def _run_suite(args: argparse.Namespace) -> int:
         with compile_notice("about a minute", prefix="coopnav evaluate"):
             warm_up_env(make_env_fn(DEFAULT_ENV_ID, {}))
         report = evaluate_suite(
-            args.policies, seeds, args.suite, args.out, overrides=overrides, verbose=True
+            args.policies,
+            seeds,
+            args.suite,
+            args.out,
+            overrides=overrides,
+            verbose=True,
+            per_city_rule=args.per_city_rule,
+            compare=args.compare,
         )
         if folder is not None:
             folder.finish(report.files)
     print(report.header())
     print()
     print(report.to_markdown())
+    if report.comparisons:
+        print()
+        print(report.comparison_markdown())
     if report.files:
         print(f"\nwritten to {Path(args.out)}: " + ", ".join(p.name for p in report.files))
     return 0

@@ -34,18 +34,28 @@ Everything else is at the environment's defaults. ``coopnav evaluate --suite rea
 policies on every city of the suite (:mod:`coopnav_env.training.suite`); the data's sources
 and licences are in ``coopnav_env/data/NOTICE-openstreetmap.md`` and
 ``coopnav_env/data/NOTICE-navigation.md``.
+
+:data:`FAMILY_SUITE` (``coopnav evaluate --suite families``) is its generated counterpart: one
+:class:`GeneratedSuiteCity` per family of :mod:`coopnav_env.sim.city_families`, a new city
+of the family in every episode (its seed drawn from the episode's reset seed, so held-out
+reset seeds fly cities that no training episode had), under the environment's default sky;
+:data:`GRID_SUITE` (``--suite grid``) the environment's own random street grids the same way.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 __all__ = [
+    "FAMILY_SUITE",
+    "GRID_SUITE",
     "REAL_SUITE",
     "SUITES",
     "SUITE_SKY",
     "SUITE_SYSTEMS",
+    "GeneratedSuiteCity",
     "SuiteCity",
     "suite_cities",
 ]
@@ -95,6 +105,67 @@ class SuiteCity:
             "systems": SUITE_SYSTEMS,
         }
 
+    def buildings_flown(self, settings: Mapping[str, Any], seeds: Sequence[int]) -> float:
+        """Buildings of the city flown with ``settings`` (the box and the default height may
+        be changed there); the same in every episode, whatever the ``seeds``."""
+        from coopnav_env.sim.file_city import load_file_city
+        from coopnav_env.sim.osm_city import resolve_osm_path
+
+        return float(
+            load_file_city(
+                f"osm:{resolve_osm_path(self.osm)}",
+                bbox=settings.get("city_bbox", self.bbox),
+                default_height_m=settings.get("city_default_height_m", self.default_height_m),
+                warn=False,
+            ).buildings.n
+        )
+
+
+@dataclass(frozen=True)
+class GeneratedSuiteCity:
+    """Generated cities of one kind in a suite: a new city every episode.
+
+    Attributes
+    ----------
+    name : str
+        Identifier (a folder name of ``coopnav evaluate --suite``'s output).
+    city : str
+        The environment's ``city`` setting: ``"grid"`` (random street grids) or
+        ``"family:NAME"`` (:mod:`coopnav_env.sim.city_families`).
+    character : str
+        What kind of place it is.
+    """
+
+    name: str
+    city: str
+    character: str
+
+    @property
+    def place(self) -> str:
+        """Where it is, in words: a generated city of its kind, new every episode."""
+        return f"a new generated city (`{self.city}`) every episode"
+
+    def env_settings(self) -> dict[str, Any]:
+        """The environment settings that fly these cities under the environment's own sky
+        (keyword arguments of ``urban_canyon_v1.parallel_env``; all others at their defaults).
+        Each episode draws its city from its reset seed, so that held-out reset seeds fly
+        cities no training episode (reset seeds below
+        ``coopnav_env.training.envs.EVAL_SEED_START``) had."""
+        return {"city": self.city}
+
+    def buildings_flown(self, settings: Mapping[str, Any], seeds: Sequence[int]) -> float:
+        """Mean number of buildings of the cities of the episodes ``seeds`` flown with
+        ``settings`` (each city built once per process and seed, as the episodes build it)."""
+        import coopnav_env.urban_canyon_v1 as v1
+
+        env = v1.parallel_env(**{**self.env_settings(), **settings})
+        counts = []
+        for seed in seeds:
+            env.reset(seed=int(seed))
+            counts.append(env.world.city.buildings.n)
+        env.close()
+        return float(sum(counts) / len(counts))
+
 
 REAL_SUITE: tuple[SuiteCity, ...] = (
     SuiteCity(
@@ -124,11 +195,31 @@ REAL_SUITE: tuple[SuiteCity, ...] = (
 )
 """The real-city suite (see the module docstring)."""
 
-SUITES: dict[str, tuple[SuiteCity, ...]] = {"real": REAL_SUITE}
+FAMILY_SUITE: tuple[GeneratedSuiteCity, ...] = (
+    GeneratedSuiteCity("irregular", "family:irregular", "irregular blocks, mixed heights"),
+    GeneratedSuiteCity("old_town", "family:old_town", "low old town, lanes, small squares"),
+    GeneratedSuiteCity("high_rise", "family:high_rise", "high-rise centre, wide streets"),
+    GeneratedSuiteCity("avenues", "family:avenues", "wide and diagonal avenues"),
+    GeneratedSuiteCity("courtyards", "family:courtyards", "perimeter blocks, inner yards"),
+)
+"""The generated-city suite: one entry per family of :mod:`coopnav_env.sim.city_families`,
+flown under the environment's default sky (GPS and BeiDou)."""
+
+GRID_SUITE: tuple[GeneratedSuiteCity, ...] = (
+    GeneratedSuiteCity("grid", "grid", "random street grid, the training city"),
+)
+"""The environment's own random street grids (the city policies are trained in), under its
+default sky, as a suite: held-out grids beside the other suites, with the same references."""
+
+SUITES: dict[str, tuple[SuiteCity | GeneratedSuiteCity, ...]] = {
+    "real": REAL_SUITE,
+    "families": FAMILY_SUITE,
+    "grid": GRID_SUITE,
+}
 """Suites by the name ``coopnav evaluate --suite`` takes."""
 
 
-def suite_cities(name: str) -> tuple[SuiteCity, ...]:
+def suite_cities(name: str) -> tuple[SuiteCity | GeneratedSuiteCity, ...]:
     """The cities of the suite called ``name`` (a key of :data:`SUITES`).
 
     Raises

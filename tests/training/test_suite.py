@@ -87,5 +87,5 @@ def test_an_unknown_suite_is_refused_before_any_work(tmp_path: Path, capsys):
     out = tmp_path / "nothing"
     rc = _run(["evaluate", "--suite", "unreal", "--policies", "column", "--out", str(out)])
     err = capsys.readouterr().err
-    assert rc == 2 and "unknown suite 'unreal'; suites: ['real']" in err
+    assert rc == 2 and "unknown suite 'unreal'; suites: ['families', 'grid', 'real']" in err
     assert not out.exists()
