@@ -49,7 +49,6 @@ from coopnav_env.gnss.errors import _iono_factors
 from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
-from coopnav_env.sim import city as _city
 from coopnav_env.sim import scenario as _scenario
 from coopnav_env.sim.city import Buildings
 from coopnav_env.sim.scenario import Epoch
@@ -600,12 +599,7 @@ def fused_settings(cfg: UrbanCanyonConfig) -> bool:
     navigation chain (exact covariance, no NLOS draws, no dead-reckoning noise, no channel
     limit, no map exclusion, no integrity monitoring), velocity commands and the base
     observation, with every compiled kernel on. Other settings step copy by copy."""
-    return (
-        _fused_config(cfg)
-        and _scenario._fused_path_on()
-        and _urban_canyon._USE_KERNEL
-        and _city._USE_KERNEL
-    )
+    return _fused_config(cfg) and _scenario._fused_path_on() and _urban_canyon._USE_KERNEL
 
 
 _FUSED_CONFIGS: dict[int, tuple[Any, bool]] = {}

@@ -609,7 +609,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         cfg = self.config
         ep = self._epoch
         # City.sky_and_walls of the world's own (valid) positions (a file city's polygons: else)
-        if _city._USE_KERNEL and isinstance(self.world.city.buildings, _city.Buildings):
+        if isinstance(self.world.city.buildings, _city.Buildings):
             b = self.world.city.buildings
             tan_max, walls = _sim_kernels.sky_and_walls(ep.pos_enu_m, self._rays, b.min_m, b.max_m)
             sky_deg = np.degrees(np.arctan(tan_max))

@@ -58,13 +58,9 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 CHUNK_ELEMENTS: int = 1 << 20
-"""Largest number of elements of one temporary array in the chunked kernels (about 8 MB of
-float64). Bounds the memory of :func:`line_of_sight`, :func:`mask_elevation_deg` and the
-collision kernels whatever the number of receivers, satellites and buildings."""
-
-_USE_KERNEL = True
-"""Trace line of sight and the horizontal sensors with the compiled loops of
-:mod:`coopnav_env.sim._kernels` (False: the numpy formulations, identical results)."""
+"""Largest number of elements of one temporary array in the chunked numpy functions (about
+8 MB of float64). Bounds the memory of :func:`is_inside_building` and the collision functions
+of :mod:`coopnav_env.sim.swarm` whatever the number of receivers and buildings."""
 
 DEFAULT_CANYON_GAPS_DEG: tuple[tuple[float, float], ...] = ((50.0, 70.0), (220.0, 240.0))
 """Default gaps of the analytic canyon mask, absolute azimuth intervals ``(start, end)`` [deg].
@@ -131,17 +127,6 @@ def _chunk_slices(n: int, elements_per_item: int) -> Iterator[slice]:
     step = max(1, CHUNK_ELEMENTS // max(int(elements_per_item), 1))
     for start in range(0, n, step):
         yield slice(start, min(start + step, n))
-
-
-def _ragged_chunks(counts: NDArray[np.intp], max_total: int) -> Iterator[tuple[int, int]]:
-    """Ranges ``[p0, p1)`` of items whose ``counts`` sum to at most ``max_total`` (or 1 item)."""
-    cum = np.cumsum(counts)
-    start, n = 0, counts.size
-    while start < n:
-        base = int(cum[start - 1]) if start else 0
-        stop = max(int(np.searchsorted(cum, base + max_total, side="right")), start + 1)
-        yield start, stop
-        start = stop
 
 
 def _readonly(arr: FloatArray) -> FloatArray:
@@ -289,39 +274,6 @@ def is_inside_building(buildings: Buildings, pos_enu_m: ArrayLike) -> BoolArray:
 # --------------------------------------------------------------------------------------------
 
 
-def _slab_interval(
-    p: Sequence[FloatArray],
-    d: Sequence[FloatArray],
-    lo: Sequence[FloatArray],
-    hi: Sequence[FloatArray],
-) -> tuple[FloatArray, FloatArray]:
-    """Parameter interval ``[t_near, t_far]`` of the line ``p + t d`` inside a box.
-
-    Each argument is a sequence with one array per coordinate axis (2 or 3 axes); the arrays
-    broadcast against each other (working axis by axis avoids slow reductions over a short
-    trailing axis). Axes along which ``d`` is zero are handled exactly (the line is inside that
-    slab for all ``t`` or for none). The box is missed when ``t_near > t_far``.
-    """
-    t_near: FloatArray | None = None
-    t_far: FloatArray | None = None
-    for p_k, d_k, lo_k, hi_k in zip(p, d, lo, hi, strict=True):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / d_k
-            t1 = (lo_k - p_k) * inv
-            t2 = (hi_k - p_k) * inv
-        t_lo = np.minimum(t1, t2)
-        t_hi = np.maximum(t1, t2)
-        zero = d_k == 0.0
-        if np.any(zero):
-            in_slab = (p_k >= lo_k) & (p_k <= hi_k)
-            t_lo = np.where(zero, np.where(in_slab, -np.inf, np.inf), t_lo)
-            t_hi = np.where(zero, np.where(in_slab, np.inf, -np.inf), t_hi)
-        t_near = t_lo if t_near is None else np.maximum(t_near, t_lo)
-        t_far = t_hi if t_far is None else np.minimum(t_far, t_hi)
-    assert t_near is not None and t_far is not None
-    return t_near, t_far
-
-
 def _unit_directions(dir_enu: ArrayLike) -> FloatArray:
     d = _as_points(dir_enu, "dir_enu")
     norm = np.linalg.norm(d, axis=1)
@@ -334,8 +286,9 @@ def line_of_sight(buildings: Buildings, pos_enu_m: ArrayLike, dir_enu: ArrayLike
     """Line of sight from receivers to satellites through a city of box buildings.
 
     The ray ``pos + t * dir`` (``t > 0``) from each receiver toward each satellite direction is
-    tested against the buildings with the slab method, vectorised over (receiver, building,
-    satellite) triples. Because every box stands on the ground and a ray with positive
+    tested against the buildings with the slab method, in one compiled call
+    (:func:`coopnav_env.sim._kernels.line_of_sight`; a file city's extruded polygons go
+    through their own kernel). Because every box stands on the ground and a ray with positive
     elevation only rises, the 3-D slab test reduces to the 2-D slab test of the horizontal ray
     against the footprint plus a height test: the ray hits the box if and only if it enters the
     footprint, at horizontal distance ``t_in >= 0``, no higher than the roof,
@@ -361,14 +314,14 @@ def line_of_sight(buildings: Buildings, pos_enu_m: ArrayLike, dir_enu: ArrayLike
 
     Notes
     -----
-    Memory stays bounded: (receiver, building) pairs that cannot block any ray are culled
-    first (buildings not taller than the receiver, and buildings whose footprint is farther
-    than ``(roof - z_rx) / tan(el_min)``, the horizontal distance at which the lowest ray has
+    (Receiver, building) pairs that cannot block any ray are culled first (buildings not
+    taller than the receiver, and buildings whose footprint is farther than
+    ``(roof - z_rx) / tan(el_min)``, the horizontal distance at which the lowest ray has
     already risen above the roof); then, per remaining pair, only the satellites low enough to
     pass under the roof at the footprint's nearest point, ``tan(el) < (roof - z_rx) / dist``,
-    are tested (typically a tenth of all triples). The surviving (receiver, building,
-    satellite) triples are processed in chunks of at most ``CHUNK_ELEMENTS / 16`` so that
-    memory stays bounded (about 10 MB) whatever the problem size.
+    are tested (typically a tenth of all triples). Memory: two ``(n_rx, n_sv)`` boolean arrays.
+    ``tests/sim/oracles.py`` holds a numpy formulation of the same test, which the tests
+    compare with the kernel bit for bit.
     """
     pos = _as_points(pos_enu_m, "pos_enu_m")
     return _trace_line_of_sight(buildings, pos, sky_directions(dir_enu))
@@ -407,140 +360,20 @@ def sky_directions(dir_enu: ArrayLike) -> SkyDirections:
 
 
 def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirections) -> BoolArray:
-    """:func:`line_of_sight` from validated receivers and prepared directions (in one
-    compiled call, :func:`coopnav_env.sim._kernels.line_of_sight`, with ``_USE_KERNEL``)."""
+    """:func:`line_of_sight` from validated receivers and prepared directions: boxes in one
+    compiled call (:func:`coopnav_env.sim._kernels.line_of_sight`), a file city's extruded
+    polygons through their own kernel."""
     if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
         return buildings.trace_line_of_sight(pos, sky)
-    if _USE_KERNEL:
-        return _kernels.line_of_sight(
-            np.ascontiguousarray(pos, dtype=float),
-            buildings.min_m,
-            buildings.max_m,
-            sky.up,
-            sky.order,
-            sky.cot_s,
-            sky.h_dir,
-        )
-    n_rx, n_sv = pos.shape[0], sky.n_sv
-    up = sky.up
-    visible = np.broadcast_to(up, (n_rx, n_sv)).copy()
-    if buildings.n == 0 or n_rx == 0 or not np.any(up):
-        return visible
-    order, cot_s, h_dir = sky.order, sky.cot_s, sky.h_dir
-    n_up = cot_s.size
-
-    lo_all, hi_all = buildings.min_m, buildings.max_m
-    blocked_s = _blocked_sorted_numpy(pos, lo_all, hi_all, cot_s, h_dir, n_up)
-    blocked_up = np.empty_like(blocked_s)
-    blocked_up[:, order] = blocked_s
-    visible[:, up] = ~blocked_up
-    # A receiver inside a building needs no special case: its footprint distance is 0, so
-    # every satellite is tested, and the ray starts inside the footprint below the roof.
-    return visible
-
-
-def _blocked_sorted_numpy(pos, lo_all, hi_all, cot_s, h_dir, n_up):
-    """The numpy formulation of :func:`coopnav_env.sim._kernels.blocked_sorted`."""
-    n_rx = pos.shape[0]
-    blocked_s = np.zeros((n_rx, n_up), dtype=bool)  # columns in sorted order
-    for cb in _chunk_slices(lo_all.shape[0], 4 * n_rx):
-        # 1. cull (receiver, building) pairs, arrays of shape (n_rx, n_b_chunk)
-        climb_m = hi_all[None, cb, 2] - pos[:, None, 2]
-        dx = np.maximum(
-            np.maximum(lo_all[None, cb, 0] - pos[:, None, 0], 0.0),
-            pos[:, None, 0] - hi_all[None, cb, 0],
-        )
-        dy = np.maximum(
-            np.maximum(lo_all[None, cb, 1] - pos[:, None, 1], 0.0),
-            pos[:, None, 1] - hi_all[None, cb, 1],
-        )
-        dist_xy = np.hypot(dx, dy)
-        rx_idx, b_loc = np.nonzero((climb_m > 0.0) & (dist_xy <= climb_m * cot_s[-1]))
-        # 2. per pair, only satellites low enough to pass under the roof at the footprint's
-        #    nearest point can be blocked: those with cot(el) >= dist_xy / climb
-        first = np.searchsorted(cot_s, dist_xy[rx_idx, b_loc] / climb_m[rx_idx, b_loc])
-        some = first < n_up
-        rx_idx, b_idx, first = rx_idx[some], b_loc[some] + cb.start, first[some]
-        n_cand = n_up - first
-        # 3. exact test on the (receiver, building, satellite) triples, in bounded chunks
-        for p0, p1 in _ragged_chunks(n_cand, CHUNK_ELEMENTS // 16):
-            k = n_cand[p0:p1]
-            pair = np.repeat(np.arange(p0, p1), k)
-            sat = first[pair] + np.arange(pair.size) - np.repeat(np.cumsum(k) - k, k)
-            rx, b = rx_idx[pair], b_idx[pair]
-            t_near, t_far = _slab_interval(
-                [pos[rx, 0], pos[rx, 1]],
-                [h_dir[sat, 0], h_dir[sat, 1]],
-                [lo_all[b, 0], lo_all[b, 1]],
-                [hi_all[b, 0], hi_all[b, 1]],
-            )  # horizontal distances along the ray's azimuth
-            climb_t = hi_all[b, 2] - pos[rx, 2]
-            hit = (
-                (t_far > 0.0)
-                & (t_near <= t_far)
-                & (np.maximum(t_near, 0.0) <= climb_t * cot_s[sat])
-            )
-            blocked_s[rx[hit], sat[hit]] = True
-    return blocked_s
-
-
-class _HorizontalSweep:
-    """Slab intervals of horizontal rays (receivers x azimuths) against the building footprints.
-
-    Iterating yields ``(t_near, t_far, lo, hi)`` per chunk of buildings taller than the lowest
-    receiver: the footprint entry/exit distances, shape ``(n, n_az, n_chunk)``, and the chunk's
-    box corners broadcastable as ``(1, 1, n_chunk, 3)``. Chunking bounds the memory.
-    """
-
-    def __init__(self, buildings: Buildings, pos: FloatArray, az_deg: ArrayLike) -> None:
-        self._dir = _ray_directions(az_deg)
-        self._pos = pos
-        self.shape = (pos.shape[0], self._dir.shape[0])
-        if buildings.n == 0 or pos.shape[0] == 0 or self._dir.shape[0] == 0:
-            self._tall = np.zeros(0, dtype=np.intp)
-        else:
-            self._tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
-        self._lo = buildings.min_m[self._tall]
-        self._hi = buildings.max_m[self._tall]
-
-    def __iter__(self):
-        pos, d, lo, hi = self._pos, self._dir, self._lo, self._hi
-        for cb in _chunk_slices(self._tall.size, 2 * self.shape[0] * self.shape[1]):
-            t_near, t_far = _sweep_slab(pos, d, lo[cb], hi[cb])
-            yield t_near, t_far, lo[None, None, cb], hi[None, None, cb]
-
-
-def _sweep_slab(
-    pos: FloatArray, d: FloatArray, lo: FloatArray, hi: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """:func:`_slab_interval` of receivers (n, 3) x directions (n_az, 2) x boxes (m, 3).
-
-    The same values, computed the same way, except that the directions with a zero component
-    along an axis (the cardinal azimuths) get their infinite slab bounds written into their
-    columns only, instead of by full-size ``where`` passes over every azimuth.
-    """
-    t_near: FloatArray | None = None
-    t_far: FloatArray | None = None
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for k in range(2):
-            p_k, lo_k, hi_k = pos[:, None, None, k], lo[None, None, :, k], hi[None, None, :, k]
-            inv = 1.0 / d[None, :, None, k]
-            t1 = (lo_k - p_k) * inv
-            t2 = (hi_k - p_k) * inv
-            t_lo = np.minimum(t1, t2)
-            t_hi = np.maximum(t1, t2, out=t1)  # (in place: fewer large temporaries)
-            zero = np.flatnonzero(d[:, k] == 0.0)
-            if zero.size:
-                in_slab = (p_k >= lo_k) & (p_k <= hi_k)  # (n, 1, m)
-                t_lo[:, zero, :] = np.where(in_slab, -np.inf, np.inf)
-                t_hi[:, zero, :] = np.where(in_slab, np.inf, -np.inf)
-            if t_near is None or t_far is None:
-                t_near, t_far = t_lo, t_hi
-            else:
-                np.maximum(t_near, t_lo, out=t_near)
-                np.minimum(t_far, t_hi, out=t_far)
-    assert t_near is not None and t_far is not None
-    return t_near, t_far
+    return _kernels.line_of_sight(
+        np.ascontiguousarray(pos, dtype=float),
+        buildings.min_m,
+        buildings.max_m,
+        sky.up,
+        sky.order,
+        sky.cot_s,
+        sky.h_dir,
+    )
 
 
 def _ray_directions(az_deg: ArrayLike) -> FloatArray:
@@ -570,13 +403,6 @@ def _ray_directions(az_deg: ArrayLike) -> FloatArray:
 _RAY_DIRECTIONS: dict[bytes, FloatArray] = {}
 
 
-def _horizontal_sweep(
-    buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike
-) -> tuple[FloatArray, _HorizontalSweep]:
-    pos = _as_points(pos_enu_m, "pos_enu_m")
-    return pos, _HorizontalSweep(buildings, pos, az_deg)
-
-
 def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
     """Elevation of the building skyline seen from each receiver along each azimuth.
 
@@ -601,39 +427,7 @@ def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: Array
         Skyline elevation [deg], in [0, 90]: 0 where no building taller than the receiver lies
         along the azimuth, 90 for a receiver inside a building.
     """
-    if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
-        return buildings.sky_and_walls(pos_enu_m, az_deg)[0]
-    if _USE_KERNEL:
-        return sky_and_walls(buildings, pos_enu_m, az_deg)[0]
-    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
-    tan_max = np.zeros(sweep.shape)  # tangent of the skyline elevation
-    for t_near, t_far, _lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
-        entered = t_near <= t_far
-        tan_max = np.maximum(
-            tan_max, _skyline_tan(pos, entered, np.maximum(t_near, 0.0), t_far, hi)
-        )
-    return np.degrees(np.arctan(tan_max))
-
-
-def _skyline_tan(pos: FloatArray, entered, t_in, t_far, hi) -> FloatArray:
-    """Largest ``tan(elevation)`` of a roof edge per (receiver, azimuth) over a building chunk.
-
-    ``entered = t_near <= t_far`` and ``t_in = max(t_near, 0)`` of the sweep, ``(n, n_az, m)``.
-    """
-    rel_h = hi[..., 2] - pos[:, None, None, 2]
-    hit = (t_far > 0.0) & entered & (rel_h > 0.0)
-    tan_el = np.zeros(hit.shape)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        np.divide(rel_h, t_in, out=tan_el, where=hit)  # +inf inside a footprint
-    return tan_el.max(axis=2)
-
-
-def _wall_min(pos: FloatArray, entered, t_in, t_far, lo, hi) -> FloatArray:
-    """Nearest footprint entry per (receiver, azimuth) over a building chunk (inf: none)."""
-    z = pos[:, None, None, 2]
-    below_roof = (z < hi[..., 2]) & (z >= lo[..., 2])
-    hit = (t_far >= 0.0) & entered & below_roof
-    return np.where(hit, t_in, np.inf).min(axis=2)
+    return sky_and_walls(buildings, pos_enu_m, az_deg)[0]
 
 
 def sky_and_walls(
@@ -641,27 +435,16 @@ def sky_and_walls(
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`mask_elevation_deg` and :func:`wall_distance_m` from one horizontal sweep.
 
-    Both trace the same horizontal rays (receivers x azimuths) through the same footprints;
-    this computes the slab intervals once and returns exactly what the two functions return.
+    Both trace the same horizontal rays (receivers x azimuths) through the same footprints:
+    one compiled sweep (:func:`coopnav_env.sim._kernels.sky_and_walls`; a file city's
+    extruded polygons through their own kernel) returns exactly what the two functions return.
     """
     if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
         return buildings.sky_and_walls(pos_enu_m, az_deg)
-    if _USE_KERNEL:
-        # every building goes to the kernel: one whose roof is not above a receiver changes
-        # nothing for it (the sweep's "taller than the lowest receiver" cull is implied)
-        pos = _as_points(pos_enu_m, "pos_enu_m")
-        tan_max, dist = _kernels.sky_and_walls(
-            np.ascontiguousarray(pos), _ray_directions(az_deg), buildings.min_m, buildings.max_m
-        )
-        return np.degrees(np.arctan(tan_max)), dist
-    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
-    tan_max = np.zeros(sweep.shape)
-    dist = np.full(sweep.shape, np.inf)
-    for t_near, t_far, lo, hi in sweep:
-        entered = t_near <= t_far
-        t_in = np.maximum(t_near, 0.0)
-        tan_max = np.maximum(tan_max, _skyline_tan(pos, entered, t_in, t_far, hi))
-        dist = np.minimum(dist, _wall_min(pos, entered, t_in, t_far, lo, hi))
+    pos = _as_points(pos_enu_m, "pos_enu_m")
+    tan_max, dist = _kernels.sky_and_walls(
+        np.ascontiguousarray(pos), _ray_directions(az_deg), buildings.min_m, buildings.max_m
+    )
     return np.degrees(np.arctan(tan_max)), dist
 
 
@@ -687,14 +470,7 @@ def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLik
         Distance [m], >= 0: ``inf`` where the ray meets no building taller than the receiver,
         0 for a receiver inside a building.
     """
-    if _USE_KERNEL or not isinstance(buildings, Buildings):
-        return sky_and_walls(buildings, pos_enu_m, az_deg)[1]
-    pos, sweep = _horizontal_sweep(buildings, pos_enu_m, az_deg)
-    dist = np.full(sweep.shape, np.inf)
-    for t_near, t_far, lo, hi in sweep:  # (n, n_az, n_b_chunk) and (1, 1, n_b_chunk, 3)
-        t_in = np.maximum(t_near, 0.0)
-        dist = np.minimum(dist, _wall_min(pos, t_near <= t_far, t_in, t_far, lo, hi))
-    return dist
+    return sky_and_walls(buildings, pos_enu_m, az_deg)[1]
 
 
 # --------------------------------------------------------------------------------------------

@@ -108,12 +108,6 @@ __all__ = ["N_CANDIDATES", "candidate_positions", "predicted_line_of_sight"]
 #: and along the vertical.
 N_CANDIDATES = 7
 
-_USE_KERNEL = True
-"""Compiled prediction (:func:`_predict_kernel`: candidates, inside test and line of sight in
-one call); False: the numpy formulation (:func:`candidate_positions`,
-:func:`~coopnav_env.sim.city.is_inside_building`, :func:`~coopnav_env.sim.city.line_of_sight`),
-the definition the tests compare it with."""
-
 
 def candidate_positions(
     pos_enu_m: np.ndarray,
@@ -188,6 +182,14 @@ def predicted_line_of_sight(
         True where the satellite is above the horizon and no building blocks it from any
         candidate (:func:`candidate_positions`) outside the buildings; all True for a UAV
         whose candidates are all inside buildings (the map says nothing).
+
+    Notes
+    -----
+    Box buildings (:class:`~coopnav_env.sim.city.Buildings`) are predicted in one compiled
+    call (:func:`_predict_kernel`); a file city's extruded polygons, which that kernel does not
+    take, by :func:`_predict_from_candidates`, the same rule written with
+    :func:`candidate_positions`, :func:`~coopnav_env.sim.city.is_inside_building` and the
+    line of sight. The tests check that the two agree on box cities.
     """
     if not (math.isfinite(margin_sigma) and margin_sigma >= 0.0):
         raise ValueError(f"margin_sigma must be finite and >= 0, got {margin_sigma!r}")
@@ -205,22 +207,42 @@ def predicted_line_of_sight(
         raise ValueError(
             f"pos_enu_m must be (N, 3) and cov_enu_m2 (N, 3, 3), got {pos.shape} and {cov.shape}"
         )
-    if _USE_KERNEL and isinstance(buildings, Buildings):  # (polygons: the functions below)
-        return _predict_kernel(
-            pos,
-            cov,
-            float(margin_sigma),
-            float(max_margin_m),
-            lo,
-            hi,
-            buildings.min_m,
-            buildings.max_m,
-            sky.up,
-            sky.order,
-            sky.cot_s,
-            sky.h_dir,
+    if not isinstance(buildings, Buildings):  # extruded polygons (sim.file_city)
+        return _predict_from_candidates(
+            buildings, sky, pos, cov, margin_sigma, max_margin_m, lo, hi
         )
-    cand = candidate_positions(pos, cov, margin_sigma, max_margin_m, (lo, hi))
+    return _predict_kernel(
+        pos,
+        cov,
+        float(margin_sigma),
+        float(max_margin_m),
+        lo,
+        hi,
+        buildings.min_m,
+        buildings.max_m,
+        sky.up,
+        sky.order,
+        sky.cot_s,
+        sky.h_dir,
+    )
+
+
+def _predict_from_candidates(
+    buildings: Buildings,
+    sky: SkyDirections,
+    pos: np.ndarray,
+    cov: np.ndarray,
+    margin_sigma: float,
+    max_margin_m: float,
+    z_lo: float,
+    z_hi: float,
+) -> np.ndarray:
+    """:func:`predicted_line_of_sight` of validated arguments through
+    :func:`candidate_positions`, :func:`~coopnav_env.sim.city.is_inside_building` and the
+    line of sight, for any buildings (the path of a file city's extruded polygons, which
+    :func:`_predict_kernel` does not take)."""
+    n = pos.shape[0]
+    cand = candidate_positions(pos, cov, margin_sigma, max_margin_m, (z_lo, z_hi))
     flat = np.ascontiguousarray(cand.reshape(-1, 3))
     possible = ~is_inside_building(buildings, flat).reshape(n, N_CANDIDATES)
     vis = _trace_line_of_sight(buildings, flat, sky).reshape(n, N_CANDIDATES, -1)
@@ -259,7 +281,7 @@ def _predict_kernel(pos, cov, margin, cap, z_lo, z_hi, b_lo, b_hi, up, order, co
             d_minor = min(margin * math.sqrt(max(l_minor, 0.0)), cap)
             d_up = min(margin * math.sqrt(max(v, 0.0)), cap)
         else:
-            ex, ey = 0.0, 1.0  # as the numpy formulation: North, then East
+            ex, ey = 0.0, 1.0  # as candidate_positions: North, then East
             d_major = d_minor = d_up = cap
         base = q * nc
         for j in range(nc):

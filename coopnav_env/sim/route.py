@@ -24,9 +24,6 @@ from numpy.typing import ArrayLike
 from coopnav_env.sim import _kernels
 from coopnav_env.sim.file_city import FileCity
 
-_USE_KERNEL = True
-"""Waypoint advance through :mod:`coopnav_env.sim._kernels` (False: the numpy formulation)."""
-
 __all__ = [
     "Polyline",
     "advance_waypoints",
@@ -319,30 +316,15 @@ def advance_waypoints(
     Returns
     -------
     ndarray of int, shape (n,)
-        The updated indices (a new array), never smaller than ``next_wp``.
+        The updated indices (a new array), never smaller than ``next_wp``. Computed in one
+        compiled call (:func:`coopnav_env.sim._kernels.advance_waypoints`).
     """
     pts = np.asarray(route, dtype=float).reshape(-1, 2)
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     idx = np.array(next_wp, dtype=np.int64, copy=True).reshape(-1)
-    if _USE_KERNEL:
-        return _kernels.advance_waypoints(
-            np.ascontiguousarray(pts), np.ascontiguousarray(xy), idx, float(reach_m)
-        )
-    k = pts.shape[0]
-    arrive = np.zeros_like(pts)  # direction of the leg arriving at each waypoint
-    if k > 1:
-        arrive[1:] = np.diff(pts, axis=0)
-    for _ in range(k):
-        not_last = idx < k - 1
-        w = pts[idx]
-        near = np.all(np.abs(xy - w) <= reach_m, axis=1)
-        past = np.einsum("ij,ij->i", xy - w, arrive[idx]) >= 0.0
-        past &= np.any(arrive[idx] != 0.0, axis=1)
-        step = not_last & (near | past)
-        if not step.any():
-            break
-        idx[step] += 1
-    return idx
+    return _kernels.advance_waypoints(
+        np.ascontiguousarray(pts), np.ascontiguousarray(xy), idx, float(reach_m)
+    )
 
 
 # --------------------------------------------------------------------------------------------

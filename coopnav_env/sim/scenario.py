@@ -146,7 +146,6 @@ from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
 from coopnav_env.sim import _integrity
 from coopnav_env.sim import _kernels as _sim_kernels
-from coopnav_env.sim import route as _route
 from coopnav_env.sim.city import (
     BoolArray,
     Buildings,
@@ -203,13 +202,7 @@ def _fused_path_on() -> bool:
     """Whether ``UrbanWorld`` may run an epoch's navigation in one compiled call
     (:meth:`UrbanWorld._navigate_fused`): only while every kernel it stands for is on (each
     module's ``_USE_KERNEL``), so that switching one off runs its numpy formulation."""
-    return (
-        _USE_KERNEL
-        and _errors._USE_KERNEL
-        and _wls._USE_KERNEL
-        and _cooperative._USE_KERNEL
-        and _route._USE_KERNEL
-    )
+    return _USE_KERNEL and _errors._USE_KERNEL and _wls._USE_KERNEL and _cooperative._USE_KERNEL
 
 
 __all__ = [

@@ -23,9 +23,6 @@ from coopnav_env.sim.city import (
     _chunk_slices,
 )
 
-_USE_KERNEL = True
-"""Relative sensing through :mod:`coopnav_env.sim._kernels` (False: the numpy formulation)."""
-
 __all__ = [
     "KinematicsConfig",
     "RelativeSensingConfig",
@@ -309,14 +306,11 @@ def separation_violations(pos_enu_m: ArrayLike, min_separation_m: float) -> Bool
     -------
     ndarray of bool, shape (n,)
         True for each UAV with another UAV strictly closer than ``min_separation_m``.
+        Computed in one compiled call (:func:`coopnav_env.sim._kernels.separation_violations`).
     """
     sep = _check_real("separation_violations", "min_separation_m", min_separation_m, 0.0)
-    if _USE_KERNEL:
-        pos = _as_points(pos_enu_m, "pos_enu_m")
-        return _kernels.separation_violations(np.ascontiguousarray(pos), float(sep))
-    rng_m = pairwise_ranges_m(pos_enu_m)
-    np.fill_diagonal(rng_m, np.inf)
-    return np.any(rng_m < sep, axis=1)
+    pos = _as_points(pos_enu_m, "pos_enu_m")
+    return _kernels.separation_violations(np.ascontiguousarray(pos), float(sep))
 
 
 # --------------------------------------------------------------------------------------------
@@ -405,32 +399,12 @@ def _measure_relative(
     """:func:`measure_relative_positions` of validated positions, with the per-axis variance
     ``(n, n)`` instead of the covariance matrices (``cov = var * I``).
 
-    The same draws and arithmetic as the numpy formulation :func:`_measure_relative_numpy`
-    (the compiled kernel by default; the tests check they agree bit for bit).
+    The draws are made here; the arithmetic is one compiled call
+    (:func:`coopnav_env.sim._kernels.relative_measurements`), which the tests compare bit for
+    bit with a numpy formulation of the same operations (``tests/sim/oracles.py``).
     """
     n = pos.shape[0]
     z = rng.standard_normal((n * (n - 1) // 2, 3))
-    if _USE_KERNEL:
-        return _kernels.relative_measurements(
-            pos, z, float(cfg.sigma0_m), float(cfg.sigma_per_m), float(cfg.max_range_m)
-        )
-    return _measure_relative_numpy(pos, z, cfg)
-
-
-def _measure_relative_numpy(
-    pos: FloatArray, z: FloatArray, cfg: RelativeSensingConfig
-) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """The numpy formulation of :func:`coopnav_env.sim._kernels.relative_measurements`."""
-    n = pos.shape[0]
-    diff = pos[None, :, :] - pos[:, None, :]  # diff[b, q] = pos[q] - pos[b]
-    range_m = np.linalg.norm(diff, axis=2)
-    sigma = cfg.sigma_m(range_m)
-    iu, ju = np.triu_indices(n, 1)
-    eps = np.zeros((n, n, 3))
-    eps[iu, ju] = z * sigma[iu, ju, None]
-    eps[ju, iu] = -eps[iu, ju]
-    available = (range_m > 0.0) & (range_m <= cfg.max_range_m)
-    np.fill_diagonal(available, False)
-    rel = np.where(available[:, :, None], diff + eps, 0.0)
-    var = np.where(available, sigma**2, 0.0)
-    return rel, var, available
+    return _kernels.relative_measurements(
+        pos, z, float(cfg.sigma0_m), float(cfg.sigma_per_m), float(cfg.max_range_m)
+    )

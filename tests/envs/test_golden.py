@@ -42,8 +42,9 @@ from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import _fused, urban_canyon
 from coopnav_env.gnss import errors
 from coopnav_env.nav import cooperative, wls
-from coopnav_env.sim import city, route, scenario, swarm
+from coopnav_env.sim import scenario
 from tests.envs.golden import CASES, episode_digest
+from tests.sim.oracles import use_oracles_in_world
 from tests.sim.test_fast_paths import count_fused_calls
 
 GOLDEN: dict[str, str] = {
@@ -96,9 +97,11 @@ def _episode(n_uavs: int, seed: int, steps: int, **kwargs) -> tuple[np.ndarray, 
 )
 def test_compiled_solvers_change_episodes_only_in_the_last_bits(monkeypatch, n_uavs, seed, kwargs):
     fast_obs, fast_rew = _episode(n_uavs, seed, 150, **kwargs)
-    for module in (cooperative, wls, errors, city, swarm, route, scenario, urban_canyon):
+    for module in (cooperative, wls, errors, scenario, urban_canyon):
         monkeypatch.setattr(module, "_USE_KERNEL", False)
+    oracle_calls = use_oracles_in_world(monkeypatch)  # the world's oracles (tests/sim)
     ref_obs, ref_rew = _episode(n_uavs, seed, 150, **kwargs)
+    assert all(oracle_calls[name] > 0 for name in oracle_calls if name != "predicted")
     assert fast_obs.shape == ref_obs.shape
     # at most one float32 ulp of the value, or 1e-7 for values near zero (differences of
     # larger numbers, whose own rounding is that large)

@@ -17,6 +17,7 @@ from coopnav_env.sim import city as C
 from coopnav_env.sim import scenario as S
 from coopnav_env.sim.city import CityConfig, canyon_city, generate_city
 from coopnav_env.sim.swarm import RelativeSensingConfig, measure_relative_positions
+from tests.sim import oracles
 
 
 def _kernel_and_numpy(monkeypatch, module, fn, *args):
@@ -36,7 +37,7 @@ def _dense_reference(buildings, pos, az_deg):
     d = np.where(np.abs(d) < 1e-15, 0.0, d)
     tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
     lo, hi = buildings.min_m[tall][None, None], buildings.max_m[tall][None, None]
-    t_near, t_far = C._slab_interval(
+    t_near, t_far = oracles.slab_interval(
         [pos[:, None, None, k] for k in range(2)],
         [d[None, :, None, k] for k in range(2)],
         [lo[..., k] for k in range(2)],
@@ -144,8 +145,9 @@ def _tricky_positions(city, rng, n=60):
 
 
 @pytest.mark.parametrize("seed", range(5))
-def test_compiled_line_of_sight_and_sweeps_equal_the_numpy_ones(monkeypatch, seed) -> None:
-    """The numba loops (coopnav_env.sim._kernels) give bit-identical results."""
+def test_compiled_line_of_sight_and_sweeps_equal_the_numpy_ones(seed) -> None:
+    """The numba loops (coopnav_env.sim._kernels) give the results of their numpy oracles
+    (tests/sim/oracles.py) bit for bit."""
     rng = np.random.default_rng(100 + seed)
     city = canyon_city() if seed == 0 else generate_city(CityConfig(), rng)
     pos = _tricky_positions(city, rng)
@@ -162,14 +164,24 @@ def test_compiled_line_of_sight_and_sweeps_equal_the_numpy_ones(monkeypatch, see
     sweep_az = np.r_[np.arange(8) * 45.0, rng.uniform(0.0, 360.0, 5)]
     fast_los = city.line_of_sight(pos, dirs)
     fast_sky, fast_walls = city.sky_and_walls(pos, sweep_az)
-    monkeypatch.setattr(C, "_USE_KERNEL", False)
-    ref_los = city.line_of_sight(pos, dirs)
-    ref_sky, ref_walls = city.sky_and_walls(pos, sweep_az)
+    ref_los = oracles.trace_line_of_sight(city.buildings, pos, C.sky_directions(dirs))
+    ref_sky, ref_walls = oracles.sky_and_walls(city.buildings, pos, sweep_az)
     assert ref_los.sum() > 0 and (~ref_los).sum() > 0  # both outcomes occur
     np.testing.assert_array_equal(fast_los, ref_los)
     np.testing.assert_array_equal(fast_sky, ref_sky)
     np.testing.assert_array_equal(fast_walls, ref_walls)
     assert np.array_equal(np.signbit(fast_sky), np.signbit(ref_sky))
+    # the separate sweeps of the skyline and the walls
+    ref_mask = oracles.mask_elevation_deg(city.buildings, pos, sweep_az)
+    assert city.mask_elevation_deg(pos, sweep_az).tobytes() == ref_mask.tobytes()
+    ref_dist = oracles.wall_distance_m(city.buildings, pos, sweep_az)
+    assert city.wall_distance_m(pos, sweep_az).tobytes() == ref_dist.tobytes()
+    # the kernel of the blocked pairs alone, against its oracle
+    sky = C.sky_directions(dirs)
+    b = city.buildings
+    fast_blocked = C._kernels.blocked_sorted(pos, b.min_m, b.max_m, sky.cot_s, sky.h_dir)
+    ref_blocked = oracles.blocked_sorted(pos, b.min_m, b.max_m, sky.cot_s, sky.h_dir)
+    np.testing.assert_array_equal(fast_blocked, ref_blocked)
 
 
 @pytest.mark.parametrize("n", [1, 2, 7, 40])
@@ -185,7 +197,7 @@ def test_relative_sensing_kernel_equals_numpy_bit_for_bit(n: int) -> None:
             pos[2] = pos[1]  # coincident UAVs: zero range, unavailable
         z = np.random.default_rng(seed).standard_normal((n * (n - 1) // 2, 3))
         fast = swarm._kernels.relative_measurements(pos, z, 0.2, 0.003, 150.0)
-        ref = swarm._measure_relative_numpy(pos, z, cfg)
+        ref = oracles.relative_measurements(pos, z, cfg)
         for name, a, b in zip(("rel", "var", "available"), fast, ref, strict=True):
             assert a.dtype == b.dtype, name
             assert a.tobytes() == b.tobytes(), name
@@ -194,7 +206,7 @@ def test_relative_sensing_kernel_equals_numpy_bit_for_bit(n: int) -> None:
         np.testing.assert_array_equal(cov, fast[1][:, :, None, None] * np.eye(3))
 
 
-def test_waypoint_advance_kernel_equals_numpy(monkeypatch) -> None:
+def test_waypoint_advance_kernel_equals_numpy() -> None:
     """Random routes (with a repeated waypoint: a zero-length leg), points on and off them."""
     from coopnav_env.sim import route
 
@@ -211,9 +223,8 @@ def test_waypoint_advance_kernel_equals_numpy(monkeypatch) -> None:
             xy = pts[rng.integers(0, k, n)] + rng.choice([0.0, 0.5, -3.0, 5.0], (n, 2))
         wp = rng.integers(0, k, n)
         reach = float(rng.choice([0.0, 5.0, 10.0]))
-        fast, ref = _kernel_and_numpy(
-            monkeypatch, route, route.advance_waypoints, pts, xy, wp, reach
-        )
+        fast = route.advance_waypoints(pts, xy, wp, reach)
+        ref = oracles.advance_waypoints(pts, xy, wp, reach)
         np.testing.assert_array_equal(fast, ref)
         assert fast.dtype == ref.dtype == np.int64
 
@@ -281,7 +292,7 @@ def test_swept_collision_kernel_equals_numpy(monkeypatch) -> None:
     assert 0 < hits < total  # both outcomes exercised
 
 
-def test_separation_kernel_equals_numpy(monkeypatch) -> None:
+def test_separation_kernel_equals_numpy() -> None:
     from coopnav_env.sim import swarm
 
     for seed in range(200):
@@ -292,7 +303,8 @@ def test_separation_kernel_equals_numpy(monkeypatch) -> None:
             pos[1] = pos[0] + [3.0, 0.0, 0.0]  # exactly at the limit: not a violation
             pos[3] = pos[2]  # coincident
         sep = float(rng.choice([0.0, 3.0, 8.0]))
-        fast, ref = _kernel_and_numpy(monkeypatch, swarm, swarm.separation_violations, pos, sep)
+        fast = swarm.separation_violations(pos, sep)
+        ref = oracles.separation_violations(pos, sep)
         np.testing.assert_array_equal(fast, ref)
 
 

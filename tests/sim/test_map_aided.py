@@ -27,10 +27,21 @@ def _cov(sig_e: float, sig_n: float, sig_u: float, rot_deg: float = 0.0) -> np.n
     return r @ np.diag([sig_e**2, sig_n**2, sig_u**2]) @ r.T
 
 
-@pytest.fixture(params=[True, False], ids=["compiled", "numpy"])
-def kernel(request, monkeypatch):
-    monkeypatch.setattr(ma, "_USE_KERNEL", request.param)
-    return request.param
+def _predict_from_candidates(buildings, sky, pos, cov, **kw):
+    """``predicted_line_of_sight`` through the candidates, the inside test and the line of
+    sight (the path of a file city's polygons), for box buildings too."""
+    lo, hi = kw["altitude_band_m"]
+    return ma._predict_from_candidates(
+        buildings, sky, pos, cov, kw["margin_sigma"], kw["max_margin_m"], lo, hi
+    )
+
+
+@pytest.fixture(params=["compiled", "candidates"])
+def predict(request):
+    """The prediction of box buildings: the compiled call, or through the candidates."""
+    if request.param == "compiled":
+        return ma.predicted_line_of_sight
+    return _predict_from_candidates
 
 
 def test_candidates_follow_the_covariance() -> None:
@@ -61,7 +72,8 @@ def test_candidates_follow_the_covariance() -> None:
 def test_compiled_prediction_equals_the_numpy_formulation() -> None:
     """500 random swarms in a grid city (positions inside buildings, degenerate and
     non-finite covariances, margins 0-3 sigma, caps 0-100 m): the compiled call and the
-    numpy formulation give the same prediction."""
+    numpy formulation through the candidates (the path of a file city's polygons) give the
+    same prediction."""
     city = generate_city(CityConfig(), np.random.default_rng(1))
     rng = np.random.default_rng(2)
     dirs = np.array([_direction(az, el) for az, el in rng.uniform([0, 5], [360, 89], (24, 2))])
@@ -81,15 +93,8 @@ def test_compiled_prediction_equals_the_numpy_formulation() -> None:
             max_margin_m=float(rng.choice([0.0, 5.0, 10.0, 100.0])),
             altitude_band_m=BAND,
         )
-        ma._USE_KERNEL = True
-        try:
-            fast = ma.predicted_line_of_sight(city.buildings, sky, pos, cov, **kw)
-        finally:
-            ma._USE_KERNEL = False
-        try:
-            ref = ma.predicted_line_of_sight(city.buildings, sky, pos, cov, **kw)
-        finally:
-            ma._USE_KERNEL = True
+        fast = ma.predicted_line_of_sight(city.buildings, sky, pos, cov, **kw)
+        ref = _predict_from_candidates(city.buildings, sky, pos, cov, **kw)
         assert fast.shape == (n, 24) and fast.dtype == bool
         assert np.array_equal(fast, ref), trial
 
@@ -122,7 +127,7 @@ def test_the_buildings_culled_per_uav_change_nothing() -> None:
     assert np.mean(kept) < 0.65
 
 
-def test_a_satellite_blocked_from_one_candidate_is_not_used(kernel) -> None:
+def test_a_satellite_blocked_from_one_candidate_is_not_used(predict) -> None:
     """A UAV 10 m west of a 20 m high wall, at 10 m: a satellite to the east at 50 degrees
     clears the roof from the predicted position (LOS) but not from 4 m further east (2 sigma
     along East); the same satellite to the west and one due south are clear from everywhere."""
@@ -133,19 +138,17 @@ def test_a_satellite_blocked_from_one_candidate_is_not_used(kernel) -> None:
     assert np.array_equal(line_of_sight(WALL, two, east), [[True], [False]])
     cov = _cov(2.0, 0.5, 0.01)[None]
     kw = dict(max_margin_m=10.0, altitude_band_m=BAND)
-    at_centre = ma.predicted_line_of_sight(WALL, sky, pos, cov, margin_sigma=0.0, **kw)
+    at_centre = predict(WALL, sky, pos, cov, margin_sigma=0.0, **kw)
     assert np.array_equal(at_centre, [[True, True, True]])
-    with_margin = ma.predicted_line_of_sight(WALL, sky, pos, cov, margin_sigma=2.0, **kw)
+    with_margin = predict(WALL, sky, pos, cov, margin_sigma=2.0, **kw)
     assert np.array_equal(with_margin, [[False, True, True]])
     # the same 4 m of margin from the cap, whatever the covariance says
     wide = _cov(50.0, 50.0, 0.01)[None]
-    capped = ma.predicted_line_of_sight(
-        WALL, sky, pos, wide, margin_sigma=2.0, max_margin_m=4.0, altitude_band_m=BAND
-    )
+    capped = predict(WALL, sky, pos, wide, margin_sigma=2.0, max_margin_m=4.0, altitude_band_m=BAND)
     assert np.array_equal(capped, [[False, True, True]])
 
 
-def test_candidates_inside_a_building_are_ignored(kernel) -> None:
+def test_candidates_inside_a_building_are_ignored(predict) -> None:
     """A UAV 2 m from the wall with 4 m of margin east: that candidate is inside the
     building (the UAV cannot be there) and blocks nothing; the others see the steep eastern
     satellite. A UAV whose every candidate is inside a building: the map says nothing."""
@@ -153,12 +156,12 @@ def test_candidates_inside_a_building_are_ignored(kernel) -> None:
     cov = _cov(2.0, 0.5, 0.01)[None]
     kw = dict(margin_sigma=2.0, max_margin_m=10.0, altitude_band_m=BAND)
     near = np.array([[8.0, 0.0, 10.0]])
-    assert np.array_equal(ma.predicted_line_of_sight(WALL, sky, near, cov, **kw), [[True, True]])
+    assert np.array_equal(predict(WALL, sky, near, cov, **kw), [[True, True]])
     inside = np.array([[20.0, 0.0, 10.0]])
-    assert np.array_equal(ma.predicted_line_of_sight(WALL, sky, inside, cov, **kw), [[True, True]])
+    assert np.array_equal(predict(WALL, sky, inside, cov, **kw), [[True, True]])
     # ... and from inside with no margin: the centre is inside as well
     kw0 = {**kw, "margin_sigma": 0.0}
-    assert np.array_equal(ma.predicted_line_of_sight(WALL, sky, inside, cov, **kw0), [[True, True]])
+    assert np.array_equal(predict(WALL, sky, inside, cov, **kw0), [[True, True]])
 
 
 def test_bad_arguments_raise_value_errors_naming_them() -> None:

@@ -1,0 +1,440 @@
+"""Numpy oracles of the world's compiled kernels (:mod:`coopnav_env.sim._kernels`).
+
+Each function here computes what one compiled path of :mod:`coopnav_env.sim` computes, written
+with numpy array operations: the readable definition of the kernel, which the library no longer
+runs. Most perform the same floating-point operations in the same order as their kernel
+(numpy's ``maximum`` and ``clip`` with their signed zeros included), so the tests compare the
+two bit for bit. :func:`use_oracles_in_world` puts them in place of the kernels in
+:class:`~coopnav_env.sim.scenario.UrbanWorld`'s function-by-function path, for end-to-end
+comparisons of whole episodes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from coopnav_env.sim import city as _city
+from coopnav_env.sim import map_aided as _map_aided
+from coopnav_env.sim import scenario as _scenario
+from coopnav_env.sim.city import (
+    CHUNK_ELEMENTS,
+    BoolArray,
+    Buildings,
+    FloatArray,
+    SkyDirections,
+    _as_points,
+    _check_real,
+    _chunk_slices,
+    _ray_directions,
+)
+from coopnav_env.sim.swarm import RelativeSensingConfig, pairwise_ranges_m
+
+__all__ = [
+    "advance_waypoints",
+    "blocked_sorted",
+    "mask_elevation_deg",
+    "relative_measurements",
+    "separation_violations",
+    "sky_and_walls",
+    "slab_interval",
+    "trace_line_of_sight",
+    "use_oracles_in_world",
+    "wall_distance_m",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# line of sight (city._trace_line_of_sight, _kernels.line_of_sight / blocked_sorted)
+# --------------------------------------------------------------------------------------------
+
+
+def slab_interval(
+    p: Sequence[FloatArray],
+    d: Sequence[FloatArray],
+    lo: Sequence[FloatArray],
+    hi: Sequence[FloatArray],
+) -> tuple[FloatArray, FloatArray]:
+    """Parameter interval ``[t_near, t_far]`` of the line ``p + t d`` inside a box.
+
+    Each argument is a sequence with one array per coordinate axis (2 or 3 axes); the arrays
+    broadcast against each other. Axes along which ``d`` is zero are handled exactly (the line
+    is inside that slab for all ``t`` or for none). The box is missed when ``t_near > t_far``.
+    """
+    t_near: FloatArray | None = None
+    t_far: FloatArray | None = None
+    for p_k, d_k, lo_k, hi_k in zip(p, d, lo, hi, strict=True):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d_k
+            t1 = (lo_k - p_k) * inv
+            t2 = (hi_k - p_k) * inv
+        t_lo = np.minimum(t1, t2)
+        t_hi = np.maximum(t1, t2)
+        zero = d_k == 0.0
+        if np.any(zero):
+            in_slab = (p_k >= lo_k) & (p_k <= hi_k)
+            t_lo = np.where(zero, np.where(in_slab, -np.inf, np.inf), t_lo)
+            t_hi = np.where(zero, np.where(in_slab, np.inf, -np.inf), t_hi)
+        t_near = t_lo if t_near is None else np.maximum(t_near, t_lo)
+        t_far = t_hi if t_far is None else np.minimum(t_far, t_hi)
+    assert t_near is not None and t_far is not None
+    return t_near, t_far
+
+
+def _ragged_chunks(counts: NDArray[np.intp], max_total: int) -> Iterator[tuple[int, int]]:
+    """Ranges ``[p0, p1)`` of items whose ``counts`` sum to at most ``max_total`` (or 1 item)."""
+    cum = np.cumsum(counts)
+    start, n = 0, counts.size
+    while start < n:
+        base = int(cum[start - 1]) if start else 0
+        stop = max(int(np.searchsorted(cum, base + max_total, side="right")), start + 1)
+        yield start, stop
+        start = stop
+
+
+def blocked_sorted(
+    pos: FloatArray, lo: FloatArray, hi: FloatArray, cot_s: FloatArray, h_dir: FloatArray
+) -> BoolArray:
+    """:func:`coopnav_env.sim._kernels.blocked_sorted`: blocked (receiver, rising satellite)
+    pairs ``(n_rx, n_up)``, satellites in the sorted order of
+    :class:`~coopnav_env.sim.city.SkyDirections` (``cot_s`` increasing, ``h_dir`` (n_up, 2)).
+
+    (Receiver, building) pairs are culled first (no roof above the receiver, or the footprint
+    beyond the reach of the lowest ray); per remaining pair only the satellites low enough to
+    pass under the roof at the footprint's nearest point are tested, with the slab test of
+    the horizontal ray and the height test, in bounded chunks of triples.
+    """
+    n_rx, n_up = pos.shape[0], cot_s.size
+    blocked_s = np.zeros((n_rx, n_up), dtype=bool)  # columns in sorted order
+    if n_up == 0:
+        return blocked_s
+    for cb in _chunk_slices(lo.shape[0], 4 * n_rx):
+        # 1. cull (receiver, building) pairs, arrays of shape (n_rx, n_b_chunk)
+        climb_m = hi[None, cb, 2] - pos[:, None, 2]
+        dx = np.maximum(
+            np.maximum(lo[None, cb, 0] - pos[:, None, 0], 0.0), pos[:, None, 0] - hi[None, cb, 0]
+        )
+        dy = np.maximum(
+            np.maximum(lo[None, cb, 1] - pos[:, None, 1], 0.0), pos[:, None, 1] - hi[None, cb, 1]
+        )
+        dist_xy = np.hypot(dx, dy)
+        rx_idx, b_loc = np.nonzero((climb_m > 0.0) & (dist_xy <= climb_m * cot_s[-1]))
+        # 2. per pair, only satellites low enough to pass under the roof at the footprint's
+        #    nearest point can be blocked: those with cot(el) >= dist_xy / climb
+        first = np.searchsorted(cot_s, dist_xy[rx_idx, b_loc] / climb_m[rx_idx, b_loc])
+        some = first < n_up
+        rx_idx, b_idx, first = rx_idx[some], b_loc[some] + cb.start, first[some]
+        n_cand = n_up - first
+        # 3. exact test on the (receiver, building, satellite) triples, in bounded chunks
+        for p0, p1 in _ragged_chunks(n_cand, CHUNK_ELEMENTS // 16):
+            k = n_cand[p0:p1]
+            pair = np.repeat(np.arange(p0, p1), k)
+            sat = first[pair] + np.arange(pair.size) - np.repeat(np.cumsum(k) - k, k)
+            rx, b = rx_idx[pair], b_idx[pair]
+            t_near, t_far = slab_interval(
+                [pos[rx, 0], pos[rx, 1]],
+                [h_dir[sat, 0], h_dir[sat, 1]],
+                [lo[b, 0], lo[b, 1]],
+                [hi[b, 0], hi[b, 1]],
+            )  # horizontal distances along the ray's azimuth
+            climb_t = hi[b, 2] - pos[rx, 2]
+            hit = (
+                (t_far > 0.0)
+                & (t_near <= t_far)
+                & (np.maximum(t_near, 0.0) <= climb_t * cot_s[sat])
+            )
+            blocked_s[rx[hit], sat[hit]] = True
+    return blocked_s
+
+
+def trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirections) -> BoolArray:
+    """``city._trace_line_of_sight`` for box buildings: visible (receiver, satellite) pairs
+    ``(n_rx, n_sv)`` of validated receivers ``pos`` (n_rx, 3) and prepared directions ``sky``
+    (:func:`~coopnav_env.sim.city.sky_directions`). A satellite below the horizon is never
+    visible; a rising one is unless :func:`blocked_sorted` finds a building in the way (a
+    receiver inside a building needs no special case: its footprint distance is 0, so every
+    satellite is tested, and the ray starts inside the footprint below the roof)."""
+    n_rx, n_sv = pos.shape[0], sky.n_sv
+    up = sky.up
+    visible = np.broadcast_to(up, (n_rx, n_sv)).copy()
+    if buildings.n == 0 or n_rx == 0 or not np.any(up):
+        return visible
+    blocked_s = blocked_sorted(pos, buildings.min_m, buildings.max_m, sky.cot_s, sky.h_dir)
+    blocked_up = np.empty_like(blocked_s)
+    blocked_up[:, sky.order] = blocked_s
+    visible[:, up] = ~blocked_up
+    return visible
+
+
+# --------------------------------------------------------------------------------------------
+# horizontal sensors (city.sky_and_walls, _kernels.sky_and_walls)
+# --------------------------------------------------------------------------------------------
+
+
+class _HorizontalSweep:
+    """Slab intervals of horizontal rays (receivers x azimuths) against the building footprints.
+
+    Iterating yields ``(t_near, t_far, lo, hi)`` per chunk of buildings taller than the lowest
+    receiver: the footprint entry/exit distances, shape ``(n, n_az, n_chunk)``, and the chunk's
+    box corners broadcastable as ``(1, 1, n_chunk, 3)``. Chunking bounds the memory.
+    """
+
+    def __init__(self, buildings: Buildings, pos: FloatArray, az_deg: ArrayLike) -> None:
+        self._dir = _ray_directions(az_deg)
+        self._pos = pos
+        self.shape = (pos.shape[0], self._dir.shape[0])
+        if buildings.n == 0 or pos.shape[0] == 0 or self._dir.shape[0] == 0:
+            self._tall = np.zeros(0, dtype=np.intp)
+        else:
+            self._tall = np.flatnonzero(buildings.max_m[:, 2] > pos[:, 2].min())
+        self._lo = buildings.min_m[self._tall]
+        self._hi = buildings.max_m[self._tall]
+
+    def __iter__(self):
+        pos, d, lo, hi = self._pos, self._dir, self._lo, self._hi
+        for cb in _chunk_slices(self._tall.size, 2 * self.shape[0] * self.shape[1]):
+            t_near, t_far = _sweep_slab(pos, d, lo[cb], hi[cb])
+            yield t_near, t_far, lo[None, None, cb], hi[None, None, cb]
+
+
+def _sweep_slab(
+    pos: FloatArray, d: FloatArray, lo: FloatArray, hi: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`slab_interval` of receivers (n, 3) x directions (n_az, 2) x boxes (m, 3).
+
+    The same values, computed the same way, except that the directions with a zero component
+    along an axis (the cardinal azimuths) get their infinite slab bounds written into their
+    columns only, instead of by full-size ``where`` passes over every azimuth.
+    """
+    t_near: FloatArray | None = None
+    t_far: FloatArray | None = None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(2):
+            p_k, lo_k, hi_k = pos[:, None, None, k], lo[None, None, :, k], hi[None, None, :, k]
+            inv = 1.0 / d[None, :, None, k]
+            t1 = (lo_k - p_k) * inv
+            t2 = (hi_k - p_k) * inv
+            t_lo = np.minimum(t1, t2)
+            t_hi = np.maximum(t1, t2, out=t1)  # (in place: fewer large temporaries)
+            zero = np.flatnonzero(d[:, k] == 0.0)
+            if zero.size:
+                in_slab = (p_k >= lo_k) & (p_k <= hi_k)  # (n, 1, m)
+                t_lo[:, zero, :] = np.where(in_slab, -np.inf, np.inf)
+                t_hi[:, zero, :] = np.where(in_slab, np.inf, -np.inf)
+            if t_near is None or t_far is None:
+                t_near, t_far = t_lo, t_hi
+            else:
+                np.maximum(t_near, t_lo, out=t_near)
+                np.minimum(t_far, t_hi, out=t_far)
+    assert t_near is not None and t_far is not None
+    return t_near, t_far
+
+
+def _skyline_tan(pos: FloatArray, entered, t_in, t_far, hi) -> FloatArray:
+    """Largest ``tan(elevation)`` of a roof edge per (receiver, azimuth) over a building chunk.
+
+    ``entered = t_near <= t_far`` and ``t_in = max(t_near, 0)`` of the sweep, ``(n, n_az, m)``.
+    """
+    rel_h = hi[..., 2] - pos[:, None, None, 2]
+    hit = (t_far > 0.0) & entered & (rel_h > 0.0)
+    tan_el = np.zeros(hit.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(rel_h, t_in, out=tan_el, where=hit)  # +inf inside a footprint
+    return tan_el.max(axis=2)
+
+
+def _wall_min(pos: FloatArray, entered, t_in, t_far, lo, hi) -> FloatArray:
+    """Nearest footprint entry per (receiver, azimuth) over a building chunk (inf: none)."""
+    z = pos[:, None, None, 2]
+    below_roof = (z < hi[..., 2]) & (z >= lo[..., 2])
+    hit = (t_far >= 0.0) & entered & below_roof
+    return np.where(hit, t_in, np.inf).min(axis=2)
+
+
+def sky_and_walls(
+    buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`coopnav_env.sim.city.sky_and_walls` for box buildings: the skyline elevation
+    [deg] and the distance to the nearest wall [m] along each azimuth, each ``(n, n_az)``,
+    from one chunked sweep of the horizontal rays through the footprints."""
+    pos = _as_points(pos_enu_m, "pos_enu_m")
+    sweep = _HorizontalSweep(buildings, pos, az_deg)
+    tan_max = np.zeros(sweep.shape)
+    dist = np.full(sweep.shape, np.inf)
+    for t_near, t_far, lo, hi in sweep:
+        entered = t_near <= t_far
+        t_in = np.maximum(t_near, 0.0)
+        tan_max = np.maximum(tan_max, _skyline_tan(pos, entered, t_in, t_far, hi))
+        dist = np.minimum(dist, _wall_min(pos, entered, t_in, t_far, lo, hi))
+    return np.degrees(np.arctan(tan_max)), dist
+
+
+def mask_elevation_deg(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
+    """:func:`coopnav_env.sim.city.mask_elevation_deg` for box buildings, ``(n, n_az)`` [deg]:
+    the skyline part of :func:`sky_and_walls` from a sweep of its own."""
+    pos = _as_points(pos_enu_m, "pos_enu_m")
+    tan_max = np.zeros((pos.shape[0], np.asarray(az_deg).shape[0]))
+    for t_near, t_far, _lo, hi in _HorizontalSweep(buildings, pos, az_deg):
+        entered = t_near <= t_far
+        tan_max = np.maximum(
+            tan_max, _skyline_tan(pos, entered, np.maximum(t_near, 0.0), t_far, hi)
+        )
+    return np.degrees(np.arctan(tan_max))
+
+
+def wall_distance_m(buildings: Buildings, pos_enu_m: ArrayLike, az_deg: ArrayLike) -> FloatArray:
+    """:func:`coopnav_env.sim.city.wall_distance_m` for box buildings, ``(n, n_az)`` [m]: the
+    wall part of :func:`sky_and_walls` from a sweep of its own."""
+    pos = _as_points(pos_enu_m, "pos_enu_m")
+    dist = np.full((pos.shape[0], np.asarray(az_deg).shape[0]), np.inf)
+    for t_near, t_far, lo, hi in _HorizontalSweep(buildings, pos, az_deg):
+        t_in = np.maximum(t_near, 0.0)
+        dist = np.minimum(dist, _wall_min(pos, t_near <= t_far, t_in, t_far, lo, hi))
+    return dist
+
+
+# --------------------------------------------------------------------------------------------
+# the swarm (swarm.separation_violations, swarm._measure_relative) and the route
+# --------------------------------------------------------------------------------------------
+
+
+def separation_violations(pos_enu_m: ArrayLike, min_separation_m: float) -> BoolArray:
+    """:func:`coopnav_env.sim.swarm.separation_violations`: UAVs ``(n,)`` with another UAV
+    strictly closer than ``min_separation_m``, from the matrix of pairwise ranges."""
+    sep = _check_real("separation_violations", "min_separation_m", min_separation_m, 0.0)
+    rng_m = pairwise_ranges_m(pos_enu_m)
+    np.fill_diagonal(rng_m, np.inf)
+    return np.any(rng_m < sep, axis=1)
+
+
+def relative_measurements(
+    pos: FloatArray, z: FloatArray, cfg: RelativeSensingConfig
+) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """:func:`coopnav_env.sim._kernels.relative_measurements` with the sensing settings
+    ``cfg``: measured relative positions ``rel`` (n, n, 3), per-axis variances ``var`` (n, n)
+    and availability (n, n) of UAVs at ``pos`` (n, 3), from the standard normal draws ``z``
+    (n (n - 1) / 2, 3) of the upper triangle in row-major order (antisymmetric errors)."""
+    n = pos.shape[0]
+    diff = pos[None, :, :] - pos[:, None, :]  # diff[b, q] = pos[q] - pos[b]
+    range_m = np.linalg.norm(diff, axis=2)
+    sigma = cfg.sigma_m(range_m)
+    iu, ju = np.triu_indices(n, 1)
+    eps = np.zeros((n, n, 3))
+    eps[iu, ju] = z * sigma[iu, ju, None]
+    eps[ju, iu] = -eps[iu, ju]
+    available = (range_m > 0.0) & (range_m <= cfg.max_range_m)
+    np.fill_diagonal(available, False)
+    rel = np.where(available[:, :, None], diff + eps, 0.0)
+    var = np.where(available, sigma**2, 0.0)
+    return rel, var, available
+
+
+def advance_waypoints(
+    route: ArrayLike, xy: ArrayLike, next_wp: ArrayLike, reach_m: float
+) -> np.ndarray:
+    """:func:`coopnav_env.sim.route.advance_waypoints`: each point's next waypoint index
+    ``(n,)`` (int64, a new array), advanced while the point is within ``reach_m`` of it along
+    East and North or past it along the leg arriving at it, never beyond the last waypoint;
+    all points at once, one round per possible skip."""
+    pts = np.asarray(route, dtype=float).reshape(-1, 2)
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    idx = np.array(next_wp, dtype=np.int64, copy=True).reshape(-1)
+    k = pts.shape[0]
+    arrive = np.zeros_like(pts)  # direction of the leg arriving at each waypoint
+    if k > 1:
+        arrive[1:] = np.diff(pts, axis=0)
+    for _ in range(k):
+        not_last = idx < k - 1
+        w = pts[idx]
+        near = np.all(np.abs(xy - w) <= reach_m, axis=1)
+        past = np.einsum("ij,ij->i", xy - w, arrive[idx]) >= 0.0
+        past &= np.any(arrive[idx] != 0.0, axis=1)
+        step = not_last & (near | past)
+        if not step.any():
+            break
+        idx[step] += 1
+    return idx
+
+
+# --------------------------------------------------------------------------------------------
+# the oracles in the world
+# --------------------------------------------------------------------------------------------
+
+
+def use_oracles_in_world(monkeypatch) -> dict[str, int]:
+    """Make ``UrbanWorld``'s function-by-function path (``scenario._USE_KERNEL`` off) and the
+    city's horizontal sensors run the oracles above instead of the compiled kernels, for box
+    buildings (a file city's polygons keep their own kernels), until ``monkeypatch`` undoes
+    it: line of sight (map-aided prediction included), relative sensing, separation, waypoint
+    advance and the skyline and wall sensors.
+
+    Returns
+    -------
+    dict
+        How many times each oracle ran, by name (``trace_line_of_sight``, ``predicted``,
+        ``relative_measurements``, ``separation_violations``, ``advance_waypoints``,
+        ``sky_and_walls``), updated as the world steps.
+    """
+    calls = dict.fromkeys(
+        (
+            "trace_line_of_sight",
+            "predicted",
+            "relative_measurements",
+            "separation_violations",
+            "advance_waypoints",
+            "sky_and_walls",
+        ),
+        0,
+    )
+    trace_kernel = _city._trace_line_of_sight
+    sky_kernel = _city.sky_and_walls
+
+    def trace(buildings, pos, sky):
+        if isinstance(buildings, Buildings):
+            calls["trace_line_of_sight"] += 1
+            return trace_line_of_sight(buildings, pos, sky)
+        return trace_kernel(buildings, pos, sky)
+
+    def sensors(buildings, pos_enu_m, az_deg):
+        if isinstance(buildings, Buildings):
+            calls["sky_and_walls"] += 1
+            return sky_and_walls(buildings, pos_enu_m, az_deg)
+        return sky_kernel(buildings, pos_enu_m, az_deg)
+
+    def separation(pos_enu_m, min_separation_m):
+        calls["separation_violations"] += 1
+        return separation_violations(pos_enu_m, min_separation_m)
+
+    def waypoints(route, xy, next_wp, reach_m):
+        calls["advance_waypoints"] += 1
+        return advance_waypoints(route, xy, next_wp, reach_m)
+
+    def predicted(buildings, sky, pos_enu_m, cov_enu_m2, **kw):
+        calls["predicted"] += 1
+        lo, hi = (float(v) for v in kw["altitude_band_m"])
+        return _map_aided._predict_from_candidates(
+            buildings,
+            sky,
+            np.ascontiguousarray(pos_enu_m, dtype=float),
+            np.ascontiguousarray(cov_enu_m2, dtype=float),
+            kw["margin_sigma"],
+            kw["max_margin_m"],
+            lo,
+            hi,
+        )
+
+    def measure(rng, pos, cfg):
+        calls["relative_measurements"] += 1
+        n = pos.shape[0]
+        return relative_measurements(pos, rng.standard_normal((n * (n - 1) // 2, 3)), cfg)
+
+    monkeypatch.setattr(_scenario, "_trace_line_of_sight", trace)
+    monkeypatch.setattr(_map_aided, "_trace_line_of_sight", trace)
+    monkeypatch.setattr(_scenario, "predicted_line_of_sight", predicted)
+    monkeypatch.setattr(_scenario, "_measure_relative", measure)
+    monkeypatch.setattr(_scenario, "separation_violations", separation)
+    monkeypatch.setattr(_scenario, "advance_waypoints", waypoints)
+    monkeypatch.setattr(_city, "sky_and_walls", sensors)
+    return calls
