@@ -128,6 +128,7 @@ from coopnav_env.gnss.errors import (
 from coopnav_env.gnss.rinex import (
     FEW_SATELLITES_FRACTION,
     MIN_SATELLITES,
+    BroadcastConstellation,
     RinexWarning,
     load_broadcast_constellation,
 )
@@ -1329,7 +1330,25 @@ class UrbanWorld:
         sky_id = getattr(self.constellation, "digest", "nominal")
         origin = (cfg.lat_deg, cfg.lon_deg, cfg.alt_m)
         key = (cfg.systems, sky_id, *origin, cfg.elevation_mask_deg, t_s)
-        return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m)
+        return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m, self._times_ahead(t_s))
+
+    def _times_ahead(self, t_s: float) -> list[float] | None:
+        """The epochs after ``t_s`` that an episode reaching ``t_s`` meets next (``t + dt_s``
+        added as :meth:`step` adds it), inside a navigation file's coverage; None for a
+        nominal sky (its times repeat from episode to episode: the cache holds them)."""
+        sky = self.constellation
+        if not isinstance(sky, BroadcastConstellation):
+            return None
+        end = sky.coverage_s[1]
+        dt = self.config.dt_s
+        times: list[float] = []
+        t = t_s
+        for _ in range(SKY_LOOKAHEAD_EPOCHS - 1):
+            t = t + dt
+            if not t <= end:
+                break
+            times.append(t)
+        return times
 
     def map_line_of_sight(
         self,
@@ -1957,6 +1976,51 @@ def _sky_epoch(constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, t
     return sky
 
 
+def _sky_epochs(
+    constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, times_s: list[float]
+) -> list[_SkyEpoch]:
+    """:func:`_sky_epoch` at each of ``times_s``, with one vectorised evaluation of the
+    satellites' orbits, azimuths and elevations for all the times.
+
+    Every value is what :func:`_sky_epoch` gives at that time, bit for bit: the arithmetic is
+    element by element (numpy's functions give a value's result wherever it sits in an
+    array), and ``tests/sim/test_sky_epochs.py`` checks it over whole navigation files.
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    sv_all = constellation.positions_ecef(t)  # (n_t, n_sv, 3)
+    known = np.isfinite(sv_all).all(axis=2)
+    if not known.all():
+        sv_all = np.where(known[..., None], sv_all, 0.0)  # azimuth of the Earth's centre: dropped
+    n_t, n_sv = known.shape
+    az_flat, el_flat = azimuth_elevation(origin_ecef_m[None], sv_all.reshape(-1, 3))
+    az_all, el_all = az_flat.reshape(n_t, n_sv), el_flat.reshape(n_t, n_sv)
+    dir_all = direction_enu(az_all, el_all)  # (n_t, n_sv, 3)
+    system_all = np.asarray(constellation.system)
+    skies = []
+    for k in range(n_t):
+        sv_index = np.flatnonzero((el_all[k] > mask_deg) & known[k])
+        system = system_all[sv_index]
+        sky = _SkyEpoch(
+            sv_index=sv_index,
+            sv_ecef=sv_all[k, sv_index],
+            system=system,
+            system_idx=system.astype(np.intp),
+            az=az_all[k, sv_index],
+            el=el_all[k, sv_index],
+            directions=sky_directions(dir_all[k, sv_index]),
+            grouped=bool(np.all(np.diff(system) >= 0)),
+        )
+        for arr in (sky.sv_index, sky.sv_ecef, sky.system, sky.system_idx, sky.az, sky.el):
+            arr.setflags(write=False)
+        skies.append(sky)
+    return skies
+
+
+SKY_LOOKAHEAD_EPOCHS: int = 32
+"""Epochs of a sky from a navigation file computed at once (:class:`_SkyCache`): the one asked
+for and the next ``SKY_LOOKAHEAD_EPOCHS - 1`` of the same episode."""
+
+
 class _SkyCache:
     """Process-wide cache of :func:`_sky_epoch`, keyed by the sky's settings and the time.
 
@@ -1966,24 +2030,62 @@ class _SkyCache:
     them. The cached arrays are read-only. At most ``max_size`` entries are kept (the oldest
     goes first); an entry is about 3 kB, so the default bounds the cache to about 6 MB (with a
     random start time, ``t0_random_s > 0``, it rarely hits and only costs the inserts).
+
+    A caller that knows the times that follow (:meth:`get`'s ``times_ahead_s``: the next
+    epochs of an episode) has them computed with the one asked for, in one vectorised call
+    (:func:`_sky_epochs`): a sky from a navigation file, whose episodes start at times drawn
+    at random, then costs a fraction of an evaluation per epoch. Those epochs wait in a
+    second store until asked for (then they move to the cache); at most ``max_ahead`` wait
+    (the oldest, those of episodes that ended early, go first).
     """
 
-    def __init__(self, max_size: int = 2048) -> None:
+    def __init__(self, max_size: int = 2048, max_ahead: int = 8192) -> None:
         self.max_size = int(max_size)
+        self.max_ahead = int(max_ahead)
         self._data: dict[tuple, _SkyEpoch] = {}
+        self._ahead: dict[tuple, _SkyEpoch] = {}
 
-    def get(self, key: tuple, constellation: Any, origin_ecef_m: np.ndarray) -> _SkyEpoch:
+    def _insert(self, key: tuple, sky: _SkyEpoch) -> None:
+        if len(self._data) >= self.max_size:
+            self._data.pop(next(iter(self._data)), None)
+        self._data[key] = sky
+
+    def get(
+        self,
+        key: tuple,
+        constellation: Any,
+        origin_ecef_m: np.ndarray,
+        times_ahead_s: list[float] | None = None,
+    ) -> _SkyEpoch:
+        """The sky of ``key`` (its last two items: the cut-off [deg] and the time [s]).
+
+        ``times_ahead_s``: times likely asked for next (computed now with this one when it
+        is missing).
+        """
         hit = self._data.get(key)
+        if hit is not None:
+            return hit
+        hit = self._ahead.pop(key, None)
         if hit is None:
-            hit = _sky_epoch(constellation, origin_ecef_m, key[-2], key[-1])
-            if len(self._data) >= self.max_size:
-                self._data.pop(next(iter(self._data)), None)
-            self._data[key] = hit
+            mask_deg, t_s = key[-2], key[-1]
+            if not times_ahead_s:
+                hit = _sky_epoch(constellation, origin_ecef_m, mask_deg, t_s)
+            else:
+                head = key[:-1]
+                later = [t for t in times_ahead_s if (*head, t) not in self._data]
+                skies = _sky_epochs(constellation, origin_ecef_m, mask_deg, [t_s, *later])
+                hit = skies[0]
+                for t, sky in zip(later, skies[1:], strict=True):
+                    self._ahead[(*head, t)] = sky
+                while len(self._ahead) > self.max_ahead:
+                    self._ahead.pop(next(iter(self._ahead)), None)
+        self._insert(key, hit)
         return hit
 
     def clear(self) -> None:
         """Drop every entry."""
         self._data.clear()
+        self._ahead.clear()
 
 
 _SKY_CACHE = _SkyCache()
