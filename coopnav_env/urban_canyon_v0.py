@@ -445,7 +445,10 @@ validity, raises `ValueError`. A station's file holds the satellites that statio
 flown far from it, the origin sees few of them, and a `RinexWarning` says so (fly at the
 station's `lat_deg`, `lon_deg`, or use a merged broadcast file). On the command line:
 `coopnav evaluate ... --env-set constellation=rinex:my_nav.rnx.gz --env-set
-constellation_start=2026-12-03T06:00:00Z`.
+constellation_start=2026-12-03T06:00:00Z`. The environment flies GPS and BeiDou; Galileo's
+records are skipped unless asked for outside it:
+`coopnav_env.gnss.rinex.load_broadcast_constellation(path, systems=("GPS", "GAL"))` computes
+Galileo orbits and clocks as the Galileo OS SIS ICD specifies.
 
 ## A city from a GeoJSON file
 

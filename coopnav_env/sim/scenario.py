@@ -555,6 +555,12 @@ class ScenarioConfig:
             systems = tuple(systems)
         except TypeError:
             raise ValueError(f"{o}.systems must be a tuple of names from {SYSTEMS}") from None
+        if "GAL" in systems:
+            raise ValueError(
+                f"{o}.systems: the environment flies {SYSTEMS} only, got {self.systems!r}; "
+                "Galileo ('GAL') satellites of a navigation file are computed by "
+                "coopnav_env.gnss.rinex.load_broadcast_constellation(path, systems=(..., 'GAL'))"
+            )
         if not systems or len(set(systems)) != len(systems) or set(systems) - set(SYSTEMS):
             raise ValueError(
                 f"{o}.systems must be a non-empty tuple of distinct names from {SYSTEMS}, "
