@@ -98,7 +98,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from coopnav_env.constants import SPEED_OF_LIGHT_MPS, SYSTEMS
+from coopnav_env.constants import FILE_SYSTEMS, SPEED_OF_LIGHT_MPS, SYSTEMS
 from coopnav_env.gnss._validate import as_float_array, as_index_array, readonly
 from coopnav_env.gnss.frames import azimuth_elevation, geodetic_to_ecef
 
@@ -146,10 +146,6 @@ GAL_MU_M3PS2: float = 3.986004418e14
 
 GAL_OMEGA_E_RADPS: float = 7.2921151467e-5
 """Galileo value of the Earth's rotation rate (OS SIS ICD 5.1.1) [rad/s]."""
-
-FILE_SYSTEMS: tuple[str, ...] = (*SYSTEMS, "GAL")
-"""Systems a navigation file's sky can hold; a satellite's ``system`` indexes this tuple
-(GPS and BeiDou as in ``SYSTEMS``; ``"GAL"``, Galileo, only when asked for)."""
 
 BDT_MINUS_GPST_S: float = -14.0
 """BDT - GPST [s]: BeiDou time runs 14 s behind GPS time."""

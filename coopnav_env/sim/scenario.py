@@ -107,7 +107,13 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from coopnav_env.constants import SHANGHAI_ALT_M, SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG, SYSTEMS
+from coopnav_env.constants import (
+    FILE_SYSTEMS,
+    SHANGHAI_ALT_M,
+    SHANGHAI_LAT_DEG,
+    SHANGHAI_LON_DEG,
+    SYSTEMS,
+)
 from coopnav_env.gnss import (
     ErrorModel,
     azimuth_elevation,
@@ -322,7 +328,8 @@ class ScenarioConfig:
     t0_random_s : float, default 0.0
         Each episode starts at ``t0_s + U(0, t0_random_s)`` (varies the sky), in [0, 1e7] [s].
     systems : tuple of str, default ("GPS", "BDS")
-        Constellations, a non-empty subset of ``SYSTEMS``.
+        Constellations, a non-empty subset of ``SYSTEMS``; with ``constellation="rinex:PATH"``
+        also ``"GAL"`` (Galileo, from the file's I/NAV records, with its own receiver clock).
     constellation : str, default "nominal"
         Where the satellites come from. ``"nominal"``: the nominal circular-orbit
         constellations (:func:`~coopnav_env.gnss.default_constellation`). ``"rinex:PATH"``:
@@ -555,16 +562,17 @@ class ScenarioConfig:
             systems = tuple(systems)
         except TypeError:
             raise ValueError(f"{o}.systems must be a tuple of names from {SYSTEMS}") from None
-        if "GAL" in systems:
+        if not systems or len(set(systems)) != len(systems) or set(systems) - set(FILE_SYSTEMS):
             raise ValueError(
-                f"{o}.systems: the environment flies {SYSTEMS} only, got {self.systems!r}; "
-                "Galileo ('GAL') satellites of a navigation file are computed by "
-                "coopnav_env.gnss.rinex.load_broadcast_constellation(path, systems=(..., 'GAL'))"
+                f"{o}.systems must be a non-empty tuple of distinct names from {SYSTEMS} "
+                f"(and 'GAL', Galileo, with constellation='rinex:PATH'), got {self.systems!r}"
             )
-        if not systems or len(set(systems)) != len(systems) or set(systems) - set(SYSTEMS):
+        spec = self.constellation
+        if "GAL" in systems and not (isinstance(spec, str) and spec.startswith("rinex:")):
             raise ValueError(
-                f"{o}.systems must be a non-empty tuple of distinct names from {SYSTEMS}, "
-                f"got {self.systems!r}"
+                f"{o}.systems: Galileo ('GAL') flies only from a navigation file, "
+                f"constellation='rinex:PATH' (the nominal constellations are {SYSTEMS}), got "
+                f"systems={self.systems!r} with constellation={spec!r}"
             )
         setv(self, "systems", systems)
         _check_real(o, "elevation_mask_deg", self.elevation_mask_deg, 0.0, 60.0)
@@ -1542,6 +1550,9 @@ class UrbanWorld:
         self.pos_enu_m = pos
         self.vel_enu_mps = np.zeros((n, 3))
         self.clock_bias_m = draw_clock_biases(rng, n, len(SYSTEMS), cfg.clock_sigma_m)
+        if "GAL" in cfg.systems:  # Galileo's clock drawn after the others' (theirs unchanged)
+            gal_clock_m = draw_clock_biases(rng, n, 1, cfg.clock_sigma_m)
+            self.clock_bias_m = np.concatenate([self.clock_bias_m, gal_clock_m], axis=1)
         # prior of the dead-reckoning fallback at the first epoch: the known launch position
         self.nav_pos_enu_m = pos.copy()
         self.nav_cov_enu_m2 = np.broadcast_to(
@@ -1766,7 +1777,7 @@ class UrbanWorld:
             self.clock_bias_m,
             bias,
         )
-        obs = GnssObservations._trusted_from_epoch(pr)
+        obs = GnssObservations._trusted_from_epoch(pr, n_systems=self.clock_bias_m.shape[1])
         rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
         x0 = self.enu_to_ecef(pred_enu)
 
@@ -1843,7 +1854,7 @@ class UrbanWorld:
             float(model.sigma_ure_m),
             bool(model.tropo),
             bool(model.differential),
-            len(SYSTEMS),
+            self.clock_bias_m.shape[1],  # clock states: the systems, Galileo's if flown
             x0,
             np.ascontiguousarray(rel_b),
             np.ascontiguousarray(var_b),
