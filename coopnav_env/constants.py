@@ -39,9 +39,16 @@ FREQ_BDS_B1C_HZ: float = 1575.42e6
 FREQ_BDS_B2A_HZ: float = 1176.45e6
 FREQ_BDS_B2B_HZ: float = 1207.14e6
 FREQ_BDS_B3I_HZ: float = 1268.52e6
+FREQ_GAL_E1_HZ: float = 1575.42e6
+FREQ_GAL_E5A_HZ: float = 1176.45e6
 
 SYSTEMS: tuple[str, ...] = ("GPS", "BDS")
 """Constellation names; a satellite's ``system`` index points into this tuple."""
+
+FILE_SYSTEMS: tuple[str, ...] = (*SYSTEMS, "GAL")
+"""``SYSTEMS`` and Galileo (``"GAL"``), which only a sky from a RINEX navigation file holds,
+when asked for; a satellite's ``system`` index points into this tuple (the same index as in
+``SYSTEMS`` for GPS and BeiDou)."""
 
 SHANGHAI_LAT_DEG: float = 31.0252
 """Default geodetic origin: Shanghai Jiao Tong University, Minhang (the paper's site) [deg]."""

@@ -445,7 +445,11 @@ validity, raises `ValueError`. A station's file holds the satellites that statio
 flown far from it, the origin sees few of them, and a `RinexWarning` says so (fly at the
 station's `lat_deg`, `lon_deg`, or use a merged broadcast file). On the command line:
 `coopnav evaluate ... --env-set constellation=rinex:my_nav.rnx.gz --env-set
-constellation_start=2026-12-03T06:00:00Z`.
+constellation_start=2026-12-03T06:00:00Z`. With a file sky, `systems` may add `"GAL"`:
+Galileo's I/NAV records, propagated as the Galileo OS SIS ICD specifies (valid 4 h either side
+of `toe`), with a receiver clock of its own (drawn after the others, so GPS and BeiDou
+episodes are unchanged) and the E1/E5a iono-free factor; the error model is otherwise the
+same for every system.
 
 ## A city from a GeoJSON file
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from coopnav_env.constants import SYSTEMS, WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84_F
+from coopnav_env.constants import WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84_F
 from coopnav_env.envs import _batched_kernels
 from coopnav_env.envs import urban_canyon as _urban_canyon
 from coopnav_env.envs.config import UrbanCanyonConfig
@@ -211,7 +211,7 @@ class FusedStep:
             st.iono,
             z,
             st.model,
-            len(SYSTEMS),
+            st.clock.shape[-1],  # clock states: the systems flown
             x0,
             rel_ecef,
             var,

@@ -31,8 +31,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from coopnav_env.constants import (
+    FILE_SYSTEMS,
     FREQ_BDS_B1I_HZ,
     FREQ_BDS_B3I_HZ,
+    FREQ_GAL_E1_HZ,
+    FREQ_GAL_E5A_HZ,
     FREQ_GPS_L1_HZ,
     FREQ_GPS_L2_HZ,
     SYSTEMS,
@@ -226,6 +229,7 @@ _DEFAULT_PAIRS: tuple[tuple[float, float], ...] = (
     (FREQ_GPS_L1_HZ, FREQ_GPS_L2_HZ),
     (FREQ_BDS_B1I_HZ, FREQ_BDS_B3I_HZ),
 )
+_GALILEO_PAIR: tuple[float, float] = (FREQ_GAL_E1_HZ, FREQ_GAL_E5A_HZ)
 
 
 @dataclass(frozen=True)
@@ -243,7 +247,8 @@ class ErrorModel:
         - the model still assumes it removed, as the paper does.
     frequency_pairs_hz : tuple of (float, float), optional
         One (f1, f2) pair [Hz] per system index of ``SYSTEMS``; default GPS
-        L1/L2 and BDS B1I/B3I.
+        L1/L2 and BDS B1I/B3I. A third pair is Galileo's (``FILE_SYSTEMS``); without
+        it, Galileo satellites (skies from navigation files) use E1/E5a.
     differential : bool, optional
         Differential corrections remove the common (clock/ephemeris and
         troposphere) errors and their variances: ``sigma_common_m`` is 0.
@@ -276,10 +281,10 @@ class ErrorModel:
             raise ValueError(
                 f"frequency_pairs_hz must be a tuple of (f1_hz, f2_hz) pairs, got {pairs!r}"
             ) from exc
-        if len(pairs) != len(SYSTEMS):
+        if len(pairs) not in (len(SYSTEMS), len(FILE_SYSTEMS)):
             raise ValueError(
-                f"frequency_pairs_hz must hold {len(SYSTEMS)} pairs, one per system {SYSTEMS}, "
-                f"got {len(pairs)}"
+                f"frequency_pairs_hz must hold {len(SYSTEMS)} pairs, one per system {SYSTEMS} "
+                f"(or {len(FILE_SYSTEMS)} with Galileo's), got {len(pairs)}"
             )
         for f1, f2 in pairs:
             if not (np.isfinite(f1) and np.isfinite(f2) and f1 > 0.0 and f2 > 0.0 and f1 != f2):
@@ -305,17 +310,20 @@ class ErrorModel:
         Parameters
         ----------
         system : array_like of int, shape (n_sv,)
-            System index of each satellite.
+            System index of each satellite into ``FILE_SYSTEMS``.
 
         Returns
         -------
         ndarray, shape (n_sv,)
             Factor [-].
         """
-        sys_idx = as_index_array(system, "system", len(SYSTEMS))
+        sys_idx = as_index_array(system, "system", len(FILE_SYSTEMS))
         if not self.iono_free:
             return np.ones(sys_idx.shape)
-        factors = np.array([iono_free_factor(f1, f2) for f1, f2 in self.frequency_pairs_hz])
+        pairs = self.frequency_pairs_hz
+        if len(pairs) == len(SYSTEMS):
+            pairs = (*pairs, _GALILEO_PAIR)
+        factors = np.array([iono_free_factor(f1, f2) for f1, f2 in pairs])
         return factors[sys_idx]
 
     def sigma_common_m(self, el_deg: ArrayLike) -> NDArray[np.float64]:
@@ -543,7 +551,7 @@ def simulate_pseudoranges(
     sv_ecef_m : array_like, shape (n_sv, 3)
         Satellite ECEF positions [m].
     system : array_like of int, shape (n_sv,)
-        System index of each satellite into ``SYSTEMS``.
+        System index of each satellite into ``FILE_SYSTEMS`` (Galileo: 2).
     visible : array_like of bool, shape (n_rx, n_sv)
         Satellites tracked by each receiver.
     model : ErrorModel
@@ -568,13 +576,13 @@ def simulate_pseudoranges(
     n_rx, n_sv = rx.shape[0], sv.shape[0]
     if n_rx < 1:
         raise ValueError("rx_ecef_m must hold at least one receiver, got shape (0, 3)")
-    sys_idx = as_index_array(system, "system", len(SYSTEMS))
+    sys_idx = as_index_array(system, "system", len(FILE_SYSTEMS))
     if sys_idx.shape != (n_sv,):
         raise ValueError(f"system must have shape ({n_sv},), got shape {sys_idx.shape}")
     vis = as_bool_matrix(visible, "visible", (n_rx, n_sv))
 
     if clock_bias_m is None:
-        clock = np.zeros((n_rx, len(SYSTEMS)))
+        clock = np.zeros((n_rx, len(FILE_SYSTEMS)))
     else:
         clock = as_float_array(clock_bias_m, "clock_bias_m")
         n_need = int(sys_idx.max()) + 1 if n_sv else 1
@@ -604,7 +612,7 @@ def _iono_factors(model: ErrorModel) -> NDArray[np.float64]:
     """``model.iono_factor`` of every system index (cached per model: it is frozen)."""
     cached = _IONO_FACTORS.get(model)
     if cached is None:
-        cached = model.iono_factor(np.arange(len(SYSTEMS)))
+        cached = model.iono_factor(np.arange(len(FILE_SYSTEMS)))
         cached.setflags(write=False)
         if len(_IONO_FACTORS) < 64:
             _IONO_FACTORS[model] = cached

@@ -1,4 +1,4 @@
-"""Satellite orbits and clocks from a RINEX navigation file (GPS LNAV, BeiDou D1/D2).
+"""Satellite orbits and clocks from a RINEX navigation file (GPS LNAV, BeiDou D1/D2, Galileo).
 
 Reading
 -------
@@ -9,14 +9,17 @@ satellite system, ``END OF HEADER``), then each record's epoch line and its broa
 lines. Fields are fixed-width (19 characters each, four per orbit line after four blanks in
 RINEX 3 and three in RINEX 2, three after the epoch of the first line), so numbers that run
 together (``1.0D-05-2.0D-07``) are read correctly; ``D``, ``d`` and ``E`` exponents are
-accepted. GPS (``G``) and BeiDou (``C``) records are kept (8 lines each); GLONASS (``R``),
-SBAS (``S``), Galileo (``E``), QZSS (``J``) and NavIC (``I``) records (an epoch line and its
-indented orbit lines, however many the version gives) are skipped and counted
-(:attr:`NavigationFile.skipped`). Any other system letter, a bad epoch, or a record cut
-short raises ``ValueError`` naming the file, the line number and what is wrong.
+accepted. GPS (``G``) and BeiDou (``C``) records are kept (8 lines each), and Galileo (``E``)
+I/NAV records when asked (``galileo=True``; their F/NAV twins, which carry the same orbit and
+the E5a clock, are skipped); GLONASS (``R``), SBAS (``S``), QZSS (``J``) and NavIC (``I``)
+records, and Galileo's when not asked for (an epoch line and its indented orbit lines, however
+many the version gives), are skipped and counted (:attr:`NavigationFile.skipped`). Any other
+system letter, a bad epoch, or a record cut short raises ``ValueError`` naming the file, the
+line number and what is wrong.
 
-A GPS or BeiDou record that cannot be used is left out, not the file, checked in this order:
-the satellite flags itself unhealthy (GPS SV health or BeiDou SatH1 not 0); a field is blank
+A record that cannot be used is left out, not the file, checked in this order:
+the satellite flags itself unhealthy (GPS SV health, BeiDou SatH1 or Galileo's health bits not
+0); a field is blank
 or not a number; the orbit is implausible (``sqrt(A)`` outside 4,472-7,071 m^0.5, a
 semi-major axis of 20,000-50,000 km; eccentricity outside [0, 0.5)); ``toe`` lies outside the
 week; the week number is not an integer or disagrees with the record's epoch. The records left
@@ -40,6 +43,11 @@ specifications do:
   inertial frame of the ``toe`` (``Omega_k = Omega_0 + OmegaDot tk - OmegaE toe``), rotated by
   -5 deg about X and then by ``OmegaE tk`` about Z into BDCS. BDCS (CGCS2000) and WGS 84 are
   treated as the same frame (they agree to a few centimetres).
+* Galileo: OS SIS ICD 2.0, 5.1.1 (GST) and 5.1.9.1 (Table 60, the same Keplerian algorithm as
+  GPS), ``mu = 3.986004418e14``, ``OmegaE = 7.2921151467e-5``; the clock (5.1.3) as GPS's,
+  without the broadcast group delay ``BGD``. GST weeks are numbered as GPS weeks in RINEX and
+  GST - GPST (tens of nanoseconds, broadcast as GGTO) is taken as 0: it moves a satellite
+  by well under a millimetre. GTRF and WGS 84 are treated as the same frame.
 
 The week of each ``toe`` is resolved against the record's ``toc`` (its calendar epoch), so
 10-bit GPS week numbers and records near a week boundary are placed correctly; a week field
@@ -52,7 +60,8 @@ A :class:`BroadcastConstellation` measures time ``t_s`` in seconds after its
 coverage rounded down to a whole second. Each ephemeris is used only inside its fit interval,
 ``|t - toe| <= validity``: half the GPS record's fit interval (its last field, in hours; at
 least 4 h, the value of a blank or 0 field); 1 h for BeiDou, whose ephemerides are refreshed
-hourly. Of the ephemerides of a satellite valid at ``t``, the one with the nearest ``toe`` is
+hourly; 4 h for Galileo (refreshed every 10 min; RTKLIB's ``MAXDTOE_GAL``). Of the
+ephemerides of a satellite valid at ``t``, the one with the nearest ``toe`` is
 used (of two equally near, the later ``toe``), as RTKLIB's ``seleph`` does. A satellite with no
 valid ephemeris at ``t`` (a gap in the file) has NaN position and clock: it is not
 broadcasting. :attr:`BroadcastConstellation.valid_spans_gps_s` are the spans in which every
@@ -68,8 +77,9 @@ References
 ----------
 IS-GPS-200N, Navstar GPS Space Segment / Navigation User Interfaces, 2022, 20.3.3.3.3 and
 Table 20-IV. BeiDou Navigation Satellite System Signal In Space Interface Control Document,
-Open Service Signal B1I (Version 3.0), 2019, 5.2.4.12. RINEX, The Receiver Independent
-Exchange Format, Version 3.05, 2020, Tables A8 (GPS) and A14 (BDS).
+Open Service Signal B1I (Version 3.0), 2019, 5.2.4.12. European GNSS (Galileo) Open Service
+Signal-In-Space Interface Control Document, Issue 2.0, 2021, 5.1. RINEX, The Receiver Independent
+Exchange Format, Version 3.05, 2020, Tables A8 (GPS), A10 (Galileo) and A14 (BDS).
 """
 
 from __future__ import annotations
@@ -88,7 +98,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from coopnav_env.constants import SPEED_OF_LIGHT_MPS, SYSTEMS
+from coopnav_env.constants import FILE_SYSTEMS, SPEED_OF_LIGHT_MPS, SYSTEMS
 from coopnav_env.gnss._validate import as_float_array, as_index_array, readonly
 from coopnav_env.gnss.frames import azimuth_elevation, geodetic_to_ecef
 
@@ -99,6 +109,10 @@ __all__ = [
     "BDS_VALIDITY_S",
     "BDT_MINUS_GPST_S",
     "FEW_SATELLITES_FRACTION",
+    "FILE_SYSTEMS",
+    "GAL_MU_M3PS2",
+    "GAL_OMEGA_E_RADPS",
+    "GAL_VALIDITY_S",
     "GPS_MU_M3PS2",
     "GPS_OMEGA_E_RADPS",
     "GPS_VALIDITY_S",
@@ -127,6 +141,12 @@ BDS_MU_M3PS2: float = 3.986004418e14
 BDS_OMEGA_E_RADPS: float = 7.292115e-5
 """BeiDou (CGCS2000) Earth rotation rate (BDS-SIS-ICD-B1I 5.2.4.12) [rad/s]."""
 
+GAL_MU_M3PS2: float = 3.986004418e14
+"""Galileo value of the Earth's gravitational constant (OS SIS ICD 5.1.1) [m^3/s^2]."""
+
+GAL_OMEGA_E_RADPS: float = 7.2921151467e-5
+"""Galileo value of the Earth's rotation rate (OS SIS ICD 5.1.1) [rad/s]."""
+
 BDT_MINUS_GPST_S: float = -14.0
 """BDT - GPST [s]: BeiDou time runs 14 s behind GPS time."""
 
@@ -135,6 +155,9 @@ GPS_VALIDITY_S: float = 7200.0
 
 BDS_VALIDITY_S: float = 3600.0
 """Validity of a BeiDou ephemeris, ``|t - toe|`` [s] (refreshed every hour)."""
+
+GAL_VALIDITY_S: float = 14400.0
+"""Validity of a Galileo ephemeris, ``|t - toe|`` [s] (4 h, RTKLIB's ``MAXDTOE_GAL``)."""
 
 BDS_GEO_PRNS: frozenset[int] = frozenset((1, 2, 3, 4, 5, 59, 60, 61, 62, 63))
 """BeiDou PRNs of geostationary satellites (C01-C05, C59-C63), propagated as GEO."""
@@ -194,8 +217,10 @@ _LEAP_SECONDS: tuple[tuple[_dt.date, int], ...] = tuple(
 )
 
 _SQRT_A_RANGE = (float(np.sqrt(20e6)), float(np.sqrt(50e6)))  # semi-major axis 20,000-50,000 km
-_KEPT_SYSTEMS = {"G": "GPS", "C": "BDS"}
-_SKIPPED_SYSTEMS = frozenset("RSEJI")
+_KEPT_SYSTEMS = {"G": "GPS", "C": "BDS", "E": "GAL"}
+_SYSTEM_WORDS = {"GPS": "GPS", "BDS": "BeiDou", "GAL": "Galileo"}
+_SKIPPED_SYSTEMS = frozenset("RSJI")
+_GAL_FNAV_ONLY = 0b010  # data sources: bit 0 I/NAV E1-B, bit 1 F/NAV E5a-I, bit 2 I/NAV E5b-I
 _HEADER_SYSTEMS = {"G", "C", "R", "E", "J", "I", "S", "M"}
 
 # Columns of the element table (one row per ephemeris) in RINEX order after the epoch line.
@@ -329,7 +354,8 @@ class RinexWarning(UserWarning):
 
 @dataclass(frozen=True, eq=False)
 class NavigationFile:
-    """The GPS and BeiDou broadcast ephemerides of one RINEX navigation file.
+    """The GPS and BeiDou (and, when asked for, Galileo) broadcast ephemerides of one RINEX
+    navigation file.
 
     Attributes
     ----------
@@ -341,7 +367,7 @@ class NavigationFile:
         Satellite system of the header (``G``, ``C`` or ``M``; others are accepted but give
         no ephemerides).
     system : ndarray of intp, shape (n_eph,)
-        Index into ``SYSTEMS`` of each ephemeris (0 = GPS, 1 = BDS).
+        Index into :data:`FILE_SYSTEMS` of each ephemeris (0 = GPS, 1 = BDS, 2 = GAL).
     prn : tuple of str, length n_eph
         Satellite of each ephemeris (``"G05"``, ``"C01"``).
     toc_gps_s : ndarray, shape (n_eph,)
@@ -354,11 +380,12 @@ class NavigationFile:
         plus ``toc_sow``. ``toe_sow`` and ``toc_sow`` are seconds of the GPS week (GPS) or of
         the BDT week (BeiDou).
     skipped : dict of str to int
-        Records of other systems skipped, by system letter.
+        Records of other systems skipped, by system letter (``"E"``: Galileo, when not asked
+        for; ``"E F/NAV"``: Galileo F/NAV records, when it is).
     unhealthy : int
-        GPS or BeiDou ephemerides dropped because the satellite flagged itself unhealthy.
+        Ephemerides dropped because the satellite flagged itself unhealthy.
     rejected : dict of (str, str) to int
-        GPS and BeiDou records left out, by ``(system, reason)``: ``"unhealthy"``,
+        Records of the systems read left out, by ``(system, reason)``: ``"unhealthy"``,
         ``"unreadable field"``, ``"implausible sqrt(A)"``, ``"implausible eccentricity"``,
         ``"toe outside the week"``, ``"bad week number"``, ``"week disagrees with epoch"``.
     digest : str
@@ -495,9 +522,10 @@ class _Record:
 
 
 def _read_records(
-    lines: list[str], body: int, name: str, rinex2: bool
+    lines: list[str], body: int, name: str, rinex2: bool, galileo: bool = False
 ) -> tuple[list[_Record], dict[str, int]]:
-    """The GPS and BeiDou records after the header (structure checked, values not yet)."""
+    """The GPS and BeiDou (and with ``galileo`` Galileo) records after the header (structure
+    checked, values not yet)."""
     # RINEX 3: 'A1,I2.2,1X,I4,5(1X,I2.2)' epoch, 3 fields from column 24, orbit lines 4X,4D19.12
     # RINEX 2: 'I2,5(1X,I2),F5.1' epoch, 3 fields from column 23, orbit lines 3X,4D19.12
     first_field, indent = (22, 3) if rinex2 else (23, 4)
@@ -514,7 +542,8 @@ def _read_records(
             letter, number_text = "G", line[0:2]
         else:
             letter, number_text = line[0], line[1:3]
-            if letter in _SKIPPED_SYSTEMS:  # the epoch line and its indented orbit lines
+            if letter in _SKIPPED_SYSTEMS or (letter == "E" and not galileo):
+                # the epoch line and its indented orbit lines
                 skipped[letter] = skipped.get(letter, 0) + 1
                 k += 1
                 while k < n_lines and lines[k][:4] == "    " and lines[k].strip():
@@ -590,8 +619,11 @@ def _record_problem(el: dict[str, float], where: str) -> tuple[str, str] | None:
     return None
 
 
-def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> NavigationFile:
-    """Read the GPS and BeiDou ephemerides of a RINEX navigation file.
+def read_rinex_nav(
+    path: str | os.PathLike[str], warn: bool = True, galileo: bool = False
+) -> NavigationFile:
+    """Read the GPS and BeiDou (and with ``galileo`` Galileo) ephemerides of a RINEX
+    navigation file.
 
     A record that cannot be used is left out, not the file: a satellite that flags itself
     unhealthy (checked first), a field that is not a number, an implausible orbit
@@ -607,6 +639,8 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
         GPS navigation file, plain or gzip-compressed (read by its content, whatever its name).
     warn : bool, default True
         Emit a :class:`RinexWarning` naming the records left out, if any.
+    galileo : bool, default False
+        Also read Galileo I/NAV records (RINEX 3 ``E``); otherwise they are skipped.
 
     Returns
     -------
@@ -618,8 +652,8 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
         The file is missing or unreadable, compressed otherwise than with gzip, the header is
         not a RINEX 2 GPS or RINEX 3 navigation header, a record has an unknown system letter,
         a bad epoch or is cut short (the message names the file, the line number and the
-        problem), or the file holds no usable GPS or BeiDou ephemeris (the message says why
-        each record was left out).
+        problem), or the file holds no usable ephemeris of the systems read (the message
+        says why each record was left out).
     """
     p = Path(path)
     name = str(path)
@@ -637,7 +671,9 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
         ) from None
     lines = text.splitlines()
     version, file_system, body = _read_header(lines, name)
-    records, skipped = _read_records(lines, body, name, rinex2=version < 3.0)
+    records, skipped = _read_records(lines, body, name, rinex2=version < 3.0, galileo=galileo)
+    words = ["GPS", "BeiDou", "Galileo"] if galileo else ["GPS", "BeiDou"]
+    systems_read = ", ".join(words[:-1]) + " and " + words[-1]
     rejected: dict[tuple[str, str], int] = {}
     first_of: dict[tuple[str, str], str] = {}
 
@@ -647,10 +683,16 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
         first_of.setdefault(key, message.removeprefix(f"{name}, "))
 
     kept: list[_Record] = []
+    n_fnav = 0
     for rec in records:
         el = dict(zip(_FIELDS, rec.values, strict=True))
         where = f"{name}, line {rec.line}: record of {rec.prn}"
         health = el["health"]
+        sources = el["spare_5_2"]  # Galileo: data sources
+        if rec.prn[0] == "E" and np.isfinite(sources) and int(sources) & 0b111 == _GAL_FNAV_ONLY:
+            skipped["E F/NAV"] = skipped.get("E F/NAV", 0) + 1  # the I/NAV twin is used
+            n_fnav += 1
+            continue
         if np.isfinite(health) and health != 0.0:  # the health flag first
             reject(rec, "unhealthy", f"{where}: health {health:g}")
         elif rec.bad_field is not None:
@@ -659,7 +701,7 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
             reject(rec, *problem)
         else:
             kept.append(rec)
-    system = np.asarray([SYSTEMS.index(_KEPT_SYSTEMS[r.prn[0]]) for r in kept], dtype=np.intp)
+    system = np.asarray([FILE_SYSTEMS.index(_KEPT_SYSTEMS[r.prn[0]]) for r in kept], dtype=np.intp)
     toc_gps = np.asarray([r.toc_gps_s for r in kept], dtype=np.float64)
     table = np.asarray([r.values for r in kept], dtype=np.float64).reshape(-1, len(_FIELDS))
     toe_gps, week_ok = _resolve_toe(
@@ -673,20 +715,21 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
             f"{name}, line {rec.line}: record of {rec.prn}: week "
             f"{int(table[j, _FIELDS.index('week')])} disagrees with its epoch",
         )
-    n_records = len(records)
+    n_records = len(records) - n_fnav
     summary = "; ".join(
         f"{s} {reason}: {n} (first: {first_of[(s, reason)]})"
         for (s, reason), n in sorted(rejected.items())
     )
     if not np.any(week_ok):
         raise ValueError(
-            f"{name}: no usable GPS or BeiDou ephemeris (records of other systems skipped: "
-            f"{skipped}; GPS and BeiDou records left out: {summary or 'none'})"
+            f"{name}: no usable {systems_read.replace(' and ', ' or ')} ephemeris (records of "
+            f"other systems skipped: {skipped}; {systems_read} records left out: "
+            f"{summary or 'none'})"
         )
     if rejected and warn:
         warnings.warn(
-            f"{name}: left out {sum(rejected.values())} of {n_records} GPS and BeiDou records, "
-            f"used the others: {summary}",
+            f"{name}: left out {sum(rejected.values())} of {n_records} {systems_read} "
+            f"records, used the others: {summary}",
             RinexWarning,
             stacklevel=2,
         )
@@ -694,7 +737,7 @@ def read_rinex_nav(path: str | os.PathLike[str], warn: bool = True) -> Navigatio
     kept = [kept[j] for j in sel]
     system, toc_gps, table, toe_gps = system[sel], toc_gps[sel], table[sel], toe_gps[sel]
     elements = {f: table[:, j].copy() for j, f in enumerate(_FIELDS)}
-    toc_scale = toc_gps - np.where(system == SYSTEMS.index("BDS"), _BDT_EPOCH_GPS_S, 0.0)
+    toc_scale = toc_gps - np.where(system == FILE_SYSTEMS.index("BDS"), _BDT_EPOCH_GPS_S, 0.0)
     elements["toc_sow"] = np.mod(toc_scale, SECONDS_PER_WEEK)
     # one ephemeris per satellite and toe: of repeated broadcasts, the newest (the latest
     # transmission time; of equal ones, the last in the file)
@@ -756,7 +799,8 @@ class BroadcastConstellation:
     Attributes
     ----------
     system : ndarray of intp, shape (n_sv,)
-        Index into ``SYSTEMS`` per satellite, satellites grouped by system in the order asked.
+        Index into :data:`FILE_SYSTEMS` per satellite (``SYSTEMS``' own for GPS and BeiDou),
+        satellites grouped by system in the order asked.
     prn : tuple of str
         Satellite labels from the file (``"G05"``, ``"C01"``), sorted within a system.
     reference_gps_s : float
@@ -798,7 +842,8 @@ class BroadcastConstellation:
     def from_navigation(
         cls, nav: NavigationFile, systems: tuple[str, ...] = SYSTEMS
     ) -> BroadcastConstellation:
-        """The satellites of ``systems`` (in that order) in a :class:`NavigationFile`.
+        """The satellites of ``systems`` (names of :data:`FILE_SYSTEMS`, in that order) in a
+        :class:`NavigationFile` (Galileo's read with ``galileo=True``).
 
         Raises
         ------
@@ -809,23 +854,29 @@ class BroadcastConstellation:
             systems = (systems,)
         systems = tuple(systems)
         for s in systems:
-            if s not in SYSTEMS:
-                raise ValueError(f"unknown system {s!r}; allowed: {SYSTEMS}")
+            if s not in FILE_SYSTEMS:
+                raise ValueError(f"unknown system {s!r}; allowed: {FILE_SYSTEMS}")
         if not systems or len(set(systems)) != len(systems):
-            raise ValueError(f"systems must name distinct systems of {SYSTEMS}, got {systems!r}")
+            raise ValueError(
+                f"systems must name distinct systems of {FILE_SYSTEMS}, got {systems!r}"
+            )
         sat_rows: list[tuple[int, str, NDArray[np.intp]]] = []
         fit_h = nav.elements["fit_or_aodc"]
         validity = np.where(
-            nav.system == SYSTEMS.index("GPS"),
+            nav.system == FILE_SYSTEMS.index("GPS"),
             np.maximum(GPS_VALIDITY_S, np.nan_to_num(fit_h, nan=0.0) * 1800.0),
-            BDS_VALIDITY_S,
+            np.where(nav.system == FILE_SYSTEMS.index("GAL"), GAL_VALIDITY_S, BDS_VALIDITY_S),
         )
         valid_spans: list[tuple[float, float]] | None = None
         for s in systems:
-            idx = SYSTEMS.index(s)
+            idx = FILE_SYSTEMS.index(s)
             rows = np.flatnonzero(nav.system == idx)
             if rows.size == 0:
-                raise ValueError(f"{nav.path}: no usable {s} ephemeris in the file")
+                hint = " (Galileo's records are read with read_rinex_nav(..., galileo=True))"
+                raise ValueError(
+                    f"{nav.path}: no usable {s} ephemeris in the file"
+                    + (hint if s == "GAL" and "E" in nav.skipped else "")
+                )
             mine_spans = _union(
                 nav.toe_gps_s[rows] - validity[rows], nav.toe_gps_s[rows] + validity[rows]
             )
@@ -1200,9 +1251,10 @@ def _propagate(pick, system, is_geo, ref_gps, t_rel, what: str) -> NDArray[np.fl
     ``pick(name)`` gives an element per (time, satellite); the time is ``ref_gps + t_rel`` in
     GPS seconds (``ref_gps`` a whole second, kept apart so that seconds of the week stay
     exact)."""
-    bds = system == SYSTEMS.index("BDS")
-    mu = np.where(bds, BDS_MU_M3PS2, GPS_MU_M3PS2)
-    omega_e = np.where(bds, BDS_OMEGA_E_RADPS, GPS_OMEGA_E_RADPS)
+    bds = system == FILE_SYSTEMS.index("BDS")
+    gal = system == FILE_SYSTEMS.index("GAL")
+    mu = np.where(bds, BDS_MU_M3PS2, np.where(gal, GAL_MU_M3PS2, GPS_MU_M3PS2))
+    omega_e = np.where(bds, BDS_OMEGA_E_RADPS, np.where(gal, GAL_OMEGA_E_RADPS, GPS_OMEGA_E_RADPS))
     # t in the satellite's own time scale, as seconds of its week (IS-GPS-200 / BDS ICD t - toe)
     ref_sow = np.mod(ref_gps - np.where(bds, _BDT_EPOCH_GPS_S, 0.0), SECONDS_PER_WEEK)
     t_sow = np.mod(ref_sow + t_rel, SECONDS_PER_WEEK)
@@ -1257,13 +1309,15 @@ def _propagate(pick, system, is_geo, ref_gps, t_rel, what: str) -> NDArray[np.fl
 def _cached_sky(
     path: str, mtime_ns: int, size: int, systems: tuple[str, ...]
 ) -> BroadcastConstellation:
-    return BroadcastConstellation.from_navigation(_cached_nav(path, mtime_ns, size), systems)
+    nav = _cached_nav(path, mtime_ns, size, "GAL" in systems)
+    return BroadcastConstellation.from_navigation(nav, systems)
 
 
 @functools.lru_cache(maxsize=8)
-def _cached_nav(path: str, mtime_ns: int, size: int) -> NavigationFile:
-    """The file read once (and its records' warning given once) for every ``systems``."""
-    return read_rinex_nav(path)
+def _cached_nav(path: str, mtime_ns: int, size: int, galileo: bool = False) -> NavigationFile:
+    """The file read once (and its records' warning given once) for every ``systems``
+    (once more with Galileo's records when a sky asks for Galileo)."""
+    return read_rinex_nav(path, galileo=galileo)
 
 
 def clear_caches() -> None:
@@ -1291,7 +1345,8 @@ def load_broadcast_constellation(
         The navigation file; a name of :data:`SHIPPED_NAV_PATHS` (``"sample"``, ``"igs_brdc"``):
         the one shipped with the package.
     systems : tuple of str, optional
-        Systems to keep, in this order (names from ``SYSTEMS``).
+        Systems to keep, in this order (names from :data:`FILE_SYSTEMS`: ``"GPS"``,
+        ``"BDS"``, and ``"GAL"`` for Galileo, whose records are read only when asked for).
 
     Returns
     -------

@@ -107,7 +107,13 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from coopnav_env.constants import SHANGHAI_ALT_M, SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG, SYSTEMS
+from coopnav_env.constants import (
+    FILE_SYSTEMS,
+    SHANGHAI_ALT_M,
+    SHANGHAI_LAT_DEG,
+    SHANGHAI_LON_DEG,
+    SYSTEMS,
+)
 from coopnav_env.gnss import (
     ErrorModel,
     azimuth_elevation,
@@ -128,6 +134,7 @@ from coopnav_env.gnss.errors import (
 from coopnav_env.gnss.rinex import (
     FEW_SATELLITES_FRACTION,
     MIN_SATELLITES,
+    BroadcastConstellation,
     RinexWarning,
     load_broadcast_constellation,
 )
@@ -314,7 +321,8 @@ class ScenarioConfig:
     t0_random_s : float, default 0.0
         Each episode starts at ``t0_s + U(0, t0_random_s)`` (varies the sky), in [0, 1e7] [s].
     systems : tuple of str, default ("GPS", "BDS")
-        Constellations, a non-empty subset of ``SYSTEMS``.
+        Constellations, a non-empty subset of ``SYSTEMS``; with ``constellation="rinex:PATH"``
+        also ``"GAL"`` (Galileo, from the file's I/NAV records, with its own receiver clock).
     constellation : str, default "nominal"
         Where the satellites come from. ``"nominal"``: the nominal circular-orbit
         constellations (:func:`~coopnav_env.gnss.default_constellation`). ``"rinex:PATH"``:
@@ -547,10 +555,17 @@ class ScenarioConfig:
             systems = tuple(systems)
         except TypeError:
             raise ValueError(f"{o}.systems must be a tuple of names from {SYSTEMS}") from None
-        if not systems or len(set(systems)) != len(systems) or set(systems) - set(SYSTEMS):
+        if not systems or len(set(systems)) != len(systems) or set(systems) - set(FILE_SYSTEMS):
             raise ValueError(
-                f"{o}.systems must be a non-empty tuple of distinct names from {SYSTEMS}, "
-                f"got {self.systems!r}"
+                f"{o}.systems must be a non-empty tuple of distinct names from {SYSTEMS} "
+                f"(and 'GAL', Galileo, with constellation='rinex:PATH'), got {self.systems!r}"
+            )
+        spec = self.constellation
+        if "GAL" in systems and not (isinstance(spec, str) and spec.startswith("rinex:")):
+            raise ValueError(
+                f"{o}.systems: Galileo ('GAL') flies only from a navigation file, "
+                f"constellation='rinex:PATH' (the nominal constellations are {SYSTEMS}), got "
+                f"systems={self.systems!r} with constellation={spec!r}"
             )
         setv(self, "systems", systems)
         _check_real(o, "elevation_mask_deg", self.elevation_mask_deg, 0.0, 60.0)
@@ -1322,7 +1337,25 @@ class UrbanWorld:
         sky_id = getattr(self.constellation, "digest", "nominal")
         origin = (cfg.lat_deg, cfg.lon_deg, cfg.alt_m)
         key = (cfg.systems, sky_id, *origin, cfg.elevation_mask_deg, t_s)
-        return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m)
+        return _SKY_CACHE.get(key, self.constellation, self.origin_ecef_m, self._times_ahead(t_s))
+
+    def _times_ahead(self, t_s: float) -> list[float] | None:
+        """The epochs after ``t_s`` that an episode reaching ``t_s`` meets next (``t + dt_s``
+        added as :meth:`step` adds it), inside a navigation file's coverage; None for a
+        nominal sky (its times repeat from episode to episode: the cache holds them)."""
+        sky = self.constellation
+        if not isinstance(sky, BroadcastConstellation):
+            return None
+        end = sky.coverage_s[1]
+        dt = self.config.dt_s
+        times: list[float] = []
+        t = t_s
+        for _ in range(SKY_LOOKAHEAD_EPOCHS - 1):
+            t = t + dt
+            if not t <= end:
+                break
+            times.append(t)
+        return times
 
     def map_line_of_sight(
         self,
@@ -1510,6 +1543,9 @@ class UrbanWorld:
         self.pos_enu_m = pos
         self.vel_enu_mps = np.zeros((n, 3))
         self.clock_bias_m = draw_clock_biases(rng, n, len(SYSTEMS), cfg.clock_sigma_m)
+        if "GAL" in cfg.systems:  # Galileo's clock drawn after the others' (theirs unchanged)
+            gal_clock_m = draw_clock_biases(rng, n, 1, cfg.clock_sigma_m)
+            self.clock_bias_m = np.concatenate([self.clock_bias_m, gal_clock_m], axis=1)
         # prior of the dead-reckoning fallback at the first epoch: the known launch position
         self.nav_pos_enu_m = pos.copy()
         self.nav_cov_enu_m2 = np.broadcast_to(
@@ -1734,7 +1770,7 @@ class UrbanWorld:
             self.clock_bias_m,
             bias,
         )
-        obs = GnssObservations._trusted_from_epoch(pr)
+        obs = GnssObservations._trusted_from_epoch(pr, n_systems=self.clock_bias_m.shape[1])
         rel_enu, rel_var, avail = _measure_relative(rng, pos, cfg.relative_sensing)
         x0 = self.enu_to_ecef(pred_enu)
 
@@ -1811,7 +1847,7 @@ class UrbanWorld:
             float(model.sigma_ure_m),
             bool(model.tropo),
             bool(model.differential),
-            len(SYSTEMS),
+            self.clock_bias_m.shape[1],  # clock states: the systems, Galileo's if flown
             x0,
             np.ascontiguousarray(rel_b),
             np.ascontiguousarray(var_b),
@@ -1950,6 +1986,51 @@ def _sky_epoch(constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, t
     return sky
 
 
+def _sky_epochs(
+    constellation: Any, origin_ecef_m: np.ndarray, mask_deg: float, times_s: list[float]
+) -> list[_SkyEpoch]:
+    """:func:`_sky_epoch` at each of ``times_s``, with one vectorised evaluation of the
+    satellites' orbits, azimuths and elevations for all the times.
+
+    Every value is what :func:`_sky_epoch` gives at that time, bit for bit: the arithmetic is
+    element by element (numpy's functions give a value's result wherever it sits in an
+    array), and ``tests/sim/test_sky_epochs.py`` checks it over whole navigation files.
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    sv_all = constellation.positions_ecef(t)  # (n_t, n_sv, 3)
+    known = np.isfinite(sv_all).all(axis=2)
+    if not known.all():
+        sv_all = np.where(known[..., None], sv_all, 0.0)  # azimuth of the Earth's centre: dropped
+    n_t, n_sv = known.shape
+    az_flat, el_flat = azimuth_elevation(origin_ecef_m[None], sv_all.reshape(-1, 3))
+    az_all, el_all = az_flat.reshape(n_t, n_sv), el_flat.reshape(n_t, n_sv)
+    dir_all = direction_enu(az_all, el_all)  # (n_t, n_sv, 3)
+    system_all = np.asarray(constellation.system)
+    skies = []
+    for k in range(n_t):
+        sv_index = np.flatnonzero((el_all[k] > mask_deg) & known[k])
+        system = system_all[sv_index]
+        sky = _SkyEpoch(
+            sv_index=sv_index,
+            sv_ecef=sv_all[k, sv_index],
+            system=system,
+            system_idx=system.astype(np.intp),
+            az=az_all[k, sv_index],
+            el=el_all[k, sv_index],
+            directions=sky_directions(dir_all[k, sv_index]),
+            grouped=bool(np.all(np.diff(system) >= 0)),
+        )
+        for arr in (sky.sv_index, sky.sv_ecef, sky.system, sky.system_idx, sky.az, sky.el):
+            arr.setflags(write=False)
+        skies.append(sky)
+    return skies
+
+
+SKY_LOOKAHEAD_EPOCHS: int = 32
+"""Epochs of a sky from a navigation file computed at once (:class:`_SkyCache`): the one asked
+for and the next ``SKY_LOOKAHEAD_EPOCHS - 1`` of the same episode."""
+
+
 class _SkyCache:
     """Process-wide cache of :func:`_sky_epoch`, keyed by the sky's settings and the time.
 
@@ -1959,24 +2040,62 @@ class _SkyCache:
     them. The cached arrays are read-only. At most ``max_size`` entries are kept (the oldest
     goes first); an entry is about 3 kB, so the default bounds the cache to about 6 MB (with a
     random start time, ``t0_random_s > 0``, it rarely hits and only costs the inserts).
+
+    A caller that knows the times that follow (:meth:`get`'s ``times_ahead_s``: the next
+    epochs of an episode) has them computed with the one asked for, in one vectorised call
+    (:func:`_sky_epochs`): a sky from a navigation file, whose episodes start at times drawn
+    at random, then costs a fraction of an evaluation per epoch. Those epochs wait in a
+    second store until asked for (then they move to the cache); at most ``max_ahead`` wait
+    (the oldest, those of episodes that ended early, go first).
     """
 
-    def __init__(self, max_size: int = 2048) -> None:
+    def __init__(self, max_size: int = 2048, max_ahead: int = 8192) -> None:
         self.max_size = int(max_size)
+        self.max_ahead = int(max_ahead)
         self._data: dict[tuple, _SkyEpoch] = {}
+        self._ahead: dict[tuple, _SkyEpoch] = {}
 
-    def get(self, key: tuple, constellation: Any, origin_ecef_m: np.ndarray) -> _SkyEpoch:
+    def _insert(self, key: tuple, sky: _SkyEpoch) -> None:
+        if len(self._data) >= self.max_size:
+            self._data.pop(next(iter(self._data)), None)
+        self._data[key] = sky
+
+    def get(
+        self,
+        key: tuple,
+        constellation: Any,
+        origin_ecef_m: np.ndarray,
+        times_ahead_s: list[float] | None = None,
+    ) -> _SkyEpoch:
+        """The sky of ``key`` (its last two items: the cut-off [deg] and the time [s]).
+
+        ``times_ahead_s``: times likely asked for next (computed now with this one when it
+        is missing).
+        """
         hit = self._data.get(key)
+        if hit is not None:
+            return hit
+        hit = self._ahead.pop(key, None)
         if hit is None:
-            hit = _sky_epoch(constellation, origin_ecef_m, key[-2], key[-1])
-            if len(self._data) >= self.max_size:
-                self._data.pop(next(iter(self._data)), None)
-            self._data[key] = hit
+            mask_deg, t_s = key[-2], key[-1]
+            if not times_ahead_s:
+                hit = _sky_epoch(constellation, origin_ecef_m, mask_deg, t_s)
+            else:
+                head = key[:-1]
+                later = [t for t in times_ahead_s if (*head, t) not in self._data]
+                skies = _sky_epochs(constellation, origin_ecef_m, mask_deg, [t_s, *later])
+                hit = skies[0]
+                for t, sky in zip(later, skies[1:], strict=True):
+                    self._ahead[(*head, t)] = sky
+                while len(self._ahead) > self.max_ahead:
+                    self._ahead.pop(next(iter(self._ahead)), None)
+        self._insert(key, hit)
         return hit
 
     def clear(self) -> None:
         """Drop every entry."""
         self._data.clear()
+        self._ahead.clear()
 
 
 _SKY_CACHE = _SkyCache()

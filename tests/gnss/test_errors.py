@@ -11,6 +11,8 @@ import pytest
 from coopnav_env.constants import (
     FREQ_BDS_B1I_HZ,
     FREQ_BDS_B3I_HZ,
+    FREQ_GAL_E1_HZ,
+    FREQ_GAL_E5A_HZ,
     FREQ_GPS_L1_HZ,
     FREQ_GPS_L2_HZ,
     SHANGHAI_ALT_M,
@@ -158,8 +160,14 @@ def test_error_model_sigmas():
     )
     with pytest.raises(ValueError, match="el_deg"):
         model.sigma_user_m(el, np.array([0, 1]))
+    # index 2 is Galileo (skies from navigation files): E1/E5a unless a third pair is given
+    gal = iono_free_factor(FREQ_GAL_E1_HZ, FREQ_GAL_E5A_HZ)
+    assert model.iono_factor([2])[0] == gal
+    assert ErrorModel.paper().iono_factor([2])[0] == gal
+    third = ErrorModel(frequency_pairs_hz=(*model.frequency_pairs_hz, (1575.42e6, 1207.14e6)))
+    assert third.iono_factor([2])[0] == iono_free_factor(1575.42e6, 1207.14e6)
     with pytest.raises(ValueError, match="system"):
-        model.iono_factor([0, 2])
+        model.iono_factor([0, 3])
 
 
 def test_error_model_is_frozen():
@@ -375,7 +383,7 @@ def _bad_call(**override):
         ({"rx_ecef_m": np.zeros((3, 2))}, "rx_ecef_m"),
         ({"rx_ecef_m": np.zeros((0, 3))}, "rx_ecef_m"),
         ({"sv_ecef_m": np.full((4, 3), np.nan)}, "sv_ecef_m"),
-        ({"system": np.array([0, 1, 0, 2])}, "system"),
+        ({"system": np.array([0, 1, 0, 3])}, "system"),
         ({"system": np.array([0, 1, 0])}, "system"),
         ({"visible": np.ones((3, 3), bool)}, "visible"),
         ({"visible": np.full((3, 4), 0.5)}, "visible"),
