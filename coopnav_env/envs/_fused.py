@@ -92,7 +92,7 @@ class FusedStep:
         Updates each copy's world, epoch and step count as ``UrbanCanyonEnv._step_arrays``
         does, and returns ``obs (K, N, obs_dim) float32, rewards (K, N), terminated (K,),
         truncated (K,), terms (K, 6, N), in_goal (K, N)`` and the parts of the infos
-        (:func:`step_infos`); or None, with nothing changed, if a copy cannot take the fused
+        (:func:`info_arrays`); or None, with nothing changed, if a copy cannot take the fused
         step now.
         """
         if not self._load(envs):
@@ -462,54 +462,59 @@ class FusedStep:
             e._epoch = ep
 
 
-def step_infos(
-    agents: list[str],
+def info_arrays(
     floats: np.ndarray,
     ints: tuple[np.ndarray, ...],
     flags: tuple[np.ndarray, ...],
     terms: np.ndarray,
     steps: np.ndarray,
-) -> list[dict[str, dict[str, Any]]]:
-    """Every copy's step infos, as ``UrbanCanyonEnv._infos`` builds one copy's (same keys in
-    the same order, the same Python numbers), from ``(K, ...)`` arrays: the real numbers of
-    :func:`coopnav_env.envs._kernels.info_floats` ``(K, 8, N)``; the satellites received,
-    by the swarm, above the mask ``(K,)``, the statuses, sources and next waypoints; the
-    rejection, goal, collision, separation and contact flags; the reward terms
-    ``(K, 6, N)``; the episode steps ``(K,)``."""
-    n = floats.shape[2]
+) -> dict[str, np.ndarray]:
+    """Every copy's step infos as arrays: :data:`INFO_KEYS` (in order) -> ``(K, N)``.
+
+    From the fused step's ``(K, ...)`` arrays: the real numbers of
+    :func:`coopnav_env.envs._kernels.info_floats` ``(K, 8, N)`` (a missing fix's error is
+    set to :data:`NO_FIX_ERROR_M` here, in place); the satellites received, by the swarm,
+    above the mask ``(K,)``, the statuses, sources and next waypoints; the rejection, goal,
+    collision, separation and contact flags; the reward terms ``(K, 6, N)``; the episode
+    steps ``(K,)``. Real numbers are float64, counts, statuses and steps int64, flags bool:
+    ``tolist()`` of an array gives the Python numbers of ``UrbanCanyonEnv._infos``.
+    """
+    n_copies, n = floats.shape[0], floats.shape[2]
     fixes = np.isfinite(floats[:, 1:3])
     floats[:, 1:3] = np.where(fixes, floats[:, 1:3], NO_FIX_ERROR_M)
     n_sats, n_swarm, n_open, co_status, sa_status, source, wp = ints
-    real = floats.tolist()
-    fix = fixes.tolist()
-    cols_int = [a.tolist() for a in (n_sats, n_swarm, co_status, sa_status, source, wp)]
-    cols_flag = [np.asarray(a, dtype=bool).tolist() for a in flags]
-    reward = terms.tolist()
-    open_sky = n_open.tolist()
-    step = steps.tolist()
-    keys = INFO_KEYS
-    out = []
-    for k, (r, fx, rw) in enumerate(zip(real, fix, reward)):
-        ci = [c[k] for c in cols_int]
-        cf = [c[k] for c in cols_flag]
-        cols = (
-            *r[:3],
-            *fx,
-            *r[3:7],
-            ci[0],
-            ci[1],
-            [open_sky[k]] * n,
-            ci[2],
-            ci[3],
-            ci[4],
-            r[7],
-            ci[5],
-            *cf,
-            *rw,
-            [step[k]] * n,
-        )
-        out.append({a: dict(zip(keys, row)) for a, row in zip(agents, zip(*cols))})
-    return out
+    k_n = (n_copies, n)
+    columns = (
+        *floats[:, :3].transpose(1, 0, 2),
+        *fixes.transpose(1, 0, 2),
+        *floats[:, 3:7].transpose(1, 0, 2),
+        n_sats,
+        n_swarm,
+        np.broadcast_to(n_open[:, None], k_n).astype(np.int64),
+        co_status,
+        sa_status,
+        source,
+        floats[:, 7],
+        wp,
+        *(np.asarray(f, dtype=bool) for f in flags),
+        *terms.transpose(1, 0, 2),
+        np.broadcast_to(steps[:, None], k_n).astype(np.int64),
+    )
+    return dict(zip(INFO_KEYS, columns, strict=True))
+
+
+def infos_from_arrays(
+    agents: list[str], info: dict[str, np.ndarray]
+) -> list[dict[str, dict[str, Any]]]:
+    """The per-copy infos ``[{agent: {key: number}}]`` of the info arrays ``key -> (K, N)``
+    (the keys in the arrays' order; Python floats, ints and bools, as ``UrbanCanyonEnv.
+    _infos`` gives them)."""
+    keys = list(info)
+    cols = [a.tolist() for a in info.values()]  # each K lists of N Python numbers
+    return [
+        {a: dict(zip(keys, row)) for a, row in zip(agents, zip(*per_copy))}
+        for per_copy in zip(*cols)
+    ]
 
 
 def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, ...]:

@@ -224,3 +224,45 @@ def test_fused_step_runs_in_a_forked_child() -> None:
     obs, *_ = batch.step(np.zeros((16, 3, 3)))  # the same step in the parent
     assert child.exitcode == 0
     assert obs_child.tobytes() == obs.tobytes()
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"n_uavs": 5, "max_steps": 7},  # the fused step
+        {"n_uavs": 3, "max_steps": 5, "nlos_probability": 0.3},  # copy by copy
+        {"n_uavs": 3, "max_steps": 5, "integrity": "fde"},  # more info keys
+    ],
+)
+def test_step_arrays_equals_step(settings) -> None:
+    # step_arrays is step with the infos as (K, N) arrays: the same episodes bit for bit,
+    # and info[key][k, i] is infos[k][agent_i][key], with the same Python type after tolist()
+    k_copies = 6
+    by_dicts = BatchedUrbanCanyonEnv(k_copies, **settings)
+    by_arrays = BatchedUrbanCanyonEnv(k_copies, **settings)
+    by_dicts.reset(seed=5)
+    by_arrays.reset(seed=5)
+    rng = np.random.default_rng(1)
+    ended = 0
+    for _ in range(12):
+        act = rng.uniform(-1.0, 1.0, (k_copies, by_dicts.n_agents, 3))
+        obs, rew, term, trunc, infos, final = by_dicts.step(act)
+        out = by_arrays.step_arrays(act)
+        assert out.obs.tobytes() == obs.tobytes()
+        assert out.final_obs.tobytes() == final.tobytes()
+        assert out.rewards.tobytes() == rew.tobytes()
+        assert np.array_equal(out.terminated, term) and np.array_equal(out.truncated, trunc)
+        ended += int((term | trunc).sum())
+        agents = by_dicts.possible_agents
+        assert list(out.info) == list(infos[0][agents[0]])  # the same keys, in order
+        for key, arr in out.info.items():
+            assert arr.shape == (k_copies, by_dicts.n_agents), key
+            values = arr.tolist()
+            for k in range(k_copies):
+                for i, a in enumerate(agents):
+                    assert _same(values[k][i], infos[k][a][key]), (key, k, a)
+        # the reset infos convert the same way
+        assert by_arrays.info_arrays(infos).keys() == out.info.keys()
+    assert ended > 0  # automatic resets covered
+    with pytest.raises(ValueError, match="needs 6 copies"):
+        by_arrays.info_arrays(infos[:2])
