@@ -43,7 +43,6 @@ from coopnav_env.envs.urban_canyon import (
     NO_FIX_ERROR_M,
     REWARD_TERMS,
     UrbanCanyonEnv,
-    _team_mix,
 )
 from coopnav_env.gnss.errors import _iono_factors
 from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
@@ -316,10 +315,20 @@ class FusedStep:
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
         nlos = np.zeros(los_flat.shape[0], dtype=bool)
-        rewards = np.empty((n_copies, n))
-        terminated = np.zeros(n_copies, dtype=bool)
-        truncated = np.zeros(n_copies, dtype=bool)
-        navigated = cfg.reward_scheme == "navigated_distance"
+        # the reward of every copy at once (UrbanCanyonEnv._step_arrays' arithmetic, each
+        # copy's row reduced as its own array would be)
+        unpaid = st.unpaid
+        if cfg.reward_scheme == "navigated_distance":
+            terms[:, 0], terms[:, 1], unpaid = _navigated_distance(
+                st, pos1, nav_pos, wp, ends[:, 1], float(cfg.nav_reward_cap_m)
+            )
+        if cfg.nav_team_weight > 0.0:  # _team_mix of each copy
+            weight = cfg.nav_team_weight
+            nav = terms[:, 0]
+            terms[:, 0] = (1.0 - weight) * nav + weight * nav.mean(axis=1, keepdims=True)
+        rewards = terms.sum(axis=1)
+        terminated = ends[:, 0] | ends[:, 1]
+        truncated = (steps >= cfg.max_steps) & ~terminated
         for k, e in enumerate(envs):
             w = e.world
             sky = skies[k]
@@ -367,16 +376,8 @@ class FusedStep:
             w.last = ep
             e._epoch = ep
             e._steps += 1
-            stacked = terms[k]
-            crash, reached = bool(ends[k, 0]), bool(ends[k, 1])
-            if navigated:
-                stacked[0], stacked[1] = e._navigated_distance(ep, reached)
-            if cfg.nav_team_weight > 0.0:
-                stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
-            rewards[k] = stacked.sum(axis=0)
-            terminated[k] = crash or reached
-            truncated[k] = (e._steps >= cfg.max_steps) and not terminated[k]
-        st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps)
+            e._unpaid_m = unpaid[k]
+        st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps, unpaid)
         info_parts = (
             floats,
             (n_sats, n_swarm, n_sv, co_status, sa_status, source, wp_c),
@@ -819,6 +820,8 @@ class _SwarmArrays:
         self.fence_hi = np.empty((k_n, 2))
         self.obs_params = np.zeros((k_n, _N_OBS_PARAMS))
         self.steps = np.empty(k_n, dtype=np.int64)
+        self.unpaid = np.zeros((k_n, n))
+        self.route_len = np.ones((k_n, n))
         self.n_b = np.zeros(k_n, dtype=np.int64)
         self.n_route = np.zeros(k_n, dtype=np.int64)
         b_max = max(e.world.city.buildings.min_m.shape[0] for e in envs)
@@ -837,11 +840,12 @@ class _SwarmArrays:
         self.nav_pos = self.nav_pos.copy()
         self.nav_cov = self.nav_cov.copy()
         self.wp = self.wp.copy()
+        self.unpaid = self.unpaid.copy()
 
-    def advance(self, pos, vel, nav_pos, nav_cov, wp, steps) -> None:
+    def advance(self, pos, vel, nav_pos, nav_cov, wp, steps, unpaid) -> None:
         """Take the state after a fused step (the arrays the worlds now view)."""
         self.pos, self.vel, self.nav_pos, self.nav_cov, self.wp = pos, vel, nav_pos, nav_cov, wp
-        self.steps = steps
+        self.steps, self.unpaid = steps, unpaid
 
     def load(self, k: int, env: UrbanCanyonEnv) -> None:
         """Copy ``k``'s state from its environment (after a reset)."""
@@ -860,6 +864,9 @@ class _SwarmArrays:
         params = env.__dict__.get("_obs_params")  # none before an environment's first reset
         if params is not None:
             self.obs_params[k] = params
+            # the route not yet paid and the route length (reward_scheme="navigated_distance")
+            self.unpaid[k] = env._unpaid_m
+            self.route_len[k] = env._route_m
         self.steps[k] = env._steps
         b = w.city.buildings
         nb = b.min_m.shape[0]
@@ -877,6 +884,31 @@ class _SwarmArrays:
         self.route[k, :nr] = route
         self.tail[k, :nr] = tail
         self.n_route[k] = nr
+
+
+def _navigated_distance(
+    st: _SwarmArrays,
+    pos: np.ndarray,
+    nav_pos: np.ndarray,
+    wp: np.ndarray,
+    reached: np.ndarray,
+    cap_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``UrbanCanyonEnv._navigated_distance`` of every copy: the terms ``nav`` and
+    ``progress`` ``(K, N)`` and the route not yet paid after the step ``(K, N)``, from the
+    true positions ``pos`` and estimates ``nav_pos`` ``(K, N, 3)``, the next waypoints ``wp``
+    and whether each swarm arrived ``reached`` ``(K,)`` (the same arithmetic, each copy's
+    rows reduced as its own arrays are)."""
+    rows = np.arange(pos.shape[0])[:, None]
+    # remaining_route_m: straight to the next waypoint, then along the route
+    d = np.linalg.norm(pos[:, :, :2] - st.route[rows, wp], axis=2)
+    now_m = d + st.tail[rows, wp]
+    unpaid = st.unpaid
+    covered = np.where(reached[:, None], unpaid, np.clip(unpaid - now_m, 0.0, None))
+    share = covered / st.route_len
+    # np.fmin: an error that is not a number (no estimate) counts as the cap (quality 0)
+    shortfall = np.fmin(np.linalg.norm(nav_pos - pos, axis=2), cap_m) / cap_m
+    return -share * shortfall, share, unpaid - covered
 
 
 def _pad(a: np.ndarray, size: int) -> np.ndarray:

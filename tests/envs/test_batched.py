@@ -266,3 +266,39 @@ def test_step_arrays_equals_step(settings) -> None:
     assert ended > 0  # automatic resets covered
     with pytest.raises(ValueError, match="needs 6 copies"):
         by_arrays.info_arrays(infos[:2])
+
+
+@pytest.mark.parametrize("n_uavs", [5, 1])
+def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
+    # copy k of a K = 64 batch of urban_canyon_v1 (reward "navigated_distance", computed for
+    # all copies at once) is the batch of one reset with seed + k, bit for bit, over episodes
+    # that end at different steps
+    k_copies, seed, steps = 64, 40, 16
+    settings = {"n_uavs": n_uavs, "max_steps": 10}
+    big = BatchedUrbanCanyonEnv.from_envs(
+        [urban_canyon_v1.parallel_env(**settings) for _ in range(k_copies)]
+    )
+    ones = [
+        BatchedUrbanCanyonEnv.from_envs([urban_canyon_v1.parallel_env(**settings)])
+        for _ in range(k_copies)
+    ]
+    obs, _ = big.reset(seed=seed)
+    for k, one in enumerate(ones):
+        assert one.reset(seed=seed + k)[0].tobytes() == obs[k].tobytes()
+    rng = np.random.default_rng(seed)
+    end_steps = set()
+    for step in range(steps):
+        act = rng.uniform(-1.0, 1.0, (k_copies, n_uavs, 3))
+        out = big.step_arrays(act)
+        for k, one in enumerate(ones):
+            ref = one.step_arrays(act[k : k + 1])
+            assert ref.final_obs.tobytes() == out.final_obs[k : k + 1].tobytes()
+            assert ref.obs.tobytes() == out.obs[k : k + 1].tobytes()
+            assert ref.rewards.tobytes() == out.rewards[k : k + 1].tobytes()
+            assert ref.terminated[0] == out.terminated[k]
+            assert ref.truncated[0] == out.truncated[k]
+            for key, arr in out.info.items():
+                assert ref.info[key].tobytes() == arr[k : k + 1].tobytes(), key
+        if (out.terminated | out.truncated).any():
+            end_steps.add(step)
+    assert len(end_steps) >= 3  # episodes ended at several different steps
