@@ -135,23 +135,6 @@ def _critic_inputs(obs: np.ndarray, state: np.ndarray | None) -> np.ndarray:
     return np.concatenate([tiled, obs], axis=-1)
 
 
-EPISODE_FIGURES: tuple[str, ...] = ("coop_error_m", "coop_fix", "in_goal", "collided", "step")
-"""The step infos the trainer's episode log reads (:func:`_episode_figures`)."""
-
-
-def _episode_figures(infos: list[Mapping[str, Mapping[str, Any]]]) -> dict[str, np.ndarray]:
-    """The figures of :data:`EPISODE_FIGURES` of a batched step's infos (``K`` dicts of
-    ``{agent: {...}}``) as arrays: ``(K, N)`` per UAV, ``step`` ``(K,)``."""
-    rows = [list(info.values()) for info in infos]
-    out = {
-        key: np.array([[v[key] for v in row] for row in rows])
-        for key in EPISODE_FIGURES
-        if key != "step"
-    }
-    out["step"] = np.array([row[0]["step"] for row in rows])
-    return out
-
-
 class _RunningStd:
     """Running standard deviation of the discounted return (reward scaling, as SB3's)."""
 
@@ -519,9 +502,9 @@ class MARLTrainer:
             if j > 0:
                 base = self._before()
             cmd = swarm_command(s, raw, None, base)  # every copy at once
-            obs, rew, terminated, truncated, infos, final_obs = self.venv.step(cmd)
+            obs, rew, terminated, truncated, info, final_obs = self.venv.step_arrays(cmd)
             done = terminated | truncated
-            self._log_episodes(rew, done, _episode_figures(infos))
+            self._log_episodes(rew, done, info)
             scaled = (
                 self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
                 if s.normalize_reward
@@ -560,13 +543,14 @@ class MARLTrainer:
         )
 
     def _log_episodes(
-        self, rew: np.ndarray, done: np.ndarray, figures: Mapping[str, np.ndarray]
+        self, rew: np.ndarray, done: np.ndarray, info: Mapping[str, np.ndarray]
     ) -> None:
         """Add a step to every copy's running episode figures and log the episodes that
-        ended (``figures``: :func:`_episode_figures`)."""
+        ended (``info``: the step's infos as ``(K, N)`` arrays,
+        :meth:`~coopnav_env.envs.BatchedUrbanCanyonEnv.step_arrays`)."""
         self._ep_return += rew.mean(axis=1)
-        err = figures["coop_error_m"]
-        fix = figures["coop_fix"]
+        err = info["coop_error_m"]
+        fix = info["coop_fix"]
         # each copy's sum over its UAVs with a fix, added up UAV after UAV
         step_sum = np.zeros(err.shape[0])
         for i in range(err.shape[1]):
@@ -575,8 +559,8 @@ class MARLTrainer:
         self._ep_err_n += fix.sum(axis=1)
         if not done.any():
             return
-        goal = figures["in_goal"].all(axis=1)
-        collision = figures["collided"].any(axis=1)
+        goal = info["in_goal"].all(axis=1)
+        collision = info["collided"].any(axis=1)
         for k in np.flatnonzero(done).tolist():
             self.episode_log.append(
                 {
@@ -584,7 +568,7 @@ class MARLTrainer:
                     "goal": float(goal[k]),
                     "collision": float(collision[k]),
                     "coop_error_m": float(self._ep_err_sum[k] / max(self._ep_err_n[k], 1.0)),
-                    "length": float(figures["step"][k]),
+                    "length": float(info["step"][k, 0]),
                 }
             )
             self._ep_return[k] = 0.0
@@ -686,7 +670,7 @@ class MARLTrainer:
                     ep[k]["a_in"].append(obs[k].copy())
                     ep[k]["c_in"].append(c_in[k].copy())
                     ep[k]["act"].append(cmd[k].astype(np.float32))
-                nxt, rew, terminated, truncated, infos, _ = self.venv.step(cmd)
+                nxt, rew, terminated, truncated, info, _ = self.venv.step_arrays(cmd)
                 done = terminated | truncated
                 if s.normalize_reward:
                     self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
@@ -694,7 +678,7 @@ class MARLTrainer:
                     ep[k]["rew"].append(rew[k].copy())
                     if done[k]:
                         recording[k] = False
-                        goals += all(bool(v["in_goal"]) for v in infos[k].values())
+                        goals += bool(info["in_goal"][k].all())
                         rewards = np.stack(ep[k]["rew"])  # (T, N)
                         togo = np.zeros_like(rewards)
                         acc = np.zeros(n_)

@@ -179,7 +179,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
     )
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 7}, seed=2)
     raws, steps = [], []
-    real_command, real_step = backend.swarm_command, tr.venv.step
+    real_command, real_step = backend.swarm_command, tr.venv.step_arrays
 
     def command(settings, raw, *args):
         raws.append(np.array(raw))
@@ -191,7 +191,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
         return out
 
     monkeypatch.setattr(backend, "swarm_command", command)
-    monkeypatch.setattr(tr.venv, "step", step)
+    monkeypatch.setattr(tr.venv, "step_arrays", step)
     data = tr.collect()
     assert tr.agent_steps == 2 * 4 * 3 * 3  # copies x decisions x repeat x UAVs
     assert len(steps) == 4 * 3  # 3 swarm steps per decision
@@ -218,8 +218,8 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
 def _record_commands(tr: MARLTrainer) -> list[np.ndarray]:
     """The list that every swarm command ``tr`` flies from now on is appended to."""
     flown: list[np.ndarray] = []
-    step = tr.venv.step
-    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    step = tr.venv.step_arrays
+    tr.venv.step_arrays = lambda cmd: flown.append(cmd.copy()) or step(cmd)
     return flown
 
 
@@ -566,17 +566,20 @@ def test_the_command_of_k_swarms_at_once_is_each_swarms_own(residual_base) -> No
 
 def test_the_episode_log_of_a_rollout_matches_the_step_infos() -> None:
     """The episode figures read from arrays equal those summed from every UAV's info."""
+    from coopnav_env.envs._fused import infos_from_arrays
+
     s = MARLSettings(algorithm="mappo", n_copies=3, rollout_steps=12, action_repeat=2)
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 9}, seed=4)
     seen: list[tuple[np.ndarray, np.ndarray, list]] = []
-    step = tr.venv.step
+    step = tr.venv.step_arrays
 
     def record(cmd):
         out = step(cmd)
-        seen.append((out[1].copy(), (out[2] | out[3]).copy(), out[4]))
+        infos = infos_from_arrays(tr.venv.possible_agents, out.info)
+        seen.append((out.rewards.copy(), out.terminated | out.truncated, infos))
         return out
 
-    tr.venv.step = record
+    tr.venv.step_arrays = record
     tr.collect()
     want, ret, errs = [], np.zeros(3), [[] for _ in range(3)]
     for rew, done, infos in seen:
