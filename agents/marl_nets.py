@@ -353,21 +353,28 @@ def base_command_before(
 def swarm_command(
     settings: MARLSettings,
     raw: np.ndarray,
-    base: Any,
-    base_cmd: np.ndarray | None,
-    observations: Mapping[str, Any],
-    agents: list[str],
+    base: Any = None,
+    base_cmd: np.ndarray | None = None,
+    observations: Mapping[str, Any] | None = None,
+    agents: list[str] | None = None,
 ) -> np.ndarray:
-    """The velocity command ``(N, 3)`` in ``[-1, 1]`` of the network's output ``raw (N, 3)``.
+    """The velocity command in ``[-1, 1]`` of the network's output ``raw``.
 
-    No base: ``clip(raw)``; a residual base: ``clip(base_cmd + residual_scale * clip(raw))``.
-    ``base``, ``observations`` and ``agents`` are not read (the base command ``base_cmd`` of
-    :func:`base_command_before` holds what the base does).
+    ``raw`` is ``(N, 3)`` for one swarm or ``(K, N, 3)`` for ``K`` swarms at once (the
+    result has its shape; every entry is computed alone, so a swarm's command is the same
+    either way). No base: ``clip(raw)``; a residual base: ``clip(base_cmd + residual_scale *
+    clip(raw))`` with ``base_cmd`` of :func:`base_command_before` (stacked over the swarms
+    for ``(K, N, 3)``), which holds what the base does. ``base``, ``observations`` and
+    ``agents`` are not read.
     """
     a = np.clip(raw, -1.0, 1.0)
     if settings.residual_base is None:
         return a
-    assert base_cmd is not None
+    if base_cmd is None:
+        raise ValueError(
+            f"swarm_command needs base_cmd (base_command_before) with residual_base "
+            f"{settings.residual_base!r}"
+        )
     return np.clip(base_cmd + settings.residual_scale * a, -1.0, 1.0)
 
 

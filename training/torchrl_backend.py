@@ -368,10 +368,17 @@ class MARLTrainer:
 
         return [make_policy(s.residual_base, e, **s.residual_base_kwargs) for e in self.venv.envs]
 
-    def _states(self) -> np.ndarray | None:
+    def _states(self, copies: np.ndarray | None = None) -> np.ndarray | None:
+        """The global states ``(K, state_dim)`` of every copy (or of the ``copies`` given, in
+        that order) for the MAPPO critic; None for IPPO."""
         if not self.settings.centralised_critic:
             return None
-        return np.stack([e.state() for e in self.venv.envs])
+        envs = self.venv.envs
+        if copies is None:
+            return np.stack([e.state() for e in envs])
+        if copies.size == 0:
+            return np.empty((0, self.venv.config.state_dim), dtype=np.float32)
+        return np.stack([envs[k].state() for k in copies.tolist()])
 
     def collect(self) -> Any:
         """One rollout of ``rollout_steps`` decisions of every copy (``action_repeat`` swarm
@@ -384,12 +391,10 @@ class MARLTrainer:
         k_, t_, n_ = s.n_copies, s.rollout_steps, self.n_agents
         actor_in, critic_in, next_critic_in, acts, logps = [], [], [], [], []
         rewards, dones, terms = [], [], []
-        agents = self.venv.possible_agents
         state = self._states()
         for _ in range(t_):
             raise_if_interrupted()  # between steps, never inside a compiled call
-            obs_d = [dict(zip(agents, self._obs[k])) for k in range(k_)]
-            base = self._before(obs_d)
+            base = self._before()
             a_in = _actor_inputs(self._obs, base)
             c_in = _critic_inputs(self._obs, state)
             td = TensorDict({("agents", "observation"): torch.from_numpy(a_in)}, batch_size=[k_])
@@ -400,7 +405,7 @@ class MARLTrainer:
             held = self._hold > 0  # (K, N): exploring starts (start_hold_decisions)
             if held.any():  # stored as flown: a draw from the actor's tail below -1
                 raw, logp = self._draw_holds(td, raw, logp, held)
-            n_c_in, acc, ended, state = self._act_held(raw, obs_d, base)
+            n_c_in, acc, ended, state = self._act_held(raw, base)
             if s.start_hold_decisions > 0:
                 self._advance_hold(ended)
             actor_in.append(a_in)
@@ -473,7 +478,7 @@ class MARLTrainer:
         self._hold = np.where(ended[:, None], draw, np.maximum(self._hold - 1, 0))
 
     def _act_held(
-        self, raw: np.ndarray, obs_d: list[dict[str, np.ndarray]], base: np.ndarray | None
+        self, raw: np.ndarray, base: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Fly every copy ``action_repeat`` steps on the actor's output ``raw`` (K, N, 3).
 
@@ -482,80 +487,88 @@ class MARLTrainer:
         end, which copies finished, and the copies' states now (:meth:`_states`, for the
         next decision's critic). ``base``: the base commands before the first step
         (velocity mode), recomputed before every later step.
+
+        A copy's state is read only where it is used: after the step at which the copy's
+        episode ends within the decision (the state the copy has then, after its automatic
+        reset, beside its final observation) and after the decision's last step.
         """
         s = self.settings
         k_, n_ = s.n_copies, self.n_agents
-        agents = self.venv.possible_agents
         acc = np.zeros((k_, n_))
         ended = np.zeros(k_, dtype=bool)
-        n_c_in: np.ndarray | None = None
+        n_c_in = np.empty((k_, n_, self.critic_dim), dtype=np.float32)
+        states = None
         for j in range(s.action_repeat):
             if j > 0:
-                obs_d = [dict(zip(agents, self._obs[k])) for k in range(k_)]
-                base = self._before(obs_d)
-            cmd = np.stack(
-                [
-                    swarm_command(
-                        s,
-                        raw[k],
-                        self._bases[k],
-                        None if base is None else base[k],
-                        obs_d[k],
-                        agents,
-                    )
-                    for k in range(k_)
-                ]
-            )
-            obs, rew, terminated, truncated, infos, final_obs = self.venv.step(cmd)
+                base = self._before()
+            cmd = swarm_command(s, raw, None, base)  # every copy at once
+            obs, rew, terminated, truncated, info, final_obs = self.venv.step_arrays(cmd)
             done = terminated | truncated
-            # the critic's input after the step; a finished copy has been reset already, so
-            # its episode end is treated as terminal (no bootstrap, see _end_flags)
-            states = self._states()
-            after = _critic_inputs(final_obs, states)
-            self._log_episodes(rew, done, infos)
+            self._log_episodes(rew, done, info)
             scaled = (
                 self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
                 if s.normalize_reward
                 else rew
             )
             live = ~ended
-            if n_c_in is None:
-                n_c_in = after.copy()
-            else:  # copies still in the decision's episode take the newer input
-                n_c_in[live] = after[live]
+            # the critic's input after the step of the copies whose decision ends here; a
+            # finished copy has been reset already, so its episode end is treated as
+            # terminal (no bootstrap, see the module docstring)
+            if j == s.action_repeat - 1:
+                states = self._states()
+                take = np.flatnonzero(live)
+                after = _critic_inputs(final_obs[take], None if states is None else states[take])
+            else:
+                take = np.flatnonzero(live & done)
+                after = _critic_inputs(final_obs[take], self._states(take))
+            n_c_in[take] = after
             acc[live] += scaled[live]
             ended |= done
             self._obs = obs.copy()
-            for kk in np.flatnonzero(done).tolist():
-                if self._bases[kk] is not None:
+            if self._bases[0] is not None:
+                for kk in np.flatnonzero(done).tolist():
                     self._bases[kk].reset()
-        assert n_c_in is not None
         return n_c_in, acc, ended, states
 
-    def _before(self, obs_d: list[dict[str, np.ndarray]]) -> np.ndarray | None:
-        """Every copy's base command the actor reads (velocity mode), else None."""
+    def _before(self) -> np.ndarray | None:
+        """Every copy's base command ``(K, N, 3)`` the actor reads (velocity mode), else None."""
         if self.settings.actor_extra_inputs == 0:
             return None
         agents = self.venv.possible_agents
         return np.stack(
-            [base_command_before(self.settings, b, o, agents) for b, o in zip(self._bases, obs_d)]
+            [
+                base_command_before(self.settings, b, dict(zip(agents, o)), agents)
+                for b, o in zip(self._bases, self._obs)
+            ]
         )
 
-    def _log_episodes(self, rew: np.ndarray, done: np.ndarray, infos: list[dict]) -> None:
+    def _log_episodes(
+        self, rew: np.ndarray, done: np.ndarray, info: Mapping[str, np.ndarray]
+    ) -> None:
+        """Add a step to every copy's running episode figures and log the episodes that
+        ended (``info``: the step's infos as ``(K, N)`` arrays,
+        :meth:`~coopnav_env.envs.BatchedUrbanCanyonEnv.step_arrays`)."""
         self._ep_return += rew.mean(axis=1)
-        for k, info in enumerate(infos):
-            errs = [v["coop_error_m"] for v in info.values() if v["coop_fix"]]
-            self._ep_err_sum[k] += sum(errs)
-            self._ep_err_n[k] += len(errs)
+        err = info["coop_error_m"]
+        fix = info["coop_fix"]
+        # each copy's sum over its UAVs with a fix, added up UAV after UAV
+        step_sum = np.zeros(err.shape[0])
+        for i in range(err.shape[1]):
+            step_sum += np.where(fix[:, i], err[:, i], 0.0)
+        self._ep_err_sum += step_sum
+        self._ep_err_n += fix.sum(axis=1)
+        if not done.any():
+            return
+        goal = info["in_goal"].all(axis=1)
+        collision = info["collided"].any(axis=1)
         for k in np.flatnonzero(done).tolist():
-            info = infos[k]
             self.episode_log.append(
                 {
                     "return": float(self._ep_return[k]),
-                    "goal": float(all(v["in_goal"] for v in info.values())),
-                    "collision": float(any(v["collided"] for v in info.values())),
+                    "goal": float(goal[k]),
+                    "collision": float(collision[k]),
                     "coop_error_m": float(self._ep_err_sum[k] / max(self._ep_err_n[k], 1.0)),
-                    "length": float(next(iter(info.values()))["step"]),
+                    "length": float(info["step"][k, 0]),
                 }
             )
             self._ep_return[k] = 0.0
@@ -657,7 +670,7 @@ class MARLTrainer:
                     ep[k]["a_in"].append(obs[k].copy())
                     ep[k]["c_in"].append(c_in[k].copy())
                     ep[k]["act"].append(cmd[k].astype(np.float32))
-                nxt, rew, terminated, truncated, infos, _ = self.venv.step(cmd)
+                nxt, rew, terminated, truncated, info, _ = self.venv.step_arrays(cmd)
                 done = terminated | truncated
                 if s.normalize_reward:
                     self.reward_std.scale(rew, np.repeat(done[:, None], n_, 1))
@@ -665,7 +678,7 @@ class MARLTrainer:
                     ep[k]["rew"].append(rew[k].copy())
                     if done[k]:
                         recording[k] = False
-                        goals += all(bool(v["in_goal"]) for v in infos[k].values())
+                        goals += bool(info["in_goal"][k].all())
                         rewards = np.stack(ep[k]["rew"])  # (T, N)
                         togo = np.zeros_like(rewards)
                         acc = np.zeros(n_)

@@ -43,7 +43,6 @@ from coopnav_env.envs.urban_canyon import (
     NO_FIX_ERROR_M,
     REWARD_TERMS,
     UrbanCanyonEnv,
-    _team_mix,
 )
 from coopnav_env.gnss.errors import _iono_factors
 from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
@@ -91,7 +90,7 @@ class FusedStep:
         Updates each copy's world, epoch and step count as ``UrbanCanyonEnv._step_arrays``
         does, and returns ``obs (K, N, obs_dim) float32, rewards (K, N), terminated (K,),
         truncated (K,), terms (K, 6, N), in_goal (K, N)`` and the parts of the infos
-        (:func:`step_infos`); or None, with nothing changed, if a copy cannot take the fused
+        (:func:`info_arrays`); or None, with nothing changed, if a copy cannot take the fused
         step now.
         """
         if not self._load(envs):
@@ -315,10 +314,20 @@ class FusedStep:
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
         nlos = np.zeros(los_flat.shape[0], dtype=bool)
-        rewards = np.empty((n_copies, n))
-        terminated = np.zeros(n_copies, dtype=bool)
-        truncated = np.zeros(n_copies, dtype=bool)
-        navigated = cfg.reward_scheme == "navigated_distance"
+        # the reward of every copy at once (UrbanCanyonEnv._step_arrays' arithmetic, each
+        # copy's row reduced as its own array would be)
+        unpaid = st.unpaid
+        if cfg.reward_scheme == "navigated_distance":
+            terms[:, 0], terms[:, 1], unpaid = _navigated_distance(
+                st, pos1, nav_pos, wp, ends[:, 1], float(cfg.nav_reward_cap_m)
+            )
+        if cfg.nav_team_weight > 0.0:  # _team_mix of each copy
+            weight = cfg.nav_team_weight
+            nav = terms[:, 0]
+            terms[:, 0] = (1.0 - weight) * nav + weight * nav.mean(axis=1, keepdims=True)
+        rewards = terms.sum(axis=1)
+        terminated = ends[:, 0] | ends[:, 1]
+        truncated = (steps >= cfg.max_steps) & ~terminated
         for k, e in enumerate(envs):
             w = e.world
             sky = skies[k]
@@ -366,16 +375,8 @@ class FusedStep:
             w.last = ep
             e._epoch = ep
             e._steps += 1
-            stacked = terms[k]
-            crash, reached = bool(ends[k, 0]), bool(ends[k, 1])
-            if navigated:
-                stacked[0], stacked[1] = e._navigated_distance(ep, reached)
-            if cfg.nav_team_weight > 0.0:
-                stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
-            rewards[k] = stacked.sum(axis=0)
-            terminated[k] = crash or reached
-            truncated[k] = (e._steps >= cfg.max_steps) and not terminated[k]
-        st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps)
+            e._unpaid_m = unpaid[k]
+        st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps, unpaid)
         info_parts = (
             floats,
             (n_sats, n_swarm, n_sv, co_status, sa_status, source, wp_c),
@@ -461,54 +462,59 @@ class FusedStep:
             e._epoch = ep
 
 
-def step_infos(
-    agents: list[str],
+def info_arrays(
     floats: np.ndarray,
     ints: tuple[np.ndarray, ...],
     flags: tuple[np.ndarray, ...],
     terms: np.ndarray,
     steps: np.ndarray,
-) -> list[dict[str, dict[str, Any]]]:
-    """Every copy's step infos, as ``UrbanCanyonEnv._infos`` builds one copy's (same keys in
-    the same order, the same Python numbers), from ``(K, ...)`` arrays: the real numbers of
-    :func:`coopnav_env.envs._kernels.info_floats` ``(K, 8, N)``; the satellites received,
-    by the swarm, above the mask ``(K,)``, the statuses, sources and next waypoints; the
-    rejection, goal, collision, separation and contact flags; the reward terms
-    ``(K, 6, N)``; the episode steps ``(K,)``."""
-    n = floats.shape[2]
+) -> dict[str, np.ndarray]:
+    """Every copy's step infos as arrays: :data:`INFO_KEYS` (in order) -> ``(K, N)``.
+
+    From the fused step's ``(K, ...)`` arrays: the real numbers of
+    :func:`coopnav_env.envs._kernels.info_floats` ``(K, 8, N)`` (a missing fix's error is
+    set to :data:`NO_FIX_ERROR_M` here, in place); the satellites received, by the swarm,
+    above the mask ``(K,)``, the statuses, sources and next waypoints; the rejection, goal,
+    collision, separation and contact flags; the reward terms ``(K, 6, N)``; the episode
+    steps ``(K,)``. Real numbers are float64, counts, statuses and steps int64, flags bool:
+    ``tolist()`` of an array gives the Python numbers of ``UrbanCanyonEnv._infos``.
+    """
+    n_copies, n = floats.shape[0], floats.shape[2]
     fixes = np.isfinite(floats[:, 1:3])
     floats[:, 1:3] = np.where(fixes, floats[:, 1:3], NO_FIX_ERROR_M)
     n_sats, n_swarm, n_open, co_status, sa_status, source, wp = ints
-    real = floats.tolist()
-    fix = fixes.tolist()
-    cols_int = [a.tolist() for a in (n_sats, n_swarm, co_status, sa_status, source, wp)]
-    cols_flag = [np.asarray(a, dtype=bool).tolist() for a in flags]
-    reward = terms.tolist()
-    open_sky = n_open.tolist()
-    step = steps.tolist()
-    keys = INFO_KEYS
-    out = []
-    for k, (r, fx, rw) in enumerate(zip(real, fix, reward)):
-        ci = [c[k] for c in cols_int]
-        cf = [c[k] for c in cols_flag]
-        cols = (
-            *r[:3],
-            *fx,
-            *r[3:7],
-            ci[0],
-            ci[1],
-            [open_sky[k]] * n,
-            ci[2],
-            ci[3],
-            ci[4],
-            r[7],
-            ci[5],
-            *cf,
-            *rw,
-            [step[k]] * n,
-        )
-        out.append({a: dict(zip(keys, row)) for a, row in zip(agents, zip(*cols))})
-    return out
+    k_n = (n_copies, n)
+    columns = (
+        *floats[:, :3].transpose(1, 0, 2),
+        *fixes.transpose(1, 0, 2),
+        *floats[:, 3:7].transpose(1, 0, 2),
+        n_sats,
+        n_swarm,
+        np.broadcast_to(n_open[:, None], k_n).astype(np.int64),
+        co_status,
+        sa_status,
+        source,
+        floats[:, 7],
+        wp,
+        *(np.asarray(f, dtype=bool) for f in flags),
+        *terms.transpose(1, 0, 2),
+        np.broadcast_to(steps[:, None], k_n).astype(np.int64),
+    )
+    return dict(zip(INFO_KEYS, columns, strict=True))
+
+
+def infos_from_arrays(
+    agents: list[str], info: dict[str, np.ndarray]
+) -> list[dict[str, dict[str, Any]]]:
+    """The per-copy infos ``[{agent: {key: number}}]`` of the info arrays ``key -> (K, N)``
+    (the keys in the arrays' order; Python floats, ints and bools, as ``UrbanCanyonEnv.
+    _infos`` gives them)."""
+    keys = list(info)
+    cols = [a.tolist() for a in info.values()]  # each K lists of N Python numbers
+    return [
+        {a: dict(zip(keys, row)) for a, row in zip(agents, zip(*per_copy))}
+        for per_copy in zip(*cols)
+    ]
 
 
 def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, ...]:
@@ -808,6 +814,8 @@ class _SwarmArrays:
         self.fence_hi = np.empty((k_n, 2))
         self.obs_params = np.zeros((k_n, _N_OBS_PARAMS))
         self.steps = np.empty(k_n, dtype=np.int64)
+        self.unpaid = np.zeros((k_n, n))
+        self.route_len = np.ones((k_n, n))
         self.n_b = np.zeros(k_n, dtype=np.int64)
         self.n_route = np.zeros(k_n, dtype=np.int64)
         b_max = max(e.world.city.buildings.min_m.shape[0] for e in envs)
@@ -826,11 +834,12 @@ class _SwarmArrays:
         self.nav_pos = self.nav_pos.copy()
         self.nav_cov = self.nav_cov.copy()
         self.wp = self.wp.copy()
+        self.unpaid = self.unpaid.copy()
 
-    def advance(self, pos, vel, nav_pos, nav_cov, wp, steps) -> None:
+    def advance(self, pos, vel, nav_pos, nav_cov, wp, steps, unpaid) -> None:
         """Take the state after a fused step (the arrays the worlds now view)."""
         self.pos, self.vel, self.nav_pos, self.nav_cov, self.wp = pos, vel, nav_pos, nav_cov, wp
-        self.steps = steps
+        self.steps, self.unpaid = steps, unpaid
 
     def load(self, k: int, env: UrbanCanyonEnv) -> None:
         """Copy ``k``'s state from its environment (after a reset)."""
@@ -849,6 +858,9 @@ class _SwarmArrays:
         params = env.__dict__.get("_obs_params")  # none before an environment's first reset
         if params is not None:
             self.obs_params[k] = params
+            # the route not yet paid and the route length (reward_scheme="navigated_distance")
+            self.unpaid[k] = env._unpaid_m
+            self.route_len[k] = env._route_m
         self.steps[k] = env._steps
         b = w.city.buildings
         nb = b.min_m.shape[0]
@@ -866,6 +878,31 @@ class _SwarmArrays:
         self.route[k, :nr] = route
         self.tail[k, :nr] = tail
         self.n_route[k] = nr
+
+
+def _navigated_distance(
+    st: _SwarmArrays,
+    pos: np.ndarray,
+    nav_pos: np.ndarray,
+    wp: np.ndarray,
+    reached: np.ndarray,
+    cap_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``UrbanCanyonEnv._navigated_distance`` of every copy: the terms ``nav`` and
+    ``progress`` ``(K, N)`` and the route not yet paid after the step ``(K, N)``, from the
+    true positions ``pos`` and estimates ``nav_pos`` ``(K, N, 3)``, the next waypoints ``wp``
+    and whether each swarm arrived ``reached`` ``(K,)`` (the same arithmetic, each copy's
+    rows reduced as its own arrays are)."""
+    rows = np.arange(pos.shape[0])[:, None]
+    # remaining_route_m: straight to the next waypoint, then along the route
+    d = np.linalg.norm(pos[:, :, :2] - st.route[rows, wp], axis=2)
+    now_m = d + st.tail[rows, wp]
+    unpaid = st.unpaid
+    covered = np.where(reached[:, None], unpaid, np.clip(unpaid - now_m, 0.0, None))
+    share = covered / st.route_len
+    # np.fmin: an error that is not a number (no estimate) counts as the cap (quality 0)
+    shortfall = np.fmin(np.linalg.norm(nav_pos - pos, axis=2), cap_m) / cap_m
+    return -share * shortfall, share, unpaid - covered
 
 
 def _pad(a: np.ndarray, size: int) -> np.ndarray:

@@ -43,16 +43,48 @@ copy by copy through ``UrbanCanyonEnv._step_arrays``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
 
-from coopnav_env.envs._fused import FusedStep, fused_settings, step_infos
+from coopnav_env.envs._fused import FusedStep, fused_settings, info_arrays, infos_from_arrays
 from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.urban_canyon import UrbanCanyonEnv
 
-__all__ = ["BatchedUrbanCanyonEnv"]
+__all__ = ["BatchedStep", "BatchedUrbanCanyonEnv"]
+
+
+class BatchedStep(NamedTuple):
+    """What :meth:`BatchedUrbanCanyonEnv.step_arrays` returns: arrays only (``K`` copies,
+    ``N`` agents).
+
+    Attributes
+    ----------
+    obs : ndarray, shape (K, N, obs_dim), float32
+        After the step; for a copy whose episode ended, the first observation of its next
+        episode (automatic reset). A buffer reused by later calls: copy it to keep it.
+    rewards : ndarray, shape (K, N), float64
+    terminated, truncated : ndarray of bool, shape (K,)
+        Whether each copy's episode ended at this step (every agent of a copy ends together).
+    info : dict of str to ndarray
+        The step infos as arrays: every key of an agent's info dict (``INFO_KEYS`` of
+        :mod:`coopnav_env.envs.urban_canyon`, in that order, plus the integrity and map
+        exclusion keys where those settings are on), each of shape ``(K, N)``: float64 for
+        real numbers, int64 for counts, statuses, waypoints and ``step``, bool for flags.
+        ``info[key][k, i]`` equals ``infos[k][agent_i][key]`` of :meth:`~BatchedUrbanCanyonEnv.
+        step`; for a finished copy, the values of its final step. New arrays every step.
+    final_obs : ndarray, shape (K, N, obs_dim), float32
+        The observations of this step before any automatic reset (equal to ``obs`` for copies
+        that did not finish).
+    """
+
+    obs: np.ndarray
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    info: dict[str, np.ndarray]
+    final_obs: np.ndarray
 
 
 class BatchedUrbanCanyonEnv:
@@ -189,7 +221,8 @@ class BatchedUrbanCanyonEnv:
         """Step every copy with ``actions`` of shape ``(K, N, 3)`` (or ``(K * N, 3)``, copy-major).
 
         Actions are clipped to ``[-1, 1]``; NaN or inf, or any other shape (a transposed
-        ``(N, K, 3)`` array included), raises ``ValueError``.
+        ``(N, K, 3)`` array included), raises ``ValueError``. :meth:`step_arrays` is the same
+        step with the infos as arrays (no per-agent dicts).
 
         Returns
         -------
@@ -207,6 +240,39 @@ class BatchedUrbanCanyonEnv:
             The observations of this step before any automatic reset (equal to ``obs`` for
             copies that did not finish).
         """
+        obs, rewards, terminated, truncated, info, final_obs = self._step(actions)
+        infos = infos_from_arrays(self.possible_agents, info) if isinstance(info, dict) else info
+        return obs, rewards, terminated, truncated, infos, final_obs
+
+    def step_arrays(self, actions: Any) -> BatchedStep:
+        """:meth:`step` with the infos as arrays ``key -> (K, N)`` (see :class:`BatchedStep`).
+
+        The same step as :meth:`step`, bit for bit; it builds no per-agent dicts, so it is
+        the one to use where arrays are wanted (trainers that stack infos into tensors).
+        """
+        obs, rewards, terminated, truncated, info, final_obs = self._step(actions)
+        if not isinstance(info, dict):
+            info = self.info_arrays(info)
+        return BatchedStep(obs, rewards, terminated, truncated, info, final_obs)
+
+    def info_arrays(self, infos: Sequence[dict[str, dict[str, Any]]]) -> dict[str, np.ndarray]:
+        """Per-copy infos ``[{agent: {key: number}}]`` (as :meth:`reset` or :meth:`step`
+        return them) as arrays ``key -> (K, N)``, with the dtypes of
+        :attr:`BatchedStep.info`."""
+        if len(infos) != self.n_copies:
+            raise ValueError(f"info_arrays needs {self.n_copies} copies' infos, got {len(infos)}")
+        agents = self.possible_agents
+        keys = list(infos[0][agents[0]])
+        out = {}
+        for key in keys:
+            values = [[copy[a][key] for a in agents] for copy in infos]
+            kind = type(values[0][0])
+            dtype = bool if kind is bool else np.int64 if kind is int else np.float64
+            out[key] = np.array(values, dtype=dtype)
+        return out
+
+    def _step(self, actions: Any):
+        """:meth:`step` with the infos as arrays (the fused step) or per-copy dicts."""
         if self._needs_reset:
             raise ValueError("step() called before reset(): call reset() first")
         cmd = self._actions(actions)
@@ -214,12 +280,12 @@ class BatchedUrbanCanyonEnv:
         if out is None:
             return self._step_copies(cmd)
         obs, rewards, terminated, truncated, _terms, _in_goal, parts = out
-        infos = step_infos(self.possible_agents, *parts)
+        info = info_arrays(*parts)
         final_obs = obs
         obs = self._obs
         obs[:] = final_obs
         self._reset_copies(np.flatnonzero(terminated | truncated).tolist())
-        return obs, rewards, terminated, truncated, infos, final_obs
+        return obs, rewards, terminated, truncated, info, final_obs
 
     def _reset_copies(self, done: list[int]) -> None:
         """Automatic reset of the copies ``done`` (the next episode continues each copy's
@@ -258,8 +324,6 @@ class BatchedUrbanCanyonEnv:
             # automatic reset: the next episode continues the copy's generator
             obs[k] = self.envs[k]._reset_arrays(None)
         return obs, rewards, terminated, truncated, infos, final_obs
-
-    # ---- the fused step -----------------------------------------------------------------------
 
     def close(self) -> None:
         """Close every copy."""

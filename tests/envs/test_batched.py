@@ -224,3 +224,81 @@ def test_fused_step_runs_in_a_forked_child() -> None:
     obs, *_ = batch.step(np.zeros((16, 3, 3)))  # the same step in the parent
     assert child.exitcode == 0
     assert obs_child.tobytes() == obs.tobytes()
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"n_uavs": 5, "max_steps": 7},  # the fused step
+        {"n_uavs": 3, "max_steps": 5, "nlos_probability": 0.3},  # copy by copy
+        {"n_uavs": 3, "max_steps": 5, "integrity": "fde"},  # more info keys
+    ],
+)
+def test_step_arrays_equals_step(settings) -> None:
+    # step_arrays is step with the infos as (K, N) arrays: the same episodes bit for bit,
+    # and info[key][k, i] is infos[k][agent_i][key], with the same Python type after tolist()
+    k_copies = 6
+    by_dicts = BatchedUrbanCanyonEnv(k_copies, **settings)
+    by_arrays = BatchedUrbanCanyonEnv(k_copies, **settings)
+    by_dicts.reset(seed=5)
+    by_arrays.reset(seed=5)
+    rng = np.random.default_rng(1)
+    ended = 0
+    for _ in range(12):
+        act = rng.uniform(-1.0, 1.0, (k_copies, by_dicts.n_agents, 3))
+        obs, rew, term, trunc, infos, final = by_dicts.step(act)
+        out = by_arrays.step_arrays(act)
+        assert out.obs.tobytes() == obs.tobytes()
+        assert out.final_obs.tobytes() == final.tobytes()
+        assert out.rewards.tobytes() == rew.tobytes()
+        assert np.array_equal(out.terminated, term) and np.array_equal(out.truncated, trunc)
+        ended += int((term | trunc).sum())
+        agents = by_dicts.possible_agents
+        assert list(out.info) == list(infos[0][agents[0]])  # the same keys, in order
+        for key, arr in out.info.items():
+            assert arr.shape == (k_copies, by_dicts.n_agents), key
+            values = arr.tolist()
+            for k in range(k_copies):
+                for i, a in enumerate(agents):
+                    assert _same(values[k][i], infos[k][a][key]), (key, k, a)
+        # the reset infos convert the same way
+        assert by_arrays.info_arrays(infos).keys() == out.info.keys()
+    assert ended > 0  # automatic resets covered
+    with pytest.raises(ValueError, match="needs 6 copies"):
+        by_arrays.info_arrays(infos[:2])
+
+
+@pytest.mark.parametrize("n_uavs", [5, 1])
+def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
+    # copy k of a K = 64 batch of urban_canyon_v1 (reward "navigated_distance", computed for
+    # all copies at once) is the batch of one reset with seed + k, bit for bit, over episodes
+    # that end at different steps
+    k_copies, seed, steps = 64, 40, 16
+    settings = {"n_uavs": n_uavs, "max_steps": 10}
+    big = BatchedUrbanCanyonEnv.from_envs(
+        [urban_canyon_v1.parallel_env(**settings) for _ in range(k_copies)]
+    )
+    ones = [
+        BatchedUrbanCanyonEnv.from_envs([urban_canyon_v1.parallel_env(**settings)])
+        for _ in range(k_copies)
+    ]
+    obs, _ = big.reset(seed=seed)
+    for k, one in enumerate(ones):
+        assert one.reset(seed=seed + k)[0].tobytes() == obs[k].tobytes()
+    rng = np.random.default_rng(seed)
+    end_steps = set()
+    for step in range(steps):
+        act = rng.uniform(-1.0, 1.0, (k_copies, n_uavs, 3))
+        out = big.step_arrays(act)
+        for k, one in enumerate(ones):
+            ref = one.step_arrays(act[k : k + 1])
+            assert ref.final_obs.tobytes() == out.final_obs[k : k + 1].tobytes()
+            assert ref.obs.tobytes() == out.obs[k : k + 1].tobytes()
+            assert ref.rewards.tobytes() == out.rewards[k : k + 1].tobytes()
+            assert ref.terminated[0] == out.terminated[k]
+            assert ref.truncated[0] == out.truncated[k]
+            for key, arr in out.info.items():
+                assert ref.info[key].tobytes() == arr[k : k + 1].tobytes(), key
+        if (out.terminated | out.truncated).any():
+            end_steps.add(step)
+    assert len(end_steps) >= 3  # episodes ended at several different steps

@@ -179,7 +179,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
     )
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 7}, seed=2)
     raws, steps = [], []
-    real_command, real_step = backend.swarm_command, tr.venv.step
+    real_command, real_step = backend.swarm_command, tr.venv.step_arrays
 
     def command(settings, raw, *args):
         raws.append(np.array(raw))
@@ -191,7 +191,7 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
         return out
 
     monkeypatch.setattr(backend, "swarm_command", command)
-    monkeypatch.setattr(tr.venv, "step", step)
+    monkeypatch.setattr(tr.venv, "step_arrays", step)
     data = tr.collect()
     assert tr.agent_steps == 2 * 4 * 3 * 3  # copies x decisions x repeat x UAVs
     assert len(steps) == 4 * 3  # 3 swarm steps per decision
@@ -218,8 +218,8 @@ def test_action_repeat_holds_the_actors_output_and_sums_the_rewards(monkeypatch)
 def _record_commands(tr: MARLTrainer) -> list[np.ndarray]:
     """The list that every swarm command ``tr`` flies from now on is appended to."""
     flown: list[np.ndarray] = []
-    step = tr.venv.step
-    tr.venv.step = lambda cmd: flown.append(cmd.copy()) or step(cmd)
+    step = tr.venv.step_arrays
+    tr.venv.step_arrays = lambda cmd: flown.append(cmd.copy()) or step(cmd)
     return flown
 
 
@@ -545,3 +545,59 @@ def test_resuming_a_run_trained_with_a_removed_switch_is_refused(tmp_path, capsy
     fresh = [*args[:-1], str(tmp_path / "fresh"), "--set", "torchrl.residual_wall_guard=false"]
     assert main([*fresh, *SMALL]) == 2
     assert "['residual_wall_guard'] were removed from coopnav" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("residual_base", [None, "ceiling"])
+def test_the_command_of_k_swarms_at_once_is_each_swarms_own(residual_base) -> None:
+    from coopnav_env.agents.marl_nets import swarm_command
+
+    s = MARLSettings(residual_base=residual_base, residual_scale=0.5)
+    rng = np.random.default_rng(7)
+    raw = rng.normal(0.0, 1.5, (6, 4, 3)).astype(np.float32)  # K swarms, N UAVs
+    base = rng.uniform(-1.0, 1.0, (6, 4, 3)).astype(np.float32)
+    base = None if residual_base is None else base
+    together = swarm_command(s, raw, None, base)
+    alone = [swarm_command(s, raw[k], None, None if base is None else base[k]) for k in range(6)]
+    assert together.shape == (6, 4, 3)
+    assert together.dtype == alone[0].dtype
+    assert together.tobytes() == np.stack(alone).tobytes()
+    assert np.abs(together).max() <= 1.0 and np.abs(raw).max() > 1.0  # clipping was exercised
+
+
+def test_the_episode_log_of_a_rollout_matches_the_step_infos() -> None:
+    """The episode figures read from arrays equal those summed from every UAV's info."""
+    from coopnav_env.envs._fused import infos_from_arrays
+
+    s = MARLSettings(algorithm="mappo", n_copies=3, rollout_steps=12, action_repeat=2)
+    tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 9}, seed=4)
+    seen: list[tuple[np.ndarray, np.ndarray, list]] = []
+    step = tr.venv.step_arrays
+
+    def record(cmd):
+        out = step(cmd)
+        infos = infos_from_arrays(tr.venv.possible_agents, out.info)
+        seen.append((out.rewards.copy(), out.terminated | out.truncated, infos))
+        return out
+
+    tr.venv.step_arrays = record
+    tr.collect()
+    want, ret, errs = [], np.zeros(3), [[] for _ in range(3)]
+    for rew, done, infos in seen:
+        ret += rew.mean(axis=1)
+        for k, info in enumerate(infos):
+            errs[k] += [v["coop_error_m"] for v in info.values() if v["coop_fix"]]
+            if done[k]:
+                want.append(
+                    {
+                        "return": ret[k],
+                        "goal": float(all(v["in_goal"] for v in info.values())),
+                        "collision": float(any(v["collided"] for v in info.values())),
+                        "coop_error_m": sum(errs[k]) / max(len(errs[k]), 1),
+                        "length": float(info["uav_0"]["step"]),
+                    }
+                )
+                ret[k], errs[k] = 0.0, []
+    assert len(want) >= 3  # episodes of 9 steps ended within the 24 steps
+    assert [e["length"] for e in tr.episode_log] == [e["length"] for e in want]
+    for got, w in zip(tr.episode_log, want, strict=True):
+        assert got == pytest.approx(w, rel=1e-12)

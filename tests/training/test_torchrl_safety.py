@@ -109,7 +109,7 @@ def test_sigint_inside_a_compiled_call_is_taken_after_it(tmp_path, monkeypatch, 
     the call: ``SystemError: CPUDispatcher(...)``, no checkpoint)."""
     from coopnav_env.envs import BatchedUrbanCanyonEnv
 
-    real = BatchedUrbanCanyonEnv.step
+    real = BatchedUrbanCanyonEnv.step_arrays
     calls = {"started": 0, "finished": 0}
 
     def compiled_call(self, actions):
@@ -120,7 +120,7 @@ def test_sigint_inside_a_compiled_call_is_taken_after_it(tmp_path, monkeypatch, 
         calls["finished"] += 1
         return result
 
-    monkeypatch.setattr(BatchedUrbanCanyonEnv, "step", compiled_call)
+    monkeypatch.setattr(BatchedUrbanCanyonEnv, "step_arrays", compiled_call)
     out = tmp_path / "run"
     assert train(out, "--timesteps", "160") == 130
     assert calls["started"] >= 10 and calls["finished"] == calls["started"]
