@@ -39,6 +39,37 @@ from numba import njit
 COND_LIMIT = 1e10
 
 
+# Views of one buffer: a kernel takes its arrays from one allocation per dtype (numba's
+# allocation and release of an array cost about as much as a few hundred flops of these
+# small problems). ``_take*(buf, off, shape...)`` returns the view at ``off`` and the next
+# offset; the buffer holds zeros, as ``numpy.zeros`` would.
+
+
+@njit(cache=True, inline="always")
+def _take1(buf, off, a):
+    """``buf[off:off + a]`` and ``off + a``."""
+    return buf[off : off + a], off + a
+
+
+@njit(cache=True, inline="always")
+def _take2(buf, off, a, b):
+    """``buf[off:off + a b]`` as ``(a, b)`` and the next offset."""
+    return buf[off : off + a * b].reshape((a, b)), off + a * b
+
+
+@njit(cache=True, inline="always")
+def _take3(buf, off, a, b, c):
+    """``buf[off:off + a b c]`` as ``(a, b, c)`` and the next offset."""
+    return buf[off : off + a * b * c].reshape((a, b, c)), off + a * b * c
+
+
+@njit(cache=True, inline="always")
+def _take4(buf, off, a, b, c, d):
+    """``buf[off:off + a b c d]`` as ``(a, b, c, d)`` and the next offset."""
+    n = a * b * c * d
+    return buf[off : off + n].reshape((a, b, c, d)), off + n
+
+
 @njit(cache=True)
 def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
     """Inverse of the symmetric positive definite ``a`` into ``out``; False if not SPD."""
@@ -413,48 +444,69 @@ def cooperative_gauss_newton(
     n_sys = has_clock.shape[1]
     p_dim = 3 + n_sys
     n_x = 3 + p_dim + 1  # columns [lam | A | a]
-    w_user = np.zeros((n, n_sv))  # 1 / sigma_user^2 of the received pseudoranges
+    fbuf = np.zeros(
+        n * n_sv  # w_user
+        + n_b * (3 + n_sys + p_dim * p_dim + n * p_dim * 3)  # pos, clk, inv, cross
+        + n_sv * (2 * n_x + (p_dim + 1))  # x, p0x, px
+        + n * n_sv * (3 + p_dim)  # g3, a_all
+        + n_sv * (p_dim + 1)  # pa_sum, pr_sum
+        + (p_dim + 3) * (p_dim + 1)  # atpx, t3
+        + 18  # m3, m3inv
+        + n_x  # grp_sum
+        + 2 * p_dim * n_sv  # ape, gmat
+        + 4 * p_dim * p_dim
+        + 2 * p_dim  # info, rhs, d_ws, scaled_ws, low_ws, linv_ws
+        + 5 * n_sv * n_sv  # sum_p, mg, mg_inv, mg_low, mg_linv
+    )
+    ibuf = np.zeros(2 * n_sv + n_sys + 1 + n_b, dtype=np.int64)
+    bbuf = np.zeros(2 * n_b, dtype=np.bool_)
+    o = 0
+    w_user, o = _take2(fbuf, o, n, n_sv)  # 1 / sigma_user^2 of the received pseudoranges
     for q in range(n):
         for k in range(n_sv):
             if vis[q, k]:
                 w_user[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
-    pos = x0.copy()
-    clk = np.zeros((n_b, n_sys))
-    inv = np.zeros((n_b, p_dim, p_dim))
-    cross = np.zeros((n_b, n, p_dim, 3))
-    converged = np.zeros(n_b, dtype=np.bool_)
-    singular = np.zeros(n_b, dtype=np.bool_)
-    n_iter = np.zeros(n_b, dtype=np.int64)
+    pos, o = _take2(fbuf, o, n_b, 3)
+    for b in range(n_b):
+        for a in range(3):
+            pos[b, a] = x0[b, a]
+    clk, o = _take2(fbuf, o, n_b, n_sys)
+    inv, o = _take3(fbuf, o, n_b, p_dim, p_dim)
+    cross, o = _take4(fbuf, o, n_b, n, p_dim, 3)
+    converged, ob = _take1(bbuf, 0, n_b)
+    singular, ob = _take1(bbuf, ob, n_b)
+    n_iter, oi = _take1(ibuf, 0, n_b)
 
-    x = np.zeros((n_sv, n_x))  # one block's rows
-    p0x = np.zeros((n_sv, n_x))
-    px = np.zeros((n_sv, p_dim + 1))
-    g3 = np.zeros((n, n_sv, 3))  # P0 lam M3^-1 of every block (the cross terms need it)
-    a_all = np.zeros((n, n_sv, p_dim))
-    sum_p = np.zeros((n_sv, n_sv))
-    pa_sum = np.zeros((n_sv, p_dim))
-    pr_sum = np.zeros(n_sv)
-    atpx = np.zeros((p_dim, p_dim + 1))
-    m3 = np.zeros((3, 3))
-    m3inv = np.zeros((3, 3))
-    t3 = np.zeros((3, p_dim + 1))
-    grp_sum = np.zeros(n_x)
-    mg = np.zeros((n_sv, n_sv))
-    mg_inv = np.zeros((n_sv, n_sv))
-    ape = np.zeros((p_dim, n_sv))
-    gmat = np.zeros((p_dim, n_sv))
-    info = np.zeros((p_dim, p_dim))
-    rhs = np.zeros(p_dim)
-    idx = np.zeros(n_sv, dtype=np.int64)
-    cols = np.zeros(n_sv, dtype=np.int64)  # the satellites of the common-error block
-    mg_low = np.zeros((n_sv, n_sv))  # scratch of the Cholesky inverse of mg
-    mg_linv = np.zeros((n_sv, n_sv))
-    d_ws = np.empty(p_dim)  # scratch of the updates (_safe_inverse_into)
-    scaled_ws = np.empty((p_dim, p_dim))
-    low_ws = np.zeros((p_dim, p_dim))
-    linv_ws = np.zeros((p_dim, p_dim))
+    x, o = _take2(fbuf, o, n_sv, n_x)  # one block's rows
+    p0x, o = _take2(fbuf, o, n_sv, n_x)
+    px, o = _take2(fbuf, o, n_sv, p_dim + 1)
+    g3, o = _take3(fbuf, o, n, n_sv, 3)  # P0 lam M3^-1 of every block (for the cross terms)
+    a_all, o = _take3(fbuf, o, n, n_sv, p_dim)
+    sum_p, o = _take2(fbuf, o, n_sv, n_sv)
+    pa_sum, o = _take2(fbuf, o, n_sv, p_dim)
+    pr_sum, o = _take1(fbuf, o, n_sv)
+    atpx, o = _take2(fbuf, o, p_dim, p_dim + 1)
+    m3, o = _take2(fbuf, o, 3, 3)
+    m3inv, o = _take2(fbuf, o, 3, 3)
+    t3, o = _take2(fbuf, o, 3, p_dim + 1)
+    grp_sum, o = _take1(fbuf, o, n_x)
+    mg, o = _take2(fbuf, o, n_sv, n_sv)
+    mg_inv, o = _take2(fbuf, o, n_sv, n_sv)
+    ape, o = _take2(fbuf, o, p_dim, n_sv)
+    gmat, o = _take2(fbuf, o, p_dim, n_sv)
+    info, o = _take2(fbuf, o, p_dim, p_dim)
+    rhs, o = _take1(fbuf, o, p_dim)
+    mg_low, o = _take2(fbuf, o, n_sv, n_sv)  # scratch of the Cholesky inverse of mg
+    mg_linv, o = _take2(fbuf, o, n_sv, n_sv)
+    d_ws, o = _take1(fbuf, o, p_dim)  # scratch of the updates (_safe_inverse_into)
+    scaled_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    low_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    linv_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    idx, oi = _take1(ibuf, oi, n_sv)
+    cols, oi = _take1(ibuf, oi, n_sv)  # the satellites of the common-error block
     # contiguous satellite range of each constellation (system is sorted)
-    start = np.zeros(n_sys + 1, dtype=np.int64)
+    start, oi = _take1(ibuf, oi, n_sys + 1)
+    assert o == fbuf.shape[0] and oi == ibuf.shape[0]  # every view taken, none overlaps
     for s in range(n_sys + 1):
         c = 0
         for k in range(n_sv):
