@@ -271,6 +271,7 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
     xy = np.ascontiguousarray(sel[6][:, :2])
     st["waypoints"] = (route, xy, next_wp.copy(), reach_m)
     sizes = {
+        "flops": flop_count(used, ref, iters, vis, sa[5], cen.shape[0] == 1, n_sys),
         "sky": s,
         "received": vis.sum(axis=1),
         "used": used.sum(axis=(1, 2)),
@@ -278,6 +279,47 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
         "co_iter": iters,
     }
     return st, sizes
+
+
+def flop_count(used, ref, iters, vis, sa_iters, shared, n_sys) -> dict[str, float]:
+    """Floating-point operations of one epoch's navigation, counted from the loops of the
+    structured solve (a multiply, add, divide or square root is one flop each).
+
+    Cooperative, per centroid and Gauss-Newton iteration, with ``m_q`` rows of UAV q,
+    ``R = sum m_q``, ``S_u`` satellites in use, ``P = 3 + n_sys`` unknowns: per row 225
+    (geometry 12, the relative-error column 15, residual and weights 11, nuisance-clock
+    removal 28, the rank-3 latent M3 18, T3 36, G3 15, the projected row 36, A^T P [A a]
+    48, the satellite sums 6), per pair of rows of a UAV 9 (nuisance pair and Woodbury
+    terms of sum_n P_n), per UAV 40 (the 3x3 inverse); the common errors ``3 S_u^2``
+    (I + E^T P E) ``+ S_u^3`` (its Cholesky inverse) ``+ 2 P S_u^2 + 3 P S_u + 2 P^2 S_u``
+    (G, the right side, the reduced normal matrix), the cross terms ``9 P R`` and the P x P
+    update 450. Standalone, per receiver and iteration: 52 per received satellite and 450
+    for the update. The finish: 200 per (centroid, UAV). ``iters`` per centroid,
+    ``sa_iters`` the largest standalone count (the receivers iterate about as often).
+    """
+    p = 3 + n_sys
+    co = 0.0
+    n_b, n, _s = used.shape
+    for b in range(n_b):
+        m = used[b].sum(axis=1).astype(float)
+        r = m.sum()
+        s_u = used[b].any(axis=0).sum()
+        per_it = (
+            225 * r
+            + 9 * (m * m).sum()
+            + 40 * (m > 0).sum()
+            + 3 * s_u**2
+            + s_u**3
+            + 2 * p * s_u**2
+            + 3 * p * s_u
+            + 2 * p * p * s_u
+            + 9 * p * r
+            + 450
+        )
+        co += per_it * iters[b]
+    sa = float(sa_iters) * (52 * vis.sum() + 450 * vis.shape[0])
+    finish = 200.0 * n_b * n
+    return {"cooperative": co, "standalone": sa, "finish": finish}
 
 
 @njit
@@ -437,6 +479,21 @@ def main(argv: list[str] | None = None) -> int:
         1.0, co_it.mean() * (len(co_it) / len(sizes))
     )
     print(f"  cooperative Gauss-Newton per centroid-iteration: {1e6 * gn_per_iter:.2f} us")
+    fl = {k: np.mean([s["flops"][k] for s in sizes]) for k in sizes[0]["flops"]}
+    total_fl = sum(fl.values())
+    print("\nflops per swarm-step (counted from the loops; bench_nav.flop_count):")
+    for k, v in fl.items():
+        print(f"  {k:>16}: {v:9.0f}")
+    print(f"  {'total':>16}: {total_fl:9.0f}")
+    t_co = stage_t["co_gauss_newton"].mean()
+    print(
+        f"  cooperative Gauss-Newton: {fl['cooperative'] / (1e9 * t_co):.2f} flop/ns measured; "
+        f"epoch_navigation: {total_fl / (1e9 * best['this checkout'].mean()):.2f} flop/ns"
+    )
+    print(
+        f"  time at 1 flop/ns: {total_fl / 1e3:.1f} us; at 2.6 flop/ns (one scalar flop per "
+        f"cycle at 2.6 GHz): {total_fl / 2.6e3:.1f} us"
+    )
     return 0
 
 
