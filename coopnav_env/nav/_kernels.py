@@ -39,6 +39,37 @@ from numba import njit
 COND_LIMIT = 1e10
 
 
+# Views of one buffer: a kernel takes its arrays from one allocation per dtype (numba's
+# allocation and release of an array cost about as much as a few hundred flops of these
+# small problems). ``_take*(buf, off, shape...)`` returns the view at ``off`` and the next
+# offset; the buffer holds zeros, as ``numpy.zeros`` would.
+
+
+@njit(cache=True, inline="always")
+def _take1(buf, off, a):
+    """``buf[off:off + a]`` and ``off + a``."""
+    return buf[off : off + a], off + a
+
+
+@njit(cache=True, inline="always")
+def _take2(buf, off, a, b):
+    """``buf[off:off + a b]`` as ``(a, b)`` and the next offset."""
+    return buf[off : off + a * b].reshape((a, b)), off + a * b
+
+
+@njit(cache=True, inline="always")
+def _take3(buf, off, a, b, c):
+    """``buf[off:off + a b c]`` as ``(a, b, c)`` and the next offset."""
+    return buf[off : off + a * b * c].reshape((a, b, c)), off + a * b * c
+
+
+@njit(cache=True, inline="always")
+def _take4(buf, off, a, b, c, d):
+    """``buf[off:off + a b c d]`` as ``(a, b, c, d)`` and the next offset."""
+    n = a * b * c * d
+    return buf[off : off + n].reshape((a, b, c, d)), off + n
+
+
 @njit(cache=True)
 def _cholesky_inverse(a: np.ndarray, out: np.ndarray) -> bool:
     """Inverse of the symmetric positive definite ``a`` into ``out``; False if not SPD."""
@@ -52,7 +83,16 @@ def _cholesky_inverse_into(
 ) -> bool:
     """:func:`_cholesky_inverse` in the scratch matrices ``low`` and ``linv`` (at least the
     size of ``a``; only the lower triangles the factorisation writes are read)."""
-    n = a.shape[0]
+    return _cholesky_inverse_leading(a, a.shape[0], out, low, linv)
+
+
+@njit(cache=True)
+def _cholesky_inverse_leading(
+    a: np.ndarray, n: int, out: np.ndarray, low: np.ndarray, linv: np.ndarray
+) -> bool:
+    """:func:`_cholesky_inverse_into` of the leading ``n x n`` block of ``a`` (into the
+    leading blocks of ``out``, ``low`` and ``linv``), so that callers can keep one buffer for
+    problems of several sizes."""
     for j in range(n):
         s = a[j, j]
         for k in range(j):
@@ -144,17 +184,33 @@ def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
     eigen-decomposition per Gauss-Newton iteration of a well-conditioned problem.
     """
     p = info.shape[0]
-    d = np.empty(p)
+    return _safe_inverse_into(
+        info, usable, out, np.empty(p), np.empty((p, p)), np.zeros((p, p)), np.zeros((p, p))
+    )
+
+
+@njit(cache=True)
+def _safe_inverse_into(
+    info: np.ndarray,
+    usable: bool,
+    out: np.ndarray,
+    d: np.ndarray,
+    scaled: np.ndarray,
+    low: np.ndarray,
+    linv: np.ndarray,
+) -> bool:
+    """:func:`_safe_inverse_one` in scratch arrays: ``d`` (P,), ``scaled``, ``low`` and
+    ``linv`` (P, P) (allocated once by the caller instead of at every Gauss-Newton update)."""
+    p = info.shape[0]
     for i in range(p):
         d[i] = np.sqrt(max(info[i, i], 1e-300))
-    scaled = np.empty((p, p))
     for i in range(p):
         for j in range(p):
             scaled[i, j] = info[i, j] / d[i] / d[j]
     singular = False
     good = usable
     if usable:
-        if not _cholesky_inverse(scaled, out):  # not numerically positive definite
+        if not _cholesky_inverse_into(scaled, out, low, linv):  # not numerically SPD
             singular = True
         else:
             norm_a = 0.0
@@ -203,7 +259,38 @@ def _gauss_newton_update(
     or singular (no update; the status says why) or the position update is below ``tol_m``.
     """
     p_dim = info.shape[0]
-    singular = _safe_inverse_one(info, usable, inv_out)
+    return _gauss_newton_update_into(
+        info,
+        rhs,
+        usable,
+        inv_out,
+        pos,
+        clock,
+        tol_m,
+        np.empty(p_dim),
+        np.empty((p_dim, p_dim)),
+        np.zeros((p_dim, p_dim)),
+        np.zeros((p_dim, p_dim)),
+    )
+
+
+@njit(cache=True)
+def _gauss_newton_update_into(
+    info: np.ndarray,
+    rhs: np.ndarray,
+    usable: bool,
+    inv_out: np.ndarray,
+    pos: np.ndarray,
+    clock: np.ndarray,
+    tol_m: float,
+    d: np.ndarray,
+    scaled: np.ndarray,
+    low: np.ndarray,
+    linv: np.ndarray,
+) -> tuple[bool, bool]:
+    """:func:`_gauss_newton_update` in the scratch arrays of :func:`_safe_inverse_into`."""
+    p_dim = info.shape[0]
+    singular = _safe_inverse_into(info, usable, inv_out, d, scaled, low, linv)
     if not usable or singular:
         return singular, True
     step2 = 0.0
@@ -248,6 +335,10 @@ def standalone_gauss_newton(
     info = np.empty((p_dim, p_dim))
     rhs = np.empty(p_dim)
     g = np.empty(p_dim)
+    d_ws = np.empty(p_dim)  # scratch of the updates (_safe_inverse_into)
+    scaled_ws = np.empty((p_dim, p_dim))
+    low_ws = np.zeros((p_dim, p_dim))
+    linv_ws = np.zeros((p_dim, p_dim))
     for r in range(n_rx):
         for it in range(1, max_iter + 1):
             n_iter[r] = it
@@ -285,8 +376,18 @@ def standalone_gauss_newton(
             for s in range(n_sys):
                 if not seen[r, s]:
                     info[3 + s, 3 + s] += 1.0
-            singular[r], converged[r] = _gauss_newton_update(
-                info, rhs, usable[r], inv[r], pos[r], clock[r], tol_m
+            singular[r], converged[r] = _gauss_newton_update_into(
+                info,
+                rhs,
+                usable[r],
+                inv[r],
+                pos[r],
+                clock[r],
+                tol_m,
+                d_ws,
+                scaled_ws,
+                low_ws,
+                linv_ws,
             )
             if converged[r]:
                 break
@@ -343,41 +444,69 @@ def cooperative_gauss_newton(
     n_sys = has_clock.shape[1]
     p_dim = 3 + n_sys
     n_x = 3 + p_dim + 1  # columns [lam | A | a]
-    w_user = np.zeros((n, n_sv))  # 1 / sigma_user^2 of the received pseudoranges
+    fbuf = np.zeros(
+        n * n_sv  # w_user
+        + n_b * (3 + n_sys + p_dim * p_dim + n * p_dim * 3)  # pos, clk, inv, cross
+        + n_sv * (2 * n_x + (p_dim + 1))  # x, p0x, px
+        + n * n_sv * (3 + p_dim)  # g3, a_all
+        + n_sv * (p_dim + 1)  # pa_sum, pr_sum
+        + (p_dim + 3) * (p_dim + 1)  # atpx, t3
+        + 18  # m3, m3inv
+        + n_x  # grp_sum
+        + 2 * p_dim * n_sv  # ape, gmat
+        + 4 * p_dim * p_dim
+        + 2 * p_dim  # info, rhs, d_ws, scaled_ws, low_ws, linv_ws
+        + 5 * n_sv * n_sv  # sum_p, mg, mg_inv, mg_low, mg_linv
+    )
+    ibuf = np.zeros(2 * n_sv + n_sys + 1 + n_b, dtype=np.int64)
+    bbuf = np.zeros(2 * n_b, dtype=np.bool_)
+    o = 0
+    w_user, o = _take2(fbuf, o, n, n_sv)  # 1 / sigma_user^2 of the received pseudoranges
     for q in range(n):
         for k in range(n_sv):
             if vis[q, k]:
                 w_user[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
-    pos = x0.copy()
-    clk = np.zeros((n_b, n_sys))
-    inv = np.zeros((n_b, p_dim, p_dim))
-    cross = np.zeros((n_b, n, p_dim, 3))
-    converged = np.zeros(n_b, dtype=np.bool_)
-    singular = np.zeros(n_b, dtype=np.bool_)
-    n_iter = np.zeros(n_b, dtype=np.int64)
+    pos, o = _take2(fbuf, o, n_b, 3)
+    for b in range(n_b):
+        for a in range(3):
+            pos[b, a] = x0[b, a]
+    clk, o = _take2(fbuf, o, n_b, n_sys)
+    inv, o = _take3(fbuf, o, n_b, p_dim, p_dim)
+    cross, o = _take4(fbuf, o, n_b, n, p_dim, 3)
+    converged, ob = _take1(bbuf, 0, n_b)
+    singular, ob = _take1(bbuf, ob, n_b)
+    n_iter, oi = _take1(ibuf, 0, n_b)
 
-    x = np.zeros((n_sv, n_x))  # one block's rows
-    p0x = np.zeros((n_sv, n_x))
-    px = np.zeros((n_sv, p_dim + 1))
-    g3 = np.zeros((n, n_sv, 3))  # P0 lam M3^-1 of every block (the cross terms need it)
-    a_all = np.zeros((n, n_sv, p_dim))
-    sum_p = np.zeros((n_sv, n_sv))
-    pa_sum = np.zeros((n_sv, p_dim))
-    pr_sum = np.zeros(n_sv)
-    atpx = np.zeros((p_dim, p_dim + 1))
-    m3 = np.zeros((3, 3))
-    m3inv = np.zeros((3, 3))
-    t3 = np.zeros((3, p_dim + 1))
-    grp_sum = np.zeros(n_x)
-    mg = np.zeros((n_sv, n_sv))
-    mg_inv = np.zeros((n_sv, n_sv))
-    ape = np.zeros((p_dim, n_sv))
-    gmat = np.zeros((p_dim, n_sv))
-    info = np.zeros((p_dim, p_dim))
-    rhs = np.zeros(p_dim)
-    idx = np.zeros(n_sv, dtype=np.int64)
+    x, o = _take2(fbuf, o, n_sv, n_x)  # one block's rows
+    p0x, o = _take2(fbuf, o, n_sv, n_x)
+    px, o = _take2(fbuf, o, n_sv, p_dim + 1)
+    g3, o = _take3(fbuf, o, n, n_sv, 3)  # P0 lam M3^-1 of every block (for the cross terms)
+    a_all, o = _take3(fbuf, o, n, n_sv, p_dim)
+    sum_p, o = _take2(fbuf, o, n_sv, n_sv)
+    pa_sum, o = _take2(fbuf, o, n_sv, p_dim)
+    pr_sum, o = _take1(fbuf, o, n_sv)
+    atpx, o = _take2(fbuf, o, p_dim, p_dim + 1)
+    m3, o = _take2(fbuf, o, 3, 3)
+    m3inv, o = _take2(fbuf, o, 3, 3)
+    t3, o = _take2(fbuf, o, 3, p_dim + 1)
+    grp_sum, o = _take1(fbuf, o, n_x)
+    mg, o = _take2(fbuf, o, n_sv, n_sv)
+    mg_inv, o = _take2(fbuf, o, n_sv, n_sv)
+    ape, o = _take2(fbuf, o, p_dim, n_sv)
+    gmat, o = _take2(fbuf, o, p_dim, n_sv)
+    info, o = _take2(fbuf, o, p_dim, p_dim)
+    rhs, o = _take1(fbuf, o, p_dim)
+    mg_low, o = _take2(fbuf, o, n_sv, n_sv)  # scratch of the Cholesky inverse of mg
+    mg_linv, o = _take2(fbuf, o, n_sv, n_sv)
+    d_ws, o = _take1(fbuf, o, p_dim)  # scratch of the updates (_safe_inverse_into)
+    scaled_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    low_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    linv_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    idx, oi = _take1(ibuf, oi, n_sv)
+    cols, oi = _take1(ibuf, oi, n_sv)  # the satellites of the common-error block
     # contiguous satellite range of each constellation (system is sorted)
-    start = np.zeros(n_sys + 1, dtype=np.int64)
+    start, oi = _take1(ibuf, oi, n_sys + 1)
+    assert o == fbuf.shape[0] and oi == ibuf.shape[0]  # every view taken, none overlaps
     for s in range(n_sys + 1):
         c = 0
         for k in range(n_sv):
@@ -387,6 +516,29 @@ def cooperative_gauss_newton(
 
     for b in range(n_b):
         pb = b if pr.shape[0] > 1 else 0
+        # The common-error block over the satellites some UAV uses. A satellite no UAV uses
+        # has zero rows and columns in sum_p, pa_sum and pr_sum (+0.0 exactly), so its row
+        # of mg is that of the identity, its Cholesky factor and inverse rows are unit rows,
+        # and every term it adds below is +0.0 (x - (+0.0) and a sum begun at +0.0 plus
+        # +0.0 are exact): leaving it out changes no bit. Only a non-finite common sigma of
+        # such a satellite would make those terms NaN; then every satellite stays in.
+        n_c = 0
+        all_cols = False
+        for k in range(n_sv):
+            in_use = False
+            for q in range(n):
+                if rows[b, q, k]:
+                    in_use = True
+                    break
+            if in_use:
+                cols[n_c] = k
+                n_c += 1
+            elif not np.isfinite(sig_c[k]):
+                all_cols = True
+        if all_cols:
+            n_c = n_sv
+            for k in range(n_sv):
+                cols[k] = k
         for it in range(1, max_iter + 1):
             n_iter[b] = it
             sum_p[:, :] = 0.0
@@ -520,12 +672,14 @@ def cooperative_gauss_newton(
                 singular[b] = True
                 converged[b] = True
                 break
-            # 3. the errors common to all UAVs
-            for k in range(n_sv):
-                for k2 in range(n_sv):
-                    mg[k, k2] = sig_c[k] * sum_p[k, k2] * sig_c[k2]
-                mg[k, k] += 1.0
-            if not _cholesky_inverse(mg, mg_inv):  # I + E^T P E is SPD unless inputs are broken
+            # 3. the errors common to all UAVs (indices c of cols, satellites k = cols[c])
+            for c in range(n_c):
+                k = cols[c]
+                for c2 in range(n_c):
+                    mg[c, c2] = sig_c[k] * sum_p[k, cols[c2]] * sig_c[cols[c2]]
+                mg[c, c] += 1.0
+            # I + E^T P E is SPD unless inputs are broken
+            if not _cholesky_inverse_leading(mg, n_c, mg_inv, mg_low, mg_linv):
                 for i in range(p_dim):
                     for j in range(p_dim):
                         inv[b, i, j] = 1.0 if i == j else 0.0
@@ -533,23 +687,25 @@ def cooperative_gauss_newton(
                 converged[b] = True
                 break
             for p in range(p_dim):
-                for k in range(n_sv):
-                    ape[p, k] = pa_sum[k, p] * sig_c[k]
+                for c in range(n_c):
+                    k = cols[c]
+                    ape[p, c] = pa_sum[k, p] * sig_c[k]
             for p in range(p_dim):
-                for k in range(n_sv):
+                for c in range(n_c):
                     acc = 0.0
-                    for k2 in range(n_sv):
-                        acc += ape[p, k2] * mg_inv[k2, k]
-                    gmat[p, k] = acc
+                    for c2 in range(n_c):
+                        acc += ape[p, c2] * mg_inv[c2, c]
+                    gmat[p, c] = acc
             for p in range(p_dim):
                 acc_r = atpx[p, p_dim]
-                for k in range(n_sv):
-                    acc_r -= gmat[p, k] * sig_c[k] * pr_sum[k]
+                for c in range(n_c):
+                    k = cols[c]
+                    acc_r -= gmat[p, c] * sig_c[k] * pr_sum[k]
                 rhs[p] = acc_r
                 for p2 in range(p_dim):
                     acc = atpx[p, p2]
-                    for k in range(n_sv):
-                        acc -= gmat[p, k] * ape[p2, k]
+                    for c in range(n_c):
+                        acc -= gmat[p, c] * ape[p2, c]
                     info[p, p2] = acc
             for s in range(n_sys):  # unit diagonal for the clocks of constellations not seen
                 if not has_clock[b, s]:
@@ -559,13 +715,24 @@ def cooperative_gauss_newton(
                 for p in range(p_dim):
                     for j in range(3):
                         acc = 0.0
-                        for k in range(n_sv):
+                        for c in range(n_c):
+                            k = cols[c]
                             gk = g3[q, k, j]
                             if gk != 0.0:
-                                acc += (a_all[q, k, p] - gmat[p, k] * sig_c[k]) * gk
+                                acc += (a_all[q, k, p] - gmat[p, c] * sig_c[k]) * gk
                         cross[b, q, p, j] = acc
-            singular[b], converged[b] = _gauss_newton_update(
-                info, rhs, usable[b], inv[b], pos[b], clk[b], tol_m
+            singular[b], converged[b] = _gauss_newton_update_into(
+                info,
+                rhs,
+                usable[b],
+                inv[b],
+                pos[b],
+                clk[b],
+                tol_m,
+                d_ws,
+                scaled_ws,
+                low_ws,
+                linv_ws,
             )
             if converged[b]:
                 break
