@@ -438,6 +438,9 @@ def section_stages(args, out: dict) -> None:
 
 
 def env_memory(make: Callable[[], Any]) -> dict[str, Any]:
+    """Bytes still allocated (``tracemalloc``) after building, resetting and stepping one
+    environment 20 times, after a first one has loaded the compiled code; its pickle size."""
+    RandomStepper(make()).run(3)  # imports, compiled kernels: once per process, not per env
     gc.collect()
     tracemalloc.start()
     base = tracemalloc.get_traced_memory()[0]
@@ -1126,8 +1129,34 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def check_sources() -> None:
+    """Warn when a subpackage of ``coopnav_env`` resolves outside this checkout.
+
+    ``coopnav_env.training`` and ``coopnav_env.agents`` are mapped to this repository's
+    ``training/`` and ``agents/`` by the editable install's finder; a ``PYTHONPATH`` entry
+    that holds another checkout's editable finder (a site-packages directory used for the
+    references) maps them to that checkout's code instead, and the figures would be another
+    version's.
+    """
+    import importlib
+
+    root = Path(__file__).resolve().parents[1]
+    for name in ("coopnav_env", "coopnav_env.training", "coopnav_env.agents"):
+        try:
+            where = Path(importlib.import_module(name).__file__).resolve()
+        except ImportError:  # an extra that is not installed: its sections say so
+            continue
+        if root not in where.parents:
+            print(
+                f"WARNING: {name} is imported from {where.parent}, not from {root}: the "
+                "figures are that code's. Point PYTHONPATH at a folder holding only the "
+                "references (vmas, mpe2), not at another checkout's site-packages."
+            )
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    check_sources()
     if args.memory_child is not None:  # one K of section 3b, in its own process
         row = batch_memory_child(
             args.memory_child, args.memory_steps, args.memory_trace, args.memory_sample
