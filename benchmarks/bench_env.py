@@ -840,6 +840,8 @@ def section_batched(args, out: dict) -> None:
     for kind, rate in row.items():
         print(f"   {kind:>9}: {rate:8.0f} env-steps/s  ({rate * n:8.0f} agent-steps/s)")
     print(f"   batched / supersuit: {row['batched'] / row['supersuit']:.2f}x")
+    if "vmas" in row:
+        print(f"   batched / vmas: {row['batched'] / row['vmas']:.2f}x")
     # the compiled part of a batched step: a ceiling for any batching of this Python code
     step = fns["batched"]
     with kernel_timers() as acc:
