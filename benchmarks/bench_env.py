@@ -1,11 +1,15 @@
-"""Benchmark: urban_canyon_v0 side by side with its peers, in one process.
+"""Benchmark: urban_canyon_v1 side by side with its peers, in one process.
+
+Every section measures ``urban_canyon_v1``, the environment every default uses (its world,
+step and observations are v0's; its reward is the task's score and its episodes start
+crash-free for 3 steps, so random actions fly a few steps longer before the first crash).
 
 What it measures (every figure of one run comes from the same process, so that the machine's
 load affects the environment and its reference alike; ratios are what to compare across
 machines):
 
 1. **Parallel-env steps/s** with uniformly random actions (resetting when an episode ends) of
-   ``urban_canyon_v0`` and of PettingZoo MPE ``simple_spread_v3`` (package ``mpe2``,
+   ``urban_canyon_v1`` and of PettingZoo MPE ``simple_spread_v3`` (package ``mpe2``,
    ``continuous_actions=True``, N agents and N landmarks, ``max_cycles=25``) at the same N,
    and their ratio; VMAS ``navigation`` (one environment, CPU) beside them when ``vmas`` is
    installed. The two are measured in alternating rounds; the best round of each counts.
@@ -17,6 +21,13 @@ machines):
    functions), and the rest (environment adapter, observations, rewards, infos, resets).
 3. **Memory per environment**: bytes allocated by building one environment, resetting it
    and stepping it 20 times (``tracemalloc``, what stays allocated), and its pickle size.
+3b. **Memory per swarm of the batched environment** (``BatchedUrbanCanyonEnv``, N = 5) at K =
+   64, 256, 1,024 and 4,096 swarms, each K in a fresh process: the growth of the resident set
+   size per swarm after building, resetting and 20 random steps; what ``tracemalloc`` sees
+   still allocated per swarm; the bytes reachable from the copies (and of them numpy array
+   data) by part of a copy (its spaces, constellation, city, last epoch, ...) and the batch's
+   own buffers; and whether 4,096 swarms of 5 UAVs fit in 2 GiB (measured, or extrapolated
+   from the largest K run).
 4. **Scaling**: step cost against the swarm size N (2 ... 100, beside MPE) and against the
    size of the grid city (blocks per side), with the growth explained.
 5. **Batched**: env-steps/s (swarm steps) of K copies at N = 5 stepped as one SB3 vector
@@ -46,9 +57,10 @@ machines):
 
 Usage::
 
-    python benchmarks/bench_env.py            # everything, about 4-6 minutes on 2 cores
+    python benchmarks/bench_env.py            # everything, about 8-10 minutes on 2 cores
     python benchmarks/bench_env.py --quick    # a smoke run, about 1 minute
     python benchmarks/bench_env.py --sections compare stages --sizes 5 50 --json out.json
+    python benchmarks/bench_env.py --sections batch_memory --memory-copies 64 4096
 
 Needs the ``benchmark`` extra (``pip install -e ".[benchmark]"``: mpe2, vmas) for the
 references; missing ones are reported and skipped. Sections 5-6 need the ``train`` extra.
@@ -75,12 +87,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from coopnav_env import urban_canyon_v0
+from coopnav_env import urban_canyon_v1
 
 SECTIONS = (
     "compare",
     "stages",
     "memory",
+    "batch_memory",
     "scaling",
     "batched",
     "train",
@@ -94,7 +107,8 @@ SECTIONS = (
 
 
 def make_urban(n: int, **kw: Any):
-    return urban_canyon_v0.parallel_env(n_uavs=n, **kw)
+    """The environment under test: ``urban_canyon_v1``'s parallel env of ``n`` UAVs."""
+    return urban_canyon_v1.parallel_env(n_uavs=n, **kw)
 
 
 def make_mpe(n: int):
@@ -211,7 +225,7 @@ def section_compare(args, out: dict) -> None:
     has_mpe, has_vmas = have("mpe2"), have("vmas")
     if not has_mpe:
         print("   mpe2 not installed (pip install -e '.[benchmark]'): no reference ratio")
-    head = f"{'N':>4} | {'urban_canyon_v0':>15} {'mpe2 spread':>12} {'ratio':>7}"
+    head = f"{'N':>4} | {'urban_canyon_v1':>15} {'mpe2 spread':>12} {'ratio':>7}"
     head += f" | {'urban hover':>11} {'ratio':>7}"
     head += f" | {'VMAS nav':>9}" if has_vmas else ""
     print(head + "   (steps/s; ratio = urban / mpe2)")
@@ -238,9 +252,12 @@ def section_compare(args, out: dict) -> None:
                 "ratio_hover": ratio_h,
             }
         )
+        rows[-1]["episode_steps"] = fns["urban"].__self__.steps / fns["urban"].__self__.episodes
+    lengths = ", ".join(f"{r['episode_steps']:.1f}" for r in rows)
     print(
-        "   (random actions crash within a few steps, so a reset -- new city, route, cold"
-        "\n   solve -- comes every ~5 steps; 'hover' sends zero commands: 200-step episodes)"
+        f"   (random actions crash soon after the crash-free start: episodes of {lengths} steps,"
+        "\n   so a reset -- new city, route, cold solve -- comes that often; 'hover' sends zero"
+        "\n   commands: 200-step episodes)"
     )
     out["compare"] = rows
 
@@ -381,7 +398,7 @@ def stage_profile(n: int, seconds: float, **env_kw: Any) -> dict[str, Any]:
 
 
 def section_stages(args, out: dict) -> None:
-    print("\n== 2. where a step of urban_canyon_v0 goes (ms per step, share) ==")
+    print("\n== 2. where a step of urban_canyon_v1 goes (ms per step, share) ==")
     rows = [stage_profile(n, args.seconds) for n in args.sizes]
     # the stages the runs went through (the default path skips the modular path's functions)
     labels = [
@@ -421,6 +438,9 @@ def section_stages(args, out: dict) -> None:
 
 
 def env_memory(make: Callable[[], Any]) -> dict[str, Any]:
+    """Bytes still allocated (``tracemalloc``) after building, resetting and stepping one
+    environment 20 times, after a first one has loaded the compiled code; its pickle size."""
+    RandomStepper(make()).run(3)  # imports, compiled kernels: once per process, not per env
     gc.collect()
     tracemalloc.start()
     base = tracemalloc.get_traced_memory()[0]
@@ -448,7 +468,7 @@ def section_memory(args, out: dict) -> None:
         if have("mpe2"):
             row["mpe2"] = env_memory(lambda n=n: make_mpe(n))
         rows.append(row)
-        parts = [f"N={n:<3} urban_canyon_v0 {row['urban']['traced_bytes'] / 1e3:8.0f} kB"]
+        parts = [f"N={n:<3} urban_canyon_v1 {row['urban']['traced_bytes'] / 1e3:8.0f} kB"]
         parts.append(f"(pickle {(row['urban']['pickle_bytes'] or 0) / 1e3:.0f} kB)")
         if "mpe2" in row:
             pk = row["mpe2"]["pickle_bytes"]
@@ -461,6 +481,245 @@ def section_memory(args, out: dict) -> None:
         f"at most {scenario._SKY_CACHE.max_size}), shared by every copy"
     )
     out["memory"] = rows
+
+
+# --------------------------------------------------------------------------------------------
+# 3b. memory per swarm of the batched environment
+# --------------------------------------------------------------------------------------------
+
+MEMORY_BUDGET_BYTES = 2 * 1024**3
+"""The budget a batch of 4,096 swarms of 5 UAVs must fit in (section 3b)."""
+
+
+def rss_bytes() -> int:
+    """Resident set size of this process now (psutil, else ``/proc/self/statm``; 0 if neither)."""
+    try:
+        import psutil
+
+        return int(psutil.Process().memory_info().rss)
+    except ImportError:
+        pass
+    try:
+        import os
+
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def peak_rss_bytes() -> int:
+    """Peak resident set size of this process (``resource``; Linux reports kB); 0 if unknown."""
+    try:
+        import resource
+    except ImportError:
+        return 0
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+_NOT_FOLLOWED = (type, type(sys), type(len), type(rss_bytes), type(peak_rss_bytes.__code__))
+
+
+def reachable_bytes(
+    root: Any, seen: set[int], bases: list[np.ndarray] | None = None
+) -> tuple[int, int]:
+    """(bytes, numpy array data bytes) of the objects reachable from ``root`` not in ``seen``.
+
+    Follows ``gc.get_referents``, not into classes, modules, functions or code objects (shared
+    by every copy); sizes are ``sys.getsizeof`` (an array that owns its data counts its
+    buffer, a view its header). The array a view looks into (its ``base``) is followed, or,
+    with ``bases`` given, appended to it instead (for the caller to tell a copy's own arrays
+    from the batch's buffers that every copy views). Adds what it visits to ``seen``, so that
+    an object reached again (from another copy, or another attribute) counts once.
+    """
+    total = arrays = 0
+    stack = [root]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen or isinstance(obj, _NOT_FOLLOWED):
+            continue
+        seen.add(id(obj))
+        total += sys.getsizeof(obj)
+        if isinstance(obj, np.ndarray):
+            if obj.base is None:
+                arrays += obj.nbytes if obj.flags.owndata else 0
+            elif bases is None:
+                stack.append(obj.base)
+            else:
+                bases.append(obj.base)
+        stack.extend(gc.get_referents(obj))
+    return total, arrays
+
+
+def copy_breakdown(
+    envs: list[Any], seen: set[int]
+) -> tuple[dict[str, tuple[int, int]], tuple[int, int]]:
+    """What ``envs`` (copies of a batch) hold: (bytes, array bytes) summed over them per part
+    of a copy (each attribute of its world, ``world.city``, ..., then each other attribute of
+    the environment, ``observation_spaces``, ...; an object shared by two parts or copies
+    counts in the first), and (bytes, array bytes) of the arrays that views of two or more of
+    the copies look into (the batch's buffers, whose size grows with K)."""
+    parts: dict[str, list[int]] = {}
+    viewed: dict[int, tuple[np.ndarray, set[int], str]] = {}
+    for c, env in enumerate(envs):
+        seen.update({id(env), id(env.__dict__), id(env.world), id(env.world.__dict__)})
+        items = [(f"world.{k}", v) for k, v in vars(env.world).items()]
+        items += [(k, v) for k, v in vars(env).items() if k != "world"]
+        for name, value in items:
+            bases: list[np.ndarray] = []
+            b, a = reachable_bytes(value, seen, bases)
+            acc = parts.setdefault(name, [0, 0])
+            acc[0] += b
+            acc[1] += a
+            for base in bases:
+                while base.base is not None:
+                    base = base.base
+                viewed.setdefault(id(base), (base, set(), name))[1].add(c)
+    shared = [0, 0]
+    for base, copies, name in viewed.values():
+        b, a = reachable_bytes(base, seen)
+        acc = shared if len(copies) > 1 else parts[name]
+        acc[0] += b
+        acc[1] += a
+    return {k: (v[0], v[1]) for k, v in parts.items()}, (shared[0], shared[1])
+
+
+def batch_memory_child(k: int, steps: int, trace: bool, sample: int) -> dict[str, Any]:
+    """What a batch of ``k`` swarms of 5 UAVs holds (run in a fresh process, see
+    :func:`section_batch_memory`): resident memory and time after building the batched
+    environment, resetting it and ``steps`` random steps; the bytes reachable from it (the first
+    ``sample`` copies broken down by part, the batch's own arrays); with ``trace``, what
+    ``tracemalloc`` sees still allocated after the same again."""
+    from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+    n = 5
+    rng = np.random.default_rng(0)
+
+    def build_and_step() -> tuple[Any, dict[str, float]]:
+        t: dict[str, float] = {}
+        t0 = time.perf_counter()
+        batch = BatchedUrbanCanyonEnv.from_envs([make_urban(n) for _ in range(k)])
+        t["build_s"] = time.perf_counter() - t0
+        t["rss_built"] = rss_bytes()
+        t0 = time.perf_counter()
+        batch.reset(seed=0)
+        t["reset_s"] = time.perf_counter() - t0
+        t["rss_reset"] = rss_bytes()
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            batch.step(rng.uniform(-1.0, 1.0, (k, n, 3)))
+        t["steps_s"] = time.perf_counter() - t0
+        gc.collect()
+        t["rss_stepped"] = rss_bytes()
+        return batch, t
+
+    # load the compiled kernels and the process-wide caches before the baseline
+    probe = BatchedUrbanCanyonEnv.from_envs([make_urban(n) for _ in range(2)])
+    probe.reset(seed=0)
+    for _ in range(3):
+        probe.step(rng.uniform(-1.0, 1.0, (2, n, 3)))
+    del probe
+    gc.collect()
+    rss0 = rss_bytes()
+    batch, t = build_and_step()
+    row: dict[str, Any] = {"k": k, "n": n, "steps": steps, "rss_base_bytes": rss0, **t}
+    for stage in ("built", "reset", "stepped"):
+        row[f"rss_{stage}_per_swarm"] = (row.pop(f"rss_{stage}") - rss0) / k
+    row["rss_peak_bytes"] = peak_rss_bytes()
+    seen: set[int] = {id(batch), id(batch.__dict__), id(batch.envs)}
+    sample = min(sample, k)
+    parts, (viewed_b, viewed_a) = copy_breakdown(batch.envs[:sample], seen)
+    row["parts_per_swarm"] = {name: (b / sample, a / sample) for name, (b, a) in parts.items()}
+    for env in batch.envs[sample:]:  # stop at the other copies: what is left is the batch's
+        seen.update({id(env), id(env.__dict__), id(env.world), id(env.world.__dict__)})
+    b, a = reachable_bytes(batch, seen)
+    # the batch's own state and the buffers the copies' views look into, shared by all K
+    row["batch_own_per_swarm"] = ((b + viewed_b) / k, (a + viewed_a) / k)
+    del batch
+    gc.collect()
+    if trace:
+        tracemalloc.start()
+        base = tracemalloc.get_traced_memory()[0]
+        batch, t = build_and_step()
+        gc.collect()
+        row["traced_per_swarm"] = (tracemalloc.get_traced_memory()[0] - base) / k
+        tracemalloc.stop()
+        del batch
+    return row
+
+
+def section_batch_memory(args, out: dict) -> None:
+    import subprocess
+
+    steps = args.memory_steps
+    print(
+        f"\n== 3b. memory per swarm of the batched env (N = 5, after building, resetting and "
+        f"{steps} random steps; each K in a fresh process) =="
+    )
+    print(
+        f"{'K':>5} | {'build s':>7} {'reset s':>7} {'steps s':>7} | RSS growth per swarm (kB): "
+        f"{'built':>6} {'reset':>6} {'stepped':>7} | {'traced kB':>9} | {'reachable kB':>12} "
+        f"{'(arrays)':>8} | {'peak RSS MB':>11}"
+    )
+    rows = []
+    for k in args.memory_copies:
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--memory-child", str(k)]
+        cmd += ["--memory-steps", str(steps)]
+        if k <= args.memory_trace_max:
+            cmd.append("--memory-trace")
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if proc.returncode != 0:
+            print(f"{k:>5} | failed: {proc.stderr.strip().splitlines()[-1:]}")
+            continue
+        row = json.loads(proc.stdout.strip().splitlines()[-1])
+        reach = sum(b for b, _ in row["parts_per_swarm"].values()) + row["batch_own_per_swarm"][0]
+        arrays = sum(a for _, a in row["parts_per_swarm"].values())
+        arrays += row["batch_own_per_swarm"][1]
+        row["reachable_per_swarm"], row["reachable_arrays_per_swarm"] = reach, arrays
+        traced = row.get("traced_per_swarm")
+        print(
+            f"{k:>5} | {row['build_s']:>7.1f} {row['reset_s']:>7.1f} {row['steps_s']:>7.1f} | "
+            f"{'':>26}{row['rss_built_per_swarm'] / 1e3:>6.1f} "
+            f"{row['rss_reset_per_swarm'] / 1e3:>6.1f} {row['rss_stepped_per_swarm'] / 1e3:>7.1f}"
+            f" | {'-' if traced is None else f'{traced / 1e3:.1f}':>9} | {reach / 1e3:>12.1f} "
+            f"{arrays / 1e3:>8.1f} | {row['rss_peak_bytes'] / 2**20:>11.0f}"
+        )
+        rows.append(row)
+    out["batch_memory"] = rows
+    if not rows:
+        return
+    last = rows[-1]
+    parts = sorted(last["parts_per_swarm"].items(), key=lambda kv: -kv[1][0])
+    print(
+        f"   per swarm, by part of a copy (objects reachable from copies 0-{args.memory_sample - 1}"
+        f" of K = {last['k']}, kB; of which numpy array data):"
+    )
+    shown = 0.0
+    for name, (b, a) in parts[:10]:
+        print(f"   {name:>28}: {b / 1e3:6.1f} ({a / 1e3:5.1f})")
+        shown += b
+    rest = sum(b for _, (b, _) in parts[10:])
+    print(f"   {'other parts':>28}: {rest / 1e3:6.1f}")
+    b, a = last["batch_own_per_swarm"]
+    print(f"   {'the batch (fused buffers)':>28}: {b / 1e3:6.1f} ({a / 1e3:5.1f})")
+    target = 4096
+    per_swarm = last["rss_stepped_per_swarm"]
+    projected = last["rss_base_bytes"] + target * per_swarm
+    how = "measured" if last["k"] == target else f"extrapolated from K = {last['k']}"
+    peak = last["rss_peak_bytes"] if last["k"] == target else projected
+    verdict = "fits" if peak <= MEMORY_BUDGET_BYTES else "does NOT fit"
+    print(
+        f"   {target:,} swarms of 5 UAVs ({how}): {per_swarm / 1e3:.0f} kB per swarm of RSS "
+        f"growth, peak RSS {peak / 2**20:.0f} MB (the process before the batch: "
+        f"{last['rss_base_bytes'] / 2**20:.0f} MB: Python, numpy, the compiled kernels): "
+        f"{verdict} in {MEMORY_BUDGET_BYTES / 2**30:.0f} GiB"
+    )
+    out["batch_memory_verdict"] = {
+        "k": target,
+        "how": how,
+        "peak_rss_bytes": peak,
+        "fits_2_gib": bool(peak <= MEMORY_BUDGET_BYTES),
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -581,6 +840,8 @@ def section_batched(args, out: dict) -> None:
     for kind, rate in row.items():
         print(f"   {kind:>9}: {rate:8.0f} env-steps/s  ({rate * n:8.0f} agent-steps/s)")
     print(f"   batched / supersuit: {row['batched'] / row['supersuit']:.2f}x")
+    if "vmas" in row:
+        print(f"   batched / vmas: {row['batched'] / row['vmas']:.2f}x")
     # the compiled part of a batched step: a ceiling for any batching of this Python code
     step = fns["batched"]
     with kernel_timers() as acc:
@@ -659,7 +920,7 @@ def train_rate(kind: str, n_envs: int, timesteps: int, n_steps: int) -> tuple[fl
 
 
 def section_train(args, out: dict) -> None:
-    n_uavs = int(urban_canyon_v0.parallel_env().config.n_uavs)
+    n_uavs = int(urban_canyon_v1.parallel_env().config.n_uavs)
     rollout = args.train_n_steps * args.train_copies * n_uavs
     steps = rollout * args.train_rollouts
     print(
@@ -836,6 +1097,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--train-copies", type=int, default=None, help="n_envs of section 6 (8)")
     ap.add_argument("--train-n-steps", type=int, default=None, help="PPO n_steps (256)")
     ap.add_argument("--train-rollouts", type=int, default=None, help="rollouts (2)")
+    ap.add_argument(
+        "--memory-copies", type=int, nargs="+", default=None, help="K of 3b (64 256 1024 4096)"
+    )
+    ap.add_argument("--memory-steps", type=int, default=None, help="steps of 3b (20)")
+    ap.add_argument(
+        "--memory-trace-max", type=int, default=None, help="largest K of 3b traced (1024)"
+    )
+    ap.add_argument("--memory-sample", type=int, default=256, help="copies broken down in 3b (256)")
+    ap.add_argument("--memory-child", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--memory-trace", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--json", default=None, metavar="PATH", help="also write the figures here")
     args = ap.parse_args(argv)
     quick = args.quick
@@ -848,6 +1119,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "train_copies": 2 if quick else 8,
         "train_n_steps": 32 if quick else 256,
         "train_rollouts": 1 if quick else 2,
+        "memory_copies": [64, 256] if quick else [64, 256, 1024, 4096],
+        "memory_steps": 5 if quick else 20,
+        "memory_trace_max": 64 if quick else 1024,
     }
     for name, value in defaults.items():
         if getattr(args, name) is None:
@@ -857,8 +1131,40 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+def check_sources() -> None:
+    """Warn when a subpackage of ``coopnav_env`` resolves outside this checkout.
+
+    ``coopnav_env.training`` and ``coopnav_env.agents`` are mapped to this repository's
+    ``training/`` and ``agents/`` by the editable install's finder; a ``PYTHONPATH`` entry
+    that holds another checkout's editable finder (a site-packages directory used for the
+    references) maps them to that checkout's code instead, and the figures would be another
+    version's.
+    """
+    import importlib
+
+    root = Path(__file__).resolve().parents[1]
+    for name in ("coopnav_env", "coopnav_env.training", "coopnav_env.agents"):
+        try:
+            where = Path(importlib.import_module(name).__file__).resolve()
+        except ImportError:  # an extra that is not installed: its sections say so
+            continue
+        if root not in where.parents:
+            print(
+                f"WARNING: {name} is imported from {where.parent}, not from {root}: the "
+                "figures are that code's. Point PYTHONPATH at a folder holding only the "
+                "references (vmas, mpe2), not at another checkout's site-packages."
+            )
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    check_sources()
+    if args.memory_child is not None:  # one K of section 3b, in its own process
+        row = batch_memory_child(
+            args.memory_child, args.memory_steps, args.memory_trace, args.memory_sample
+        )
+        print(json.dumps(row, default=float))
+        return 0
     try:
         import torch
 
@@ -875,6 +1181,7 @@ def main(argv: list[str] | None = None) -> int:
         "compare": section_compare,
         "stages": section_stages,
         "memory": section_memory,
+        "batch_memory": section_batch_memory,
         "scaling": section_scaling,
         "batched": section_batched,
         "train": section_train,

@@ -2,7 +2,7 @@
 
 What it measures, all in one process (so that the machine's load affects every variant alike;
 the ratio is the figure to compare across machines): parallel-env steps per second of
-``urban_canyon_v0`` at N UAVs (default 5) with uniformly random actions (resetting when an
+``urban_canyon_v1`` at N UAVs (default 5) with uniformly random actions (resetting when an
 episode ends; bench_env's ``RandomStepper``), for
 
 * ``off``: the defaults (no integrity monitoring): the reference;
@@ -49,8 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_env import RandomStepper
 
-from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import preset_config
+from coopnav_env import urban_canyon_v1
 
 VARIANTS = ("off", "fde", "raim", "fde+map", "fde+nlos", "3dma+nlos")
 
@@ -58,17 +57,17 @@ VARIANTS = ("off", "fde", "raim", "fde+map", "fde+nlos", "3dma+nlos")
 def make_env(variant: str, n: int):
     """The environment of one variant at ``n`` UAVs."""
     if variant == "off":
-        return urban_canyon_v0.parallel_env(n_uavs=n)
+        return urban_canyon_v1.parallel_env(n_uavs=n)
     if variant == "fde":
-        return urban_canyon_v0.parallel_env(n_uavs=n, integrity="fde")
+        return urban_canyon_v1.parallel_env(n_uavs=n, integrity="fde")
     if variant == "raim":
-        return urban_canyon_v0.parallel_env(n_uavs=n, integrity="raim")
+        return urban_canyon_v1.parallel_env(n_uavs=n, integrity="raim")
     if variant == "fde+map":
-        return urban_canyon_v0.parallel_env(n_uavs=n, integrity="fde", nlos_exclusion="map")
+        return urban_canyon_v1.parallel_env(n_uavs=n, integrity="fde", nlos_exclusion="map")
     if variant == "fde+nlos":
-        return urban_canyon_v0.parallel_env(config=preset_config("urban_nlos", n_uavs=n))
+        return urban_canyon_v1.parallel_env(preset="urban_nlos", n_uavs=n)
     if variant == "3dma+nlos":
-        return urban_canyon_v0.parallel_env(config=preset_config("urban_nlos_3dma", n_uavs=n))
+        return urban_canyon_v1.parallel_env(preset="urban_nlos_3dma", n_uavs=n)
     raise ValueError(f"unknown variant {variant!r}; variants are {VARIANTS}")
 
 
@@ -135,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     variants = tuple(dict.fromkeys(["off", *args.variants]))
     out: dict = {"steps": args.steps, "rounds": args.rounds, "results": {}}
-    print("integrity monitoring: step cost of urban_canyon_v0 (best of alternating rounds)")
+    print("integrity monitoring: step cost of urban_canyon_v1 (best of alternating rounds)")
     head = f"{'N':>4} | {'variant':>9} | {'CPU ms/step':>11} {'ratio':>6}"
     print(head + f" | {'wall ms/step':>12} {'ratio':>6}")
     for n in args.n_uavs:

@@ -1,4 +1,4 @@
-"""Benchmark: RLlib training throughput of ``urban_canyon_v0`` against the number of env runners.
+"""Benchmark: RLlib training throughput of ``urban_canyon_v1`` against the number of env runners.
 
 For each ``--runners`` count, one short ``coopnav train --backend rllib`` run (a fresh local
 Ray in its own process, ``--iterations`` PPO iterations with the packaged hyperparameters
@@ -100,8 +100,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {r} env runners: {res['env_steps_per_s']:.0f} env-steps/s", file=sys.stderr)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     first = results[0]
+    env_id = load_config().get("env_id", "urban_canyon_v1")
     print(
-        f"urban_canyon_v0, {first['n_uavs']} UAVs; train batch {first['batch_env_steps']} "
+        f"{env_id}, {first['n_uavs']} UAVs; train batch {first['batch_env_steps']} "
         f"env-steps (= {first['batch_env_steps'] * first['n_uavs']} agent-steps) per iteration; "
         f"{args.iterations} iterations, the first not timed"
     )

@@ -1,0 +1,59 @@
+"""The helpers of ``benchmarks/bench_env.py`` count what they say they count."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _bench_env():
+    spec = importlib.util.spec_from_file_location("bench_env", ROOT / "benchmarks" / "bench_env.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+bench_env = _bench_env()
+
+
+def test_the_benchmark_measures_urban_canyon_v1_without_the_legacy_warning():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FutureWarning)
+        env = bench_env.make_urban(3)
+    assert env.metadata["name"] == "urban_canyon_v1"
+    assert len(env.possible_agents) == 3
+
+
+def test_reachable_bytes_counts_a_shared_array_once():
+    data = np.zeros(1000)  # 8,000 bytes of data
+    first, second = [data], [data]
+    seen: set[int] = set()
+    b1, a1 = bench_env.reachable_bytes(first, seen)
+    b2, a2 = bench_env.reachable_bytes(second, seen)
+    assert a1 == 8000 and b1 >= 8000 + sys.getsizeof(first)
+    assert a2 == 0 and b2 == sys.getsizeof(second)
+
+
+def test_reachable_bytes_hands_back_the_array_a_view_looks_into():
+    base = np.zeros((64, 5, 3))
+    view = base[3]
+    bases: list[np.ndarray] = []
+    b, a = bench_env.reachable_bytes({"pos": view}, set(), bases)
+    assert a == 0 and b < base.nbytes  # the view's header, not the batch's buffer
+    assert len(bases) == 1 and bases[0] is base
+    b_all, a_all = bench_env.reachable_bytes({"pos": view}, set())
+    assert a_all == base.nbytes and b_all > base.nbytes
+
+
+def test_memory_options_default_to_the_issue_sizes():
+    args = bench_env.parse_args([])
+    assert args.memory_copies == [64, 256, 1024, 4096]
+    assert "batch_memory" in bench_env.SECTIONS
+    quick = bench_env.parse_args(["--quick"])
+    assert max(quick.memory_copies) < 4096
