@@ -45,7 +45,9 @@ def test_the_suite_has_three_places_of_different_character() -> None:
     characters = {c.character for c in REAL_SUITE}
     assert {"dense old town", "high-rise district", "wide avenues"} <= characters
     assert suite_cities("real") == REAL_SUITE
-    with pytest.raises(ValueError, match=r"unknown suite 'unreal'; suites: \['real'\]"):
+    with pytest.raises(
+        ValueError, match=r"unknown suite 'unreal'; suites: \['families', 'grid', 'real'\]"
+    ):
         suite_cities("unreal")
 
 
