@@ -566,7 +566,14 @@ def test_the_command_of_k_swarms_at_once_is_each_swarms_own(residual_base) -> No
 
 def test_the_episode_log_of_a_rollout_matches_the_step_infos() -> None:
     """The episode figures read from arrays equal those summed from every UAV's info."""
-    from coopnav_env.envs._fused import infos_from_arrays
+
+    def infos_from_arrays(agents: list[str], info: dict) -> list[dict]:
+        """Each copy's per-agent info dicts, read from the (K, N) info arrays."""
+        n_copies = next(iter(info.values())).shape[0]
+        return [
+            {a: {key: arr[k, i] for key, arr in info.items()} for i, a in enumerate(agents)}
+            for k in range(n_copies)
+        ]
 
     s = MARLSettings(algorithm="mappo", n_copies=3, rollout_steps=12, action_repeat=2)
     tr = MARLTrainer(s, {"n_uavs": 3, "max_steps": 9}, seed=4)
