@@ -295,7 +295,8 @@ itself, `env(...)` is `pettingzoo.utils.parallel_to_aec(parallel_env(...))` (AEC
 `city` (`"grid"`): `"grid"`, a random street grid, `"canyon"`, the paper's canyon,
 `"geojson:PATH"`, building footprints from a file (section "A city from a GeoJSON file"),
 `"osm:PATH"`, an OpenStreetMap extract (`docs/cities.md`), or `"family:NAME"`, a city
-generated per episode of a family (`docs/city_families.md`).
+generated per episode of a family (`docs/city_families.md`; `"family:mixed"`: of every
+family).
 
 `city_origin`, `city_start_lat_lon`, `city_goal_lat_lon` (`"file"`, None, None): the file
 city's geodetic origin and fixed start and goal (same section).
@@ -309,6 +310,9 @@ of a building without `height` or `building:levels`; metres per storey (`docs/ci
 (mean 45 m), 10 % of the blocks open squares; 500 m x 500 m.
 
 `city_seed` (None): None draws a new city every episode; an int keeps one city.
+
+`city_pool` (None): family cities only: each episode's city seed drawn from `0 .. city_pool - 1`
+(a fixed set of training cities; exclusive with `city_seed`).
 
 `canyon_h_over_d`, `canyon_street_width_m`, `canyon_length_m` (sqrt(3), 20, 400): the canyon;
 `h/d` holds at 15 m altitude (Eq. 25), so the roofs are 32.3 m high.

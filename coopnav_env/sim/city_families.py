@@ -66,6 +66,7 @@ __all__ = [
     "FAMILIES",
     "FAMILY_PREFIX",
     "FAMILY_SIZE_M",
+    "MIXED_FAMILY",
     "SEEDED_CACHE_SIZE",
     "CityStatistics",
     "FamilyFootprints",
@@ -73,6 +74,7 @@ __all__ = [
     "family_city",
     "family_footprints",
     "family_name",
+    "family_of_seed",
     "seeded_family_city",
     "statistics_table",
 ]
@@ -394,10 +396,14 @@ _GENERATORS = {
 }
 FAMILIES: tuple[str, ...] = tuple(_GENERATORS)
 """The city families, in the order the documentation shows them."""
+MIXED_FAMILY: str = "mixed"
+"""``city="family:mixed"``: every city of a family drawn from its city seed
+(:func:`family_of_seed`), each of :data:`FAMILIES` equally often."""
 
 
 def family_name(spec: str) -> str:
-    """The family a ``city`` setting ``"family:NAME"`` (or a bare ``NAME``) names.
+    """The family a ``city`` setting ``"family:NAME"`` (or a bare ``NAME``) names
+    (:data:`MIXED_FAMILY` for ``"family:mixed"``).
 
     Raises
     ------
@@ -405,18 +411,32 @@ def family_name(spec: str) -> str:
         An unknown family, listing the known ones.
     """
     name = spec[len(FAMILY_PREFIX) :] if spec.startswith(FAMILY_PREFIX) else spec
-    if name not in _GENERATORS:
+    if name not in _GENERATORS and name != MIXED_FAMILY:
         raise ValueError(
             f"unknown city family {name!r}; the families are "
-            + ", ".join(f"'{FAMILY_PREFIX}{f}'" for f in FAMILIES)
+            + ", ".join(f"'{FAMILY_PREFIX}{f}'" for f in (*FAMILIES, MIXED_FAMILY))
         )
     return name
+
+
+def family_of_seed(name: str, seed: int) -> str:
+    """The family of the city of ``seed`` under a ``city`` setting naming ``name``: ``name``
+    itself, or for :data:`MIXED_FAMILY` ``FAMILIES[seed % len(FAMILIES)]`` (city seeds are
+    drawn uniformly, so each family comes equally often)."""
+    name = family_name(name)
+    return FAMILIES[int(seed) % len(FAMILIES)] if name == MIXED_FAMILY else name
 
 
 def family_footprints(name: str, rng: np.random.Generator) -> FamilyFootprints:
     """Draw one city of family ``name`` (:data:`FAMILIES`) from ``rng``: footprints and roofs
     (the same generator state gives the same city)."""
-    return _GENERATORS[family_name(name)](rng)
+    family = family_name(name)
+    if family == MIXED_FAMILY:
+        raise ValueError(
+            f"{FAMILY_PREFIX}{MIXED_FAMILY} names every family: draw one city of one family "
+            "(family_of_seed gives the family of a city seed)"
+        )
+    return _GENERATORS[family](rng)
 
 
 def family_city(

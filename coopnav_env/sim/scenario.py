@@ -173,6 +173,7 @@ from coopnav_env.sim.city_families import (
     FAMILIES,
     FAMILY_PREFIX,
     family_name,
+    family_of_seed,
     seeded_family_city,
 )
 from coopnav_env.sim.file_city import (
@@ -300,13 +301,21 @@ class ScenarioConfig:
         (:data:`~coopnav_env.sim.osm_city.SHIPPED_OSM_PATHS`). ``"family:NAME"``: a
         generated city of a family (:mod:`coopnav_env.sim.city_families`: ``irregular``,
         ``old_town``, ``high_rise``, ``avenues``, ``courtyards``), flown as a file city, new
-        every episode unless ``city_seed`` is set.
+        every episode unless ``city_seed`` is set; ``"family:mixed"``: each city of a family
+        drawn with it (every family equally often).
     city_config : CityConfig, default CityConfig()
         Street grid parameters (``city="grid"`` only): 6 x 6 blocks of 60 m, 20 m streets,
         roofs 10-150 m (mean 45 m), 10 % open squares; 500 m x 500 m.
     city_seed : int or None, default None
         ``None``: a new grid or family city is drawn from the episode generator at every reset
         (domain randomisation). An int in [0, 2**63): the same city in every episode.
+    city_pool : int or None, default None
+        Generated family cities (``city="family:..."``) only: each episode's city seed is
+        drawn from ``0 .. city_pool - 1``, so that training meets ``city_pool`` distinct
+        cities, each built once per process (while
+        :data:`~coopnav_env.sim.city_families.SEEDED_CACHE_SIZE` holds them). Held-out
+        episodes at the default None draw from all ``2**63`` seeds. In [1, 2**31);
+        exclusive with ``city_seed``.
     canyon_h_over_d : float, default sqrt(3)
         ``h/d`` of the canyon at its reference altitude of 15 m (Eq. 25), in (0, 100].
     canyon_street_width_m : float, default 20.0
@@ -470,6 +479,7 @@ class ScenarioConfig:
     city: CityKind = "grid"
     city_config: CityConfig = field(default_factory=CityConfig)
     city_seed: int | None = None
+    city_pool: int | None = None
     canyon_h_over_d: float = math.sqrt(3.0)
     canyon_street_width_m: float = 20.0
     canyon_length_m: float = 400.0
@@ -539,6 +549,18 @@ class ScenarioConfig:
         )
         if self.city_seed is not None:
             _check_int(o, "city_seed", self.city_seed, 0, 2**63 - 1)
+        if self.city_pool is not None:
+            _check_int(o, "city_pool", self.city_pool, 1, 2**31 - 1)
+            if not _is_family_city(self.city):
+                raise ValueError(
+                    f"{o}.city_pool={self.city_pool} applies to generated family cities "
+                    f"('family:NAME') only, got city={self.city!r}: leave city_pool at None"
+                )
+            if self.city_seed is not None:
+                raise ValueError(
+                    f"{o}.city_pool={self.city_pool} and city_seed={self.city_seed} exclude "
+                    "each other: city_seed fixes one city, city_pool draws among several"
+                )
         _check_real(o, "canyon_h_over_d", self.canyon_h_over_d, 0.0, 100.0, lo_open=True)
         _check_real(o, "canyon_street_width_m", self.canyon_street_width_m, 4.0, 1000.0)
         _check_real(o, "canyon_length_m", self.canyon_length_m, 50.0, 100_000.0)
@@ -905,8 +927,10 @@ def make_city(config: ScenarioConfig, rng: np.random.Generator) -> City:
     :func:`generate_city` drawing from ``rng``. ``city="geojson:PATH"``: the file's city
     (:func:`~coopnav_env.sim.file_city.load_file_city`, cached; ``rng`` untouched).
     ``city="family:NAME"``: :func:`~coopnav_env.sim.city_families.seeded_family_city` of
-    ``city_seed``, or without it of a city seed drawn from ``rng`` (one draw; a city is built
-    once per process and seed, so that episodes repeated on the same seeds reuse it).
+    ``city_seed``, or without it of a city seed drawn from ``rng`` (one draw, from
+    ``0 .. city_pool - 1`` when ``city_pool`` is set; a city is built once per process and
+    seed, so that episodes repeated on the same seeds reuse it); ``"family:mixed"``: of the
+    family :func:`~coopnav_env.sim.city_families.family_of_seed` names.
     """
     if _is_file_city(config.city):
         return _file_city(config)
@@ -914,8 +938,9 @@ def make_city(config: ScenarioConfig, rng: np.random.Generator) -> City:
         name, origin = family_name(config.city), (config.lat_deg, config.lon_deg, config.alt_m)
         seed = config.city_seed
         if seed is None:  # one draw: the episode's city seed (a city is built once per seed)
-            seed = int(rng.integers(0, 2**63 - 1))
-        return seeded_family_city(name, seed, origin)
+            high = 2**63 - 1 if config.city_pool is None else config.city_pool
+            seed = int(rng.integers(0, high))
+        return seeded_family_city(family_of_seed(name, seed), seed, origin)
     if config.city == "canyon":
         return canyon_city(
             h_over_d=config.canyon_h_over_d,

@@ -9,7 +9,12 @@ from coopnav_env import urban_canyon_v1
 from coopnav_env.agents import make_policy
 from coopnav_env.envs import make_config
 from coopnav_env.sim.city import is_inside_building
-from coopnav_env.sim.city_families import FAMILIES
+from coopnav_env.sim.city_families import (
+    FAMILIES,
+    family_footprints,
+    family_of_seed,
+    seeded_family_city,
+)
 from coopnav_env.sim.file_city import FileCity
 
 
@@ -70,3 +75,36 @@ def test_the_column_heuristic_flies_towards_the_goal_in_every_family(name: str) 
     assert not crashed
     moved = np.linalg.norm(goal - start) - np.linalg.norm(goal - env.world.pos_enu_m[:, :2].mean(0))
     assert moved > 60.0
+
+
+def test_the_mixed_family_draws_each_family_from_the_city_seed() -> None:
+    assert [family_of_seed("family:mixed", s) for s in range(len(FAMILIES))] == list(FAMILIES)
+    assert family_of_seed("family:old_town", 3) == "old_town"
+    env = urban_canyon_v1.parallel_env(city="family:mixed", city_pool=len(FAMILIES))
+    seen = set()
+    for seed in range(30):
+        env.reset(seed=seed)
+        seen.add(env.world.city.source)
+    # five cities in the pool, one of each family: thirty episodes meet all of them
+    assert seen == {f"family:{f}" for f in FAMILIES}
+    with pytest.raises(ValueError, match="family:mixed names every family"):
+        family_footprints("mixed", np.random.default_rng(0))
+
+
+def test_a_city_pool_draws_the_city_seeds_below_it() -> None:
+    env = urban_canyon_v1.parallel_env(city="family:irregular", city_pool=2)
+    cfg = env.config
+    origin = (cfg.lat_deg, cfg.lon_deg, cfg.alt_m)
+    pool = [seeded_family_city("irregular", s, origin) for s in (0, 1)]
+    for seed in range(6):
+        env.reset(seed=seed)
+        assert any(env.world.city is c for c in pool)
+
+
+def test_a_city_pool_outside_family_cities_or_with_a_city_seed_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"city_pool=3 applies to generated family cities.*'grid'"):
+        make_config(city="grid", city_pool=3)
+    with pytest.raises(ValueError, match=r"city_pool=3 and city_seed=1 exclude each other"):
+        make_config(city="family:mixed", city_pool=3, city_seed=1)
+    with pytest.raises(ValueError, match=r"city_pool must be an integer in \[1, "):
+        make_config(city="family:mixed", city_pool=0)
