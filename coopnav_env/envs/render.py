@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from coopnav_env.constants import SYSTEMS
+from coopnav_env.constants import FILE_SYSTEMS
 from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 
 __all__ = ["close_window", "gnss_time_text", "render_frame", "show_frame"]
 
-SYSTEM_COLOURS = {"GPS": "#1f77b4", "BDS": "#d62728"}
+SYSTEM_COLOURS = {"GPS": "#1f77b4", "BDS": "#d62728", "GAL": "#6a4c93"}
 SOURCE_COLOURS = {
     NavSource.COOPERATIVE: "#2a9d8f",
     NavSource.STANDALONE: "#f4a261",
@@ -413,7 +413,7 @@ def _draw_sky(ax: Any, world: UrbanWorld, ep: Epoch, q: int) -> None:
     ax.scatter(
         th[blocked], r[blocked], s=34, facecolors="white", edgecolors="#868e96", lw=1.0, zorder=3
     )
-    for s, name in enumerate(SYSTEMS):
+    for s, name in enumerate(FILE_SYSTEMS):
         sel = up & los & (ep.system == s)
         if name in world.config.systems:
             ax.scatter(

@@ -135,3 +135,27 @@ def test_galileo_episodes_equal_on_the_fused_step_and_the_world_step(monkeypatch
             assert repr(inf_a) == repr(inf_b)
         else:
             assert all(a[k].tobytes() == b[k].tobytes() for k in b)
+
+
+def test_the_sky_plot_shows_galileo_satellites_in_their_own_colour() -> None:
+    pytest.importorskip("matplotlib")
+    from matplotlib.axes import Axes
+
+    from coopnav_env.envs.render import SYSTEM_COLOURS
+
+    env = urban_canyon_v1.parallel_env(n_uavs=2, render_mode="rgb_array", **GALILEO_SKY)
+    env.reset(seed=1)
+    labels: list[tuple[str, str]] = []
+    scatter = Axes.scatter
+
+    def record(self, *args, **kwargs):
+        if "label" in kwargs and "color" in kwargs:
+            labels.append((kwargs["label"], kwargs["color"]))
+        return scatter(self, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Axes, "scatter", record)
+        env.render()
+    gal = [c for label, c in labels if label.startswith("GAL (")]
+    assert gal == [SYSTEM_COLOURS["GAL"]]
+    assert len(set(SYSTEM_COLOURS.values())) == len(FILE_SYSTEMS)
