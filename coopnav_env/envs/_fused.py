@@ -11,10 +11,11 @@ that is of a separate environment, bit for bit.
 
 It computes the settings of :func:`fused_settings` (the default measurement chain: no NLOS
 draws, no dead-reckoning noise, no channel limit, no map exclusion, no integrity
-monitoring, the exact covariance, velocity commands, the base observation) on worlds of box
-buildings; with other settings, or a world it cannot take (a file city's polygons, a
-replaced constellation, a sky whose satellites are not grouped by constellation), the
-callers step through ``UrbanWorld.step`` as before. A reset begins in the copy's own
+monitoring, the exact covariance; velocity or route-frame commands, the base observation
+with or without the agent index) on worlds of box buildings; with other settings, or a
+world it cannot take (a file city's polygons, a replaced constellation, a sky whose
+satellites are not grouped by constellation), the callers step through ``UrbanWorld.step``
+as before. A reset begins in the copy's own
 Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
 route); the batched environment then computes the first epochs of all the copies it resets
 at a step in the same kernels (:meth:`FusedStep.first_epochs`). The state arrays reload a copy
@@ -37,11 +38,13 @@ import numpy as np
 from coopnav_env.constants import WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84_F
 from coopnav_env.envs import _batched_kernels
 from coopnav_env.envs import urban_canyon as _urban_canyon
+from coopnav_env.envs.autopilot import route_frame_velocity
 from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.urban_canyon import (
     INFO_KEYS,
     NO_FIX_ERROR_M,
     REWARD_TERMS,
+    ROUTE_FRAME_GAIN_PER_S,
     UrbanCanyonEnv,
 )
 from coopnav_env.gnss.errors import _iono_factors
@@ -119,6 +122,8 @@ class FusedStep:
         n_copies, n = len(envs), cfg.n_uavs
         world0 = envs[0].world
         dt = cfg.dt_s
+        if not cold and cfg.action_frame == "route":
+            cmd = _route_commands(envs, cmd, st)
         # the epoch's sky of each copy (its own time)
         t_new = [e.world.t_s if cold else e.world.t_s + dt for e in envs]
         rows = self.skies.rows(world0, t_new)
@@ -279,7 +284,7 @@ class FusedStep:
             return ()
         sky_deg = np.degrees(np.arctan(tan_max))
         steps = st.steps + 1
-        obs = np.empty((n_copies, n, cfg.obs_dim), dtype=np.float32)
+        obs = np.empty((n_copies, n, cfg.obs_base_dim), dtype=np.float32)
         floats = np.empty((n_copies, 8, n))
         _run_chunks(
             _batched_kernels.observations_infos,
@@ -311,6 +316,10 @@ class FusedStep:
             obs,
             floats,
         )
+        if cfg.obs_agent_index:  # each UAV's one-hot index after the kernel's columns
+            obs = np.concatenate(
+                [obs, np.broadcast_to(np.eye(n, dtype=np.float32), (n_copies, n, n))], axis=2
+            )
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
         nlos = np.zeros(los_flat.shape[0], dtype=bool)
@@ -603,8 +612,9 @@ _WGS84 = np.array([WGS84_A_M, WGS84_B_M, WGS84_F, WGS84_E2, _EP2], dtype=np.floa
 def fused_settings(cfg: UrbanCanyonConfig) -> bool:
     """Whether the settings are those the fused step computes: the default measurement and
     navigation chain (exact covariance, no NLOS draws, no dead-reckoning noise, no channel
-    limit, no map exclusion, no integrity monitoring), velocity commands and the base
-    observation, with every compiled kernel on. Other settings step copy by copy."""
+    limit, no map exclusion, no integrity monitoring), velocity or route-frame commands
+    and the base observation (with or without the agent index), with every compiled kernel
+    on. Other settings step copy by copy."""
     return _fused_config(cfg) and _scenario._fused_path_on() and _urban_canyon._USE_KERNEL
 
 
@@ -627,13 +637,7 @@ def _fused_config(cfg: UrbanCanyonConfig) -> bool:
         and cfg.nlos_exclusion == "off"
         and cfg.integrity == "off"
         and cfg.covariance == "exact"
-        and cfg.action_frame == "velocity"
-        and not (
-            cfg.obs_protection_level
-            or cfg.obs_satellite_sectors
-            or cfg.obs_true_error
-            or cfg.obs_agent_index
-        )
+        and not (cfg.obs_protection_level or cfg.obs_satellite_sectors or cfg.obs_true_error)
     )
     if len(_FUSED_CONFIGS) >= 256:  # configurations made in a loop: start again
         _FUSED_CONFIGS.clear()
@@ -878,6 +882,37 @@ class _SwarmArrays:
         self.route[k, :nr] = route
         self.tail[k, :nr] = tail
         self.n_route[k] = nr
+
+
+def _route_commands(envs: list[UrbanCanyonEnv], action: np.ndarray, st: _SwarmArrays) -> np.ndarray:
+    """The velocity commands ``(K, N, 3)`` of route-frame set-points ``action`` (``action_frame=
+    "route"``): :func:`coopnav_env.envs.autopilot.route_frame_velocity` on every copy's
+    previous estimates and next waypoints, with each copy's largest offsets where its
+    environment has them (``UrbanCanyonEnv._route_offset_cap_m``), else
+    ``route_offset_max_m``: ``route_frame_command`` of each copy, bit for bit."""
+    cfg = envs[0].config
+    kin = cfg.kinematics
+    caps = [getattr(e, "_route_offset_cap_m", None) for e in envs]
+    offset: np.ndarray | float = cfg.route_offset_max_m
+    if any(c is not None for c in caps):
+        offset = np.stack(
+            [
+                np.full(cfg.n_uavs, cfg.route_offset_max_m) if c is None else c[st.wp[k]]
+                for k, c in enumerate(caps)
+            ]
+        )
+    return route_frame_velocity(
+        action,
+        st.nav_pos,
+        st.wp,
+        st.route,
+        kin.max_speed_mps,
+        (kin.altitude_min_m, kin.altitude_max_m),
+        offset,
+        cfg.route_turn_brake_mps2,
+        ROUTE_FRAME_GAIN_PER_S,
+        route_lengths=st.n_route,
+    )
 
 
 def _navigated_distance(

@@ -69,6 +69,7 @@ def route_frame_velocity(
     offset_max_m: np.ndarray | float,
     turn_brake_mps2: float,
     gain_per_s: float,
+    route_lengths: np.ndarray | None = None,
 ) -> np.ndarray:
     """The route autopilot of ``K`` swarms at once: route-frame set-points to velocity commands.
 
@@ -85,8 +86,9 @@ def route_frame_velocity(
         Each UAV's estimated position [m]; a UAV with a non-finite estimate holds still.
     next_waypoint : ndarray of int, shape (K, N)
         Each UAV's next waypoint on its swarm's route.
-    routes_xy_m : list of K ndarrays, shape (k_i, 2)
-        Each swarm's street route [m].
+    routes_xy_m : list of K ndarrays, shape (k_i, 2), or ndarray, shape (K, R, 2)
+        Each swarm's street route [m]; an array (with ``route_lengths``) holds swarm ``k``'s
+        route in its first ``route_lengths[k]`` rows (the rest is padding, never read).
     max_speed_mps : float
         The speed of a command of 1 [m/s].
     altitude_band_m : (float, float)
@@ -97,6 +99,9 @@ def route_frame_velocity(
         The braking the speed allows before every waypoint but a route's last [m/s²].
     gain_per_s : float
         The pursuit gain [1/s] (:func:`pursuit_velocity`).
+    route_lengths : ndarray of int, shape (K,), optional
+        The waypoints of each swarm's route when ``routes_xy_m`` is a padded ``(K, R, 2)``
+        array; None when it is a list of routes.
 
     Returns
     -------
@@ -109,10 +114,21 @@ def route_frame_velocity(
         raise ValueError(
             f"routes_xy_m must hold {k_} routes (one per swarm), got {len(routes_xy_m)}"
         )
-    routes = [np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in routes_xy_m]
-    lengths = np.array([r.shape[0] for r in routes], dtype=np.int64)
-    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])[:, None]  # (K, 1)
-    flat = np.concatenate(routes)
+    if route_lengths is None:
+        routes = [np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in routes_xy_m]
+        lengths = np.array([r.shape[0] for r in routes], dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])[:, None]  # (K, 1)
+        flat = np.concatenate(routes)
+    else:
+        padded = np.asarray(routes_xy_m, dtype=np.float64)
+        lengths = np.asarray(route_lengths, dtype=np.int64)
+        if padded.ndim != 3 or padded.shape[2] != 2 or lengths.shape != (k_,):
+            raise ValueError(
+                f"padded routes_xy_m must have shape ({k_}, R, 2) with route_lengths of shape "
+                f"({k_},), got {padded.shape} and {lengths.shape}"
+            )
+        starts = (np.arange(k_, dtype=np.int64) * padded.shape[1])[:, None]
+        flat = padded.reshape(-1, 2)
     wp = np.asarray(next_waypoint, dtype=np.int64)
     est = np.asarray(est_enu_m, dtype=np.float64).reshape(k_ * n_, 3)
     ok = np.all(np.isfinite(est), axis=1)

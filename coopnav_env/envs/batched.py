@@ -24,8 +24,9 @@ fused step against ``UrbanWorld.step``.
 What is batched and what is not
 -------------------------------
 With the default measurement chain (no NLOS draws, no dead-reckoning noise, no channel limit,
-no map exclusion, no integrity monitoring, the exact covariance, velocity commands, the base
-observation: :func:`coopnav_env.envs._fused.fused_settings`), a step of all K copies is three
+no map exclusion, no integrity monitoring, the exact covariance; velocity or route-frame
+commands, the base observation with or without the agent index:
+:func:`coopnav_env.envs._fused.fused_settings`), a step of all K copies is three
 compiled calls over the copies (:mod:`coopnav_env.envs._batched_kernels`: motion, line of
 sight and relative sensing; pseudoranges, both solvers, the estimate selection, waypoints,
 reward terms and the skyline and wall sensors; observations and the infos' numbers), run in

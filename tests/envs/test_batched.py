@@ -163,6 +163,15 @@ def test_settings_outside_the_fused_step_step_copy_by_copy() -> None:
         {"n_uavs": 4, "max_steps": 10, "nav_reward": "sigma", "nav_team_weight": 0.5},
         {"v1": True, "n_uavs": 5, "max_steps": 12},  # v1's crash-free start
         {"v1": True, "n_uavs": 5, "max_steps": 12, "crash_free_steps": 8},
+        # the route frame (its autopilot on the previous estimates) and the agent index
+        {
+            "v1": True,
+            "n_uavs": 5,
+            "max_steps": 12,
+            "action_frame": "route",
+            "obs_agent_index": True,
+        },
+        {"v1": True, "n_uavs": 3, "max_steps": 9, "action_frame": "route", "crash_free_steps": 0},
     ],
 )
 def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
@@ -232,6 +241,7 @@ def test_fused_step_runs_in_a_forked_child() -> None:
         {"n_uavs": 5, "max_steps": 7},  # the fused step
         {"n_uavs": 3, "max_steps": 5, "nlos_probability": 0.3},  # copy by copy
         {"n_uavs": 3, "max_steps": 5, "integrity": "fde"},  # more info keys
+        {"n_uavs": 4, "max_steps": 6, "action_frame": "route", "obs_agent_index": True},
     ],
 )
 def test_step_arrays_equals_step(settings) -> None:
@@ -302,3 +312,51 @@ def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
         if (out.terminated | out.truncated).any():
             end_steps.add(step)
     assert len(end_steps) >= 3  # episodes ended at several different steps
+
+
+def test_route_frame_copies_of_a_large_batch_equal_copy_by_copy_environments(monkeypatch) -> None:
+    # the settings of the MAPPO recipes (urban_canyon_v1, route frame, agent index): copy k of a
+    # K = 64 batch through the fused step equals a separate environment reset with seed + k
+    # stepped through UrbanWorld.step (the fused step off), bit for bit, over episodes that
+    # end at different steps (crashes at corners without braking, arrivals, truncations)
+    k_copies, seed, n = 64, 3, 5
+    settings = {
+        "n_uavs": n,
+        "max_steps": 40,
+        "action_frame": "route",
+        "route_turn_brake_mps2": 0.0,
+        "obs_agent_index": True,
+        "crash_free_steps": 0,
+    }
+    big = BatchedUrbanCanyonEnv.from_envs(
+        [urban_canyon_v1.parallel_env(**settings) for _ in range(k_copies)]
+    )
+    assert fused_settings(big.config)
+    single = [urban_canyon_v1.parallel_env(**settings) for _ in range(k_copies)]
+    obs, _ = big.reset(seed=seed)
+    agents = single[0].possible_agents
+    for k, env in enumerate(single):
+        o, _ = env.reset(seed=seed + k)
+        assert obs[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+    rng = np.random.default_rng(0)
+    end_steps = set()
+    for step in range(45):
+        act = rng.uniform(-1.2, 1.2, (k_copies, n, 3))
+        act[..., 0] = rng.uniform(0.5, 1.2, (k_copies, n))  # fast: corners crash
+        out = big.step_arrays(act)
+        monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
+        for k, env in enumerate(single):
+            o, r, te, tr, _ = env.step({a: act[k, j] for j, a in enumerate(agents)})
+            assert out.final_obs[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+            assert out.rewards[k].tobytes() == np.array([r[a] for a in agents]).tobytes()
+            assert out.terminated[k] == te[agents[0]] and out.truncated[k] == tr[agents[0]]
+            if not env.agents:
+                o, _ = env.reset()
+            assert out.obs[k].tobytes() == np.stack([o[a] for a in agents]).tobytes()
+            assert big.envs[k].state().tobytes() == env.state().tobytes()
+        monkeypatch.undo()
+        if (out.terminated | out.truncated).any():
+            end_steps.add(step)
+    assert big._fused_step.state is not None  # the batch took the fused step
+    assert len(end_steps) >= 10  # episodes ended at many different steps
+    assert out.obs.shape == (k_copies, n, big.config.obs_dim)

@@ -63,6 +63,25 @@ def test_k_swarms_fly_the_one_swarm_commands_on_recorded_episodes(brake) -> None
             )
             assert got.shape == (k_, 4, 3)
             assert got.tobytes() == want.tobytes()
+            # the routes padded into one (K, R, 2) array (the fused step's form)
+            padded = np.full((k_, max(len(r) for r in routes), 2), np.nan)
+            for k, r in enumerate(routes):
+                padded[k, : len(r)] = r
+            n_points = np.array([len(r) for r in routes])
+            kin = cfg.kinematics
+            got_padded = route_frame_velocity(
+                action,
+                est,
+                wp,
+                padded,
+                kin.max_speed_mps,
+                (kin.altitude_min_m, kin.altitude_max_m),
+                cfg.route_offset_max_m if offset is None else offset,
+                cfg.route_turn_brake_mps2,
+                ROUTE_FRAME_GAIN_PER_S,
+                route_lengths=n_points,
+            )
+            assert got_padded.tobytes() == want.tobytes()
             checked += 1
         venv.step(action)
     assert checked == 120
@@ -77,4 +96,20 @@ def test_one_route_per_swarm_is_required() -> None:
     with pytest.raises(ValueError, match=r"routes_xy_m must hold 2 routes .* got 1"):
         _batched(
             np.zeros((2, 3, 3)), np.zeros((2, 3, 3)), np.zeros((2, 3), int), routes, venv.config
+        )
+
+
+def test_padded_routes_need_one_length_per_swarm() -> None:
+    with pytest.raises(ValueError, match=r"padded routes_xy_m must have shape \(2, R, 2\)"):
+        route_frame_velocity(
+            np.zeros((2, 3, 3)),
+            np.zeros((2, 3, 3)),
+            np.zeros((2, 3), int),
+            np.zeros((2, 4, 2)),
+            10.0,
+            (10.0, 60.0),
+            4.0,
+            0.0,
+            ROUTE_FRAME_GAIN_PER_S,
+            route_lengths=np.array([4]),
         )
