@@ -20,6 +20,7 @@ true position error, 3 entries
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Mapping
@@ -144,14 +145,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._window: Any = None
 
         lo, hi = _observation_bounds(cfg)
-        self.observation_spaces = {
-            a: spaces.Box(lo, hi, dtype=np.float32) for a in self.possible_agents
-        }
-        self.action_spaces = {
-            a: spaces.Box(-1.0, 1.0, (3,), dtype=np.float32) for a in self.possible_agents
-        }
+        self.observation_spaces = {a: _box(lo, hi) for a in self.possible_agents}
+        self.action_spaces = {a: _box(-1.0, 1.0, (3,)) for a in self.possible_agents}
         s_lo, s_hi = _state_bounds(cfg)
-        self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
+        self.state_space = _box(s_lo, s_hi)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
         self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
         n_base = cfg.obs_base_dim  # the kernel's columns (the optional blocks follow)
@@ -833,6 +830,33 @@ def aec_env(
 def _city_scale_m(world: UrbanWorld) -> float:
     x0, x1, y0, y1 = world.city.extent_m
     return float(max(x1 - x0, y1 - y0))
+
+
+def _box(low: Any, high: Any, shape: tuple[int, ...] | None = None) -> spaces.Box:
+    """``spaces.Box(low, high, shape, dtype=np.float32)``, its bound arrays shared.
+
+    Every Box with the same bounds (the spaces of every agent and every copy of one
+    configuration) holds the same ``low``, ``high``, ``bounded_below`` and ``bounded_above``
+    arrays and printed forms, those of one template Box per distinct bounds (at most
+    :data:`_BOX_TEMPLATES_MAX` kept); each returned Box is an object of its own, with its own
+    random generator, so that seeding or sampling one leaves the others as they were.
+    """
+    low_a, high_a = np.asarray(low), np.asarray(high)
+    key = (low_a.dtype.str, low_a.shape, low_a.tobytes(), high_a.dtype.str, high_a.tobytes(), shape)
+    template = _BOX_TEMPLATES.get(key)
+    if template is None:
+        template = spaces.Box(low, high, shape, dtype=np.float32)
+        if len(_BOX_TEMPLATES) < _BOX_TEMPLATES_MAX:
+            _BOX_TEMPLATES[key] = template
+    return copy.copy(template)
+
+
+_BOX_TEMPLATES: dict[tuple, spaces.Box] = {}
+"""Bounds -> the template Box whose arrays the spaces with those bounds share (:func:`_box`);
+the templates themselves are never handed out, so their generators are never drawn from."""
+
+_BOX_TEMPLATES_MAX = 256
+"""At most this many distinct bounds keep a template (further ones get arrays of their own)."""
 
 
 def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:
