@@ -1,4 +1,5 @@
-"""Numpy oracles of the navigation kernels (:mod:`coopnav_env.nav._kernels`).
+"""Numpy oracles of the navigation kernels (:mod:`coopnav_env.nav._kernels`,
+:mod:`coopnav_env.nav._integrity_kernels`).
 
 The library runs the standalone Gauss-Newton loop, the exact structured cooperative loop and
 their helpers (statuses, set-up masks, nuisance count, the outputs of every UAV, the square
@@ -6,16 +7,20 @@ root of diagonal covariances) in compiled kernels only. The functions here are t
 definitions, written batched over receivers and centroid problems: a second, independent
 implementation of the same algebra that the tests compare the kernels with (statuses,
 masks and counts identical; positions to 1e-6 m and covariances to 1e-9 relative, the
-summation orders differing). The exact structured cooperative loop is the library's own
-numpy loop (``cooperative._gauss_newton_numpy``, which the paper's covariance runs), given
-the exact covariance. :func:`use_nav_oracles` puts the oracles in place of the kernels.
+summation orders differing). The exact structured cooperative loop is the library's own numpy
+loop (``cooperative._gauss_newton_numpy``, which the paper's covariance runs), given the exact
+covariance. :func:`problem_statistics` is the dense definition of the integrity monitor's
+residual statistic. :func:`use_nav_oracles` puts the solvers' oracles in place of the kernels.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
+from coopnav_env.nav import _integrity_kernels as _ik
 from coopnav_env.nav import cooperative as _cooperative
 from coopnav_env.nav import wls as _wls
 from coopnav_env.nav.types import NavStatus, implausible_radius
@@ -26,6 +31,7 @@ __all__ = [
     "finish",
     "fix_status",
     "n_nuisance",
+    "problem_statistics",
     "setup_masks",
     "sqrtm_psd",
     "standalone_gauss_newton",
@@ -232,6 +238,89 @@ def cooperative_gauss_newton(obs, st, x0, transfer, covariance, method, max_iter
     loop (:func:`coopnav_env.nav.cooperative._gauss_newton_numpy`)."""
     return _cooperative._gauss_newton_numpy(
         obs, st, x0, transfer, covariance, method, max_iter, tol_m
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# integrity monitoring (_integrity_kernels.problem_statistics)
+# --------------------------------------------------------------------------------------------
+
+
+def problem_statistics(
+    pr, sv, system, rows, w, sig_c, pos, clk, base, bcov, ref, has_clock, rot, positive_only=False
+):
+    """The numpy definition of :func:`coopnav_env.nav._integrity_kernels.problem_statistics`:
+    the covariance formed densely (``diag(1/w) + sig_c sig_c^T [same satellite] +
+    u^T C_d u [same UAV]``), the clocks as the solvers parametrise them (the clock reference's
+    clocks ``has_clock`` and one nuisance clock per other UAV and constellation) as explicit
+    columns, ``numpy.linalg`` for every inverse (the kernel eliminates every UAV's own clocks
+    instead: the same column space). Returns the same tuple (``ok`` always True) plus
+    ``R a``, ``diag R`` and the ECEF position gains ``K`` (3, m) of the rows
+    (``numpy.nonzero(rows)`` order)."""
+    qq, kk = np.nonzero(rows)
+    m = qq.size
+    n_sys = has_clock.shape[0]
+    pq = pos[None] + base[qq]
+    d = sv[kk] - pq
+    rng = np.linalg.norm(d, axis=1)
+    u = d / rng[:, None]
+    cols = [-u]
+    onehot = np.eye(n_sys)[system[kk]]
+    cols.append(onehot * has_clock[None])
+    nuis = []
+    for q in np.unique(qq):
+        if q == ref:
+            continue
+        for j in range(n_sys):
+            c = ((qq == q) & (system[kk] == j)).astype(float)
+            if c.any():
+                nuis.append(c)
+    g = np.concatenate(cols + ([np.stack(nuis, axis=1)] if nuis else []), axis=1)
+    keep = np.ones(g.shape[1], dtype=bool)
+    keep[3 : 3 + n_sys] = has_clock
+    g = g[:, keep]
+    a = pr[qq, kk] - rng - np.where(has_clock[system[kk]], clk[system[kk]], 0.0)
+    cov = np.diag(1.0 / w[qq, kk])
+    cov += (kk[:, None] == kk[None, :]) * np.outer(sig_c[kk], sig_c[kk])
+    cov += (qq[:, None] == qq[None, :]) * np.einsum("mi,mij,nj->mn", u, bcov[qq], u)
+    cinv = np.linalg.inv(cov)
+    info = g.T @ cinv @ g
+    info_inv = np.linalg.inv(info)
+    r_mat = cinv - cinv @ g @ info_inv @ g.T @ cinv
+    resid = a - g @ (info_inv @ (g.T @ (cinv @ a)))  # the GLS residuals
+    ra = cinv @ resid  # = R a
+    t_stat = float(resid @ ra)
+    dof = m - g.shape[1]
+    gain = (info_inv @ g.T @ cinv)[:3]  # (3, m) position shift per unit bias
+    k_enu = rot @ gain
+    kh = np.hypot(k_enu[0], k_enu[1])
+    ku = np.abs(k_enu[2])
+    r_ii = np.diag(r_mat)
+    obs_ok = r_ii > _ik.UNOBSERVABLE_RII * w[qq, kk]
+    sr = np.sqrt(np.where(obs_ok, r_ii, 1.0))
+    h_slope = float(np.max(np.where(obs_ok, kh / sr, 0.0)))
+    v_slope = float(np.max(np.where(obs_ok, ku / sr, 0.0)))
+    if np.any(~obs_ok & (kh > _ik.HARMLESS_GAIN)):
+        h_slope = math.inf
+    if np.any(~obs_ok & (ku > _ik.HARMLESS_GAIN)):
+        v_slope = math.inf
+    wstat = np.where(obs_ok & ((ra > 0.0) | (not positive_only)), np.abs(ra) / sr, -1.0)
+    # the largest; an exact tie (within TIE_RTOL) goes to the first positive residual
+    tie = (wstat >= 0.0) & (wstat >= wstat.max() * (1.0 - _ik.TIE_RTOL))
+    positive_tie = tie & (ra > 0.0)
+    i = int(np.flatnonzero(positive_tie if positive_tie.any() else tie)[0])
+    return (
+        True,
+        t_stat,
+        dof,
+        int(qq[i]),
+        int(kk[i]),
+        float(wstat[i]),
+        h_slope,
+        v_slope,
+        ra,
+        r_ii,
+        gain,
     )
 
 
