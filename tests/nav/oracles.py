@@ -333,7 +333,9 @@ def use_nav_oracles(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
     """Make :func:`~coopnav_env.nav.solve_standalone`, :func:`~coopnav_env.nav.solve_cooperative`
     and :func:`~coopnav_env.nav.solve_cooperative_samples` run the oracles above instead of
     the compiled kernels, and ``cooperative._solve_isotropic`` (the simulator's one-call
-    cooperative solve) decline, so that its callers run ``solve_cooperative``.
+    cooperative solve) decline, so that its callers run ``solve_cooperative`` (a module that
+    imported it by name keeps its own: ``tests/envs/oracles.use_all_oracles`` rebinds the
+    world's).
 
     Returns a dict counting the calls of each oracle, so that a test can check they ran.
     """
