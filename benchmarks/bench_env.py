@@ -283,7 +283,7 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     # of an epoch in one compiled call (UrbanWorld._navigate_fused)
     ("pseudorange+solvers", "coopnav_env.sim._kernels", "epoch_navigation"),
     ("receiver geometry", "coopnav_env.sim.scenario", "_range_azimuth_elevation"),
-    # the modular path (covariance="paper", or a kernel switched off): function by function
+    # the modular path (covariance="paper", or satellites not grouped by constellation)
     ("cooperative solver", "coopnav_env.sim.scenario", "UrbanWorld._solve_cooperative"),
     ("standalone solver", "coopnav_env.sim.scenario", "solve_standalone"),
     ("pseudoranges", "coopnav_env.sim.scenario", "_simulate_pseudoranges"),
@@ -292,7 +292,6 @@ STAGES: tuple[tuple[str, str, str], ...] = (
     ("skyline + walls", "coopnav_env.sim._kernels", "sky_and_walls"),
     ("skyline + walls", "coopnav_env.sim.city", "City.sky_and_walls"),
     ("motion + collisions", "coopnav_env.sim._kernels", "world_motion"),
-    ("motion + collisions", "coopnav_env.sim.scenario", "_swept_collisions_culled"),
     ("relative sensing", "coopnav_env.sim.scenario", "_measure_relative"),
     ("relative sensing", "coopnav_env.sim.scenario", "UrbanWorld._relative_ecef"),
 )

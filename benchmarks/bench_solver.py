@@ -12,9 +12,8 @@ covariance, DDT):
 * **call** -- one whole public call ``solve_cooperative(..., max_iter=1)`` (set-up, one
   Gauss-Newton step, every UAV's position and covariance), structured vs ``method="dense"``.
 * **fix** -- one whole public call ``solve_cooperative(...)`` iterated to convergence (what the
-  environment runs every step) with the Gauss-Newton loop in the compiled kernel
-  (``coopnav_env.nav._kernels``, the default) vs the numpy formulation of the same algebra
-  (``cooperative._USE_KERNEL = False``).
+  environment runs every step) with the compiled kernels (``coopnav_env.nav._kernels``, what
+  the library runs) vs the numpy oracles of the same algebra (``tests/nav/oracles.py``).
 
 Both run in this process, interleaved, in ``--rounds`` alternating rounds; a round's figure is
 the median of its repeated timings, and the best round of each counts (as ``timeit``
@@ -34,11 +33,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from coopnav_env.nav import cooperative as coop
 from coopnav_env.nav import solve_cooperative
+from tests.nav.oracles import use_nav_oracles
 from tests.nav.scenario import make_scenario
 
 
@@ -92,11 +93,12 @@ def main(argv: list[str] | None = None) -> int:
         rounds: list[tuple[float, ...]] = []
 
         def fix(kernel: bool) -> None:
-            coop._USE_KERNEL = kernel
-            try:
+            if kernel:
                 solve_cooperative(obs, rel, centroid=0, x0_ecef_m=x0)
-            finally:
-                coop._USE_KERNEL = True
+                return
+            with pytest.MonkeyPatch.context() as m:
+                use_nav_oracles(m)
+                solve_cooperative(obs, rel, centroid=0, x0_ecef_m=x0)
 
         for _ in range(max(1, args.rounds)):
             rounds.append(

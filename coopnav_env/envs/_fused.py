@@ -37,7 +37,6 @@ import numpy as np
 
 from coopnav_env.constants import WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84_F
 from coopnav_env.envs import _batched_kernels
-from coopnav_env.envs import urban_canyon as _urban_canyon
 from coopnav_env.envs.autopilot import route_frame_velocity
 from coopnav_env.envs.config import UrbanCanyonConfig
 from coopnav_env.envs.urban_canyon import (
@@ -51,7 +50,6 @@ from coopnav_env.gnss.errors import _iono_factors
 from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
-from coopnav_env.sim import scenario as _scenario
 from coopnav_env.sim.city import Buildings
 from coopnav_env.sim.scenario import Epoch
 
@@ -613,9 +611,9 @@ def fused_settings(cfg: UrbanCanyonConfig) -> bool:
     """Whether the settings are those the fused step computes: the default measurement and
     navigation chain (exact covariance, no NLOS draws, no dead-reckoning noise, no channel
     limit, no map exclusion, no integrity monitoring), velocity or route-frame commands
-    and the base observation (with or without the agent index), with every compiled kernel
-    on. Other settings step copy by copy."""
-    return _fused_config(cfg) and _scenario._fused_path_on() and _urban_canyon._USE_KERNEL
+    and the base observation (with or without the agent index).
+    Other settings step copy by copy."""
+    return _fused_config(cfg)
 
 
 _FUSED_CONFIGS: dict[int, tuple[Any, bool]] = {}

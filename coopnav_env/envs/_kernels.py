@@ -1,10 +1,11 @@
 """Compiled (numba) observation builder of :class:`~coopnav_env.envs.urban_canyon.UrbanCanyonEnv`.
 
 :func:`observation_rows` writes every agent's observation vector in one pass, with the same
-float64 operations in the same order as the numpy formulation
-(``UrbanCanyonEnv._observation_array_numpy``), then clips and rounds to float32 as it does, so
-the two agree bit for bit (the tests compare them). The numpy version spends its time in the
-overhead of some thirty small array operations per step.
+float64 operations in the same order as the numpy formulation (the test oracle
+``observation_rows`` of ``tests/envs/oracles.py``), then clips and rounds to float32 as it
+does, so the two agree bit for bit (the tests compare them). The numpy version spends its time
+in the overhead of some thirty small array operations per step. The reward terms, info figures
+and satellite sectors below have their oracles there too.
 """
 
 from __future__ import annotations
@@ -153,8 +154,9 @@ def reward_terms(
     sigma_reward,  # bool: nav term from the predicted sigma (else from the true error)
     params,  # (10,) float: see UrbanCanyonEnv._reward_params
 ):
-    """The reward terms of ``UrbanCanyonEnv._step_arrays`` (its numpy formulation), in the
-    order of ``REWARD_TERMS``, shape (6, n); and the in-goal flags (n,)."""
+    """The reward terms of ``UrbanCanyonEnv._reward_terms`` (its numpy formulation is
+    ``reward_terms`` of ``tests/envs/oracles.py``), in the order of ``REWARD_TERMS``, shape
+    (6, n); and the in-goal flags (n,)."""
     n = pos.shape[0]
     w_nav, cap, scale, w_prog, step_len = params[0], params[1], params[2], params[3], params[4]
     pen_col, pen_sep, pen_con, goal_r = params[5], params[6], params[7], params[8]
@@ -207,10 +209,10 @@ def info_floats(
     nav_cov,  # (n, 3, 3) covariance of the estimate used
     goal,  # (3,)
 ):
-    """The per-agent real numbers of ``UrbanCanyonEnv._infos`` (its numpy formulation
-    ``_info_floats_numpy``), with the same float64 operations, ``(8, n)``: errors of the
-    estimate used, the cooperative and the standalone fix (inf: no fix), sigma E/N/U and 3-D,
-    goal distance."""
+    """The per-agent real numbers of ``UrbanCanyonEnv._infos`` (its numpy formulation is
+    ``info_floats`` of ``tests/envs/oracles.py``), with the same float64 operations,
+    ``(8, n)``: errors of the estimate used, the cooperative and the standalone fix (inf: no
+    fix), sigma E/N/U and 3-D, goal distance."""
     n = pos.shape[0]
     floats = np.empty((8, n))
     for i in range(n):
@@ -235,8 +237,8 @@ def info_floats(
 
 @njit(cache=True)
 def satellite_sectors(tracked, az_deg, n_az):
-    """The ``obs_satellite_sectors`` columns (the numpy formulation is
-    ``UrbanCanyonEnv._satellite_sectors_numpy``), ``(n, 2 n_az)`` float32: per sector of the
+    """The ``obs_satellite_sectors`` columns (the numpy formulation is ``satellite_sectors``
+    of ``tests/envs/oracles.py``), ``(n, 2 n_az)`` float32: per sector of the
     skyline azimuths ``360 a / n_az`` (the sector centred on each, ``floor(az n_az / 360 +
     0.5) mod n_az``), the satellites tracked, then those above the cut-off not tracked, each
     count / 4 clipped to [0, 1]. ``tracked`` is ``(n, S)`` bool, ``az_deg`` ``(S,)``."""

@@ -20,6 +20,7 @@ true position error, 3 entries
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Mapping
@@ -39,7 +40,7 @@ from coopnav_env.sim import city as _city
 from coopnav_env.sim.city import _ray_directions
 from coopnav_env.sim.file_city import FileCity
 from coopnav_env.sim.route import remaining_route_m
-from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
+from coopnav_env.sim.scenario import Epoch, UrbanWorld
 
 __all__ = [
     "INFO_KEYS",
@@ -55,9 +56,6 @@ __all__ = [
     "route_frame_command",
     "route_offset_room_m",
 ]
-
-_USE_KERNEL = True
-"""Observations through :mod:`coopnav_env.envs._kernels` (False: the numpy formulation)."""
 
 REWARD_TERMS: tuple[str, ...] = ("nav", "progress", "collision", "separation", "contact", "goal")
 """Names of the reward terms; ``infos[agent]["reward_<term>"]`` holds each (their sum is the
@@ -147,14 +145,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._window: Any = None
 
         lo, hi = _observation_bounds(cfg)
-        self.observation_spaces = {
-            a: spaces.Box(lo, hi, dtype=np.float32) for a in self.possible_agents
-        }
-        self.action_spaces = {
-            a: spaces.Box(-1.0, 1.0, (3,), dtype=np.float32) for a in self.possible_agents
-        }
+        self.observation_spaces = {a: _box(lo, hi) for a in self.possible_agents}
+        self.action_spaces = {a: _box(-1.0, 1.0, (3,)) for a in self.possible_agents}
         s_lo, s_hi = _state_bounds(cfg)
-        self.state_space = spaces.Box(s_lo, s_hi, dtype=np.float32)
+        self.state_space = _box(s_lo, s_hi)
         self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
         self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
         n_base = cfg.obs_base_dim  # the kernel's columns (the optional blocks follow)
@@ -380,73 +374,42 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             self._trail.append(ep.pos_enu_m)
             self._trail = self._trail[-60:]
 
-        if _USE_KERNEL:
-            stacked, in_goal, crash, reached = _kernels.reward_terms(
-                self.world.route_xy_m,
-                self.world.route_tail_m,
-                prev.next_waypoint,
-                prev.pos_enu_m[:, :2],
-                ep.pos_enu_m,
-                ep.goal_enu_m,
-                ep.nav_pos_enu_m,
-                ep.nav_cov_enu_m2,
-                ep.collided,
-                ep.separation_violation,
-                ep.out_of_contact,
-                cfg.nav_reward == "sigma",
-                self._reward_params,
-            )
-            if cfg.reward_scheme == "navigated_distance":
-                stacked[0], stacked[1] = self._navigated_distance(ep, bool(reached))
-            if cfg.nav_team_weight > 0.0:
-                stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
-            terms = dict(zip(REWARD_TERMS, stacked))
-            reward = self._integrity_term(terms, stacked.sum(axis=0))
-            terminated = bool(crash or reached)
-            truncated = (self._steps >= cfg.max_steps) and not terminated
-            return self._observation_array(), reward, terminated, truncated, terms, in_goal
-
-        # the numpy formulation (the definition of the compiled reward_terms)
-        # reward terms, shape (N,) each
-        # progress: decrease of the remaining street route, both ends measured to the
-        # waypoint that was next at the previous step (no reward for switching waypoints)
-        route = self.world.route_xy_m
-        tail = self.world.route_tail_m
-        d_prev = remaining_route_m(route, prev.pos_enu_m[:, :2], prev.next_waypoint, tail)
-        d_now = remaining_route_m(route, ep.pos_enu_m[:, :2], prev.next_waypoint, tail)
-        in_goal = ep.goal_distance_m <= cfg.goal_radius_m
-        crash = bool(ep.collided.any())
-        reached = bool(in_goal.all()) and not crash
-        if cfg.nav_reward == "error":
-            nav_m = ep.nav_error_m
-        else:
-            nav_m = np.sqrt(np.clip(np.trace(ep.nav_cov_enu_m2, axis1=1, axis2=2), 0.0, None))
-        n = cfg.n_uavs
-        nav = (
-            -cfg.nav_reward_weight
-            * np.minimum(nav_m, cfg.nav_reward_cap_m)
-            / cfg.nav_reward_scale_m
-        )
-        progress = (
-            cfg.progress_reward_weight
-            * (d_prev - d_now)
-            / (cfg.kinematics.max_speed_mps * cfg.dt_s)
-        )
+        stacked, in_goal, crash, reached = self._reward_terms(prev, ep)
         if cfg.reward_scheme == "navigated_distance":
-            nav, progress = self._navigated_distance(ep, reached)
-        terms = {
-            "nav": _team_mix(nav, cfg.nav_team_weight) if cfg.nav_team_weight > 0.0 else nav,
-            "progress": progress,
-            "collision": -cfg.collision_penalty * ep.collided,
-            "separation": -cfg.separation_penalty * ep.separation_violation,
-            "contact": -cfg.contact_penalty * ep.out_of_contact,
-            "goal": np.full(n, cfg.goal_bonus if reached else 0.0),
-        }
-        reward = self._integrity_term(terms, np.sum([terms[t] for t in REWARD_TERMS], axis=0))
-
-        terminated = crash or reached
+            stacked[0], stacked[1] = self._navigated_distance(ep, bool(reached))
+        if cfg.nav_team_weight > 0.0:
+            stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
+        terms = dict(zip(REWARD_TERMS, stacked))
+        reward = self._integrity_term(terms, stacked.sum(axis=0))
+        terminated = bool(crash or reached)
         truncated = (self._steps >= cfg.max_steps) and not terminated
         return self._observation_array(), reward, terminated, truncated, terms, in_goal
+
+    def _reward_terms(self, prev: Epoch, ep: Epoch) -> tuple[np.ndarray, np.ndarray, bool, bool]:
+        """The reward terms of the step from ``prev`` to ``ep`` before the navigated-distance
+        scheme, the team mix and the integrity term: ``(6, N)`` float64 in the order of
+        :data:`REWARD_TERMS`, the in-goal flags ``(N,)``, whether a UAV crashed and whether
+        the swarm reached the goal, by the compiled
+        :func:`coopnav_env.envs._kernels.reward_terms`.
+
+        ``progress`` is the decrease of the remaining street route, both ends measured to the
+        waypoint that was next at ``prev`` (no reward for switching waypoints).
+        """
+        return _kernels.reward_terms(
+            self.world.route_xy_m,
+            self.world.route_tail_m,
+            prev.next_waypoint,
+            prev.pos_enu_m[:, :2],
+            ep.pos_enu_m,
+            ep.goal_enu_m,
+            ep.nav_pos_enu_m,
+            ep.nav_cov_enu_m2,
+            ep.collided,
+            ep.separation_violation,
+            ep.out_of_contact,
+            self.config.nav_reward == "sigma",
+            self._reward_params,
+        )
 
     def _navigated_distance(self, ep: Epoch, reached: bool) -> tuple[np.ndarray, np.ndarray]:
         """The terms ``nav`` and ``progress`` of ``reward_scheme="navigated_distance"`` for the
@@ -524,9 +487,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
     def _observation_array(self) -> np.ndarray:
         """Every agent's observation, ``(N, obs_dim)`` float32 (rows in agent order).
 
-        Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows`; the numpy
-        formulation :meth:`_observation_array_numpy` (``_USE_KERNEL = False``) is the readable
-        definition, and the two agree bit for bit. With ``obs_protection_level`` the two
+        Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows` (its numpy
+        definition, equal bit for bit, is ``observation_rows`` of ``tests/envs/oracles.py``).
+        With ``obs_protection_level`` the two
         protection-level columns follow, then with ``obs_satellite_sectors`` the ``2 A``
         satellite-sector columns (:meth:`_satellite_sectors`), then with ``obs_true_error``
         (privileged) the 3 columns of the true position error, then with ``obs_agent_index``
@@ -583,29 +546,16 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         width of ``360 / A`` deg: the origin, the true position and the estimate give the
         same sectors except for a satellite within that hair of a sector boundary (or so
         near the zenith that its azimuth is meaningless anyway). The compiled
-        :func:`coopnav_env.envs._kernels.satellite_sectors` computes it (``_USE_KERNEL``);
-        :meth:`_satellite_sectors_numpy` is the definition (equal: small integer counts).
+        :func:`coopnav_env.envs._kernels.satellite_sectors` computes it (its numpy definition,
+        equal bit for bit, is ``satellite_sectors`` of ``tests/envs/oracles.py``).
         """
-        if not _USE_KERNEL:
-            return self._satellite_sectors_numpy()
         return _kernels.satellite_sectors(
             self._tracked(), self._epoch.sv_az_deg, self.config.obs_sky_azimuths
         )
 
-    def _satellite_sectors_numpy(self) -> np.ndarray:
-        """The numpy formulation of :meth:`_satellite_sectors` (the definition)."""
-        a = self.config.obs_sky_azimuths
-        tracked = self._tracked()
-        sector = np.floor(self._epoch.sv_az_deg * (a / 360.0) + 0.5).astype(np.int64) % a
-        one_hot = (sector[:, None] == np.arange(a)[None, :]).astype(np.float64)  # (S, A)
-        counts = np.concatenate([tracked @ one_hot, ~tracked @ one_hot], axis=1)
-        return np.minimum(counts / 4.0, 1.0).astype(np.float32)
-
     def _observation_rows(self) -> np.ndarray:
         """The observation without the optional blocks (protection levels, satellite
-        sectors)."""
-        if not _USE_KERNEL:
-            return self._observation_array_numpy()
+        sectors, ...), ``(N, n_base)`` float32."""
         cfg = self.config
         ep = self._epoch
         # City.sky_and_walls of the world's own (valid) positions (a file city's polygons: else)
@@ -638,88 +588,12 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             self._obs_high,
         )
 
-    def _observation_array_numpy(self) -> np.ndarray:
-        """The numpy formulation of :meth:`_observation_array` (the definition)."""
-        cfg = self.config
-        ep = self._epoch
-        n = cfg.n_uavs
-        big = self._city_scale_m
-        k = cfg.obs_neighbours
-        n_open = max(ep.n_above_mask, 1)
-        sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
-        sky = sky_deg / 90.0
-
-        # neighbour slots: nearest (measured) first
-        rel, avail = ep.rel_enu_m, ep.rel_available
-        dist = np.where(avail, np.linalg.norm(rel, axis=2), np.inf)
-        m = min(k, n)
-        order = np.argsort(dist, axis=1, kind="stable")[:, :m]
-        present = np.take_along_axis(avail, order, axis=1)
-        rel_k = np.take_along_axis(rel, order[:, :, None], axis=1)
-        rel_k = np.where(present[:, :, None], rel_k / cfg.relative_sensing.max_range_m, 0.0)
-        slots = np.zeros((n, k, 4))
-        slots[:, :m, :3] = rel_k
-        slots[:, :m, 3] = present
-
-        # route: next waypoint and the leg after it, from the estimated position
-        route = self.world.route_xy_m
-        wp = ep.next_waypoint
-        last = route.shape[0] - 1
-        est_xy = ep.nav_pos_enu_m[:, :2]
-        to_wp = route[wp] - est_xy
-        after = route[np.minimum(wp + 1, last)] - route[wp]  # 0 when the next one is the goal
-        remaining = remaining_route_m(route, est_xy, wp, self.world.route_tail_m)
-        kin = cfg.kinematics
-        alt = (ep.nav_pos_enu_m[:, 2] - kin.altitude_min_m) / (
-            kin.altitude_max_m - kin.altitude_min_m
-        )
-
-        obs = np.concatenate(
-            [
-                (ep.nav_pos_enu_m - ep.goal_enu_m) / big,
-                ep.vel_enu_mps / cfg.kinematics.max_speed_mps,
-                ep.nav_sigma_enu_m / cfg.obs_sigma_max_m,
-                (ep.n_sats / n_open)[:, None],
-                (ep.n_sats_swarm / n_open)[:, None],
-                sky,
-                slots.reshape(n, 4 * k),
-                (ep.nav_source == NavSource.COOPERATIVE)[:, None],
-                (ep.nav_source != NavSource.DEAD_RECKONING)[:, None],
-                np.full((n, 1), 1.0 - self._steps / cfg.max_steps),
-                to_wp / cfg.obs_route_scale_m,
-                after / cfg.obs_route_scale_m,
-                (remaining / (2.0 * big))[:, None],
-                alt[:, None],
-                np.minimum(walls / cfg.obs_wall_scale_m, 1.0),
-            ],
-            axis=1,
-        )
-        space = self.observation_spaces[self.possible_agents[0]]
-        n_base = obs.shape[1]  # the optional blocks are appended by the caller
-        return np.clip(obs, space.low[:n_base], space.high[:n_base]).astype(np.float32)
-
-    def _info_floats_numpy(self) -> np.ndarray:
-        """The per-agent real numbers of the infos, ``(8, N)``: errors of the estimate used, the
-        cooperative and the standalone fix (inf: no fix), sigma E/N/U and 3-D, goal distance
-        (the numpy formulation of :func:`coopnav_env.envs._kernels.info_floats`)."""
-        ep = self._epoch
-        # three errors in one pass: estimate used, cooperative, standalone (inf: no fix)
-        err = np.linalg.norm(
-            np.stack([ep.nav_pos_enu_m, ep.coop_pos_enu_m, ep.standalone_pos_enu_m]) - ep.pos_enu_m,
-            axis=2,
-        )
-        err[1:] = np.where(np.isfinite(err[1:]), err[1:], np.inf)
-        sig = ep.nav_sigma_enu_m
-        return np.concatenate(
-            [err, sig.T, np.sqrt((sig**2).sum(axis=1))[None], ep.goal_distance_m[None]]
-        )
-
     def _info_floats(self) -> np.ndarray:
         """The per-agent real numbers of the infos, ``(8, N)``, by the compiled
-        :func:`coopnav_env.envs._kernels.info_floats` (``_USE_KERNEL``; bit for bit the numpy
-        formulation :meth:`_info_floats_numpy` otherwise)."""
-        if not _USE_KERNEL:
-            return self._info_floats_numpy()
+        :func:`coopnav_env.envs._kernels.info_floats`: errors of the estimate used, the
+        cooperative and the standalone fix (inf: no fix), sigma E/N/U and 3-D, goal distance
+        (its numpy definition, equal bit for bit, is ``info_floats`` of
+        ``tests/envs/oracles.py``)."""
         ep = self._epoch
         return _kernels.info_floats(
             ep.pos_enu_m,
@@ -956,6 +830,33 @@ def aec_env(
 def _city_scale_m(world: UrbanWorld) -> float:
     x0, x1, y0, y1 = world.city.extent_m
     return float(max(x1 - x0, y1 - y0))
+
+
+def _box(low: Any, high: Any, shape: tuple[int, ...] | None = None) -> spaces.Box:
+    """``spaces.Box(low, high, shape, dtype=np.float32)``, its bound arrays shared.
+
+    Every Box with the same bounds (the spaces of every agent and every copy of one
+    configuration) holds the same ``low``, ``high``, ``bounded_below`` and ``bounded_above``
+    arrays and printed forms, those of one template Box per distinct bounds (at most
+    :data:`_BOX_TEMPLATES_MAX` kept); each returned Box is an object of its own, with its own
+    random generator, so that seeding or sampling one leaves the others as they were.
+    """
+    low_a, high_a = np.asarray(low), np.asarray(high)
+    key = (low_a.dtype.str, low_a.shape, low_a.tobytes(), high_a.dtype.str, high_a.tobytes(), shape)
+    template = _BOX_TEMPLATES.get(key)
+    if template is None:
+        template = spaces.Box(low, high, shape, dtype=np.float32)
+        if len(_BOX_TEMPLATES) < _BOX_TEMPLATES_MAX:
+            _BOX_TEMPLATES[key] = template
+    return copy.copy(template)
+
+
+_BOX_TEMPLATES: dict[tuple, spaces.Box] = {}
+"""Bounds -> the template Box whose arrays the spaces with those bounds share (:func:`_box`);
+the templates themselves are never handed out, so their generators are never drawn from."""
+
+_BOX_TEMPLATES_MAX = 256
+"""At most this many distinct bounds keep a template (further ones get arrays of their own)."""
 
 
 def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@
 ``frames._line_of_sight`` followed by ``frames._azimuth_elevation`` compute for a whole array:
 the range, and the azimuth and elevation in the receiver's ENU frame (whose latitude and
 longitude it also computes, as ``frames._ecef_to_geodetic`` does). The numpy formulation is
-the reference (``errors._USE_KERNEL = False``); the two agree to a few units in the last place
+the reference (``tests/gnss/oracles.py``); the two agree to a few units in the last place
 (the transcendental functions are libm's here and numpy's there), which the tests bound.
 """
 

@@ -368,6 +368,9 @@ def default_constellation(
     Returns
     -------
     Constellation
+        The same object for the same arguments (built once per process: a constellation is
+        immutable, a frozen dataclass of read-only arrays, so every world of a configuration
+        shares one).
     """
     if isinstance(systems, str):
         systems = (systems,)
@@ -379,11 +382,22 @@ def default_constellation(
             raise ValueError(f"unknown system {name!r}; allowed: {SYSTEMS}")
     if len(set(systems)) != len(systems):
         raise ValueError(f"systems must not repeat a name, got {systems!r}")
+    key = (systems, bool(bds_geo_igso))
+    cached = _DEFAULT_CONSTELLATIONS.get(key)
+    if cached is not None:
+        return cached
     builders = {
         "GPS": gps_nominal_constellation,
         "BDS": lambda: beidou3_constellation(include_geo_igso=bds_geo_igso),
     }
-    return Constellation.concatenate(*(builders[name]() for name in systems))
+    built = Constellation.concatenate(*(builders[name]() for name in systems))
+    _DEFAULT_CONSTELLATIONS[key] = built
+    return built
+
+
+_DEFAULT_CONSTELLATIONS: dict[tuple[tuple[str, ...], bool], Constellation] = {}
+"""``(systems, bds_geo_igso) -> Constellation`` of :func:`default_constellation` (a few
+entries at most: the valid arguments are the orderings of the systems' names)."""
 
 
 def select_highest(el_deg: ArrayLike, visible: ArrayLike, max_sats: int) -> NDArray[np.bool_]:

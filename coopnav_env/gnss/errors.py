@@ -55,12 +55,7 @@ from coopnav_env.gnss._validate import (
     as_point_list,
     readonly,
 )
-from coopnav_env.gnss.frames import (
-    _EP2,
-    _N_BOWRING_ITER,
-    _azimuth_elevation,
-    _line_of_sight,
-)
+from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
 
 __all__ = [
     "ErrorModel",
@@ -622,23 +617,16 @@ def _iono_factors(model: ErrorModel) -> NDArray[np.float64]:
 _IONO_FACTORS: dict[ErrorModel, NDArray[np.float64]] = {}
 
 
-_USE_KERNEL = True
-"""Receiver-satellite geometry through :mod:`coopnav_env.gnss._kernels` (False: numpy)."""
-
-
 def _range_azimuth_elevation(
     rx: NDArray[np.float64], sv: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Range, azimuth and elevation of every (receiver, satellite) pair (validated arrays).
 
     :func:`~coopnav_env.gnss.frames.line_of_sight` and
-    :func:`~coopnav_env.gnss.frames.azimuth_elevation` in one compiled pass (the numpy
-    formulation with ``_USE_KERNEL = False``; they agree to a few units in the last place).
+    :func:`~coopnav_env.gnss.frames.azimuth_elevation` in one compiled pass
+    (:func:`coopnav_env.gnss._kernels.range_azimuth_elevation`); they agree to a few units in
+    the last place (libm's transcendental functions there, numpy's here).
     """
-    if not _USE_KERNEL:
-        unit, range_m = _line_of_sight(rx, sv)
-        az_deg, el_deg = _azimuth_elevation(rx, unit)
-        return range_m, az_deg, el_deg
     range_m, az_deg, el_deg, at_centre, zero_range = _kernels.range_azimuth_elevation(
         np.ascontiguousarray(rx, dtype=np.float64),
         np.ascontiguousarray(sv, dtype=np.float64),
@@ -654,6 +642,43 @@ def _range_azimuth_elevation(
     if zero_range:
         raise ValueError("line_of_sight: a receiver coincides with a satellite (zero range)")
     return range_m, az_deg, el_deg
+
+
+def _pseudorange_model(
+    z_common: NDArray[np.float64],
+    z_user: NDArray[np.float64],
+    range_m: NDArray[np.float64],
+    el_deg: NDArray[np.float64],
+    sys_idx: NDArray[np.intp],
+    vis: NDArray[np.bool_],
+    model: ErrorModel,
+    clock: NDArray[np.float64],
+    extra: NDArray[np.float64],
+    el_ref: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.float64], ...]:
+    """Sigmas, errors and pseudoranges of one epoch from its standard normal draws (Eq. 1-8).
+
+    Returns ``sigma_common (n_sv,), sigma_user (n_rx, n_sv), common_error (n_sv,),
+    user_error (n_rx, n_sv), pr (n_rx, n_sv)`` (NaN where not visible), computed by the
+    compiled :func:`coopnav_env.gnss._kernels.pseudorange_model`. ``el_ref`` None: the common
+    error's elevation is the mean over the receivers.
+    """
+    n_sv = range_m.shape[1]
+    return _kernels.pseudorange_model(
+        range_m,
+        el_deg,
+        np.ascontiguousarray(sys_idx, dtype=np.int64),
+        np.ascontiguousarray(vis, dtype=bool),
+        np.ascontiguousarray(clock, dtype=np.float64),
+        _iono_factors(model),
+        z_common,
+        z_user,
+        np.ascontiguousarray(extra, dtype=float),
+        np.full(n_sv, np.nan) if el_ref is None else np.ascontiguousarray(el_ref, dtype=float),
+        float(model.sigma_ure_m),
+        bool(model.tropo),
+        bool(model.differential),
+    )
 
 
 def _simulate_pseudoranges(
@@ -678,26 +703,9 @@ def _simulate_pseudoranges(
     z_user = gen.standard_normal((n_rx, n_sv))
     if extra is None:
         extra = np.zeros((n_rx, n_sv))
-    if _USE_KERNEL:
-        sigma_common, sigma_user, common_error, user_error, pr = _kernels.pseudorange_model(
-            range_m,
-            el_deg,
-            np.ascontiguousarray(sys_idx, dtype=np.int64),
-            np.ascontiguousarray(vis, dtype=bool),
-            np.ascontiguousarray(clock, dtype=np.float64),
-            _iono_factors(model),
-            z_common,
-            z_user,
-            np.ascontiguousarray(extra, dtype=float),
-            np.full(n_sv, np.nan) if el_ref is None else np.ascontiguousarray(el_ref, dtype=float),
-            float(model.sigma_ure_m),
-            bool(model.tropo),
-            bool(model.differential),
-        )
-    else:
-        sigma_common, sigma_user, common_error, user_error, pr = _pseudorange_model_numpy(
-            z_common, z_user, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
-        )
+    sigma_common, sigma_user, common_error, user_error, pr = _pseudorange_model(
+        z_common, z_user, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
+    )
     return PseudorangeEpoch._trusted(
         pr_m=pr,
         visible=readonly(vis),  # the caller's arrays are copied, the fresh ones are not
@@ -712,22 +720,3 @@ def _simulate_pseudoranges(
         user_error_m=user_error,
         clock_bias_m=readonly(clock),
     )
-
-
-def _pseudorange_model_numpy(
-    z_common, z_user, range_m, el_deg, sys_idx, vis, model, clock, extra, el_ref
-):
-    """The numpy formulation of :func:`coopnav_env.gnss._kernels.pseudorange_model`:
-    returns ``sigma_common, sigma_user, common_error, user_error, pr``."""
-    if el_ref is None:
-        el_ref = el_deg.mean(axis=0)
-
-    # model.sigma_common_m(el_ref) and model.sigma_user_m(el_deg, sys_idx), unchecked
-    sigma_common = model._sigma_common(el_ref)
-    sigma_user = _sigma_user(el_deg, _iono_factors(model)[sys_idx])
-
-    common_error = sigma_common * z_common
-    user_error = sigma_user * z_user
-    pr = range_m + clock[:, sys_idx] + common_error[None, :] + user_error + extra
-    pr = np.where(vis, pr, np.nan)
-    return sigma_common, sigma_user, common_error, user_error, pr

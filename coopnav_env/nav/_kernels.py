@@ -22,7 +22,7 @@ whole standalone solver after its argument checks), :func:`setup_masks` (clock r
 used rows, DDT pivots and availability of the centroid problems), :func:`cooperative_finish`
 (statuses, centroid outputs and every UAV's position and covariance, Eq. 19-22),
 :func:`fix_status`, :func:`n_nuisance` and :func:`sqrtm_diagonal`. Each has its numpy
-formulation in :mod:`.wls` / :mod:`.cooperative` (``_USE_KERNEL = False``), compared in
+formulation as a test oracle (``tests/nav/oracles.py``), compared in
 ``tests/nav/test_kernels.py``.
 
 The kernels are compiled on first use and cached on disk beside this file (numba

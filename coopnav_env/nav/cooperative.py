@@ -69,8 +69,8 @@ and eliminate, in order: the per-UAV latent (Woodbury with a 3x3 solve per UAV),
 nuisance clocks (an ``N_const x N_const`` solve per UAV), and the common errors (one
 ``n_sv x n_sv`` Cholesky). For the exact model the Gauss-Newton loop runs in a compiled kernel
 (:mod:`coopnav_env.nav._kernels`, numba), one loop per centroid problem; the numpy formulation
-here (batched over UAVs and centroids) serves the paper's covariance and the literal DDT, and
-is the second implementation the tests compare the kernel with.
+here (batched over UAVs and centroids) serves the paper's covariance and the literal DDT (the
+tests also run it on the exact model, as the second implementation of the kernel).
 """
 
 from __future__ import annotations
@@ -96,7 +96,6 @@ from coopnav_env.nav.wls import (
     StandaloneSolution,
     _radius_args,
     _safe_inverse,
-    fix_status,
     solve_standalone,
 )
 
@@ -107,10 +106,6 @@ __all__ = [
     "solve_cooperative_samples",
     "solve_master_slave",
 ]
-
-_USE_KERNEL = True
-"""Run the exact structured model in the compiled kernel (False: the numpy formulation, which
-the tests use as a second implementation)."""
 
 Transfer = Literal["sdt", "ddt"]
 CovarianceModel = Literal["exact", "paper"]
@@ -268,27 +263,18 @@ def _sort_by_system(obs: GnssObservations) -> tuple[GnssObservations, np.ndarray
     )
 
 
-_DIAGONAL = np.array([0, 4, 8])
-_OFF_DIAGONAL = np.array([1, 2, 3, 5, 6, 7])
-
-
 def _sqrtm_psd(cov: np.ndarray) -> np.ndarray:
     """Symmetric square roots of positive semi-definite ``(..., 3, 3)`` matrices.
 
     When every matrix is diagonal (the simulator's relative sensing: ``sigma_d^2 I``) the
-    root is the square root of the diagonal, which is what the eigendecomposition returns for
-    a diagonal matrix too (to the last bit for ordinary values; the tests check it), without
-    its cost.
+    root is the square root of the diagonal (:func:`coopnav_env.nav._kernels.sqrtm_diagonal`),
+    which is what the eigendecomposition returns for a diagonal matrix too (to the last bit for
+    ordinary values; the tests check it), without its cost.
     """
-    if _USE_KERNEL and cov.ndim >= 2:
-        flat3 = np.ascontiguousarray(cov, dtype=np.float64).reshape(-1, 3, 3)
-        root, diagonal = _kernels.sqrtm_diagonal(flat3)
-        if diagonal:
-            return root.reshape(cov.shape)
-    else:
-        flat = cov.reshape((*cov.shape[:-2], 9))
-        if not flat[..., _OFF_DIAGONAL].any():
-            return np.sqrt(np.clip(flat[..., _DIAGONAL], 0.0, None))[..., None] * np.eye(3)
+    flat3 = np.ascontiguousarray(cov, dtype=np.float64).reshape(-1, 3, 3)
+    root, diagonal = _kernels.sqrtm_diagonal(flat3)
+    if diagonal:
+        return root.reshape(cov.shape)
     lam, vec = np.linalg.eigh(cov)
     return np.einsum("...ij,...j,...kj->...ik", vec, np.sqrt(np.clip(lam, 0.0, None)), vec)
 
@@ -336,23 +322,9 @@ def _setup(
         base = np.where(bavail[..., None], base, 0.0)
         bcov = np.where(bavail[..., None, None], bcov, 0.0)
     n_b = cen.shape[0]
-    vis = obs.visible
-    n_sys = obs.n_systems
-    if _USE_KERNEL:
-        ref, used, has_clock, pivot, too_few = _kernels.setup_masks(
-            np.ascontiguousarray(vis, dtype=bool),
-            np.ascontiguousarray(bavail, dtype=bool),
-            np.ascontiguousarray(cen, dtype=np.int64),
-            np.ascontiguousarray(obs.system, dtype=np.int64),
-            np.ascontiguousarray(obs.el_deg, dtype=np.float64),
-            int(n_sys),
-            transfer == "ddt",
-            -1 if sdt_min_centroid_sats is None else int(sdt_min_centroid_sats),
-        )
-    else:
-        ref, used, has_clock, pivot, too_few = _setup_masks_numpy(
-            obs, bavail, cen, transfer, sdt_min_centroid_sats
-        )
+    ref, used, has_clock, pivot, too_few = _setup_masks(
+        obs, bavail, cen, transfer, sdt_min_centroid_sats
+    )
     bidx = np.arange(n_b)
     froot = _sqrtm_psd(bcov)
 
@@ -380,53 +352,31 @@ def _setup(
         too_few=too_few,
         pr=np.where(obs.visible, obs.pr_m, 0.0)[None],
         avail=bavail,
-        sys_slices=_system_slices(obs.system, n_sys),
+        sys_slices=_system_slices(obs.system, obs.n_systems),
     )
 
 
-def _setup_masks_numpy(obs, bavail, cen, transfer, sdt_min_centroid_sats):
-    """The numpy formulation of :func:`coopnav_env.nav._kernels.setup_masks`."""
-    n_b = cen.shape[0]
-    vis = obs.visible
-    n_sys = obs.n_systems
-    onehot = np.eye(n_sys, dtype=bool)[obs.system]  # (S, n_sys)
-    used0 = vis[None, :, :] & bavail[:, :, None]  # (B, N, S)
-    n_vis = (used0).sum(axis=2)  # (B, N)
-    ref = cen.copy()
-    virt = cen < 0
-    if np.any(virt):
-        # clock reference of a virtual point: the available UAV seeing most satellites
-        best = np.argmax(n_vis[virt], axis=1)
-        ref[virt] = np.where(n_vis[virt][np.arange(best.size), best] > 0, best, -1)
-    bidx = np.arange(n_b)
-    ref_vis = np.where((ref >= 0)[:, None], used0[bidx, np.maximum(ref, 0)], False)  # (B, S)
-    has_clock = (ref_vis[:, :, None] & onehot[None]).any(axis=1)  # (B, n_sys)
-
-    # DDT pivots: highest elevation (at the reference) among satellites of the constellation
-    # seen by both the reference and UAV q.
-    el_ref = np.where(ref_vis, obs.el_deg[np.maximum(ref, 0)], -np.inf)  # (B, S)
-    common = used0 & ref_vis[:, None, :]  # (B, N, S)
-    score = np.where(
-        common[..., None] & onehot[None, None], el_ref[:, None, :, None], -np.inf
-    )  # (B, N, S, n_sys)
-    pivot = np.argmax(score, axis=2)  # (B, N, n_sys)
-    pivot = np.where(np.isfinite(np.max(score, axis=2)), pivot, -1)
-
-    if transfer == "ddt":
-        # measurements of constellation s are transferred only with a common pivot
-        used = used0 & (pivot >= 0)[:, :, obs.system]
-        n_ref = ref_vis.sum(axis=1)
-        too_few = n_ref < 1
-    else:
-        used = used0
-        if sdt_min_centroid_sats is None:
-            need = 3 + has_clock.sum(axis=1)
-        else:
-            need = np.full(n_b, int(sdt_min_centroid_sats))
-        n_ref = ref_vis.sum(axis=1)
-        too_few = np.where(cen >= 0, n_ref < need, ref < 0)
-
-    return ref, used, has_clock, pivot, too_few
+def _setup_masks(
+    obs: GnssObservations,
+    bavail: np.ndarray,
+    cen: np.ndarray,
+    transfer: Transfer,
+    sdt_min_centroid_sats: int | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``ref, used, has_clock, pivot, too_few`` of the centroid problems ``cen`` (B,): clock
+    reference UAV (B,), rows used (B, N, S), constellations with a clock (B, n_sys), DDT pivot
+    per UAV and constellation (B, N, n_sys; -1: none) and the problems without enough
+    satellites (B,), by the compiled :func:`coopnav_env.nav._kernels.setup_masks`."""
+    return _kernels.setup_masks(
+        np.ascontiguousarray(obs.visible, dtype=bool),
+        np.ascontiguousarray(bavail, dtype=bool),
+        np.ascontiguousarray(cen, dtype=np.int64),
+        np.ascontiguousarray(obs.system, dtype=np.int64),
+        np.ascontiguousarray(obs.el_deg, dtype=np.float64),
+        int(obs.n_systems),
+        transfer == "ddt",
+        -1 if sdt_min_centroid_sats is None else int(sdt_min_centroid_sats),
+    )
 
 
 @dataclass
@@ -660,14 +610,10 @@ def _gauss_newton(
     (B, N, S) and the number of nuisance clocks they carry (B,) are what :func:`_finish` needs.
     The exact structured model runs in the compiled kernel
     (:func:`coopnav_env.nav._kernels.cooperative_gauss_newton`); the paper's covariance, the
-    literal DDT and the dense reference run the numpy formulation below.
+    literal DDT and the dense reference run :func:`_gauss_newton_numpy`.
     """
-    n_b = st.ref.shape[0]
-    n_sys = obs.n_systems
-    p_dim = 3 + n_sys
-    literal = transfer == "ddt" and (covariance == "paper" or method == "dense")
     usable = ~st.too_few
-    if method == "structured" and covariance == "exact" and _USE_KERNEL:
+    if method == "structured" and covariance == "exact":
         pos, clk, inv, cross, converged, singular, iters = _kernels.cooperative_gauss_newton(
             np.ascontiguousarray(st.pr, dtype=float),
             np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
@@ -687,6 +633,27 @@ def _gauss_newton(
         )
         n_iter = int(iters.max()) if iters.size else 0
         return pos, clk, inv, cross, converged, singular, st.used, _n_nuisance(obs, st), n_iter
+    return _gauss_newton_numpy(obs, st, x0, transfer, covariance, method, max_iter, tol_m)
+
+
+def _gauss_newton_numpy(
+    obs: GnssObservations,
+    st: _Setup,
+    x0: np.ndarray,
+    transfer: Transfer,
+    covariance: CovarianceModel,
+    method: str,
+    max_iter: int,
+    tol_m: float,
+):
+    """:func:`_gauss_newton` of every problem at once with numpy (what the paper's
+    covariance, the literal DDT and the dense reference run; on the exact structured model it
+    computes what the compiled kernel computes, and the tests compare the two)."""
+    n_b = st.ref.shape[0]
+    n_sys = obs.n_systems
+    p_dim = 3 + n_sys
+    literal = transfer == "ddt" and (covariance == "paper" or method == "dense")
+    usable = ~st.too_few
     pos = x0.copy()
     clk = np.zeros((n_b, n_sys))
     converged = np.zeros(n_b, dtype=bool)
@@ -722,18 +689,14 @@ def _at_satellite(obs: GnssObservations, st: _Setup, pos: np.ndarray) -> np.ndar
 
 
 def _n_nuisance(obs: GnssObservations, st: _Setup) -> np.ndarray:
-    """Nuisance clocks (UAV other than the reference, constellation with a row) per problem."""
-    if _USE_KERNEL:
-        return _kernels.n_nuisance(
-            np.ascontiguousarray(st.used, dtype=bool),
-            np.ascontiguousarray(obs.system, dtype=np.int64),
-            np.ascontiguousarray(st.ref, dtype=np.int64),
-            int(obs.n_systems),
-        )
-    onehot = np.eye(obs.n_systems)[obs.system]  # (S, n_sys)
-    per = np.einsum("bns,sq->bnq", st.used.astype(float), onehot) > 0
-    not_ref = np.arange(obs.n_rx)[None, :] != st.ref[:, None]
-    return (per & not_ref[:, :, None]).sum(axis=(1, 2))
+    """Nuisance clocks (UAV other than the reference, constellation with a row) per problem
+    (B,), by the compiled :func:`coopnav_env.nav._kernels.n_nuisance`."""
+    return _kernels.n_nuisance(
+        np.ascontiguousarray(st.used, dtype=bool),
+        np.ascontiguousarray(obs.system, dtype=np.int64),
+        np.ascontiguousarray(st.ref, dtype=np.int64),
+        int(obs.n_systems),
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -988,11 +951,11 @@ def _solve_isotropic(
     (N,), ``x0_ecef_m`` (3,). Returns exactly what ``solve_cooperative`` returns for
     ``RelativePositions(rel_ecef_m, var_m2[..., None, None] * I, available)`` (the same kernels
     on the same arguments: :func:`coopnav_env.nav._kernels.cooperative_isotropic`), or None
-    when this path does not apply (kernels switched off, satellites not grouped by
-    constellation): the caller then runs ``solve_cooperative``.
+    when this path does not apply (satellites not grouped by constellation): the caller then
+    runs ``solve_cooperative``.
     """
     system = obs.system
-    if not _USE_KERNEL or (system.size > 1 and not bool((system[1:] >= system[:-1]).all())):
+    if system.size > 1 and not bool((system[1:] >= system[:-1]).all()):
         return None
     n = obs.n_rx
     self_centroids = isinstance(centroid, str)
@@ -1043,55 +1006,30 @@ def _finish(
     """Statuses, centroid outputs and every UAV's position/covariance from each centroid.
 
     ``with_uavs=False`` (centroid ``"self"``, where UAV q's solution is centroid q's) skips
-    the UAV outputs and returns ``None`` for them. Compiled as
-    :func:`coopnav_env.nav._kernels.cooperative_finish` (``_USE_KERNEL``; this numpy code
-    otherwise).
+    the UAV outputs and returns ``None`` for them. Computed by the compiled
+    :func:`coopnav_env.nav._kernels.cooperative_finish`.
     """
-    if _USE_KERNEL:
-        out = _kernels.cooperative_finish(
-            np.ascontiguousarray(pos, dtype=float),
-            np.ascontiguousarray(clk, dtype=float),
-            np.ascontiguousarray(inv, dtype=float),
-            np.ascontiguousarray(cross, dtype=float),
-            np.ascontiguousarray(converged, dtype=bool),
-            np.ascontiguousarray(singular, dtype=bool),
-            np.ascontiguousarray(rows, dtype=bool),
-            np.ascontiguousarray(n_nuis, dtype=np.int64),
-            np.ascontiguousarray(st.too_few, dtype=bool),
-            np.ascontiguousarray(st.has_clock, dtype=bool),
-            np.ascontiguousarray(st.base, dtype=float),
-            np.ascontiguousarray(st.bcov, dtype=float),
-            np.ascontiguousarray(st.froot, dtype=float),
-            np.ascontiguousarray(st.avail, dtype=bool),
-            *_radius_args(plausible_radius_m),
-            bool(with_uavs),
-        )
-        if not with_uavs:
-            return (*out[:6], None, None, None)
-        return out
-    n_meas = rows.sum(axis=(1, 2))
-    n_uavs = rows.any(axis=2).sum(axis=1)
-    # counting rule: measurements minus per-UAV nuisance clocks must cover the unknowns
-    too_few = st.too_few | (n_meas - n_nuis < 3 + st.has_clock.sum(axis=1))
-    c_status, failed = fix_status(pos, converged, singular, too_few, plausible_radius_m)
-    h_star = inv[:, :3, :3].copy()
-    c_pos = pos.copy()
-    c_pos[failed] = np.nan
-    h_star[failed] = np.nan
-    c_clk = np.where(st.has_clock & ~failed[:, None], clk, np.nan)
+    out = _kernels.cooperative_finish(
+        np.ascontiguousarray(pos, dtype=float),
+        np.ascontiguousarray(clk, dtype=float),
+        np.ascontiguousarray(inv, dtype=float),
+        np.ascontiguousarray(cross, dtype=float),
+        np.ascontiguousarray(converged, dtype=bool),
+        np.ascontiguousarray(singular, dtype=bool),
+        np.ascontiguousarray(rows, dtype=bool),
+        np.ascontiguousarray(n_nuis, dtype=np.int64),
+        np.ascontiguousarray(st.too_few, dtype=bool),
+        np.ascontiguousarray(st.has_clock, dtype=bool),
+        np.ascontiguousarray(st.base, dtype=float),
+        np.ascontiguousarray(st.bcov, dtype=float),
+        np.ascontiguousarray(st.froot, dtype=float),
+        np.ascontiguousarray(st.avail, dtype=bool),
+        *_radius_args(plausible_radius_m),
+        bool(with_uavs),
+    )
     if not with_uavs:
-        return c_pos, h_star, c_clk, c_status, n_uavs, n_meas, None, None, None
-    # Every UAV from each centroid: p_q = p* + x_q, H_q = H* + C_d,q + Y + Y^T, where
-    # Y = cov(p*~, eps_q) = [H A^T C~^-1 (1 F_q)]_pos F_q^T (Eq. 19-22, Appendix B)
-    y = np.matmul(inv[:, None, :3], cross) @ np.swapaxes(st.froot, -1, -2)
-    uav_pos = c_pos[:, None, :] + st.base
-    uav_cov = h_star[:, None] + st.bcov + y + np.swapaxes(y, -1, -2)
-    uav_status = np.repeat(c_status[:, None], obs.n_rx, axis=1)
-    no_link = ~st.avail
-    uav_status[no_link & (uav_status == NavStatus.OK)] = NavStatus.NO_RELATIVE_POSITION
-    uav_pos[no_link] = np.nan
-    uav_cov[no_link] = np.nan
-    return c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status
+        return (*out[:6], None, None, None)
+    return out
 
 
 def solve_cooperative_samples(

@@ -19,7 +19,6 @@ from coopnav_env.nav.types import (
     NavStatus,
     check_iteration,
     check_plausible_radius,
-    implausible_radius,
     initial_positions,
     weak_geometry,
 )
@@ -27,11 +26,8 @@ from coopnav_env.nav.types import (
 __all__ = ["StandaloneSolution", "pdop", "solve_standalone"]
 
 #: A normal matrix whose diagonally scaled condition number exceeds this is reported singular
-#: (the numpy formulation and the compiled kernels share the value).
+#: (the numpy solves of this package and the compiled kernels share the value).
 COND_LIMIT = _kernels.COND_LIMIT
-
-_USE_KERNEL = True
-"""Run the Gauss-Newton loop in the compiled kernel (False: the numpy formulation)."""
 
 
 def pdop(los_unit: np.ndarray, system: np.ndarray) -> float:
@@ -177,27 +173,10 @@ def solve_standalone(
     check_plausible_radius(plausible_radius_m)
     max_iter = check_iteration(max_iter, tol_m)
     n_rx = obs.pr_m.shape[0]
-    n_sys = obs.n_systems
-    vis = obs.visible
     pos = initial_positions(x0_ecef_m, n_rx)
-    if _USE_KERNEL:
-        pos, cov, clock, status, n_used, n_iter = _kernels.standalone_solve(
-            np.ascontiguousarray(vis, dtype=bool),
-            np.ascontiguousarray(obs.pr_m, dtype=float),
-            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
-            np.ascontiguousarray(obs.sigma_user_m, dtype=float),
-            np.ascontiguousarray(obs.sigma_common_m, dtype=float),
-            np.ascontiguousarray(obs.system, dtype=np.int64),
-            int(n_sys),
-            np.ascontiguousarray(pos),
-            int(max_iter),
-            float(tol_m),
-            *_radius_args(plausible_radius_m),
-        )
-    else:
-        pos, cov, clock, status, n_used, n_iter = _standalone_numpy(
-            obs, pos, max_iter, tol_m, plausible_radius_m
-        )
+    pos, cov, clock, status, n_used, n_iter = _standalone_solve(
+        obs, pos, max_iter, tol_m, plausible_radius_m
+    )
     return StandaloneSolution(
         pos_ecef_m=pos,
         cov_ecef_m2=cov,
@@ -208,48 +187,30 @@ def solve_standalone(
     )
 
 
-def _standalone_numpy(obs, pos, max_iter, tol_m, plausible_radius_m):
-    """The numpy formulation of :func:`coopnav_env.nav._kernels.standalone_solve`."""
-    vis = obs.visible
-    n_sys = obs.n_systems
-    w = np.where(vis, 1.0 / (obs.sigma_user_m**2 + obs.sigma_common_m[None, :] ** 2), 0.0)
-    pr = np.where(vis, obs.pr_m, 0.0)
-    onehot = np.eye(n_sys)[obs.system]  # (n_sv, n_sys)
-    seen = np.einsum("rs,sk->rk", vis.astype(float), onehot) > 0  # (n_rx, n_sys)
-    n_used = vis.sum(axis=1)
-    too_few = n_used < 3 + seen.sum(axis=1)
-    pos, clock, inv, converged, singular, n_iter = _gauss_newton_numpy(
-        obs, pr, w, onehot, seen, ~too_few, pos, max_iter, tol_m
-    )
-    status, failed = fix_status(pos, converged, singular, too_few, plausible_radius_m)
-    pos[failed] = np.nan
-    cov = inv[:, :3, :3].copy()
-    cov[failed] = np.nan
-    clock = np.where(seen & ~failed[:, None], clock, np.nan)
-    return pos, cov, clock, status, n_used, n_iter
-
-
-def fix_status(
+def _standalone_solve(
+    obs: GnssObservations,
     pos: np.ndarray,
-    converged: np.ndarray,
-    singular: np.ndarray,
-    too_few: np.ndarray,
+    max_iter: int,
+    tol_m: float,
     plausible_radius_m: tuple[float, float] | None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:class:`NavStatus` of each fix (n,) and whether it failed (no position).
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """Every receiver's Gauss-Newton fix from the starting positions ``pos`` (n_rx, 3), by
+    the compiled :func:`coopnav_env.nav._kernels.standalone_solve`.
 
-    In increasing precedence: ``OK``, ``NOT_CONVERGED``, ``IMPLAUSIBLE_POSITION`` (a
-    converged fix outside ``plausible_radius_m``), ``SINGULAR_GEOMETRY``,
-    ``TOO_FEW_SATELLITES``; the last two have failed. Shared by both solvers (a compiled
-    helper; the numpy formulation is :func:`_fix_status_numpy`).
+    Returns ``pos (n_rx, 3), cov (n_rx, 3, 3), clock (n_rx, n_sys), status (n_rx,),
+    n_used (n_rx,), n_iter`` as :class:`StandaloneSolution` holds them.
     """
-    if not _USE_KERNEL:
-        return _fix_status_numpy(pos, converged, singular, too_few, plausible_radius_m)
-    return _kernels.fix_status(
-        np.ascontiguousarray(pos, dtype=float),
-        np.ascontiguousarray(converged, dtype=bool),
-        np.ascontiguousarray(singular, dtype=bool),
-        np.ascontiguousarray(too_few, dtype=bool),
+    return _kernels.standalone_solve(
+        np.ascontiguousarray(obs.visible, dtype=bool),
+        np.ascontiguousarray(obs.pr_m, dtype=float),
+        np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+        np.ascontiguousarray(obs.sigma_user_m, dtype=float),
+        np.ascontiguousarray(obs.sigma_common_m, dtype=float),
+        np.ascontiguousarray(obs.system, dtype=np.int64),
+        int(obs.n_systems),
+        np.ascontiguousarray(pos),
+        int(max_iter),
+        float(tol_m),
         *_radius_args(plausible_radius_m),
     )
 
@@ -260,51 +221,3 @@ def _radius_args(plausible_radius_m: tuple[float, float] | None) -> tuple[bool, 
         return False, 0.0, 0.0
     lo, hi = plausible_radius_m
     return True, float(lo), float(hi)
-
-
-def _fix_status_numpy(pos, converged, singular, too_few, plausible_radius_m):
-    """The numpy formulation of :func:`fix_status`."""
-    status = np.full(pos.shape[0], NavStatus.OK, dtype=np.int64)
-    status[~converged] = NavStatus.NOT_CONVERGED
-    status[converged & implausible_radius(pos, plausible_radius_m)] = NavStatus.IMPLAUSIBLE_POSITION
-    status[singular] = NavStatus.SINGULAR_GEOMETRY
-    status[too_few] = NavStatus.TOO_FEW_SATELLITES
-    failed = (status == NavStatus.TOO_FEW_SATELLITES) | (status == NavStatus.SINGULAR_GEOMETRY)
-    return status, failed
-
-
-def _gauss_newton_numpy(obs, pr, w, onehot, seen, usable, pos, max_iter, tol_m):
-    """The numpy formulation of the standalone Gauss-Newton loop (second implementation of
-    :func:`coopnav_env.nav._kernels.standalone_gauss_newton`, used by the tests)."""
-    n_rx, n_sv = pr.shape
-    n_sys = seen.shape[1]
-    clock = np.zeros((n_rx, n_sys))
-    converged = np.zeros(n_rx, dtype=bool)
-    n_iter = 0
-    singular = np.zeros(n_rx, dtype=bool)
-    inv = np.zeros((n_rx, 3 + n_sys, 3 + n_sys))
-    for n_iter in range(1, max_iter + 1):  # noqa: B007 - n_iter is reported
-        diff = obs.sv_ecef_m[None, :, :] - pos[:, None, :]
-        rng_m = np.linalg.norm(diff, axis=-1)
-        # a satellite at the iterate: no line of sight, the receiver's geometry is singular
-        at_sat = np.any((rng_m == 0.0) & (w > 0.0), axis=1)
-        los = diff / np.where(rng_m == 0.0, 1.0, rng_m)[..., None]
-        # Rows of satellites not received carry zero weight (w = 0), so they drop out.
-        g = np.concatenate([-los, np.broadcast_to(onehot, (n_rx, n_sv, n_sys))], axis=-1)
-        resid = pr - rng_m - clock @ onehot.T
-        info = np.einsum("rsp,rs,rsq->rpq", g, w, g)
-        # Clock columns of constellations a receiver does not see carry no data.
-        idx = np.arange(3, 3 + n_sys)
-        info[:, idx, idx] += ~seen
-        rhs = np.einsum("rsp,rs,rs->rp", g, w, resid)
-        inv, singular = _safe_inverse(info, usable & ~at_sat)
-        singular |= usable & at_sat
-        dx = np.einsum("rpq,rq->rp", inv, rhs)
-        dx[~usable | singular] = 0.0
-        pos = pos + dx[:, :3]
-        clock = clock + dx[:, 3:]
-        step = np.linalg.norm(dx[:, :3], axis=1)
-        converged = step < tol_m
-        if np.all(converged | ~usable | singular):
-            break
-    return pos, clock, inv, converged, singular, n_iter

@@ -7,8 +7,8 @@ fix whose fault is not cleared has ``NavStatus.FAULT_DETECTED`` and the UAV fall
 next source. The default (fused) path runs it inside its one compiled call
 (:func:`coopnav_env.sim._kernels.epoch_navigation` with ``fde``, the stage
 :func:`coopnav_env.sim._integrity_kernels.epoch_fde`); the modular path
-(:meth:`UrbanWorld._navigate`, when a kernel is switched off or the satellites are not grouped
-by constellation) calls the public :func:`~coopnav_env.nav.fde_standalone` and
+(:meth:`UrbanWorld._navigate`, for the paper's covariance or satellites not grouped by
+constellation) calls the public :func:`~coopnav_env.nav.fde_standalone` and
 :func:`~coopnav_env.nav.fde_cooperative`, which run the same kernels on the same arguments.
 """
 

@@ -5,9 +5,8 @@ and the estimate selection of :class:`~coopnav_env.sim.scenario.UrbanWorld`; and
 :mod:`coopnav_env.gnss` and :mod:`coopnav_env.nav` into one call per epoch (the same kernels
 on the same arguments as the function-by-function path, so the same results bit for bit).
 
-Each has a numpy formulation that stays the readable definition (selected with the module
-flag ``_USE_KERNEL = False`` of :mod:`.city`, :mod:`.swarm`, :mod:`.route` or
-:mod:`.scenario`) and a test that compares the two. Most compute the same floating-point
+Each has a numpy formulation that stays the readable definition, as a test oracle
+(``tests/sim/oracles.py``), and a test that compares the two. Most compute the same floating-point
 operations in the same order (including numpy's handling of signed zeros in ``maximum`` and
 ``clip``), so the results are identical bit for bit; the estimate selection rotates to ENU in
 loops instead of matmuls (1e-13 apart). They exist because the numpy versions spend most of
@@ -260,8 +259,8 @@ def select_navigation(
 ):
     """The estimate each UAV uses: cooperative, else standalone, else dead reckoning.
 
-    ``UrbanWorld._epoch``'s selection (its numpy formulation is ``_select_navigation_numpy``
-    in :mod:`coopnav_env.sim.scenario`): fixes with status OK whose ``trace(cov)`` passes the
+    ``UrbanWorld._epoch``'s selection (its numpy formulation is ``select_navigation`` of
+    ``tests/sim/oracles.py``): fixes with status OK whose ``trace(cov)`` passes the
     gate, expressed in ENU (NaN where not used). Status 4 (NO_RELATIVE_POSITION) replaces the
     cooperative status of an unlinked UAV. Returns ``sa_pos, sa_cov, co_pos, co_cov`` (ENU),
     ``co_status, source, nav_pos, nav_cov, sa_rejected, co_rejected``.
@@ -383,8 +382,10 @@ def _segment_box_dist2(p0, d, lo, hi):
 
 @njit(cache=True, error_model="numpy")
 def swept_collisions_culled(lo, hi, start, end, radius):
-    """``scenario._swept_collisions_culled``: the exact segment-box test on the (UAV, building)
-    pairs whose bounding boxes overlap (touching counts), any hit per UAV."""
+    """:func:`~coopnav_env.sim.swarm.swept_collisions` restricted to the (UAV, building) pairs
+    whose bounding boxes overlap (touching counts): the exact segment-box test on those pairs
+    only, any hit per UAV (its numpy formulation is ``swept_collisions_culled`` of
+    ``tests/sim/oracles.py``)."""
     n = start.shape[0]
     m = lo.shape[0]
     hit = np.zeros(n, dtype=np.bool_)

@@ -124,7 +124,6 @@ from coopnav_env.gnss import (
     geodetic_to_ecef,
     select_highest,
 )
-from coopnav_env.gnss import errors as _errors
 from coopnav_env.gnss.errors import (
     DEFAULT_CLOCK_SIGMA_M,
     _iono_factors,
@@ -146,8 +145,6 @@ from coopnav_env.nav import (
     solve_cooperative,
     solve_standalone,
 )
-from coopnav_env.nav import cooperative as _cooperative
-from coopnav_env.nav import wls as _wls
 from coopnav_env.nav.cooperative import _solve_isotropic
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
@@ -194,24 +191,7 @@ from coopnav_env.sim.swarm import (
     KinematicsConfig,
     RelativeSensingConfig,
     _measure_relative,
-    separation_violations,
-    step_kinematics,
-    swept_collisions,
 )
-
-_USE_KERNEL = True
-"""Compiled motion step (:func:`coopnav_env.sim._kernels.world_motion`), swept collisions and
-estimate selection (:func:`coopnav_env.sim._kernels.select_navigation`); False: their numpy
-formulations (``step_kinematics`` and the fence, ``_swept_collisions_culled``,
-``_select_navigation_numpy``)."""
-
-
-def _fused_path_on() -> bool:
-    """Whether ``UrbanWorld`` may run an epoch's navigation in one compiled call
-    (:meth:`UrbanWorld._navigate_fused`): only while every kernel it stands for is on (each
-    module's ``_USE_KERNEL``), so that switching one off runs its numpy formulation."""
-    return _USE_KERNEL and _errors._USE_KERNEL and _wls._USE_KERNEL and _cooperative._USE_KERNEL
-
 
 __all__ = [
     "AUTO_SHARED_MIN_UAVS",
@@ -1038,6 +1018,54 @@ _NO_BOXES = np.zeros((0, 3))
 _NO_BOXES.setflags(write=False)
 
 
+def _world_motion(
+    pos0: FloatArray,
+    vel0: FloatArray,
+    cmd: FloatArray,
+    kin: KinematicsConfig,
+    lo: FloatArray,
+    hi: FloatArray,
+    buildings: Any,
+) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
+    """One motion step of every UAV: ``pos1, vel1`` (N, 3), ``hit`` and ``sep`` (N,).
+
+    :func:`~coopnav_env.sim.swarm.step_kinematics` of the commands ``cmd`` (N, 3), the fence
+    (positions clipped to ``[lo, hi]`` (2,) east-north, the velocity across a fence zeroed),
+    the swept collisions with ``buildings`` (a UAV that hits one stays where it was, at rest)
+    and the separation violations of the new positions, in one compiled call
+    (:func:`coopnav_env.sim._kernels.world_motion`). A file city's extruded polygons collide
+    through their own :meth:`swept_collisions` after it.
+    """
+    if cmd.shape != pos0.shape:
+        raise ValueError(f"cmd must have shape {pos0.shape}, got {cmd.shape}")
+    if not np.all(np.isfinite(cmd)):
+        raise ValueError("cmd must be finite")
+    polygons = not isinstance(buildings, Buildings)  # a file city's extruded polygons
+    r = kin.uav_radius_m
+    pos1, vel1, hit, sep = _sim_kernels.world_motion(
+        pos0,
+        vel0,
+        np.ascontiguousarray(cmd),
+        float(kin.max_speed_mps),
+        float(kin.max_accel_mps2 * kin.dt_s),
+        float(kin.dt_s),
+        float(kin.altitude_min_m),
+        float(kin.altitude_max_m),
+        lo,
+        hi,
+        _NO_BOXES if polygons else buildings.min_m,
+        _NO_BOXES if polygons else buildings.max_m,
+        float(r),
+        float(kin.min_separation_m),
+    )
+    if polygons:  # the motion above met no building: collide with the polygons
+        hit = buildings.swept_collisions(pos0, pos1, r)
+        pos1[hit] = pos0[hit]
+        vel1[hit] = 0.0
+        sep = _sim_kernels.separation_violations(pos1, float(kin.min_separation_m))
+    return pos1, vel1, hit, sep
+
+
 def _file_city_start_goal(
     city: FileCity,
     rng: np.random.Generator,
@@ -1626,46 +1654,7 @@ class UrbanWorld:
         r = kin.uav_radius_m
         lo = np.array([x0 + r, y0 + r])
         hi = np.array([x1 - r, y1 - r])
-        b = self.city.buildings
-        polygons = not isinstance(b, Buildings)  # a file city's extruded polygons
-        if _USE_KERNEL:
-            if cmd.shape != pos0.shape:
-                raise ValueError(f"cmd must have shape {pos0.shape}, got {cmd.shape}")
-            if not np.all(np.isfinite(cmd)):
-                raise ValueError("cmd must be finite")
-            pos1, vel1, hit, sep = _sim_kernels.world_motion(
-                pos0,
-                vel0,
-                np.ascontiguousarray(cmd),
-                float(kin.max_speed_mps),
-                float(kin.max_accel_mps2 * kin.dt_s),
-                float(kin.dt_s),
-                float(kin.altitude_min_m),
-                float(kin.altitude_max_m),
-                lo,
-                hi,
-                _NO_BOXES if polygons else b.min_m,
-                _NO_BOXES if polygons else b.max_m,
-                float(r),
-                float(kin.min_separation_m),
-            )
-            if polygons:  # the motion above met no building: collide with the polygons
-                hit = b.swept_collisions(pos0, pos1, r)
-                pos1[hit] = pos0[hit]
-                vel1[hit] = 0.0
-                sep = _sim_kernels.separation_violations(pos1, float(kin.min_separation_m))
-        else:
-            pos1, vel1 = step_kinematics(pos0, vel0, cmd, kin)
-            out = (pos1[:, :2] < lo) | (pos1[:, :2] > hi)
-            pos1[:, :2] = np.clip(pos1[:, :2], lo, hi)
-            vel1[:, :2] = np.where(out, 0.0, vel1[:, :2])
-            if polygons:
-                hit = b.swept_collisions(pos0, pos1, r)
-            else:
-                hit = _swept_collisions_culled(b, pos0, pos1, r)
-            pos1[hit] = pos0[hit]
-            vel1[hit] = 0.0
-            sep = separation_violations(pos1, kin.min_separation_m)
+        pos1, vel1, hit, sep = _world_motion(pos0, vel0, cmd, kin, lo, hi, self.city.buildings)
         self.pos_enu_m, self.vel_enu_mps = pos1, vel1
         self.t_s = self.t_s + cfg.dt_s
         self.last = self._epoch(rng, hit, sep)
@@ -1716,7 +1705,7 @@ class UrbanWorld:
             map_excluded = received & ~predicted
             received = received & predicted
         nlos = received & ~los
-        fused = _fused_path_on() and cfg.covariance == "exact" and sky.grouped
+        fused = cfg.covariance == "exact" and sky.grouped
         navigate = self._navigate_fused if fused else self._navigate
         (
             rel_enu,
@@ -1808,8 +1797,7 @@ class UrbanWorld:
             rows = self._relative_rows(rel_enu, rel_var, avail, centroid)
             sa, co, used = _integrity.modular_fde(self, obs, sa, co, *rows, centroid)
 
-        select = _select_navigation if _USE_KERNEL else _select_navigation_numpy
-        sel = select(self, sa, co, linked, pred_enu, dr_var)
+        sel = _select_navigation(self, sa, co, linked, pred_enu, dr_var)
         integrity = used(sel[5]) if cfg.integrity != "off" else None
         next_wp = advance_waypoints(self.route_xy_m, sel[6][:, :2], self.next_wp, cfg.route_reach_m)
         link_or_self = avail | np.eye(n, dtype=bool)
@@ -1944,32 +1932,6 @@ def _select_navigation(world, sa, co, linked, pred_enu, dr_var):
         np.ascontiguousarray(world.nav_cov_enu_m2, dtype=np.float64),
         float(dr_var),
     )
-
-
-def _select_navigation_numpy(world, sa, co, linked, pred_enu, dr_var):
-    """The numpy formulation of :func:`_select_navigation` (the definition)."""
-    cfg = world.config
-    sa_ok = sa.status == NavStatus.OK
-    co_status = np.where(linked, co.status, NavStatus.NO_RELATIVE_POSITION).astype(np.int64)
-    co_ok = co_status == NavStatus.OK
-    # integrity gate: a fix whose predicted 3-D sigma is too large is not used
-    sa_rej = sa_ok & ~_sigma_within(sa.cov_ecef_m2, cfg.max_fix_sigma_m)
-    co_rej = co_ok & ~_sigma_within(co.cov_ecef_m2, cfg.max_fix_sigma_m)
-    sa_ok &= ~sa_rej
-    co_ok &= ~co_rej
-    sa_pos = np.where(sa_ok[:, None], world.ecef_to_enu(sa.pos_ecef_m), np.nan)
-    sa_cov = np.where(sa_ok[:, None, None], world.cov_ecef_to_enu(sa.cov_ecef_m2), np.nan)
-    co_pos = np.where(co_ok[:, None], world.ecef_to_enu(co.pos_ecef_m), np.nan)
-    co_cov = np.where(co_ok[:, None, None], world.cov_ecef_to_enu(co.cov_ecef_m2), np.nan)
-    source = np.where(
-        co_ok,
-        NavSource.COOPERATIVE,
-        np.where(sa_ok, NavSource.STANDALONE, NavSource.DEAD_RECKONING),
-    ).astype(np.int64)
-    dr_cov = world.nav_cov_enu_m2 + np.eye(3) * dr_var
-    nav_pos = np.where(co_ok[:, None], co_pos, np.where(sa_ok[:, None], sa_pos, pred_enu))
-    nav_cov = np.where(co_ok[:, None, None], co_cov, np.where(sa_ok[:, None, None], sa_cov, dr_cov))
-    return sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej
 
 
 @dataclass(frozen=True, eq=False)
@@ -2124,53 +2086,3 @@ class _SkyCache:
 
 
 _SKY_CACHE = _SkyCache()
-
-
-def _sigma_within(cov_ecef_m2: np.ndarray, max_sigma_m: float | None) -> BoolArray:
-    """``sqrt(trace(cov)) <= max_sigma_m`` per fix (True everywhere when the gate is off).
-
-    The trace is invariant under the ECEF-ENU rotation. NaN covariances (no fix) give False,
-    which does not matter: only fixes the solver reported OK are tested.
-    """
-    if max_sigma_m is None:
-        return np.ones(cov_ecef_m2.shape[0], dtype=bool)
-    tr = np.einsum("nii->n", cov_ecef_m2)
-    with np.errstate(invalid="ignore"):
-        return tr <= max_sigma_m**2
-
-
-def _swept_collisions_culled(
-    buildings: Buildings, start_enu_m: FloatArray, end_enu_m: FloatArray, radius_m: float
-) -> BoolArray:
-    """:func:`swept_collisions` restricted to the (UAV, building) pairs whose boxes overlap.
-
-    The bounding box of each swept sphere is tested against every building box first (a cheap
-    ``(N, n_b)`` test); the exact segment-box distance then only runs on the UAVs and buildings
-    of overlapping pairs. The result equals :func:`swept_collisions` (the exact test is run on
-    a superset of the pairs that can collide). The compiled
-    :func:`coopnav_env.sim._kernels.swept_collisions_culled` runs the exact test on the
-    overlapping pairs only, with the same operations (``_USE_KERNEL = False``: this numpy code).
-    """
-    if _USE_KERNEL:
-        return _sim_kernels.swept_collisions_culled(
-            buildings.min_m,
-            buildings.max_m,
-            np.ascontiguousarray(start_enu_m, dtype=np.float64),
-            np.ascontiguousarray(end_enu_m, dtype=np.float64),
-            float(radius_m),
-        )
-    n = start_enu_m.shape[0]
-    lo = np.minimum(start_enu_m, end_enu_m) - radius_m
-    hi = np.maximum(start_enu_m, end_enu_m) + radius_m
-    overlap = np.all(
-        (lo[:, None, :] <= buildings.max_m[None]) & (hi[:, None, :] >= buildings.min_m[None]),
-        axis=2,
-    )  # (N, n_b)
-    hit = np.zeros(n, dtype=bool)
-    uav = np.flatnonzero(overlap.any(axis=1))
-    if uav.size == 0:
-        return hit
-    bld = np.flatnonzero(overlap.any(axis=0))
-    sub = Buildings(buildings.min_m[bld], buildings.max_m[bld])
-    hit[uav] = swept_collisions(sub, start_enu_m[uav], end_enu_m[uav], radius_m)
-    return hit

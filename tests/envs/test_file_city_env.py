@@ -189,12 +189,22 @@ def test_coopnav_train_runs_on_the_sample_city(tmp_path: Path) -> None:
 
 
 def test_numpy_motion_path_equals_the_compiled_one(monkeypatch) -> None:
+    """The motion oracle (tests/sim/oracles.py) on a file city's polygons: the same episode."""
+    from coopnav_env.envs import _fused
     from coopnav_env.sim import scenario
+    from tests.sim import oracles
 
     fast = _episode(urban_canyon_v0.parallel_env(**CITY), 4, 30)
-    monkeypatch.setattr(scenario, "_USE_KERNEL", False)
+    calls = {"motion": 0}
+
+    def motion(*args):
+        calls["motion"] += 1
+        return oracles.world_motion(*args)
+
+    monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
+    monkeypatch.setattr(scenario, "_world_motion", motion)
     slow = _episode(urban_canyon_v0.parallel_env(**CITY), 4, 30)
-    assert len(fast) == len(slow)
+    assert len(fast) == len(slow) and calls["motion"] == len(slow) - 1  # every step
     for a, b in zip(fast, slow):
         for x, y in zip(a[0].values(), b[0].values()):  # observations
             np.testing.assert_array_equal(x, y)

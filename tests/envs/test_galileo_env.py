@@ -15,6 +15,7 @@ from coopnav_env import urban_canyon_v1
 from coopnav_env.constants import FILE_SYSTEMS
 from coopnav_env.envs import _fused
 from coopnav_env.sim import scenario as S
+from tests.sim.oracles import navigate_function_by_function
 
 ELKO = (
     Path(__file__).resolve().parents[1] / "gnss" / "data" / "ELKO00USA_R_20182100000_01D_MN.rnx.gz"
@@ -87,7 +88,7 @@ def test_galileo_epochs_equal_on_the_fused_and_the_modular_navigation(monkeypatc
         return out
 
     fast = epochs()
-    monkeypatch.setattr(S, "_fused_path_on", lambda: False)
+    navigate_function_by_function(monkeypatch)
     ref = epochs()
     n_gal = 0
     for a, b in zip(fast, ref, strict=True):

@@ -11,8 +11,8 @@ They were regenerated when the Gauss-Newton loops of the solvers moved into comp
 (``coopnav_env.nav._kernels``): same algebra, different summation order, so navigation
 solutions differ by about 1e-10 m and observations by at most one float32 ulp (or 1e-7
 for values near zero). The test
-below pins that: an episode run with the numpy formulation of the solvers stays within those
-bounds of the same episode with the kernels.
+below pins that: an episode run with the numpy oracles of every kernel (``tests/*/oracles.py``)
+stays within those bounds of the same episode with the kernels.
 
 Regenerated again (third session of 2026-11-30) when the receiver-satellite geometry moved
 into a compiled kernel (libm's arctan2/arcsin/sin/cos instead of numpy's: elevations differ by
@@ -39,12 +39,10 @@ import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
-from coopnav_env.envs import _fused, urban_canyon
-from coopnav_env.gnss import errors
-from coopnav_env.nav import cooperative, wls
-from coopnav_env.sim import scenario
+from coopnav_env.envs import _fused
 from tests.envs.golden import CASES, episode_digest
-from tests.sim.oracles import use_oracles_in_world
+from tests.envs.oracles import use_all_oracles
+from tests.sim.oracles import navigate_function_by_function
 from tests.sim.test_fast_paths import count_fused_calls
 
 GOLDEN: dict[str, str] = {
@@ -71,7 +69,7 @@ def test_fused_epoch_equals_the_modular_kernels(monkeypatch, name, kwargs, steps
     short = min(steps, 60)
     fast = episode_digest(kwargs, short, seed)
     assert calls["fused"] > short  # every epoch, resets included, went through it
-    monkeypatch.setattr(scenario, "_fused_path_on", lambda: False)
+    navigate_function_by_function(monkeypatch)
     calls["fused"] = 0
     assert episode_digest(kwargs, short, seed) == fast
     assert calls["fused"] == 0
@@ -97,11 +95,10 @@ def _episode(n_uavs: int, seed: int, steps: int, **kwargs) -> tuple[np.ndarray, 
 )
 def test_compiled_solvers_change_episodes_only_in_the_last_bits(monkeypatch, n_uavs, seed, kwargs):
     fast_obs, fast_rew = _episode(n_uavs, seed, 150, **kwargs)
-    for module in (cooperative, wls, errors, scenario, urban_canyon):
-        monkeypatch.setattr(module, "_USE_KERNEL", False)
-    oracle_calls = use_oracles_in_world(monkeypatch)  # the world's oracles (tests/sim)
+    oracle_calls = use_all_oracles(monkeypatch)  # no compiled kernel of the library's own
     ref_obs, ref_rew = _episode(n_uavs, seed, 150, **kwargs)
-    assert all(oracle_calls[name] > 0 for name in oracle_calls if name != "predicted")
+    unused = {"predicted", "satellite_sectors"}  # no map-aided exclusion, no sector columns
+    assert all(oracle_calls[name] > 0 for name in oracle_calls if name not in unused)
     assert fast_obs.shape == ref_obs.shape
     # at most one float32 ulp of the value, or 1e-7 for values near zero (differences of
     # larger numbers, whose own rounding is that large)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import coopnav_env.sim.scenario as S
 from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import (
     PRESETS,
@@ -16,6 +15,7 @@ from coopnav_env.envs import (
 )
 from coopnav_env.nav import IntegrityStatus, NavStatus, integrity_rates
 from coopnav_env.sim import NavSource
+from tests.sim.oracles import navigate_function_by_function
 from tests.sim.test_fast_paths import _assert_epochs_identical, _world_epochs, count_fused_calls
 
 INTEGRITY_KEYS = (
@@ -76,7 +76,7 @@ def test_fused_path_equals_the_public_functions(monkeypatch, kw) -> None:
     calls = count_fused_calls(monkeypatch)
     fast = _world_epochs(kw, steps=15)
     assert calls["fused"] == len(fast)
-    monkeypatch.setattr(S, "_fused_path_on", lambda: False)
+    navigate_function_by_function(monkeypatch)
     ref = _world_epochs(kw, steps=15)
     _assert_epochs_identical(fast, ref)
     assert any(e.fault_detected.any() for e in fast)

@@ -11,6 +11,7 @@ from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import PRESETS, UrbanCanyonConfig, make_config, preset_config
 from coopnav_env.nav import NavStatus
 from coopnav_env.sim import UrbanWorld
+from tests.sim.oracles import navigate_function_by_function
 from tests.sim.test_fast_paths import _assert_epochs_identical, _world_epochs, count_fused_calls
 
 
@@ -60,7 +61,7 @@ def test_fused_path_equals_the_modular_path(monkeypatch, kw) -> None:
     fast = _world_epochs(kw, steps=15)
     assert calls["fused"] == len(fast)
     assert sum(int(e.map_excluded.sum()) for e in fast) > 0
-    monkeypatch.setattr(S, "_fused_path_on", lambda: False)
+    navigate_function_by_function(monkeypatch)
     _assert_epochs_identical(fast, _world_epochs(kw, steps=15))
 
 

@@ -1,4 +1,5 @@
-"""The compiled observation builder equals the numpy formulation bit for bit."""
+"""The compiled observation builder, infos and rewards equal their numpy oracles
+(``tests/envs/oracles.py``) bit for bit."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import numpy as np
 import pytest
 
 from coopnav_env import urban_canyon_v0
+from tests.envs import oracles
 
 
 @pytest.mark.parametrize(
@@ -23,7 +25,7 @@ def test_observation_kernel_matches_numpy(kwargs) -> None:
     env.reset(seed=3)
     rng = np.random.default_rng(1)
     for _ in range(60):
-        fast, ref = env._observation_array(), env._observation_array_numpy()
+        fast, ref = env._observation_array(), oracles.observation_rows(env)
         assert fast.dtype == ref.dtype == np.float32 and fast.shape == ref.shape
         assert fast.tobytes() == ref.tobytes()  # signed zeros included
         env.step({a: rng.uniform(-1.5, 1.5, 3) for a in env.agents})
@@ -47,7 +49,7 @@ def test_info_kernel_matches_numpy(kwargs) -> None:
     rng = np.random.default_rng(3)
     missing = 0
     for _ in range(60):
-        fast, ref = env._info_floats(), env._info_floats_numpy()
+        fast, ref = env._info_floats(), oracles.info_floats(env)
         assert fast.shape == ref.shape == (8, env._epoch.n_uavs)
         assert fast.tobytes() == ref.tobytes()
         missing += int(np.isinf(ref[1:3]).sum())
@@ -66,18 +68,18 @@ def test_observation_kernel_with_isolated_uavs() -> None:
         n_uavs=4, relative_sensing=RelativeSensingConfig(max_range_m=1.0)
     )
     env.reset(seed=0)
-    fast, ref = env._observation_array(), env._observation_array_numpy()
+    fast, ref = env._observation_array(), oracles.observation_rows(env)
     assert not env._epoch.rel_available.any()
     assert fast.tobytes() == ref.tobytes()
 
 
 @pytest.mark.parametrize("nav_reward", ["error", "sigma"])
 def test_reward_kernel_matches_numpy(monkeypatch, nav_reward) -> None:
-    """Rewards, terms, in-goal flags and episode ends: identical with both formulations."""
-    from coopnav_env.envs import urban_canyon
+    """Rewards, terms, in-goal flags and episode ends: identical with the kernels (the fused
+    step) and with the oracles (the environment's own step)."""
 
-    def run(flag: bool):
-        monkeypatch.setattr(urban_canyon, "_USE_KERNEL", flag)
+    def run(use_oracles: bool):
+        calls = oracles.use_oracles_in_env(monkeypatch) if use_oracles else None
         env = urban_canyon_v0.parallel_env(n_uavs=6, nav_reward=nav_reward, goal_radius_m=80.0)
         env.reset(seed=5)
         rng = np.random.default_rng(2)
@@ -87,9 +89,10 @@ def test_reward_kernel_matches_numpy(monkeypatch, nav_reward) -> None:
             out.append(env._step_arrays(cmd))
             if out[-1][2] or out[-1][3]:
                 env._reset_arrays(None)
+        assert calls is None or calls["reward_terms"] == 60
         return out
 
-    fast, ref = run(True), run(False)
+    fast, ref = run(False), run(True)
     ends = 0
     for a, b in zip(fast, ref, strict=True):
         assert a[1].tobytes() == b[1].tobytes()  # rewards

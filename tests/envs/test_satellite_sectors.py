@@ -8,9 +8,9 @@ from pettingzoo.test import parallel_api_test
 
 from coopnav_env import urban_canyon_v0
 from coopnav_env.envs import make_config, obs_layout, preset_config
-from coopnav_env.envs import urban_canyon as uc
 from tests.batched_alike import assert_batched_obs_equal_separate
 from tests.env_flight import assert_layout_bounds_are_the_space
+from tests.envs import oracles
 
 CASES = [
     {"n_uavs": 5},
@@ -126,17 +126,20 @@ def test_option_appends_only_and_keeps_the_episode() -> None:
 
 @pytest.mark.parametrize("kwargs", [CASES[0], CASES[2], CASES[4]])
 def test_kernel_equals_numpy(monkeypatch, kwargs) -> None:
-    """The compiled and the numpy observation paths agree bit for bit with the option on
+    """The compiled observations and the numpy oracles agree bit for bit with the option on
     (protection levels too in the last case)."""
 
-    def run(flag):
-        monkeypatch.setattr(uc, "_USE_KERNEL", flag)
+    def run():
         return [np.stack(list(o.values())).tobytes() for o in _rollout(_env(kwargs), 5, 40)]
 
-    assert run(True) == run(False)
+    fast = run()
+    with monkeypatch.context() as m:
+        calls = oracles.use_oracles_in_env(m)
+        assert fast == run()
+    assert calls["satellite_sectors"] > 0
     env = _env(kwargs)
     for _ in _rollout(env, seed=5, steps=20):
-        assert env._satellite_sectors().tobytes() == env._satellite_sectors_numpy().tobytes()
+        assert env._satellite_sectors().tobytes() == oracles.satellite_sectors(env).tobytes()
 
 
 def test_batched_equals_separate_environments() -> None:

@@ -291,3 +291,18 @@ def test_select_highest_random_is_subset_with_highest():
 def test_select_highest_bad_inputs(args, match):
     with pytest.raises(ValueError, match=match):
         select_highest(*args)
+
+
+def test_default_constellation_is_built_once_per_arguments():
+    """Every world of a configuration shares one constellation: it is immutable."""
+    first = default_constellation(("GPS", "BDS"))
+    assert default_constellation(["GPS", "BDS"]) is first
+    assert default_constellation(("BDS", "GPS")) is not first
+    assert default_constellation(("GPS", "BDS"), bds_geo_igso=True) is not first
+    assert default_constellation("GPS") is default_constellation(("GPS",))
+    for name in ("system", "semi_major_axis_m", "raan_rad", "arg_lat_rad", "gha0_rad"):
+        assert not getattr(first, name).flags.writeable, name
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first.prn = ()  # type: ignore[misc]
+    with pytest.raises(ValueError, match="must not repeat"):
+        default_constellation(("GPS", "GPS"))

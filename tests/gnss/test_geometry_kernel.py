@@ -1,4 +1,5 @@
-"""The compiled receiver-satellite geometry agrees with the numpy formulation."""
+"""The compiled receiver-satellite geometry and error model agree with their numpy oracles
+(``tests/gnss/oracles.py``)."""
 
 from __future__ import annotations
 
@@ -7,21 +8,10 @@ import pytest
 
 from coopnav_env.gnss import default_constellation, errors
 from coopnav_env.gnss.frames import geodetic_to_ecef
+from tests.gnss import oracles
 
 
-@pytest.fixture
-def numpy_geometry(monkeypatch):
-    def run(rx, sv):
-        monkeypatch.setattr(errors, "_USE_KERNEL", False)
-        try:
-            return errors._range_azimuth_elevation(rx, sv)
-        finally:
-            monkeypatch.setattr(errors, "_USE_KERNEL", True)
-
-    return run
-
-
-def test_kernel_matches_numpy_everywhere_on_earth(numpy_geometry) -> None:
+def test_kernel_matches_numpy_everywhere_on_earth() -> None:
     sv = default_constellation(("GPS", "BDS")).positions_ecef(1234.0)
     rng = np.random.default_rng(0)
     for _ in range(40):
@@ -32,7 +22,7 @@ def test_kernel_matches_numpy_everywhere_on_earth(numpy_geometry) -> None:
             rng.uniform(-100.0, 2000.0, 25),
         )
         rng_k, az_k, el_k = errors._range_azimuth_elevation(rx, sv)
-        rng_n, az_n, el_n = numpy_geometry(rx, sv)
+        rng_n, az_n, el_n = oracles.range_azimuth_elevation(rx, sv)
         np.testing.assert_array_equal(rng_k, rng_n)  # same operations, same order
         assert np.all((az_k >= 0.0) & (az_k < 360.0))
         d_az = np.abs(az_k - az_n)
@@ -76,11 +66,12 @@ def test_pseudorange_model_kernel_matches_numpy(monkeypatch, differential, tropo
         fast = errors._simulate_pseudoranges(
             np.random.default_rng(9), rx, sv, system, vis, model, clock, extra, el_ref
         )
-        monkeypatch.setattr(errors, "_USE_KERNEL", False)
-        ref = errors._simulate_pseudoranges(
-            np.random.default_rng(9), rx, sv, system, vis, model, clock, extra, el_ref
-        )
-        monkeypatch.setattr(errors, "_USE_KERNEL", True)
+        with monkeypatch.context() as m:
+            calls = oracles.use_gnss_oracles(m)
+            ref = errors._simulate_pseudoranges(
+                np.random.default_rng(9), rx, sv, system, vis, model, clock, extra, el_ref
+            )
+        assert calls == {"range_azimuth_elevation": 1, "pseudorange_model": 1}
         np.testing.assert_array_equal(np.isnan(fast.pr_m), ~vis)
         for name in ("sigma_common_m", "sigma_user_m", "common_error_m", "user_error_m"):
             np.testing.assert_allclose(

@@ -1,6 +1,6 @@
 """The navigation library keeps its promise (issue 15): degenerate cases are statuses, bad
 arguments a clear ``ValueError`` raised before any arithmetic; with the compiled kernels and
-with their numpy formulations alike."""
+with their numpy oracles alike."""
 
 from __future__ import annotations
 
@@ -14,16 +14,15 @@ from coopnav_env.nav import (
     solve_master_slave,
     solve_standalone,
 )
-from coopnav_env.nav import cooperative as C
-from coopnav_env.nav import wls as W
+from tests.nav import oracles
 from tests.nav.scenario import make_scenario
 
 
 @pytest.fixture(params=["kernels", "numpy"])
 def formulation(request, monkeypatch):
+    """The solvers with their compiled kernels, or with the numpy oracles in their place."""
     if request.param == "numpy":
-        monkeypatch.setattr(W, "_USE_KERNEL", False)
-        monkeypatch.setattr(C, "_USE_KERNEL", False)
+        oracles.use_nav_oracles(monkeypatch)
     return request.param
 
 
@@ -58,9 +57,9 @@ def test_the_kernels_and_numpy_agree_on_the_status(monkeypatch):
     _, obs, rel = _epoch()
     on_sat = np.tile(obs.sv_ecef_m[3], (3, 1))
     a = solve_cooperative(obs, rel, x0_ecef_m=on_sat).status
-    monkeypatch.setattr(C, "_USE_KERNEL", False)
-    monkeypatch.setattr(W, "_USE_KERNEL", False)
+    calls = oracles.use_nav_oracles(monkeypatch)
     assert np.array_equal(a, solve_cooperative(obs, rel, x0_ecef_m=on_sat).status)
+    assert calls["gauss_newton"] == 1
 
 
 @pytest.mark.parametrize(

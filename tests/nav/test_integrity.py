@@ -41,6 +41,7 @@ from coopnav_env.nav import _kernels as nav_kernels
 from coopnav_env.nav import integrity as integ
 from coopnav_env.nav.cooperative import _dense_system, _linearize, _setup, _sort_by_system
 from coopnav_env.sim import CanyonMask
+from tests.nav import oracles
 from tests.nav.scenario import Scenario, sig_tropo, sig_user
 
 LAT, LON, ALT = SHANGHAI_LAT_DEG, SHANGHAI_LON_DEG, SHANGHAI_ALT_M + 30.0
@@ -97,12 +98,12 @@ def h_error(sc: Scenario, pos_ecef: np.ndarray) -> np.ndarray:
 
 def standalone_reference(sc: Scenario, q: int):
     """Receiver ``q``'s noiseless observations and the dense reference statistics of its
-    standalone fix at the truth (``_problem_statistics_dense``'s outputs)."""
+    standalone fix at the truth (``tests/nav/oracles.problem_statistics``' outputs)."""
     sub = sc.observations(noise=False).subset_receivers([q])
     w = np.where(sub.visible, 1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2), 0.0)
     hc = np.zeros(2, bool)
     hc[np.unique(sub.system[sub.visible[0]])] = True
-    out = integ._problem_statistics_dense(
+    out = oracles.problem_statistics(
         np.nan_to_num(sub.pr_m),
         sub.sv_ecef_m,
         sub.system,
@@ -232,7 +233,7 @@ def test_compiled_statistics_equal_the_dense_reference(transfer, centroid) -> No
         args, st = _problem_args(obs, rel, cen, transfer, sol, b)
         ref, hc = int(st.ref[b]), st.has_clock[b]
         got = kernel_statistics(args, st.froot[b])
-        want = integ._problem_statistics_dense(*args, st.bcov[b], ref, hc, ROT)
+        want = oracles.problem_statistics(*args, st.bcov[b], ref, hc, ROT)
         assert got[0]
         assert got[1] == pytest.approx(want[1], rel=1e-9)
         assert got[2] == want[2] > 10
@@ -303,7 +304,7 @@ def test_standalone_statistics_equal_the_dense_reference(q) -> None:
         pr, sub.sv_ecef_m, sub.system, 2, sub.visible, w, zs, pos, base, root, ROT, False
     )
     hc = np.ones(2, bool)
-    dense = integ._problem_statistics_dense(
+    dense = oracles.problem_statistics(
         pr,
         sub.sv_ecef_m,
         sub.system,
@@ -464,7 +465,7 @@ def test_detection_rate_follows_the_noncentral_chi_square(solver) -> None:
     else:
         sol = solve_cooperative(obs0, rel0, centroid=1)
         args, st = _problem_args(obs0, rel0, 1, "ddt", sol, 0)
-        ref_stats = integ._problem_statistics_dense(*args, st.bcov[0], 1, st.has_clock[0], ROT)
+        ref_stats = oracles.problem_statistics(*args, st.bcov[0], 1, st.has_clock[0], ROT)
         qq, kk = np.nonzero(st.used[0])
         row = int(np.flatnonzero((qq == q) & (kk == k))[0])
     dof, r_ii = ref_stats[2], ref_stats[9][row]
@@ -542,7 +543,7 @@ def test_misleading_information_rate_is_within_the_integrity_risk(solver) -> Non
     else:
         sol = solve_cooperative(obs0, rel0, centroid=q)
         args, st = _problem_args(obs0, rel0, q, "ddt", sol, 0)
-        out = integ._problem_statistics_dense(*args, st.bcov[0], q, st.has_clock[0], ROT)
+        out = oracles.problem_statistics(*args, st.bcov[0], q, st.has_clock[0], ROT)
         rows_q, rows_k = np.nonzero(st.used[0])
     dof, r_ii, gain = out[2], out[9], out[10]
     _thr, lam = integ.threshold_tables(1e-3, ir, dof)

@@ -1,10 +1,10 @@
-"""The compiled Gauss-Newton kernels against the numpy formulation of the same solvers.
+"""The compiled Gauss-Newton kernels against the numpy oracles of the same solvers.
 
-The solvers run their iterations in ``coopnav_env.nav._kernels`` (numba); the numpy
-formulation (``_USE_KERNEL = False``) is a second, independent implementation of the same
-algebra. Both must give the same statuses, positions to 1e-6 m and covariances to 1e-9
-relative, in every mode the kernels serve, with noise, masked UAVs, UAVs out of range,
-degenerate problems and warm starts.
+The solvers run their iterations in ``coopnav_env.nav._kernels`` (numba); the numpy oracles
+(``tests/nav/oracles.py``) are a second, independent implementation of the same algebra.
+Both must give the same statuses, positions to 1e-6 m and covariances to 1e-9 relative, in
+every mode the kernels serve, with noise, masked UAVs, UAVs out of range, degenerate problems
+and warm starts.
 """
 
 from __future__ import annotations
@@ -23,16 +23,18 @@ from coopnav_env.nav import (
     solve_standalone,
     wls,
 )
+from tests.nav import oracles
 from tests.nav.scenario import make_scenario
 
 
 def _both(monkeypatch, fn):
-    """``fn()`` with the kernels and with the numpy formulation."""
+    """``fn()`` with the kernels and with the numpy oracles (each oracle that ``fn`` needs
+    must have run)."""
     fast = fn()
     with monkeypatch.context() as m:
-        m.setattr(cooperative, "_USE_KERNEL", False)
-        m.setattr(wls, "_USE_KERNEL", False)
+        calls = oracles.use_nav_oracles(m)
         ref = fn()
+    assert calls["standalone_solve"] + calls["gauss_newton"] > 0
     return fast, ref
 
 
@@ -190,7 +192,7 @@ def test_setup_masks_kernel_equals_numpy(seed):
                     transfer == "ddt",
                     -1 if need is None else need,
                 )
-                ref = cooperative._setup_masks_numpy(sobs, bavail, cen, transfer, need)
+                ref = oracles.setup_masks(sobs, bavail, cen, transfer, need)
                 for name, a, b in zip(
                     ("ref", "used", "has_clock", "pivot", "too_few"), fast, ref, strict=True
                 ):
@@ -221,8 +223,9 @@ def test_safe_inverse_condition_test(cond):
             np.testing.assert_allclose(out * np.outer(d, d), np.eye(5), rtol=1e-14, atol=1e-14)
 
 
-def test_square_root_of_diagonal_covariances(monkeypatch):
-    """The diagonal shortcut (compiled and numpy) equals the eigendecomposition's root."""
+def test_square_root_of_diagonal_covariances():
+    """The diagonal shortcut (compiled and its numpy oracle) equals the eigendecomposition's
+    root."""
     rng = np.random.default_rng(0)
     var = rng.uniform(0.0, 4.0, (3, 17, 3)) ** 2
     var[0, 0] = [0.0, -0.0, 1e-300]  # zero, negative zero, tiny
@@ -230,18 +233,17 @@ def test_square_root_of_diagonal_covariances(monkeypatch):
     lam, vec = np.linalg.eigh(cov)
     eig_root = np.einsum("...ij,...j,...kj->...ik", vec, np.sqrt(np.clip(lam, 0.0, None)), vec)
     fast = cooperative._sqrtm_psd(cov)
-    monkeypatch.setattr(cooperative, "_USE_KERNEL", False)
-    ref = cooperative._sqrtm_psd(cov)
+    ref = oracles.sqrtm_psd(cov)
     assert fast.shape == ref.shape == cov.shape
     assert fast.tobytes() == ref.tobytes()
     np.testing.assert_allclose(fast, eig_root, rtol=1e-15, atol=0.0)
     np.testing.assert_array_equal(fast[1:], eig_root[1:])  # ordinary values: bit for bit
-    # a full matrix takes the eigendecomposition in both paths
+    # a full matrix takes the eigendecomposition in both
     a = rng.normal(size=(4, 3, 3))
     full = a @ np.swapaxes(a, 1, 2)
-    monkeypatch.setattr(cooperative, "_USE_KERNEL", True)
     root = cooperative._sqrtm_psd(full)
     np.testing.assert_allclose(root @ root, full, atol=1e-12)
+    assert root.tobytes() == oracles.sqrtm_psd(full).tobytes()
 
 
 def _fields_equal(a, b) -> None:
@@ -266,7 +268,7 @@ def _fields_equal(a, b) -> None:
 @pytest.mark.parametrize("case", CASES)
 @pytest.mark.parametrize("transfer", ["sdt", "ddt"])
 @pytest.mark.parametrize("which", ["self", "first", "last"])
-def test_one_call_isotropic_solve_equals_solve_cooperative(monkeypatch, case, transfer, which):
+def test_one_call_isotropic_solve_equals_solve_cooperative(case, transfer, which):
     """The simulator's one-call path (`_solve_isotropic`) is `solve_cooperative`, bit for bit
     (centroid "self", or one shared centroid at the first or the last UAV)."""
     sc = make_scenario(**case)
@@ -301,13 +303,11 @@ def test_one_call_isotropic_solve_equals_solve_cooperative(monkeypatch, case, tr
             obs, rel_ecef[a], var[a], avail[a], a, transfer, x0[a], 8
         )
     _fields_equal(fast, ref)
-    # the path declines (the caller then runs solve_cooperative) without the kernels ...
-    monkeypatch.setattr(cooperative, "_USE_KERNEL", False)
-    assert cooperative._solve_isotropic(obs, rel_ecef, var, avail, "self", transfer, x0, 8) is None
 
 
 def test_one_call_isotropic_solve_declines_unsorted_satellites():
-    """... and for satellites not grouped by constellation."""
+    """The one-call path declines (the caller then runs solve_cooperative) for satellites
+    not grouped by constellation."""
     sc = make_scenario(seed=3)
     obs = sc.observations(np.random.default_rng(3))
     assert np.any(np.diff(obs.system) < 0)
@@ -323,3 +323,20 @@ def test_one_call_isotropic_solve_declines_unsorted_satellites():
         8,
     )
     assert out is None
+
+
+@pytest.mark.parametrize("radius", [None, (6.0e6, 7.0e6)])
+def test_fix_status_kernel_equals_numpy(radius):
+    """Statuses and failed flags of every combination of the inputs, identical."""
+    from coopnav_env.nav import _kernels
+
+    rng = np.random.default_rng(11)
+    n = 400
+    pos = rng.normal(0.0, 1.0, (n, 3)) * rng.choice([5.0e6, 6.4e6, 9.0e6], n)[:, None]
+    flags = [rng.random(n) < 0.3 for _ in range(3)]
+    check, lo, hi = wls._radius_args(radius)
+    fast = _kernels.fix_status(pos, *flags, check, lo, hi)
+    ref = oracles.fix_status(pos, *flags, radius)
+    assert fast[0].dtype == ref[0].dtype and np.array_equal(fast[0], ref[0])
+    assert np.array_equal(fast[1], ref[1])
+    assert len(set(ref[0].tolist())) >= 4  # most statuses occur

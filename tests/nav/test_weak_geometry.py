@@ -14,8 +14,7 @@ from coopnav_env.nav import (
     solve_standalone,
     weak_geometry,
 )
-from coopnav_env.nav import cooperative as C
-from coopnav_env.nav import wls as W
+from tests.nav import oracles
 from tests.nav.scenario import make_scenario
 
 TRUTH = np.array([6378137.0, 0.0, 0.0])
@@ -23,9 +22,9 @@ TRUTH = np.array([6378137.0, 0.0, 0.0])
 
 @pytest.fixture(params=["kernels", "numpy"])
 def formulation(request, monkeypatch):
+    """The solvers with their compiled kernels, or with the numpy oracles in their place."""
     if request.param == "numpy":
-        monkeypatch.setattr(W, "_USE_KERNEL", False)
-        monkeypatch.setattr(C, "_USE_KERNEL", False)
+        oracles.use_nav_oracles(monkeypatch)
     return request.param
 
 

@@ -16,6 +16,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from coopnav_env.nav import NavStatus
 from coopnav_env.sim import city as _city
 from coopnav_env.sim import map_aided as _map_aided
 from coopnav_env.sim import scenario as _scenario
@@ -30,19 +31,30 @@ from coopnav_env.sim.city import (
     _chunk_slices,
     _ray_directions,
 )
-from coopnav_env.sim.swarm import RelativeSensingConfig, pairwise_ranges_m
+from coopnav_env.sim.scenario import NavSource
+from coopnav_env.sim.swarm import (
+    KinematicsConfig,
+    RelativeSensingConfig,
+    pairwise_ranges_m,
+    step_kinematics,
+    swept_collisions,
+)
 
 __all__ = [
     "advance_waypoints",
     "blocked_sorted",
     "mask_elevation_deg",
+    "navigate_function_by_function",
     "relative_measurements",
+    "select_navigation",
     "separation_violations",
     "sky_and_walls",
     "slab_interval",
+    "swept_collisions_culled",
     "trace_line_of_sight",
     "use_oracles_in_world",
     "wall_distance_m",
+    "world_motion",
 ]
 
 
@@ -359,30 +371,143 @@ def advance_waypoints(
 
 
 # --------------------------------------------------------------------------------------------
+# motion (scenario._world_motion, _kernels.world_motion / swept_collisions_culled)
+# --------------------------------------------------------------------------------------------
+
+
+def swept_collisions_culled(
+    buildings: Buildings, start_enu_m: FloatArray, end_enu_m: FloatArray, radius_m: float
+) -> BoolArray:
+    """:func:`~coopnav_env.sim.swarm.swept_collisions` restricted to the (UAV, building) pairs
+    whose boxes overlap (the definition of ``_kernels.swept_collisions_culled``).
+
+    The bounding box of each swept sphere is tested against every building box first; the
+    exact segment-box distance then runs on the UAVs and buildings of overlapping pairs. The
+    result equals :func:`~coopnav_env.sim.swarm.swept_collisions` (the exact test runs on a
+    superset of the pairs that can collide).
+    """
+    n = start_enu_m.shape[0]
+    lo = np.minimum(start_enu_m, end_enu_m) - radius_m
+    hi = np.maximum(start_enu_m, end_enu_m) + radius_m
+    overlap = np.all(
+        (lo[:, None, :] <= buildings.max_m[None]) & (hi[:, None, :] >= buildings.min_m[None]),
+        axis=2,
+    )  # (N, n_b)
+    hit = np.zeros(n, dtype=bool)
+    uav = np.flatnonzero(overlap.any(axis=1))
+    if uav.size == 0:
+        return hit
+    bld = np.flatnonzero(overlap.any(axis=0))
+    sub = Buildings(buildings.min_m[bld], buildings.max_m[bld])
+    hit[uav] = swept_collisions(sub, start_enu_m[uav], end_enu_m[uav], radius_m)
+    return hit
+
+
+def world_motion(
+    pos0: FloatArray,
+    vel0: FloatArray,
+    cmd: FloatArray,
+    kin: KinematicsConfig,
+    lo: FloatArray,
+    hi: FloatArray,
+    buildings,
+) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
+    """``pos1, vel1, hit, sep`` of one motion step: the definition of
+    ``scenario._world_motion`` (same arguments, same results). Kinematics, the fence at
+    ``[lo, hi]``, swept collisions (a UAV that hits stays where it was, at rest) and the
+    separation violations of the new positions."""
+    pos1, vel1 = step_kinematics(pos0, vel0, cmd, kin)
+    out = (pos1[:, :2] < lo) | (pos1[:, :2] > hi)
+    pos1[:, :2] = np.clip(pos1[:, :2], lo, hi)
+    vel1[:, :2] = np.where(out, 0.0, vel1[:, :2])
+    if isinstance(buildings, Buildings):
+        hit = swept_collisions_culled(buildings, pos0, pos1, kin.uav_radius_m)
+    else:  # a file city's extruded polygons
+        hit = buildings.swept_collisions(pos0, pos1, kin.uav_radius_m)
+    pos1[hit] = pos0[hit]
+    vel1[hit] = 0.0
+    sep = separation_violations(pos1, kin.min_separation_m)
+    return pos1, vel1, hit, sep
+
+
+# --------------------------------------------------------------------------------------------
+# the estimate selection (scenario._select_navigation, _kernels.select_navigation)
+# --------------------------------------------------------------------------------------------
+
+
+def _sigma_within(cov_ecef_m2: FloatArray, max_sigma_m: float | None) -> BoolArray:
+    """``sqrt(trace(cov)) <= max_sigma_m`` per fix (True everywhere when the gate is off); the
+    trace is invariant under the ECEF-ENU rotation, NaN covariances give False."""
+    if max_sigma_m is None:
+        return np.ones(cov_ecef_m2.shape[0], dtype=bool)
+    tr = np.einsum("nii->n", cov_ecef_m2)
+    with np.errstate(invalid="ignore"):
+        return tr <= max_sigma_m**2
+
+
+def select_navigation(world, sa, co, linked, pred_enu, dr_var):
+    """The estimate each UAV uses, cooperative, else standalone, else dead reckoning: the
+    definition of ``scenario._select_navigation`` (same arguments and results; the kernel
+    rotates to ENU in loops instead of matmuls, 1e-13 apart)."""
+    cfg = world.config
+    sa_ok = sa.status == NavStatus.OK
+    co_status = np.where(linked, co.status, NavStatus.NO_RELATIVE_POSITION).astype(np.int64)
+    co_ok = co_status == NavStatus.OK
+    # integrity gate: a fix whose predicted 3-D sigma is too large is not used
+    sa_rej = sa_ok & ~_sigma_within(sa.cov_ecef_m2, cfg.max_fix_sigma_m)
+    co_rej = co_ok & ~_sigma_within(co.cov_ecef_m2, cfg.max_fix_sigma_m)
+    sa_ok &= ~sa_rej
+    co_ok &= ~co_rej
+    sa_pos = np.where(sa_ok[:, None], world.ecef_to_enu(sa.pos_ecef_m), np.nan)
+    sa_cov = np.where(sa_ok[:, None, None], world.cov_ecef_to_enu(sa.cov_ecef_m2), np.nan)
+    co_pos = np.where(co_ok[:, None], world.ecef_to_enu(co.pos_ecef_m), np.nan)
+    co_cov = np.where(co_ok[:, None, None], world.cov_ecef_to_enu(co.cov_ecef_m2), np.nan)
+    source = np.where(
+        co_ok,
+        NavSource.COOPERATIVE,
+        np.where(sa_ok, NavSource.STANDALONE, NavSource.DEAD_RECKONING),
+    ).astype(np.int64)
+    dr_cov = world.nav_cov_enu_m2 + np.eye(3) * dr_var
+    nav_pos = np.where(co_ok[:, None], co_pos, np.where(sa_ok[:, None], sa_pos, pred_enu))
+    nav_cov = np.where(co_ok[:, None, None], co_cov, np.where(sa_ok[:, None, None], sa_cov, dr_cov))
+    return sa_pos, sa_cov, co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej
+
+
+# --------------------------------------------------------------------------------------------
 # the oracles in the world
 # --------------------------------------------------------------------------------------------
 
 
+def navigate_function_by_function(monkeypatch) -> None:
+    """Make ``UrbanWorld`` run every epoch's navigation function by function
+    (``UrbanWorld._navigate``, the definition of the one-call ``_navigate_fused``), until
+    ``monkeypatch`` undoes it."""
+    monkeypatch.setattr(_scenario.UrbanWorld, "_navigate_fused", _scenario.UrbanWorld._navigate)
+
+
 def use_oracles_in_world(monkeypatch) -> dict[str, int]:
-    """Make ``UrbanWorld``'s function-by-function path (``scenario._USE_KERNEL`` off) and the
-    city's horizontal sensors run the oracles above instead of the compiled kernels, for box
-    buildings (a file city's polygons keep their own kernels), until ``monkeypatch`` undoes
-    it: line of sight (map-aided prediction included), relative sensing, separation, waypoint
-    advance and the skyline and wall sensors.
+    """Make ``UrbanWorld`` navigate function by function (:func:`navigate_function_by_function`)
+    and run the oracles above instead of the compiled kernels there and in the city's
+    horizontal sensors, for box buildings (a file city's polygons keep their own kernels),
+    until ``monkeypatch`` undoes it: line of sight (map-aided prediction included), relative
+    sensing, motion (kinematics, fence, collisions, separation), the estimate selection,
+    waypoint advance and the skyline and wall sensors.
 
     Returns
     -------
     dict
         How many times each oracle ran, by name (``trace_line_of_sight``, ``predicted``,
-        ``relative_measurements``, ``separation_violations``, ``advance_waypoints``,
-        ``sky_and_walls``), updated as the world steps.
+        ``relative_measurements``, ``world_motion``, ``select_navigation``,
+        ``advance_waypoints``, ``sky_and_walls``), updated as the world steps.
     """
+    navigate_function_by_function(monkeypatch)
     calls = dict.fromkeys(
         (
             "trace_line_of_sight",
             "predicted",
             "relative_measurements",
-            "separation_violations",
+            "world_motion",
+            "select_navigation",
             "advance_waypoints",
             "sky_and_walls",
         ),
@@ -403,9 +528,13 @@ def use_oracles_in_world(monkeypatch) -> dict[str, int]:
             return sky_and_walls(buildings, pos_enu_m, az_deg)
         return sky_kernel(buildings, pos_enu_m, az_deg)
 
-    def separation(pos_enu_m, min_separation_m):
-        calls["separation_violations"] += 1
-        return separation_violations(pos_enu_m, min_separation_m)
+    def motion(*args):
+        calls["world_motion"] += 1
+        return world_motion(*args)
+
+    def select(*args):
+        calls["select_navigation"] += 1
+        return select_navigation(*args)
 
     def waypoints(route, xy, next_wp, reach_m):
         calls["advance_waypoints"] += 1
@@ -434,7 +563,8 @@ def use_oracles_in_world(monkeypatch) -> dict[str, int]:
     monkeypatch.setattr(_map_aided, "_trace_line_of_sight", trace)
     monkeypatch.setattr(_scenario, "predicted_line_of_sight", predicted)
     monkeypatch.setattr(_scenario, "_measure_relative", measure)
-    monkeypatch.setattr(_scenario, "separation_violations", separation)
+    monkeypatch.setattr(_scenario, "_world_motion", motion)
+    monkeypatch.setattr(_scenario, "_select_navigation", select)
     monkeypatch.setattr(_scenario, "advance_waypoints", waypoints)
     monkeypatch.setattr(_city, "sky_and_walls", sensors)
     return calls

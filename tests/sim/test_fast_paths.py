@@ -20,16 +20,6 @@ from coopnav_env.sim.swarm import RelativeSensingConfig, measure_relative_positi
 from tests.sim import oracles
 
 
-def _kernel_and_numpy(monkeypatch, module, fn, *args):
-    """``fn(*args)`` with ``module``'s compiled kernels, then with its numpy formulation
-    (``module._USE_KERNEL`` False, restored afterwards)."""
-    fast = fn(*args)
-    with monkeypatch.context() as m:
-        m.setattr(module, "_USE_KERNEL", False)
-        ref = fn(*args)
-    return fast, ref
-
-
 def _dense_reference(buildings, pos, az_deg):
     """The skyline and wall sweeps as they were written before they shared one pass."""
     az = np.radians(np.asarray(az_deg, dtype=float))
@@ -257,7 +247,7 @@ def test_navigation_selection_kernel_matches_numpy(gate) -> None:
         world.nav_cov_enu_m2 = np.broadcast_to(np.eye(3) * rng.uniform(1, 4), (n, 3, 3)).copy()
         dr_var = float(trial % 2) * 0.25
         fast = S._select_navigation(world, sa, co, linked, pred, dr_var)
-        ref = S._select_navigation_numpy(world, sa, co, linked, pred, dr_var)
+        ref = oracles.select_navigation(world, sa, co, linked, pred, dr_var)
         for k, (a, b) in enumerate(zip(fast, ref, strict=True)):
             assert a.shape == b.shape and a.dtype == b.dtype, k
             assert np.array_equal(np.isnan(a), np.isnan(b)) if a.dtype.kind == "f" else True
@@ -266,7 +256,7 @@ def test_navigation_selection_kernel_matches_numpy(gate) -> None:
     assert (rejected > 0) == (gate is not None)  # the gate was exercised
 
 
-def test_swept_collision_kernel_equals_numpy(monkeypatch) -> None:
+def test_swept_collision_kernel_equals_numpy() -> None:
     """UAVs anywhere, on footprint corners and at roof height, moving or not, radius 0 too."""
     hits = total = 0
     for seed in range(150):
@@ -285,7 +275,8 @@ def test_swept_collision_kernel_equals_numpy(monkeypatch) -> None:
             step[:m, 2] = 0.0
         p1 = p0 + step
         radius = float(rng.choice([0.0, 1.0, 2.5]))
-        fast, ref = _kernel_and_numpy(monkeypatch, S, S._swept_collisions_culled, b, p0, p1, radius)
+        fast = S._sim_kernels.swept_collisions_culled(b.min_m, b.max_m, p0, p1, radius)
+        ref = oracles.swept_collisions_culled(b, p0, p1, radius)
         np.testing.assert_array_equal(fast, ref)
         hits += int(ref.sum())
         total += n
@@ -321,9 +312,9 @@ def test_world_motion_kernel_equals_numpy(monkeypatch) -> None:
         cmd = rng.uniform(-1.6, 1.6, (12, 3))
         cmd[: step % 4] = 0.0
         a = fast_w.step(cmd, g_fast)
-        monkeypatch.setattr(S, "_USE_KERNEL", False)
-        b = ref_w.step(cmd, g_ref)
-        monkeypatch.setattr(S, "_USE_KERNEL", True)
+        with monkeypatch.context() as m:
+            m.setattr(S, "_world_motion", oracles.world_motion)
+            b = ref_w.step(cmd, g_ref)
         for name in ("pos_enu_m", "vel_enu_mps", "collided", "separation_violation"):
             x, y = getattr(a, name), getattr(b, name)
             assert x.tobytes() == y.tobytes(), (step, name)
@@ -392,7 +383,7 @@ def test_fused_epoch_navigation_equals_the_modular_path(monkeypatch, kw) -> None
     calls = count_fused_calls(monkeypatch)
     fast = _world_epochs(kw)
     assert calls["fused"] == len(fast)
-    monkeypatch.setattr(S, "_fused_path_on", lambda: False)
+    oracles.navigate_function_by_function(monkeypatch)
     calls["fused"] = 0
     ref = _world_epochs(kw)
     assert calls["fused"] == 0

@@ -23,8 +23,9 @@ from coopnav_env.sim import (
     formation_offsets,
     separation_violations,
 )
-from coopnav_env.sim.scenario import _swept_collisions_culled
+from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim.swarm import swept_collisions
+from tests.sim import oracles
 
 FIELD = np.array([200.0, 0.0, 0.0])
 """Offset from the canyon's centre line to the open field [m]."""
@@ -275,8 +276,9 @@ def test_culled_swept_collisions_equal_the_full_test() -> None:
     b = world.city.buildings
     p0 = np.c_[rng.uniform(-250, 250, (400, 2)), rng.uniform(5, 30, 400)]
     p1 = p0 + rng.normal(0, 8, (400, 3))
-    hit = _swept_collisions_culled(b, p0, p1, 1.0)
+    hit = _sim_kernels.swept_collisions_culled(b.min_m, b.max_m, p0, p1, 1.0)
     np.testing.assert_array_equal(hit, swept_collisions(b, p0, p1, 1.0))
+    np.testing.assert_array_equal(oracles.swept_collisions_culled(b, p0, p1, 1.0), hit)
     assert 0 < hit.sum() < hit.size
 
 
@@ -370,7 +372,7 @@ def _first_epoch_with_solver_inputs(cfg: ScenarioConfig, seed: int):
     import coopnav_env.sim.scenario as scenario
 
     calls = {}
-    original, fused_on = scenario.solve_standalone, scenario._fused_path_on
+    original, fused = scenario.solve_standalone, scenario.UrbanWorld._navigate_fused
 
     def spy(obs, x0, **kw):
         calls["obs"] = obs
@@ -378,11 +380,11 @@ def _first_epoch_with_solver_inputs(cfg: ScenarioConfig, seed: int):
 
     world = UrbanWorld(cfg)
     scenario.solve_standalone = spy
-    scenario._fused_path_on = lambda: False
+    scenario.UrbanWorld._navigate_fused = scenario.UrbanWorld._navigate
     try:
         ep = world.reset(np.random.default_rng(seed))
     finally:
-        scenario.solve_standalone, scenario._fused_path_on = original, fused_on
+        scenario.solve_standalone, scenario.UrbanWorld._navigate_fused = original, fused
     return world, ep, calls["obs"]
 
 
@@ -457,12 +459,8 @@ def test_integrity_gate_rejects_only_fixes_with_a_large_predicted_sigma() -> Non
     assert ScenarioConfig(max_fix_sigma_m=None).max_fix_sigma_m is None
 
 
-@pytest.mark.parametrize("use_kernel", [True, False])
-def test_world_step_rejects_bad_commands(monkeypatch, use_kernel) -> None:
-    """Both motion paths refuse a NaN or wrongly shaped command with a clear error."""
-    from coopnav_env.sim import scenario
-
-    monkeypatch.setattr(scenario, "_USE_KERNEL", use_kernel)
+def test_world_step_rejects_bad_commands() -> None:
+    """The motion step refuses a NaN or wrongly shaped command with a clear error."""
     world = UrbanWorld(ScenarioConfig(n_uavs=3))
     world.reset(np.random.default_rng(0))
     rng = np.random.default_rng(1)
