@@ -233,30 +233,35 @@ class BatchedVecEnv(_SwarmSeeding, VecEnv):
         self._actions = np.asarray(actions, dtype=self.action_space.dtype)
 
     def step_wait(self) -> VecEnvStepReturn:
+        """Step every copy through ``BatchedUrbanCanyonEnv.step_arrays``.
+
+        The slot infos are built straight from the info arrays (one flat dict per slot, no
+        per-copy agent dicts); a finished copy's slots get ``terminal_observation`` and, when
+        the time limit ended the episode, ``TimeLimit.truncated``.
+        """
         if self._actions is None:
             raise ValueError("step_wait() called without step_async()")
         actions, self._actions = self._actions, None
-        obs, rewards, terminated, truncated, infos, final_obs = self.batch.step(
-            actions.reshape(self.n_copies, self.n_agents, -1)
-        )
-        n = self.n_agents
-        agents = self.batch.possible_agents
-        flat_infos: list[dict[str, Any]] = []
-        for k, info in enumerate(infos):
-            if terminated[k] or truncated[k]:
-                for i, a in enumerate(agents):
-                    slot = info[a]
-                    slot["terminal_observation"] = final_obs[k, i].copy()
-                    if truncated[k] and not terminated[k]:
-                        slot = {**slot, "TimeLimit.truncated": True}
-                    flat_infos.append(slot)
-            else:
-                flat_infos.extend(info[a] for a in agents)
-        dones = np.repeat(terminated | truncated, n)
+        step = self.batch.step_arrays(actions.reshape(self.n_copies, self.n_agents, -1))
+        done = step.terminated | step.truncated
+        keys = list(step.info)
+        # each column flattened slot-major (slot k * N + i), as Python numbers
+        columns = [a.reshape(-1).tolist() for a in step.info.values()]
+        flat_infos: list[dict[str, Any]] = [dict(zip(keys, row)) for row in zip(*columns)]
+        if done.any():
+            final_obs = step.final_obs.reshape(self.num_envs, -1)
+            n = self.n_agents
+            for k in np.flatnonzero(done).tolist():
+                time_limit = bool(step.truncated[k] and not step.terminated[k])
+                for slot in range(k * n, (k + 1) * n):
+                    info = flat_infos[slot]
+                    info["terminal_observation"] = final_obs[slot].copy()
+                    if time_limit:
+                        info["TimeLimit.truncated"] = True
         return (
-            obs.reshape(self.num_envs, -1).copy(),
-            rewards.reshape(-1).astype(np.float32),
-            dones,
+            step.obs.reshape(self.num_envs, -1).copy(),
+            step.rewards.reshape(-1).astype(np.float32),
+            np.repeat(done, self.n_agents),
             flat_infos,
         )
 
