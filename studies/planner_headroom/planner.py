@@ -18,11 +18,15 @@ swarm's velocity commands by sampling-based model-predictive control: at every s
    environment so that it keeps planning the route) plus a per-UAV velocity offset held for
    the horizon (one candidate is always the base alone, offset zero);
 2. flies each candidate ``horizon`` steps in a deep copy of the environment (with fresh noise) and
-   scores it by
+   scores it (``objective="error"``, the default) by
    the swarm's mean *true* cooperative 3-D error (the estimate's error where there is no
    cooperative fix) over the horizon, plus ``crash_cost_m`` if any UAV hits a building, minus
    ``progress_weight_m`` times the swarm's mean progress reward (the decrease of the
-   remaining route, so that the plan still reaches the goal);
+   remaining route, so that the plan still reaches the goal); with ``objective="return"``,
+   by minus the swarm's mean reward over the horizon, plus ``crash_cost_m`` for a crash (on
+   ``urban_canyon_v1`` the reward is the task's score, paid with the true error, so the
+   planner then maximises the score itself; there the progress reward of the default
+   objective is a share of the route, too small beside metres of error to drive the plan);
 3. refits the offsets' Gaussian to the best ``n_elite`` candidates (cross-entropy method) for
    ``iterations`` rounds and applies the first command of the best plan found.
 
@@ -45,7 +49,10 @@ import numpy as np
 
 from coopnav_env.agents import make_policy, register_policy
 
-__all__ = ["PrivilegedPlanner", "make_planner"]
+__all__ = ["OBJECTIVES", "PrivilegedPlanner", "make_planner"]
+
+OBJECTIVES: tuple[str, ...] = ("error", "return")
+"""What the look-ahead can minimise (:class:`PrivilegedPlanner`'s ``objective``)."""
 
 
 class PrivilegedPlanner:
@@ -65,7 +72,8 @@ class PrivilegedPlanner:
     offset_std : float
         Initial standard deviation of the per-UAV velocity offsets (fraction of max speed).
     crash_cost_m : float
-        Cost of a crash in the look-ahead, in metres of error.
+        Cost of a crash in the look-ahead, in the objective's units (metres of error, or
+        return with ``objective="return"``).
     progress_weight_m : float
         Metres of error one unit of the progress reward is worth.
     noise_samples : int
@@ -92,6 +100,9 @@ class PrivilegedPlanner:
         in an unknown direction, which the plain look-ahead from the estimate, whose errors
         start at zero, does not; a draw that falls inside a building is replaced by the
         estimate.
+    objective : {"error", "return"}
+        What the look-ahead minimises: the swarm's true error less its progress (``"error"``)
+        or minus its reward (``"return"``; see the module docstring).
     guard_offsets : bool
         Limit every offset, in the look-ahead and in the command applied, toward walls the
         range sensor sees (:meth:`coopnav_env.agents.heuristics.ColumnPolicy.guard_delta`: nothing
@@ -123,6 +134,7 @@ class PrivilegedPlanner:
         from_estimate: bool = False,
         sample_belief: bool = False,
         guard_offsets: bool = False,
+        objective: str = "error",
     ) -> None:
         for name, v, lo in (
             ("horizon", horizon, 1),
@@ -165,6 +177,11 @@ class PrivilegedPlanner:
                 f"or a column with wall_margin_m set), got {getattr(base, 'name', base)!r}"
             )
         self.guard_offsets = guard_offsets
+        if objective not in OBJECTIVES:
+            raise ValueError(
+                f"planner objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}"
+            )
+        self.objective = objective
         self._rng = np.random.default_rng(seed)
         base_env = getattr(env, "unwrapped", env)
         self._agents = list(base_env.possible_agents)
@@ -206,14 +223,17 @@ class PrivilegedPlanner:
                 a: np.clip(cmd[a] + off[j], -1.0, 1.0).astype(np.float32)
                 for j, a in enumerate(live)
             }
-            obs, _r, _te, _tr, infos = env.step(acts)
-            errs = [
-                i["coop_error_m"] if i["coop_fix"] else i["nav_error_m"] for i in infos.values()
-            ]
-            cost += float(np.mean(errs))
-            cost -= self.progress_weight_m * float(
-                np.mean([i["reward_progress"] for i in infos.values()])
-            )
+            obs, rewards, _te, _tr, infos = env.step(acts)
+            if self.objective == "return":
+                cost -= float(np.mean(list(rewards.values())))
+            else:
+                errs = [
+                    i["coop_error_m"] if i["coop_fix"] else i["nav_error_m"] for i in infos.values()
+                ]
+                cost += float(np.mean(errs))
+                cost -= self.progress_weight_m * float(
+                    np.mean([i["reward_progress"] for i in infos.values()])
+                )
             if any(i["collided"] for i in infos.values()):
                 cost += self.crash_cost_m
                 break

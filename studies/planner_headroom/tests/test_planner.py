@@ -170,3 +170,27 @@ def test_guarded_offsets_never_point_at_a_near_wall() -> None:
         make_policy("planner@guard_offsets=1", env)
     with pytest.raises(ValueError, match="needs a base with a wall guard"):
         make_policy("planner@guard_offsets=True,base='wide_column'", env)
+
+
+def test_the_return_objective_is_minus_the_swarms_mean_reward_over_the_horizon() -> None:
+    import copy
+
+    from coopnav_env import urban_canyon_v1
+
+    env = urban_canyon_v1.parallel_env()
+    obs, _ = env.reset(seed=1_000_004)
+    planner = make_policy("planner@objective='return',horizon=3", env)
+    planner.reset(1_000_004)
+    offsets = np.zeros((len(env.possible_agents), 3))
+    cost = planner._rollout(offsets, obs, 77)
+    # the same look-ahead by hand: a copy with the noise seed, the base alone, rewards summed
+    twin, base = copy.deepcopy((env, planner.base))
+    twin._rng = np.random.default_rng(77)
+    o, total = dict(obs), 0.0
+    for _ in range(3):
+        o, rewards, *_ = twin.step(base.act(o))
+        total += float(np.mean(list(rewards.values())))
+    assert total > 0.0  # the swarm covered route: v1 paid it
+    assert cost == pytest.approx(-total, abs=1e-12)
+    with pytest.raises(ValueError, match="objective"):
+        make_policy("planner@objective='score'", env)
