@@ -1,0 +1,140 @@
+"""Pool a method's training seeds in protocol reports and compare it with a rule, per city.
+
+Reads the per-episode records (``report.json``) of one or more folders written by
+``run_protocol.py`` (each holding ``grid/``, ``families/`` and ``real/`` suites of city
+folders), takes every policy whose name starts with ``--method-prefix`` as one training seed of
+the method, and writes, per city, the method's mean score, goal rate and cruise spacing, its
+paired score difference from ``--reference`` with a 95 % bootstrap interval over episodes and
+seeds (:func:`coopnav_env.training.stats.paired_difference`: runs averaged per episode), and
+its share of the gap from ``--baseline`` to ``--reference``. The reference's episodes must be
+the same in every folder (the same seeds, bit-identical returns), else it stops.
+
+Usage::
+
+    python studies/generalisation/pool_seeds.py \\
+        studies/generalisation/trained_on_families/protocol \\
+        studies/generalisation/trained_on_families/protocol_s2 \\
+        --out studies/generalisation/trained_on_families/pooled.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from coopnav_env.training.files import atomic_write_text
+from coopnav_env.training.stats import gap_closed, paired_difference
+
+SUITES = ("grid", "families", "real")
+
+
+def _episodes(folders: list[Path]) -> dict[str, dict[str, list[dict]]]:
+    """``city -> policy -> episodes`` over every folder (a policy met twice must agree)."""
+    out: dict[str, dict[str, list[dict]]] = {}
+    for folder in folders:
+        for suite in SUITES:
+            for report in sorted((folder / suite).glob("*/report.json")):
+                city = report.parent.name
+                data = json.loads(report.read_text())
+                per_city = out.setdefault(city, {})
+                for policy, eps in data["episodes"].items():
+                    if policy in per_city and per_city[policy] != eps:
+                        raise ValueError(
+                            f"{report}: the episodes of {policy!r} differ from those of "
+                            "another folder: the reports are not of the same protocol"
+                        )
+                    per_city[policy] = eps
+    if not out:
+        raise ValueError(f"no report.json under {', '.join(map(str, folders))}")
+    return out
+
+
+def _scores(eps: list[dict], key: str = "return") -> np.ndarray:
+    return np.array([float(e[key]) for e in eps])
+
+
+def pooled_table(
+    folders: list[Path], prefix: str, reference: str, baseline: str
+) -> tuple[str, int]:
+    """The markdown table of the pooled method per city, and the number of seeds pooled."""
+    rows = [
+        f"| city | seeds | score | score - {reference} [95 % CI] | excludes 0 | goal rate | "
+        f"{reference} goal rate | cruise spacing [m] | gap closed ({baseline} = 0, "
+        f"{reference} = 1) |",
+        "|---|---:|---:|---|---|---:|---:|---:|---|",
+    ]
+    n_seeds = 0
+    for city, policies in _episodes(folders).items():
+        runs = sorted(p for p in policies if p.startswith(prefix))
+        if not runs or reference not in policies:
+            continue
+        n_seeds = max(n_seeds, len(runs))
+        seeds = [e["seed"] for e in policies[reference]]
+        for p in runs:
+            if [e["seed"] for e in policies[p]] != seeds:
+                raise ValueError(f"{city}: {p!r} flew other episodes than {reference!r}")
+        method = np.stack([_scores(policies[p]) for p in runs])
+        ref = _scores(policies[reference])[None, :]
+        diff, _ = paired_difference(method, ref)
+        goal = np.mean([[e["success"] for e in policies[p]] for p in runs])
+        ref_goal = np.mean([e["success"] for e in policies[reference]])
+        spacing = np.nanmean([[e["cruise_spacing_m"] for e in policies[p]] for p in runs])
+        gap = "n/a"
+        if baseline in policies:
+            base = _scores(policies[baseline])
+            size = float(ref.mean() - base.mean())
+            if abs(size) >= 0.01:
+                g = gap_closed(method, base, ref[0])
+                gap = f"{g.value:.2f} [{g.low:.2f}, {g.high:.2f}]"
+            else:
+                gap = f"n/a (gap {size:+.3f})"
+        sign = "above" if diff.low > 0 else "below" if diff.high < 0 else "no"
+        rows.append(
+            f"| {city} | {len(runs)} | {method.mean():.3f} | {diff.value:+.3f} "
+            f"[{diff.low:+.3f}, {diff.high:+.3f}] | {sign} | {goal:.2f} | {ref_goal:.2f} | "
+            f"{spacing:.1f} | {gap} |"
+        )
+    return "\n".join(rows), n_seeds
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(
+        description="Pool a method's training seeds in generalisation protocol reports and "
+        "compare it with a rule per city (paired 95 %% bootstrap intervals); write markdown."
+    )
+    ap.add_argument("folders", nargs="+", help="protocol output folders (run_protocol.py --out)")
+    ap.add_argument(
+        "--method-prefix",
+        default="mappo:pretrained/families_scratch_s",
+        help="policies whose names start with this are the method's seeds "
+        "(mappo:pretrained/families_scratch_s)",
+    )
+    ap.add_argument("--reference", default="high_wide_column", help="the rule (high_wide_column)")
+    ap.add_argument("--baseline", default="column", help="the gap's 0 (column)")
+    ap.add_argument("--out", help="markdown file to write (default: print only)")
+    args = ap.parse_args(argv)
+    table, n = pooled_table(
+        [Path(f) for f in args.folders], args.method_prefix, args.reference, args.baseline
+    )
+    if n == 0:
+        ap.error(f"no policy named {args.method_prefix}* beside {args.reference} in the reports")
+    given = argv if argv is not None else sys.argv[1:]
+    text = (
+        f"# `{args.method_prefix}*` pooled over {n} training seeds\n\n"
+        f"Regenerate: `python studies/generalisation/pool_seeds.py {' '.join(given)}`\n\n"
+        f"{table}\n"
+    )
+    if args.out:
+        atomic_write_text(Path(args.out), text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,47 @@
+"""Pooling a method's training seeds across protocol reports (studies.generalisation.pool_seeds)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from studies.generalisation.pool_seeds import pooled_table
+
+
+def _episodes(returns, success=True) -> list[dict]:
+    return [
+        {"seed": 1000200 + i, "return": r, "success": success, "cruise_spacing_m": 10.0}
+        for i, r in enumerate(returns)
+    ]
+
+
+def _report(folder: Path, city: str, episodes: dict[str, list[dict]]) -> None:
+    d = folder / "real" / city
+    d.mkdir(parents=True)
+    (d / "report.json").write_text(json.dumps({"episodes": episodes}))
+
+
+def test_two_folders_pool_the_seeds_against_the_shared_rule(tmp_path) -> None:
+    rule = _episodes([1.0, 1.2, 1.1, 0.9])
+    base = _episodes([0.5, 0.6, 0.4, 0.5])
+    _report(tmp_path / "a", "x", {"rule": rule, "base": base, "m_s0": _episodes([1.5] * 4)})
+    _report(tmp_path / "b", "x", {"rule": rule, "base": base, "m_s1": _episodes([1.3] * 4)})
+    table, n = pooled_table([tmp_path / "a", tmp_path / "b"], "m_s", "rule", "base")
+    assert n == 2
+    row = table.splitlines()[-1].split("|")
+    # method mean 1.4, rule mean 1.05: +0.350, every resampled difference positive
+    assert row[1].strip() == "x" and row[2].strip() == "2" and row[3].strip() == "1.400"
+    assert row[4].strip().startswith("+0.350") and row[5].strip() == "above"
+    gap = (1.4 - 0.5) / (1.05 - 0.5)
+    assert row[9].strip().startswith(f"{gap:.2f}")
+    assert np.isclose(float(row[8]), 10.0)
+
+
+def test_reports_whose_shared_rows_differ_are_refused(tmp_path) -> None:
+    _report(tmp_path / "a", "x", {"rule": _episodes([1.0, 1.1]), "m_s0": _episodes([1.2, 1.2])})
+    _report(tmp_path / "b", "x", {"rule": _episodes([1.0, 1.3]), "m_s1": _episodes([1.2, 1.2])})
+    with pytest.raises(ValueError, match="episodes of 'rule' differ"):
+        pooled_table([tmp_path / "a", tmp_path / "b"], "m_s", "rule", "base")
