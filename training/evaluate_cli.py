@@ -6,7 +6,8 @@ Parses the flags, finds the environment to evaluate in and calls
 (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/``torchrl:`` ...) came from, found beside the
 model or one or two folders up
 (:func:`~coopnav_env.training.run_configs.train_config_of_policies`); else the environment's
-defaults; ``--env-set``, ``--n-uavs`` and ``--city`` then change it. A trained policy flown
+defaults (a run's ``city_pool``, its training cities, is left out: evaluation flies unseen
+cities); ``--env-set``, ``--n-uavs`` and ``--city`` then change it. A trained policy flown
 without its run's settings gets a warning on stderr naming the settings used instead.
 ``--suite NAME`` flies the policies on every city of a suite instead
 (:func:`coopnav_env.training.suite.evaluate_suite`). The library API
@@ -250,11 +251,18 @@ def _env_from_args(args: argparse.Namespace) -> tuple[str, dict[str, Any], str]:
             f"{run_env_id} (leave --env-id out)"
         )
     env_id = args.env_id or trained.get("env_id") or DEFAULT_ENV_ID
-    env = apply_overrides(dict(trained.get("env") or {}), args.env_overrides)
+    run_env = dict(trained.get("env") or {})
+    # a run's training cities (city_pool) are not evaluation cities: held-out episodes fly
+    # cities drawn from every seed, unless --env-set names a pool itself
+    dropped_pool = run_env.pop("city_pool", None)
+    env = apply_overrides(run_env, args.env_overrides)
     if args.n_uavs is not None:
         env["n_uavs"] = args.n_uavs
     if args.city is not None:
         env["city"] = args.city
+    if dropped_pool is not None and "city_pool" not in env:
+        note = f"city_pool={dropped_pool} of the run dropped: unseen cities"
+        source = "; ".join(x for x in (source, note) if x)
     flags = bool(args.env_overrides) or args.n_uavs is not None or args.city is not None
     if flags:
         source = "; ".join(x for x in (source, "changed by --env-set/--n-uavs/--city") if x)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import shutil
 
 import numpy as np
@@ -193,3 +194,20 @@ def test_the_warning_names_thereward_settings() -> None:
     assert "n_uavs=3" in text and "collision_penalty=7.0" in text
     assert "nav_reward='error'" in text and "max_steps=200" in text
     assert reward_settings("urban_canyon_v0", {"bogus": 1}) == ""  # the evaluation says why
+
+
+def test_a_run_trained_on_a_city_pool_is_evaluated_on_unseen_cities(tmp_path, capsys) -> None:
+    """The shipped families policy trained on ``city_pool: 200``: ``coopnav evaluate`` flies
+    it on cities drawn from every seed and says so; ``--env-set`` may name a pool again."""
+    policy = "mappo:pretrained/families_scratch_s0"
+    out = tmp_path / "ev"
+    argv = ("--policies", policy, "--out", str(out), "--env-set", "max_steps=5")
+    assert _evaluate_cli(*argv) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert "city_pool=200 of the run dropped: unseen cities" in head
+    env = json.loads((out / "report.json").read_text())["env_kwargs"]
+    assert env["city"] == "family:mixed" and "city_pool" not in env
+    pooled = tmp_path / "pooled"
+    argv = ("--policies", policy, "--out", str(pooled), "--env-set", "city_pool=3")
+    assert _evaluate_cli(*argv, "--env-set", "max_steps=5") == 0
+    assert json.loads((pooled / "report.json").read_text())["env_kwargs"]["city_pool"] == 3
