@@ -87,7 +87,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def _policy_env(name: str, city: Any) -> Any:
+def policy_env(name: str, city: Any) -> Any:
     """The env ``name`` flies ``city`` in: its run's settings (none for a rule) under the
     suite city's city and sky, as ``coopnav evaluate --suite`` builds it."""
     import coopnav_env.urban_canyon_v1 as v1
@@ -121,6 +121,19 @@ def save_small_png(fig: Any, path: Path, dpi: int, colours: int = 128) -> Path:
     return path
 
 
+def cruise_altitude_per_uav_m(pos_enu_m: Any) -> list[float]:
+    """Each UAV's mean altitude over the cruise
+    (:data:`coopnav_env.training.behaviour.CRUISE`, the steps ``cruise_behaviour`` averages)."""
+    import numpy as np
+
+    from coopnav_env.training.behaviour import CRUISE
+
+    pos = np.asarray(pos_enu_m, dtype=float)
+    t0, t1 = (round(f * (len(pos) - 1)) for f in CRUISE)
+    part = pos[max(t0, 1) : max(t1, t0 + 1) + 1]
+    return [float(z) for z in part[:, :, 2].mean(axis=0)]
+
+
 def _describe(rec: Any) -> str:
     if rec.collided:
         return "crash"
@@ -146,15 +159,15 @@ def main(argv: list[str] | None = None) -> int:
     ensure_folder(out)
     rows = [
         "| city | reset seed | policy | score | outcome | steps | spacing [m] | altitude [m] "
-        "| spread across route [m] | speed [m/s] |",
-        "|---|---:|---|---:|---|---:|---:|---:|---:|---:|",
+        "| spread across route [m] | speed [m/s] | altitude per UAV [m] |",
+        "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---|",
     ]
     t_all = time.perf_counter()
     for city in [c for c in cities if c.name in wanted]:
         t0 = time.perf_counter()
         flown = {}
         for name in (args.rule, args.learned):
-            env = _policy_env(name, city)
+            env = policy_env(name, city)
             flown[name] = (env, make_policy(name, env))
         seed, how = args.seed_start, "the first held-out seed"
         records = {}
@@ -198,9 +211,10 @@ def main(argv: list[str] | None = None) -> int:
             cells = " | ".join(
                 f"{b[k]:.1f}" for k in ("spacing_m", "altitude_m", "lateral_spread_m", "speed_mps")
             )
+            per_uav = ", ".join(f"{z:.1f}" for z in cruise_altitude_per_uav_m(rec.pos_enu_m))
             rows.append(
                 f"| {city.name} | {seed} | `{name}` | {rec.episode_return:.3f} | "
-                f"{_describe(rec)} | {rec.length} | {cells} |"
+                f"{_describe(rec)} | {rec.length} | {cells} | {per_uav} |"
             )
         for env, _policy in flown.values():
             env.close()
@@ -215,9 +229,8 @@ def main(argv: list[str] | None = None) -> int:
         "# The drawn episodes\n\n"
         f"Regenerate: `{command}` ({(time.perf_counter() - t_all) / 60:.1f} min). One held-out "
         "episode per city and policy, the same reset seed for both; descriptors over the "
-        "cruise (the middle 60 % of the steps, `coopnav_env.training.behaviour`).\n\n"
-        + "\n".join(rows)
-        + "\n"
+        "cruise (the middle 60 % of the steps, `coopnav_env.training.behaviour`); altitude "
+        "per UAV: `uav_0`, `uav_1`, ... in order.\n\n" + "\n".join(rows) + "\n"
     )
     atomic_write_text(out / "episodes.md", text)
     print(f"{out / 'episodes.md'}", flush=True)
