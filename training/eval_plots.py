@@ -10,6 +10,9 @@
   route, which is where the policies differ most (a formation follower, the sky-seeking
   heuristic and a learned policy fly much the same streets at different heights). Start and
   end markers are explained in the legend, which sits below the axes, off the data.
+* :func:`trajectory_comparison_figure`: several policies' episodes side by side (a column per
+  policy, top view above side view, the side views on one altitude scale), for drawing two
+  policies on the same episode.
 
 Policy names are shortened for the plots by :func:`short_labels`: ``waypoint@altitude_m=28``
 becomes ``waypoint (tuned)``, ``ppo:runs/quick/final_model.zip`` becomes ``ppo (quick)``.
@@ -35,6 +38,7 @@ __all__ = [
     "plot_trajectories",
     "short_label",
     "short_labels",
+    "trajectory_comparison_figure",
     "trajectory_figure",
 ]
 
@@ -207,24 +211,9 @@ def _flown_distance(xy: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((1, xy.shape[1])), np.cumsum(step, axis=0)])
 
 
-def trajectory_figure(env: Any, record: Any, title: str = "") -> Figure | None:
-    """The figure of :func:`plot_trajectories` (not saved); None without true positions."""
-    if record.pos_enu_m is None:
-        return None
-    plt = _pyplot()
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Rectangle
-
-    env.reset(seed=record.seed)
-    world = _world(env)
-    fig, (top, side) = plt.subplots(
-        2,
-        1,
-        figsize=(6.4, 9.0),
-        height_ratios=[3.0, 1.3],
-        layout="constrained",
-    )
-    if world.get("rings") is not None:  # polygons (holes drawn over in white)
+def _draw_buildings(top: Any, world: Mapping[str, Any]) -> None:
+    """The city's footprints on the top view (a file city's holes drawn over in white)."""
+    if world.get("rings") is not None:
         from matplotlib.patches import Polygon
 
         for rings in world["rings"]:
@@ -232,8 +221,18 @@ def trajectory_figure(env: Any, record: Any, title: str = "") -> Figure | None:
             for hole in rings[1:]:
                 top.add_patch(Polygon(hole, color="white", lw=0))
     elif world["footprints"] is not None:
+        from matplotlib.patches import Rectangle
+
         for x0, y0, x1, y1 in world["footprints"]:
             top.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="0.78", lw=0))
+
+
+def _draw_episode(top: Any, side: Any, world: Mapping[str, Any], record: Any) -> list[Any]:
+    """One episode's world and tracks on a top view and a side view (altitude along the
+    route); returns the legend handles of the UAVs' colours."""
+    from matplotlib.lines import Line2D
+
+    _draw_buildings(top, world)
     route = world["route"]
     if route is not None:
         top.plot(route[:, 0], route[:, 1], color="0.45", lw=0.9, ls="--")
@@ -271,32 +270,117 @@ def trajectory_figure(env: Any, record: Any, title: str = "") -> Figure | None:
         side.axhline(float(np.median(heights)), color="0.5", lw=0.9, ls="-.")
     side.set_ylabel("altitude [m]")
     side.grid(True, alpha=0.3)
-    outcome = (
-        "ended by a crash"
-        if record.collided
-        else f"{int(record.goal_reached.sum())} of {pos.shape[1]} UAVs reached the goal area"
-    )
-    top.set_title(f"{title}\n{record.length} steps, {outcome}", fontsize=9)
-    side.set_title("side view: altitude along the route", fontsize=8)
+    return handles
+
+
+def _outcome(record: Any) -> str:
+    """How the episode ended, in words."""
+    n = int(np.asarray(record.goal_reached).size)
+    if record.collided:
+        return "ended by a crash"
+    return f"{int(np.sum(record.goal_reached))} of {n} UAVs reached the goal area"
+
+
+def _legend_handles(world: Mapping[str, Any], records: Sequence[Any]) -> list[Any]:
+    """Legend entries of the markers and lines that ``records`` drawn in ``world`` show."""
+    from matplotlib.lines import Line2D
 
     def marker(m: str, label: str, **kw: Any) -> Line2D:
         return Line2D([], [], marker=m, color="k", ls="", ms=kw.pop("ms", 6), label=label, **kw)
 
-    handles.append(marker("o", "start", ms=4))
-    if record.collided:
+    handles = [marker("o", "start", ms=4)]
+    if any(r.collided for r in records):
         handles.append(marker("x", "end: the episode ended in a crash", mew=1.5))
-    else:
-        if record.goal_reached.any():
-            handles.append(marker("*", "end: reached the goal area", ms=8))
-        if not record.goal_reached.all():
-            handles.append(marker("s", "end: did not reach the goal area"))
-    if goal is not None:
+    flown = [r for r in records if not r.collided]
+    if any(np.any(r.goal_reached) for r in flown):
+        handles.append(marker("*", "end: reached the goal area", ms=8))
+    if any(not np.all(r.goal_reached) for r in flown):
+        handles.append(marker("s", "end: did not reach the goal area"))
+    if world["goal"] is not None:
         handles.append(marker("*", "goal", ms=12, mfc="gold", mec="k"))
-    if route is not None:
+    if world["route"] is not None:
         handles.append(Line2D([], [], color="0.45", lw=0.9, ls="--", label="planned route"))
+    heights = world["heights"]
     if heights is not None and heights.size:
         handles.append(Line2D([], [], color="0.5", lw=0.9, ls="-.", label="median building height"))
+    return handles
+
+
+def trajectory_figure(env: Any, record: Any, title: str = "") -> Figure | None:
+    """The figure of :func:`plot_trajectories` (not saved); None without true positions."""
+    if record.pos_enu_m is None:
+        return None
+    plt = _pyplot()
+    env.reset(seed=record.seed)
+    world = _world(env)
+    fig, (top, side) = plt.subplots(
+        2,
+        1,
+        figsize=(6.4, 9.0),
+        height_ratios=[3.0, 1.3],
+        layout="constrained",
+    )
+    handles = _draw_episode(top, side, world, record)
+    top.set_title(f"{title}\n{record.length} steps, {_outcome(record)}", fontsize=9)
+    side.set_title("side view: altitude along the route", fontsize=8)
+    handles += _legend_handles(world, [record])
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    return fig
+
+
+def trajectory_comparison_figure(panels: Sequence[tuple[str, Any, Any]], title: str = "") -> Figure:
+    """Several policies' episodes side by side: a column per policy, the top view above the
+    side view (altitude along the route), the side views on one altitude scale.
+
+    Parameters
+    ----------
+    panels : sequence of (label, env, EpisodeRecord)
+        Each policy's label, the env it flew in and its episode; every env is reset with its
+        record's seed to draw that episode's world (the same world for every panel when the
+        records share a seed and the envs a city).
+    title : str
+        The figure's title, above the panels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        No panels, or a record without true positions.
+    """
+    if not panels:
+        raise ValueError("panels must name at least one (label, env, record)")
+    for label, _env, record in panels:
+        if record.pos_enu_m is None:
+            raise ValueError(f"the episode of {label!r} has no true positions to draw")
+    plt = _pyplot()
+    n = len(panels)
+    fig, axes = plt.subplots(
+        2,
+        n,
+        figsize=(4.6 * n, 7.0),
+        height_ratios=[3.0, 1.3],
+        layout="constrained",
+        squeeze=False,
+    )
+    worlds, colours = [], []
+    for k, (label, env, record) in enumerate(panels):
+        env.reset(seed=record.seed)
+        world = _world(env)
+        worlds.append(world)
+        colours = _draw_episode(axes[0, k], axes[1, k], world, record)
+        axes[0, k].set_title(f"{label}\n{record.length} steps, {_outcome(record)}", fontsize=9)
+        axes[1, k].set_title("side view: altitude along the route", fontsize=8)
+    low = min(ax.get_ylim()[0] for ax in axes[1])
+    high = max(ax.get_ylim()[1] for ax in axes[1])
+    for ax in axes[1]:
+        ax.set_ylim(low, high)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    handles = colours + _legend_handles(worlds[0], [p[2] for p in panels])
+    fig.legend(handles=handles, loc="outside lower center", ncol=5, fontsize=7, frameon=False)
     return fig
 
 

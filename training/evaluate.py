@@ -15,9 +15,10 @@ in training: ``coopnav train`` keeps its reset seeds below
   step), collisions (episodes ended by a crash), satellites received per UAV and by the UAV
   with its neighbours, the error of the estimate each UAV actually used (cooperative, else
   standalone, else dead reckoning), episode return and length;
-* what the swarm flew like: the cruise spacing, the mean distance of a UAV to its nearest
-  neighbour over the middle 60 % of an episode's steps (:data:`CRUISE`, leaving out the start
-  lattice and the closing at the goal).
+* what the swarm flew like, over the middle 60 % of an episode's steps (:data:`CRUISE`,
+  leaving out the start lattice and the closing at the goal): the cruise spacing (the mean
+  distance of a UAV to its nearest neighbour), altitude, spread across the street route and
+  horizontal speed (:mod:`coopnav_env.training.behaviour`).
 
 Several policies can be pooled as one *method* (one policy per training seed): a method's row
 summarises all their episodes. Given a baseline and a reference (``gap``), the report also
@@ -56,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from coopnav_env.envs.urban_canyon import fix_error_m
+from coopnav_env.training.behaviour import CRUISE, cruise_behaviour, cruise_spacing_m
 from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START, make_env_fn
 from coopnav_env.training.files import (
     atomic_path,
@@ -88,44 +90,8 @@ DEFAULT_EPISODES: int = 20
 ERROR_THRESHOLD_M: float = 3.0
 """Threshold of the availability statistic P(3-D error < 3 m) (the paper's Figure 8)."""
 
-CRUISE: tuple[float, float] = (0.2, 0.8)
-"""The share of an episode's steps that counts as the cruise (start and end left out)."""
-
 BOOTSTRAP_REPS: int = 2000
 """Bootstrap replicates of the intervals of the gap table."""
-
-
-def cruise_spacing_m(pos_enu_m: np.ndarray | None, cruise: tuple[float, float] = CRUISE) -> float:
-    """Mean distance of a UAV to its nearest neighbour during the cruise of one episode [m].
-
-    Parameters
-    ----------
-    pos_enu_m : ndarray, shape (T + 1, N, 3), or None
-        True positions from the reset on (:attr:`EpisodeRecord.pos_enu_m`).
-    cruise : (float, float)
-        The first and last share of the steps that count (:data:`CRUISE`): the positions
-        from step ``round(cruise[0] T)`` (at least 1) to step ``round(cruise[1] T)`` (at least
-        the one after the first), both included.
-
-    Returns
-    -------
-    float
-        The mean over those steps and over UAVs of the distance to the nearest other UAV
-        (crashed UAVs keep their last position); NaN without positions or with one UAV.
-    """
-    if pos_enu_m is None:
-        return math.nan
-    pos = np.asarray(pos_enu_m, dtype=float)
-    if pos.ndim != 3 or pos.shape[2] != 3:
-        raise ValueError(f"pos_enu_m must have shape (T + 1, N, 3), got {pos.shape}")
-    if pos.shape[1] < 2 or pos.shape[0] < 2:
-        return math.nan
-    t0, t1 = (round(f * (len(pos) - 1)) for f in cruise)
-    part = pos[max(t0, 1) : max(t1, t0 + 1) + 1]
-    d = np.linalg.norm(part[:, :, None, :] - part[:, None, :, :], axis=-1)
-    n = d.shape[1]
-    d[:, np.arange(n), np.arange(n)] = np.inf
-    return float(d.min(axis=2).mean())
 
 
 # --------------------------------------------------------------------------------------------
@@ -161,6 +127,11 @@ class EpisodeRecord:
     h_error_m, hpl_m : ndarray, shape (T, N), or None
         With integrity monitoring on (the env's ``integrity`` setting): the horizontal error of
         the estimate used and its horizontal protection level (inf: none); None otherwise.
+    route_xy_m : ndarray, shape (K, 2), or None
+        The episode's planned street route (the env's ``world.route_xy_m`` after the reset);
+        None where the env has none.
+    dt_s : float
+        The env's step length [s]; NaN where it does not say.
     """
 
     seed: int
@@ -177,6 +148,13 @@ class EpisodeRecord:
     length: int
     h_error_m: np.ndarray | None = None
     hpl_m: np.ndarray | None = None
+    route_xy_m: np.ndarray | None = None
+    dt_s: float = math.nan
+
+    def behaviour(self) -> dict[str, float]:
+        """The episode's cruise descriptors
+        (:func:`coopnav_env.training.behaviour.cruise_behaviour`)."""
+        return cruise_behaviour(self.pos_enu_m, self.route_xy_m, self.dt_s)
 
 
 @dataclass
@@ -212,6 +190,9 @@ class PolicyStats:
     misleading_rate: float = math.nan
     alert_limit_m: float = math.nan
     cruise_spacing_m: float = math.nan
+    cruise_altitude_m: float = math.nan
+    cruise_spread_m: float = math.nan
+    cruise_speed_mps: float = math.nan
 
     @classmethod
     def from_episodes(
@@ -223,9 +204,11 @@ class PolicyStats:
     ) -> PolicyStats:
         """Aggregate episode records.
 
-        ``cruise_spacing_m`` is the mean over episodes of :func:`cruise_spacing_m` (NaN where
-        an episode has no positions). With integrity monitoring (records with ``hpl_m``):
-        ``availability`` is the share of
+        ``cruise_spacing_m``, ``cruise_altitude_m``, ``cruise_spread_m`` (across the street
+        route) and ``cruise_speed_mps`` are the means over episodes of
+        :meth:`EpisodeRecord.behaviour` (NaN where an episode has no positions, the spread
+        where it has no route and the speed where the step length is unknown). With
+        integrity monitoring (records with ``hpl_m``): ``availability`` is the share of
         UAV-steps whose horizontal protection level is within ``alert_limit_m``, and
         ``misleading_rate`` the share whose true horizontal error exceeds the protection
         level (:func:`coopnav_env.nav.integrity_rates`); NaN without integrity.
@@ -238,6 +221,7 @@ class PolicyStats:
         used = _error_stats(np.concatenate([e.nav_error_m.ravel() for e in eps]))
         collisions = int(sum(e.collided for e in eps))
         c, s = _error_stats(coop), _error_stats(alone)
+        moves = [e.behaviour() for e in eps]
         return cls(
             policy=policy,
             episodes=len(eps),
@@ -265,7 +249,10 @@ class PolicyStats:
             length_mean=float(np.mean([e.length for e in eps])),
             wall_s=round(float(wall_s), 3),
             **_integrity_stats(eps, alert_limit_m),
-            cruise_spacing_m=float(np.mean([cruise_spacing_m(e.pos_enu_m) for e in eps])),
+            cruise_spacing_m=float(np.mean([m["spacing_m"] for m in moves])),
+            cruise_altitude_m=float(np.mean([m["altitude_m"] for m in moves])),
+            cruise_spread_m=float(np.mean([m["lateral_spread_m"] for m in moves])),
+            cruise_speed_mps=float(np.mean([m["speed_mps"] for m in moves])),
         )
 
 
@@ -320,6 +307,7 @@ def _finite_mean(x: np.ndarray) -> float:
 
 def _episode_summary(e: EpisodeRecord) -> dict[str, Any]:
     """Per-episode figures written to ``report.json`` (for paired comparisons)."""
+    b = e.behaviour()
     return {
         "seed": e.seed,
         "coop_error_mean_m": _finite_mean(e.coop_error_m),
@@ -328,7 +316,10 @@ def _episode_summary(e: EpisodeRecord) -> dict[str, Any]:
         "collided": bool(e.collided),
         "length": int(e.length),
         "return": float(e.episode_return),
-        "cruise_spacing_m": cruise_spacing_m(e.pos_enu_m),
+        "cruise_spacing_m": b["spacing_m"],
+        "cruise_altitude_m": b["altitude_m"],
+        "cruise_spread_m": b["lateral_spread_m"],
+        "cruise_speed_mps": b["speed_mps"],
     }
 
 
@@ -368,6 +359,9 @@ _TABLE: tuple[tuple[str, str, str], ...] = (
     ("return", "return_mean", "{:.3f}"),  # urban_canyon_v1: the task's score
     ("steps", "length_mean", "{:.1f}"),
     ("cruise spacing [m]", "cruise_spacing_m", "{:.1f}"),
+    ("altitude [m]", "cruise_altitude_m", "{:.1f}"),
+    ("spread across route [m]", "cruise_spread_m", "{:.1f}"),
+    ("speed [m/s]", "cruise_speed_mps", "{:.1f}"),
     ("availability", "availability", "{:.3f}"),
     ("MI rate", "misleading_rate", "{:.4f}"),
 )
@@ -619,6 +613,18 @@ def _true_positions(env: Any, infos: Mapping[str, Mapping[str, Any]]) -> np.ndar
     return None
 
 
+def _route_and_step(env: Any) -> tuple[np.ndarray | None, float]:
+    """A copy of the env's planned street route, shape (K, 2) (None if it has none), and its
+    step length [s] (NaN if it does not say), read after a reset."""
+    base = getattr(env, "unwrapped", env)
+    route = getattr(getattr(base, "world", None), "route_xy_m", None)
+    if route is not None:
+        route = np.array(route, dtype=float).reshape(-1, 2)
+        route = route if route.shape[0] >= 2 else None
+    dt_s = getattr(getattr(base, "config", None), "dt_s", None)
+    return route, float(dt_s) if dt_s is not None else math.nan
+
+
 def _in_goal(info: Mapping[str, Any]) -> bool:
     """Whether a UAV is in the goal area (``in_goal``; ``goal_reached`` for other envs)."""
     return bool(info.get("in_goal", info.get("goal_reached", False)))
@@ -670,6 +676,7 @@ def run_episode(
     h_rows: list[np.ndarray] = []
     pl_rows: list[np.ndarray] = []
     pos0 = _true_positions(env, infos)
+    route, dt_s = _route_and_step(env)
     positions = [pos0] if pos0 is not None else None
     goal = np.zeros(n, dtype=bool)
     at_goal = np.zeros(n, dtype=bool)
@@ -716,6 +723,8 @@ def run_episode(
         length=steps,
         h_error_m=np.array(h_rows, dtype=float).reshape(-1, n) if integrity else None,
         hpl_m=np.array(pl_rows, dtype=float).reshape(-1, n) if integrity else None,
+        route_xy_m=route,
+        dt_s=dt_s,
     )
 
 

@@ -3,7 +3,7 @@
 Flies each policy through ``--episodes`` held-out episodes (reset seeds from ``--seed-start``)
 of every city of the suites, each trained policy with its run's settings and the suite's city
 and sky (as ``coopnav evaluate --suite`` does), and writes the mean of
-:func:`studies.generalisation.behaviour.cruise_behaviour` per policy and city to ``--out``
+:func:`coopnav_env.training.behaviour.cruise_behaviour` per policy and city to ``--out``
 (markdown).
 
 Usage::
@@ -33,7 +33,6 @@ def main(argv: list[str] | None = None) -> int:
     from coopnav_env.training.evaluate import run_episode
     from coopnav_env.training.files import atomic_write_text
     from coopnav_env.training.run_configs import train_config_of_policies
-    from studies.generalisation.behaviour import cruise_behaviour
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--policies", nargs="+", default=list(POLICIES))
@@ -58,9 +57,7 @@ def main(argv: list[str] | None = None) -> int:
                 policy = make_policy(name, env)
                 rows = []
                 for seed in range(args.seed_start, args.seed_start + args.episodes):
-                    rec = run_episode(env, policy, seed)
-                    route = np.array(env.world.route_xy_m, copy=True)
-                    rows.append(cruise_behaviour(rec.pos_enu_m, route, env.config.dt_s))
+                    rows.append(run_episode(env, policy, seed).behaviour())
                 env.close()
                 cells = " | ".join(f"{np.nanmean([r[k] for r in rows]):.1f}" for k in KEYS)
                 lines.append(f"| {city.name} | `{name}` | {cells} |")

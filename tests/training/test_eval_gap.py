@@ -146,9 +146,12 @@ def plain():
     return evaluate(["random", "gap_test_homing"], SEEDS, TOY_ENV, env_id=TOY_ENV_ID, plots=False)
 
 
-def test_the_default_table_gains_only_the_cruise_spacing(plain) -> None:
+def test_the_default_table_gains_only_the_behaviour_descriptors(plain) -> None:
     head = plain.to_markdown().splitlines()[0]
-    assert head.endswith("| return | steps | cruise spacing [m] |")
+    assert head.endswith(
+        "| return | steps | cruise spacing [m] | altitude [m] | spread across route [m] "
+        "| speed [m/s] |"
+    )
     assert head.startswith("| policy | coop mean [m] |")
     assert len(plain.to_markdown().splitlines()) == 2 + 2  # two policies, no method rows
     assert plain.gap_markdown() == ""
@@ -158,6 +161,11 @@ def test_the_default_table_gains_only_the_cruise_spacing(plain) -> None:
     spacing = [cruise_spacing_m(e.pos_enu_m) for e in plain.episodes["random"]]
     assert s.cruise_spacing_m == pytest.approx(np.mean(spacing)) and s.cruise_spacing_m > 0
     assert [e["cruise_spacing_m"] for e in data["episodes"]["random"]] == spacing
+    # the toy env flies at 10 m, has no street route and no step length: those are n/a
+    assert s.cruise_altitude_m == 10.0
+    assert math.isnan(s.cruise_spread_m) and math.isnan(s.cruise_speed_mps)
+    assert plain.to_markdown().splitlines()[2].endswith("| 10.0 | n/a | n/a |")
+    assert [e["cruise_altitude_m"] for e in data["episodes"]["random"]] == [10.0] * len(SEEDS)
 
 
 def test_a_method_pools_its_policies_and_the_gap_table_pairs_the_episodes(plain) -> None:
@@ -300,6 +308,27 @@ def test_the_command_line_refuses_bad_methods_and_gaps(argv, match, tmp_path) ->
     with pytest.raises(ValueError, match=match):
         _cli("--policies", "random", "gap_test_homing", *argv, "--out", str(out))
     assert not out.exists()  # refused before the folder was claimed
+
+
+@pytest.mark.skipif(not HAS_ENV, reason="urban_canyon_v1 not available")
+def test_an_urban_episode_records_its_route_and_step_for_the_behaviour_descriptors() -> None:
+    import coopnav_env.urban_canyon_v1 as v1
+    from coopnav_env.agents import make_policy
+    from coopnav_env.training.behaviour import cruise_behaviour
+    from coopnav_env.training.evaluate import run_episode
+
+    env = v1.parallel_env(max_steps=12)
+    rec = run_episode(env, make_policy("column", env), 1_000_000)
+    np.testing.assert_array_equal(rec.route_xy_m, env.world.route_xy_m)
+    assert rec.dt_s == env.config.dt_s
+    b = rec.behaviour()
+    assert b == cruise_behaviour(rec.pos_enu_m, env.world.route_xy_m, env.config.dt_s)
+    assert all(math.isfinite(v) and v > 0.0 for v in b.values()), b
+    rep = evaluate(["column"], [1_000_000], {"max_steps": 12}, env_id="urban_canyon_v1")
+    s = rep["column"]
+    assert (s.cruise_spacing_m, s.cruise_altitude_m) == (b["spacing_m"], b["altitude_m"])
+    assert (s.cruise_spread_m, s.cruise_speed_mps) == (b["lateral_spread_m"], b["speed_mps"])
+    env.close()
 
 
 @pytest.mark.skipif(not HAS_ENV, reason="urban_canyon_v1 not available")

@@ -17,6 +17,7 @@ from coopnav_env.training.eval_plots import (
     error_cdf_figure,
     short_label,
     short_labels,
+    trajectory_comparison_figure,
     trajectory_figure,
 )
 from coopnav_env.training.evaluate import EpisodeRecord, evaluate
@@ -99,6 +100,40 @@ def test_trajectory_figure_has_a_side_view_and_explains_its_markers() -> None:
     done = trajectory_figure(ToyParallelEnv(2), _record(False, [True, False], pos), "x")
     texts = [t.get_text() for t in done.legends[0].get_texts()]
     assert texts[2:] == ["start", "end: reached the goal area", "end: did not reach the goal area"]
+
+
+def test_a_comparison_figure_puts_each_episode_in_its_column_on_one_altitude_scale() -> None:
+    from tests.training.toy_env import ToyParallelEnv
+
+    t = np.linspace(0.0, 1.0, 5)
+    low = np.stack([np.c_[3 * t, t, 10 + 5 * t], np.c_[2 * t, 0 * t, 12 - t]], axis=1)
+    high = low + np.array([0.0, 0.0, 40.0])
+    panels = [
+        ("rule", ToyParallelEnv(2), _record(False, [True, True], low)),
+        ("learned", ToyParallelEnv(2), _record(True, [False, False], high)),
+    ]
+    fig = trajectory_comparison_figure(panels, "same episode")
+    top_rule, top_learned, side_rule, side_learned = fig.axes
+    assert top_rule.get_title().startswith("rule\n4 steps, 2 of 2 UAVs reached")
+    assert top_learned.get_title() == "learned\n4 steps, ended by a crash"
+    np.testing.assert_allclose(side_learned.lines[0].get_ydata(), high[:, 0, 2])
+    assert side_rule.get_ylim() == side_learned.get_ylim()
+    assert side_rule.get_ylim()[0] <= 11.0 and side_rule.get_ylim()[1] >= 55.0
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert texts == [
+        "uav_0",
+        "uav_1",
+        "start",
+        "end: the episode ended in a crash",
+        "end: reached the goal area",
+    ]
+    assert fig._suptitle.get_text() == "same episode"
+    with pytest.raises(ValueError, match="at least one"):
+        trajectory_comparison_figure([])
+    none = _record(False, [True, True], low)
+    none.pos_enu_m = None
+    with pytest.raises(ValueError, match="'rule' has no true positions"):
+        trajectory_comparison_figure([("rule", ToyParallelEnv(2), none)])
 
 
 @pytest.mark.skipif(not HAS_ENV, reason="urban_canyon_v0 not available")
