@@ -1,6 +1,6 @@
-"""The PettingZoo environment ``urban_canyon_v0`` (adapter, configuration, rendering), its
-Gymnasium single-agent view :class:`UrbanCanyonSwarmEnv` and the named observation layout
-:func:`obs_layout`.
+"""The PettingZoo environment ``urban_canyon_v0`` (adapter, task, route autopilot,
+configuration, rendering), its Gymnasium single-agent view :class:`UrbanCanyonSwarmEnv` and the
+named observation layout :func:`obs_layout`.
 
 Import it through its versioned shim: ``from coopnav_env import urban_canyon_v0``.
 """

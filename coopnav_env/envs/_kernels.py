@@ -1,4 +1,4 @@
-"""Compiled (numba) observation builder of :class:`~coopnav_env.envs.urban_canyon.UrbanCanyonEnv`.
+"""Compiled (numba) observation builder and reward terms of the task (:mod:`coopnav_env.envs.task`).
 
 :func:`observation_rows` writes every agent's observation vector in one pass, with the same
 float64 operations in the same order as the numpy formulation (the test oracle
@@ -138,6 +138,34 @@ def observation_rows(
     return out
 
 
+@njit(cache=True, inline="always")
+def _goal_events(pos, goal, collided, goal_r):
+    """The in-goal flags (n,) (horizontal distance to the goal <= ``goal_r``), whether a UAV
+    collided, and whether the swarm reached the goal (every UAV in it, none collided)."""
+    n = pos.shape[0]
+    in_goal = np.empty(n, dtype=np.bool_)
+    crash = False
+    all_in = True
+    for i in range(n):
+        dx = pos[i, 0] - goal[0]
+        dy = pos[i, 1] - goal[1]
+        in_goal[i] = np.hypot(dx, dy) <= goal_r
+        all_in = all_in and in_goal[i]
+        crash = crash or collided[i]
+    return in_goal, crash, all_in and not crash
+
+
+@njit(cache=True, inline="always")
+def _event_terms(terms, collided, separation, out_of_contact, reached, params):
+    """Rows 2..5 of ``terms`` (collision, separation, contact, goal) for each UAV."""
+    pen_col, pen_sep, pen_con, goal_bonus = params[5], params[6], params[7], params[9]
+    for i in range(terms.shape[1]):
+        terms[2, i] = -pen_col * (1.0 if collided[i] else 0.0)
+        terms[3, i] = -pen_sep * (1.0 if separation[i] else 0.0)
+        terms[4, i] = -pen_con * (1.0 if out_of_contact[i] else 0.0)
+        terms[5, i] = goal_bonus if reached else 0.0
+
+
 @njit(cache=True)
 def reward_terms(
     route,  # (k, 2)
@@ -152,26 +180,16 @@ def reward_terms(
     separation,
     out_of_contact,
     sigma_reward,  # bool: nav term from the predicted sigma (else from the true error)
-    params,  # (10,) float: see UrbanCanyonEnv._reward_params
+    params,  # (10,) float: see coopnav_env.envs.task.reward_params
 ):
-    """The reward terms of ``UrbanCanyonEnv._reward_terms`` (its numpy formulation is
+    """The per-step reward terms (``reward_scheme="per_step"``; its numpy formulation is
     ``reward_terms`` of ``tests/envs/oracles.py``), in the order of ``REWARD_TERMS``, shape
-    (6, n); and the in-goal flags (n,)."""
+    (6, n); the in-goal flags (n,); whether a UAV collided; whether the swarm reached the
+    goal."""
     n = pos.shape[0]
     w_nav, cap, scale, w_prog, step_len = params[0], params[1], params[2], params[3], params[4]
-    pen_col, pen_sep, pen_con, goal_r = params[5], params[6], params[7], params[8]
-    goal_bonus = params[9]
     terms = np.empty((6, n))
-    in_goal = np.empty(n, dtype=np.bool_)
-    crash = False
-    all_in = True
-    for i in range(n):
-        dx = pos[i, 0] - goal[0]
-        dy = pos[i, 1] - goal[1]
-        in_goal[i] = np.hypot(dx, dy) <= goal_r
-        all_in = all_in and in_goal[i]
-        crash = crash or collided[i]
-    reached = all_in and not crash
+    in_goal, crash, reached = _goal_events(pos, goal, collided, params[8])
     for i in range(n):
         w = wp_prev[i]
         ax = xy_prev[i, 0] - route[w, 0]
@@ -193,10 +211,27 @@ def reward_terms(
         capped = nav_m if (nav_m < cap or nav_m != nav_m) else cap  # numpy.minimum
         terms[0, i] = -w_nav * capped / scale
         terms[1, i] = w_prog * (d_prev - d_now) / step_len
-        terms[2, i] = -pen_col * (1.0 if collided[i] else 0.0)
-        terms[3, i] = -pen_sep * (1.0 if separation[i] else 0.0)
-        terms[4, i] = -pen_con * (1.0 if out_of_contact[i] else 0.0)
-        terms[5, i] = goal_bonus if reached else 0.0
+    _event_terms(terms, collided, separation, out_of_contact, reached, params)
+    return terms, in_goal, crash, reached
+
+
+@njit(cache=True)
+def event_reward_terms(
+    pos,  # (n, 3) true positions after the step
+    goal,  # (3,)
+    collided,
+    separation,
+    out_of_contact,
+    params,  # (10,) float: see coopnav_env.envs.task.reward_params
+):
+    """The reward terms of the step's events (collision, separation, contact, goal) alone, in
+    the order of ``REWARD_TERMS``, shape (6, n), with the rows ``nav`` and ``progress`` zero
+    (``reward_scheme="navigated_distance"`` computes those from the route); the in-goal flags
+    (n,); whether a UAV collided; whether the swarm reached the goal. Rows 2..5 and the flags
+    are those of :func:`reward_terms`, bit for bit."""
+    terms = np.zeros((6, pos.shape[0]))
+    in_goal, crash, reached = _goal_events(pos, goal, collided, params[8])
+    _event_terms(terms, collided, separation, out_of_contact, reached, params)
     return terms, in_goal, crash, reached
 
 

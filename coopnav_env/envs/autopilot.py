@@ -1,17 +1,32 @@
-"""The pursuit autopilot shared by the `waypoint` follower and the route action frame.
+"""The autopilots: pursuit of a point, and the route action frame built on it.
 
 :func:`pursuit_velocity` turns a point to fly to and an altitude error into a velocity: the
 `waypoint` follower (:class:`coopnav_env.agents.heuristics.WaypointPolicy`) flies it toward its
-next waypoint, and ``action_frame="route"``
-(:func:`coopnav_env.envs.urban_canyon.route_frame_command`) toward set-points along the street
-route; :func:`route_frame_velocity` is that route autopilot for ``K`` swarms at once.
+next waypoint, and ``action_frame="route"`` (:func:`route_frame_command`) toward set-points
+along the street route; :func:`route_frame_velocity` is that route autopilot for ``K`` swarms
+at once. :func:`route_offset_room_m` and :func:`check_route_offset` bound the set-points'
+offset across the street to the room the city leaves.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-__all__ = ["pursuit_velocity", "route_frame_velocity"]
+from coopnav_env.envs.config import UrbanCanyonConfig
+
+if TYPE_CHECKING:
+    from coopnav_env.sim.file_city import FileCity
+
+__all__ = [
+    "ROUTE_FRAME_GAIN_PER_S",
+    "check_route_offset",
+    "pursuit_velocity",
+    "route_frame_command",
+    "route_frame_velocity",
+    "route_offset_room_m",
+]
 
 
 def pursuit_velocity(
@@ -59,6 +74,116 @@ def pursuit_velocity(
     return v
 
 
+ROUTE_FRAME_GAIN_PER_S = 0.6
+"""Gain of the ``action_frame="route"`` autopilot on the altitude and on the speed before
+a waypoint [1/s] (the `waypoint` follower's)."""
+
+
+def check_route_offset(cfg: UrbanCanyonConfig, street_width_m: float) -> None:
+    """Refuse (``ValueError``) a ``route_offset_max_m`` that reaches the walls of a street
+    ``street_width_m`` wide: it must be less than half the width less the UAV radius."""
+    room_m = street_width_m / 2.0 - cfg.kinematics.uav_radius_m
+    if not cfg.route_offset_max_m < room_m:
+        raise ValueError(
+            f"route_offset_max_m must be less than half the street width minus the UAV radius "
+            f"({street_width_m:g} / 2 - {cfg.kinematics.uav_radius_m:g} = {room_m:g} m), got "
+            f"{cfg.route_offset_max_m!r}"
+        )
+
+
+def route_offset_room_m(
+    city: FileCity, route_xy_m: np.ndarray, cfg: UrbanCanyonConfig
+) -> np.ndarray:
+    """Largest route-frame offset [m] on each leg of a file city's route, ``(k,)``: leg ``i``
+    ends at waypoint ``i`` (leg 0: the way to the first waypoint, its clearance there). It is
+    ``route_offset_max_m``, or less where the free space is narrower: the smallest distance to
+    a wall of the free-space cells along the leg
+    (:attr:`~coopnav_env.sim.file_city.FileCity.clearance_grid_m`, sampled every metre) less
+    the UAV radius and 1 m, at least 0."""
+    route = np.asarray(route_xy_m, dtype=np.float64).reshape(-1, 2)
+    res = city.resolution_m
+    ny, nx = city.clearance_grid_m.shape
+    room = np.empty(route.shape[0])
+    for i in range(route.shape[0]):
+        a = route[max(i - 1, 0)]
+        b = route[i]
+        n = max(int(np.ceil(np.linalg.norm(b - a))), 1) + 1
+        pts = np.linspace(a, b, n)
+        col = np.clip(np.floor((pts[:, 0] - city.grid_x_m[0]) / res + 0.5), 0, nx - 1)
+        row = np.clip(np.floor((pts[:, 1] - city.grid_y_m[0]) / res + 0.5), 0, ny - 1)
+        room[i] = city.clearance_grid_m[row.astype(np.int64), col.astype(np.int64)].min()
+    room -= cfg.kinematics.uav_radius_m + 1.0
+    return np.clip(room, 0.0, cfg.route_offset_max_m)
+
+
+def route_frame_command(
+    action: np.ndarray,
+    est_enu_m: np.ndarray,
+    next_waypoint: np.ndarray,
+    route_xy_m: np.ndarray,
+    cfg: UrbanCanyonConfig,
+    offset_max_m: np.ndarray | None = None,
+) -> np.ndarray:
+    """The velocity command of route-frame set-points (``action_frame="route"``).
+
+    Parameters
+    ----------
+    action : ndarray, shape (N, 3)
+        Set-points in ``[-1, 1]``: speed along the route, offset across the street, altitude
+        (:class:`~coopnav_env.envs.config.UrbanCanyonConfig`, ``action_frame``).
+    est_enu_m : ndarray, shape (N, 3)
+        Each UAV's estimated position [m] (the autopilot flies on what the UAV knows).
+    next_waypoint : ndarray of int, shape (N,)
+        Each UAV's next waypoint on ``route_xy_m``.
+    route_xy_m : ndarray, shape (k, 2)
+        The street route's waypoints [m].
+    cfg : UrbanCanyonConfig
+    offset_max_m : ndarray, shape (N,), optional
+        Each UAV's largest offset [m] in place of ``route_offset_max_m`` (a file city: the
+        room on the UAV's leg, :func:`route_offset_room_m`).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        The velocity command, fractions of ``max_speed_mps`` in ``[-1, 1]``: the `waypoint`
+        follower's autopilot with set-points. Horizontally, from the estimated position
+        toward the next waypoint moved ``o = a1 * route_offset_max_m`` (or ``offset_max_m``)
+        to the left of the leg that ends there (before the first waypoint: of the way to it),
+        at the speed
+        ``(a0 + 1) / 2 * max_speed_mps``, at most ``1 + 0.6 d`` m/s at ``d`` m from that
+        point (with ``route_turn_brake_mps2 = b > 0``, also at most ``1 + sqrt(2 b (d - 3))``
+        m/s before a turn). Vertically ``0.6 (h - h_est)`` toward ``h`` from ``altitude_min_m``
+        (``a2 = -1``) to ``altitude_max_m`` (``+1``), with the estimated altitude ``h_est``
+        clamped to the band. A UAV with no finite estimate holds still (zero command).
+    """
+    kin = cfg.kinematics
+    gain = ROUTE_FRAME_GAIN_PER_S
+    act = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    route = np.asarray(route_xy_m, dtype=np.float64).reshape(-1, 2)
+    wp = np.asarray(next_waypoint, dtype=np.int64)
+    est = np.asarray(est_enu_m, dtype=np.float64)
+    ok = np.all(np.isfinite(est), axis=1)
+    est = np.where(ok[:, None], est, 0.0)
+    target = route[wp]
+    # the leg that ends at the next waypoint; before the first one, the way to it
+    leg = np.where((wp > 0)[:, None], target - route[np.maximum(wp - 1, 0)], target - est[:, :2])
+    norm = np.linalg.norm(leg, axis=1)
+    tangent = np.where((norm > 1e-9)[:, None], leg / np.maximum(norm, 1e-9)[:, None], 0.0)
+    left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    o_max = cfg.route_offset_max_m if offset_max_m is None else np.asarray(offset_max_m)
+    aim = target + left * (act[:, 1] * o_max)[:, None] - est[:, :2]
+    speed = (act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps
+    # braking for the route's turns: before every waypoint but the last
+    brake = np.where(wp < route.shape[0] - 1, cfg.route_turn_brake_mps2, 0.0)
+    band_m = kin.altitude_max_m - kin.altitude_min_m
+    height = kin.altitude_min_m + (act[:, 2] + 1.0) / 2.0 * band_m
+    # the UAV flies inside the altitude band: an estimate outside it is clamped to it
+    climb = height - np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
+    v = pursuit_velocity(aim, speed, climb, gain, brake)
+    v[~ok] = 0.0
+    return np.clip(v / kin.max_speed_mps, -1.0, 1.0)
+
+
 def route_frame_velocity(
     action: np.ndarray,
     est_enu_m: np.ndarray,
@@ -74,7 +199,7 @@ def route_frame_velocity(
     """The route autopilot of ``K`` swarms at once: route-frame set-points to velocity commands.
 
     Every entry is computed from its own UAV's numbers with the operations of
-    :func:`coopnav_env.envs.urban_canyon.route_frame_command` (one swarm), so swarm ``k``'s
+    :func:`route_frame_command` (one swarm), so swarm ``k``'s
     commands equal that function's on swarm ``k`` alone, bit for bit.
 
     Parameters

@@ -54,7 +54,8 @@ sector``                                      per azimuth sector); only with
 =========================  =====  ==========  ==============================================
 
 The sector of skyline azimuth ``360 a / A`` is centred on it and ``360 / A`` degrees wide
-(see ``UrbanCanyonEnv._satellite_sectors``); a count of 4 or more reads 1.
+(see :meth:`coopnav_env.envs.task.UrbanCanyonTask.satellite_sectors`); a count of 4 or more
+reads 1.
 
 ``L`` depends only on the configuration (the grid's extent is ``n * block + (n + 1) * street``
 whatever the buildings; the canyon is fixed), so it is known before any episode. The layout

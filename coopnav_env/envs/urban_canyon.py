@@ -5,17 +5,24 @@ The world itself (city, satellites, measurements, navigation) is
 rewards, terminations and frames. The user documentation (agents, spaces, rewards, episode
 end, arguments, version history) is the docstring of :mod:`coopnav_env.urban_canyon_v0`.
 
+One step: the command (with ``action_frame="route"``, the route autopilot of
+:mod:`coopnav_env.envs.autopilot` turns set-points into velocities) -> ``UrbanWorld.step``
+-> the task of :mod:`coopnav_env.envs.task` (reward terms, termination and truncation,
+observations, state) -> flat infos. Default settings take the fused step of
+:mod:`coopnav_env.envs._fused` (the same numbers, bit for bit), as a batch of one.
+
 Observation layout
 ------------------
 One float32 vector per agent, ``20 + 2 A + 4 K`` long (``A = obs_sky_azimuths``, default 8;
 ``K = obs_neighbours``, default 4; 52 by default), clipped to its bounds. The index table (with
 units and scales) is in the docstring of :mod:`coopnav_env.urban_canyon_v0`; it is built by
-:meth:`UrbanCanyonEnv._observation_array` below, in the same order. Optional blocks follow,
-in this order: the two protection levels (``obs_protection_level``), then the satellites
-tracked and the satellites above the cut-off not tracked per skyline azimuth sector, ``A``
-entries each (``obs_satellite_sectors``, :meth:`UrbanCanyonEnv._satellite_sectors`), then the
-true position error, 3 entries
-(``obs_true_error``), then the UAV's one-hot index, ``N`` entries (``obs_agent_index``).
+:meth:`coopnav_env.envs.task.UrbanCanyonTask.observations`, in the same order. Optional blocks
+follow, in this order: the two protection levels (``obs_protection_level``), then the
+satellites tracked and the satellites above the cut-off not tracked per skyline azimuth
+sector, ``A`` entries each (``obs_satellite_sectors``,
+:meth:`~coopnav_env.envs.task.UrbanCanyonTask.satellite_sectors`), then the true position
+error, 3 entries (``obs_true_error``), then the UAV's one-hot index, ``N`` entries
+(``obs_agent_index``).
 """
 
 from __future__ import annotations
@@ -33,19 +40,29 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from coopnav_env.envs import _kernels
-from coopnav_env.envs.autopilot import pursuit_velocity
+from coopnav_env.envs.autopilot import (
+    ROUTE_FRAME_GAIN_PER_S,
+    check_route_offset,
+    route_frame_command,
+    route_offset_room_m,
+)
 from coopnav_env.envs.config import V1_DEFAULTS, UrbanCanyonConfig, make_config
-from coopnav_env.sim import _kernels as _sim_kernels
-from coopnav_env.sim import city as _city
-from coopnav_env.sim.city import _ray_directions
+from coopnav_env.envs.task import (
+    REWARD_TERMS,
+    UrbanCanyonTask,
+    city_scale_m,
+    episode_end,
+    observation_bounds,
+    state_bounds,
+)
 from coopnav_env.sim.file_city import FileCity
-from coopnav_env.sim.route import remaining_route_m
 from coopnav_env.sim.scenario import Epoch, UrbanWorld
 
 __all__ = [
     "INFO_KEYS",
     "NO_FIX_ERROR_M",
     "REWARD_TERMS",
+    "ROUTE_FRAME_GAIN_PER_S",
     "UrbanCanyonEnv",
     "UrbanCanyonV1Env",
     "aec_env",
@@ -56,10 +73,6 @@ __all__ = [
     "route_frame_command",
     "route_offset_room_m",
 ]
-
-REWARD_TERMS: tuple[str, ...] = ("nav", "progress", "collision", "separation", "contact", "goal")
-"""Names of the reward terms; ``infos[agent]["reward_<term>"]`` holds each (their sum is the
-reward)."""
 
 NO_FIX_ERROR_M = -1.0
 """``coop_error_m`` / ``standalone_error_m`` in the infos when that fix does not exist (the
@@ -144,31 +157,17 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._trail: list[np.ndarray] = []
         self._window: Any = None
 
-        lo, hi = _observation_bounds(cfg)
+        self.task = UrbanCanyonTask(cfg)
+        lo, hi = observation_bounds(cfg)
         self.observation_spaces = {a: _box(lo, hi) for a in self.possible_agents}
         self.action_spaces = {a: _box(-1.0, 1.0, (3,)) for a in self.possible_agents}
-        s_lo, s_hi = _state_bounds(cfg)
+        s_lo, s_hi = state_bounds(cfg)
         self.state_space = _box(s_lo, s_hi)
-        self._az_deg = np.arange(cfg.obs_sky_azimuths) * (360.0 / cfg.obs_sky_azimuths)
-        self._rays = _ray_directions(self._az_deg)  # the sensors' horizontal ray directions
-        n_base = cfg.obs_base_dim  # the kernel's columns (the optional blocks follow)
-        self._obs_low = lo[:n_base].astype(np.float64)  # the clip bounds as numpy sees them
-        self._reward_params = np.array(
-            [
-                cfg.nav_reward_weight,
-                cfg.nav_reward_cap_m,
-                cfg.nav_reward_scale_m,
-                cfg.progress_reward_weight,
-                cfg.kinematics.max_speed_mps * cfg.dt_s,
-                cfg.collision_penalty,
-                cfg.separation_penalty,
-                cfg.contact_penalty,
-                cfg.goal_radius_m,
-                cfg.goal_bonus,
-            ],
-            dtype=np.float64,
-        )
-        self._obs_high = hi[:n_base].astype(np.float64)
+        # the task's constants under the names the fused step reads (coopnav_env.envs._fused)
+        self._az_deg = self.task.az_deg
+        self._rays = self.task.rays  # the sensors' horizontal ray directions
+        self._obs_low, self._obs_high = self.task.obs_low, self.task.obs_high
+        self._reward_params = self.task.reward_params
 
     # ---- spaces -----------------------------------------------------------------------------
 
@@ -262,34 +261,13 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                     self.world.city, self.world.route_xy_m, self.config
                 )
             else:
-                _check_route_offset(self.config, float(self.world.city.street_width_m))
-        self._city_scale_m = _city_scale_m(self.world)
+                check_route_offset(self.config, float(self.world.city.street_width_m))
+        self._city_scale_m = city_scale_m(self.world)
         # the observation kernel's scales (the city scale changes with the city)
-        cfg = self.config
-        self._obs_params = np.array(
-            [
-                self._city_scale_m,
-                cfg.kinematics.max_speed_mps,
-                cfg.obs_sigma_max_m,
-                cfg.relative_sensing.max_range_m,
-                cfg.max_steps,
-                cfg.obs_route_scale_m,
-                cfg.kinematics.altitude_min_m,
-                cfg.kinematics.altitude_max_m,
-                cfg.obs_wall_scale_m,
-            ],
-            dtype=np.float64,
-        )
+        self._obs_params = self.task.observation_params(self._city_scale_m)
         self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
         # reward_scheme="navigated_distance": each UAV's route length and the part not yet paid
-        route_m = remaining_route_m(
-            self.world.route_xy_m,
-            self._epoch.pos_enu_m[:, :2],
-            self._epoch.next_waypoint,
-            self.world.route_tail_m,
-        )
-        self._route_m = np.maximum(route_m, 1e-9)
-        self._unpaid_m = route_m.copy()
+        self._route_m, self._unpaid_m = self.task.route_lengths(self.world, self._epoch)
         return self._observation_array()
 
     def _reset_infos(self) -> dict[str, dict[str, Any]]:
@@ -299,10 +277,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         libraries that build their info specs from the reset (TorchRL's ``PettingZooWrapper``,
         BenchMARL) see every key they will get later.
         """
-        terms = {t: np.zeros(self.config.n_uavs) for t in REWARD_TERMS}
-        if self.config.integrity != "off":
-            terms["integrity"] = np.zeros(self.config.n_uavs)
-        return self._infos(terms, self._epoch.goal_distance_m <= self.config.goal_radius_m)
+        in_goal = self._epoch.goal_distance_m <= self.config.goal_radius_m
+        return self._infos(self.task.zero_terms(), in_goal)
 
     def step(
         self, actions: dict[str, Any]
@@ -374,81 +350,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             self._trail.append(ep.pos_enu_m)
             self._trail = self._trail[-60:]
 
-        stacked, in_goal, crash, reached = self._reward_terms(prev, ep)
-        if cfg.reward_scheme == "navigated_distance":
-            stacked[0], stacked[1] = self._navigated_distance(ep, bool(reached))
-        if cfg.nav_team_weight > 0.0:
-            stacked[0] = _team_mix(stacked[0], cfg.nav_team_weight)
-        terms = dict(zip(REWARD_TERMS, stacked))
-        reward = self._integrity_term(terms, stacked.sum(axis=0))
-        terminated = bool(crash or reached)
-        truncated = (self._steps >= cfg.max_steps) and not terminated
-        return self._observation_array(), reward, terminated, truncated, terms, in_goal
-
-    def _reward_terms(self, prev: Epoch, ep: Epoch) -> tuple[np.ndarray, np.ndarray, bool, bool]:
-        """The reward terms of the step from ``prev`` to ``ep`` before the navigated-distance
-        scheme, the team mix and the integrity term: ``(6, N)`` float64 in the order of
-        :data:`REWARD_TERMS`, the in-goal flags ``(N,)``, whether a UAV crashed and whether
-        the swarm reached the goal, by the compiled
-        :func:`coopnav_env.envs._kernels.reward_terms`.
-
-        ``progress`` is the decrease of the remaining street route, both ends measured to the
-        waypoint that was next at ``prev`` (no reward for switching waypoints).
-        """
-        return _kernels.reward_terms(
-            self.world.route_xy_m,
-            self.world.route_tail_m,
-            prev.next_waypoint,
-            prev.pos_enu_m[:, :2],
-            ep.pos_enu_m,
-            ep.goal_enu_m,
-            ep.nav_pos_enu_m,
-            ep.nav_cov_enu_m2,
-            ep.collided,
-            ep.separation_violation,
-            ep.out_of_contact,
-            self.config.nav_reward == "sigma",
-            self._reward_params,
-        )
-
-    def _navigated_distance(self, ep: Epoch, reached: bool) -> tuple[np.ndarray, np.ndarray]:
-        """The terms ``nav`` and ``progress`` of ``reward_scheme="navigated_distance"`` for the
-        epoch ``ep``, each ``(N,)``; updates the part of each UAV's route not yet paid.
-
-        ``progress``: the share of its route a UAV covers for the first time this step (its
-        remaining route below its lowest one so far, divided by its route length at reset;
-        all that is left when the swarm arrives). ``nav``: minus that share times
-        ``min(nav_error_m, cap) / cap``. Their sum over an episode that arrives is the route's
-        distance-weighted navigation quality, whatever the speed: a metre is paid once, at
-        the error the UAV had when it first got there, so flying back and forth earns nothing.
-        """
-        cfg = self.config
-        now_m = remaining_route_m(
-            self.world.route_xy_m, ep.pos_enu_m[:, :2], ep.next_waypoint, self.world.route_tail_m
-        )
-        covered_m = self._unpaid_m if reached else np.clip(self._unpaid_m - now_m, 0.0, None)
-        self._unpaid_m = self._unpaid_m - covered_m
-        share = covered_m / self._route_m
-        # np.fmin: an error that is not a number (no estimate) counts as the cap (quality 0)
-        shortfall = np.fmin(ep.nav_error_m, cfg.nav_reward_cap_m) / cfg.nav_reward_cap_m
-        return -share * shortfall, share
-
-    def _integrity_term(self, terms: dict[str, np.ndarray], reward: np.ndarray) -> np.ndarray:
-        """With ``integrity`` on, add the reward term ``integrity`` (``-integrity_penalty`` for
-        a UAV whose estimate is not available or misleading) to ``terms`` and ``reward``."""
-        cfg = self.config
-        if cfg.integrity == "off":
-            return reward
-        if cfg.integrity_penalty == 0.0:  # the term is reported, and is zero
-            terms["integrity"] = np.zeros(reward.shape[0])
-            return reward
-        ep = self._epoch
-        d = ep.nav_pos_enu_m - ep.pos_enu_m
-        h_err = np.hypot(d[:, 0], d[:, 1])
-        hpl = ep.hpl_m
-        bad = (h_err > hpl) | (hpl > cfg.alert_limit_m)  # (hpl is never NaN)
-        terms["integrity"] = -cfg.integrity_penalty * bad
-        return reward + terms["integrity"]
+        out = self.task.reward(self.world, prev, ep, self._unpaid_m, self._route_m)
+        self._unpaid_m = out.unpaid_m
+        terminated, truncated = episode_end(self._steps, cfg.max_steps, out.crashed, out.reached)
+        obs = self._observation_array()
+        return obs, out.reward, terminated, truncated, out.terms, out.in_goal
 
     def _action_array(self, actions: dict[str, Any]) -> np.ndarray:
         if not isinstance(actions, dict):
@@ -485,108 +391,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
     # ---- observations, infos, state ---------------------------------------------------------
 
     def _observation_array(self) -> np.ndarray:
-        """Every agent's observation, ``(N, obs_dim)`` float32 (rows in agent order).
-
-        Built by the compiled :func:`coopnav_env.envs._kernels.observation_rows` (its numpy
-        definition, equal bit for bit, is ``observation_rows`` of ``tests/envs/oracles.py``).
-        With ``obs_protection_level`` the two
-        protection-level columns follow, then with ``obs_satellite_sectors`` the ``2 A``
-        satellite-sector columns (:meth:`_satellite_sectors`), then with ``obs_true_error``
-        (privileged) the 3 columns of the true position error, then with ``obs_agent_index``
-        the ``N`` columns of the UAV's one-hot index.
-        """
-        obs = self._observation_rows()
-        cfg = self.config
-        if not (
-            cfg.obs_protection_level
-            or cfg.obs_satellite_sectors
-            or cfg.obs_true_error
-            or cfg.obs_agent_index
-        ):
-            return obs
-        ep = self._epoch
-        blocks = [obs]
-        if cfg.obs_protection_level:
-            scale = 2.0 * cfg.alert_limit_m
-            pl = np.clip(np.stack([ep.hpl_m, ep.vpl_m], axis=1) / scale, 0.0, 1.0)
-            blocks.append(pl.astype(np.float32))
-        if cfg.obs_satellite_sectors:
-            blocks.append(self._satellite_sectors())
-        if cfg.obs_true_error:  # privileged (a diagnostic): the truth no receiver knows
-            err = (ep.nav_pos_enu_m - ep.pos_enu_m) / cfg.obs_sigma_max_m
-            blocks.append(np.clip(err, -1.0, 1.0).astype(np.float32))
-        if cfg.obs_agent_index:
-            blocks.append(np.eye(cfg.n_uavs, dtype=np.float32))
-        return np.concatenate(blocks, axis=1)
-
-    def _tracked(self) -> np.ndarray:
-        """``(N, S)`` bool: the satellites each UAV's receiver tracks this epoch, i.e. those
-        its pseudoranges come from (line of sight, or NLOS through a reflection when NLOS
-        reception is on; after the ``max_sats`` channel limit) *before* 3D-mapping-aided
-        exclusion: a satellite the map excludes is still tracked, only not used."""
-        ep = self._epoch
-        return ep.received if ep.map_excluded is None else ep.received | ep.map_excluded
-
-    def _satellite_sectors(self) -> np.ndarray:
-        """The ``obs_satellite_sectors`` columns, ``(N, 2 A)`` float32.
-
-        Columns ``0..A-1`` (``satellites_received_sector``): satellites the UAV tracks
-        (:meth:`_tracked`) whose azimuth falls in sector ``a``; columns ``A..2A-1``
-        (``satellites_blocked_sector``): satellites above ``elevation_mask_deg`` it does not
-        track, per sector. Each count is divided by 4 and clipped to [0, 1]. Sector ``a`` is
-        centred on the skyline azimuth ``360 a / A`` (clockwise from North) and spans
-        ``360 / A`` degrees: a satellite at azimuth ``az`` is in sector
-        ``floor(az A / 360 + 1/2) mod A``, the skyline direction nearest to it.
-
-        The azimuths are those of the world (``Epoch.sv_az_deg``, computed at the city's
-        geodetic origin), in [0, 360). A receiver would compute them from its almanac and its
-        approximate position; the satellites are some 20,000 km away, so moving the receiver
-        by ``d`` turns the line of sight by at most ``d / 20,000 km`` (0.003 deg for the 1 km
-        of a city, or a navigation error of tens of metres far less), far below the sector
-        width of ``360 / A`` deg: the origin, the true position and the estimate give the
-        same sectors except for a satellite within that hair of a sector boundary (or so
-        near the zenith that its azimuth is meaningless anyway). The compiled
-        :func:`coopnav_env.envs._kernels.satellite_sectors` computes it (its numpy definition,
-        equal bit for bit, is ``satellite_sectors`` of ``tests/envs/oracles.py``).
-        """
-        return _kernels.satellite_sectors(
-            self._tracked(), self._epoch.sv_az_deg, self.config.obs_sky_azimuths
-        )
-
-    def _observation_rows(self) -> np.ndarray:
-        """The observation without the optional blocks (protection levels, satellite
-        sectors, ...), ``(N, n_base)`` float32."""
-        cfg = self.config
-        ep = self._epoch
-        # City.sky_and_walls of the world's own (valid) positions (a file city's polygons: else)
-        if isinstance(self.world.city.buildings, _city.Buildings):
-            b = self.world.city.buildings
-            tan_max, walls = _sim_kernels.sky_and_walls(ep.pos_enu_m, self._rays, b.min_m, b.max_m)
-            sky_deg = np.degrees(np.arctan(tan_max))
-        else:
-            sky_deg, walls = self.world.city.sky_and_walls(ep.pos_enu_m, self._az_deg)
-        return _kernels.observation_rows(
-            ep.nav_pos_enu_m,
-            ep.goal_enu_m,
-            ep.vel_enu_mps,
-            ep.nav_cov_enu_m2,
-            ep.n_sats,
-            ep.n_sats_swarm,
-            max(ep.n_above_mask, 1),
-            sky_deg,
-            ep.rel_enu_m,
-            ep.rel_available,
-            self.world.route_xy_m,
-            self.world.route_tail_m,
-            ep.next_waypoint,
-            ep.nav_source,
-            walls,
-            self._steps,
-            self._obs_params,
-            cfg.obs_neighbours,
-            self._obs_low,
-            self._obs_high,
-        )
+        """Every agent's observation at the current epoch, ``(N, obs_dim)`` float32 (rows in
+        agent order): :meth:`coopnav_env.envs.task.UrbanCanyonTask.observations`."""
+        return self.task.observations(self.world, self._epoch, self._steps, self._obs_params)
 
     def _info_floats(self) -> np.ndarray:
         """The per-agent real numbers of the infos, ``(8, N)``, by the compiled
@@ -706,22 +513,14 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         """
         if self._epoch is None:
             raise ValueError("state() called before reset(): call reset() first")
-        cfg = self.config
-        ep = self._epoch
-        big = self._city_scale_m
-        x0, x1, y0, y1 = self.world.city.extent_m
-        centre = np.array([(x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0])
-        parts = [
-            ((ep.pos_enu_m - ep.goal_enu_m) / big).ravel(),
-            (ep.vel_enu_mps / cfg.kinematics.max_speed_mps).ravel(),
-            (ep.goal_enu_m - centre) / (big / 2.0),
-            ((ep.nav_pos_enu_m - ep.pos_enu_m) / cfg.nav_reward_cap_m).ravel(),
-            (ep.nav_sigma_enu_m / cfg.obs_sigma_max_m).ravel(),
-            ep.n_sats / max(ep.n_above_mask, 1),
-            [1.0 - self._steps / cfg.max_steps],
-        ]
-        s = np.concatenate([np.asarray(p, dtype=float) for p in parts])
-        return np.clip(s, self.state_space.low, self.state_space.high).astype(np.float32)
+        return self.task.state(
+            self.world,
+            self._epoch,
+            self._steps,
+            self._city_scale_m,
+            self.state_space.low,
+            self.state_space.high,
+        )
 
     # ---- rendering --------------------------------------------------------------------------
 
@@ -827,11 +626,6 @@ def aec_env(
     return parallel_to_aec(parallel_env(render_mode=render_mode, config=config, **fields))
 
 
-def _city_scale_m(world: UrbanWorld) -> float:
-    x0, x1, y0, y1 = world.city.extent_m
-    return float(max(x1 - x0, y1 - y0))
-
-
 def _box(low: Any, high: Any, shape: tuple[int, ...] | None = None) -> spaces.Box:
     """``spaces.Box(low, high, shape, dtype=np.float32)``, its bound arrays shared.
 
@@ -859,35 +653,6 @@ _BOX_TEMPLATES_MAX = 256
 """At most this many distinct bounds keep a template (further ones get arrays of their own)."""
 
 
-def _observation_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Per-index bounds of the observation vector (see the module docstring)."""
-    a, k = cfg.obs_sky_azimuths, cfg.obs_neighbours
-    lo = np.concatenate(
-        [
-            -np.ones(6),  # position vs goal, velocity
-            np.zeros(5 + a),  # sigma, satellite counts, sky
-            np.tile([-1.0, -1.0, -1.0, 0.0], k),  # neighbour slots
-            np.zeros(3),  # flags, time left
-            -np.ones(4),  # next waypoint, leg after it
-            np.zeros(2 + a),  # remaining route, altitude, wall distances
-            np.zeros(2 if cfg.obs_protection_level else 0),  # HPL, VPL / (2 alert limit)
-            np.zeros(2 * a if cfg.obs_satellite_sectors else 0),  # satellites per sector / 4
-            -np.ones(3 if cfg.obs_true_error else 0),  # true position error (privileged)
-            np.zeros(cfg.n_uavs if cfg.obs_agent_index else 0),  # one-hot index of the UAV
-        ]
-    )
-    hi = np.ones(cfg.obs_dim)
-    assert lo.shape == hi.shape
-    return lo.astype(np.float32), hi.astype(np.float32)
-
-
-def _state_bounds(cfg: UrbanCanyonConfig) -> tuple[np.ndarray, np.ndarray]:
-    n = cfg.n_uavs
-    lo = np.concatenate([-np.ones(6 * n + 3 + 3 * n), np.zeros(3 * n + n + 1)])
-    hi = np.ones(cfg.state_dim)
-    return lo.astype(np.float32), hi.astype(np.float32)
-
-
 def fix_error_m(info: dict[str, Any], key: str) -> float:
     """The error ``info[key]`` of one agent's infos, ``inf`` where the fix does not exist.
 
@@ -903,118 +668,3 @@ def fix_error_m(info: dict[str, Any], key: str) -> float:
 
 
 _FIX_FLAGS = {"coop_error_m": "coop_fix", "standalone_error_m": "standalone_fix"}
-
-
-ROUTE_FRAME_GAIN_PER_S = 0.6
-"""Gain of the ``action_frame="route"`` autopilot on the altitude and on the speed before
-a waypoint [1/s] (the `waypoint` follower's)."""
-
-
-def _check_route_offset(cfg: UrbanCanyonConfig, street_width_m: float) -> None:
-    """Refuse a ``route_offset_max_m`` that reaches the walls of a street ``street_width_m``
-    wide."""
-    room_m = street_width_m / 2.0 - cfg.kinematics.uav_radius_m
-    if not cfg.route_offset_max_m < room_m:
-        raise ValueError(
-            f"route_offset_max_m must be less than half the street width minus the UAV radius "
-            f"({street_width_m:g} / 2 - {cfg.kinematics.uav_radius_m:g} = {room_m:g} m), got "
-            f"{cfg.route_offset_max_m!r}"
-        )
-
-
-def route_offset_room_m(
-    city: FileCity, route_xy_m: np.ndarray, cfg: UrbanCanyonConfig
-) -> np.ndarray:
-    """Largest route-frame offset [m] on each leg of a file city's route, ``(k,)``: leg ``i``
-    ends at waypoint ``i`` (leg 0: the way to the first waypoint, its clearance there). It is
-    ``route_offset_max_m``, or less where the free space is narrower: the smallest distance to
-    a wall of the free-space cells along the leg
-    (:attr:`~coopnav_env.sim.file_city.FileCity.clearance_grid_m`, sampled every metre) less
-    the UAV radius and 1 m, at least 0."""
-    route = np.asarray(route_xy_m, dtype=np.float64).reshape(-1, 2)
-    res = city.resolution_m
-    ny, nx = city.clearance_grid_m.shape
-    room = np.empty(route.shape[0])
-    for i in range(route.shape[0]):
-        a = route[max(i - 1, 0)]
-        b = route[i]
-        n = max(int(np.ceil(np.linalg.norm(b - a))), 1) + 1
-        pts = np.linspace(a, b, n)
-        col = np.clip(np.floor((pts[:, 0] - city.grid_x_m[0]) / res + 0.5), 0, nx - 1)
-        row = np.clip(np.floor((pts[:, 1] - city.grid_y_m[0]) / res + 0.5), 0, ny - 1)
-        room[i] = city.clearance_grid_m[row.astype(np.int64), col.astype(np.int64)].min()
-    room -= cfg.kinematics.uav_radius_m + 1.0
-    return np.clip(room, 0.0, cfg.route_offset_max_m)
-
-
-def route_frame_command(
-    action: np.ndarray,
-    est_enu_m: np.ndarray,
-    next_waypoint: np.ndarray,
-    route_xy_m: np.ndarray,
-    cfg: UrbanCanyonConfig,
-    offset_max_m: np.ndarray | None = None,
-) -> np.ndarray:
-    """The velocity command of route-frame set-points (``action_frame="route"``).
-
-    Parameters
-    ----------
-    action : ndarray, shape (N, 3)
-        Set-points in ``[-1, 1]``: speed along the route, offset across the street, altitude
-        (:class:`~coopnav_env.envs.config.UrbanCanyonConfig`, ``action_frame``).
-    est_enu_m : ndarray, shape (N, 3)
-        Each UAV's estimated position [m] (the autopilot flies on what the UAV knows).
-    next_waypoint : ndarray of int, shape (N,)
-        Each UAV's next waypoint on ``route_xy_m``.
-    route_xy_m : ndarray, shape (k, 2)
-        The street route's waypoints [m].
-    cfg : UrbanCanyonConfig
-    offset_max_m : ndarray, shape (N,), optional
-        Each UAV's largest offset [m] in place of ``route_offset_max_m`` (a file city: the
-        room on the UAV's leg, :func:`route_offset_room_m`).
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-        The velocity command, fractions of ``max_speed_mps`` in ``[-1, 1]``: the `waypoint`
-        follower's autopilot with set-points. Horizontally, from the estimated position
-        toward the next waypoint moved ``o = a1 * route_offset_max_m`` (or ``offset_max_m``)
-        to the left of the leg that ends there (before the first waypoint: of the way to it),
-        at the speed
-        ``(a0 + 1) / 2 * max_speed_mps``, at most ``1 + 0.6 d`` m/s at ``d`` m from that
-        point (with ``route_turn_brake_mps2 = b > 0``, also at most ``1 + sqrt(2 b (d - 3))``
-        m/s before a turn). Vertically ``0.6 (h - h_est)`` toward ``h`` from ``altitude_min_m``
-        (``a2 = -1``) to ``altitude_max_m`` (``+1``), with the estimated altitude ``h_est``
-        clamped to the band. A UAV with no finite estimate holds still (zero command).
-    """
-    kin = cfg.kinematics
-    gain = ROUTE_FRAME_GAIN_PER_S
-    act = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-    route = np.asarray(route_xy_m, dtype=np.float64).reshape(-1, 2)
-    wp = np.asarray(next_waypoint, dtype=np.int64)
-    est = np.asarray(est_enu_m, dtype=np.float64)
-    ok = np.all(np.isfinite(est), axis=1)
-    est = np.where(ok[:, None], est, 0.0)
-    target = route[wp]
-    # the leg that ends at the next waypoint; before the first one, the way to it
-    leg = np.where((wp > 0)[:, None], target - route[np.maximum(wp - 1, 0)], target - est[:, :2])
-    norm = np.linalg.norm(leg, axis=1)
-    tangent = np.where((norm > 1e-9)[:, None], leg / np.maximum(norm, 1e-9)[:, None], 0.0)
-    left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
-    o_max = cfg.route_offset_max_m if offset_max_m is None else np.asarray(offset_max_m)
-    aim = target + left * (act[:, 1] * o_max)[:, None] - est[:, :2]
-    speed = (act[:, 0] + 1.0) / 2.0 * kin.max_speed_mps
-    # braking for the route's turns: before every waypoint but the last
-    brake = np.where(wp < route.shape[0] - 1, cfg.route_turn_brake_mps2, 0.0)
-    band_m = kin.altitude_max_m - kin.altitude_min_m
-    height = kin.altitude_min_m + (act[:, 2] + 1.0) / 2.0 * band_m
-    # the UAV flies inside the altitude band: an estimate outside it is clamped to it
-    climb = height - np.clip(est[:, 2], kin.altitude_min_m, kin.altitude_max_m)
-    v = pursuit_velocity(aim, speed, climb, gain, brake)
-    v[~ok] = 0.0
-    return np.clip(v / kin.max_speed_mps, -1.0, 1.0)
-
-
-def _team_mix(nav: np.ndarray, weight: float) -> np.ndarray:
-    """Team credit: ``(1 - weight) * nav_i + weight * mean(nav)`` (``nav_team_weight``)."""
-    return (1.0 - weight) * nav + weight * nav.mean()

@@ -49,6 +49,7 @@ __all__ = [
     "is_inside_building",
     "line_of_sight",
     "mask_elevation_deg",
+    "ray_directions",
     "sky_and_walls",
     "sky_directions",
     "wall_distance_m",
@@ -376,11 +377,13 @@ def _trace_line_of_sight(buildings: Buildings, pos: FloatArray, sky: SkyDirectio
     )
 
 
-def _ray_directions(az_deg: ArrayLike) -> FloatArray:
-    """Horizontal unit vectors ``(sin az, cos az)`` (n_az, 2) of azimuths [deg], read-only.
+def ray_directions(az_deg: ArrayLike) -> FloatArray:
+    """Horizontal unit vectors ``(sin az, cos az)`` (n_az, 2) of azimuths [deg], read-only:
+    the rays :func:`sky_and_walls` traces (and the compiled sweeps take).
 
     Components below 1e-15 are exact zeros, so that the slab test treats the cardinal
     directions exactly. Cached by value (an environment asks for the same azimuths each step).
+    A non-finite azimuth or an array that is not one-dimensional raises ``ValueError``.
     """
     az = np.asarray(az_deg, dtype=np.float64)
     key = az.tobytes() if az.ndim == 1 else None
@@ -443,7 +446,7 @@ def sky_and_walls(
         return buildings.sky_and_walls(pos_enu_m, az_deg)
     pos = _as_points(pos_enu_m, "pos_enu_m")
     tan_max, dist = _kernels.sky_and_walls(
-        np.ascontiguousarray(pos), _ray_directions(az_deg), buildings.min_m, buildings.max_m
+        np.ascontiguousarray(pos), ray_directions(az_deg), buildings.min_m, buildings.max_m
     )
     return np.degrees(np.arctan(tan_max)), dist
 

@@ -114,7 +114,7 @@ from numpy.typing import ArrayLike, NDArray
 from coopnav_env.gnss.frames import ecef_to_enu, ecef_to_geodetic, enu_to_ecef, geodetic_to_ecef
 from coopnav_env.sim import _polygon_kernels as _pk
 from coopnav_env.sim._route_kernels import pull_string
-from coopnav_env.sim.city import City, SkyDirections, _as_points, _ray_directions, _readonly
+from coopnav_env.sim.city import City, SkyDirections, _as_points, _readonly, ray_directions
 
 __all__ = [
     "CLEARANCE_M",
@@ -301,7 +301,7 @@ class ExtrudedBuildings:
         ``(n, n_az)`` each, as :func:`~coopnav_env.sim.city.sky_and_walls` defines them (90 deg
         and 0 m inside a footprint below its roof; 0 deg and ``inf`` where nothing is met)."""
         pos = np.ascontiguousarray(_as_points(pos_enu_m, "pos_enu_m"))
-        tan_max, dist = _pk.sky_and_walls(pos, _ray_directions(az_deg), *self._args())
+        tan_max, dist = _pk.sky_and_walls(pos, ray_directions(az_deg), *self._args())
         return np.degrees(np.arctan(tan_max)), dist
 
     def swept_collisions(
@@ -1490,7 +1490,7 @@ def _walls_within(
     tile of ``tile_m`` at a time, against the buildings whose bounding box comes within
     ``radius_m`` of the tile's points: a wall within the radius belongs to one of them, and the
     distance to it is the same number, so the counts are those of all buildings at once."""
-    dirs = _ray_directions(np.arange(0.0, 360.0, 45.0))
+    dirs = ray_directions(np.arange(0.0, 360.0, 45.0))
     out = np.zeros(cells.shape[0], dtype=np.int64)
     bb, es = buildings.bbox_m, buildings.edge_start
     _, tile = np.unique(np.floor(cells[:, :2] / tile_m), axis=0, return_inverse=True)

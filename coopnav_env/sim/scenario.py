@@ -164,6 +164,7 @@ from coopnav_env.sim.city import (
     draw_nlos,
     generate_city,
     is_inside_building,
+    ray_directions,
     sky_directions,
 )
 from coopnav_env.sim.city_families import (
@@ -1452,6 +1453,21 @@ class UrbanWorld:
     def cov_ecef_to_enu(self, cov_ecef_m2: np.ndarray) -> np.ndarray:
         """Covariances (..., 3, 3) from ECEF to ENU [m^2] (NaN propagates)."""
         return self.rot_enu @ cov_ecef_m2 @ self.rot_enu.T
+
+    def sky_and_walls(
+        self, pos_enu_m: np.ndarray, az_deg: np.ndarray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Skyline elevation [deg] and nearest-wall distance [m] along each azimuth ``az_deg``
+        (A,) from positions of this world's swarm (``Epoch.pos_enu_m``, finite by
+        construction), ``(n, A)`` each: :meth:`City.sky_and_walls` without re-checking the
+        positions (the numbers are the same, bit for bit)."""
+        b = self.city.buildings
+        if not isinstance(b, Buildings):  # extruded polygons (sim.file_city)
+            return self.city.sky_and_walls(pos_enu_m, az_deg)
+        tan_max, walls = _sim_kernels.sky_and_walls(
+            np.ascontiguousarray(pos_enu_m), ray_directions(az_deg), b.min_m, b.max_m
+        )
+        return np.degrees(np.arctan(tan_max)), walls
 
     def _relative_ecef(
         self,

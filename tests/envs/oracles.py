@@ -1,10 +1,12 @@
 """Numpy oracles of the environment's compiled kernels (:mod:`coopnav_env.envs._kernels`).
 
-:class:`~coopnav_env.envs.urban_canyon.UrbanCanyonEnv` builds its observations, satellite
-sectors, info figures and reward terms in compiled loops only. The functions here are their
-readable numpy definitions, each taking the environment (its current and, for the reward,
-previous epoch); the kernels perform the same floating-point operations, so the tests compare
-the two bit for bit. :func:`use_oracles_in_env` puts them in place of the kernels, and
+The task (:class:`~coopnav_env.envs.task.UrbanCanyonTask`) builds its observations, satellite
+sectors and reward terms, and the environment
+(:class:`~coopnav_env.envs.urban_canyon.UrbanCanyonEnv`) its info figures, in compiled loops
+only. The functions here are their readable numpy definitions, each taking the arguments of
+the method it defines (the task and the world's epochs, or the environment); the kernels
+perform the same floating-point operations, so the tests compare the two bit for bit.
+:func:`use_oracles_in_env` puts them in place of the kernels, and
 :func:`use_all_oracles` does so for every layer below too (GNSS, navigation, world).
 """
 
@@ -16,11 +18,13 @@ import numpy as np
 import pytest
 
 from coopnav_env.envs import _fused, batched
-from coopnav_env.envs.urban_canyon import REWARD_TERMS, UrbanCanyonEnv
+from coopnav_env.envs.task import REWARD_TERMS, UrbanCanyonTask, observation_bounds
+from coopnav_env.envs.task import tracked_satellites as _tracked_satellites
+from coopnav_env.envs.urban_canyon import UrbanCanyonEnv
 from coopnav_env.nav import cooperative as _cooperative
 from coopnav_env.sim import scenario as _scenario
 from coopnav_env.sim.route import remaining_route_m
-from coopnav_env.sim.scenario import Epoch, NavSource
+from coopnav_env.sim.scenario import Epoch, NavSource, UrbanWorld
 from tests.gnss.oracles import use_gnss_oracles
 from tests.nav.oracles import use_nav_oracles
 from tests.sim.oracles import use_oracles_in_world
@@ -35,16 +39,17 @@ __all__ = [
 ]
 
 
-def observation_rows(env: UrbanCanyonEnv) -> np.ndarray:
+def observation_rows(
+    task: UrbanCanyonTask, world: UrbanWorld, ep: Epoch, steps: int, obs_params: np.ndarray
+) -> np.ndarray:
     """Every agent's observation without the optional blocks, ``(N, n_base)`` float32: the
-    definition of ``UrbanCanyonEnv._observation_rows``."""
-    cfg = env.config
-    ep = env._epoch
+    definition of ``UrbanCanyonTask.observation_rows``."""
+    cfg = task.config
     n = cfg.n_uavs
-    big = env._city_scale_m
+    big = obs_params[0]  # the city's scale
     k = cfg.obs_neighbours
     n_open = max(ep.n_above_mask, 1)
-    sky_deg, walls = env.world.city.sky_and_walls(ep.pos_enu_m, env._az_deg)
+    sky_deg, walls = world.city.sky_and_walls(ep.pos_enu_m, task.az_deg)
     sky = sky_deg / 90.0
 
     # neighbour slots: nearest (measured) first
@@ -60,13 +65,13 @@ def observation_rows(env: UrbanCanyonEnv) -> np.ndarray:
     slots[:, :m, 3] = present
 
     # route: next waypoint and the leg after it, from the estimated position
-    route = env.world.route_xy_m
+    route = world.route_xy_m
     wp = ep.next_waypoint
     last = route.shape[0] - 1
     est_xy = ep.nav_pos_enu_m[:, :2]
     to_wp = route[wp] - est_xy
     after = route[np.minimum(wp + 1, last)] - route[wp]  # 0 when the next one is the goal
-    remaining = remaining_route_m(route, est_xy, wp, env.world.route_tail_m)
+    remaining = remaining_route_m(route, est_xy, wp, world.route_tail_m)
     kin = cfg.kinematics
     alt = (ep.nav_pos_enu_m[:, 2] - kin.altitude_min_m) / (kin.altitude_max_m - kin.altitude_min_m)
 
@@ -81,7 +86,7 @@ def observation_rows(env: UrbanCanyonEnv) -> np.ndarray:
             slots.reshape(n, 4 * k),
             (ep.nav_source == NavSource.COOPERATIVE)[:, None],
             (ep.nav_source != NavSource.DEAD_RECKONING)[:, None],
-            np.full((n, 1), 1.0 - env._steps / cfg.max_steps),
+            np.full((n, 1), 1.0 - steps / cfg.max_steps),
             to_wp / cfg.obs_route_scale_m,
             after / cfg.obs_route_scale_m,
             (remaining / (2.0 * big))[:, None],
@@ -90,18 +95,18 @@ def observation_rows(env: UrbanCanyonEnv) -> np.ndarray:
         ],
         axis=1,
     )
-    space = env.observation_spaces[env.possible_agents[0]]
+    low, high = observation_bounds(cfg)
     n_base = obs.shape[1]  # the optional blocks are appended by the caller
-    return np.clip(obs, space.low[:n_base], space.high[:n_base]).astype(np.float32)
+    return np.clip(obs, low[:n_base], high[:n_base]).astype(np.float32)
 
 
-def satellite_sectors(env: UrbanCanyonEnv) -> np.ndarray:
+def satellite_sectors(task: UrbanCanyonTask, ep: Epoch) -> np.ndarray:
     """The ``obs_satellite_sectors`` columns, ``(N, 2 A)`` float32: the definition of
-    ``UrbanCanyonEnv._satellite_sectors`` (tracked, then not tracked, satellites per azimuth
+    ``UrbanCanyonTask.satellite_sectors`` (tracked, then not tracked, satellites per azimuth
     sector, divided by 4 and clipped to 1)."""
-    a = env.config.obs_sky_azimuths
-    tracked = env._tracked()
-    sector = np.floor(env._epoch.sv_az_deg * (a / 360.0) + 0.5).astype(np.int64) % a
+    a = task.config.obs_sky_azimuths
+    tracked = _tracked_satellites(ep)
+    sector = np.floor(ep.sv_az_deg * (a / 360.0) + 0.5).astype(np.int64) % a
     one_hot = (sector[:, None] == np.arange(a)[None, :]).astype(np.float64)  # (S, A)
     counts = np.concatenate([tracked @ one_hot, ~tracked @ one_hot], axis=1)
     return np.minimum(counts / 4.0, 1.0).astype(np.float32)
@@ -125,16 +130,17 @@ def info_floats(env: UrbanCanyonEnv) -> np.ndarray:
 
 
 def reward_terms(
-    env: UrbanCanyonEnv, prev: Epoch, ep: Epoch
+    task: UrbanCanyonTask, world: UrbanWorld, prev: Epoch, ep: Epoch
 ) -> tuple[np.ndarray, np.ndarray, bool, bool]:
     """``(6, N)`` reward terms (order of :data:`REWARD_TERMS`), in-goal flags, crash and
     reached of the step from ``prev`` to ``ep``: the definition of
-    ``UrbanCanyonEnv._reward_terms``."""
-    cfg = env.config
+    ``UrbanCanyonTask.reward_terms`` (with ``reward_scheme="navigated_distance"`` the rows
+    ``nav`` and ``progress`` are zero: the task fills them from the route)."""
+    cfg = task.config
     # progress: decrease of the remaining street route, both ends measured to the
     # waypoint that was next at the previous step (no reward for switching waypoints)
-    route = env.world.route_xy_m
-    tail = env.world.route_tail_m
+    route = world.route_xy_m
+    tail = world.route_tail_m
     d_prev = remaining_route_m(route, prev.pos_enu_m[:, :2], prev.next_waypoint, tail)
     d_now = remaining_route_m(route, ep.pos_enu_m[:, :2], prev.next_waypoint, tail)
     in_goal = ep.goal_distance_m <= cfg.goal_radius_m
@@ -157,6 +163,8 @@ def reward_terms(
         "contact": -cfg.contact_penalty * ep.out_of_contact,
         "goal": np.full(n, cfg.goal_bonus if reached else 0.0),
     }
+    if cfg.reward_scheme == "navigated_distance":
+        terms["nav"] = terms["progress"] = np.zeros(n)
     return np.stack([terms[t] for t in REWARD_TERMS]), in_goal, crash, reached
 
 
@@ -181,13 +189,13 @@ def use_oracles_in_env(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
     monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
     monkeypatch.setattr(batched, "fused_settings", lambda cfg: False)
     monkeypatch.setattr(
-        UrbanCanyonEnv, "_observation_rows", counted("observation_rows", observation_rows)
+        UrbanCanyonTask, "observation_rows", counted("observation_rows", observation_rows)
     )
     monkeypatch.setattr(
-        UrbanCanyonEnv, "_satellite_sectors", counted("satellite_sectors", satellite_sectors)
+        UrbanCanyonTask, "satellite_sectors", counted("satellite_sectors", satellite_sectors)
     )
     monkeypatch.setattr(UrbanCanyonEnv, "_info_floats", counted("info_floats", info_floats))
-    monkeypatch.setattr(UrbanCanyonEnv, "_reward_terms", counted("reward_terms", reward_terms))
+    monkeypatch.setattr(UrbanCanyonTask, "reward_terms", counted("reward_terms", reward_terms))
     return calls
 
 

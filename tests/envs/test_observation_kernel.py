@@ -25,7 +25,10 @@ def test_observation_kernel_matches_numpy(kwargs) -> None:
     env.reset(seed=3)
     rng = np.random.default_rng(1)
     for _ in range(60):
-        fast, ref = env._observation_array(), oracles.observation_rows(env)
+        fast, ref = (
+            env._observation_array(),
+            oracles.observation_rows(env.task, env.world, env._epoch, env._steps, env._obs_params),
+        )
         assert fast.dtype == ref.dtype == np.float32 and fast.shape == ref.shape
         assert fast.tobytes() == ref.tobytes()  # signed zeros included
         env.step({a: rng.uniform(-1.5, 1.5, 3) for a in env.agents})
@@ -68,7 +71,10 @@ def test_observation_kernel_with_isolated_uavs() -> None:
         n_uavs=4, relative_sensing=RelativeSensingConfig(max_range_m=1.0)
     )
     env.reset(seed=0)
-    fast, ref = env._observation_array(), oracles.observation_rows(env)
+    fast, ref = (
+        env._observation_array(),
+        oracles.observation_rows(env.task, env.world, env._epoch, env._steps, env._obs_params),
+    )
     assert not env._epoch.rel_available.any()
     assert fast.tobytes() == ref.tobytes()
 

@@ -12,6 +12,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 from coopnav_env import GYM_ENV_ID_V1, urban_canyon_v0, urban_canyon_v1
 from coopnav_env.agents import make_policy
 from coopnav_env.envs.config import PER_STEP_REWARD_FIELDS, V1_DEFAULTS, UrbanCanyonConfig
+from coopnav_env.envs.task import navigated_distance
 from coopnav_env.envs.urban_canyon import REWARD_TERMS
 from coopnav_env.sim.route import route_tail_lengths_m
 
@@ -105,9 +106,10 @@ def _route_walk(env, step_m: float, error_m: float, back_and_forth: bool = False
             nav_error_m=np.full(n, error_m),
         )
 
-    env._route_m = np.full(n, total)
-    env._unpaid_m = np.full(n, total)
+    route_m = np.full(n, total)
+    unpaid_m = np.full(n, total)
     assert tail[0] == pytest.approx(total)
+    cap = env.config.nav_reward_cap_m
     s_values = list(np.arange(step_m, total - 1.0, step_m))
     if back_and_forth:  # forward 2 steps, back 1, ...
         walk = []
@@ -118,9 +120,13 @@ def _route_walk(env, step_m: float, error_m: float, back_and_forth: bool = False
         s_values = walk
     paid = np.zeros(n)
     for s in s_values:
-        nav, progress = env._navigated_distance(epoch(s), reached=False)
+        nav, progress, unpaid_m = navigated_distance(
+            route, tail, epoch(s), unpaid_m, route_m, False, cap
+        )
         paid += nav + progress
-    nav, progress = env._navigated_distance(epoch(total - 1.0), reached=True)
+    nav, progress, _ = navigated_distance(
+        route, tail, epoch(total - 1.0), unpaid_m, route_m, True, cap
+    )
     return paid + nav + progress
 
 

@@ -29,7 +29,7 @@ from coopnav_env.sim.city import (
     _as_points,
     _check_real,
     _chunk_slices,
-    _ray_directions,
+    ray_directions,
 )
 from coopnav_env.sim.scenario import NavSource
 from coopnav_env.sim.swarm import (
@@ -194,7 +194,7 @@ class _HorizontalSweep:
     """
 
     def __init__(self, buildings: Buildings, pos: FloatArray, az_deg: ArrayLike) -> None:
-        self._dir = _ray_directions(az_deg)
+        self._dir = ray_directions(az_deg)
         self._pos = pos
         self.shape = (pos.shape[0], self._dir.shape[0])
         if buildings.n == 0 or pos.shape[0] == 0 or self._dir.shape[0] == 0:
