@@ -16,10 +16,15 @@ Each swarm ``k`` runs the kernels of the one-swarm step (:mod:`coopnav_env.sim._
 :mod:`coopnav_env.gnss._kernels`, :mod:`coopnav_env.envs._kernels`) on its own slices, with
 its own random draws, in a ``prange`` loop: its arithmetic does not depend on ``K`` or on the
 other swarms, so copy ``k`` of a batch is bit for bit a separate environment (the tests of
-``tests/envs/test_batched.py`` compare them).
+``tests/envs/test_batched.py`` and ``tests/envs/test_batched_polygons.py`` compare them).
 
-Arrays whose size depends on the swarm are padded: buildings ``(K, B_max, 3)`` with counts
-``n_b``, routes ``(K, R_max, 2)`` with counts ``n_route``; the satellites come from a table of
+Arrays whose size depends on the swarm are padded: box buildings ``(K, B_max, 3)`` with
+counts ``n_b``; a swarm whose city is extruded polygons (a file or family city) has none, and
+its polygons come in ``polygons`` (edges ``(K, E_max, 4)``, ring offsets, roofs and bounding
+boxes with per-swarm counts, :func:`_polygons_of`), traced by the kernels of
+:mod:`coopnav_env.sim._polygon_kernels` in the order of ``UrbanWorld.step`` (swept collisions
+after the motion, then the separation test again; line of sight; the skyline and walls).
+Routes are ``(K, R_max, 2)`` with counts ``n_route``; the satellites come from a table of
 skies ``(T, S_max, ...)`` with the row of each swarm's epoch ``sky_row`` and its count
 ``n_sv``; the line-of-sight matrices go into one flat buffer at offsets ``los_off`` (each
 copy's ``(N, S)`` block contiguous).

@@ -12,15 +12,22 @@ that is of a separate environment, bit for bit.
 It computes the settings of :func:`fused_settings` (the default measurement chain: no NLOS
 draws, no dead-reckoning noise, no channel limit, no map exclusion, no integrity
 monitoring, the exact covariance; velocity or route-frame commands, the base observation
-with or without the agent index) on worlds of box buildings; with other settings, or a
-world it cannot take (a file city's polygons, a replaced constellation, a sky whose
+with or without the agent index) on worlds of box buildings (:class:`~coopnav_env.sim.city.
+Buildings`: the grid cities) and of extruded polygons (:class:`~coopnav_env.sim.file_city.
+ExtrudedBuildings`: the generated family cities and the cities read from GeoJSON or
+OpenStreetMap files), under a nominal or a RINEX sky. Each copy's buildings are padded into
+the state arrays (boxes ``(K, B_max, 3)``; polygons as edges ``(K, E_max, 4)``, ring
+offsets, roofs and bounding boxes, with each copy's counts), and a copy of polygons runs the
+kernels of :mod:`coopnav_env.sim._polygon_kernels` (swept collisions after the motion, line
+of sight, the skyline and wall sweep) where the world step calls them, in the same order.
+With other settings, or a world it cannot take (a replaced constellation, a sky whose
 satellites are not grouped by constellation), the callers step through ``UrbanWorld.step``
 as before. A reset begins in the copy's own
 Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
 route); the batched environment then computes the first epochs of all the copies it resets
 at a step in the same kernels (:meth:`FusedStep.first_epochs`). The state arrays reload a copy
-whose world changed since the last fused step (a reset, a step through the other path, an
-assignment to its world).
+whose world changed since the last fused step (a reset, which may bring a new city, a step
+through the other path, an assignment to its world).
 """
 
 from __future__ import annotations
@@ -776,8 +783,10 @@ class _SwarmArrays:
     """The state of every copy as ``(K, ...)`` arrays, loaded from the copies' worlds.
 
     Buildings and routes are padded to the largest copy (``n_b``, ``n_route`` give each
-    copy's count); :meth:`advance` takes the arrays of a step, :meth:`load` reloads one copy
-    after its reset (after :meth:`own`, which copies the arrays the epochs share).
+    copy's count; a copy of extruded polygons has no boxes, and its polygons are in
+    :attr:`polygons` with ``is_poly`` set); :meth:`advance` takes the arrays of a step,
+    :meth:`load` reloads one copy after its reset (after :meth:`own`, which copies the
+    arrays the epochs share).
     """
 
     def __init__(self, envs: list[UrbanCanyonEnv]) -> None:
