@@ -35,7 +35,8 @@ machines):
    (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched
    environments; and the time inside the compiled kernels per swarm step
    (:func:`kernel_timers`), whose inverse times two cores is a ceiling for any batching of
-   this simulation.
+   this simulation. ``--city`` flies the copies on another city (``family:mixed``: a new
+   generated city of extruded polygons every episode).
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the
@@ -61,6 +62,7 @@ Usage::
     python benchmarks/bench_env.py --quick    # a smoke run, about 1 minute
     python benchmarks/bench_env.py --sections compare stages --sizes 5 50 --json out.json
     python benchmarks/bench_env.py --sections batch_memory --memory-copies 64 4096
+    python benchmarks/bench_env.py --sections batched --city family:mixed
 
 Needs the ``benchmark`` extra (``pip install -e ".[benchmark]"``: mpe2, vmas) for the
 references; missing ones are reported and skipped. Sections 5-6 need the ``train`` extra.
@@ -346,6 +348,7 @@ def stage_timers() -> contextlib.AbstractContextManager[dict[str, float]]:
 
 KERNEL_MODULES = (
     "coopnav_env.sim._kernels",
+    "coopnav_env.sim._polygon_kernels",
     "coopnav_env.gnss._kernels",
     "coopnav_env.nav._kernels",
     "coopnav_env.envs._kernels",
@@ -805,10 +808,15 @@ def section_scaling(args, out: dict) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def vec_stepper(kind: str, n: int, k: int) -> tuple[Callable[[int], None], Any]:
+def vec_stepper(
+    kind: str, n: int, k: int, city: str | None = None
+) -> tuple[Callable[[int], None], Any]:
+    """A stepper of ``k`` copies of ``n`` UAVs as one vector env of ``kind`` with random
+    actions (on ``city``: the environment's ``city`` setting, None for its default)."""
     from coopnav_env.training.vec_env import make_vec_env
 
-    venv = make_vec_env(functools.partial(make_urban, n), k, 1, kind=kind)
+    city_kw = {} if city is None else {"city": city}
+    venv = make_vec_env(functools.partial(make_urban, n, **city_kw), k, 1, kind=kind)
     venv.seed(0)
     venv.reset()
     rng = np.random.default_rng(0)
@@ -822,13 +830,16 @@ def vec_stepper(kind: str, n: int, k: int) -> tuple[Callable[[int], None], Any]:
 
 def section_batched(args, out: dict) -> None:
     n, k = 5, args.copies
-    print(f"\n== 5. K = {k} copies at N = {n} as one vector env (env-steps/s = swarm steps) ==")
+    where = "" if args.city is None else f" on city={args.city}"
+    print(
+        f"\n== 5. K = {k} copies at N = {n}{where} as one vector env (env-steps/s = swarm steps) =="
+    )
     if not (have("stable_baselines3") and have("supersuit")):
         print("   needs the train extra (stable-baselines3, supersuit): skipped")
         return
     fns, venvs = {}, []
     for kind in ("supersuit", "batched"):
-        fn, venv = vec_stepper(kind, n, k)
+        fn, venv = vec_stepper(kind, n, k, args.city)
         fns[kind] = fn
         venvs.append(venv)
     if have("vmas"):
@@ -867,6 +878,7 @@ def section_batched(args, out: dict) -> None:
     out["batched"] = {
         "n": n,
         "copies": k,
+        "city": args.city,
         "env_steps_per_s": row,
         "compiled_s_per_swarm_step": compiled,
         "compiled_by_kernel_s_per_swarm_step": per_swarm,
@@ -1093,6 +1105,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     ap.add_argument("--blocks", type=int, nargs="+", default=None, help="4b (3 6 12 24)")
     ap.add_argument("--copies", type=int, default=64, help="K of section 5 (64)")
+    ap.add_argument(
+        "--city",
+        default=None,
+        help="the environment's city setting for section 5's copies, e.g. family:mixed or "
+        "geojson:PATH (default: the environment's grid city)",
+    )
     ap.add_argument("--train-copies", type=int, default=None, help="n_envs of section 6 (8)")
     ap.add_argument("--train-n-steps", type=int, default=None, help="PPO n_steps (256)")
     ap.add_argument("--train-rollouts", type=int, default=None, help="rollouts (2)")
