@@ -35,7 +35,9 @@ machines):
    (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched
    environments; and the time inside the compiled kernels per swarm step
    (:func:`kernel_timers`), whose inverse times two cores is a ceiling for any batching of
-   this simulation.
+   this simulation. ``--city`` flies the copies on another city (``family:mixed``: a new
+   generated city of extruded polygons every episode; with ``--city-pool P``, one of ``P``
+   cities, all built before timing as in a long training run).
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the
@@ -61,6 +63,7 @@ Usage::
     python benchmarks/bench_env.py --quick    # a smoke run, about 1 minute
     python benchmarks/bench_env.py --sections compare stages --sizes 5 50 --json out.json
     python benchmarks/bench_env.py --sections batch_memory --memory-copies 64 4096
+    python benchmarks/bench_env.py --sections batched --city family:mixed --city-pool 200
 
 Needs the ``benchmark`` extra (``pip install -e ".[benchmark]"``: mpe2, vmas) for the
 references; missing ones are reported and skipped. Sections 5-6 need the ``train`` extra.
@@ -346,6 +349,7 @@ def stage_timers() -> contextlib.AbstractContextManager[dict[str, float]]:
 
 KERNEL_MODULES = (
     "coopnav_env.sim._kernels",
+    "coopnav_env.sim._polygon_kernels",
     "coopnav_env.gnss._kernels",
     "coopnav_env.nav._kernels",
     "coopnav_env.envs._kernels",
@@ -805,10 +809,30 @@ def section_scaling(args, out: dict) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def vec_stepper(kind: str, n: int, k: int) -> tuple[Callable[[int], None], Any]:
+def city_settings(city: str | None, pool: int | None) -> dict[str, Any]:
+    """The environment settings of ``--city`` and ``--city-pool`` (none for the defaults)."""
+    return ({} if city is None else {"city": city}) | ({} if pool is None else {"city_pool": pool})
+
+
+def build_city_pool(n: int, city: str, pool: int) -> None:
+    """Build the ``pool`` cities of a family city's pool before any timing, as a long training
+    run has them (a city is built once per process and seed: ``seeded_family_city``)."""
+    from coopnav_env.sim.city_families import family_of_seed, seeded_family_city
+
+    cfg = make_urban(n, city=city, city_pool=pool).config
+    origin = (cfg.lat_deg, cfg.lon_deg, cfg.alt_m)
+    for seed in range(pool):
+        seeded_family_city(family_of_seed(city, seed), seed, origin)
+
+
+def vec_stepper(
+    kind: str, n: int, k: int, city_kw: dict[str, Any] | None = None
+) -> tuple[Callable[[int], None], Any]:
+    """A stepper of ``k`` copies of ``n`` UAVs as one vector env of ``kind`` with random
+    actions (``city_kw``: :func:`city_settings`)."""
     from coopnav_env.training.vec_env import make_vec_env
 
-    venv = make_vec_env(functools.partial(make_urban, n), k, 1, kind=kind)
+    venv = make_vec_env(functools.partial(make_urban, n, **(city_kw or {})), k, 1, kind=kind)
     venv.seed(0)
     venv.reset()
     rng = np.random.default_rng(0)
@@ -822,13 +846,19 @@ def vec_stepper(kind: str, n: int, k: int) -> tuple[Callable[[int], None], Any]:
 
 def section_batched(args, out: dict) -> None:
     n, k = 5, args.copies
-    print(f"\n== 5. K = {k} copies at N = {n} as one vector env (env-steps/s = swarm steps) ==")
+    city_kw = city_settings(args.city, args.city_pool)
+    where = "".join(f" {key}={value}" for key, value in city_kw.items())
+    print(
+        f"\n== 5. K = {k} copies at N = {n}{where} as one vector env (env-steps/s = swarm steps) =="
+    )
     if not (have("stable_baselines3") and have("supersuit")):
         print("   needs the train extra (stable-baselines3, supersuit): skipped")
         return
+    if args.city_pool is not None:
+        build_city_pool(n, args.city, args.city_pool)
     fns, venvs = {}, []
     for kind in ("supersuit", "batched"):
-        fn, venv = vec_stepper(kind, n, k)
+        fn, venv = vec_stepper(kind, n, k, city_kw)
         fns[kind] = fn
         venvs.append(venv)
     if have("vmas"):
@@ -867,6 +897,8 @@ def section_batched(args, out: dict) -> None:
     out["batched"] = {
         "n": n,
         "copies": k,
+        "city": args.city,
+        "city_pool": args.city_pool,
         "env_steps_per_s": row,
         "compiled_s_per_swarm_step": compiled,
         "compiled_by_kernel_s_per_swarm_step": per_swarm,
@@ -1093,6 +1125,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     ap.add_argument("--blocks", type=int, nargs="+", default=None, help="4b (3 6 12 24)")
     ap.add_argument("--copies", type=int, default=64, help="K of section 5 (64)")
+    ap.add_argument(
+        "--city",
+        default=None,
+        help="the environment's city setting for section 5's copies, e.g. family:mixed or "
+        "geojson:PATH (default: the environment's grid city)",
+    )
+    ap.add_argument(
+        "--city-pool",
+        type=int,
+        default=None,
+        help="with --city family:NAME, the environment's city_pool; the pool's cities are "
+        "built before timing, as in a long training run",
+    )
     ap.add_argument("--train-copies", type=int, default=None, help="n_envs of section 6 (8)")
     ap.add_argument("--train-n-steps", type=int, default=None, help="PPO n_steps (256)")
     ap.add_argument("--train-rollouts", type=int, default=None, help="rollouts (2)")

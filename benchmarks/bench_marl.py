@@ -12,7 +12,11 @@ this process and times, over ``--iterations`` iterations after a first untimed o
   (``BatchedUrbanCanyonEnv.step_arrays`` with random actions in ``[-1, 1]``, automatic
   resets): the ceiling of collection with a free policy.
 
-One thread for torch (the packaged ``torch_threads``). Timings are noisy on a shared machine
+A configuration of family cities drawn from a pool (``city: family:NAME`` with ``city_pool``)
+has the pool's cities built before the first iteration, as a long run has them after its
+first few hundred episodes (a city is built once per process and seed); else a few
+iterations would time mostly the building of new cities. One thread for torch (the packaged
+``torch_threads``). Timings are noisy on a shared machine
 (its load is printed). Usage: ``python benchmarks/bench_marl.py [--config mappo_route_scratch]
 [--iterations 5]``.
 """
@@ -34,6 +38,21 @@ from coopnav_env.training.config import TrainConfig, load_config
 from coopnav_env.training.torchrl_backend import MARLTrainer, settings_of
 
 
+def build_city_pool(env_cfg) -> None:
+    """Build every city of a family city pool (``city_pool`` cities of ``city=family:NAME``)
+    now, as ``make_city`` would build them (nothing for other cities)."""
+    from coopnav_env.sim.city_families import family_of_seed, seeded_family_city
+
+    pool = getattr(env_cfg, "city_pool", None)
+    if pool is None or env_cfg.city_seed is not None or not env_cfg.city.startswith("family:"):
+        return
+    origin = (env_cfg.lat_deg, env_cfg.lon_deg, env_cfg.alt_m)
+    t0 = time.perf_counter()
+    for seed in range(pool):
+        seeded_family_city(family_of_seed(env_cfg.city, seed), seed, origin)
+    print(f"built the {pool} cities of the city pool first ({time.perf_counter() - t0:.0f} s)")
+
+
 def main() -> None:
     import torch
 
@@ -49,6 +68,7 @@ def main() -> None:
     torch.set_num_threads(cfg.torch_threads)
     settings, env_kwargs = settings_of(cfg)
     trainer = MARLTrainer(settings, env_kwargs, seed=cfg.seed)
+    build_city_pool(trainer.venv.envs[0].config)
     trainer.update(trainer.collect())  # compiles, warms the caches and torch
     collect_s = update_s = 0.0
     steps0 = trainer.agent_steps

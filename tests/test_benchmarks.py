@@ -57,3 +57,19 @@ def test_memory_options_default_to_the_issue_sizes():
     assert "batch_memory" in bench_env.SECTIONS
     quick = bench_env.parse_args(["--quick"])
     assert max(quick.memory_copies) < 4096
+
+
+def test_city_options_fly_the_copies_on_a_built_family_pool():
+    from coopnav_env.sim.city_families import seeded_family_city
+
+    args = bench_env.parse_args(["--city", "family:mixed", "--city-pool", "3"])
+    assert (args.city, args.city_pool) == ("family:mixed", 3)
+    assert bench_env.city_settings(None, None) == {}
+    kw = bench_env.city_settings(args.city, args.city_pool)
+    assert kw == {"city": "family:mixed", "city_pool": 3}
+    bench_env.build_city_pool(2, args.city, args.city_pool)
+    misses = seeded_family_city.cache_info().misses
+    env = bench_env.make_urban(2, **kw)
+    for seed in range(4):  # every episode flies one of the pool's cities, built already
+        env.reset(seed=seed)
+    assert seeded_family_city.cache_info().misses == misses

@@ -16,10 +16,15 @@ Each swarm ``k`` runs the kernels of the one-swarm step (:mod:`coopnav_env.sim._
 :mod:`coopnav_env.gnss._kernels`, :mod:`coopnav_env.envs._kernels`) on its own slices, with
 its own random draws, in a ``prange`` loop: its arithmetic does not depend on ``K`` or on the
 other swarms, so copy ``k`` of a batch is bit for bit a separate environment (the tests of
-``tests/envs/test_batched.py`` compare them).
+``tests/envs/test_batched.py`` and ``tests/envs/test_batched_polygons.py`` compare them).
 
-Arrays whose size depends on the swarm are padded: buildings ``(K, B_max, 3)`` with counts
-``n_b``, routes ``(K, R_max, 2)`` with counts ``n_route``; the satellites come from a table of
+Arrays whose size depends on the swarm are padded: box buildings ``(K, B_max, 3)`` with
+counts ``n_b``; a swarm whose city is extruded polygons (a file or family city) has none, and
+its polygons come in ``polygons`` (edges ``(K, E_max, 4)``, ring offsets, roofs and bounding
+boxes with per-swarm counts, :func:`_polygons_of`), traced by the kernels of
+:mod:`coopnav_env.sim._polygon_kernels` in the order of ``UrbanWorld.step`` (swept collisions
+after the motion, then the separation test again; line of sight; the skyline and walls).
+Routes are ``(K, R_max, 2)`` with counts ``n_route``; the satellites come from a table of
 skies ``(T, S_max, ...)`` with the row of each swarm's epoch ``sky_row`` and its count
 ``n_sv``; the line-of-sight matrices go into one flat buffer at offsets ``los_off`` (each
 copy's ``(N, S)`` block contiguous).
@@ -33,6 +38,23 @@ from numba import njit
 from coopnav_env.envs import _kernels as _env_kernels
 from coopnav_env.gnss import _kernels as _gnss_kernels
 from coopnav_env.sim import _kernels as _sim_kernels
+from coopnav_env.sim import _polygon_kernels as _poly_kernels
+
+
+@njit(cache=True)
+def _polygons_of(k, polygons):
+    """Copy ``k``'s extruded polygon buildings from the padded ``polygons``: whether it has
+    them (else boxes), and its ``edges (n_e, 4), edge_start (n_p + 1,), heights (n_p,),
+    bbox (n_p, 4)`` as :mod:`coopnav_env.sim._polygon_kernels` takes them."""
+    is_poly, edges, edge_start, heights, bbox, n_poly, n_edge = polygons
+    npb = n_poly[k]
+    return (
+        is_poly[k],
+        np.ascontiguousarray(edges[k, : n_edge[k]]),
+        np.ascontiguousarray(edge_start[k, : npb + 1]),
+        np.ascontiguousarray(heights[k, :npb]),
+        np.ascontiguousarray(bbox[k, :npb]),
+    )
 
 
 @njit(cache=True)
@@ -48,6 +70,7 @@ def _motion_one(
     b_lo,
     b_hi,
     n_b,
+    polygons,
     sky_row,
     n_sv,
     sky_up,
@@ -72,6 +95,7 @@ def _motion_one(
     nb = n_b[k]
     lo = np.ascontiguousarray(b_lo[k, :nb])
     hi = np.ascontiguousarray(b_hi[k, :nb])
+    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, polygons)
     if moving:
         p1, v1, h, s = _sim_kernels.world_motion(
             pos0[k],
@@ -89,6 +113,16 @@ def _motion_one(
             motion[5],
             motion[6],
         )
+        if is_poly:  # the motion above met no building: collide with the polygons
+            h = _poly_kernels.swept_collisions(
+                edges, edge_start, heights, bbox, pos0[k], p1, motion[5]
+            )
+            for i in range(n):
+                if h[i]:
+                    for c in range(3):
+                        p1[i, c] = pos0[k, i, c]
+                        v1[i, c] = 0.0
+            s = _sim_kernels.separation_violations(p1, motion[6])
     else:  # the first epoch of an episode: where the swarm starts, no collision test
         p1 = pos0[k].copy()
         v1 = vel0[k].copy()
@@ -101,15 +135,16 @@ def _motion_one(
     row = sky_row[k]
     ns = n_sv[k]
     nu = n_up[k]
-    vis = _sim_kernels.line_of_sight(
-        p1,
-        lo,
-        hi,
-        np.ascontiguousarray(sky_up[row, :ns]),
-        np.ascontiguousarray(sky_order[row, :nu]),
-        np.ascontiguousarray(sky_cot[row, :nu]),
-        np.ascontiguousarray(sky_hdir[row, :nu]),
-    )
+    up = np.ascontiguousarray(sky_up[row, :ns])
+    order = np.ascontiguousarray(sky_order[row, :nu])
+    cot = np.ascontiguousarray(sky_cot[row, :nu])
+    hdir = np.ascontiguousarray(sky_hdir[row, :nu])
+    if is_poly:
+        vis = _poly_kernels.line_of_sight(
+            p1, edges, edge_start, heights, bbox, up, order, cot, hdir
+        )
+    else:
+        vis = _sim_kernels.line_of_sight(p1, lo, hi, up, order, cot, hdir)
     off = los_off[k]
     for i in range(n):
         c = 0
@@ -145,6 +180,7 @@ def motion_sight_relative(
     b_lo,  # (K, B_max, 3) building boxes
     b_hi,
     n_b,  # (K,)
+    polygons,  # extruded polygon buildings (see _polygons_of)
     sky_row,  # (K,) row of each swarm's sky in the table
     n_sv,  # (K,)
     sky_up,  # (T, S_max) bool
@@ -180,6 +216,7 @@ def motion_sight_relative(
             b_lo,
             b_hi,
             n_b,
+            polygons,
             sky_row,
             n_sv,
             sky_up,
@@ -247,6 +284,7 @@ def _navigate_one(
     b_lo,
     b_hi,
     n_b,
+    polygons,
     wgs,
     n_bowring,
     sa_status,
@@ -419,9 +457,13 @@ def _navigate_one(
     ends[k, 0] = crash
     ends[k, 1] = reached
     nb = n_b[k]
-    tm, w = _sim_kernels.sky_and_walls(
-        pos1[k], rays, np.ascontiguousarray(b_lo[k, :nb]), np.ascontiguousarray(b_hi[k, :nb])
-    )
+    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, polygons)
+    if is_poly:
+        tm, w = _poly_kernels.sky_and_walls(pos1[k], rays, edges, edge_start, heights, bbox)
+    else:
+        tm, w = _sim_kernels.sky_and_walls(
+            pos1[k], rays, np.ascontiguousarray(b_lo[k, :nb]), np.ascontiguousarray(b_hi[k, :nb])
+        )
     tan_max[k] = tm
     walls[k] = w
 
@@ -472,6 +514,7 @@ def navigation_reward_sensors(
     b_lo,
     b_hi,
     n_b,
+    polygons,  # extruded polygon buildings (see _polygons_of)
     wgs,  # (5,) WGS84 a, b, f, e2, e'2
     n_bowring,
     outputs,  # the arrays written (NAVIGATION_OUTPUTS, in order)
@@ -551,6 +594,7 @@ def navigation_reward_sensors(
             b_lo,
             b_hi,
             n_b,
+            polygons,
             wgs,
             n_bowring,
             sa_status,

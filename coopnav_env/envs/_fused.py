@@ -12,15 +12,22 @@ that is of a separate environment, bit for bit.
 It computes the settings of :func:`fused_settings` (the default measurement chain: no NLOS
 draws, no dead-reckoning noise, no channel limit, no map exclusion, no integrity
 monitoring, the exact covariance; velocity or route-frame commands, the base observation
-with or without the agent index) on worlds of box buildings; with other settings, or a
-world it cannot take (a file city's polygons, a replaced constellation, a sky whose
+with or without the agent index) on worlds of box buildings (:class:`~coopnav_env.sim.city.
+Buildings`: the grid cities) and of extruded polygons (:class:`~coopnav_env.sim.file_city.
+ExtrudedBuildings`: the generated family cities and the cities read from GeoJSON or
+OpenStreetMap files), under a nominal or a RINEX sky. Each copy's buildings are padded into
+the state arrays (boxes ``(K, B_max, 3)``; polygons as edges ``(K, E_max, 4)``, ring
+offsets, roofs and bounding boxes, with each copy's counts), and a copy of polygons runs the
+kernels of :mod:`coopnav_env.sim._polygon_kernels` (swept collisions after the motion, line
+of sight, the skyline and wall sweep) where the world step calls them, in the same order.
+With other settings, or a world it cannot take (a replaced constellation, a sky whose
 satellites are not grouped by constellation), the callers step through ``UrbanWorld.step``
 as before. A reset begins in the copy's own
 Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
 route); the batched environment then computes the first epochs of all the copies it resets
 at a step in the same kernels (:meth:`FusedStep.first_epochs`). The state arrays reload a copy
-whose world changed since the last fused step (a reset, a step through the other path, an
-assignment to its world).
+whose world changed since the last fused step (a reset, which may bring a new city, a step
+through the other path, an assignment to its world).
 """
 
 from __future__ import annotations
@@ -51,6 +58,7 @@ from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
 from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
 from coopnav_env.sim.city import Buildings
+from coopnav_env.sim.file_city import ExtrudedBuildings
 from coopnav_env.sim.scenario import Epoch
 
 
@@ -159,6 +167,7 @@ class FusedStep:
             st.b_lo,
             st.b_hi,
             st.n_b,
+            st.polygons,
             row,
             n_sv,
             tab.up,
@@ -243,6 +252,7 @@ class FusedStep:
             st.b_lo,
             st.b_hi,
             st.n_b,
+            st.polygons,
             _WGS84,
             _N_BOWRING_ITER,
             outputs,
@@ -644,11 +654,11 @@ def _fused_config(cfg: UrbanCanyonConfig) -> bool:
 
 
 def _fused_world(world: Any, cold: bool = False) -> bool:
-    """Whether a copy's world can take the fused step: box buildings (not a file city's
-    polygons), its own constellation (the cached sky) and a warm-started navigation (with
-    ``cold``: an episode begun, before its first epoch)."""
+    """Whether a copy's world can take the fused step: box buildings or a file city's
+    extruded polygons, its own constellation (the cached sky) and a warm-started navigation
+    (with ``cold``: an episode begun, before its first epoch)."""
     return (
-        isinstance(world.city.buildings, Buildings)
+        isinstance(world.city.buildings, Buildings | ExtrudedBuildings)
         and world.constellation is world.__dict__.get("_cached_constellation")
         and bool(world._warm) is not cold
     )
@@ -773,8 +783,10 @@ class _SwarmArrays:
     """The state of every copy as ``(K, ...)`` arrays, loaded from the copies' worlds.
 
     Buildings and routes are padded to the largest copy (``n_b``, ``n_route`` give each
-    copy's count); :meth:`advance` takes the arrays of a step, :meth:`load` reloads one copy
-    after its reset (after :meth:`own`, which copies the arrays the epochs share).
+    copy's count; a copy of extruded polygons has no boxes, and its polygons are in
+    :attr:`polygons` with ``is_poly`` set); :meth:`advance` takes the arrays of a step,
+    :meth:`load` reloads one copy after its reset (after :meth:`own`, which copies the
+    arrays the epochs share).
     """
 
     def __init__(self, envs: list[UrbanCanyonEnv]) -> None:
@@ -820,10 +832,21 @@ class _SwarmArrays:
         self.route_len = np.ones((k_n, n))
         self.n_b = np.zeros(k_n, dtype=np.int64)
         self.n_route = np.zeros(k_n, dtype=np.int64)
-        b_max = max(e.world.city.buildings.min_m.shape[0] for e in envs)
+        boxes = [b for b in (e.world.city.buildings for e in envs) if isinstance(b, Buildings)]
+        polys = [b for b in (e.world.city.buildings for e in envs) if not isinstance(b, Buildings)]
+        b_max = max((b.min_m.shape[0] for b in boxes), default=0)
+        p_max = max((b.n for b in polys), default=0)
+        e_max = max((b.edges_m.shape[0] for b in polys), default=0)
         r_max = max(e.world.route_xy_m.shape[0] for e in envs)
         self.b_lo = np.zeros((k_n, max(b_max, 1), 3))
         self.b_hi = np.zeros((k_n, max(b_max, 1), 3))
+        self.is_poly = np.zeros(k_n, dtype=bool)
+        self.n_poly = np.zeros(k_n, dtype=np.int64)
+        self.n_edge = np.zeros(k_n, dtype=np.int64)
+        self.edges = np.zeros((k_n, max(e_max, 1), 4))
+        self.edge_start = np.zeros((k_n, p_max + 1), dtype=np.int64)
+        self.heights = np.zeros((k_n, max(p_max, 1)))
+        self.bbox = np.zeros((k_n, max(p_max, 1), 4))
         self.route = np.zeros((k_n, r_max, 2))
         self.tail = np.zeros((k_n, r_max))
         for k, e in enumerate(envs):
@@ -865,13 +888,18 @@ class _SwarmArrays:
             self.route_len[k] = env._route_m
         self.steps[k] = env._steps
         b = w.city.buildings
-        nb = b.min_m.shape[0]
-        if nb > self.b_lo.shape[1]:
-            self.b_lo = _pad(self.b_lo, nb)
-            self.b_hi = _pad(self.b_hi, nb)
-        self.b_lo[k, :nb] = b.min_m
-        self.b_hi[k, :nb] = b.max_m
-        self.n_b[k] = nb
+        if isinstance(b, Buildings):
+            nb = b.min_m.shape[0]
+            if nb > self.b_lo.shape[1]:
+                self.b_lo = _pad(self.b_lo, nb)
+                self.b_hi = _pad(self.b_hi, nb)
+            self.b_lo[k, :nb] = b.min_m
+            self.b_hi[k, :nb] = b.max_m
+            self.n_b[k] = nb
+            self.is_poly[k], self.n_poly[k], self.n_edge[k] = False, 0, 0
+        else:  # a file city's extruded polygons (and no boxes)
+            self._load_polygons(k, b)
+            self.n_b[k] = 0
         route, tail = w.route_xy_m, w.route_tail_m
         nr = route.shape[0]
         if nr > self.route.shape[1]:
@@ -880,6 +908,37 @@ class _SwarmArrays:
         self.route[k, :nr] = route
         self.tail[k, :nr] = tail
         self.n_route[k] = nr
+
+    def _load_polygons(self, k: int, b: ExtrudedBuildings) -> None:
+        """Copy ``k``'s extruded polygons into the padded arrays (grown where they are short)."""
+        npb, ne = b.n, b.edges_m.shape[0]
+        if ne > self.edges.shape[1]:
+            self.edges = _pad(self.edges, ne)
+        if npb + 1 > self.edge_start.shape[1]:
+            self.edge_start = _pad(self.edge_start, npb + 1)
+        if npb > self.heights.shape[1]:
+            self.heights = _pad(self.heights, npb)
+            self.bbox = _pad(self.bbox, npb)
+        self.edges[k, :ne] = b.edges_m
+        self.edge_start[k, : npb + 1] = b.edge_start
+        self.heights[k, :npb] = b.heights_m
+        self.bbox[k, :npb] = b.bbox_m
+        self.is_poly[k], self.n_poly[k], self.n_edge[k] = True, npb, ne
+
+    @property
+    def polygons(self) -> tuple[np.ndarray, ...]:
+        """The extruded polygons of the kernels: ``is_poly (K,), edges (K, E_max, 4),
+        edge_start (K, P_max + 1), heights (K, P_max), bbox (K, P_max, 4), n_poly (K,),
+        n_edge (K,)`` (``_batched_kernels._polygons_of`` takes copy ``k``'s)."""
+        return (
+            self.is_poly,
+            self.edges,
+            self.edge_start,
+            self.heights,
+            self.bbox,
+            self.n_poly,
+            self.n_edge,
+        )
 
 
 def _route_commands(envs: list[UrbanCanyonEnv], action: np.ndarray, st: _SwarmArrays) -> np.ndarray:

@@ -31,7 +31,9 @@ compiled calls over the copies (:mod:`coopnav_env.envs._batched_kernels`: motion
 sight and relative sensing; pseudoranges, both solvers, the estimate selection, waypoints,
 reward terms and the skyline and wall sensors; observations and the infos' numbers), run in
 chunks of copies on every core, with the rotations to ECEF and the skyline's ``arctan`` as
-numpy calls on the ``(K, ...)`` arrays between them. Each copy keeps its own city, satellites
+numpy calls on the ``(K, ...)`` arrays between them. Cities of box buildings (the grids) and
+of extruded polygons (generated families, GeoJSON and OpenStreetMap files) both take it.
+Each copy keeps its own city, satellites
 (its own GNSS time), solver problems and generator (one draw call per copy per step, in the
 order of ``UrbanWorld``); no problem is padded or stacked with another copy's, so its
 arithmetic does not depend on K. Still once per copy in Python: those draws, the copy's

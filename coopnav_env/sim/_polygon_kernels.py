@@ -382,6 +382,54 @@ def wall_clearance(xs, ys, reach, edges, edge_start, bbox):
     return out
 
 
+@njit(cache=True)
+def largest_component(free):
+    """The largest 8-connected piece of ``free`` (n_y, n_x) bool, with the moves of
+    :func:`astar` (no corner cutting): pieces are numbered in row-major order of their first
+    cell, and of equally large pieces the first counts. Returns a bool array like ``free``."""
+    ny, nx = free.shape
+    label = np.full((ny, nx), -1, dtype=np.int64)
+    stack = np.empty(ny * nx, dtype=np.int64)
+    steps_r = (1, -1, 0, 0, 1, 1, -1, -1)
+    steps_c = (0, 0, 1, -1, 1, -1, 1, -1)
+    best, best_size, n_pieces = -1, 0, 0
+    for r0 in range(ny):
+        for c0 in range(nx):
+            if not free[r0, c0] or label[r0, c0] >= 0:
+                continue
+            k = n_pieces
+            n_pieces += 1
+            label[r0, c0] = k
+            stack[0] = r0 * nx + c0
+            top, size = 1, 0
+            while top > 0:
+                top -= 1
+                cur = stack[top]
+                r, c = cur // nx, cur % nx
+                size += 1
+                for s in range(8):
+                    dr, dc = steps_r[s], steps_c[s]
+                    rr, cc = r + dr, c + dc
+                    if rr < 0 or rr >= ny or cc < 0 or cc >= nx:
+                        continue
+                    if not free[rr, cc] or label[rr, cc] >= 0:
+                        continue
+                    if dr != 0 and dc != 0 and not (free[r + dr, c] and free[r, c + dc]):
+                        continue
+                    label[rr, cc] = k
+                    stack[top] = rr * nx + cc
+                    top += 1
+            if size > best_size:
+                best, best_size = k, size
+    out = np.zeros((ny, nx), dtype=np.bool_)
+    if best < 0:
+        return out
+    for r in range(ny):
+        for c in range(nx):
+            out[r, c] = label[r, c] == best
+    return out
+
+
 @njit(cache=True, inline="always")
 def _heap_less(hf, hc, i, j):
     return hf[i] < hf[j] or (hf[i] == hf[j] and hc[i] < hc[j])

@@ -1140,8 +1140,6 @@ def _read_buildings(
 # the city
 # --------------------------------------------------------------------------------------------
 
-_STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))
-
 
 @dataclass(frozen=True, eq=False)
 class FileCity(City):
@@ -1345,30 +1343,9 @@ def _astar(
 
 
 def _largest_component(free: BoolArray) -> BoolArray:
-    """The largest 8-connected piece of ``free`` (the same moves as :func:`_astar`)."""
-    ny, nx = free.shape
-    label = np.full(free.shape, -1, dtype=np.int64)
-    sizes = []
-    for r0, c0 in zip(*np.nonzero(free)):
-        if label[r0, c0] >= 0:
-            continue
-        k = len(sizes)
-        label[r0, c0] = k
-        stack, size = [(int(r0), int(c0))], 0
-        while stack:
-            r, c = stack.pop()
-            size += 1
-            for dr, dc in _STEPS:
-                rr, cc = r + dr, c + dc
-                if 0 <= rr < ny and 0 <= cc < nx and free[rr, cc] and label[rr, cc] < 0:
-                    if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
-                        continue
-                    label[rr, cc] = k
-                    stack.append((rr, cc))
-        sizes.append(size)
-    if not sizes:
-        return np.zeros_like(free)
-    return label == int(np.argmax(sizes))
+    """The largest 8-connected piece of ``free`` (the same moves as :func:`_astar`), by the
+    compiled :func:`coopnav_env.sim._polygon_kernels.largest_component`."""
+    return _pk.largest_component(np.ascontiguousarray(free, dtype=bool))
 
 
 def load_file_city(

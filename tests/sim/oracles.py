@@ -43,6 +43,7 @@ from coopnav_env.sim.swarm import (
 __all__ = [
     "advance_waypoints",
     "blocked_sorted",
+    "largest_component",
     "mask_elevation_deg",
     "navigate_function_by_function",
     "relative_measurements",
@@ -568,3 +569,36 @@ def use_oracles_in_world(monkeypatch) -> dict[str, int]:
     monkeypatch.setattr(_scenario, "advance_waypoints", waypoints)
     monkeypatch.setattr(_city, "sky_and_walls", sensors)
     return calls
+
+
+_GRID_STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))
+"""The 8 moves of a free-space grid (rows, columns)."""
+
+
+def largest_component(free: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """:func:`coopnav_env.sim._polygon_kernels.largest_component`: the largest 8-connected
+    piece of ``free`` (a diagonal move needs both cells beside it free), pieces numbered in
+    row-major order of their first cell, the first of equally large pieces kept."""
+    ny, nx = free.shape
+    label = np.full(free.shape, -1, dtype=np.int64)
+    sizes = []
+    for r0, c0 in zip(*np.nonzero(free)):
+        if label[r0, c0] >= 0:
+            continue
+        k = len(sizes)
+        label[r0, c0] = k
+        stack, size = [(int(r0), int(c0))], 0
+        while stack:
+            r, c = stack.pop()
+            size += 1
+            for dr, dc in _GRID_STEPS:
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < ny and 0 <= cc < nx and free[rr, cc] and label[rr, cc] < 0:
+                    if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
+                        continue
+                    label[rr, cc] = k
+                    stack.append((rr, cc))
+        sizes.append(size)
+    if not sizes:
+        return np.zeros_like(free)
+    return label == int(np.argmax(sizes))

@@ -43,6 +43,7 @@ from coopnav_env.sim.city import (
     wall_distance_m,
 )
 from coopnav_env.sim.osm_city import helsinki_geojson_path
+from tests.sim import oracles
 
 GRAZE_M = 1e-6
 
@@ -469,6 +470,26 @@ def test_free_space_keeps_clearance_and_routes_stay_free(city: fc.FileCity) -> N
             assert city.is_free_xy(a + t * (c - a)).all()
         length = np.hypot(*np.diff(route, axis=0).T).sum()
         assert length >= np.hypot(*(g - s)) - 1e-9
+
+
+def test_largest_component_equals_its_oracle(city: fc.FileCity) -> None:
+    # the compiled labelling keeps the piece the numpy oracle keeps, on random grids (many
+    # pieces, diagonal contacts that do and do not connect, ties between equal pieces) and on
+    # the city's own free space
+    rng = np.random.default_rng(3)
+    grids = [rng.random((ny, nx)) < p for ny, nx, p in ((1, 1, 0.5), (7, 9, 0.45), (40, 30, 0.55))]
+    grids += [rng.random((60, 80)) < 0.5 for _ in range(20)]
+    grids += [np.zeros((5, 4), dtype=bool), np.eye(6, dtype=bool), city.free]
+    grids.append(np.array([[1, 0, 1], [0, 0, 0], [1, 1, 0]], dtype=bool))  # a tie: the first
+    kept = []
+    for free in grids:
+        got = fc._largest_component(free)
+        expected = oracles.largest_component(free)
+        assert got.dtype == expected.dtype == bool
+        np.testing.assert_array_equal(got, expected)
+        kept.append(int(got.sum()))
+    assert kept[-1] == 2 and fc._largest_component(grids[-1])[2, 0]
+    assert kept[-4] == 0 and kept[-3] == 1  # nothing free; a diagonal without its sides
 
 
 def test_route_refuses_an_end_inside_a_building(city: fc.FileCity) -> None:
