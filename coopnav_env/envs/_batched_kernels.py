@@ -278,7 +278,7 @@ def _navigate_one(
     goal,
     hit,
     sep,
-    sigma_reward,
+    reward_mode,
     reward_params,
     rays,
     b_lo,
@@ -433,25 +433,30 @@ def _navigate_one(
         for p in range(n):
             lonely = lonely and not av[i, p]
         out_of_contact[k, i] = lonely and n > 1
-    xy_prev = np.empty((n, 2))
-    for i in range(n):
-        xy_prev[i, 0] = pos0[k, i, 0]
-        xy_prev[i, 1] = pos0[k, i, 1]
-    t, g, crash, reached = _env_kernels.reward_terms(
-        r_k,
-        t_k,
-        next_wp[k],
-        xy_prev,
-        pos1[k],
-        goal[k],
-        sel[6],
-        sel[7],
-        hit[k],
-        sep[k],
-        out_of_contact[k],
-        sigma_reward,
-        reward_params,
-    )
+    if reward_mode == 2:  # navigated distance: nav and progress come from the route after
+        t, g, crash, reached = _env_kernels.event_reward_terms(
+            pos1[k], goal[k], hit[k], sep[k], out_of_contact[k], reward_params
+        )
+    else:
+        xy_prev = np.empty((n, 2))
+        for i in range(n):
+            xy_prev[i, 0] = pos0[k, i, 0]
+            xy_prev[i, 1] = pos0[k, i, 1]
+        t, g, crash, reached = _env_kernels.reward_terms(
+            r_k,
+            t_k,
+            next_wp[k],
+            xy_prev,
+            pos1[k],
+            goal[k],
+            sel[6],
+            sel[7],
+            hit[k],
+            sep[k],
+            out_of_contact[k],
+            reward_mode == 1,
+            reward_params,
+        )
     terms[k] = t
     in_goal[k] = g
     ends[k, 0] = crash
@@ -508,7 +513,7 @@ def navigation_reward_sensors(
     goal,  # (K, 3)
     hit,  # (K, N) collided
     sep,  # (K, N) separation violated
-    sigma_reward,
+    reward_mode,  # 0: distance nav term, 1: sigma nav term, 2: events only (navigated distance)
     reward_params,
     rays,  # (A, 2) sensor ray directions
     b_lo,
@@ -588,7 +593,7 @@ def navigation_reward_sensors(
             goal,
             hit,
             sep,
-            sigma_reward,
+            reward_mode,
             reward_params,
             rays,
             b_lo,

@@ -246,7 +246,7 @@ class FusedStep:
             st.goal,
             hit,
             sep,
-            cfg.nav_reward == "sigma",
+            _reward_mode(cfg),
             envs[0]._reward_params,
             envs[0]._rays,
             st.b_lo,
@@ -617,6 +617,15 @@ _N_OBS_PARAMS = 9
 _WGS84 = np.array([WGS84_A_M, WGS84_B_M, WGS84_F, WGS84_E2, _EP2], dtype=np.float64)
 
 
+def _reward_mode(cfg: UrbanCanyonConfig) -> int:
+    """The reward kernel's mode: 2 where ``reward_scheme="navigated_distance"`` computes the
+    terms ``nav`` and ``progress`` from the route after the kernel (the kernel computes the
+    event terms alone), else 1 for ``nav_reward="sigma"`` and 0 for the error."""
+    if cfg.reward_scheme == "navigated_distance":
+        return 2
+    return int(cfg.nav_reward == "sigma")
+
+
 def fused_settings(cfg: UrbanCanyonConfig) -> bool:
     """Whether the settings are those the fused step computes: the default measurement and
     navigation chain (exact covariance, no NLOS draws, no dead-reckoning noise, no channel
@@ -980,7 +989,7 @@ def _navigated_distance(
     reached: np.ndarray,
     cap_m: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``UrbanCanyonEnv._navigated_distance`` of every copy: the terms ``nav`` and
+    """:func:`coopnav_env.envs.task.navigated_distance` of every copy: the terms ``nav`` and
     ``progress`` ``(K, N)`` and the route not yet paid after the step ``(K, N)``, from the
     true positions ``pos`` and estimates ``nav_pos`` ``(K, N, 3)``, the next waypoints ``wp``
     and whether each swarm arrived ``reached`` ``(K,)`` (the same arithmetic, each copy's
