@@ -64,10 +64,15 @@ def _removed_in_effect(d: Mapping[str, Any]) -> dict[str, Any]:
         found["residual_wall_guard"] = d["residual_wall_guard"]
     if float(d.get("noise_correlation", 0.0) or 0.0) > 0.0:
         found["noise_correlation"] = d["noise_correlation"]
-    # exploring starts were left out of the objective ("masked", the only behaviour before
-    # the setting existed) unless the record says otherwise; "unweighted" is what stays
+    # held starts logged with the actor's own log-probability ("unweighted") is what stays.
+    # A record that names none of the removed settings was written by this version, whose
+    # holds are that; an earlier release recorded every setting it had (the removed ones
+    # among them), and before start_hold_objective existed its holds were left out of the
+    # objective ("masked")
     holds = d.get("start_hold_decisions", 0)
-    objective = d.get("start_hold_objective", "masked")
+    objective = d.get("start_hold_objective")
+    if objective is None:
+        objective = "masked" if any(k in d for k in REMOVED_SETTINGS) else "unweighted"
     if isinstance(holds, int) and holds > 0 and objective != "unweighted":
         found["start_hold_objective"] = objective
     return found
@@ -170,6 +175,15 @@ class MARLSettings:
         spacing a held start gives (a swarm strung out along the route by up to
         ``start_hold_decisions * action_repeat`` steps). Evaluation and exported policies
         never hold.
+    dual_clip : float or None
+        Dual-clip PPO's cap ``c`` on the ratio of the new to the old policy's probability of
+        a logged action (``> 1 + clip_epsilon``; 3 is the usual value), or None (default:
+        plain clipped PPO). A ratio above ``c`` counts as ``c`` and adds no gradient. Plain
+        PPO bounds the ratio only where the advantage is positive, so a sample whose ratio
+        runs away with a negative advantage (a held exploring start far in the actor's
+        tail, once the actor's standard deviation has shrunk) can dominate a minibatch and
+        drive the loss to infinity; the cap bounds it. Runs whose ratios never exceed ``c``
+        train exactly as without it.
     """
 
     algorithm: str = "mappo"
@@ -193,6 +207,7 @@ class MARLSettings:
     residual_scale: float = 0.5
     action_repeat: int = 1
     start_hold_decisions: int = 0
+    dual_clip: float | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -245,6 +260,17 @@ class MARLSettings:
             raise bad("start_hold_decisions", "an integer >= 0")
         if h > 0 and self.residual_base is not None:
             raise bad("start_hold_decisions", "0 with a residual_base (it holds set-points)")
+        c = self.dual_clip
+        if c is not None and (
+            isinstance(c, bool)
+            or not isinstance(c, int | float)
+            or not (1.0 + float(self.clip_epsilon) < float(c) <= 1e6)
+        ):
+            raise bad(
+                "dual_clip",
+                f"null or a number above 1 + clip_epsilon = {1.0 + float(self.clip_epsilon):g} "
+                "(3 is the usual value)",
+            )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any] | None) -> MARLSettings:

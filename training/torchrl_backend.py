@@ -267,6 +267,32 @@ def pretrain_of(cfg: TrainConfig) -> WarmStart | None:
     return WarmStart.from_value(dict(cfg.torchrl).get("pretrain"), seed=cfg.seed)
 
 
+class TrainingDivergedError(ValueError):
+    """A PPO loss that is not finite: the run's settings must change (``torchrl.dual_clip``,
+    a lower learning rate) before it can go on from its last checkpoint."""
+
+
+def _dual_clip_loss_class() -> type:
+    """TorchRL's ``ClipPPOLoss`` with dual clipping (:attr:`MARLSettings.dual_clip`): the log
+    ratio of the new to the old probability is capped at ``log(dual_clip)`` before the
+    clipped surrogate, so that a capped sample adds ``dual_clip`` times its advantage and no
+    gradient. Above ``1 + clip_epsilon`` the cap changes only samples whose advantage is
+    negative (with a positive one the clipped branch is already the minimum), which is
+    dual-clip PPO."""
+    from torchrl.objectives import ClipPPOLoss
+
+    class DualClipPPOLoss(ClipPPOLoss):
+        def __init__(self, *args: Any, dual_clip: float, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.max_log_weight = math.log(float(dual_clip))
+
+        def _log_weight(self, tensordict: Any, adv_shape: Any) -> Any:
+            log_weight, dist, kl_approx, log_is_weight = super()._log_weight(tensordict, adv_shape)
+            return log_weight.clamp(max=self.max_log_weight), dist, kl_approx, log_is_weight
+
+    return DualClipPPOLoss
+
+
 class MARLTrainer:
     """One MAPPO/IPPO training run on the batched environment (see the module docstring).
 
@@ -307,7 +333,10 @@ class MARLTrainer:
         self.actor, self.critic = build_modules(
             settings, self.n_agents, self.actor_dim, self.critic_dim
         )
-        self.loss = ClipPPOLoss(
+        loss_class = ClipPPOLoss if settings.dual_clip is None else _dual_clip_loss_class()
+        extra = {} if settings.dual_clip is None else {"dual_clip": settings.dual_clip}
+        self.loss = loss_class(
+            **extra,
             actor_network=self.actor,
             critic_network=self.critic,
             clip_epsilon=settings.clip_epsilon,
@@ -792,6 +821,16 @@ class MARLTrainer:
                 total = out["loss_objective"] + out["loss_critic"]
                 if "loss_entropy" in out.keys():
                     total = total + out["loss_entropy"]
+                if not bool(torch.isfinite(total)):
+                    raise TrainingDivergedError(
+                        f"the PPO loss is not finite at iteration {self.iterations + 1} "
+                        f"(agent-step {self.agent_steps}; objective "
+                        f"{float(out['loss_objective']):.3g}, critic "
+                        f"{float(out['loss_critic']):.3g}): the policy's probability ratios "
+                        "ran away and no update was applied. Resume from the last checkpoint "
+                        "with --set torchrl.dual_clip=3 (dual-clip PPO caps the ratio), or "
+                        "lower torchrl.learning_rate"
+                    )
                 self.optim.zero_grad()
                 total.backward()
                 torch.nn.utils.clip_grad_norm_(self.loss.parameters(), s.max_grad_norm)

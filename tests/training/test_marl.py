@@ -97,9 +97,16 @@ def test_recorded_settings_of_removed_switches_fly_unless_they_changed_the_fligh
             settings_from_record({**old, "residual_mode": mode}, "x.pt", "fly")
     with pytest.raises(ValueError, match="residual_wall_guard=True"):
         settings_from_record({**old, "residual_wall_guard": True}, "x.pt", "fly")
-    # held starts before start_hold_objective existed were masked: not resumable
+    # held starts of a release before start_hold_objective existed (its record names the
+    # other settings it had, removed since) were masked: not resumable
     with pytest.raises(ValueError, match="start_hold_objective='masked'"):
-        settings_from_record({"start_hold_decisions": 3}, "x.pt", "resume")
+        settings_from_record(
+            {"start_hold_decisions": 3, "residual_mode": "velocity"}, "x.pt", "resume"
+        )
+    # a record of this version names no removed setting: its held starts are the kept ones
+    assert settings_from_record({"start_hold_decisions": 3}, "x.pt", "resume") == (
+        MARLSettings(start_hold_decisions=3)
+    )
     # what stays (held starts logged with the actor's own log-probability, no noise) resumes
     kept = {**old, "noise_correlation": 0.0, "start_hold_objective": "unweighted"}
     assert settings_from_record(kept, "x.pt", "resume") == flown
@@ -520,6 +527,25 @@ def test_action_distribution_is_the_gaussian_whose_mean_the_policy_flies(tmp_pat
     residual = make_policy(f"mappo:{tmp_path}", urban_canyon_v0.parallel_env())
     with pytest.raises(ValueError, match="residual policy"):
         residual.action_distribution(obs)
+
+
+def test_a_run_with_exploring_starts_resumes_and_can_take_a_dual_clip(tmp_path) -> None:
+    """A run of this version that holds exploring starts (the packaged route recipes) resumes
+    from its checkpoint; the resumed part may add ``torchrl.dual_clip``, which the run then
+    records."""
+    import json
+
+    out = tmp_path / "run"
+    args = ["train", "--backend", "torchrl", "--algorithm", "mappo", "--out", str(out)]
+    hold = ["--env-set", "action_frame=route", "--set", "torchrl.start_hold_decisions=2"]
+    hold += ["--set", "torchrl.pretrain=null"]
+    assert main([*args, "--timesteps", "160", "--checkpoint-freq", "80", *hold, *SMALL]) == 0
+    resumed = [*args, "--timesteps", "240", "--resume", "latest", *SMALL]
+    assert main([*resumed, "--set", "torchrl.dual_clip=3"]) == 0
+    run = json.loads((out / "run.json").read_text())
+    assert run["agent_steps"] == 240
+    assert run["settings"]["start_hold_decisions"] == 2
+    assert run["settings"]["dual_clip"] == 3
 
 
 def test_resuming_a_run_trained_with_a_removed_switch_is_refused(tmp_path, capsys) -> None:
