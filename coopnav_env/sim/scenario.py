@@ -1176,14 +1176,21 @@ def _place_formation(
         kin.altitude_max_m - kin.uav_radius_m,
     )
     x0, x1, y0, y1 = city.extent_m
-    a_lo, a_hi = off[:, 0].min(), off[:, 0].max()
+    along = off[:, 0].tolist()
+    a_lo, a_hi = min(along), max(along)
+    # np.clip of one number: the larger of it and the low bound, then the smaller of that
+    # and the high bound
+    pos = np.empty((off.shape[0], 3))
     if north_south:
-        c = np.clip(centre_xy[1], y0 + margin - a_lo, y1 - margin - a_hi)
-        xy = np.stack([centre_xy[0] + off[:, 1], c + off[:, 0]], axis=1)
+        c = min(max(float(centre_xy[1]), y0 + margin - a_lo), y1 - margin - a_hi)
+        pos[:, 0] = centre_xy[0] + off[:, 1]
+        pos[:, 1] = c + off[:, 0]
     else:
-        c = np.clip(centre_xy[0], x0 + margin - a_lo, x1 - margin - a_hi)
-        xy = np.stack([c + off[:, 0], centre_xy[1] + off[:, 1]], axis=1)
-    return np.column_stack([xy, off[:, 2]])
+        c = min(max(float(centre_xy[0]), x0 + margin - a_lo), x1 - margin - a_hi)
+        pos[:, 0] = c + off[:, 0]
+        pos[:, 1] = centre_xy[1] + off[:, 1]
+    pos[:, 2] = off[:, 2]
+    return pos
 
 
 # --------------------------------------------------------------------------------------------
