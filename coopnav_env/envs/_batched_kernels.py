@@ -748,3 +748,46 @@ def observations_infos(
             obs,
             floats,
         )
+
+
+@njit(cache=True, nogil=True)
+def navigated_distance_terms(
+    pos,  # (K, N, 3) true positions after the step
+    nav_pos,  # (K, N, 3) estimates after the step (NaN: none)
+    route,  # (K, R_max, 2)
+    tail,  # (K, R_max) route length after each waypoint
+    wp,  # (K, N) next waypoints
+    reached,  # (K,) bool: the swarm arrived this step
+    unpaid,  # (K, N) route not yet paid before the step
+    route_len,  # (K, N) route length at reset (> 0)
+    cap_m,  # nav_reward_cap_m
+    terms,  # output: (K, 6, N); rows 0 (nav) and 1 (progress) written
+    unpaid_after,  # output: (K, N) route not yet paid after the step
+):
+    """The terms ``nav`` and ``progress`` of ``reward_scheme="navigated_distance"`` of every
+    copy (:func:`coopnav_env.envs.task.navigated_distance`), with the float64 operations of
+    its numpy formulation in the same order (the oracle ``navigated_distance_rows`` of
+    ``tests/envs/oracles.py``, equal bit for bit): the remaining route is the distance to the
+    next waypoint plus the route after it; ``np.clip(x, 0, None)`` is ``np.maximum(x, 0)``;
+    ``np.fmin`` takes the cap where the error is not a number."""
+    for k in range(pos.shape[0]):
+        for i in range(pos.shape[1]):
+            j = wp[k, i]
+            dx = pos[k, i, 0] - route[k, j, 0]
+            dy = pos[k, i, 1] - route[k, j, 1]
+            now_m = np.sqrt(dx * dx + dy * dy) + tail[k, j]
+            u = unpaid[k, i]
+            if reached[k]:
+                covered = u
+            else:
+                x = u - now_m
+                covered = x if (x >= 0.0 or x != x) else 0.0  # numpy's maximum(x, 0)
+            share = covered / route_len[k, i]
+            ex = nav_pos[k, i, 0] - pos[k, i, 0]
+            ey = nav_pos[k, i, 1] - pos[k, i, 1]
+            ez = nav_pos[k, i, 2] - pos[k, i, 2]
+            err = np.sqrt(ex * ex + ey * ey + ez * ez)
+            short = (err if (err <= cap_m or cap_m != cap_m) else cap_m) / cap_m  # numpy's fmin
+            terms[k, 0, i] = -share * short
+            terms[k, 1, i] = share
+            unpaid_after[k, i] = u - covered

@@ -335,8 +335,19 @@ class FusedStep:
         # copy's row reduced as its own array would be)
         unpaid = st.unpaid
         if cfg.reward_scheme == "navigated_distance":
-            terms[:, 0], terms[:, 1], unpaid = _navigated_distance(
-                st, pos1, nav_pos, wp, ends[:, 1], float(cfg.nav_reward_cap_m)
+            unpaid = np.empty_like(st.unpaid)
+            _batched_kernels.navigated_distance_terms(
+                pos1,
+                nav_pos,
+                st.route,
+                st.tail,
+                wp,
+                ends[:, 1],
+                st.unpaid,
+                st.route_len,
+                float(cfg.nav_reward_cap_m),
+                terms,
+                unpaid,
             )
         if cfg.nav_team_weight > 0.0:  # _team_mix of each copy
             weight = cfg.nav_team_weight
@@ -979,31 +990,6 @@ def _route_commands(envs: list[UrbanCanyonEnv], action: np.ndarray, st: _SwarmAr
         ROUTE_FRAME_GAIN_PER_S,
         route_lengths=st.n_route,
     )
-
-
-def _navigated_distance(
-    st: _SwarmArrays,
-    pos: np.ndarray,
-    nav_pos: np.ndarray,
-    wp: np.ndarray,
-    reached: np.ndarray,
-    cap_m: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`coopnav_env.envs.task.navigated_distance` of every copy: the terms ``nav`` and
-    ``progress`` ``(K, N)`` and the route not yet paid after the step ``(K, N)``, from the
-    true positions ``pos`` and estimates ``nav_pos`` ``(K, N, 3)``, the next waypoints ``wp``
-    and whether each swarm arrived ``reached`` ``(K,)`` (the same arithmetic, each copy's
-    rows reduced as its own arrays are)."""
-    rows = np.arange(pos.shape[0])[:, None]
-    # remaining_route_m: straight to the next waypoint, then along the route
-    d = np.linalg.norm(pos[:, :, :2] - st.route[rows, wp], axis=2)
-    now_m = d + st.tail[rows, wp]
-    unpaid = st.unpaid
-    covered = np.where(reached[:, None], unpaid, np.clip(unpaid - now_m, 0.0, None))
-    share = covered / st.route_len
-    # np.fmin: an error that is not a number (no estimate) counts as the cap (quality 0)
-    shortfall = np.fmin(np.linalg.norm(nav_pos - pos, axis=2), cap_m) / cap_m
-    return -share * shortfall, share, unpaid - covered
 
 
 def _pad(a: np.ndarray, size: int) -> np.ndarray:

@@ -383,10 +383,11 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         if cmd.shape != (len(self.agents), 3):
             bad = {a: np.shape(actions[a]) for a in self.agents if np.shape(actions[a]) != (3,)}
             raise ValueError(f"every action must have shape (3,), got {bad}")
-        if not np.all(np.isfinite(cmd)):
+        if not np.isfinite(cmd).all():
             bad = [a for a, row in zip(self.agents, cmd) if not np.all(np.isfinite(row))]
             raise ValueError(f"actions contain NaN or inf for {bad}")
-        return np.clip(cmd, -1.0, 1.0)
+        # np.clip(cmd, -1, 1) of finite numbers, in place on the copy (two ufunc calls)
+        return np.minimum(np.maximum(cmd, -1.0, out=cmd), 1.0, out=cmd)
 
     # ---- observations, infos, state ---------------------------------------------------------
 
@@ -420,11 +421,12 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         averaging.
         """
         ep = self._epoch
-        floats = self._info_floats()
-        fixes = np.isfinite(floats[1:3])
-        floats[1:3] = np.where(fixes, floats[1:3], NO_FIX_ERROR_M)
-        rows = floats.tolist()
-        fix_rows = fixes.tolist()
+        rows = self._info_floats().tolist()
+        # a missing fix: its flag False and its error NO_FIX_ERROR_M (on N Python floats:
+        # cheaper than numpy's isfinite and where)
+        fix_rows = [[math.isfinite(x) for x in rows[1]], [math.isfinite(x) for x in rows[2]]]
+        for r, fixed in zip((1, 2), fix_rows):
+            rows[r] = [x if f else NO_FIX_ERROR_M for x, f in zip(rows[r], fixed)]
         # rows of Python ints and bools (tolist per array: no stacked copy)
         ints = [
             a.tolist()

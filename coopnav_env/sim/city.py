@@ -26,6 +26,7 @@ explicit :class:`numpy.random.Generator`.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -187,6 +188,16 @@ class Buildings:
             )
         object.__setattr__(self, "min_m", _readonly(lo))
         object.__setattr__(self, "max_m", _readonly(hi))
+
+    @classmethod
+    def _of_arrays(cls, min_m: FloatArray, max_m: FloatArray) -> Buildings:
+        """Buildings of float64 corner arrays ``(n_b, 3)`` that are valid by construction
+        (a generator's own output), taken as they are (made read-only), without the checks
+        and copies of the constructor."""
+        out = object.__new__(cls)
+        object.__setattr__(out, "min_m", _readonly(min_m))
+        object.__setattr__(out, "max_m", _readonly(max_m))
+        return out
 
     @property
     def n(self) -> int:
@@ -778,6 +789,34 @@ class City:
             _check_real("City", "street_width_m", width, 0.0, math.inf, lo_open=True),
         )
 
+    @classmethod
+    def _of_parts(
+        cls,
+        buildings: Buildings,
+        extent_m: tuple[float, float, float, float],
+        street_centres_x_m: FloatArray,
+        street_centres_y_m: FloatArray,
+        open_squares: FloatArray,
+        config: CityConfig,
+        street_width_m: float,
+    ) -> City:
+        """A city of parts that are valid by construction (:func:`generate_city`'s: float
+        extent, read-only float64 arrays, a checked street width), without the checks and
+        copies of the constructor."""
+        out = object.__new__(cls)
+        for name, value in (
+            ("buildings", buildings),
+            ("extent_m", tuple(float(v) for v in extent_m)),
+            ("street_centres_x_m", _readonly(street_centres_x_m)),
+            ("street_centres_y_m", _readonly(street_centres_y_m)),
+            ("open_squares", _readonly(open_squares)),
+            ("config", config),
+            ("street_width_m", float(street_width_m)),
+            ("canyon_mask", None),
+        ):
+            object.__setattr__(out, name, value)
+        return out
+
     def is_inside_building(self, pos_enu_m: ArrayLike) -> BoolArray:
         """Whether each point (shape ``(n, 3)``, ENU [m]) is inside a building; ``(n,)`` bool."""
         return is_inside_building(self.buildings, pos_enu_m)
@@ -877,6 +916,28 @@ def _truncated_normal(
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def _grid_layout(
+    n_blocks_x: int, n_blocks_y: int, block_m: float, street_m: float
+) -> tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """What a grid city's size fixes (:func:`generate_city`): the south-west corner
+    ``x0, y0`` [m], the street centre lines ``street_x (n_x + 1,)``, ``street_y (n_y + 1,)``,
+    the west and south edges of every block ``blk_x0, blk_y0 (n_x n_y,)`` and their pairs
+    ``(n_x n_y, 2)`` [m], all read-only."""
+    pitch = block_m + street_m
+    size_x = n_blocks_x * block_m + (n_blocks_x + 1) * street_m
+    size_y = n_blocks_y * block_m + (n_blocks_y + 1) * street_m
+    x0, y0 = -size_x / 2.0, -size_y / 2.0
+    street_x = x0 + street_m / 2.0 + pitch * np.arange(n_blocks_x + 1)
+    street_y = y0 + street_m / 2.0 + pitch * np.arange(n_blocks_y + 1)
+    ix, iy = np.unravel_index(np.arange(n_blocks_x * n_blocks_y), (n_blocks_x, n_blocks_y))
+    blk_x0 = x0 + street_m + pitch * ix  # west edge of each block
+    blk_y0 = y0 + street_m + pitch * iy  # south edge of each block
+    blk_xy = np.stack([blk_x0, blk_y0], axis=1)
+    arrays = (street_x, street_y, blk_x0, blk_y0, blk_xy)
+    return (x0, y0, *(_readonly(a) for a in arrays))
+
+
 def generate_city(config: CityConfig, rng: np.random.Generator) -> City:
     """Generate a random grid city.
 
@@ -894,25 +955,19 @@ def generate_city(config: CityConfig, rng: np.random.Generator) -> City:
         Buildings stand exactly on the block edges (no setback) and never on a street.
     """
     c = config
-    block, street, k = c.block_size_m, c.street_width_m, c.buildings_per_block
-    pitch = block + street
-    size_x = c.n_blocks_x * block + (c.n_blocks_x + 1) * street
-    size_y = c.n_blocks_y * block + (c.n_blocks_y + 1) * street
-    x0, y0 = -size_x / 2.0, -size_y / 2.0
-    street_x = x0 + street / 2.0 + pitch * np.arange(c.n_blocks_x + 1)
-    street_y = y0 + street / 2.0 + pitch * np.arange(c.n_blocks_y + 1)
+    block, k = c.block_size_m, c.buildings_per_block
+    x0, y0, street_x, street_y, blk_x0, blk_y0, blk_xy = _grid_layout(
+        c.n_blocks_x, c.n_blocks_y, c.block_size_m, c.street_width_m
+    )
 
     n_blocks = c.n_blocks_x * c.n_blocks_y
     n_open = round(c.open_square_fraction * n_blocks)
     open_idx = rng.choice(n_blocks, size=n_open, replace=False)
     built = np.ones(n_blocks, dtype=bool)
     built[open_idx] = False
-    ix, iy = np.unravel_index(np.arange(n_blocks), (c.n_blocks_x, c.n_blocks_y))
-    blk_x0 = x0 + street + pitch * ix  # west edge of each block
-    blk_y0 = y0 + street + pitch * iy  # south edge of each block
-    open_squares = np.stack([blk_x0, blk_y0], axis=1)[np.sort(open_idx)] + block / 2.0
+    open_squares = blk_xy[np.sort(open_idx)] + block / 2.0
 
-    m = int(built.sum())
+    m = n_blocks - n_open
     bx0, by0 = blk_x0[built], blk_y0[built]
     split_along_x = rng.integers(0, 2, size=m).astype(bool)  # strips stacked along East
     weights = rng.uniform(0.6, 1.4, size=(m, k))
@@ -924,19 +979,23 @@ def generate_city(config: CityConfig, rng: np.random.Generator) -> City:
     lo_along, hi_along = starts, starts + lengths  # (m, k), offsets inside the block
     full_lo, full_hi = np.zeros((m, k)), np.full((m, k), block)
     sx = split_along_x[:, None]
-    fx0 = bx0[:, None] + np.where(sx, lo_along, full_lo)
-    fx1 = bx0[:, None] + np.where(sx, hi_along, full_hi)
-    fy0 = by0[:, None] + np.where(sx, full_lo, lo_along)
-    fy1 = by0[:, None] + np.where(sx, full_hi, hi_along)
-    footprints = np.stack([fx0, fy0, fx1, fy1], axis=2).reshape(-1, 4)
-    buildings = Buildings.from_footprints(footprints, heights)
-    return City(
-        buildings=buildings,
-        extent_m=(x0, -x0, y0, -y0),
-        street_centres_x_m=street_x,
-        street_centres_y_m=street_y,
-        open_squares=open_squares,
-        config=config,
+    # the boxes' corners (x_min, y_min, 0) and (x_max, y_max, height), building j of block b
+    # in row b k + j; valid by construction (positive strips inside the block, heights in the
+    # configuration's range), so not checked again
+    lo, hi = np.zeros((m * k, 3)), np.empty((m * k, 3))
+    lo[:, 0] = (bx0[:, None] + np.where(sx, lo_along, full_lo)).ravel()
+    hi[:, 0] = (bx0[:, None] + np.where(sx, hi_along, full_hi)).ravel()
+    lo[:, 1] = (by0[:, None] + np.where(sx, full_lo, lo_along)).ravel()
+    hi[:, 1] = (by0[:, None] + np.where(sx, full_hi, hi_along)).ravel()
+    hi[:, 2] = heights
+    return City._of_parts(
+        Buildings._of_arrays(lo, hi),
+        (x0, -x0, y0, -y0),
+        street_x,
+        street_y,
+        open_squares,
+        config,
+        float(c.street_width_m),
     )
 
 

@@ -257,7 +257,9 @@ def route_tail_lengths_m(route: ArrayLike) -> np.ndarray:
     """Length of the route after each waypoint [m], shape ``(k,)`` (0 at the last one)."""
     pts = np.asarray(route, dtype=float).reshape(-1, 2)
     legs = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    return np.r_[np.cumsum(legs[::-1])[::-1], 0.0]
+    tail = np.zeros(legs.size + 1)
+    tail[:-1] = np.cumsum(legs[::-1])[::-1]
+    return tail
 
 
 def remaining_route_m(

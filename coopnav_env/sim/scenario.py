@@ -1004,11 +1004,17 @@ def _street_frames(
     """
     x0, x1, y0, y1 = city.extent_m
     cx, cy = city.street_centres_x_m, city.street_centres_y_m
-    lengths = np.r_[np.full(cx.size, y1 - y0), np.full(cy.size, x1 - x0)]
-    street = rng.choice(lengths.size, size=n, p=lengths / lengths.sum())
+    lengths = np.empty(cx.size + cy.size)
+    lengths[: cx.size] = y1 - y0
+    lengths[cx.size :] = x1 - x0
+    # rng.choice(lengths.size, size=n, p=p) without its checks of p: the same cumulative
+    # distribution and the same uniform draws (one rng.random(n)), so the same streets
+    cdf = (lengths / lengths.sum()).cumsum()
+    cdf /= cdf[-1]
+    street = cdf.searchsorted(rng.random(n), side="right")
     along01 = rng.random(n)
     ns = street < cx.size
-    centre = np.r_[cx, cy][street]
+    centre = np.concatenate([cx, cy])[street]
     y_along = y0 + margin_m + along01 * (y1 - y0 - 2.0 * margin_m)
     x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
     xy = np.stack([np.where(ns, centre, x_along), np.where(ns, y_along, centre)], axis=1)
@@ -1170,14 +1176,21 @@ def _place_formation(
         kin.altitude_max_m - kin.uav_radius_m,
     )
     x0, x1, y0, y1 = city.extent_m
-    a_lo, a_hi = off[:, 0].min(), off[:, 0].max()
+    along = off[:, 0].tolist()
+    a_lo, a_hi = min(along), max(along)
+    # np.clip of one number: the larger of it and the low bound, then the smaller of that
+    # and the high bound
+    pos = np.empty((off.shape[0], 3))
     if north_south:
-        c = np.clip(centre_xy[1], y0 + margin - a_lo, y1 - margin - a_hi)
-        xy = np.stack([centre_xy[0] + off[:, 1], c + off[:, 0]], axis=1)
+        c = min(max(float(centre_xy[1]), y0 + margin - a_lo), y1 - margin - a_hi)
+        pos[:, 0] = centre_xy[0] + off[:, 1]
+        pos[:, 1] = c + off[:, 0]
     else:
-        c = np.clip(centre_xy[0], x0 + margin - a_lo, x1 - margin - a_hi)
-        xy = np.stack([c + off[:, 0], centre_xy[1] + off[:, 1]], axis=1)
-    return np.column_stack([xy, off[:, 2]])
+        c = min(max(float(centre_xy[0]), x0 + margin - a_lo), x1 - margin - a_hi)
+        pos[:, 0] = c + off[:, 0]
+        pos[:, 1] = centre_xy[1] + off[:, 1]
+    pos[:, 2] = off[:, 2]
+    return pos
 
 
 # --------------------------------------------------------------------------------------------
@@ -1645,7 +1658,7 @@ class UrbanWorld:
             dist = np.hypot(*(cand[1:] - centre).T)
             ok = dist >= cfg.goal_distance_min_m
             pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
-            goal = np.r_[cand[1 + pick], cfg.start_altitude_m]
+            goal = np.array([*cand[1 + pick].tolist(), float(cfg.start_altitude_m)])
         else:
             goal = np.array(goal_enu_m, dtype=float)
             if goal.shape != (3,) or not np.all(np.isfinite(goal)):

@@ -31,6 +31,7 @@ from tests.sim.oracles import use_oracles_in_world
 
 __all__ = [
     "info_floats",
+    "navigated_distance_rows",
     "observation_rows",
     "reward_terms",
     "satellite_sectors",
@@ -127,6 +128,35 @@ def info_floats(env: UrbanCanyonEnv) -> np.ndarray:
     return np.concatenate(
         [err, sig.T, np.sqrt((sig**2).sum(axis=1))[None], ep.goal_distance_m[None]]
     )
+
+
+def navigated_distance_rows(
+    pos: np.ndarray,
+    nav_pos: np.ndarray,
+    route: np.ndarray,
+    tail: np.ndarray,
+    wp: np.ndarray,
+    reached: np.ndarray,
+    unpaid: np.ndarray,
+    route_len: np.ndarray,
+    cap_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The terms ``nav`` and ``progress`` ``(K, N)`` of ``reward_scheme="navigated_distance"``
+    of every copy and the route not yet paid after the step ``(K, N)`` (the definition of
+    ``_batched_kernels.navigated_distance_terms``: :func:`coopnav_env.envs.task.
+    navigated_distance` on each copy's rows), from the true positions ``pos`` and estimates
+    ``nav_pos`` ``(K, N, 3)``, the padded routes ``route (K, R, 2)`` and ``tail (K, R)``, the
+    next waypoints ``wp (K, N)``, whether each swarm arrived ``reached (K,)``, the route not
+    yet paid ``unpaid`` and the route lengths ``route_len`` ``(K, N)``."""
+    rows = np.arange(pos.shape[0])[:, None]
+    # remaining_route_m: straight to the next waypoint, then along the route
+    d = np.linalg.norm(pos[:, :, :2] - route[rows, wp], axis=2)
+    now_m = d + tail[rows, wp]
+    covered = np.where(reached[:, None], unpaid, np.clip(unpaid - now_m, 0.0, None))
+    share = covered / route_len
+    # np.fmin: an error that is not a number (no estimate) counts as the cap (quality 0)
+    shortfall = np.fmin(np.linalg.norm(nav_pos - pos, axis=2), cap_m) / cap_m
+    return -share * shortfall, share, unpaid - covered
 
 
 def reward_terms(

@@ -602,3 +602,71 @@ def largest_component(free: NDArray[np.bool_]) -> NDArray[np.bool_]:
     if not sizes:
         return np.zeros_like(free)
     return label == int(np.argmax(sizes))
+
+
+def generate_city(config: _city.CityConfig, rng: np.random.Generator) -> _city.City:
+    """A grid city by the constructors' checked path: the definition of
+    :func:`coopnav_env.sim.city.generate_city` (which caches the layout a configuration fixes
+    and builds its boxes without the constructors' checks), the same draws in the same order
+    and the same arithmetic."""
+    c = config
+    block, street, k = c.block_size_m, c.street_width_m, c.buildings_per_block
+    pitch = block + street
+    size_x = c.n_blocks_x * block + (c.n_blocks_x + 1) * street
+    size_y = c.n_blocks_y * block + (c.n_blocks_y + 1) * street
+    x0, y0 = -size_x / 2.0, -size_y / 2.0
+    street_x = x0 + street / 2.0 + pitch * np.arange(c.n_blocks_x + 1)
+    street_y = y0 + street / 2.0 + pitch * np.arange(c.n_blocks_y + 1)
+    n_blocks = c.n_blocks_x * c.n_blocks_y
+    n_open = round(c.open_square_fraction * n_blocks)
+    open_idx = rng.choice(n_blocks, size=n_open, replace=False)
+    built = np.ones(n_blocks, dtype=bool)
+    built[open_idx] = False
+    ix, iy = np.unravel_index(np.arange(n_blocks), (c.n_blocks_x, c.n_blocks_y))
+    blk_x0 = x0 + street + pitch * ix
+    blk_y0 = y0 + street + pitch * iy
+    open_squares = np.stack([blk_x0, blk_y0], axis=1)[np.sort(open_idx)] + block / 2.0
+    m = int(built.sum())
+    bx0, by0 = blk_x0[built], blk_y0[built]
+    split_along_x = rng.integers(0, 2, size=m).astype(bool)
+    weights = rng.uniform(0.6, 1.4, size=(m, k))
+    heights = _city._truncated_normal(
+        rng, m * k, c.height_mean_m, c.height_std_m, c.height_min_m, c.height_max_m
+    )
+    lengths = weights / weights.sum(axis=1, keepdims=True) * (block - (k - 1) * c.building_gap_m)
+    starts = np.cumsum(lengths, axis=1) - lengths + c.building_gap_m * np.arange(k)
+    lo_along, hi_along = starts, starts + lengths
+    full_lo, full_hi = np.zeros((m, k)), np.full((m, k), block)
+    sx = split_along_x[:, None]
+    fx0 = bx0[:, None] + np.where(sx, lo_along, full_lo)
+    fx1 = bx0[:, None] + np.where(sx, hi_along, full_hi)
+    fy0 = by0[:, None] + np.where(sx, full_lo, lo_along)
+    fy1 = by0[:, None] + np.where(sx, full_hi, hi_along)
+    footprints = np.stack([fx0, fy0, fx1, fy1], axis=2).reshape(-1, 4)
+    return _city.City(
+        buildings=Buildings.from_footprints(footprints, heights),
+        extent_m=(x0, -x0, y0, -y0),
+        street_centres_x_m=street_x,
+        street_centres_y_m=street_y,
+        open_squares=open_squares,
+        config=config,
+    )
+
+
+def street_frames(
+    city: _city.City, rng: np.random.Generator, n: int, margin_m: float
+) -> tuple[FloatArray, BoolArray]:
+    """The definition of ``coopnav_env.sim.scenario._street_frames`` (which draws the
+    streets from their cumulative distribution itself): ``rng.choice`` with the streets'
+    lengths as weights."""
+    x0, x1, y0, y1 = city.extent_m
+    cx, cy = city.street_centres_x_m, city.street_centres_y_m
+    lengths = np.r_[np.full(cx.size, y1 - y0), np.full(cy.size, x1 - x0)]
+    street = rng.choice(lengths.size, size=n, p=lengths / lengths.sum())
+    along01 = rng.random(n)
+    ns = street < cx.size
+    centre = np.r_[cx, cy][street]
+    y_along = y0 + margin_m + along01 * (y1 - y0 - 2.0 * margin_m)
+    x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
+    xy = np.stack([np.where(ns, centre, x_along), np.where(ns, y_along, centre)], axis=1)
+    return xy, ns

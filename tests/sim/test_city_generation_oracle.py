@@ -1,0 +1,52 @@
+"""Grid-city generation and the street draws of a reset equal their numpy oracles
+(``tests/sim/oracles.py``: the constructors' checked path, ``rng.choice``) bit for bit, and
+leave the generator in the same state."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coopnav_env.sim import scenario
+from coopnav_env.sim.city import CityConfig, generate_city
+from tests.sim import oracles
+
+CONFIGS = [
+    CityConfig(),
+    CityConfig(n_blocks_x=3, n_blocks_y=7, buildings_per_block=1, open_square_fraction=0.0),
+    CityConfig(n_blocks_x=9, n_blocks_y=2, buildings_per_block=5, building_gap_m=2.5),
+    CityConfig(n_blocks_x=2, n_blocks_y=2, open_square_fraction=1.0),  # no buildings
+    CityConfig(block_size_m=37.5, street_width_m=11.25, height_std_m=0.0),
+]
+
+
+def _city_bytes(city) -> list[bytes]:
+    b = city.buildings
+    arrays = (b.min_m, b.max_m, city.street_centres_x_m, city.street_centres_y_m)
+    return [a.tobytes() for a in (*arrays, city.open_squares)] + [
+        repr((city.extent_m, city.street_width_m, [a.shape for a in arrays])).encode()
+    ]
+
+
+@pytest.mark.parametrize("config", CONFIGS)
+def test_generate_city_matches_oracle(config: CityConfig) -> None:
+    for seed in range(20):
+        fast_rng, ref_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+        fast, ref = generate_city(config, fast_rng), oracles.generate_city(config, ref_rng)
+        assert _city_bytes(fast) == _city_bytes(ref)
+        assert fast.config is ref.config and fast.canyon_mask is None
+        assert not fast.buildings.min_m.flags.writeable
+        assert not fast.street_centres_x_m.flags.writeable
+        assert fast_rng.random() == ref_rng.random()  # the same draws, no more, no fewer
+
+
+@pytest.mark.parametrize("config", CONFIGS[:3])
+def test_street_frames_match_rng_choice(config: CityConfig) -> None:
+    city = generate_city(config, np.random.default_rng(0))
+    for seed in range(50):
+        a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+        xy, ns = scenario._street_frames(city, a, 256, 4.0)
+        xy_ref, ns_ref = oracles.street_frames(city, b, 256, 4.0)
+        assert xy.tobytes() == xy_ref.tobytes() and ns.tobytes() == ns_ref.tobytes()
+        assert a.random() == b.random()
+    assert ns.any() and not ns.all()  # both orientations drawn
