@@ -13,13 +13,13 @@ them.
 from __future__ import annotations
 
 import hashlib
-import json
 from typing import Any
 
 import numpy as np
 import pytest
 
 from coopnav_env.sim.real_suite import REAL_SUITE
+from tests.envs.golden import _update
 
 #: (name, environment keyword arguments, steps, seed) of the golden v1 episodes.
 CASES_V1: tuple[tuple[str, dict[str, Any], int, int], ...] = (
@@ -35,14 +35,6 @@ GOLDEN_V1: dict[str, str] = {
     "v1_n3_families": "5131fb7b950d4ef90c5512ba7715da0d7a2549ed7266e1f70736aeefa57da1f5",
     "v1_n4_monte_carlo_rinex": "98f4ba248770e0c428f5eb458c1d657dd560ab1ab52a110e98b38200dcb7affa",
 }
-
-
-def _update(h: Any, obj: Any) -> None:
-    if isinstance(obj, np.ndarray):
-        h.update(str((obj.dtype.str, obj.shape)).encode())
-        h.update(np.ascontiguousarray(obj).tobytes())
-    else:
-        h.update(json.dumps(obj, sort_keys=True, default=repr).encode())
 
 
 def episode_digest_v1(env_kwargs: dict[str, Any], steps: int, seed: int) -> str:
