@@ -827,9 +827,10 @@ class MARLTrainer:
                         f"(agent-step {self.agent_steps}; objective "
                         f"{float(out['loss_objective']):.3g}, critic "
                         f"{float(out['loss_critic']):.3g}): the policy's probability ratios "
-                        "ran away and no update was applied. Resume from the last checkpoint "
-                        "with --set torchrl.dual_clip=3 (dual-clip PPO caps the ratio), or "
-                        "lower torchrl.learning_rate"
+                        "ran away, and this minibatch's update was not applied. Resume from a "
+                        "checkpoint from before the objective grew (loss_objective in "
+                        "logs/progress.csv) with --set torchrl.dual_clip=3 (dual-clip PPO caps "
+                        "the ratio), or lower torchrl.learning_rate"
                     )
                 self.optim.zero_grad()
                 total.backward()
