@@ -72,8 +72,13 @@ SUITE_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("collisions", "collisions", "{:d}"),
     ("sats/UAV", "n_sats_mean", "{:.1f}"),
     ("steps", "length_mean", "{:.1f}"),
+    ("cruise spacing [m]", "cruise_spacing_m", "{:.1f}"),
+    ("altitude [m]", "cruise_altitude_m", "{:.1f}"),
+    ("spread across route [m]", "cruise_spread_m", "{:.1f}"),
+    ("speed [m/s]", "cruise_speed_mps", "{:.1f}"),
 )
-"""Columns of the summary table: (title, :class:`PolicyStats` field, format)."""
+"""Columns of the summary table: (title, :class:`PolicyStats` field, format); the last four
+are the behaviour descriptors of :mod:`coopnav_env.training.behaviour`."""
 
 
 def suite_outputs(suite: str, compare: bool = False) -> tuple[str, ...]:

@@ -45,6 +45,10 @@ def test_the_suite_command_writes_a_report_per_city_and_a_summary(tmp_path: Path
         assert 0.0 <= row["goal_rate"] <= 1.0
         assert row["n_sats_mean"] >= 4.0  # a real GPS sky over every city
         assert row["episodes"] == 1
+        # what the swarm did, beside how well: the behaviour descriptors of the cruise
+        assert 0.0 < row["cruise_spacing_m"] < 500.0
+        assert 0.0 < row["cruise_altitude_m"] < 200.0
+        assert row["cruise_spread_m"] >= 0.0 and row["cruise_speed_mps"] >= 0.0
     for city in REAL_SUITE:
         report = json.loads((out / city.name / "report.json").read_text())
         assert report["env_kwargs"]["city"] == f"osm:{city.osm}"
@@ -53,6 +57,7 @@ def test_the_suite_command_writes_a_report_per_city_and_a_summary(tmp_path: Path
         assert f"| {city.name} | column |" in printed
     table = (out / "summary.md").read_text()
     assert "| city | policy | score | nav error mean [m] |" in table and "sats/UAV" in table
+    assert "| cruise spacing [m] | altitude [m] | spread across route [m] | speed [m/s] |" in table
 
 
 def test_a_trained_policy_flies_its_runs_settings_in_the_suite_city():
