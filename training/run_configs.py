@@ -66,6 +66,21 @@ def config_of_policy(name: str) -> Path | None:
     return None
 
 
+def _flown_environment(data: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
+    """The environment id and settings a run's configuration flies: ``urban_canyon_v1``'s
+    settings on top of its defaults (:data:`~coopnav_env.envs.config.V1_DEFAULTS`), so that
+    runs recorded before a v1 default existed (e.g. ``crash_free_steps``) compare equal to
+    runs that record it at its default."""
+    from coopnav_env.envs.config import V1_DEFAULTS
+    from coopnav_env.training.envs import DEFAULT_ENV_ID
+
+    env_id = data.get("env_id") or DEFAULT_ENV_ID
+    env = dict(data.get("env") or {})
+    if env_id == "urban_canyon_v1":
+        env = {**V1_DEFAULTS, **env}
+    return env_id, env
+
+
 def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
     """The training configuration a trained policy (``ppo:``, ``rllib:``, ``mappo:``/``ippo:``/
     ``torchrl:``) came from.
@@ -74,7 +89,8 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
     ``DIR/final_model.zip``, ``DIR/final_model`` (RLlib) or ``DIR/checkpoints/*`` is evaluated
     in the environment it was trained in unless told otherwise (empty if none is found; then
     ``coopnav evaluate`` warns on stderr).
-    Trained policies from runs with different environment settings raise ``ValueError``.
+    Trained policies from runs whose environments differ raise ``ValueError`` (settings a
+    run leaves out count at their ``urban_canyon_v1`` defaults).
     """
     found: dict[str, Any] | None = None
     for name in policies:
@@ -82,8 +98,8 @@ def train_config_of_policies(policies: Sequence[str]) -> dict[str, Any]:
         if cfg is None:
             continue
         data = read_train_config(cfg)
-        key = (data.get("env_id"), data.get("env") or {})
-        if found is not None and key != (found.get("env_id"), found.get("env") or {}):
+        key = _flown_environment(data)
+        if found is not None and key != _flown_environment(found):
             raise ValueError(
                 "the PPO policies were trained in different environments "
                 f"({found.get('env')} vs {data.get('env')}); pass --train-config or "

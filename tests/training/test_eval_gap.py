@@ -345,3 +345,31 @@ def test_a_heuristic_flies_in_the_frame_it_commands_beside_a_policy_of_another()
     plain = evaluate(["formation"], [1_000_000], short, env_id="urban_canyon_v1")
     assert plain.own_frame == {} and "frame they command" not in plain.header()
     assert plain["formation"].return_mean == rep["formation"].return_mean
+
+
+def test_runs_that_differ_only_in_unrecorded_v1_defaults_fly_together(tmp_path) -> None:
+    """A run recorded before a v1 default existed (no ``crash_free_steps``) and one that
+    records it at the default fly the same environment: evaluated together; a run that sets
+    it otherwise is refused, naming both environments."""
+    import yaml
+
+    from coopnav_env.envs.config import V1_DEFAULTS
+    from coopnav_env.training.run_configs import train_config_of_policies
+
+    def run(name: str, env: dict) -> str:
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "final_model.zip").write_bytes(b"")
+        text = yaml.safe_dump({"env_id": "urban_canyon_v1", "env": env, "backend": "sb3"})
+        (folder / "config.yaml").write_text(text)
+        return f"ppo:{folder / 'final_model.zip'}"
+
+    base = {"action_frame": "route", "route_turn_brake_mps2": 2}
+    old = run("old", base)
+    new = run("new", {**base, "crash_free_steps": V1_DEFAULTS["crash_free_steps"]})
+    other = run("other", {**base, "crash_free_steps": V1_DEFAULTS["crash_free_steps"] + 2})
+    for pair in ([old, new], [new, old]):
+        env = train_config_of_policies(pair)["env"]
+        assert {**V1_DEFAULTS, **env} == {**V1_DEFAULTS, **base}
+    with pytest.raises(ValueError, match="trained in different environments"):
+        train_config_of_policies([old, other])
