@@ -27,6 +27,31 @@ def _same(a, b) -> bool:
     return type(a) is type(b) and a == b
 
 
+def assert_same_records(fused: list, world: list) -> None:
+    """Assert two recordings of one episode sequence equal bit for bit: each entry an
+    ``Epoch`` (every field's bytes and dtype), a ``step`` result (observations, rewards, ends,
+    infos by value and by bytes) or a reset's observations."""
+    assert len(fused) == len(world)
+    for a, b in zip(fused, world, strict=True):
+        if isinstance(b, Epoch):
+            for f in dataclasses.fields(b):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                assert np.asarray(x).tobytes() == np.asarray(y).tobytes(), f.name
+                assert np.asarray(x).dtype == np.asarray(y).dtype, f.name
+        elif isinstance(b, tuple):
+            obs_a, rew_a, te_a, tr_a, inf_a = a
+            obs_b, rew_b, te_b, tr_b, inf_b = b
+            assert all(obs_a[k].tobytes() == obs_b[k].tobytes() for k in obs_b)
+            assert rew_a == rew_b and te_a == te_b and tr_a == tr_b
+            assert _same(inf_a, inf_b)
+            for agent in inf_b:
+                for key, v in inf_b[agent].items():
+                    w = inf_a[agent][key]
+                    assert np.asarray(w).tobytes() == np.asarray(v).tobytes(), key
+        else:
+            assert all(a[k].tobytes() == b[k].tobytes() for k in b)
+
+
 def test_copies_equal_separate_environments_across_episode_ends() -> None:
     k_copies, seed = 3, 10
     batch = BatchedUrbanCanyonEnv(k_copies, **SETTINGS)
@@ -197,20 +222,7 @@ def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
 
     fused, world = run(True), run(False)
     assert len(fused) == len(world)
-    for a, b in zip(fused, world, strict=True):
-        if isinstance(b, Epoch):
-            for f in dataclasses.fields(b):
-                x, y = getattr(a, f.name), getattr(b, f.name)
-                assert np.asarray(x).tobytes() == np.asarray(y).tobytes(), f.name
-                assert np.asarray(x).dtype == np.asarray(y).dtype, f.name
-        elif isinstance(b, tuple):
-            obs_a, rew_a, te_a, tr_a, inf_a = a
-            obs_b, rew_b, te_b, tr_b, inf_b = b
-            assert all(obs_a[k].tobytes() == obs_b[k].tobytes() for k in obs_b)
-            assert rew_a == rew_b and te_a == te_b and tr_a == tr_b
-            assert _same(inf_a, inf_b)
-        else:
-            assert all(a[k].tobytes() == b[k].tobytes() for k in b)
+    assert_same_records(fused, world)
 
 
 def _step_in_child(batch, queue) -> None:

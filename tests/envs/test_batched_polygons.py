@@ -3,8 +3,6 @@ copy k of a batch equals a separate environment stepped through ``UrbanWorld.ste
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -13,7 +11,7 @@ from coopnav_env.envs import BatchedUrbanCanyonEnv, _fused
 from coopnav_env.envs._fused import fused_settings
 from coopnav_env.sim.file_city import ExtrudedBuildings
 from coopnav_env.sim.real_suite import REAL_SUITE
-from coopnav_env.sim.scenario import Epoch
+from tests.envs.test_batched import assert_same_records
 
 pytestmark = [
     pytest.mark.filterwarnings("ignore:city file .* default height:UserWarning"),
@@ -155,21 +153,4 @@ def test_fused_step_equals_the_world_step_on_polygons(monkeypatch, settings) -> 
     fused, world = run(True), run(False)
     assert len(fused) == len(world)
     assert sum(isinstance(b, dict) for b in world) >= 3  # at least two resets
-    for a, b in zip(fused, world, strict=True):
-        if isinstance(b, Epoch):
-            for f in dataclasses.fields(b):
-                x, y = getattr(a, f.name), getattr(b, f.name)
-                assert np.asarray(x).tobytes() == np.asarray(y).tobytes(), f.name
-                assert np.asarray(x).dtype == np.asarray(y).dtype, f.name
-        elif isinstance(b, tuple):
-            obs_a, rew_a, te_a, tr_a, inf_a = a
-            obs_b, rew_b, te_b, tr_b, inf_b = b
-            assert all(obs_a[k].tobytes() == obs_b[k].tobytes() for k in obs_b)
-            assert rew_a == rew_b and te_a == te_b and tr_a == tr_b
-            assert inf_a.keys() == inf_b.keys()
-            for agent in inf_b:
-                for key, v in inf_b[agent].items():
-                    w = inf_a[agent][key]
-                    assert np.asarray(w).tobytes() == np.asarray(v).tobytes(), key
-        else:
-            assert all(a[k].tobytes() == b[k].tobytes() for k in b)
+    assert_same_records(fused, world)
