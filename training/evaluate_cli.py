@@ -184,8 +184,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="POLICY",
         help="with --suite: every other row's paired score difference from POLICY (a flown "
-        "policy or per_city_column) in each city, with 95 %% bootstrap intervals; written "
-        "as comparison.md (default: none)",
+        "policy or per_city_column) in each city and over all cities (equal weight), with 95 %% "
+        "bootstrap intervals; written as comparison.md (default: none)",
     )
     parser.add_argument(
         "--gap",

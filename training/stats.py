@@ -13,12 +13,14 @@ direct formulation (``tests/training/test_stats.py``).
 
 Paired comparisons (:func:`paired_difference`, :func:`gap_closed`) resample the same
 episodes for every policy compared, so that the episode-to-episode variation (city, route,
-satellites) cancels.
+satellites) cancels. :func:`suite_paired_difference` puts per-city paired differences
+together into one suite-level figure, every city weighted equally, with a bootstrap stratified
+by city.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +32,7 @@ __all__ = [
     "interquartile_mean",
     "paired_difference",
     "stratified_bootstrap_ci",
+    "suite_paired_difference",
 ]
 
 
@@ -143,6 +146,112 @@ def paired_difference(
     lo, hi = np.quantile(diffs, [alpha, 1.0 - alpha])
     per_ep = a.mean(axis=0) - b.mean(axis=0)
     return Interval(float(per_ep.mean()), float(lo), float(hi)), float(np.mean(per_ep < 0.0))
+
+
+def suite_paired_difference(
+    a: Sequence[np.ndarray],
+    b: Sequence[np.ndarray],
+    reps: int = 2000,
+    confidence: float = 0.95,
+    seed: int = 0,
+) -> Interval:
+    """Mean over cities of each city's mean paired difference ``a - b``, with a bootstrap CI.
+
+    The suite-level figure of a generalisation benchmark: every city counts once, whatever
+    its number of episodes, so the estimate is ``mean_c mean_e (a_c - b_c)[e]`` (the runs of
+    each method averaged per episode first, as in :func:`paired_difference`). Each replicate
+    resamples the episodes of every city with replacement *within* that city (stratified
+    bootstrap; the same episodes for both methods), then the runs of each method, and takes
+    the same mean over cities; the interval is the percentile interval of the replicates. A
+    method's runs (training seeds) are the same policies in every city, so a replicate draws
+    one set of runs per method for all cities, applied in each city as
+    :func:`paired_difference` applies them. With a single city the result is
+    :func:`paired_difference`'s interval for the same ``seed``, bit for bit.
+
+    Parameters
+    ----------
+    a, b : sequence of ndarray, each of shape (runs, episodes)
+        Per-city score matrices of the two methods, one entry per city, in the same city
+        order; ``a[c]`` and ``b[c]`` cover the same episodes of city ``c`` (columns in the
+        same order). The number of runs of a method must be the same in every city (row ``i``
+        is the same training run everywhere); the episode counts may differ between cities.
+    reps : int
+        Bootstrap replicates (at least 1).
+    confidence : float
+        Coverage of the interval, in (0, 1).
+    seed : int
+        Seed of the resampling generator (results are deterministic).
+
+    Returns
+    -------
+    Interval
+        The equal-weight mean of the per-city mean differences and its percentile interval.
+
+    Raises
+    ------
+    ValueError
+        No city, ``a`` and ``b`` of different city counts, a city's matrix that is not
+        ``(runs, episodes)`` or not finite, a city where ``a`` and ``b`` cover different
+        episode counts, a method whose run count differs between cities, fewer than 1
+        replicate, or a ``confidence`` outside (0, 1).
+    """
+    a_cities, b_cities = list(a), list(b)
+    if not a_cities:
+        raise ValueError("give at least one city: a and b are empty")
+    if len(a_cities) != len(b_cities):
+        raise ValueError(
+            f"a and b must hold one matrix per city each, got {len(a_cities)} and "
+            f"{len(b_cities)} cities"
+        )
+    a_cities = [_check_city(x, "a", c) for c, x in enumerate(a_cities)]
+    b_cities = [_check_city(x, "b", c) for c, x in enumerate(b_cities)]
+    for c, (x, y) in enumerate(zip(a_cities, b_cities)):
+        if x.shape[1] != y.shape[1]:
+            raise ValueError(
+                f"city {c}: a and b must cover the same episodes, got {x.shape[1]} and "
+                f"{y.shape[1]} episodes"
+            )
+    for name, cities in (("a", a_cities), ("b", b_cities)):
+        runs = [x.shape[0] for x in cities]
+        if len(set(runs)) != 1:
+            raise ValueError(
+                f"{name} must have the same runs (training seeds) in every city, got run "
+                f"counts {runs}; drop the runs missing from some city"
+            )
+    if int(reps) < 1:
+        raise ValueError(f"reps must be at least 1, got {reps}")
+    if not (0.0 < confidence < 1.0):
+        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
+    rng = np.random.default_rng(seed)
+    n_cities = len(a_cities)
+    n_a, n_b = a_cities[0].shape[0], b_cities[0].shape[0]
+    diffs = np.empty(int(reps))
+    for r in range(int(reps)):
+        # the draw order of paired_difference (episodes, then runs of a, then of b), with
+        # every city's episodes drawn first
+        eps = [rng.integers(0, x.shape[1], x.shape[1]) for x in a_cities]
+        ra = rng.integers(0, n_a, n_a)
+        rb = rng.integers(0, n_b, n_b)
+        total = 0.0
+        for x, y, ep in zip(a_cities, b_cities, eps):
+            total += float(x[ra][:, ep].mean() - y[rb][:, ep].mean())
+        diffs[r] = total / n_cities
+    alpha = (1.0 - confidence) / 2.0
+    lo, hi = np.quantile(diffs, [alpha, 1.0 - alpha])
+    per_city = [float((x.mean(axis=0) - y.mean(axis=0)).mean()) for x, y in zip(a_cities, b_cities)]
+    return Interval(sum(per_city) / n_cities, float(lo), float(hi))
+
+
+def _check_city(x: np.ndarray, name: str, city: int) -> np.ndarray:
+    s = np.asarray(x, dtype=float)
+    if s.ndim != 2 or s.shape[0] < 1 or s.shape[1] < 1:
+        raise ValueError(
+            f"{name}[{city}] must be a (runs, episodes) matrix with at least one of each, got "
+            f"shape {s.shape}"
+        )
+    if not np.all(np.isfinite(s)):
+        raise ValueError(f"{name}[{city}] scores must be finite")
+    return s
 
 
 def bootstrap_mean_interval(

@@ -22,7 +22,10 @@ Two references can be added per city:
   flown on the held-out seeds as the row :data:`PER_CITY_RULE`: a rule re-tuned for each
   city, which a policy tuned on other cities does not get;
 * ``compare=NAME``: every other policy's paired difference of episode scores from policy
-  ``NAME`` in each city, with a paired 95 % bootstrap interval (``comparison.md``).
+  ``NAME`` in each city, with a paired 95 % bootstrap interval (``comparison.md``), and over
+  the whole suite (the row :data:`ALL_CITIES`): the mean of the per-city differences, every
+  city weighted equally, with an interval that resamples episodes within each city
+  (:func:`coopnav_env.training.stats.suite_paired_difference`).
 """
 
 from __future__ import annotations
@@ -43,9 +46,10 @@ from coopnav_env.training.envs import DEFAULT_ENV_ID, EVAL_SEED_START
 from coopnav_env.training.evaluate import PolicyStats, Report, evaluate, write_report
 from coopnav_env.training.files import atomic_write_text, jsonable, write_json
 from coopnav_env.training.run_configs import train_config_of_policies
-from coopnav_env.training.stats import Interval, paired_difference
+from coopnav_env.training.stats import Interval, paired_difference, suite_paired_difference
 
 __all__ = [
+    "ALL_CITIES",
     "PER_CITY_RULE",
     "SUITE_COLUMNS",
     "TUNING_SEED_START",
@@ -54,6 +58,9 @@ __all__ = [
     "evaluate_suite",
     "suite_outputs",
 ]
+
+ALL_CITIES: str = "all cities (equal weight)"
+"""City name of the suite-level comparison rows (``compare``): every city weighted equally."""
 
 PER_CITY_RULE: str = "per_city_column"
 """Row name of the column preset re-tuned for each city (``per_city_rule``)."""
@@ -90,15 +97,20 @@ def suite_outputs(suite: str, compare: bool = False) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class Comparison:
-    """One policy against the suite's reference policy in one city.
+    """One policy against the suite's reference policy in one city, or over the suite.
 
     Attributes
     ----------
     city, policy, reference : str
+        ``city`` is :data:`ALL_CITIES` for the suite-level row.
     score_difference : Interval
         Mean over the city's episodes of the policy's score minus the reference's on the same
-        episode, with its paired 95 % bootstrap interval.
+        episode, with its paired 95 % bootstrap interval; for the suite-level row, the mean of
+        the cities' mean differences (every city weighted equally), with a 95 % bootstrap
+        interval stratified by city.
     goal_rate, reference_goal_rate : float
+        Share of episodes with the whole swarm at the goal; for the suite-level row, the mean
+        of the cities' goal rates.
     """
 
     city: str
@@ -128,6 +140,9 @@ class SuiteReport:
         mean score on the tuning episodes.
     comparisons : list of Comparison
         With ``compare``: every other policy against the reference, per city.
+    suite_comparisons : list of Comparison
+        With ``compare``: every other policy against the reference over the whole suite (city
+        :data:`ALL_CITIES`, every city weighted equally), one per policy.
     files : list of Path
         What was written (empty when nothing was).
     """
@@ -138,6 +153,7 @@ class SuiteReport:
     n_buildings: dict[str, float]
     picks: dict[str, tuple[str, float]] = field(default_factory=dict)
     comparisons: list[Comparison] = field(default_factory=list)
+    suite_comparisons: list[Comparison] = field(default_factory=list)
     files: list[Path] = field(default_factory=list)
 
     def rows(self) -> list[tuple[SuiteEntry, PolicyStats]]:
@@ -181,7 +197,8 @@ class SuiteReport:
 
     def comparison_markdown(self) -> str:
         """The paired score differences from the reference (``compare``), a row per city and
-        policy, in GitHub Markdown."""
+        policy, then a row per policy over all cities (:data:`ALL_CITIES`), in GitHub
+        Markdown."""
         if not self.comparisons:
             return ""
         ref = self.comparisons[0].reference
@@ -194,7 +211,7 @@ class SuiteReport:
             f"{ref} goal rate",
         ]
         lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
-        for c in self.comparisons:
+        for c in (*self.comparisons, *self.suite_comparisons):
             d = c.score_difference
             side = "above" if d.low > 0.0 else "below" if d.high < 0.0 else "no"
             lines.append(
@@ -226,6 +243,17 @@ class SuiteReport:
                     "reference_goal_rate": c.reference_goal_rate,
                 }
                 for c in self.comparisons
+            ],
+            "suite_comparisons": [
+                {
+                    "city": c.city,
+                    "policy": c.policy,
+                    "reference": c.reference,
+                    "score_difference": jsonable(c.score_difference.as_dict()),
+                    "goal_rate": c.goal_rate,
+                    "reference_goal_rate": c.reference_goal_rate,
+                }
+                for c in self.suite_comparisons
             ],
             "rows": [
                 {"city": c.name, **jsonable({f: getattr(s, f) for _, f, _ in SUITE_COLUMNS})}
@@ -338,6 +366,35 @@ def _comparisons(city: str, report: Report, reference: str) -> list[Comparison]:
     return out
 
 
+def _suite_comparisons(reports: Mapping[str, Report], reference: str) -> list[Comparison]:
+    """Every policy but ``reference`` against it over all cities of ``reports``: the mean of
+    the cities' mean paired differences, every city weighted equally."""
+    scores = {
+        city: {p: np.array([[e.episode_return for e in eps]]) for p, eps in r.episodes.items()}
+        for city, r in reports.items()
+    }
+    goal = {city: {s.policy: s.goal_rate for s in r.stats} for city, r in reports.items()}
+    first = next(iter(reports.values()))
+    out = []
+    for p in (s.policy for s in first.stats):
+        if p == reference:
+            continue
+        diff = suite_paired_difference(
+            [scores[c][p] for c in reports], [scores[c][reference] for c in reports]
+        )
+        out.append(
+            Comparison(
+                ALL_CITIES,
+                p,
+                reference,
+                diff,
+                float(np.mean([goal[c][p] for c in reports])),
+                float(np.mean([goal[c][reference] for c in reports])),
+            )
+        )
+    return out
+
+
 def evaluate_suite(
     policies: Sequence[str],
     seeds: Sequence[int],
@@ -372,7 +429,8 @@ def evaluate_suite(
         the best mean score on ``N`` tuning episodes of that city (see the module docstring).
     compare : str or None
         A policy of ``policies`` (or :data:`PER_CITY_RULE`) to compare every other row with:
-        paired score differences with 95 % bootstrap intervals, per city.
+        paired score differences with 95 % bootstrap intervals, per city and over all cities
+        (every city weighted equally).
 
     Returns
     -------
@@ -427,7 +485,8 @@ def evaluate_suite(
             picks[city.name] = pick
         if compare is not None:
             comparisons += _comparisons(city.name, report, compare)
-    result = SuiteReport(suite, cities, reports, n_buildings, picks, comparisons)
+    suite_rows = _suite_comparisons(reports, compare) if compare is not None else []
+    result = SuiteReport(suite, cities, reports, n_buildings, picks, comparisons, suite_rows)
     if out is not None:
         out = Path(out)
         for city in cities:

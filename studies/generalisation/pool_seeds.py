@@ -6,8 +6,14 @@ folders), takes every policy whose name starts with ``--method-prefix`` as one t
 the method, and writes, per city, the method's mean score, goal rate and cruise spacing, its
 paired score difference from ``--reference`` with a 95 % bootstrap interval over episodes and
 seeds (:func:`coopnav_env.training.stats.paired_difference`: runs averaged per episode), and
-its share of the gap from ``--baseline`` to ``--reference``. The reference's episodes must be
-the same in every folder (the same seeds, bit-identical returns), else it stops.
+its share of the gap from ``--baseline`` to ``--reference``. After the cities of a suite with
+at least two cities, one row ``SUITE: all cities (equal weight)`` gives the same over the whole
+suite, every city weighted equally: the mean of the cities' mean scores, goal rates and
+spacings, and the mean of their paired differences with an interval that resamples episodes
+within each city and the seeds once for all cities
+(:func:`coopnav_env.training.stats.suite_paired_difference`; no gap share). The reference's
+episodes must be the same in every folder (the same seeds, bit-identical returns), else it
+stops.
 
 Usage::
 
@@ -22,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,20 +36,22 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from coopnav_env.training.files import atomic_write_text
-from coopnav_env.training.stats import gap_closed, paired_difference
+from coopnav_env.training.stats import gap_closed, paired_difference, suite_paired_difference
+from coopnav_env.training.suite import ALL_CITIES
 
 SUITES = ("grid", "families", "real")
 
 
-def _episodes(folders: list[Path]) -> dict[str, dict[str, list[dict]]]:
-    """``city -> policy -> episodes`` over every folder (a policy met twice must agree)."""
-    out: dict[str, dict[str, list[dict]]] = {}
+def _episodes(folders: list[Path]) -> dict[str, dict[str, dict[str, list[dict]]]]:
+    """``suite -> city -> policy -> episodes`` over every folder (a policy met twice must
+    agree), suites in :data:`SUITES` order."""
+    out: dict[str, dict[str, dict[str, list[dict]]]] = {}
     for folder in folders:
         for suite in SUITES:
             for report in sorted((folder / suite).glob("*/report.json")):
                 city = report.parent.name
                 data = json.loads(report.read_text())
-                per_city = out.setdefault(city, {})
+                per_city = out.setdefault(suite, {}).setdefault(city, {})
                 for policy, eps in data["episodes"].items():
                     if policy in per_city and per_city[policy] != eps:
                         raise ValueError(
@@ -52,7 +61,7 @@ def _episodes(folders: list[Path]) -> dict[str, dict[str, list[dict]]]:
                     per_city[policy] = eps
     if not out:
         raise ValueError(f"no report.json under {', '.join(map(str, folders))}")
-    return out
+    return {suite: out[suite] for suite in SUITES if suite in out}
 
 
 def _scores(eps: list[dict], key: str = "return") -> np.ndarray:
@@ -62,7 +71,8 @@ def _scores(eps: list[dict], key: str = "return") -> np.ndarray:
 def pooled_table(
     folders: list[Path], prefix: str, reference: str, baseline: str
 ) -> tuple[str, int]:
-    """The markdown table of the pooled method per city, and the number of seeds pooled."""
+    """The markdown table of the pooled method per city (and over every suite of two or more
+    cities, each weighted equally), and the number of seeds pooled."""
     rows = [
         f"| city | seeds | score | score - {reference} [95 % CI] | excludes 0 | goal rate | "
         f"{reference} goal rate | cruise spacing [m] | gap closed ({baseline} = 0, "
@@ -70,37 +80,89 @@ def pooled_table(
         "|---|---:|---:|---|---|---:|---:|---:|---|",
     ]
     n_seeds = 0
-    for city, policies in _episodes(folders).items():
-        runs = sorted(p for p in policies if p.startswith(prefix))
-        if not runs or reference not in policies:
-            continue
-        n_seeds = max(n_seeds, len(runs))
-        seeds = [e["seed"] for e in policies[reference]]
-        for p in runs:
-            if [e["seed"] for e in policies[p]] != seeds:
-                raise ValueError(f"{city}: {p!r} flew other episodes than {reference!r}")
-        method = np.stack([_scores(policies[p]) for p in runs])
-        ref = _scores(policies[reference])[None, :]
-        diff, _ = paired_difference(method, ref)
-        goal = np.mean([[e["success"] for e in policies[p]] for p in runs])
-        ref_goal = np.mean([e["success"] for e in policies[reference]])
-        spacing = np.nanmean([[e["cruise_spacing_m"] for e in policies[p]] for p in runs])
-        gap = "n/a"
-        if baseline in policies:
-            base = _scores(policies[baseline])
-            size = float(ref.mean() - base.mean())
-            if abs(size) >= 0.01:
-                g = gap_closed(method, base, ref[0])
-                gap = f"{g.value:.2f} [{g.low:.2f}, {g.high:.2f}]"
-            else:
-                gap = f"n/a (gap {size:+.3f})"
-        sign = "above" if diff.low > 0 else "below" if diff.high < 0 else "no"
-        rows.append(
-            f"| {city} | {len(runs)} | {method.mean():.3f} | {diff.value:+.3f} "
-            f"[{diff.low:+.3f}, {diff.high:+.3f}] | {sign} | {goal:.2f} | {ref_goal:.2f} | "
-            f"{spacing:.1f} | {gap} |"
-        )
+    for suite, cities in _episodes(folders).items():
+        pooled = []
+        for city, policies in cities.items():
+            row = _city_row(city, policies, prefix, reference, baseline)
+            if row is not None:
+                rows.append(row[0])
+                pooled.append(row[1])
+        n_seeds = max([n_seeds, *(len(p.runs) for p in pooled)])
+        if len(pooled) >= 2:
+            rows.append(_suite_row(suite, pooled))
     return "\n".join(rows), n_seeds
+
+
+@dataclass(frozen=True)
+class _Pooled:
+    """One city's pooled figures: the method's seeds, score matrices and means."""
+
+    city: str
+    runs: tuple[str, ...]
+    method: np.ndarray  # (runs, episodes)
+    reference: np.ndarray  # (1, episodes)
+    goal: float
+    reference_goal: float
+    spacing: float
+
+
+def _suite_row(suite: str, pooled: list[_Pooled]) -> str:
+    """The row over every city of ``suite``, each weighted equally."""
+    runs = pooled[0].runs
+    for p in pooled:
+        if p.runs != runs:
+            raise ValueError(
+                f"{suite}: {p.city} pools the seeds {list(p.runs)} and {pooled[0].city} "
+                f"{list(runs)}: a suite row needs the same seeds in every city"
+            )
+    diff = suite_paired_difference([p.method for p in pooled], [p.reference for p in pooled])
+    sign = "above" if diff.low > 0 else "below" if diff.high < 0 else "no"
+    score = np.mean([p.method.mean() for p in pooled])
+    goal = np.mean([p.goal for p in pooled])
+    ref_goal = np.mean([p.reference_goal for p in pooled])
+    spacing = np.mean([p.spacing for p in pooled])
+    return (
+        f"| {suite}: {ALL_CITIES} | {len(runs)} | {score:.3f} | {diff.value:+.3f} "
+        f"[{diff.low:+.3f}, {diff.high:+.3f}] | {sign} | {goal:.2f} | {ref_goal:.2f} | "
+        f"{spacing:.1f} | n/a |"
+    )
+
+
+def _city_row(
+    city: str, policies: dict[str, list[dict]], prefix: str, reference: str, baseline: str
+) -> tuple[str, _Pooled] | None:
+    """The table row of one city and its pooled figures (None without the method or the
+    reference)."""
+    runs = sorted(p for p in policies if p.startswith(prefix))
+    if not runs or reference not in policies:
+        return None
+    seeds = [e["seed"] for e in policies[reference]]
+    for p in runs:
+        if [e["seed"] for e in policies[p]] != seeds:
+            raise ValueError(f"{city}: {p!r} flew other episodes than {reference!r}")
+    method = np.stack([_scores(policies[p]) for p in runs])
+    ref = _scores(policies[reference])[None, :]
+    diff, _ = paired_difference(method, ref)
+    goal = np.mean([[e["success"] for e in policies[p]] for p in runs])
+    ref_goal = np.mean([e["success"] for e in policies[reference]])
+    spacing = np.nanmean([[e["cruise_spacing_m"] for e in policies[p]] for p in runs])
+    gap = "n/a"
+    if baseline in policies:
+        base = _scores(policies[baseline])
+        size = float(ref.mean() - base.mean())
+        if abs(size) >= 0.01:
+            g = gap_closed(method, base, ref[0])
+            gap = f"{g.value:.2f} [{g.low:.2f}, {g.high:.2f}]"
+        else:
+            gap = f"n/a (gap {size:+.3f})"
+    sign = "above" if diff.low > 0 else "below" if diff.high < 0 else "no"
+    row = (
+        f"| {city} | {len(runs)} | {method.mean():.3f} | {diff.value:+.3f} "
+        f"[{diff.low:+.3f}, {diff.high:+.3f}] | {sign} | {goal:.2f} | {ref_goal:.2f} | "
+        f"{spacing:.1f} | {gap} |"
+    )
+    pooled = _Pooled(city, tuple(runs), method, ref, float(goal), float(ref_goal), float(spacing))
+    return row, pooled
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,8 +17,10 @@ from coopnav_env.training.cli import main
 from coopnav_env.training.envs import EVAL_SEED_START
 from coopnav_env.training.evaluate import evaluate
 from coopnav_env.training.suite import (
+    ALL_CITIES,
     PER_CITY_RULE,
     TUNING_SEED_START,
+    Comparison,
     evaluate_suite,
 )
 
@@ -100,6 +102,53 @@ def test_the_per_city_rule_is_the_best_preset_on_tuning_episodes(one_family, tmp
     assert summary["comparisons"][0]["policy"] == "column"
     table = (tmp_path / "out" / "comparison.md").read_text()
     assert f"| {one_family.name} | column | {d.value:+.3f} [" in table
+    # over a suite of one city, the suite-level row is that city's row
+    (whole,) = result.suite_comparisons
+    assert whole == Comparison(ALL_CITIES, "column", PER_CITY_RULE, d, *_goals(comp))
+    assert summary["suite_comparisons"][0]["city"] == ALL_CITIES
+    assert f"| {ALL_CITIES} | column | {d.value:+.3f} [{d.low:+.3f}, {d.high:+.3f}] |" in table
+
+
+def _goals(c) -> tuple[float, float]:
+    return c.goal_rate, c.reference_goal_rate
+
+
+def test_the_suite_row_weighs_every_city_equally(monkeypatch, tmp_path: Path):
+    cities = (next(c for c in FAMILY_SUITE if c.city == "family:courtyards"), GRID_SUITE[0])
+    monkeypatch.setattr(suite_module, "suite_cities", lambda name: cities)
+    result = evaluate_suite(
+        ["column", "high_wide_column"],
+        [EVAL_SEED_START + i for i in (0, 5, 9)],
+        "families",
+        tmp_path / "out",
+        compare="high_wide_column",
+    )
+    per_city = {c.city: c for c in result.comparisons}
+    assert sorted(per_city) == sorted(c.name for c in cities)
+    (whole,) = result.suite_comparisons
+    assert (whole.city, whole.policy, whole.reference) == (ALL_CITIES, "column", "high_wide_column")
+    values = [c.score_difference.value for c in per_city.values()]
+    d = whole.score_difference
+    assert d.value == pytest.approx(float(np.mean(values)), abs=1e-12)
+    assert d.low <= d.value <= d.high
+    assert whole.goal_rate == pytest.approx(np.mean([c.goal_rate for c in per_city.values()]))
+    assert whole.reference_goal_rate == pytest.approx(
+        np.mean([c.reference_goal_rate for c in per_city.values()])
+    )
+    table = (tmp_path / "out" / "comparison.md").read_text().splitlines()
+    # the suite row follows the city rows
+    assert table[-1].startswith(f"| {ALL_CITIES} | column | {d.value:+.3f} [{d.low:+.3f}, ")
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["suite_comparisons"] == [
+        {
+            "city": ALL_CITIES,
+            "policy": "column",
+            "reference": "high_wide_column",
+            "score_difference": d.as_dict(),
+            "goal_rate": whole.goal_rate,
+            "reference_goal_rate": whole.reference_goal_rate,
+        }
+    ]
 
 
 @pytest.mark.parametrize(

@@ -18,8 +18,8 @@ def _episodes(returns, success=True) -> list[dict]:
     ]
 
 
-def _report(folder: Path, city: str, episodes: dict[str, list[dict]]) -> None:
-    d = folder / "real" / city
+def _report(folder: Path, city: str, episodes: dict[str, list[dict]], suite: str = "real") -> None:
+    d = folder / suite / city
     d.mkdir(parents=True)
     (d / "report.json").write_text(json.dumps({"episodes": episodes}))
 
@@ -45,3 +45,36 @@ def test_reports_whose_shared_rows_differ_are_refused(tmp_path) -> None:
     _report(tmp_path / "b", "x", {"rule": _episodes([1.0, 1.3]), "m_s1": _episodes([1.2, 1.2])})
     with pytest.raises(ValueError, match="episodes of 'rule' differ"):
         pooled_table([tmp_path / "a", tmp_path / "b"], "m_s", "rule", "base")
+
+
+def test_a_suite_of_several_cities_gets_one_row_weighing_them_equally(tmp_path) -> None:
+    # city x: 4 episodes, method - rule = +0.4 each; city y: 2 episodes, -0.2 each. The suite
+    # row: (0.4 - 0.2) / 2 = +0.100 (the episode-weighted mean would be +0.200); no spread
+    # within a city, so the interval is the point. A suite of one city gets no such row.
+    _report(tmp_path / "a", "x", {"rule": _episodes([1.0] * 4), "m_s0": _episodes([1.4] * 4)})
+    _report(tmp_path / "a", "y", {"rule": _episodes([1.0] * 2), "m_s0": _episodes([0.8] * 2)})
+    _report(
+        tmp_path / "a",
+        "g",
+        {"rule": _episodes([1.0]), "m_s0": _episodes([1.0])},
+        suite="grid",
+    )
+    table, n = pooled_table([tmp_path / "a"], "m_s", "rule", "base")
+    lines = table.splitlines()
+    assert n == 1 and [line.split("|")[1].strip() for line in lines[2:]] == [
+        "g",
+        "x",
+        "y",
+        "real: all cities (equal weight)",
+    ]
+    row = lines[-1].split("|")
+    assert row[2].strip() == "1" and row[3].strip() == "1.100"  # (1.4 + 0.8) / 2
+    assert row[4].strip() == "+0.100 [+0.100, +0.100]" and row[5].strip() == "above"
+    assert row[6].strip() == "1.00" and row[9].strip() == "n/a"
+
+
+def test_a_suite_row_needs_the_same_seeds_in_every_city(tmp_path) -> None:
+    _report(tmp_path / "a", "x", {"rule": _episodes([1.0]), "m_s0": _episodes([1.2])})
+    _report(tmp_path / "a", "y", {"rule": _episodes([1.0]), "m_s1": _episodes([1.2])})
+    with pytest.raises(ValueError, match="same seeds in every city"):
+        pooled_table([tmp_path / "a"], "m_s", "rule", "base")
