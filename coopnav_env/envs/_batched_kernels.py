@@ -22,8 +22,9 @@ chunks on threads): its arithmetic does not depend on ``K`` or on the other swar
 The kernels take a few typed records (named tuples of arrays and numbers, built where their
 arrays are allocated): each kernel's settings (:class:`MotionSettings`,
 :class:`NavigationSettings`, :class:`ObservationSettings`), the copies' :class:`Cities` and
-:class:`Routes`, the epoch's :class:`SkyRows`, the arrays of the step so far
-(:class:`Moved`, :class:`NavigationInputs`, :class:`Navigated`) and the arrays they write.
+:class:`Routes`, the epoch's :class:`SkyRows`, the arrays of the step that a kernel reads
+(:class:`Moved`, :class:`NavigationInputs`, :class:`ObservationInputs`) and those it writes
+(:class:`Moved`, :class:`Navigated`, :class:`Observed`).
 
 Arrays whose size depends on the swarm are padded: box buildings ``(K, B_max, 3)`` with
 counts ``n_b``; a swarm whose city is extruded polygons (a file or family city) has none, and
@@ -222,6 +223,29 @@ class ObservationSettings(NamedTuple):
     high: np.ndarray  # (obs_dim,)
 
 
+class ObservationInputs(NamedTuple):
+    """The arrays of a step that :func:`observations_infos` reads (of :class:`Moved` and
+    :class:`Navigated`, and the skyline)."""
+
+    pos: np.ndarray  # (K, N, 3) true positions after the step
+    vel: np.ndarray  # (K, N, 3)
+    rel: np.ndarray  # (K, N, N, 3) measured relative positions (ENU)
+    avail: np.ndarray  # (K, N, N) bool
+    nav_pos: np.ndarray  # (K, N, 3) estimates
+    nav_cov: np.ndarray  # (K, N, 3, 3)
+    co_pos: np.ndarray  # (K, N, 3) cooperative estimates
+    sa_pos: np.ndarray  # (K, N, 3) standalone estimates
+    n_sats: np.ndarray  # (K, N) int64 satellites received
+    n_swarm: np.ndarray  # (K, N) int64 satellites received by the swarm
+    n_sv: np.ndarray  # (K,) int64 satellites above the mask
+    next_wp: np.ndarray  # (K, N) int64 next waypoints after the step
+    source: np.ndarray  # (K, N) int64 estimate sources
+    walls: np.ndarray  # (K, N, A) wall distances
+    sky_deg: np.ndarray  # (K, N, A) skyline elevations
+    steps: np.ndarray  # (K,) steps of each episode so far
+    obs_params: np.ndarray  # (K, 9) each copy's observation scales
+
+
 class Observed(NamedTuple):
     """What :func:`observations_infos` writes."""
 
@@ -229,7 +253,7 @@ class Observed(NamedTuple):
     floats: np.ndarray  # (K, 8, N) the infos' real numbers
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _polygons_of(k, cities):
     """Copy ``k``'s extruded polygon buildings from ``cities``: whether it has them (else
     boxes), and its ``edges (n_e, 4), edge_start (n_p + 1,), heights (n_p,), bbox (n_p, 4)``
@@ -244,7 +268,7 @@ def _polygons_of(k, cities):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _boxes_of(k, cities):
     """Copy ``k``'s box buildings ``lo, hi (n_b, 3)`` from ``cities``."""
     nb = cities.n_b[k]
@@ -254,7 +278,7 @@ def _boxes_of(k, cities):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
     n = pos0.shape[1]
     motion = settings.motion
@@ -336,7 +360,7 @@ def motion_sight_relative(k0, k1, settings, cities, sky, pos0, vel0, cmd, z, out
     """Motion, line of sight and relative sensing of the copies ``k0 <= k < k1`` (see the
     module docstring), written into ``out``.
 
-    Each record may come as a plain tuple of its fields (as ``_fused._run_chunks`` passes it).
+    Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
 
     Parameters
     ----------
@@ -360,7 +384,7 @@ def motion_sight_relative(k0, k1, settings, cities, sky, pos0, vel0, cmd, z, out
         _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
     n = inputs.rx_ecef.shape[1]
     row = sky.row[k]
@@ -539,7 +563,7 @@ def navigation_reward_sensors(k0, k1, settings, cities, routes, sky, moved, inpu
     """Navigation, reward terms and skyline / wall sensors of the copies ``k0 <= k < k1``
     (module docstring), written into ``out``.
 
-    Each record may come as a plain tuple of its fields (as ``_fused._run_chunks`` passes it).
+    Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
 
     Parameters
     ----------
@@ -564,42 +588,47 @@ def navigation_reward_sensors(k0, k1, settings, cities, routes, sky, moved, inpu
         _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out)
 
 
-@njit(cache=True)
-def _observe_one(k, settings, routes, n_sv, moved, nav, sky_deg, steps, obs_params, out):
+@njit(cache=True, inline="always")
+def _observe_one(k, settings, routes, inputs, out):
     nr = routes.n_route[k]
     out.obs[k] = _env_kernels.observation_rows(
-        nav.nav_pos[k],
+        inputs.nav_pos[k],
         routes.goal[k],
-        moved.vel[k],
-        nav.nav_cov[k],
-        nav.n_sats[k],
-        nav.n_swarm[k],
-        max(n_sv[k], 1),
-        sky_deg[k],
-        moved.rel[k],
-        moved.avail[k],
+        inputs.vel[k],
+        inputs.nav_cov[k],
+        inputs.n_sats[k],
+        inputs.n_swarm[k],
+        max(inputs.n_sv[k], 1),
+        inputs.sky_deg[k],
+        inputs.rel[k],
+        inputs.avail[k],
         np.ascontiguousarray(routes.route[k, :nr]),
         np.ascontiguousarray(routes.tail[k, :nr]),
-        nav.next_wp[k],
-        nav.source[k],
-        nav.walls[k],
-        steps[k],
-        obs_params[k],
+        inputs.next_wp[k],
+        inputs.source[k],
+        inputs.walls[k],
+        inputs.steps[k],
+        inputs.obs_params[k],
         settings.k_neigh,
         settings.low,
         settings.high,
     )
     out.floats[k] = _env_kernels.info_floats(
-        moved.pos[k], nav.nav_pos[k], nav.co_pos[k], nav.sa_pos[k], nav.nav_cov[k], routes.goal[k]
+        inputs.pos[k],
+        inputs.nav_pos[k],
+        inputs.co_pos[k],
+        inputs.sa_pos[k],
+        inputs.nav_cov[k],
+        routes.goal[k],
     )
 
 
 @njit(cache=True, nogil=True)
-def observations_infos(k0, k1, settings, routes, n_sv, moved, nav, sky_deg, steps, obs_params, out):
+def observations_infos(k0, k1, settings, routes, inputs, out):
     """Observations and the infos' real numbers of the copies ``k0 <= k < k1``, written into
     ``out``.
 
-    Each record may come as a plain tuple of its fields (as ``_fused._run_chunks`` passes it).
+    Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
 
     Parameters
     ----------
@@ -607,25 +636,14 @@ def observations_infos(k0, k1, settings, routes, n_sv, moved, nav, sky_deg, step
         The copies ``k0 <= k < k1`` of the batch.
     settings : ObservationSettings
     routes : Routes
-    n_sv : ndarray, shape (K,)
-        Satellites above the mask.
-    moved : Moved
-        The swarms after :func:`motion_sight_relative`.
-    nav : Navigated
-        The navigation after :func:`navigation_reward_sensors`.
-    sky_deg : ndarray, shape (K, N, A)
-        Skyline elevations.
-    steps : ndarray, shape (K,)
-        Steps of each episode so far.
-    obs_params : ndarray, shape (K, 9)
-        Each copy's observation scales.
+    inputs : ObservationInputs
     out : Observed
         The arrays written.
     """
     settings, routes = ObservationSettings(*settings), Routes(*routes)
-    moved, nav, out = Moved(*moved), Navigated(*nav), Observed(*out)
+    inputs, out = ObservationInputs(*inputs), Observed(*out)
     for k in range(k0, k1):
-        _observe_one(k, settings, routes, n_sv, moved, nav, sky_deg, steps, obs_params, out)
+        _observe_one(k, settings, routes, inputs, out)
 
 
 @njit(cache=True, nogil=True)

@@ -145,10 +145,14 @@ class FusedStep:
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         los_off[1:] = (n * n_sv).cumsum()
         tab = self.skies
-        sky = _batched_kernels.SkyRows(
-            row, n_sv, n_up, los_off, tab.sv, tab.system, tab.up, tab.order, tab.cot, tab.hdir
+        # the records go to the kernels as plain tuples (_run_chunks), each made once here
+        sky = tuple(
+            _batched_kernels.SkyRows(
+                row, n_sv, n_up, los_off, tab.sv, tab.system, tab.up, tab.order, tab.cot, tab.hdir
+            )
         )
-        moved = _batched_kernels.Moved(
+        cities, routes = tuple(st.cities), tuple(st.routes)
+        moved_arrays = _batched_kernels.Moved(
             pos=np.empty((n_copies, n, 3)),
             vel=np.empty((n_copies, n, 3)),
             hit=np.empty((n_copies, n), dtype=bool),
@@ -159,6 +163,7 @@ class FusedStep:
             avail=np.empty((n_copies, n, n), dtype=bool),
             n_rx=np.empty((n_copies, n), dtype=np.int64),
         )
+        moved = tuple(moved_arrays)
         motion_settings, nav_settings = st.motion_settings, st.navigation_settings
         if cold:
             motion_settings = st.first_motion_settings
@@ -166,8 +171,8 @@ class FusedStep:
         _run_chunks(
             _batched_kernels.motion_sight_relative,
             n_copies,
-            motion_settings,
-            st.cities,
+            tuple(motion_settings),
+            cities,
             sky,
             st.pos,
             st.vel,
@@ -175,7 +180,7 @@ class FusedStep:
             z,
             moved,
         )
-        pos1, vel1, hit, sep, los_flat, rel, _var, avail, n_rx = moved
+        pos1, vel1, hit, sep, los_flat, rel, _var, avail, n_rx = moved_arrays
         if not cold and cfg.crash_free_steps > 0:
             # the crash-free start (UrbanCanyonEnv._step_arrays): a UAV stopped by a wall in
             # the episode's first steps is not a collision, and the episode goes on
@@ -195,16 +200,16 @@ class FusedStep:
         inputs = _batched_kernels.NavigationInputs(
             st.pos, rx_ecef, pred, x0, st.nav_cov, rel_ecef, st.wp, st.clock
         )
-        outputs = _batched_kernels.navigated(n_copies, n, envs[0]._rays.shape[0])
+        outputs = tuple(_batched_kernels.navigated(n_copies, n, envs[0]._rays.shape[0]))
         _run_chunks(
             _batched_kernels.navigation_reward_sensors,
             n_copies,
-            nav_settings,
-            st.cities,
-            st.routes,
+            tuple(nav_settings),
+            cities,
+            routes,
             sky,
             moved,
-            inputs,
+            tuple(inputs),
             z,
             outputs,
         )
@@ -230,7 +235,7 @@ class FusedStep:
             in_goal,
             ends,
             tan_max,
-            _walls,
+            walls,
             bad_geometry,
         ) = outputs
         if bad_geometry.any():
@@ -247,18 +252,32 @@ class FusedStep:
             obs=np.empty((n_copies, n, cfg.obs_base_dim), dtype=np.float32),
             floats=np.empty((n_copies, 8, n)),
         )
-        _run_chunks(
-            _batched_kernels.observations_infos,
-            n_copies,
-            st.observation_settings,
-            st.routes,
+        obs_inputs = _batched_kernels.ObservationInputs(
+            pos1,
+            vel1,
+            rel,
+            avail,
+            nav_pos,
+            nav_cov,
+            co_pos,
+            sa_pos,
+            n_sats,
+            n_swarm,
             n_sv,
-            moved,
-            outputs,
+            wp,
+            source,
+            walls,
             sky_deg,
             steps,
             st.obs_params,
-            observed,
+        )
+        _run_chunks(
+            _batched_kernels.observations_infos,
+            n_copies,
+            tuple(st.observation_settings),
+            routes,
+            tuple(obs_inputs),
+            tuple(observed),
         )
         obs, floats = observed
         if cfg.obs_agent_index:  # each UAV's one-hot index after the kernel's columns
@@ -509,11 +528,10 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     OpenMP threading layer numba picks by default competes with PyTorch's own OpenMP pool in
     one process (a trainer's), which slowed both severalfold in the benchmark.
 
-    The records among ``args`` (the named tuples of :mod:`coopnav_env.envs._batched_kernels`)
-    go to the kernel as plain tuples of their fields, which it names again: numba takes a
-    plain tuple in about half the time of a named one.
+    The records of :mod:`coopnav_env.envs._batched_kernels` come in ``args`` as plain tuples
+    of their fields (``tuple(record)``), which the kernel names again: numba takes a plain
+    tuple in about half the time of a named one.
     """
-    args = [tuple(a) if isinstance(a, tuple) else a for a in args]
     threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
     if threads == 1:
         kernel(0, n_copies, *args)
