@@ -157,7 +157,7 @@ class NavigationInputs(NamedTuple):
 
 
 class Navigated(NamedTuple):
-    """What :func:`navigation_reward_sensors` writes (:func:`navigated` allocates it)."""
+    """What :func:`navigation_reward_sensors` writes (:func:`navigation_outputs` allocates it)."""
 
     sa_status: np.ndarray  # (K, N) int64
     n_iter: np.ndarray  # (K, 2) int64 standalone, cooperative iterations
@@ -184,7 +184,7 @@ class Navigated(NamedTuple):
     bad_geometry: np.ndarray  # (K,) bool a receiver at the Earth's centre or on a satellite
 
 
-def navigated(n_copies: int, n: int, n_az: int) -> Navigated:
+def navigation_outputs(n_copies: int, n: int, n_az: int) -> Navigated:
     """The arrays :func:`navigation_reward_sensors` fills, for ``n_copies`` swarms of ``n``
     UAVs with ``n_az`` sensor rays."""
     k, i64 = n_copies, np.int64

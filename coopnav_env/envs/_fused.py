@@ -200,7 +200,7 @@ class FusedStep:
         inputs = _batched_kernels.NavigationInputs(
             st.pos, rx_ecef, pred, x0, st.nav_cov, rel_ecef, st.wp, st.clock
         )
-        outputs = tuple(_batched_kernels.navigated(n_copies, n, envs[0]._rays.shape[0]))
+        outputs = tuple(_batched_kernels.navigation_outputs(n_copies, n, envs[0]._rays.shape[0]))
         _run_chunks(
             _batched_kernels.navigation_reward_sensors,
             n_copies,
