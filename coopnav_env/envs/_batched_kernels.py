@@ -14,23 +14,33 @@ rotations and the skyline's ``arctan``, which stay numpy calls on ``(K, ...)`` a
 
 Each swarm ``k`` runs the kernels of the one-swarm step (:mod:`coopnav_env.sim._kernels`,
 :mod:`coopnav_env.gnss._kernels`, :mod:`coopnav_env.envs._kernels`) on its own slices, with
-its own random draws, in a ``prange`` loop: its arithmetic does not depend on ``K`` or on the
-other swarms, so copy ``k`` of a batch is bit for bit a separate environment (the tests of
+its own random draws, in a loop over a chunk of the copies (``_fused._run_chunks`` runs the
+chunks on threads): its arithmetic does not depend on ``K`` or on the other swarms, so copy
+``k`` of a batch is bit for bit a separate environment (the tests of
 ``tests/envs/test_batched.py`` and ``tests/envs/test_batched_polygons.py`` compare them).
+
+The kernels take a few typed records (named tuples of arrays and numbers, built where their
+arrays are allocated): each kernel's settings (:class:`MotionSettings`,
+:class:`NavigationSettings`, :class:`ObservationSettings`), the copies' :class:`Cities` and
+:class:`Routes`, the epoch's :class:`SkyRows`, the arrays of the step that a kernel reads
+(:class:`Moved`, :class:`NavigationInputs`, :class:`ObservationInputs`) and those it writes
+(:class:`Moved`, :class:`Navigated`, :class:`Observed`).
 
 Arrays whose size depends on the swarm are padded: box buildings ``(K, B_max, 3)`` with
 counts ``n_b``; a swarm whose city is extruded polygons (a file or family city) has none, and
-its polygons come in ``polygons`` (edges ``(K, E_max, 4)``, ring offsets, roofs and bounding
-boxes with per-swarm counts, :func:`_polygons_of`), traced by the kernels of
+its polygons come in :class:`Cities` too (edges ``(K, E_max, 4)``, ring offsets, roofs and
+bounding boxes with per-swarm counts, :func:`_polygons_of`), traced by the kernels of
 :mod:`coopnav_env.sim._polygon_kernels` in the order of ``UrbanWorld.step`` (swept collisions
 after the motion, then the separation test again; line of sight; the skyline and walls).
 Routes are ``(K, R_max, 2)`` with counts ``n_route``; the satellites come from a table of
-skies ``(T, S_max, ...)`` with the row of each swarm's epoch ``sky_row`` and its count
+skies ``(T, S_max, ...)`` with the row of each swarm's epoch ``row`` and its count
 ``n_sv``; the line-of-sight matrices go into one flat buffer at offsets ``los_off`` (each
 copy's ``(N, S)`` block contiguous).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -41,62 +51,240 @@ from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import _polygon_kernels as _poly_kernels
 
 
-@njit(cache=True)
-def _polygons_of(k, polygons):
-    """Copy ``k``'s extruded polygon buildings from the padded ``polygons``: whether it has
-    them (else boxes), and its ``edges (n_e, 4), edge_start (n_p + 1,), heights (n_p,),
-    bbox (n_p, 4)`` as :mod:`coopnav_env.sim._polygon_kernels` takes them."""
-    is_poly, edges, edge_start, heights, bbox, n_poly, n_edge = polygons
-    npb = n_poly[k]
-    return (
-        is_poly[k],
-        np.ascontiguousarray(edges[k, : n_edge[k]]),
-        np.ascontiguousarray(edge_start[k, : npb + 1]),
-        np.ascontiguousarray(heights[k, :npb]),
-        np.ascontiguousarray(bbox[k, :npb]),
+class Cities(NamedTuple):
+    """Each copy's fence and buildings, padded to the largest copy (reloaded at its resets).
+
+    A copy of box buildings has ``n_b`` boxes and ``is_poly`` False; a copy of extruded
+    polygons has no boxes, and its polygons are ``edges (n_edge, 4)``, ring offsets
+    ``edge_start (n_poly + 1,)``, roofs ``heights (n_poly,)`` and bounding boxes ``bbox
+    (n_poly, 4)`` (:func:`_polygons_of`).
+    """
+
+    fence_lo: np.ndarray  # (K, 2) the fence's low corner, less the UAV radius
+    fence_hi: np.ndarray  # (K, 2)
+    b_lo: np.ndarray  # (K, B_max, 3) box buildings' low corners
+    b_hi: np.ndarray  # (K, B_max, 3)
+    n_b: np.ndarray  # (K,) int64 boxes of each copy
+    is_poly: np.ndarray  # (K,) bool: the copy's buildings are extruded polygons
+    edges: np.ndarray  # (K, E_max, 4) polygon edges (x0, y0, x1, y1)
+    edge_start: np.ndarray  # (K, P_max + 1) int64 first edge of each polygon
+    heights: np.ndarray  # (K, P_max) roof heights
+    bbox: np.ndarray  # (K, P_max, 4) polygon bounding boxes
+    n_poly: np.ndarray  # (K,) int64 polygons of each copy
+    n_edge: np.ndarray  # (K,) int64 edges of each copy
+
+
+class Routes(NamedTuple):
+    """Each copy's route and goal, padded to the longest route (reloaded at its resets)."""
+
+    route: np.ndarray  # (K, R_max, 2) waypoints
+    tail: np.ndarray  # (K, R_max) route length after each waypoint
+    n_route: np.ndarray  # (K,) int64 waypoints of each copy
+    goal: np.ndarray  # (K, 3)
+
+
+class SkyRows(NamedTuple):
+    """The satellites of each copy's epoch: its row of a table of skies ``(T, S_max, ...)``,
+    and where its line-of-sight block ``(N, n_sv)`` lies in the flat buffer."""
+
+    row: np.ndarray  # (K,) int64 row of each copy's sky in the table
+    n_sv: np.ndarray  # (K,) int64 satellites above the mask
+    n_up: np.ndarray  # (K,) int64 rising satellites (line-of-sight order)
+    los_off: np.ndarray  # (K + 1,) int64 offsets of the line-of-sight blocks
+    sv: np.ndarray  # (T, S_max, 3) satellite positions in ECEF
+    system: np.ndarray  # (T, S_max) int64 constellation index (sorted)
+    up: np.ndarray  # (T, S_max) bool
+    order: np.ndarray  # (T, S_max) int64
+    cot: np.ndarray  # (T, S_max)
+    hdir: np.ndarray  # (T, S_max, 2)
+
+
+class MotionSettings(NamedTuple):
+    """The configuration of :func:`motion_sight_relative`."""
+
+    motion: np.ndarray  # (7,) max speed, max dv, dt, altitude min, max, radius, min separation
+    sensing: np.ndarray  # (3,) relative sensing sigma0, sigma per metre, max range
+    moving: bool  # False at an episode's first epoch (the swarm stays where it starts)
+
+
+class Moved(NamedTuple):
+    """What :func:`motion_sight_relative` writes (the swarms after their motion)."""
+
+    pos: np.ndarray  # (K, N, 3) true positions after the step
+    vel: np.ndarray  # (K, N, 3)
+    hit: np.ndarray  # (K, N) bool collided
+    sep: np.ndarray  # (K, N) bool separation violated
+    los_flat: np.ndarray  # (los_off[K],) bool line of sight (= the received satellites)
+    rel: np.ndarray  # (K, N, N, 3) measured relative positions (ENU)
+    var: np.ndarray  # (K, N, N)
+    avail: np.ndarray  # (K, N, N) bool
+    n_rx: np.ndarray  # (K, N) int64 satellites in line of sight of each UAV
+
+
+class NavigationSettings(NamedTuple):
+    """The configuration of :func:`navigation_reward_sensors`."""
+
+    shared: bool  # one shared centroid per swarm (else one per UAV)
+    model: np.ndarray  # (3,) sigma URE, troposphere (1/0), differential (1/0)
+    iono: np.ndarray  # (n_sys_all,)
+    n_sys: int  # clock states: the systems flown
+    ddt: bool  # double-difference transfer (else single)
+    max_iter: int
+    radius: np.ndarray  # (3,) check (1/0), min, max plausible radius
+    gate: np.ndarray  # (2,) on (1/0), max sigma^2
+    origin: np.ndarray  # (3,) ECEF origin of the ENU frame
+    rot: np.ndarray  # (3, 3) ENU rotation
+    dr_var: float  # dead-reckoning variance of a step (0 at an episode's first epoch)
+    reach_m: float  # waypoint reach
+    reward_mode: int  # 0: distance nav term, 1: sigma nav term, 2: events only
+    reward_params: np.ndarray
+    rays: np.ndarray  # (A, 2) sensor ray directions
+    wgs: np.ndarray  # (5,) WGS84 a, b, f, e2, e'2
+    n_bowring: int
+
+
+class NavigationInputs(NamedTuple):
+    """The arrays of a step that :func:`navigation_reward_sensors` reads besides the motion."""
+
+    pos0: np.ndarray  # (K, N, 3) true positions before the step
+    rx_ecef: np.ndarray  # (K, N, 3) true positions after it, ECEF
+    pred: np.ndarray  # (K, N, 3) ENU predicted positions
+    x0: np.ndarray  # (K, N, 3) the same in ECEF
+    prev_cov: np.ndarray  # (K, N, 3, 3) covariances of the previous estimates
+    rel_ecef: np.ndarray  # (K, N, N, 3) relative positions in ECEF ((K, 1, N, 3): shared)
+    next_wp: np.ndarray  # (K, N) int64 next waypoints before the step
+    clock: np.ndarray  # (K, N, n_sys_all) receiver clock biases [m]
+
+
+class Navigated(NamedTuple):
+    """What :func:`navigation_reward_sensors` writes (:func:`navigation_outputs` allocates it)."""
+
+    sa_status: np.ndarray  # (K, N) int64
+    n_iter: np.ndarray  # (K, 2) int64 standalone, cooperative iterations
+    sa_pos: np.ndarray  # (K, N, 3)
+    sa_cov: np.ndarray  # (K, N, 3, 3)
+    co_pos: np.ndarray  # (K, N, 3)
+    co_cov: np.ndarray  # (K, N, 3, 3)
+    co_status: np.ndarray  # (K, N) int64
+    source: np.ndarray  # (K, N) int64
+    nav_pos: np.ndarray  # (K, N, 3)
+    nav_cov: np.ndarray  # (K, N, 3, 3)
+    sa_rej: np.ndarray  # (K, N) bool
+    co_rej: np.ndarray  # (K, N) bool
+    next_wp: np.ndarray  # (K, N) int64
+    n_swarm: np.ndarray  # (K, N) int64
+    n_sats: np.ndarray  # (K, N) int64
+    centroid_uav: np.ndarray  # (K,) int64 (-1: one centroid per UAV)
+    out_of_contact: np.ndarray  # (K, N) bool
+    terms: np.ndarray  # (K, 6, N) reward terms
+    in_goal: np.ndarray  # (K, N) bool
+    ends: np.ndarray  # (K, 2) bool crash, reached
+    tan_max: np.ndarray  # (K, N, A) skyline tangents
+    walls: np.ndarray  # (K, N, A)
+    bad_geometry: np.ndarray  # (K,) bool a receiver at the Earth's centre or on a satellite
+
+
+def navigation_outputs(n_copies: int, n: int, n_az: int) -> Navigated:
+    """The arrays :func:`navigation_reward_sensors` fills, for ``n_copies`` swarms of ``n``
+    UAVs with ``n_az`` sensor rays."""
+    k, i64 = n_copies, np.int64
+    return Navigated(
+        sa_status=np.empty((k, n), dtype=i64),
+        n_iter=np.empty((k, 2), dtype=i64),
+        sa_pos=np.empty((k, n, 3)),
+        sa_cov=np.empty((k, n, 3, 3)),
+        co_pos=np.empty((k, n, 3)),
+        co_cov=np.empty((k, n, 3, 3)),
+        co_status=np.empty((k, n), dtype=i64),
+        source=np.empty((k, n), dtype=i64),
+        nav_pos=np.empty((k, n, 3)),
+        nav_cov=np.empty((k, n, 3, 3)),
+        sa_rej=np.empty((k, n), dtype=bool),
+        co_rej=np.empty((k, n), dtype=bool),
+        next_wp=np.empty((k, n), dtype=i64),
+        n_swarm=np.empty((k, n), dtype=i64),
+        n_sats=np.empty((k, n), dtype=i64),
+        centroid_uav=np.empty(k, dtype=i64),
+        out_of_contact=np.empty((k, n), dtype=bool),
+        terms=np.empty((k, 6, n)),
+        in_goal=np.empty((k, n), dtype=bool),
+        ends=np.empty((k, 2), dtype=bool),
+        tan_max=np.empty((k, n, n_az)),
+        walls=np.empty((k, n, n_az)),
+        bad_geometry=np.zeros(k, dtype=bool),
     )
 
 
-@njit(cache=True)
-def _motion_one(
-    k,
-    pos0,
-    vel0,
-    cmd,
-    motion,
-    moving,
-    fence_lo,
-    fence_hi,
-    b_lo,
-    b_hi,
-    n_b,
-    polygons,
-    sky_row,
-    n_sv,
-    sky_up,
-    sky_order,
-    sky_cot,
-    sky_hdir,
-    n_up,
-    z,
-    sensing,
-    pos1,
-    vel1,
-    hit,
-    sep,
-    los_flat,
-    los_off,
-    rel,
-    var,
-    avail,
-    n_rx,
-):
+class ObservationSettings(NamedTuple):
+    """The configuration of :func:`observations_infos`."""
+
+    k_neigh: int  # neighbours observed
+    low: np.ndarray  # (obs_dim,) the observation space's bounds
+    high: np.ndarray  # (obs_dim,)
+
+
+class ObservationInputs(NamedTuple):
+    """The arrays of a step that :func:`observations_infos` reads (of :class:`Moved` and
+    :class:`Navigated`, and the skyline)."""
+
+    pos: np.ndarray  # (K, N, 3) true positions after the step
+    vel: np.ndarray  # (K, N, 3)
+    rel: np.ndarray  # (K, N, N, 3) measured relative positions (ENU)
+    avail: np.ndarray  # (K, N, N) bool
+    nav_pos: np.ndarray  # (K, N, 3) estimates
+    nav_cov: np.ndarray  # (K, N, 3, 3)
+    co_pos: np.ndarray  # (K, N, 3) cooperative estimates
+    sa_pos: np.ndarray  # (K, N, 3) standalone estimates
+    n_sats: np.ndarray  # (K, N) int64 satellites received
+    n_swarm: np.ndarray  # (K, N) int64 satellites received by the swarm
+    n_sv: np.ndarray  # (K,) int64 satellites above the mask
+    next_wp: np.ndarray  # (K, N) int64 next waypoints after the step
+    source: np.ndarray  # (K, N) int64 estimate sources
+    walls: np.ndarray  # (K, N, A) wall distances
+    sky_deg: np.ndarray  # (K, N, A) skyline elevations
+    steps: np.ndarray  # (K,) steps of each episode so far
+    obs_params: np.ndarray  # (K, 9) each copy's observation scales
+
+
+class Observed(NamedTuple):
+    """What :func:`observations_infos` writes."""
+
+    obs: np.ndarray  # (K, N, obs_dim) float32
+    floats: np.ndarray  # (K, 8, N) the infos' real numbers
+
+
+@njit(cache=True, inline="always")
+def _polygons_of(k, cities):
+    """Copy ``k``'s extruded polygon buildings from ``cities``: whether it has them (else
+    boxes), and its ``edges (n_e, 4), edge_start (n_p + 1,), heights (n_p,), bbox (n_p, 4)``
+    as :mod:`coopnav_env.sim._polygon_kernels` takes them."""
+    npb = cities.n_poly[k]
+    return (
+        cities.is_poly[k],
+        np.ascontiguousarray(cities.edges[k, : cities.n_edge[k]]),
+        np.ascontiguousarray(cities.edge_start[k, : npb + 1]),
+        np.ascontiguousarray(cities.heights[k, :npb]),
+        np.ascontiguousarray(cities.bbox[k, :npb]),
+    )
+
+
+@njit(cache=True, inline="always")
+def _boxes_of(k, cities):
+    """Copy ``k``'s box buildings ``lo, hi (n_b, 3)`` from ``cities``."""
+    nb = cities.n_b[k]
+    return (
+        np.ascontiguousarray(cities.b_lo[k, :nb]),
+        np.ascontiguousarray(cities.b_hi[k, :nb]),
+    )
+
+
+@njit(cache=True, inline="always")
+def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
     n = pos0.shape[1]
-    nb = n_b[k]
-    lo = np.ascontiguousarray(b_lo[k, :nb])
-    hi = np.ascontiguousarray(b_hi[k, :nb])
-    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, polygons)
-    if moving:
+    motion = settings.motion
+    lo, hi = _boxes_of(k, cities)
+    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, cities)
+    if settings.moving:
         p1, v1, h, s = _sim_kernels.world_motion(
             pos0[k],
             vel0[k],
@@ -106,8 +294,8 @@ def _motion_one(
             motion[2],
             motion[3],
             motion[4],
-            fence_lo[k],
-            fence_hi[k],
+            cities.fence_lo[k],
+            cities.fence_hi[k],
             lo,
             hi,
             motion[5],
@@ -128,31 +316,31 @@ def _motion_one(
         v1 = vel0[k].copy()
         h = np.zeros(n, dtype=np.bool_)
         s = np.zeros(n, dtype=np.bool_)
-    pos1[k] = p1
-    vel1[k] = v1
-    hit[k] = h
-    sep[k] = s
-    row = sky_row[k]
-    ns = n_sv[k]
-    nu = n_up[k]
-    up = np.ascontiguousarray(sky_up[row, :ns])
-    order = np.ascontiguousarray(sky_order[row, :nu])
-    cot = np.ascontiguousarray(sky_cot[row, :nu])
-    hdir = np.ascontiguousarray(sky_hdir[row, :nu])
+    out.pos[k] = p1
+    out.vel[k] = v1
+    out.hit[k] = h
+    out.sep[k] = s
+    row = sky.row[k]
+    ns = sky.n_sv[k]
+    nu = sky.n_up[k]
+    up = np.ascontiguousarray(sky.up[row, :ns])
+    order = np.ascontiguousarray(sky.order[row, :nu])
+    cot = np.ascontiguousarray(sky.cot[row, :nu])
+    hdir = np.ascontiguousarray(sky.hdir[row, :nu])
     if is_poly:
         vis = _poly_kernels.line_of_sight(
             p1, edges, edge_start, heights, bbox, up, order, cot, hdir
         )
     else:
         vis = _sim_kernels.line_of_sight(p1, lo, hi, up, order, cot, hdir)
-    off = los_off[k]
+    off = sky.los_off[k]
     for i in range(n):
         c = 0
         for j in range(ns):
-            los_flat[off + i * ns + j] = vis[i, j]
+            out.los_flat[off + i * ns + j] = vis[i, j]
             if vis[i, j]:
                 c += 1
-        n_rx[k, i] = c
+        out.n_rx[k, i] = c
     # the draws of the epoch: pseudoranges (S + N S), then relative sensing (N (N - 1) / 2, 3)
     m = n * (n - 1) // 2
     start = ns + n * ns
@@ -160,176 +348,65 @@ def _motion_one(
     for p in range(m):
         for c in range(3):
             zr[p, c] = z[k, start + 3 * p + c]
+    sensing = settings.sensing
     r, v, a = _sim_kernels.relative_measurements(p1, zr, sensing[0], sensing[1], sensing[2])
-    rel[k] = r
-    var[k] = v
-    avail[k] = a
+    out.rel[k] = r
+    out.var[k] = v
+    out.avail[k] = a
 
 
 @njit(cache=True, nogil=True)
-def motion_sight_relative(
-    k0,  # the copies k0 <= k < k1 of the batch
-    k1,
-    pos0,  # (K, N, 3) true positions before the step
-    vel0,  # (K, N, 3)
-    cmd,  # (K, N, 3) clipped commands
-    motion,  # (7,) max speed, max dv, dt, altitude min, altitude max, radius, min separation
-    moving,  # bool: False at an episode's first epoch (the swarm stays where it starts)
-    fence_lo,  # (K, 2)
-    fence_hi,  # (K, 2)
-    b_lo,  # (K, B_max, 3) building boxes
-    b_hi,
-    n_b,  # (K,)
-    polygons,  # extruded polygon buildings (see _polygons_of)
-    sky_row,  # (K,) row of each swarm's sky in the table
-    n_sv,  # (K,)
-    sky_up,  # (T, S_max) bool
-    sky_order,  # (T, S_max) int
-    sky_cot,  # (T, S_max)
-    sky_hdir,  # (T, S_max, 2)
-    n_up,  # (K,) rising satellites of each swarm's sky
-    z,  # (K, L_max) standard normal draws of the epoch
-    sensing,  # (3,) relative sensing sigma0, sigma per metre, max range
-    los_off,  # (K + 1,) offsets of the line-of-sight blocks in the flat buffer
-    pos1,  # outputs: (K, N, 3)
-    vel1,  # (K, N, 3)
-    hit,  # (K, N) bool
-    sep,  # (K, N) bool
-    los_flat,  # (los_off[K],) bool
-    rel,  # (K, N, N, 3)
-    var,  # (K, N, N)
-    avail,  # (K, N, N) bool
-    n_rx,  # (K, N) int64 satellites in line of sight of each UAV
-):
+def motion_sight_relative(k0, k1, settings, cities, sky, pos0, vel0, cmd, z, out):
     """Motion, line of sight and relative sensing of the copies ``k0 <= k < k1`` (see the
-    module docstring), written into the output arrays."""
+    module docstring), written into ``out``.
+
+    Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
+
+    Parameters
+    ----------
+    k0, k1 : int
+        The copies ``k0 <= k < k1`` of the batch.
+    settings : MotionSettings
+    cities : Cities
+    sky : SkyRows
+    pos0, vel0 : ndarray, shape (K, N, 3)
+        True positions and velocities before the step.
+    cmd : ndarray, shape (K, N, 3)
+        Clipped commands.
+    z : ndarray, shape (K, L_max)
+        Standard normal draws of the epoch.
+    out : Moved
+        The arrays written.
+    """
+    settings, cities, sky = MotionSettings(*settings), Cities(*cities), SkyRows(*sky)
+    out = Moved(*out)
     for k in range(k0, k1):
-        _motion_one(
-            k,
-            pos0,
-            vel0,
-            cmd,
-            motion,
-            moving,
-            fence_lo,
-            fence_hi,
-            b_lo,
-            b_hi,
-            n_b,
-            polygons,
-            sky_row,
-            n_sv,
-            sky_up,
-            sky_order,
-            sky_cot,
-            sky_hdir,
-            n_up,
-            z,
-            sensing,
-            pos1,
-            vel1,
-            hit,
-            sep,
-            los_flat,
-            los_off,
-            rel,
-            var,
-            avail,
-            n_rx,
-        )
+        _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out)
 
 
-@njit(cache=True)
-def _navigate_one(
-    k,
-    shared,
-    rx_ecef,
-    sky_row,
-    n_sv,
-    sky_sv,
-    sky_sys,
-    los_flat,
-    los_off,
-    clock,
-    iono,
-    z,
-    model,
-    n_sys,
-    x0,
-    rel_ecef,
-    var,
-    avail,
-    ddt,
-    max_iter,
-    radius,
-    gate,
-    origin,
-    rot,
-    pred,
-    prev_cov,
-    dr_var,
-    route,
-    tail,
-    n_route,
-    next_wp,
-    reach_m,
-    pos0,
-    pos1,
-    goal,
-    hit,
-    sep,
-    reward_mode,
-    reward_params,
-    rays,
-    b_lo,
-    b_hi,
-    n_b,
-    polygons,
-    wgs,
-    n_bowring,
-    sa_status,
-    n_iter,
-    sa_pos,
-    sa_cov,
-    co_pos,
-    co_cov,
-    co_status,
-    source,
-    nav_pos,
-    nav_cov,
-    sa_rej,
-    co_rej,
-    wp_out,
-    n_swarm,
-    n_sats,
-    centroid_uav,
-    out_of_contact,
-    terms,
-    in_goal,
-    ends,
-    tan_max,
-    walls,
-    bad_geometry,
-):
-    n = rx_ecef.shape[1]
-    row = sky_row[k]
-    ns = n_sv[k]
-    sv = np.ascontiguousarray(sky_sv[row, :ns])
-    system = np.ascontiguousarray(sky_sys[row, :ns])
-    off = los_off[k]
+@njit(cache=True, inline="always")
+def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
+    n = inputs.rx_ecef.shape[1]
+    row = sky.row[k]
+    ns = sky.n_sv[k]
+    sv = np.ascontiguousarray(sky.sv[row, :ns])
+    system = np.ascontiguousarray(sky.system[row, :ns])
+    off = sky.los_off[k]
+    n_sats = out.n_sats
     received = np.empty((n, ns), dtype=np.bool_)
     for i in range(n):
         c = 0
         for j in range(ns):
-            received[i, j] = los_flat[off + i * ns + j]
+            received[i, j] = moved.los_flat[off + i * ns + j]
             if received[i, j]:
                 c += 1
         n_sats[k, i] = c
+    wgs = settings.wgs
     range_m, _az, el_deg, at_centre, zero_range = _gnss_kernels.range_azimuth_elevation(
-        rx_ecef[k], sv, wgs[0], wgs[1], wgs[2], wgs[3], wgs[4], n_bowring
+        inputs.rx_ecef[k], sv, wgs[0], wgs[1], wgs[2], wgs[3], wgs[4], settings.n_bowring
     )
     if at_centre or zero_range:
-        bad_geometry[k] = True
+        out.bad_geometry[k] = True
         return
     z_common = np.empty(ns)
     z_user = np.empty((n, ns))
@@ -338,8 +415,9 @@ def _navigate_one(
     for i in range(n):
         for j in range(ns):
             z_user[i, j] = z[k, ns + i * ns + j]
-    av = avail[k]
-    if shared:  # one centroid: the UAV receiving the most satellites (the first of equals)
+    av = moved.avail[k]
+    x0 = inputs.x0
+    if settings.shared:  # one centroid: the UAV receiving the most satellites (the first of equals)
         a = 0
         for i in range(1, n):
             if n_sats[k, i] > n_sats[k, a]:
@@ -349,13 +427,13 @@ def _navigate_one(
         rel_b = np.empty((1, n, 3))
         var_b = np.empty((1, n))
         avail_b = np.empty((1, n), dtype=np.bool_)
-        rel_b[0] = rel_ecef[k, 0]  # the centroid row only
-        var_b[0] = var[k, a]
+        rel_b[0] = inputs.rel_ecef[k, 0]  # the centroid row only
+        var_b[0] = moved.var[k, a]
         avail_b[0] = av[a]
         cen = np.array([a], dtype=np.int64)
         x0_co = np.empty((1, 3))
         x0_co[0] = x0[k, a]
-        centroid_uav[k] = a
+        out.centroid_uav[k] = a
     else:  # every UAV its own centroid; one out of range of every other navigates standalone
         linked = np.empty(n, dtype=np.bool_)
         for i in range(n):
@@ -363,23 +441,24 @@ def _navigate_one(
             for p in range(n):
                 any_link = any_link or av[i, p]
             linked[i] = any_link or n == 1
-        rel_b = rel_ecef[k]
-        var_b = var[k]
+        rel_b = inputs.rel_ecef[k]
+        var_b = moved.var[k]
         avail_b = av
         cen = np.arange(n).astype(np.int64)
         x0_co = x0[k]
-        centroid_uav[k] = -1
-    nr = n_route[k]
-    r_k = np.ascontiguousarray(route[k, :nr])
-    t_k = np.ascontiguousarray(tail[k, :nr])
+        out.centroid_uav[k] = -1
+    nr = routes.n_route[k]
+    r_k = np.ascontiguousarray(routes.route[k, :nr])
+    t_k = np.ascontiguousarray(routes.tail[k, :nr])
+    model, radius, gate = settings.model, settings.radius, settings.gate
     s_status, s_iter, c_iter, sel, wp, nsw, _used = _sim_kernels.epoch_navigation(
         range_m,
         el_deg,
         sv,
         system,
         received,
-        clock[k],
-        iono,
+        inputs.clock[k],
+        settings.iono,
         z_common,
         z_user,
         np.zeros((n, ns)),
@@ -387,15 +466,15 @@ def _navigate_one(
         model[0],
         model[1] != 0.0,
         model[2] != 0.0,
-        n_sys,
+        settings.n_sys,
         x0[k],
         rel_b,
         var_b,
         avail_b,
         cen,
         x0_co,
-        ddt,
-        max_iter,
+        settings.ddt,
+        settings.max_iter,
         1e-4,
         radius[0] != 0.0,
         radius[1],
@@ -403,351 +482,168 @@ def _navigate_one(
         linked,
         gate[0] != 0.0,
         gate[1],
-        origin,
-        rot,
-        pred[k],
-        prev_cov[k],
-        dr_var,
+        settings.origin,
+        settings.rot,
+        inputs.pred[k],
+        inputs.prev_cov[k],
+        settings.dr_var,
         r_k,
-        next_wp[k],
-        reach_m,
+        inputs.next_wp[k],
+        settings.reach_m,
         av,
     )
-    sa_status[k] = s_status
-    n_iter[k, 0] = s_iter
-    n_iter[k, 1] = c_iter
-    sa_pos[k] = sel[0]
-    sa_cov[k] = sel[1]
-    co_pos[k] = sel[2]
-    co_cov[k] = sel[3]
-    co_status[k] = sel[4]
-    source[k] = sel[5]
-    nav_pos[k] = sel[6]
-    nav_cov[k] = sel[7]
-    sa_rej[k] = sel[8]
-    co_rej[k] = sel[9]
-    wp_out[k] = wp
-    n_swarm[k] = nsw
+    out.sa_status[k] = s_status
+    out.n_iter[k, 0] = s_iter
+    out.n_iter[k, 1] = c_iter
+    out.sa_pos[k] = sel[0]
+    out.sa_cov[k] = sel[1]
+    out.co_pos[k] = sel[2]
+    out.co_cov[k] = sel[3]
+    out.co_status[k] = sel[4]
+    out.source[k] = sel[5]
+    out.nav_pos[k] = sel[6]
+    out.nav_cov[k] = sel[7]
+    out.sa_rej[k] = sel[8]
+    out.co_rej[k] = sel[9]
+    out.next_wp[k] = wp
+    out.n_swarm[k] = nsw
     for i in range(n):
         lonely = True
         for p in range(n):
             lonely = lonely and not av[i, p]
-        out_of_contact[k, i] = lonely and n > 1
-    if reward_mode == 2:  # navigated distance: nav and progress come from the route after
+        out.out_of_contact[k, i] = lonely and n > 1
+    pos1 = moved.pos
+    if settings.reward_mode == 2:  # navigated distance: nav and progress come from the route after
         t, g, crash, reached = _env_kernels.event_reward_terms(
-            pos1[k], goal[k], hit[k], sep[k], out_of_contact[k], reward_params
+            pos1[k],
+            routes.goal[k],
+            moved.hit[k],
+            moved.sep[k],
+            out.out_of_contact[k],
+            settings.reward_params,
         )
     else:
         xy_prev = np.empty((n, 2))
         for i in range(n):
-            xy_prev[i, 0] = pos0[k, i, 0]
-            xy_prev[i, 1] = pos0[k, i, 1]
+            xy_prev[i, 0] = inputs.pos0[k, i, 0]
+            xy_prev[i, 1] = inputs.pos0[k, i, 1]
         t, g, crash, reached = _env_kernels.reward_terms(
             r_k,
             t_k,
-            next_wp[k],
+            inputs.next_wp[k],
             xy_prev,
             pos1[k],
-            goal[k],
+            routes.goal[k],
             sel[6],
             sel[7],
-            hit[k],
-            sep[k],
-            out_of_contact[k],
-            reward_mode == 1,
-            reward_params,
+            moved.hit[k],
+            moved.sep[k],
+            out.out_of_contact[k],
+            settings.reward_mode == 1,
+            settings.reward_params,
         )
-    terms[k] = t
-    in_goal[k] = g
-    ends[k, 0] = crash
-    ends[k, 1] = reached
-    nb = n_b[k]
-    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, polygons)
+    out.terms[k] = t
+    out.in_goal[k] = g
+    out.ends[k, 0] = crash
+    out.ends[k, 1] = reached
+    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, cities)
     if is_poly:
-        tm, w = _poly_kernels.sky_and_walls(pos1[k], rays, edges, edge_start, heights, bbox)
+        tm, w = _poly_kernels.sky_and_walls(
+            pos1[k], settings.rays, edges, edge_start, heights, bbox
+        )
     else:
-        tm, w = _sim_kernels.sky_and_walls(
-            pos1[k], rays, np.ascontiguousarray(b_lo[k, :nb]), np.ascontiguousarray(b_hi[k, :nb])
-        )
-    tan_max[k] = tm
-    walls[k] = w
+        lo, hi = _boxes_of(k, cities)
+        tm, w = _sim_kernels.sky_and_walls(pos1[k], settings.rays, lo, hi)
+    out.tan_max[k] = tm
+    out.walls[k] = w
 
 
 @njit(cache=True, nogil=True)
-def navigation_reward_sensors(
-    k0,  # the copies k0 <= k < k1 of the batch
-    k1,
-    shared,  # bool: one shared centroid per swarm (else one per UAV)
-    rx_ecef,  # (K, N, 3) true positions in ECEF
-    sky_row,  # (K,)
-    n_sv,  # (K,)
-    sky_sv,  # (T, S_max, 3) satellite positions
-    sky_sys,  # (T, S_max) int64 constellation index (sorted)
-    los_flat,  # line of sight (= the received satellites), flat
-    los_off,  # (K + 1,)
-    clock,  # (K, N, n_sys_all) receiver clock biases [m]
-    iono,  # (n_sys_all,)
-    z,  # (K, L_max) the epoch's standard normal draws
-    model,  # (3,) sigma URE, troposphere (1/0), differential (1/0)
-    n_sys,
-    x0,  # (K, N, 3) ECEF predicted positions
-    rel_ecef,  # (K, N, N, 3) measured relative positions in ECEF ((K, 1, N, 3): shared)
-    var,  # (K, N, N)
-    avail,  # (K, N, N) bool
-    ddt,
-    max_iter,
-    radius,  # (3,) check (1/0), min, max plausible radius
-    gate,  # (2,) on (1/0), max sigma^2
-    origin,
-    rot,
-    pred,  # (K, N, 3) ENU predicted positions
-    prev_cov,  # (K, N, 3, 3) covariances of the previous estimates
-    dr_var,
-    route,  # (K, R_max, 2)
-    tail,  # (K, R_max)
-    n_route,  # (K,)
-    next_wp,  # (K, N) next waypoints before the step
-    reach_m,
-    pos0,  # (K, N, 3) true positions before the step
-    pos1,  # (K, N, 3) after it
-    goal,  # (K, 3)
-    hit,  # (K, N) collided
-    sep,  # (K, N) separation violated
-    reward_mode,  # 0: distance nav term, 1: sigma nav term, 2: events only (navigated distance)
-    reward_params,
-    rays,  # (A, 2) sensor ray directions
-    b_lo,
-    b_hi,
-    n_b,
-    polygons,  # extruded polygon buildings (see _polygons_of)
-    wgs,  # (5,) WGS84 a, b, f, e2, e'2
-    n_bowring,
-    outputs,  # the arrays written (NAVIGATION_OUTPUTS, in order)
-):
+def navigation_reward_sensors(k0, k1, settings, cities, routes, sky, moved, inputs, z, out):
     """Navigation, reward terms and skyline / wall sensors of the copies ``k0 <= k < k1``
-    (module docstring), written into ``outputs``: ``sa_status, n_iter (K, 2), sa_pos, sa_cov,
-    co_pos, co_cov, co_status, source, nav_pos, nav_cov, sa_rej, co_rej, next_wp, n_swarm,
-    n_sats, centroid_uav, out_of_contact, terms (K, 6, N), in_goal, ends (K, 2: crash,
-    reached), tan_max, walls, bad_geometry (K,)``."""
-    (
-        sa_status,
-        n_iter,
-        sa_pos,
-        sa_cov,
-        co_pos,
-        co_cov,
-        co_status,
-        source,
-        nav_pos,
-        nav_cov,
-        sa_rej,
-        co_rej,
-        wp_out,
-        n_swarm,
-        n_sats,
-        centroid_uav,
-        out_of_contact,
-        terms,
-        in_goal,
-        ends,
-        tan_max,
-        walls,
-        bad_geometry,
-    ) = outputs
+    (module docstring), written into ``out``.
+
+    Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
+
+    Parameters
+    ----------
+    k0, k1 : int
+        The copies ``k0 <= k < k1`` of the batch.
+    settings : NavigationSettings
+    cities : Cities
+    routes : Routes
+    sky : SkyRows
+    moved : Moved
+        The swarms after :func:`motion_sight_relative`.
+    inputs : NavigationInputs
+    z : ndarray, shape (K, L_max)
+        The epoch's standard normal draws.
+    out : Navigated
+        The arrays written.
+    """
+    settings, cities, routes = NavigationSettings(*settings), Cities(*cities), Routes(*routes)
+    sky, moved, inputs = SkyRows(*sky), Moved(*moved), NavigationInputs(*inputs)
+    out = Navigated(*out)
     for k in range(k0, k1):
-        _navigate_one(
-            k,
-            shared,
-            rx_ecef,
-            sky_row,
-            n_sv,
-            sky_sv,
-            sky_sys,
-            los_flat,
-            los_off,
-            clock,
-            iono,
-            z,
-            model,
-            n_sys,
-            x0,
-            rel_ecef,
-            var,
-            avail,
-            ddt,
-            max_iter,
-            radius,
-            gate,
-            origin,
-            rot,
-            pred,
-            prev_cov,
-            dr_var,
-            route,
-            tail,
-            n_route,
-            next_wp,
-            reach_m,
-            pos0,
-            pos1,
-            goal,
-            hit,
-            sep,
-            reward_mode,
-            reward_params,
-            rays,
-            b_lo,
-            b_hi,
-            n_b,
-            polygons,
-            wgs,
-            n_bowring,
-            sa_status,
-            n_iter,
-            sa_pos,
-            sa_cov,
-            co_pos,
-            co_cov,
-            co_status,
-            source,
-            nav_pos,
-            nav_cov,
-            sa_rej,
-            co_rej,
-            wp_out,
-            n_swarm,
-            n_sats,
-            centroid_uav,
-            out_of_contact,
-            terms,
-            in_goal,
-            ends,
-            tan_max,
-            walls,
-            bad_geometry,
-        )
+        _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out)
 
 
-@njit(cache=True)
-def _observe_one(
-    k,
-    nav_pos,
-    goal,
-    vel,
-    nav_cov,
-    n_sats,
-    n_swarm,
-    n_sv,
-    sky_deg,
-    rel,
-    avail,
-    route,
-    tail,
-    n_route,
-    wp,
-    source,
-    walls,
-    steps,
-    obs_params,
-    k_neigh,
-    low,
-    high,
-    pos,
-    co_pos,
-    sa_pos,
-    obs,
-    floats,
-):
-    nr = n_route[k]
-    obs[k] = _env_kernels.observation_rows(
-        nav_pos[k],
-        goal[k],
-        vel[k],
-        nav_cov[k],
-        n_sats[k],
-        n_swarm[k],
-        max(n_sv[k], 1),
-        sky_deg[k],
-        rel[k],
-        avail[k],
-        np.ascontiguousarray(route[k, :nr]),
-        np.ascontiguousarray(tail[k, :nr]),
-        wp[k],
-        source[k],
-        walls[k],
-        steps[k],
-        obs_params[k],
-        k_neigh,
-        low,
-        high,
+@njit(cache=True, inline="always")
+def _observe_one(k, settings, routes, inputs, out):
+    nr = routes.n_route[k]
+    out.obs[k] = _env_kernels.observation_rows(
+        inputs.nav_pos[k],
+        routes.goal[k],
+        inputs.vel[k],
+        inputs.nav_cov[k],
+        inputs.n_sats[k],
+        inputs.n_swarm[k],
+        max(inputs.n_sv[k], 1),
+        inputs.sky_deg[k],
+        inputs.rel[k],
+        inputs.avail[k],
+        np.ascontiguousarray(routes.route[k, :nr]),
+        np.ascontiguousarray(routes.tail[k, :nr]),
+        inputs.next_wp[k],
+        inputs.source[k],
+        inputs.walls[k],
+        inputs.steps[k],
+        inputs.obs_params[k],
+        settings.k_neigh,
+        settings.low,
+        settings.high,
     )
-    floats[k] = _env_kernels.info_floats(
-        pos[k], nav_pos[k], co_pos[k], sa_pos[k], nav_cov[k], goal[k]
+    out.floats[k] = _env_kernels.info_floats(
+        inputs.pos[k],
+        inputs.nav_pos[k],
+        inputs.co_pos[k],
+        inputs.sa_pos[k],
+        inputs.nav_cov[k],
+        routes.goal[k],
     )
 
 
 @njit(cache=True, nogil=True)
-def observations_infos(
-    k0,  # the copies k0 <= k < k1 of the batch
-    k1,
-    nav_pos,  # (K, N, 3)
-    goal,  # (K, 3)
-    vel,  # (K, N, 3)
-    nav_cov,  # (K, N, 3, 3)
-    n_sats,  # (K, N)
-    n_swarm,  # (K, N)
-    n_sv,  # (K,)
-    sky_deg,  # (K, N, A)
-    rel,  # (K, N, N, 3)
-    avail,  # (K, N, N)
-    route,  # (K, R_max, 2)
-    tail,  # (K, R_max)
-    n_route,  # (K,)
-    wp,  # (K, N)
-    source,  # (K, N)
-    walls,  # (K, N, A)
-    steps,  # (K,) steps of each episode so far
-    obs_params,  # (K, 9)
-    k_neigh,
-    low,  # (obs_dim,)
-    high,
-    pos,  # (K, N, 3) true positions
-    co_pos,
-    sa_pos,
-    obs,  # outputs: (K, N, obs_dim) float32
-    floats,  # (K, 8, N)
-):
-    """Observations and the infos' real numbers of the copies ``k0 <= k < k1``."""
+def observations_infos(k0, k1, settings, routes, inputs, out):
+    """Observations and the infos' real numbers of the copies ``k0 <= k < k1``, written into
+    ``out``.
+
+    Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
+
+    Parameters
+    ----------
+    k0, k1 : int
+        The copies ``k0 <= k < k1`` of the batch.
+    settings : ObservationSettings
+    routes : Routes
+    inputs : ObservationInputs
+    out : Observed
+        The arrays written.
+    """
+    settings, routes = ObservationSettings(*settings), Routes(*routes)
+    inputs, out = ObservationInputs(*inputs), Observed(*out)
     for k in range(k0, k1):
-        _observe_one(
-            k,
-            nav_pos,
-            goal,
-            vel,
-            nav_cov,
-            n_sats,
-            n_swarm,
-            n_sv,
-            sky_deg,
-            rel,
-            avail,
-            route,
-            tail,
-            n_route,
-            wp,
-            source,
-            walls,
-            steps,
-            obs_params,
-            k_neigh,
-            low,
-            high,
-            pos,
-            co_pos,
-            sa_pos,
-            obs,
-            floats,
-        )
+        _observe_one(k, settings, routes, inputs, out)
 
 
 @njit(cache=True, nogil=True)

@@ -145,49 +145,42 @@ class FusedStep:
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         los_off[1:] = (n * n_sv).cumsum()
         tab = self.skies
-        pos1 = np.empty((n_copies, n, 3))
-        vel1 = np.empty((n_copies, n, 3))
-        hit = np.empty((n_copies, n), dtype=bool)
-        sep = np.empty((n_copies, n), dtype=bool)
-        los_flat = np.empty(int(los_off[-1]), dtype=bool)
-        rel = np.empty((n_copies, n, n, 3))
-        var = np.empty((n_copies, n, n))
-        avail = np.empty((n_copies, n, n), dtype=bool)
-        n_rx = np.empty((n_copies, n), dtype=np.int64)
+        # the records go to the kernels as plain tuples (_run_chunks), each made once here
+        sky = tuple(
+            _batched_kernels.SkyRows(
+                row, n_sv, n_up, los_off, tab.sv, tab.system, tab.up, tab.order, tab.cot, tab.hdir
+            )
+        )
+        cities, routes = tuple(st.cities), tuple(st.routes)
+        moved_arrays = _batched_kernels.Moved(
+            pos=np.empty((n_copies, n, 3)),
+            vel=np.empty((n_copies, n, 3)),
+            hit=np.empty((n_copies, n), dtype=bool),
+            sep=np.empty((n_copies, n), dtype=bool),
+            los_flat=np.empty(int(los_off[-1]), dtype=bool),
+            rel=np.empty((n_copies, n, n, 3)),
+            var=np.empty((n_copies, n, n)),
+            avail=np.empty((n_copies, n, n), dtype=bool),
+            n_rx=np.empty((n_copies, n), dtype=np.int64),
+        )
+        moved = tuple(moved_arrays)
+        motion_settings, nav_settings = st.motion_settings, st.navigation_settings
+        if cold:
+            motion_settings = st.first_motion_settings
+            nav_settings = st.first_navigation_settings
         _run_chunks(
             _batched_kernels.motion_sight_relative,
             n_copies,
+            tuple(motion_settings),
+            cities,
+            sky,
             st.pos,
             st.vel,
             cmd,
-            st.motion,
-            not cold,
-            st.fence_lo,
-            st.fence_hi,
-            st.b_lo,
-            st.b_hi,
-            st.n_b,
-            st.polygons,
-            row,
-            n_sv,
-            tab.up,
-            tab.order,
-            tab.cot,
-            tab.hdir,
-            n_up,
             z,
-            st.sensing,
-            los_off,
-            pos1,
-            vel1,
-            hit,
-            sep,
-            los_flat,
-            rel,
-            var,
-            avail,
-            n_rx,
+            moved,
         )
+        pos1, vel1, hit, sep, los_flat, rel, _var, avail, n_rx = moved_arrays
         if not cold and cfg.crash_free_steps > 0:
             # the crash-free start (UrbanCanyonEnv._step_arrays): a UAV stopped by a wall in
             # the episode's first steps is not a collision, and the episode goes on
@@ -199,62 +192,25 @@ class FusedStep:
         # positions
         pred = st.nav_pos if cold else st.nav_pos + vel1 * dt
         x0 = origin + pred @ rot
-        shared = cfg.centroid_mode == "shared" or n == 1
-        if shared:  # only the centroid's row: the UAV receiving the most (the first of equals)
+        if st.navigation_settings.shared:  # only the centroid's row: the UAV receiving the most
             centroid = n_rx.argmax(axis=1)
             rel_ecef = (rel[np.arange(n_copies), centroid] @ rot)[:, None]
         else:
             rel_ecef = rel @ rot
-        dr_var = (cfg.dead_reckoning_sigma_mps * dt) ** 2 * (0.0 if cold else 1.0)
-        outputs = _navigation_outputs(n_copies, n, envs[0]._rays.shape[0])
+        inputs = _batched_kernels.NavigationInputs(
+            st.pos, rx_ecef, pred, x0, st.nav_cov, rel_ecef, st.wp, st.clock
+        )
+        outputs = tuple(_batched_kernels.navigation_outputs(n_copies, n, envs[0]._rays.shape[0]))
         _run_chunks(
             _batched_kernels.navigation_reward_sensors,
             n_copies,
-            shared,
-            rx_ecef,
-            row,
-            n_sv,
-            tab.sv,
-            tab.system,
-            los_flat,
-            los_off,
-            st.clock,
-            st.iono,
+            tuple(nav_settings),
+            cities,
+            routes,
+            sky,
+            moved,
+            tuple(inputs),
             z,
-            st.model,
-            st.clock.shape[-1],  # clock states: the systems flown
-            x0,
-            rel_ecef,
-            var,
-            avail,
-            cfg.transfer == "ddt",
-            int(cfg.nav_max_iter),
-            st.radius,
-            st.gate,
-            origin,
-            rot,
-            pred,
-            st.nav_cov,
-            float(dr_var),
-            st.route,
-            st.tail,
-            st.n_route,
-            st.wp,
-            float(cfg.route_reach_m),
-            st.pos,
-            pos1,
-            st.goal,
-            hit,
-            sep,
-            _reward_mode(cfg),
-            envs[0]._reward_params,
-            envs[0]._rays,
-            st.b_lo,
-            st.b_hi,
-            st.n_b,
-            st.polygons,
-            _WGS84,
-            _N_BOWRING_ITER,
             outputs,
         )
         (
@@ -292,38 +248,38 @@ class FusedStep:
             return ()
         sky_deg = np.degrees(np.arctan(tan_max))
         steps = st.steps + 1
-        obs = np.empty((n_copies, n, cfg.obs_base_dim), dtype=np.float32)
-        floats = np.empty((n_copies, 8, n))
-        _run_chunks(
-            _batched_kernels.observations_infos,
-            n_copies,
-            nav_pos,
-            st.goal,
+        observed = _batched_kernels.Observed(
+            obs=np.empty((n_copies, n, cfg.obs_base_dim), dtype=np.float32),
+            floats=np.empty((n_copies, 8, n)),
+        )
+        obs_inputs = _batched_kernels.ObservationInputs(
+            pos1,
             vel1,
+            rel,
+            avail,
+            nav_pos,
             nav_cov,
+            co_pos,
+            sa_pos,
             n_sats,
             n_swarm,
             n_sv,
-            sky_deg,
-            rel,
-            avail,
-            st.route,
-            st.tail,
-            st.n_route,
             wp,
             source,
             walls,
+            sky_deg,
             steps,
             st.obs_params,
-            cfg.obs_neighbours,
-            envs[0]._obs_low,
-            envs[0]._obs_high,
-            pos1,
-            co_pos,
-            sa_pos,
-            obs,
-            floats,
         )
+        _run_chunks(
+            _batched_kernels.observations_infos,
+            n_copies,
+            tuple(st.observation_settings),
+            routes,
+            tuple(obs_inputs),
+            tuple(observed),
+        )
+        obs, floats = observed
         if cfg.obs_agent_index:  # each UAV's one-hot index after the kernel's columns
             obs = np.concatenate(
                 [obs, np.broadcast_to(np.eye(n, dtype=np.float32), (n_copies, n, n))], axis=2
@@ -545,36 +501,6 @@ def infos_from_arrays(
     ]
 
 
-def _navigation_outputs(n_copies: int, n: int, n_az: int) -> tuple[np.ndarray, ...]:
-    """The arrays :func:`coopnav_env.envs._batched_kernels.navigation_reward_sensors` fills."""
-    k, i64 = n_copies, np.int64
-    return (
-        np.empty((k, n), dtype=i64),  # sa_status
-        np.empty((k, 2), dtype=i64),  # n_iter
-        np.empty((k, n, 3)),  # sa_pos
-        np.empty((k, n, 3, 3)),  # sa_cov
-        np.empty((k, n, 3)),  # co_pos
-        np.empty((k, n, 3, 3)),  # co_cov
-        np.empty((k, n), dtype=i64),  # co_status
-        np.empty((k, n), dtype=i64),  # source
-        np.empty((k, n, 3)),  # nav_pos
-        np.empty((k, n, 3, 3)),  # nav_cov
-        np.empty((k, n), dtype=bool),  # sa_rej
-        np.empty((k, n), dtype=bool),  # co_rej
-        np.empty((k, n), dtype=i64),  # next_wp
-        np.empty((k, n), dtype=i64),  # n_swarm
-        np.empty((k, n), dtype=i64),  # n_sats
-        np.empty(k, dtype=i64),  # centroid_uav
-        np.empty((k, n), dtype=bool),  # out_of_contact
-        np.empty((k, 6, n)),  # terms
-        np.empty((k, n), dtype=bool),  # in_goal
-        np.empty((k, 2), dtype=bool),  # ends
-        np.empty((k, n, n_az)),  # tan_max
-        np.empty((k, n, n_az)),  # walls
-        np.zeros(k, dtype=bool),  # bad_geometry
-    )
-
-
 MIN_COPIES_PER_THREAD = 4
 """Fewest copies a thread of the fused step takes (fewer: the thread costs more than it saves)."""
 
@@ -601,6 +527,10 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     another process holds takes fewer). Threads rather than numba's ``parallel=True``: the
     OpenMP threading layer numba picks by default competes with PyTorch's own OpenMP pool in
     one process (a trainer's), which slowed both severalfold in the benchmark.
+
+    The records of :mod:`coopnav_env.envs._batched_kernels` come in ``args`` as plain tuples
+    of their fields (``tuple(record)``), which the kernel names again: numba takes a plain
+    tuple in about half the time of a named one.
     """
     threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
     if threads == 1:
@@ -803,10 +733,12 @@ class _SwarmArrays:
     """The state of every copy as ``(K, ...)`` arrays, loaded from the copies' worlds.
 
     Buildings and routes are padded to the largest copy (``n_b``, ``n_route`` give each
-    copy's count; a copy of extruded polygons has no boxes, and its polygons are in
-    :attr:`polygons` with ``is_poly`` set); :meth:`advance` takes the arrays of a step,
+    copy's count; a copy of extruded polygons has no boxes, and its polygons are in the
+    polygon arrays with ``is_poly`` set); :meth:`advance` takes the arrays of a step,
     :meth:`load` reloads one copy after its reset (after :meth:`own`, which copies the
-    arrays the epochs share).
+    arrays the epochs share). The kernels take them as the records of :mod:`coopnav_env.envs.
+    _batched_kernels`: :attr:`cities` and :attr:`routes` (rebuilt by :meth:`load`), and the
+    settings of each kernel, made once here (``first_*``: those of an episode's first epoch).
     """
 
     def __init__(self, envs: list[UrbanCanyonEnv]) -> None:
@@ -871,6 +803,34 @@ class _SwarmArrays:
         self.tail = np.zeros((k_n, r_max))
         for k, e in enumerate(envs):
             self.load(k, e)
+        self.motion_settings = _batched_kernels.MotionSettings(self.motion, self.sensing, True)
+        self.first_motion_settings = self.motion_settings._replace(moving=False)
+        dr_var = (cfg.dead_reckoning_sigma_mps * cfg.dt_s) ** 2
+        self.navigation_settings = _batched_kernels.NavigationSettings(
+            shared=cfg.centroid_mode == "shared" or n == 1,
+            model=self.model,
+            iono=self.iono,
+            n_sys=self.clock.shape[-1],  # clock states: the systems flown
+            ddt=cfg.transfer == "ddt",
+            max_iter=int(cfg.nav_max_iter),
+            radius=self.radius,
+            gate=self.gate,
+            origin=w0.origin_ecef_m,
+            rot=w0.rot_enu,
+            dr_var=float(dr_var * 1.0),
+            reach_m=float(cfg.route_reach_m),
+            reward_mode=_reward_mode(cfg),
+            reward_params=envs[0]._reward_params,
+            rays=envs[0]._rays,
+            wgs=_WGS84,
+            n_bowring=_N_BOWRING_ITER,
+        )
+        self.first_navigation_settings = self.navigation_settings._replace(
+            dr_var=float(dr_var * 0.0)
+        )
+        self.observation_settings = _batched_kernels.ObservationSettings(
+            cfg.obs_neighbours, envs[0]._obs_low, envs[0]._obs_high
+        )
 
     def own(self) -> None:
         """Copy the arrays that the copies' worlds and epochs share, before :meth:`load`."""
@@ -928,6 +888,21 @@ class _SwarmArrays:
         self.route[k, :nr] = route
         self.tail[k, :nr] = tail
         self.n_route[k] = nr
+        self.cities = _batched_kernels.Cities(
+            self.fence_lo,
+            self.fence_hi,
+            self.b_lo,
+            self.b_hi,
+            self.n_b,
+            self.is_poly,
+            self.edges,
+            self.edge_start,
+            self.heights,
+            self.bbox,
+            self.n_poly,
+            self.n_edge,
+        )
+        self.routes = _batched_kernels.Routes(self.route, self.tail, self.n_route, self.goal)
 
     def _load_polygons(self, k: int, b: ExtrudedBuildings) -> None:
         """Copy ``k``'s extruded polygons into the padded arrays (grown where they are short)."""
@@ -944,21 +919,6 @@ class _SwarmArrays:
         self.heights[k, :npb] = b.heights_m
         self.bbox[k, :npb] = b.bbox_m
         self.is_poly[k], self.n_poly[k], self.n_edge[k] = True, npb, ne
-
-    @property
-    def polygons(self) -> tuple[np.ndarray, ...]:
-        """The extruded polygons of the kernels: ``is_poly (K,), edges (K, E_max, 4),
-        edge_start (K, P_max + 1), heights (K, P_max), bbox (K, P_max, 4), n_poly (K,),
-        n_edge (K,)`` (``_batched_kernels._polygons_of`` takes copy ``k``'s)."""
-        return (
-            self.is_poly,
-            self.edges,
-            self.edge_start,
-            self.heights,
-            self.bbox,
-            self.n_poly,
-            self.n_edge,
-        )
 
 
 def _route_commands(envs: list[UrbanCanyonEnv], action: np.ndarray, st: _SwarmArrays) -> np.ndarray:
