@@ -8,14 +8,18 @@ one process:
 * ``collect``: SB3's ``collect_rollouts`` (the env plus the policy's forward pass and the
   rollout buffer), no update;
 * ``learn``: ``PPO.learn`` for whole rollouts (collection plus the update), with the
-  packaged PPO settings and, with ``--batch-size``, a larger minibatch.
+  packaged PPO settings and, with ``--batch-size``, a larger minibatch; with
+  ``--torch-threads``, once per number of PyTorch threads (the gradient updates use them;
+  the vector env's compiled kernels run on every core whatever this is).
 
 Settings are those of ``coopnav train --backend sb3`` (urban_canyon_v1 with the packaged
-``env`` overrides, no warm start). Prints agent-steps per second.
+``env`` overrides, no warm start). Prints agent-steps per second, medians over the rounds,
+and each ``learn`` row's ratio to the first one (the first ``K``, minibatch and thread count
+given: with the defaults, the packaged settings).
 
 Usage::
 
-    python benchmarks/bench_sb3.py --n-envs 2 16 --batch-size 256 2048
+    python benchmarks/bench_sb3.py --n-envs 2 16 --batch-size 256 2048 --torch-threads 1 2
 """
 
 from __future__ import annotations
@@ -90,21 +94,41 @@ def main() -> None:
     import torch
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--n-envs", type=int, nargs="+", default=[2, 16])
-    p.add_argument("--batch-size", type=int, nargs="+", default=[256])
-    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--n-envs", type=int, nargs="+", default=[2, 16], help="swarm copies K")
+    p.add_argument("--batch-size", type=int, nargs="+", default=[256], help="PPO minibatches")
+    p.add_argument(
+        "--torch-threads",
+        type=int,
+        nargs="+",
+        default=[1],
+        help="PyTorch threads of the learn timings (coopnav train's torch_threads)",
+    )
+    p.add_argument("--rounds", type=int, default=2, help="alternating rounds (medians count)")
     p.add_argument("--rollouts", type=int, default=2, help="PPO rollouts per learn timing")
     a = p.parse_args()
-    torch.set_num_threads(1)
+    for name in ("n_envs", "batch_size", "torch_threads", "rounds", "rollouts"):
+        bad = [v for v in np.atleast_1d(getattr(a, name)) if v < 1]
+        if bad:
+            p.error(f"--{name.replace('_', '-')} must be at least 1, got {bad[0]}")
     rows: dict[str, list[float]] = {}
     for _ in range(a.rounds):
         for k in a.n_envs:
+            torch.set_num_threads(1)
             rows.setdefault(f"K={k} env", []).append(env_rate(k, 200))
             for b in a.batch_size:
-                rows.setdefault(f"K={k} collect", []).append(collect_rate(k, b))
-                rows.setdefault(f"K={k} learn batch={b}", []).append(learn_rate(k, b, a.rollouts))
+                torch.set_num_threads(1)
+                rows.setdefault(f"K={k} collect batch={b}", []).append(collect_rate(k, b))
+                for t in a.torch_threads:
+                    torch.set_num_threads(t)
+                    name = f"K={k} learn batch={b} threads={t}"
+                    rows.setdefault(name, []).append(learn_rate(k, b, a.rollouts))
+    first_learn = next(np.median(v) for n, v in rows.items() if " learn " in n)
     for name, v in rows.items():
-        print(f"{name:28s} {np.median(v):9.0f} agent-steps/s  (rounds: {[round(x) for x in v]})")
+        ratio = f"{np.median(v) / first_learn:5.2f}x" if " learn " in name else "      "
+        print(
+            f"{name:38s} {np.median(v):9.0f} agent-steps/s {ratio} "
+            f"(rounds: {[round(x) for x in v]})"
+        )
 
 
 if __name__ == "__main__":
