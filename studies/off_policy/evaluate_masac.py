@@ -143,6 +143,7 @@ def summarise(
 
     groups = {name: [name] for name in flown} | {m: list(ps) for m, ps in methods.items()}
     ref, base = matrix([REFERENCE], "score"), matrix([BASELINE], "score")
+    untrained = matrix([UNTRAINED], "score") if UNTRAINED in flown else None
     rows = []
     for name, members in groups.items():
         scores = matrix(members, "score")
@@ -153,13 +154,36 @@ def summarise(
         )
         for k in KEYS[1:]:
             row[k] = float(matrix(members, k).mean())
-        for key, other in (("score_minus_reference", ref), ("score_minus_baseline", base)):
+        pairs = [("score_minus_reference", ref), ("score_minus_baseline", base)]
+        if untrained is not None:
+            pairs.append(("score_minus_untrained", untrained))
+        for key, other in pairs:
             iv, _ = paired_difference(scores, other, reps=reps, seed=0)
             row[key] = [iv.value, iv.low, iv.high]
         gap = gap_closed(scores, base, ref, reps=reps, seed=0)
         row["gap_closed"] = [gap.value, gap.low, gap.high]
         rows.append(row)
     return rows
+
+
+def untrained_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
+    """The paired score difference of every MASAC row to the untrained actor (Markdown)."""
+    found = [r for r in rows if "score_minus_untrained" in r and r["name"] != UNTRAINED]
+    found = [r for r in found if r["name"] not in (BASELINE, REFERENCE_LABEL)]
+    if not found:
+        return ""
+    lines = [
+        "",
+        f"What training added: score minus the untrained actor's (`{UNTRAINED}`, the same "
+        "actor at its initial weights), paired 95 % interval:",
+        "",
+        "| policy | score - untrained [95 % CI] |",
+        "|---|---|",
+    ]
+    for r in found:
+        v = r["score_minus_untrained"]
+        lines.append(f"| `{r['name']}` | {v[0]:+.3f} [{v[1]:+.3f}, {v[2]:+.3f}] |")
+    return "\n".join(lines) + "\n"
 
 
 def training_markdown(training: Sequence[Mapping[str, Any]]) -> str:
@@ -269,7 +293,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as exc:
         p.error(str(exc))
     report = evaluate(args.policies, seeds, args.reps, untrained=not args.no_untrained)
-    text = to_markdown(report) + training_markdown(report["training"])
+    text = to_markdown(report) + untrained_markdown(report["rows"])
+    text += training_markdown(report["training"])
     write_report(out, "MASAC (BenchMARL) from scratch on v1 street grids", report, text)
     return 0
 
