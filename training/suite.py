@@ -233,34 +233,26 @@ class SuiteReport:
                 city: {"preset": preset, "tuning_score": score}
                 for city, (preset, score) in self.picks.items()
             },
-            "comparisons": [
-                {
-                    "city": c.city,
-                    "policy": c.policy,
-                    "reference": c.reference,
-                    "score_difference": jsonable(c.score_difference.as_dict()),
-                    "goal_rate": c.goal_rate,
-                    "reference_goal_rate": c.reference_goal_rate,
-                }
-                for c in self.comparisons
-            ],
-            "suite_comparisons": [
-                {
-                    "city": c.city,
-                    "policy": c.policy,
-                    "reference": c.reference,
-                    "score_difference": jsonable(c.score_difference.as_dict()),
-                    "goal_rate": c.goal_rate,
-                    "reference_goal_rate": c.reference_goal_rate,
-                }
-                for c in self.suite_comparisons
-            ],
+            "comparisons": [_comparison_dict(c) for c in self.comparisons],
+            "suite_comparisons": [_comparison_dict(c) for c in self.suite_comparisons],
             "rows": [
                 {"city": c.name, **jsonable({f: getattr(s, f) for _, f, _ in SUITE_COLUMNS})}
                 | {"policy": s.policy, "episodes": s.episodes}
                 for c, s in self.rows()
             ],
         }
+
+
+def _comparison_dict(c: Comparison) -> dict[str, Any]:
+    """One comparison row of ``summary.json``."""
+    return {
+        "city": c.city,
+        "policy": c.policy,
+        "reference": c.reference,
+        "score_difference": jsonable(c.score_difference.as_dict()),
+        "goal_rate": c.goal_rate,
+        "reference_goal_rate": c.reference_goal_rate,
+    }
 
 
 def _fmt(value: Any, fmt: str) -> str:
