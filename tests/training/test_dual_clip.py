@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import pytest
@@ -20,12 +19,7 @@ from coopnav_env.training.torchrl_backend import (  # noqa: E402
 ENV = {"n_uavs": 3, "max_steps": 6, "action_frame": "route"}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    torch.set_num_threads(1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.mark.parametrize("value", [1.0, 1.2, 0.5, True, "3", -3.0])

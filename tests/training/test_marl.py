@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +28,7 @@ SMALL = ["--set", "torchrl.n_copies=2", "--set", "torchrl.rollout_steps=8", "--n
 V0 = ["--env-id", "urban_canyon_v0"]  # tests of v0's torchrl section (a residual over a column)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    torch.set_num_threads(1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.mark.parametrize(

@@ -6,7 +6,6 @@ import json
 import os
 import re
 import signal
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -48,12 +47,7 @@ PRETRAIN = (
 SPEC = WarmStart("waypoint", {"altitude_m": 28.0}, episodes=4, epochs=1, learning_rate=1e-3)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    torch.set_num_threads(1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def train(out: Path, *args: str) -> int:

@@ -45,12 +45,7 @@ TINY = [
 STEP = 16  # agent-steps an iteration of TINY
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    torch.set_num_threads(1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        yield
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def train(out: Path, *args: str) -> int:
