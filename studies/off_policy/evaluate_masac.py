@@ -46,6 +46,7 @@ from studies.off_policy.masac import (
 )
 from studies.task_objective.compare_learned import (
     CRUISE,
+    KEYS,
     SCORE_NEUTRAL_SETTINGS,
     add_report_arguments,
     fly,
@@ -61,15 +62,6 @@ REFERENCE = "wide@spacing_m=60,cruise_speed_mps=10,ceiling_margin_m=-10"
 REFERENCE_LABEL = "high_wide_column"
 METHOD = "masac"
 UNTRAINED = "masac_untrained"
-KEYS = (
-    "score",
-    "goal",
-    "collided",
-    "nav_error_m",
-    "steps",
-    "cruise_spacing_m",
-    "cruise_altitude_m",
-)
 
 
 def check_env_settings(env: Mapping[str, Any]) -> None:

@@ -37,6 +37,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 CRUISE = (0.2, 0.8)
 """The share of an episode's steps that counts as the cruise (start and end left out)."""
 
+KEYS = (
+    "score",
+    "goal",
+    "collided",
+    "nav_error_m",
+    "steps",
+    "cruise_spacing_m",
+    "cruise_altitude_m",
+)
+"""What :func:`fly_policy` records per episode, in the reports' column order (score first)."""
+
 
 SCORE_NEUTRAL_SETTINGS = frozenset(
     {
@@ -239,15 +250,7 @@ def compare(
     names = list(dict.fromkeys([*heuristics, reference, baseline]))
     names += [p for ps in methods.values() for p in ps if p not in names]
     flown = {name: fly(name, seeds) for name in tqdm(names, desc="policies")}
-    keys = (
-        "score",
-        "goal",
-        "collided",
-        "nav_error_m",
-        "steps",
-        "cruise_spacing_m",
-        "cruise_altitude_m",
-    )
+    keys = KEYS
 
     def matrix(per_policy: Sequence[str], key: str) -> np.ndarray:
         return np.array([[e[key] for e in flown[p]] for p in per_policy], dtype=float)
