@@ -403,7 +403,7 @@ def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
         n_sats[k, i] = c
     wgs = settings.wgs
     range_m, _az, el_deg, at_centre, zero_range = _gnss_kernels.range_azimuth_elevation(
-        inputs.rx_ecef[k], sv, wgs[0], wgs[1], wgs[2], wgs[3], wgs[4], settings.n_bowring
+        inputs.rx_ecef[k], sv, wgs[0], wgs[1], wgs[2], wgs[3], wgs[4], settings.n_bowring, False
     )
     if at_centre or zero_range:
         out.bad_geometry[k] = True
@@ -546,8 +546,8 @@ def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
     out.in_goal[k] = g
     out.ends[k, 0] = crash
     out.ends[k, 1] = reached
-    is_poly, edges, edge_start, heights, bbox = _polygons_of(k, cities)
-    if is_poly:
+    if cities.is_poly[k]:  # (a box city's copy makes no polygon arrays)
+        _p, edges, edge_start, heights, bbox = _polygons_of(k, cities)
         tm, w = _poly_kernels.sky_and_walls(
             pos1[k], settings.rays, edges, edge_start, heights, bbox
         )

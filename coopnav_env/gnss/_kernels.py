@@ -15,14 +15,16 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy")
-def range_azimuth_elevation(rx, sv, a_m, b_m, f, e2, ep2, n_bowring):
+def range_azimuth_elevation(rx, sv, a_m, b_m, f, e2, ep2, n_bowring, azimuth=True):
     """Range [m], azimuth [deg, 0..360) and elevation [deg] of every (receiver, satellite).
 
     ``rx`` (n, 3) and ``sv`` (s, 3) ECEF [m]. The ENU frame of each receiver comes from its
     geodetic latitude and longitude (Bowring's iteration with ``n_bowring`` steps on the
     ellipsoid ``a_m, b_m, f, e2, ep2``, as ``frames._ecef_to_geodetic``). Returns
     ``range_m, az_deg, el_deg`` (n, s) and two flags: a receiver at the Earth's centre (no
-    latitude) and a zero range (receiver on a satellite); the caller raises for them.
+    latitude) and a zero range (receiver on a satellite); the caller raises for them. With
+    ``azimuth`` False the azimuths are not computed (``az_deg`` is NaN; the ranges and
+    elevations are the same): a caller that reads none saves an ``arctan2`` per pair.
     """
     n = rx.shape[0]
     s = sv.shape[0]
@@ -60,11 +62,14 @@ def range_azimuth_elevation(rx, sv, a_m, b_m, f, e2, ep2, n_bowring):
             e = -so * u0 + co * u1 + 0.0 * u2
             nn = -sl * co * u0 + -sl * so * u1 + cl * u2
             up = cl * co * u0 + cl * so * u1 + sl * u2
-            a = np.arctan2(e, nn) * to_deg
-            a = a % 360.0
-            if a >= 360.0:
-                a -= 360.0
-            az[i, k] = a
+            if azimuth:
+                a = np.arctan2(e, nn) * to_deg
+                a = a % 360.0
+                if a >= 360.0:
+                    a -= 360.0
+                az[i, k] = a
+            else:
+                az[i, k] = np.nan
             el[i, k] = np.arcsin(min(max(up, -1.0), 1.0)) * to_deg
     return range_m, az, el, at_centre, zero_range
 

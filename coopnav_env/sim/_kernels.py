@@ -60,6 +60,19 @@ def _slab_2d(px, py, dx, dy, lox, loy, hix, hiy):
     return _fmax(lo_x, lo_y), _fmin(hi_x, hi_y)
 
 
+@njit(cache=True, inline="always")
+def _slab_offsets(o_lo, o_hi, d, inv, inside):
+    """:func:`_slab_1d` from the offsets ``o_lo = lo - p``, ``o_hi = hi - p``, the direction
+    ``d``, its reciprocal ``inv = 1 / d`` and whether ``lo <= p <= hi`` (the same results)."""
+    if d == 0.0:
+        if inside:
+            return -np.inf, np.inf
+        return np.inf, -np.inf
+    t1 = o_lo * inv
+    t2 = o_hi * inv
+    return _fmin(t1, t2), _fmax(t1, t2)
+
+
 @njit(cache=True, error_model="numpy")
 def sky_and_walls(pos, dirs, lo, hi):
     """Skyline ``tan(elevation)`` and nearest wall per (receiver, azimuth).
@@ -68,32 +81,56 @@ def sky_and_walls(pos, dirs, lo, hi):
     cardinal axes, ``lo``/``hi`` (m, 3) corners of the buildings taller than the lowest
     receiver. Returns ``tan_max`` (n, n_az) (0: no roof above the receiver along the ray,
     inf: inside a footprint) and ``dist`` (n, n_az) (inf: no wall).
+
+    Each ray's footprint interval is :func:`_slab_2d`'s, with the same operations: the
+    reciprocals of the directions are taken once per ray and the offsets ``lo - p``,
+    ``hi - p`` once per (receiver, building), and every ray takes the buildings in their
+    order, so each ray's largest tangent and smallest distance are those of one ray at a
+    time.
     """
     n = pos.shape[0]
     n_az = dirs.shape[0]
     m = lo.shape[0]
     tan_max = np.zeros((n, n_az))
     dist = np.full((n, n_az), np.inf)
+    inv = np.empty((n_az, 2))  # _slab_1d's 1 / d (unused where d == 0)
+    for a in range(n_az):
+        for c in range(2):
+            d = dirs[a, c]
+            inv[a, c] = 1.0 / d if d != 0.0 else 0.0
     for i in range(n):
         px, py, z = pos[i, 0], pos[i, 1], pos[i, 2]
-        for a in range(n_az):
-            dx, dy = dirs[a, 0], dirs[a, 1]
-            best_tan = 0.0
-            best_dist = np.inf
-            for b in range(m):
-                t_near, t_far = _slab_2d(px, py, dx, dy, lo[b, 0], lo[b, 1], hi[b, 0], hi[b, 1])
-                entered = t_near <= t_far
+        for b in range(m):
+            top = hi[b, 2]
+            # Both updates need the roof above the receiver: the skyline ``top - z > 0``,
+            # the wall ``z < top``; the two agree for every pair of floats (a difference of
+            # finite floats is 0 only when they are equal and keeps the sign of the exact
+            # one; an infinite or NaN operand fails both or passes both), so a building
+            # with ``not z < top`` changes no ray's result.
+            if not z < top:
+                continue
+            rel_h = top - z
+            is_wall = z >= lo[b, 2]
+            x0, x1 = lo[b, 0], hi[b, 0]
+            y0, y1 = lo[b, 1], hi[b, 1]
+            in_x = px >= x0 and px <= x1
+            in_y = py >= y0 and py <= y1
+            ox0, ox1 = x0 - px, x1 - px
+            oy0, oy1 = y0 - py, y1 - py
+            for a in range(n_az):
+                lo_x, hi_x = _slab_offsets(ox0, ox1, dirs[a, 0], inv[a, 0], in_x)
+                lo_y, hi_y = _slab_offsets(oy0, oy1, dirs[a, 1], inv[a, 1], in_y)
+                t_near = _fmax(lo_x, lo_y)
+                t_far = _fmin(hi_x, hi_y)
+                if not t_near <= t_far:
+                    continue
                 t_in = _fmax(t_near, 0.0)
-                rel_h = hi[b, 2] - z
-                if t_far > 0.0 and entered and rel_h > 0.0:
+                if t_far > 0.0:
                     tan_el = rel_h / t_in
-                    if tan_el > best_tan:
-                        best_tan = tan_el
-                if t_far >= 0.0 and entered and z < hi[b, 2] and z >= lo[b, 2]:
-                    if t_in < best_dist:
-                        best_dist = t_in
-            tan_max[i, a] = best_tan
-            dist[i, a] = best_dist
+                    if tan_el > tan_max[i, a]:
+                        tan_max[i, a] = tan_el
+                if t_far >= 0.0 and is_wall and t_in < dist[i, a]:
+                    dist[i, a] = t_in
     return tan_max, dist
 
 

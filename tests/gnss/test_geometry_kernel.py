@@ -32,6 +32,26 @@ def test_kernel_matches_numpy_everywhere_on_earth() -> None:
         assert np.abs(el_k - el_n).max() < 1e-9
 
 
+def test_kernel_without_azimuths_keeps_ranges_and_elevations() -> None:
+    """``azimuth=False`` (the batched step's call) leaves the ranges, elevations and flags of
+    the full call bit for bit, and NaN azimuths."""
+    from coopnav_env.constants import WGS84_A_M, WGS84_B_M, WGS84_E2, WGS84_F
+    from coopnav_env.gnss import _kernels
+    from coopnav_env.gnss.frames import _EP2, _N_BOWRING_ITER
+
+    sv = default_constellation(("GPS", "BDS")).positions_ecef(1234.0)
+    rng = np.random.default_rng(1)
+    rx = geodetic_to_ecef(
+        rng.uniform(-90.0, 90.0, 30), rng.uniform(-180.0, 180.0, 30), rng.uniform(0, 500, 30)
+    )
+    wgs = (WGS84_A_M, WGS84_B_M, WGS84_F, WGS84_E2, _EP2, _N_BOWRING_ITER)
+    full = _kernels.range_azimuth_elevation(rx, sv, *wgs)
+    bare = _kernels.range_azimuth_elevation(rx, sv, *wgs, False)
+    for i in (0, 2, 3, 4):
+        np.testing.assert_array_equal(bare[i], full[i])
+    assert np.isnan(bare[1]).all()
+
+
 def test_zero_range_is_still_an_error() -> None:
     sv = np.array([[7e6, 0.0, 0.0], [0.0, 2.6e7, 0.0]])
     with pytest.raises(ValueError, match="zero range"):
