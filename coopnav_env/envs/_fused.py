@@ -59,7 +59,7 @@ from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
 from coopnav_env.sim.city import Buildings
 from coopnav_env.sim.file_city import ExtrudedBuildings
-from coopnav_env.sim.scenario import Epoch
+from coopnav_env.sim.scenario import _INTEGRITY_FIELDS, Epoch
 
 
 class FusedStep:
@@ -138,10 +138,10 @@ class FusedStep:
         skies, row, n_sv, n_up = rows
         # each copy's draws in the order of UrbanWorld._navigate_fused: pseudoranges
         # (S + N S), relative sensing (N (N - 1) / 2 x 3), as one call per copy
-        n_draws = n_sv * (1 + n) + 3 * (n * (n - 1) // 2)
-        z = np.empty((n_copies, int(n_draws.max())))
-        for k, e in enumerate(envs):
-            z[k, : n_draws[k]] = e._rng.standard_normal(n_draws[k])
+        n_draws = (n_sv * (1 + n) + 3 * (n * (n - 1) // 2)).tolist()
+        z = np.empty((n_copies, max(n_draws)))
+        for k, e in enumerate(envs):  # straight into the copy's row (the draws of size=n_draws)
+            e._rng.standard_normal(out=z[k, : n_draws[k]])
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         los_off[1:] = (n * n_sv).cumsum()
         tab = self.skies
@@ -312,14 +312,17 @@ class FusedStep:
         rewards = terms.sum(axis=1)
         terminated = ends[:, 0] | ends[:, 1]
         truncated = (steps >= cfg.max_steps) & ~terminated
+        # Python numbers of every copy at once (tolist), not one scalar per copy
+        bounds, sv_counts = los_off.tolist(), n_sv.tolist()
+        centroids, iterations = centroid_uav.tolist(), n_iter.tolist()
         for k, e in enumerate(envs):
             w = e.world
             sky = skies[k]
-            a, b = los_off[k], los_off[k + 1]
-            los = los_flat[a:b].reshape(n, n_sv[k])
+            a, b, n_above = bounds[k], bounds[k + 1], sv_counts[k]
+            los = los_flat[a:b].reshape(n, n_above)
             w.pos_enu_m, w.vel_enu_mps, w.t_s = pos1[k], vel1[k], t_new[k]
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
-            ep = Epoch(
+            ep = Epoch._of_fields(
                 t_s=float(t_new[k]),
                 pos_enu_m=pos_c[k],
                 vel_enu_mps=vel_c[k],
@@ -330,8 +333,8 @@ class FusedStep:
                 sv_index=sky.sv_index,
                 los=los,
                 received=los,
-                nlos=nlos[a:b].reshape(n, n_sv[k]),
-                n_above_mask=int(n_sv[k]),
+                nlos=nlos[a:b].reshape(n, n_above),
+                n_above_mask=n_above,
                 n_sats=n_sats[k],
                 n_sats_swarm=n_swarm[k],
                 rel_enu_m=rel[k],
@@ -345,15 +348,16 @@ class FusedStep:
                 nav_pos_enu_m=nav_pos[k],
                 nav_cov_enu_m2=nav_cov[k],
                 nav_source=source[k],
-                centroid_uav=int(centroid_uav[k]),
+                centroid_uav=centroids[k],
                 collided=hit[k],
                 separation_violation=sep[k],
                 out_of_contact=out_of_contact[k],
-                n_iter_standalone=int(n_iter[k, 0]),
-                n_iter_coop=int(n_iter[k, 1]),
+                n_iter_standalone=iterations[k][0],
+                n_iter_coop=iterations[k][1],
                 standalone_rejected=sa_rej[k],
                 coop_rejected=co_rej[k],
                 next_waypoint=wp_c[k],
+                **_NO_INTEGRITY,
                 map_excluded=None,
             )
             w.last = ep
@@ -397,15 +401,17 @@ class FusedStep:
         n = rel.shape[1]
         nlos = np.zeros(los_flat.shape[0], dtype=bool)
         wp_c, goal_c = wp.copy(), st.goal.copy()
+        bounds, sv_counts = los_off.tolist(), n_sv.tolist()
+        centroids, iterations = centroid_uav.tolist(), n_iter.tolist()
         for k, e in enumerate(envs):
             w = e.world
             sky = skies[k]
-            a, b = los_off[k], los_off[k + 1]
-            los = los_flat[a:b].reshape(n, n_sv[k])
+            a, b, n_above = bounds[k], bounds[k + 1], sv_counts[k]
+            los = los_flat[a:b].reshape(n, n_above)
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
             w._warm = True
             no = np.zeros(n, dtype=bool)
-            ep = Epoch(
+            ep = Epoch._of_fields(
                 t_s=float(t_s[k]),
                 pos_enu_m=w.pos_enu_m.copy(),
                 vel_enu_mps=w.vel_enu_mps.copy(),
@@ -416,8 +422,8 @@ class FusedStep:
                 sv_index=sky.sv_index,
                 los=los,
                 received=los,
-                nlos=nlos[a:b].reshape(n, n_sv[k]),
-                n_above_mask=int(n_sv[k]),
+                nlos=nlos[a:b].reshape(n, n_above),
+                n_above_mask=n_above,
                 n_sats=n_sats[k],
                 n_sats_swarm=n_swarm[k],
                 rel_enu_m=rel[k],
@@ -431,15 +437,16 @@ class FusedStep:
                 nav_pos_enu_m=nav_pos[k],
                 nav_cov_enu_m2=nav_cov[k],
                 nav_source=source[k],
-                centroid_uav=int(centroid_uav[k]),
+                centroid_uav=centroids[k],
                 collided=no,
                 separation_violation=no.copy(),
                 out_of_contact=out_of_contact[k],
-                n_iter_standalone=int(n_iter[k, 0]),
-                n_iter_coop=int(n_iter[k, 1]),
+                n_iter_standalone=iterations[k][0],
+                n_iter_coop=iterations[k][1],
                 standalone_rejected=sa_rej[k],
                 coop_rejected=co_rej[k],
                 next_waypoint=wp_c[k],
+                **_NO_INTEGRITY,
                 map_excluded=None,
             )
             w.last = ep
@@ -551,6 +558,9 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     for f in futures:
         f.result()
 
+
+_NO_INTEGRITY = dict.fromkeys(_INTEGRITY_FIELDS)
+"""The integrity fields of an epoch of the fused step (integrity monitoring is off): None."""
 
 _N_OBS_PARAMS = 9
 """Entries of ``UrbanCanyonEnv._obs_params`` (the observation kernel's scales)."""
