@@ -32,13 +32,14 @@ through the other path, an assignment to its world).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import operator
 import os
 import weakref
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -312,56 +313,47 @@ class FusedStep:
         rewards = terms.sum(axis=1)
         terminated = ends[:, 0] | ends[:, 1]
         truncated = (steps >= cfg.max_steps) & ~terminated
-        # Python numbers of every copy at once (tolist), not one scalar per copy
-        bounds, sv_counts = los_off.tolist(), n_sv.tolist()
-        centroids, iterations = centroid_uav.tolist(), n_iter.tolist()
+        # each copy's epoch is made when first read (most batched steps read none)
+        epochs = _StepEpochs(
+            n,
+            t_new,
+            skies,
+            los_off.tolist(),
+            n_sv.tolist(),
+            los_flat,
+            nlos,
+            centroid_uav.tolist(),
+            n_iter.tolist(),
+            _EpochRows(
+                pos_enu_m=pos_c,
+                vel_enu_mps=vel_c,
+                goal_enu_m=goal_c,
+                n_sats=n_sats,
+                n_sats_swarm=n_swarm,
+                rel_enu_m=rel,
+                rel_available=avail,
+                standalone_pos_enu_m=sa_pos,
+                standalone_cov_enu_m2=sa_cov,
+                standalone_status=sa_status,
+                coop_pos_enu_m=co_pos,
+                coop_cov_enu_m2=co_cov,
+                coop_status=co_status,
+                nav_pos_enu_m=nav_pos,
+                nav_cov_enu_m2=nav_cov,
+                nav_source=source,
+                collided=hit,
+                separation_violation=sep,
+                out_of_contact=out_of_contact,
+                standalone_rejected=sa_rej,
+                coop_rejected=co_rej,
+                next_waypoint=wp_c,
+            ),
+        )
         for k, e in enumerate(envs):
             w = e.world
-            sky = skies[k]
-            a, b, n_above = bounds[k], bounds[k + 1], sv_counts[k]
-            los = los_flat[a:b].reshape(n, n_above)
             w.pos_enu_m, w.vel_enu_mps, w.t_s = pos1[k], vel1[k], t_new[k]
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
-            ep = Epoch._of_fields(
-                t_s=float(t_new[k]),
-                pos_enu_m=pos_c[k],
-                vel_enu_mps=vel_c[k],
-                goal_enu_m=goal_c[k],
-                sv_az_deg=sky.az,
-                sv_el_deg=sky.el,
-                system=sky.system,
-                sv_index=sky.sv_index,
-                los=los,
-                received=los,
-                nlos=nlos[a:b].reshape(n, n_above),
-                n_above_mask=n_above,
-                n_sats=n_sats[k],
-                n_sats_swarm=n_swarm[k],
-                rel_enu_m=rel[k],
-                rel_available=avail[k],
-                standalone_pos_enu_m=sa_pos[k],
-                standalone_cov_enu_m2=sa_cov[k],
-                standalone_status=sa_status[k],
-                coop_pos_enu_m=co_pos[k],
-                coop_cov_enu_m2=co_cov[k],
-                coop_status=co_status[k],
-                nav_pos_enu_m=nav_pos[k],
-                nav_cov_enu_m2=nav_cov[k],
-                nav_source=source[k],
-                centroid_uav=centroids[k],
-                collided=hit[k],
-                separation_violation=sep[k],
-                out_of_contact=out_of_contact[k],
-                n_iter_standalone=iterations[k][0],
-                n_iter_coop=iterations[k][1],
-                standalone_rejected=sa_rej[k],
-                coop_rejected=co_rej[k],
-                next_waypoint=wp_c[k],
-                **_NO_INTEGRITY,
-                map_excluded=None,
-            )
-            w.last = ep
-            e._epoch = ep
+            w.last = e._epoch = _StepEpoch.of(epochs, k)
             e._steps += 1
             e._unpaid_m = unpaid[k]
         st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps, unpaid)
@@ -451,6 +443,140 @@ class FusedStep:
             )
             w.last = ep
             e._epoch = ep
+
+
+class _EpochRows(NamedTuple):
+    """The ``(K, ...)`` arrays of a fused step whose row ``k`` is that field of copy ``k``'s
+    epoch (the fields of :class:`~coopnav_env.sim.scenario.Epoch` of these names)."""
+
+    pos_enu_m: np.ndarray
+    vel_enu_mps: np.ndarray
+    goal_enu_m: np.ndarray
+    n_sats: np.ndarray
+    n_sats_swarm: np.ndarray
+    rel_enu_m: np.ndarray
+    rel_available: np.ndarray
+    standalone_pos_enu_m: np.ndarray
+    standalone_cov_enu_m2: np.ndarray
+    standalone_status: np.ndarray
+    coop_pos_enu_m: np.ndarray
+    coop_cov_enu_m2: np.ndarray
+    coop_status: np.ndarray
+    nav_pos_enu_m: np.ndarray
+    nav_cov_enu_m2: np.ndarray
+    nav_source: np.ndarray
+    collided: np.ndarray
+    separation_violation: np.ndarray
+    out_of_contact: np.ndarray
+    standalone_rejected: np.ndarray
+    coop_rejected: np.ndarray
+    next_waypoint: np.ndarray
+
+
+class _StepEpochs:
+    """Every copy's epoch of one fused step, as the step's arrays: :meth:`fields` makes copy
+    ``k``'s (what :class:`_StepEpoch` reads when one of its fields is first read).
+
+    The arrays are the step's own (later steps make new ones; the state arrays that the next
+    step reads are never written), so an epoch read any time later is the one of its step.
+    """
+
+    def __init__(
+        self,
+        n: int,
+        t_s: list[float],
+        skies: list[Any],
+        los_bounds: list[int],
+        n_above: list[int],
+        los_flat: np.ndarray,
+        nlos_flat: np.ndarray,
+        centroids: list[int],
+        iterations: list[list[int]],
+        rows: _EpochRows,
+    ) -> None:
+        self.n, self.t_s, self.skies = n, t_s, skies
+        self.los_bounds, self.n_above = los_bounds, n_above
+        self.los_flat, self.nlos_flat = los_flat, nlos_flat
+        self.centroids, self.iterations = centroids, iterations
+        self.rows = rows
+
+    def fields(self, k: int) -> dict[str, Any]:
+        """Copy ``k``'s epoch fields, in the order of :class:`~coopnav_env.sim.scenario.Epoch`
+        (each array a view of its row of the step's arrays)."""
+        r, sky = self.rows, self.skies[k]
+        a, b, n_above = self.los_bounds[k], self.los_bounds[k + 1], self.n_above[k]
+        los = self.los_flat[a:b].reshape(self.n, n_above)
+        n_iter_standalone, n_iter_coop = self.iterations[k]
+        return dict(
+            t_s=float(self.t_s[k]),
+            pos_enu_m=r.pos_enu_m[k],
+            vel_enu_mps=r.vel_enu_mps[k],
+            goal_enu_m=r.goal_enu_m[k],
+            sv_az_deg=sky.az,
+            sv_el_deg=sky.el,
+            system=sky.system,
+            sv_index=sky.sv_index,
+            los=los,
+            received=los,
+            nlos=self.nlos_flat[a:b].reshape(self.n, n_above),
+            n_above_mask=n_above,
+            n_sats=r.n_sats[k],
+            n_sats_swarm=r.n_sats_swarm[k],
+            rel_enu_m=r.rel_enu_m[k],
+            rel_available=r.rel_available[k],
+            standalone_pos_enu_m=r.standalone_pos_enu_m[k],
+            standalone_cov_enu_m2=r.standalone_cov_enu_m2[k],
+            standalone_status=r.standalone_status[k],
+            coop_pos_enu_m=r.coop_pos_enu_m[k],
+            coop_cov_enu_m2=r.coop_cov_enu_m2[k],
+            coop_status=r.coop_status[k],
+            nav_pos_enu_m=r.nav_pos_enu_m[k],
+            nav_cov_enu_m2=r.nav_cov_enu_m2[k],
+            nav_source=r.nav_source[k],
+            centroid_uav=self.centroids[k],
+            collided=r.collided[k],
+            separation_violation=r.separation_violation[k],
+            out_of_contact=r.out_of_contact[k],
+            n_iter_standalone=n_iter_standalone,
+            n_iter_coop=n_iter_coop,
+            standalone_rejected=r.standalone_rejected[k],
+            coop_rejected=r.coop_rejected[k],
+            next_waypoint=r.next_waypoint[k],
+            **_NO_INTEGRITY,
+            map_excluded=None,
+        )
+
+
+class _StepEpoch(Epoch):
+    """Copy ``k``'s :class:`~coopnav_env.sim.scenario.Epoch` of a fused step, its fields
+    filled from the step's arrays (:meth:`_StepEpochs.fields`) when one is first read: an
+    epoch whose fields nobody reads costs no view of them. It pickles and copies as the plain
+    epoch of those fields."""
+
+    @classmethod
+    def of(cls, epochs: _StepEpochs, k: int) -> _StepEpoch:
+        """Copy ``k``'s epoch of ``epochs``, its fields not yet filled."""
+        out = object.__new__(cls)
+        out.__dict__["_pending"] = (epochs, k)
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        # called only where the usual lookup fails: before the fields are filled, every field
+        pending = self.__dict__.pop("_pending", None)
+        if pending is None:
+            raise AttributeError(f"'Epoch' object has no attribute {name!r}")
+        epochs, k = pending
+        self.__dict__.update(epochs.fields(k))
+        return getattr(self, name)
+
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        return _plain_epoch, ({f: getattr(self, f) for f in _EPOCH_FIELDS},)
+
+
+def _plain_epoch(fields: dict[str, Any]) -> Epoch:
+    """The :class:`~coopnav_env.sim.scenario.Epoch` of ``fields`` (every field, in order):
+    what a :class:`_StepEpoch` pickles and copies as."""
+    return Epoch._of_fields(**fields)
 
 
 def info_arrays(
@@ -558,6 +684,9 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     for f in futures:
         f.result()
 
+
+_EPOCH_FIELDS = tuple(f.name for f in dataclasses.fields(Epoch))
+"""The fields of an epoch, in order."""
 
 _NO_INTEGRITY = dict.fromkeys(_INTEGRITY_FIELDS)
 """The integrity fields of an epoch of the fused step (integrity monitoring is off): None."""
