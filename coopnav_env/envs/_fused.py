@@ -216,11 +216,11 @@ class FusedStep:
         )
         (
             sa_status,
-            n_iter,
+            _n_iter,
             sa_pos,
-            sa_cov,
+            _sa_cov,
             co_pos,
-            co_cov,
+            _co_cov,
             co_status,
             source,
             nav_pos,
@@ -230,7 +230,7 @@ class FusedStep:
             wp,
             n_swarm,
             n_sats,
-            centroid_uav,
+            _centroid_uav,
             out_of_contact,
             terms,
             in_goal,
@@ -287,7 +287,6 @@ class FusedStep:
             )
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
-        nlos = np.zeros(los_flat.shape[0], dtype=bool)
         # the reward of every copy at once (UrbanCanyonEnv._step_arrays' arithmetic, each
         # copy's row reduced as its own array would be)
         unpaid = st.unpaid
@@ -314,40 +313,21 @@ class FusedStep:
         terminated = ends[:, 0] | ends[:, 1]
         truncated = (steps >= cfg.max_steps) & ~terminated
         # each copy's epoch is made when first read (most batched steps read none)
-        epochs = _StepEpochs(
-            n,
+        epochs = _step_epochs(
             t_new,
             skies,
-            los_off.tolist(),
-            n_sv.tolist(),
+            los_off,
+            n_sv,
             los_flat,
-            nlos,
-            centroid_uav.tolist(),
-            n_iter.tolist(),
-            _EpochRows(
-                pos_enu_m=pos_c,
-                vel_enu_mps=vel_c,
-                goal_enu_m=goal_c,
-                n_sats=n_sats,
-                n_sats_swarm=n_swarm,
-                rel_enu_m=rel,
-                rel_available=avail,
-                standalone_pos_enu_m=sa_pos,
-                standalone_cov_enu_m2=sa_cov,
-                standalone_status=sa_status,
-                coop_pos_enu_m=co_pos,
-                coop_cov_enu_m2=co_cov,
-                coop_status=co_status,
-                nav_pos_enu_m=nav_pos,
-                nav_cov_enu_m2=nav_cov,
-                nav_source=source,
-                collided=hit,
-                separation_violation=sep,
-                out_of_contact=out_of_contact,
-                standalone_rejected=sa_rej,
-                coop_rejected=co_rej,
-                next_waypoint=wp_c,
-            ),
+            outputs,
+            rel,
+            avail,
+            pos_c,
+            vel_c,
+            goal_c,
+            hit,
+            sep,
+            wp_c,
         )
         for k, e in enumerate(envs):
             w = e.world
@@ -370,79 +350,31 @@ class FusedStep:
     def _first_epochs(envs, st, t_s, skies, n_sv, los_off, los_flat, outputs, rel, avail) -> None:
         """The worlds and epochs after :meth:`first_epochs`' kernels (``UrbanWorld._epoch``
         at a reset: collisions and separation not tested, the positions unchanged)."""
-        (
-            sa_status,
-            n_iter,
-            sa_pos,
-            sa_cov,
-            co_pos,
-            co_cov,
-            co_status,
-            source,
-            nav_pos,
-            nav_cov,
-            sa_rej,
-            co_rej,
-            wp,
-            n_swarm,
-            n_sats,
-            centroid_uav,
-            out_of_contact,
-            *_rest,
-        ) = outputs
-        n = rel.shape[1]
-        nlos = np.zeros(los_flat.shape[0], dtype=bool)
-        wp_c, goal_c = wp.copy(), st.goal.copy()
-        bounds, sv_counts = los_off.tolist(), n_sv.tolist()
-        centroids, iterations = centroid_uav.tolist(), n_iter.tolist()
+        out = _batched_kernels.Navigated._make(outputs)
+        nav_pos, nav_cov, wp = out.nav_pos, out.nav_cov, out.next_wp
+        no = np.zeros(nav_pos.shape[:2], dtype=bool)
+        # the positions and velocities of the throwaway state arrays (copies of the worlds')
+        epochs = _step_epochs(
+            t_s,
+            skies,
+            los_off,
+            n_sv,
+            los_flat,
+            outputs,
+            rel,
+            avail,
+            st.pos,
+            st.vel,
+            st.goal.copy(),
+            no,
+            no.copy(),
+            wp.copy(),
+        )
         for k, e in enumerate(envs):
             w = e.world
-            sky = skies[k]
-            a, b, n_above = bounds[k], bounds[k + 1], sv_counts[k]
-            los = los_flat[a:b].reshape(n, n_above)
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
             w._warm = True
-            no = np.zeros(n, dtype=bool)
-            ep = Epoch._of_fields(
-                t_s=float(t_s[k]),
-                pos_enu_m=w.pos_enu_m.copy(),
-                vel_enu_mps=w.vel_enu_mps.copy(),
-                goal_enu_m=goal_c[k],
-                sv_az_deg=sky.az,
-                sv_el_deg=sky.el,
-                system=sky.system,
-                sv_index=sky.sv_index,
-                los=los,
-                received=los,
-                nlos=nlos[a:b].reshape(n, n_above),
-                n_above_mask=n_above,
-                n_sats=n_sats[k],
-                n_sats_swarm=n_swarm[k],
-                rel_enu_m=rel[k],
-                rel_available=avail[k],
-                standalone_pos_enu_m=sa_pos[k],
-                standalone_cov_enu_m2=sa_cov[k],
-                standalone_status=sa_status[k],
-                coop_pos_enu_m=co_pos[k],
-                coop_cov_enu_m2=co_cov[k],
-                coop_status=co_status[k],
-                nav_pos_enu_m=nav_pos[k],
-                nav_cov_enu_m2=nav_cov[k],
-                nav_source=source[k],
-                centroid_uav=centroids[k],
-                collided=no,
-                separation_violation=no.copy(),
-                out_of_contact=out_of_contact[k],
-                n_iter_standalone=iterations[k][0],
-                n_iter_coop=iterations[k][1],
-                standalone_rejected=sa_rej[k],
-                coop_rejected=co_rej[k],
-                next_waypoint=wp_c[k],
-                **_NO_INTEGRITY,
-                map_excluded=None,
-            )
-            w.last = ep
-            e._epoch = ep
+            w.last = e._epoch = _StepEpoch.of(epochs, k)
 
 
 class _EpochRows(NamedTuple):
@@ -571,6 +503,65 @@ class _StepEpoch(Epoch):
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
         return _plain_epoch, ({f: getattr(self, f) for f in _EPOCH_FIELDS},)
+
+
+def _step_epochs(
+    t_s: list[float],
+    skies: list[Any],
+    los_off: np.ndarray,
+    n_sv: np.ndarray,
+    los_flat: np.ndarray,
+    outputs: tuple[np.ndarray, ...],
+    rel: np.ndarray,
+    avail: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    goal: np.ndarray,
+    collided: np.ndarray,
+    separation: np.ndarray,
+    next_wp: np.ndarray,
+) -> _StepEpochs:
+    """The epochs of the copies of a fused step (or of their first epochs), from the step's
+    times, skies, line of sight (``los_flat``, copy ``k``'s at ``los_off[k]:los_off[k + 1]``),
+    navigation ``outputs`` (the record :class:`~coopnav_env.envs._batched_kernels.Navigated`
+    as a tuple), relative sensing and the epochs' own ``(K, ...)`` arrays of positions,
+    velocities, goals, collisions, separation violations and next waypoints."""
+    out = _batched_kernels.Navigated._make(outputs)
+    return _StepEpochs(
+        rel.shape[1],
+        t_s,
+        skies,
+        los_off.tolist(),
+        n_sv.tolist(),
+        los_flat,
+        np.zeros(los_flat.shape[0], dtype=bool),
+        out.centroid_uav.tolist(),
+        out.n_iter.tolist(),
+        _EpochRows(
+            pos_enu_m=pos,
+            vel_enu_mps=vel,
+            goal_enu_m=goal,
+            n_sats=out.n_sats,
+            n_sats_swarm=out.n_swarm,
+            rel_enu_m=rel,
+            rel_available=avail,
+            standalone_pos_enu_m=out.sa_pos,
+            standalone_cov_enu_m2=out.sa_cov,
+            standalone_status=out.sa_status,
+            coop_pos_enu_m=out.co_pos,
+            coop_cov_enu_m2=out.co_cov,
+            coop_status=out.co_status,
+            nav_pos_enu_m=out.nav_pos,
+            nav_cov_enu_m2=out.nav_cov,
+            nav_source=out.source,
+            collided=collided,
+            separation_violation=separation,
+            out_of_contact=out.out_of_contact,
+            standalone_rejected=out.sa_rej,
+            coop_rejected=out.co_rej,
+            next_waypoint=next_wp,
+        ),
+    )
 
 
 def _plain_epoch(fields: dict[str, Any]) -> Epoch:

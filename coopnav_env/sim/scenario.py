@@ -1317,8 +1317,8 @@ class Epoch:
     @classmethod
     def _of_fields(cls, **fields: Any) -> Epoch:
         """The epoch of ``fields``, every field in the class's order, set directly: the
-        object the constructor makes, without its ``object.__setattr__`` per field (most of
-        the Python of a fused step's epoch)."""
+        object the constructor makes, without its ``object.__setattr__`` per field (the
+        epochs of the fused step, :mod:`coopnav_env.envs._fused`)."""
         out = object.__new__(cls)
         out.__dict__.update(fields)
         return out
