@@ -32,13 +32,14 @@ through the other path, an assignment to its world).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import operator
 import os
 import weakref
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -59,7 +60,7 @@ from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
 from coopnav_env.sim.city import Buildings
 from coopnav_env.sim.file_city import ExtrudedBuildings
-from coopnav_env.sim.scenario import Epoch
+from coopnav_env.sim.scenario import _INTEGRITY_FIELDS, Epoch
 
 
 class FusedStep:
@@ -138,10 +139,10 @@ class FusedStep:
         skies, row, n_sv, n_up = rows
         # each copy's draws in the order of UrbanWorld._navigate_fused: pseudoranges
         # (S + N S), relative sensing (N (N - 1) / 2 x 3), as one call per copy
-        n_draws = n_sv * (1 + n) + 3 * (n * (n - 1) // 2)
-        z = np.empty((n_copies, int(n_draws.max())))
-        for k, e in enumerate(envs):
-            z[k, : n_draws[k]] = e._rng.standard_normal(n_draws[k])
+        n_draws = (n_sv * (1 + n) + 3 * (n * (n - 1) // 2)).tolist()
+        z = np.empty((n_copies, max(n_draws)))
+        for k, e in enumerate(envs):  # straight into the copy's row (the draws of size=n_draws)
+            e._rng.standard_normal(out=z[k, : n_draws[k]])
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         los_off[1:] = (n * n_sv).cumsum()
         tab = self.skies
@@ -215,11 +216,11 @@ class FusedStep:
         )
         (
             sa_status,
-            n_iter,
+            _n_iter,
             sa_pos,
-            sa_cov,
+            _sa_cov,
             co_pos,
-            co_cov,
+            _co_cov,
             co_status,
             source,
             nav_pos,
@@ -229,7 +230,7 @@ class FusedStep:
             wp,
             n_swarm,
             n_sats,
-            centroid_uav,
+            _centroid_uav,
             out_of_contact,
             terms,
             in_goal,
@@ -286,7 +287,6 @@ class FusedStep:
             )
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
-        nlos = np.zeros(los_flat.shape[0], dtype=bool)
         # the reward of every copy at once (UrbanCanyonEnv._step_arrays' arithmetic, each
         # copy's row reduced as its own array would be)
         unpaid = st.unpaid
@@ -312,52 +312,28 @@ class FusedStep:
         rewards = terms.sum(axis=1)
         terminated = ends[:, 0] | ends[:, 1]
         truncated = (steps >= cfg.max_steps) & ~terminated
+        # each copy's epoch is made when first read (most batched steps read none)
+        epochs = _step_epochs(
+            t_new,
+            skies,
+            los_off,
+            n_sv,
+            los_flat,
+            outputs,
+            rel,
+            avail,
+            pos_c,
+            vel_c,
+            goal_c,
+            hit,
+            sep,
+            wp_c,
+        )
         for k, e in enumerate(envs):
             w = e.world
-            sky = skies[k]
-            a, b = los_off[k], los_off[k + 1]
-            los = los_flat[a:b].reshape(n, n_sv[k])
             w.pos_enu_m, w.vel_enu_mps, w.t_s = pos1[k], vel1[k], t_new[k]
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
-            ep = Epoch(
-                t_s=float(t_new[k]),
-                pos_enu_m=pos_c[k],
-                vel_enu_mps=vel_c[k],
-                goal_enu_m=goal_c[k],
-                sv_az_deg=sky.az,
-                sv_el_deg=sky.el,
-                system=sky.system,
-                sv_index=sky.sv_index,
-                los=los,
-                received=los,
-                nlos=nlos[a:b].reshape(n, n_sv[k]),
-                n_above_mask=int(n_sv[k]),
-                n_sats=n_sats[k],
-                n_sats_swarm=n_swarm[k],
-                rel_enu_m=rel[k],
-                rel_available=avail[k],
-                standalone_pos_enu_m=sa_pos[k],
-                standalone_cov_enu_m2=sa_cov[k],
-                standalone_status=sa_status[k],
-                coop_pos_enu_m=co_pos[k],
-                coop_cov_enu_m2=co_cov[k],
-                coop_status=co_status[k],
-                nav_pos_enu_m=nav_pos[k],
-                nav_cov_enu_m2=nav_cov[k],
-                nav_source=source[k],
-                centroid_uav=int(centroid_uav[k]),
-                collided=hit[k],
-                separation_violation=sep[k],
-                out_of_contact=out_of_contact[k],
-                n_iter_standalone=int(n_iter[k, 0]),
-                n_iter_coop=int(n_iter[k, 1]),
-                standalone_rejected=sa_rej[k],
-                coop_rejected=co_rej[k],
-                next_waypoint=wp_c[k],
-                map_excluded=None,
-            )
-            w.last = ep
-            e._epoch = ep
+            w.last = e._epoch = _StepEpoch.of(epochs, k)
             e._steps += 1
             e._unpaid_m = unpaid[k]
         st.advance(pos1, vel1, nav_pos, nav_cov, wp, steps, unpaid)
@@ -374,76 +350,224 @@ class FusedStep:
     def _first_epochs(envs, st, t_s, skies, n_sv, los_off, los_flat, outputs, rel, avail) -> None:
         """The worlds and epochs after :meth:`first_epochs`' kernels (``UrbanWorld._epoch``
         at a reset: collisions and separation not tested, the positions unchanged)."""
-        (
-            sa_status,
-            n_iter,
-            sa_pos,
-            sa_cov,
-            co_pos,
-            co_cov,
-            co_status,
-            source,
-            nav_pos,
-            nav_cov,
-            sa_rej,
-            co_rej,
-            wp,
-            n_swarm,
-            n_sats,
-            centroid_uav,
-            out_of_contact,
-            *_rest,
-        ) = outputs
-        n = rel.shape[1]
-        nlos = np.zeros(los_flat.shape[0], dtype=bool)
-        wp_c, goal_c = wp.copy(), st.goal.copy()
+        out = _batched_kernels.Navigated._make(outputs)
+        nav_pos, nav_cov, wp = out.nav_pos, out.nav_cov, out.next_wp
+        no = np.zeros(nav_pos.shape[:2], dtype=bool)
+        # the positions and velocities of the throwaway state arrays (copies of the worlds')
+        epochs = _step_epochs(
+            t_s,
+            skies,
+            los_off,
+            n_sv,
+            los_flat,
+            outputs,
+            rel,
+            avail,
+            st.pos,
+            st.vel,
+            st.goal.copy(),
+            no,
+            no.copy(),
+            wp.copy(),
+        )
         for k, e in enumerate(envs):
             w = e.world
-            sky = skies[k]
-            a, b = los_off[k], los_off[k + 1]
-            los = los_flat[a:b].reshape(n, n_sv[k])
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
             w._warm = True
-            no = np.zeros(n, dtype=bool)
-            ep = Epoch(
-                t_s=float(t_s[k]),
-                pos_enu_m=w.pos_enu_m.copy(),
-                vel_enu_mps=w.vel_enu_mps.copy(),
-                goal_enu_m=goal_c[k],
-                sv_az_deg=sky.az,
-                sv_el_deg=sky.el,
-                system=sky.system,
-                sv_index=sky.sv_index,
-                los=los,
-                received=los,
-                nlos=nlos[a:b].reshape(n, n_sv[k]),
-                n_above_mask=int(n_sv[k]),
-                n_sats=n_sats[k],
-                n_sats_swarm=n_swarm[k],
-                rel_enu_m=rel[k],
-                rel_available=avail[k],
-                standalone_pos_enu_m=sa_pos[k],
-                standalone_cov_enu_m2=sa_cov[k],
-                standalone_status=sa_status[k],
-                coop_pos_enu_m=co_pos[k],
-                coop_cov_enu_m2=co_cov[k],
-                coop_status=co_status[k],
-                nav_pos_enu_m=nav_pos[k],
-                nav_cov_enu_m2=nav_cov[k],
-                nav_source=source[k],
-                centroid_uav=int(centroid_uav[k]),
-                collided=no,
-                separation_violation=no.copy(),
-                out_of_contact=out_of_contact[k],
-                n_iter_standalone=int(n_iter[k, 0]),
-                n_iter_coop=int(n_iter[k, 1]),
-                standalone_rejected=sa_rej[k],
-                coop_rejected=co_rej[k],
-                next_waypoint=wp_c[k],
-                map_excluded=None,
-            )
-            w.last = ep
-            e._epoch = ep
+            w.last = e._epoch = _StepEpoch.of(epochs, k)
+
+
+class _EpochRows(NamedTuple):
+    """The ``(K, ...)`` arrays of a fused step whose row ``k`` is that field of copy ``k``'s
+    epoch (the fields of :class:`~coopnav_env.sim.scenario.Epoch` of these names)."""
+
+    pos_enu_m: np.ndarray
+    vel_enu_mps: np.ndarray
+    goal_enu_m: np.ndarray
+    n_sats: np.ndarray
+    n_sats_swarm: np.ndarray
+    rel_enu_m: np.ndarray
+    rel_available: np.ndarray
+    standalone_pos_enu_m: np.ndarray
+    standalone_cov_enu_m2: np.ndarray
+    standalone_status: np.ndarray
+    coop_pos_enu_m: np.ndarray
+    coop_cov_enu_m2: np.ndarray
+    coop_status: np.ndarray
+    nav_pos_enu_m: np.ndarray
+    nav_cov_enu_m2: np.ndarray
+    nav_source: np.ndarray
+    collided: np.ndarray
+    separation_violation: np.ndarray
+    out_of_contact: np.ndarray
+    standalone_rejected: np.ndarray
+    coop_rejected: np.ndarray
+    next_waypoint: np.ndarray
+
+
+class _StepEpochs:
+    """Every copy's epoch of one fused step, as the step's arrays: :meth:`fields` makes copy
+    ``k``'s (what :class:`_StepEpoch` reads when one of its fields is first read).
+
+    The arrays are the step's own (later steps make new ones; the state arrays that the next
+    step reads are never written), so an epoch read any time later is the one of its step.
+    """
+
+    def __init__(
+        self,
+        n: int,
+        t_s: list[float],
+        skies: list[Any],
+        los_bounds: list[int],
+        n_above: list[int],
+        los_flat: np.ndarray,
+        nlos_flat: np.ndarray,
+        centroids: list[int],
+        iterations: list[list[int]],
+        rows: _EpochRows,
+    ) -> None:
+        self.n, self.t_s, self.skies = n, t_s, skies
+        self.los_bounds, self.n_above = los_bounds, n_above
+        self.los_flat, self.nlos_flat = los_flat, nlos_flat
+        self.centroids, self.iterations = centroids, iterations
+        self.rows = rows
+
+    def fields(self, k: int) -> dict[str, Any]:
+        """Copy ``k``'s epoch fields, in the order of :class:`~coopnav_env.sim.scenario.Epoch`
+        (each array a view of its row of the step's arrays)."""
+        r, sky = self.rows, self.skies[k]
+        a, b, n_above = self.los_bounds[k], self.los_bounds[k + 1], self.n_above[k]
+        los = self.los_flat[a:b].reshape(self.n, n_above)
+        n_iter_standalone, n_iter_coop = self.iterations[k]
+        return dict(
+            t_s=float(self.t_s[k]),
+            pos_enu_m=r.pos_enu_m[k],
+            vel_enu_mps=r.vel_enu_mps[k],
+            goal_enu_m=r.goal_enu_m[k],
+            sv_az_deg=sky.az,
+            sv_el_deg=sky.el,
+            system=sky.system,
+            sv_index=sky.sv_index,
+            los=los,
+            received=los,
+            nlos=self.nlos_flat[a:b].reshape(self.n, n_above),
+            n_above_mask=n_above,
+            n_sats=r.n_sats[k],
+            n_sats_swarm=r.n_sats_swarm[k],
+            rel_enu_m=r.rel_enu_m[k],
+            rel_available=r.rel_available[k],
+            standalone_pos_enu_m=r.standalone_pos_enu_m[k],
+            standalone_cov_enu_m2=r.standalone_cov_enu_m2[k],
+            standalone_status=r.standalone_status[k],
+            coop_pos_enu_m=r.coop_pos_enu_m[k],
+            coop_cov_enu_m2=r.coop_cov_enu_m2[k],
+            coop_status=r.coop_status[k],
+            nav_pos_enu_m=r.nav_pos_enu_m[k],
+            nav_cov_enu_m2=r.nav_cov_enu_m2[k],
+            nav_source=r.nav_source[k],
+            centroid_uav=self.centroids[k],
+            collided=r.collided[k],
+            separation_violation=r.separation_violation[k],
+            out_of_contact=r.out_of_contact[k],
+            n_iter_standalone=n_iter_standalone,
+            n_iter_coop=n_iter_coop,
+            standalone_rejected=r.standalone_rejected[k],
+            coop_rejected=r.coop_rejected[k],
+            next_waypoint=r.next_waypoint[k],
+            **_NO_INTEGRITY,
+            map_excluded=None,
+        )
+
+
+class _StepEpoch(Epoch):
+    """Copy ``k``'s :class:`~coopnav_env.sim.scenario.Epoch` of a fused step, its fields
+    filled from the step's arrays (:meth:`_StepEpochs.fields`) when one is first read: an
+    epoch whose fields nobody reads costs no view of them. It pickles and copies as the plain
+    epoch of those fields."""
+
+    @classmethod
+    def of(cls, epochs: _StepEpochs, k: int) -> _StepEpoch:
+        """Copy ``k``'s epoch of ``epochs``, its fields not yet filled."""
+        out = object.__new__(cls)
+        out.__dict__["_pending"] = (epochs, k)
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        # called only where the usual lookup fails: before the fields are filled, every field
+        pending = self.__dict__.pop("_pending", None)
+        if pending is None:
+            raise AttributeError(f"'Epoch' object has no attribute {name!r}")
+        epochs, k = pending
+        self.__dict__.update(epochs.fields(k))
+        return getattr(self, name)
+
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        return _plain_epoch, ({f: getattr(self, f) for f in _EPOCH_FIELDS},)
+
+
+def _step_epochs(
+    t_s: list[float],
+    skies: list[Any],
+    los_off: np.ndarray,
+    n_sv: np.ndarray,
+    los_flat: np.ndarray,
+    outputs: tuple[np.ndarray, ...],
+    rel: np.ndarray,
+    avail: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    goal: np.ndarray,
+    collided: np.ndarray,
+    separation: np.ndarray,
+    next_wp: np.ndarray,
+) -> _StepEpochs:
+    """The epochs of the copies of a fused step (or of their first epochs), from the step's
+    times, skies, line of sight (``los_flat``, copy ``k``'s at ``los_off[k]:los_off[k + 1]``),
+    navigation ``outputs`` (the record :class:`~coopnav_env.envs._batched_kernels.Navigated`
+    as a tuple), relative sensing and the epochs' own ``(K, ...)`` arrays of positions,
+    velocities, goals, collisions, separation violations and next waypoints."""
+    out = _batched_kernels.Navigated._make(outputs)
+    return _StepEpochs(
+        rel.shape[1],
+        t_s,
+        skies,
+        los_off.tolist(),
+        n_sv.tolist(),
+        los_flat,
+        np.zeros(los_flat.shape[0], dtype=bool),
+        out.centroid_uav.tolist(),
+        out.n_iter.tolist(),
+        _EpochRows(
+            pos_enu_m=pos,
+            vel_enu_mps=vel,
+            goal_enu_m=goal,
+            n_sats=out.n_sats,
+            n_sats_swarm=out.n_swarm,
+            rel_enu_m=rel,
+            rel_available=avail,
+            standalone_pos_enu_m=out.sa_pos,
+            standalone_cov_enu_m2=out.sa_cov,
+            standalone_status=out.sa_status,
+            coop_pos_enu_m=out.co_pos,
+            coop_cov_enu_m2=out.co_cov,
+            coop_status=out.co_status,
+            nav_pos_enu_m=out.nav_pos,
+            nav_cov_enu_m2=out.nav_cov,
+            nav_source=out.source,
+            collided=collided,
+            separation_violation=separation,
+            out_of_contact=out.out_of_contact,
+            standalone_rejected=out.sa_rej,
+            coop_rejected=out.co_rej,
+            next_waypoint=next_wp,
+        ),
+    )
+
+
+def _plain_epoch(fields: dict[str, Any]) -> Epoch:
+    """The :class:`~coopnav_env.sim.scenario.Epoch` of ``fields`` (every field, in order):
+    what a :class:`_StepEpoch` pickles and copies as."""
+    return Epoch._of_fields(**fields)
 
 
 def info_arrays(
@@ -551,6 +675,12 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     for f in futures:
         f.result()
 
+
+_EPOCH_FIELDS = tuple(f.name for f in dataclasses.fields(Epoch))
+"""The fields of an epoch, in order."""
+
+_NO_INTEGRITY = dict.fromkeys(_INTEGRITY_FIELDS)
+"""The integrity fields of an epoch of the fused step (integrity monitoring is off): None."""
 
 _N_OBS_PARAMS = 9
 """Entries of ``UrbanCanyonEnv._obs_params`` (the observation kernel's scales)."""

@@ -37,10 +37,11 @@ Each copy keeps its own city, satellites
 (its own GNSS time), solver problems and generator (one draw call per copy per step, in the
 order of ``UrbanWorld``); no problem is padded or stacked with another copy's, so its
 arithmetic does not depend on K. Still once per copy in Python: those draws, the copy's
-``Epoch`` and world attributes (what ``envs[k]`` shows), the infos dictionaries and the
-start of each automatic reset (a new city, formation and route); the first epochs of the
-copies reset at a step are again the compiled calls over all of them. Other settings step
-copy by copy through ``UrbanCanyonEnv._step_arrays``.
+world attributes and a stand-in for its ``Epoch`` (what ``envs[k]`` shows; the epoch's
+fields are views made from the step's arrays when one is first read), the infos
+dictionaries and the start of each automatic reset (a new city, formation and route); the
+first epochs of the copies reset at a step are again the compiled calls over all of them.
+Other settings step copy by copy through ``UrbanCanyonEnv._step_arrays``.
 """
 
 from __future__ import annotations
