@@ -1,14 +1,14 @@
 """Pick each training run's checkpoint by its score on validation episodes.
 
-A PPO run's return wanders between checkpoints (by about 0.05 of score late in the
-from-scratch grid runs), so its last checkpoint is one draw from that wander. This script
-flies every checkpoint of each run from ``--from-steps`` on (and the run's final model) on
-*validation* episodes of ``urban_canyon_v1`` (reset seeds ``--seed-start`` on, by default
-1,001,000 on: disjoint from the training seeds, below 1,000,000, and from the held-out test
-episodes of the studies, 1,000,100-1,000,199), and keeps, per run, the checkpoint with the
-highest mean score. With ``--export DIR`` the kept checkpoints are exported as policies
-``DIR/<run folder name>`` (:func:`coopnav_env.training.torchrl_backend.export_policy`), to be
-compared on the test episodes by ``compare_learned.py``.
+A PPO run's return can wander between checkpoints, so that its last checkpoint is one draw
+from that wander. This script flies every checkpoint of each run from ``--from-steps`` on
+(and the run's final model) on *validation* episodes of ``urban_canyon_v1`` (reset seeds
+``--seed-start`` on, by default 1,001,000 on: disjoint from the training seeds, below
+1,000,000, and from the held-out test episodes of the studies, 1,000,100-1,000,199), and
+keeps, per run, the checkpoint with the highest mean score. With ``--export DIR`` the kept
+checkpoints are exported as policies ``DIR/<run folder name>``
+(:func:`coopnav_env.training.torchrl_backend.export_policy`), to be compared on the test
+episodes by ``compare_learned.py``.
 
 Example::
 
