@@ -60,7 +60,7 @@ from coopnav_env.nav.types import PLAUSIBLE_RADIUS_M
 from coopnav_env.nav.wls import _radius_args
 from coopnav_env.sim.city import Buildings
 from coopnav_env.sim.file_city import ExtrudedBuildings
-from coopnav_env.sim.scenario import _INTEGRITY_FIELDS, Epoch
+from coopnav_env.sim.scenario import Epoch
 
 
 class FusedStep:
@@ -474,8 +474,7 @@ class _StepEpochs:
             standalone_rejected=r.standalone_rejected[k],
             coop_rejected=r.coop_rejected[k],
             next_waypoint=r.next_waypoint[k],
-            **_NO_INTEGRITY,
-            map_excluded=None,
+            **_EPOCH_DEFAULTS,
         )
 
 
@@ -501,8 +500,8 @@ class _StepEpoch(Epoch):
         self.__dict__.update(epochs.fields(k))
         return getattr(self, name)
 
-    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
-        return _plain_epoch, ({f: getattr(self, f) for f in _EPOCH_FIELDS},)
+    def __reduce__(self) -> tuple[type[Epoch], tuple[Any, ...]]:
+        return Epoch, tuple(getattr(self, f) for f in _EPOCH_FIELDS)
 
 
 def _step_epochs(
@@ -562,12 +561,6 @@ def _step_epochs(
             next_waypoint=next_wp,
         ),
     )
-
-
-def _plain_epoch(fields: dict[str, Any]) -> Epoch:
-    """The :class:`~coopnav_env.sim.scenario.Epoch` of ``fields`` (every field, in order):
-    what a :class:`_StepEpoch` pickles and copies as."""
-    return Epoch._of_fields(**fields)
 
 
 def info_arrays(
@@ -679,8 +672,11 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
 _EPOCH_FIELDS = tuple(f.name for f in dataclasses.fields(Epoch))
 """The fields of an epoch, in order."""
 
-_NO_INTEGRITY = dict.fromkeys(_INTEGRITY_FIELDS)
-"""The integrity fields of an epoch of the fused step (integrity monitoring is off): None."""
+_EPOCH_DEFAULTS = {
+    f.name: f.default for f in dataclasses.fields(Epoch) if f.default is not dataclasses.MISSING
+}
+"""The fields an epoch of the fused step leaves at their defaults, in order (the last ones of
+an epoch: integrity monitoring and the map-aided exclusion are off there)."""
 
 _N_OBS_PARAMS = 9
 """Entries of ``UrbanCanyonEnv._obs_params`` (the observation kernel's scales)."""

@@ -1314,15 +1314,6 @@ class Epoch:
     fde_excluded: np.ndarray | None = None
     map_excluded: BoolArray | None = None
 
-    @classmethod
-    def _of_fields(cls, **fields: Any) -> Epoch:
-        """The epoch of ``fields``, every field in the class's order, set directly: the
-        object the constructor makes, without its ``object.__setattr__`` per field (the
-        epochs of the fused step, :mod:`coopnav_env.envs._fused`)."""
-        out = object.__new__(cls)
-        out.__dict__.update(fields)
-        return out
-
     @property
     def n_uavs(self) -> int:
         """Number of UAVs N."""

@@ -225,6 +225,33 @@ def test_fused_step_equals_the_world_step(monkeypatch, settings) -> None:
     assert_same_records(fused, world)
 
 
+def test_copies_epochs_read_late_or_copied_equal_those_read_at_once() -> None:
+    # a fused step makes each copy's epoch when one of its fields is first read: read after
+    # later steps and automatic resets, pickled or deep-copied, it is the epoch of its step
+    import copy
+    import pickle
+
+    def run(read_at_once: bool) -> list:
+        batch = BatchedUrbanCanyonEnv(3, n_uavs=4)
+        batch.reset(seed=5)
+        rng = np.random.default_rng(6)
+        epochs = []
+        for _ in range(12):  # random commands: copies crash and reset along the way
+            batch.step(rng.uniform(-1.0, 1.0, (3, 4, 3)))
+            for e in batch.envs:
+                epochs.append(e.world.last)
+                if read_at_once:
+                    _ = e.world.last.t_s
+        return epochs
+
+    at_once, late = run(True), run(False)
+    assert_same_records(late, at_once)
+    copies = [pickle.loads(pickle.dumps(ep)) for ep in run(False)]
+    copies += [copy.deepcopy(ep) for ep in run(False)]
+    assert all(type(c) is Epoch for c in copies)
+    assert_same_records(copies, at_once + at_once)
+
+
 def _step_in_child(batch, queue) -> None:
     obs, *_ = batch.step(np.zeros((batch.n_copies, batch.n_agents, 3)))
     queue.put(obs.copy())
