@@ -23,6 +23,43 @@ from coopnav_env.nav import _kernels as _nav_kernels
 from coopnav_env.sim import _integrity_kernels
 
 
+@njit(cache=True)
+def grid_boxes(bx0, by0, split_along_x, weights, weight_sums, heights, block_m, span_m, gap_m):
+    """The boxes of a grid city's built blocks: ``lo, hi (m k, 3)`` [m], building ``j`` of
+    block ``b`` in row ``b k + j``.
+
+    Block ``b`` (west and south edges ``bx0[b], by0[b]``, side ``block_m``) is cut into
+    ``k`` strips stacked along East where ``split_along_x[b]`` (else along North), of lengths
+    ``weights[b, j] / weight_sums[b] * span_m`` (``span_m``: the side less the gaps) with
+    ``gap_m`` between them; each box stands from the ground to ``heights[b k + j]``. The
+    arithmetic of the numpy definition (``tests/sim/oracles.py``, ``generate_city``), in its
+    order: the strips' starts are their cumulative sums less their lengths plus ``j gap``.
+    """
+    m, k = weights.shape
+    lo = np.zeros((m * k, 3))
+    hi = np.empty((m * k, 3))
+    for b in range(m):
+        cum = 0.0
+        for j in range(k):
+            length = weights[b, j] / weight_sums[b] * span_m
+            cum += length
+            start = cum - length + gap_m * j
+            end = start + length
+            r = b * k + j
+            if split_along_x[b]:
+                lo[r, 0] = bx0[b] + start
+                hi[r, 0] = bx0[b] + end
+                lo[r, 1] = by0[b] + 0.0
+                hi[r, 1] = by0[b] + block_m
+            else:
+                lo[r, 0] = bx0[b] + 0.0
+                hi[r, 0] = bx0[b] + block_m
+                lo[r, 1] = by0[b] + start
+                hi[r, 1] = by0[b] + end
+            hi[r, 2] = heights[r]
+    return lo, hi
+
+
 @njit(cache=True, inline="always")
 def _fmax(a, b):
     """``numpy.maximum`` of two floats (``max`` differs for signed zeros: max(-0., 0.) = -0.)."""

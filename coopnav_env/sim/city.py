@@ -974,20 +974,20 @@ def generate_city(config: CityConfig, rng: np.random.Generator) -> City:
     heights = _truncated_normal(
         rng, m * k, c.height_mean_m, c.height_std_m, c.height_min_m, c.height_max_m
     )
-    lengths = weights / weights.sum(axis=1, keepdims=True) * (block - (k - 1) * c.building_gap_m)
-    starts = np.cumsum(lengths, axis=1) - lengths + c.building_gap_m * np.arange(k)
-    lo_along, hi_along = starts, starts + lengths  # (m, k), offsets inside the block
-    full_lo, full_hi = np.zeros((m, k)), np.full((m, k), block)
-    sx = split_along_x[:, None]
     # the boxes' corners (x_min, y_min, 0) and (x_max, y_max, height), building j of block b
     # in row b k + j; valid by construction (positive strips inside the block, heights in the
     # configuration's range), so not checked again
-    lo, hi = np.zeros((m * k, 3)), np.empty((m * k, 3))
-    lo[:, 0] = (bx0[:, None] + np.where(sx, lo_along, full_lo)).ravel()
-    hi[:, 0] = (bx0[:, None] + np.where(sx, hi_along, full_hi)).ravel()
-    lo[:, 1] = (by0[:, None] + np.where(sx, full_lo, lo_along)).ravel()
-    hi[:, 1] = (by0[:, None] + np.where(sx, full_hi, hi_along)).ravel()
-    hi[:, 2] = heights
+    lo, hi = _kernels.grid_boxes(
+        bx0,
+        by0,
+        split_along_x,
+        weights,
+        weights.sum(axis=1),
+        heights,
+        float(block),
+        float(block - (k - 1) * c.building_gap_m),
+        float(c.building_gap_m),
+    )
     return City._of_parts(
         Buildings._of_arrays(lo, hi),
         (x0, -x0, y0, -y0),

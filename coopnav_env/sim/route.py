@@ -40,30 +40,52 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
-def _street_of(xy: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> tuple[str, float]:
-    """The street a point is on: ``("ns", x_centre)`` or ``("ew", y_centre)``, the nearest."""
-    dx = np.abs(cx - xy[0]) if cx.size else np.array([np.inf])
-    dy = np.abs(cy - xy[1]) if cy.size else np.array([np.inf])
-    if dx.min() <= dy.min():
-        return "ns", float(cx[int(np.argmin(dx))])
-    return "ew", float(cy[int(np.argmin(dy))])
+def _nearest(values: list[float], v: float) -> tuple[float, int]:
+    """The smallest ``|values[i] - v|`` and its first index ``i`` (``inf, -1`` when empty)."""
+    best, arg = math.inf, -1
+    for i, c in enumerate(values):
+        d = abs(c - v)
+        if d < best:
+            best, arg = d, i
+    return best, arg
+
+
+def _street_of(x: float, y: float, cx: list[float], cy: list[float]) -> tuple[str, float]:
+    """The street a point is on: ``("ns", x_centre)`` or ``("ew", y_centre)``, the nearest
+    (a north-south one where both are as near)."""
+    dx, ix = _nearest(cx, x)
+    dy, iy = _nearest(cy, y)
+    if dx <= dy:
+        return "ns", cx[ix]
+    return "ew", cy[iy]
 
 
 def _snapped_ends(
     city: Any, start_xy: ArrayLike, goal_xy: ArrayLike
-) -> tuple[np.ndarray, np.ndarray, tuple[str, float, float], tuple[str, float, float]]:
-    """The street centre lines (x of the north-south ones, y of the east-west ones) and both
-    ends snapped to their nearest street: ``(kind, East, North)`` each."""
-    cx = np.asarray(city.street_centres_x_m, dtype=float).reshape(-1)
-    cy = np.asarray(city.street_centres_y_m, dtype=float).reshape(-1)
-    if cx.size + cy.size == 0:
+) -> tuple[list[float], list[float], tuple[str, float, float], tuple[str, float, float]]:
+    """The street centre lines (x of the north-south ones, y of the east-west ones, as
+    Python floats: a grid has a few, and scalar arithmetic on them is numpy's, bit for bit)
+    and both ends snapped to their nearest street: ``(kind, East, North)`` each."""
+    cx = np.asarray(city.street_centres_x_m, dtype=float).reshape(-1).tolist()
+    cy = np.asarray(city.street_centres_y_m, dtype=float).reshape(-1).tolist()
+    if not cx and not cy:
         raise ValueError("street_route needs a city with at least one street")
     ends = []
     for xy in (start_xy, goal_xy):
-        p = np.asarray(xy, dtype=float).reshape(2)
-        kind, c = _street_of(p, cx, cy)
-        ends.append((kind, c, float(p[1])) if kind == "ns" else (kind, float(p[0]), c))
+        x, y = np.asarray(xy, dtype=float).reshape(2).tolist()
+        kind, c = _street_of(x, y, cx, cy)
+        ends.append((kind, c, y) if kind == "ns" else (kind, x, c))
     return cx, cy, ends[0], ends[1]
+
+
+def _nearest_pair(values: list[float], a: float, b: float) -> float:
+    """The value with the smallest ``|v - a| + |v - b|`` (the first of equals)."""
+    best, arg = math.inf, 0
+    for i, v in enumerate(values):
+        d = abs(v - a) + abs(v - b)
+        if d < best:
+            best, arg = d, i
+    return values[arg]
 
 
 def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarray:
@@ -98,12 +120,12 @@ def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarr
     cx, cy, (s_kind, sx, sy), (g_kind, gx, gy) = _snapped_ends(city, start_xy, goal_xy)
     pts: list[tuple[float, float]] = [(sx, sy)]
     if s_kind == g_kind == "ns":
-        if not math.isclose(sx, gx) and cy.size:
-            b = cy[int(np.argmin(np.abs(cy - sy) + np.abs(cy - gy)))]
+        if not math.isclose(sx, gx) and cy:
+            b = _nearest_pair(cy, sy, gy)
             pts += [(sx, b), (gx, b)]
     elif s_kind == g_kind == "ew":
-        if not math.isclose(sy, gy) and cx.size:
-            b = cx[int(np.argmin(np.abs(cx - sx) + np.abs(cx - gx)))]
+        if not math.isclose(sy, gy) and cx:
+            b = _nearest_pair(cx, sx, gx)
             pts += [(b, sy), (b, gy)]
     elif s_kind == "ns":
         pts.append((sx, gy))
@@ -178,7 +200,7 @@ def street_routes(
     s_c = sx if s_kind == "ns" else sy
     g_c = gx if g_kind == "ns" else gy
 
-    def between(vals: np.ndarray, a: float, b: float) -> list[float]:
+    def between(vals: list[float], a: float, b: float) -> list[float]:
         lo, hi = min(a, b) - 1e-6, max(a, b) + 1e-6
         return [float(v) for v in vals if lo <= v <= hi]
 
@@ -255,11 +277,17 @@ def extend_route(points: ArrayLike, back_m: float, fwd_m: float, extent: tuple) 
 
 def route_tail_lengths_m(route: ArrayLike) -> np.ndarray:
     """Length of the route after each waypoint [m], shape ``(k,)`` (0 at the last one)."""
-    pts = np.asarray(route, dtype=float).reshape(-1, 2)
-    legs = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    tail = np.zeros(legs.size + 1)
-    tail[:-1] = np.cumsum(legs[::-1])[::-1]
-    return tail
+    pts = np.asarray(route, dtype=float).reshape(-1, 2).tolist()
+    # the legs' lengths as numpy's norm of each difference (sqrt of dx^2 + dy^2) and their
+    # sums from the end, in Python floats (a route has a few points)
+    tail = [0.0] * max(len(pts), 1)
+    acc = 0.0
+    for i in range(len(pts) - 2, -1, -1):
+        dx = pts[i + 1][0] - pts[i][0]
+        dy = pts[i + 1][1] - pts[i][1]
+        acc += math.sqrt(dx * dx + dy * dy)
+        tail[i] = acc
+    return np.array(tail)
 
 
 def remaining_route_m(

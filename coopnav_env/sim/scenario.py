@@ -1017,12 +1017,17 @@ def _street_frames(
     centre = np.concatenate([cx, cy])[street]
     y_along = y0 + margin_m + along01 * (y1 - y0 - 2.0 * margin_m)
     x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
-    xy = np.stack([np.where(ns, centre, x_along), np.where(ns, y_along, centre)], axis=1)
+    xy = np.empty((n, 2))
+    xy[:, 0] = np.where(ns, centre, x_along)
+    xy[:, 1] = np.where(ns, y_along, centre)
     return xy, ns
 
 
 _NO_BOXES = np.zeros((0, 3))
 _NO_BOXES.setflags(write=False)
+
+_DIAG3 = np.arange(3)
+"""Indices of a 3 x 3 matrix's diagonal."""
 
 
 def _world_motion(
@@ -1630,9 +1635,8 @@ class UrbanWorld:
             self.clock_bias_m = np.concatenate([self.clock_bias_m, gal_clock_m], axis=1)
         # prior of the dead-reckoning fallback at the first epoch: the known launch position
         self.nav_pos_enu_m = pos.copy()
-        self.nav_cov_enu_m2 = np.broadcast_to(
-            np.eye(3) * cfg.start_prior_sigma_m**2, (n, 3, 3)
-        ).copy()
+        self.nav_cov_enu_m2 = np.zeros((n, 3, 3))
+        self.nav_cov_enu_m2[:, _DIAG3, _DIAG3] = 1.0 * cfg.start_prior_sigma_m**2
         self._warm = False
 
     def _street_start_goal(
@@ -1655,9 +1659,11 @@ class UrbanWorld:
                 raise ValueError(f"start_pos_enu_m must be finite with shape ({n}, 3)")
         if goal_enu_m is None:
             centre = pos[:, :2].mean(axis=0)
-            dist = np.hypot(*(cand[1:] - centre).T)
-            ok = dist >= cfg.goal_distance_min_m
-            pick = int(np.argmax(ok)) if np.any(ok) else int(np.argmax(dist))
+            d = cand[1:] - centre
+            dist = np.hypot(d[:, 0], d[:, 1])
+            pick = int((dist >= cfg.goal_distance_min_m).argmax())  # the first far enough
+            if not dist[pick] >= cfg.goal_distance_min_m:  # none: the farthest
+                pick = int(dist.argmax())
             goal = np.array([*cand[1 + pick].tolist(), float(cfg.start_altitude_m)])
         else:
             goal = np.array(goal_enu_m, dtype=float)
