@@ -32,8 +32,9 @@ machines):
    size of the grid city (blocks per side), with the growth explained.
 5. **Batched**: env-steps/s (swarm steps) of K copies at N = 5 stepped as one SB3 vector
    environment, SuperSuit's adapters vs the batched vector environment
-   (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), and VMAS with K batched
-   environments; and the time inside the compiled kernels per swarm step
+   (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), the batched environment
+   itself through its array step (``arrays``: ``BatchedUrbanCanyonEnv.step_arrays``, no
+   per-slot info dicts) and VMAS with K batched environments; and the time inside the compiled kernels per swarm step
    (:func:`kernel_timers`), whose inverse times two cores is a ceiling for any batching of
    this simulation. ``--city`` flies the copies on another city (``family:mixed``: a new
    generated city of extruded polygons every episode; with ``--city-pool P``, one of ``P``
@@ -844,6 +845,25 @@ def vec_stepper(
     return step, venv
 
 
+def batch_stepper(
+    n: int, k: int, city_kw: dict[str, Any] | None = None
+) -> tuple[Callable[[int], None], Any]:
+    """A stepper of ``k`` copies of ``n`` UAVs as :class:`~coopnav_env.envs.
+    BatchedUrbanCanyonEnv` itself, with random actions through :meth:`step_arrays` (arrays in
+    and out, no per-slot dicts: what a trainer that reads arrays pays)."""
+    from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+    batch = BatchedUrbanCanyonEnv.from_envs([make_urban(n, **(city_kw or {})) for _ in range(k)])
+    batch.reset(seed=0)
+    rng = np.random.default_rng(0)
+
+    def step(m: int) -> None:
+        for _ in range(m):
+            batch.step_arrays(rng.uniform(-1.0, 1.0, (k, n, 3)).astype(np.float32))
+
+    return step, batch
+
+
 def section_batched(args, out: dict) -> None:
     n, k = 5, args.copies
     city_kw = city_settings(args.city, args.city_pool)
@@ -861,6 +881,8 @@ def section_batched(args, out: dict) -> None:
         fn, venv = vec_stepper(kind, n, k, city_kw)
         fns[kind] = fn
         venvs.append(venv)
+    fns["arrays"], batch = batch_stepper(n, k, city_kw)
+    venvs.append(batch)
     if have("vmas"):
         fns["vmas"] = vmas_stepper(n, k)
     seconds = max(args.seconds, 1.0)
@@ -871,6 +893,7 @@ def section_batched(args, out: dict) -> None:
     print(f"   batched / supersuit: {row['batched'] / row['supersuit']:.2f}x")
     if "vmas" in row:
         print(f"   batched / vmas: {row['batched'] / row['vmas']:.2f}x")
+        print(f"   arrays / vmas: {row['arrays'] / row['vmas']:.2f}x")
     # the compiled part of a batched step: a ceiling for any batching of this Python code
     step = fns["batched"]
     with kernel_timers() as acc:

@@ -73,3 +73,23 @@ def test_city_options_fly_the_copies_on_a_built_family_pool():
     for seed in range(4):  # every episode flies one of the pool's cities, built already
         env.reset(seed=seed)
     assert seeded_family_city.cache_info().misses == misses
+
+
+def test_the_arrays_stepper_steps_every_copy_through_step_arrays(monkeypatch):
+    from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+    calls = []
+    step_arrays = BatchedUrbanCanyonEnv.step_arrays
+
+    def counted(self, actions):
+        calls.append(np.asarray(actions).shape)
+        return step_arrays(self, actions)
+
+    monkeypatch.setattr(BatchedUrbanCanyonEnv, "step_arrays", counted)
+    step, batch = bench_env.batch_stepper(2, 3)
+    steps0 = [e._steps for e in batch.envs]
+    step(2)
+    assert calls == [(3, 2, 3), (3, 2, 3)]  # K copies of N UAVs, one call per batched step
+    # every copy advanced twice, or began a new episode on the way
+    assert all(e._steps in (s + 2, 0, 1) for e, s in zip(batch.envs, steps0))
+    batch.close()
