@@ -34,11 +34,11 @@ machines):
    environment, SuperSuit's adapters vs the batched vector environment
    (``coopnav_env.training.vec_env.make_vec_env(kind=...)``), the batched environment
    itself through its array step (``arrays``: ``BatchedUrbanCanyonEnv.step_arrays``, no
-   per-slot info dicts) and VMAS with K batched environments; and the time inside the compiled kernels per swarm step
-   (:func:`kernel_timers`), whose inverse times two cores is a ceiling for any batching of
-   this simulation. ``--city`` flies the copies on another city (``family:mixed``: a new
-   generated city of extruded polygons every episode; with ``--city-pool P``, one of ``P``
-   cities, all built before timing as in a long training run).
+   per-slot info dicts) and VMAS with K batched environments; and the time inside the
+   compiled kernels per swarm step (:func:`kernel_timers`), whose inverse times two cores is a
+   ceiling for any batching of this simulation. ``--city`` flies the copies on another city
+   (``family:mixed``: a new generated city of extruded polygons every episode; with
+   ``--city-pool P``, one of ``P`` cities, all built before timing as in a long training run).
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the

@@ -687,3 +687,18 @@ def navigated_distance_terms(
             terms[k, 0, i] = -share * short
             terms[k, 1, i] = share
             unpaid_after[k, i] = u - covered
+
+
+@njit(cache=True, nogil=True)
+def episode_ends(pos, goal, hit, goal_r):
+    """Whether each copy's episode ends by its events after a motion step, ``(K, 2)`` bool:
+    a UAV collided (column 0) or the swarm reached the goal (column 1), from the true
+    positions ``pos (K, N, 3)``, goals ``(K, 3)``, collisions ``hit (K, N)`` and the goal
+    radius ``goal_r``: the ``ends`` that :func:`navigation_reward_sensors` computes for
+    them (the same function on the same arrays), known before it runs."""
+    ends = np.zeros((pos.shape[0], 2), dtype=np.bool_)
+    for k in range(pos.shape[0]):
+        _in_goal, crash, reached = _env_kernels._goal_events(pos[k], goal[k], hit[k], goal_r)
+        ends[k, 0] = crash
+        ends[k, 1] = reached
+    return ends

@@ -23,21 +23,27 @@ of sight, the skyline and wall sweep) where the world step calls them, in the sa
 With other settings, or a world it cannot take (a replaced constellation, a sky whose
 satellites are not grouped by constellation), the callers step through ``UrbanWorld.step``
 as before. A reset begins in the copy's own
-Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
-route); the batched environment then computes the first epochs of all the copies it resets
-at a step in the same kernels (:meth:`FusedStep.first_epochs`). The state arrays reload a copy
+Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._new_episode``: city, formation,
+route); the batched environment draws those of the copies a step ends while the step's
+navigation kernel runs on the other cores (:meth:`FusedStep.run`'s ``begin``), then computes
+the first epochs of all the copies it resets at a step in the same kernels
+(:meth:`FusedStep.first_epochs`). The state arrays reload a copy
 whose world changed since the last fused step (a reset, which may bring a new city, a step
 through the other path, an assignment to its world).
 """
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import functools
 import itertools
 import operator
 import os
+import threading
+import time
 import weakref
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, NamedTuple
 
@@ -74,6 +80,7 @@ class FusedStep:
         self.skies = _SkyTable()
         self.state: _SwarmArrays | None = None
         self._seen: list[tuple] = []
+        self._overlap = _Overlap()
 
     def _load(self, envs: list[UrbanCanyonEnv]) -> bool:
         """Make the state arrays those of the copies' worlds; False if one cannot be taken."""
@@ -94,7 +101,12 @@ class FusedStep:
                 st.load(k, envs[k])
         return True
 
-    def run(self, envs: list[UrbanCanyonEnv], cmd: np.ndarray):
+    def run(
+        self,
+        envs: list[UrbanCanyonEnv],
+        cmd: np.ndarray,
+        begin: Callable[[np.ndarray], None] | None = None,
+    ):
         """One epoch of every copy with the clipped commands ``cmd`` ``(K, N, 3)``.
 
         Updates each copy's world, epoch and step count as ``UrbanCanyonEnv._step_arrays``
@@ -102,10 +114,16 @@ class FusedStep:
         truncated (K,), terms (K, 6, N), in_goal (K, N)`` and the parts of the infos
         (:func:`info_arrays`); or None, with nothing changed, if a copy cannot take the fused
         step now.
+
+        ``begin(done)``, when given, is called with the copies whose episodes this step ends
+        (``(K,)`` bool: ``terminated | truncated``, known once the UAVs have moved) while the
+        navigation kernel runs on the other cores: the caller draws those copies' next
+        episodes there (Python beside compiled code), before their worlds take this step's
+        final state. Each copy's generator has drawn this step's numbers by then.
         """
         if not self._load(envs):
             return None
-        out = self._epochs(envs, cmd, self.state, cold=False)
+        out = self._epochs(envs, cmd, self.state, cold=False, begin=begin)
         if out is not None:
             self._seen = [_fingerprint(e) for e in envs]
         return out
@@ -123,7 +141,14 @@ class FusedStep:
         cmd = np.zeros((len(envs), n, 3))
         return self._epochs(envs, cmd, _SwarmArrays(envs), cold=True) is not None
 
-    def _epochs(self, envs: list[UrbanCanyonEnv], cmd: np.ndarray, st: Any, cold: bool):
+    def _epochs(
+        self,
+        envs: list[UrbanCanyonEnv],
+        cmd: np.ndarray,
+        st: Any,
+        cold: bool,
+        begin: Callable[[np.ndarray], None] | None = None,
+    ):
         """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``."""
         cfg = envs[0].config
         n_copies, n = len(envs), cfg.n_uavs
@@ -202,18 +227,24 @@ class FusedStep:
             st.pos, rx_ecef, pred, x0, st.nav_cov, rel_ecef, st.wp, st.clock
         )
         outputs = tuple(_batched_kernels.navigation_outputs(n_copies, n, envs[0]._rays.shape[0]))
-        _run_chunks(
-            _batched_kernels.navigation_reward_sensors,
-            n_copies,
-            tuple(nav_settings),
-            cities,
-            routes,
-            sky,
-            moved,
-            tuple(inputs),
-            z,
-            outputs,
-        )
+        nav_args = (tuple(nav_settings), cities, routes, sky, moved, tuple(inputs), z, outputs)
+        predicted = None
+        if begin is None or cold:
+            _run_chunks(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
+        else:
+            # the episodes this step ends, from the moved swarms (what the kernel computes
+            # from the same arrays), begun by the caller while the kernel runs
+            predicted = _batched_kernels.episode_ends(
+                pos1, st.goal, hit, float(nav_settings.reward_params[8])
+            )
+            done = predicted[:, 0] | predicted[:, 1] | (st.steps + 1 >= cfg.max_steps)
+            self._overlap.run(
+                _batched_kernels.navigation_reward_sensors,
+                n_copies,
+                nav_args,
+                functools.partial(begin, done),
+                int(done.sum()),
+            )
         (
             sa_status,
             _n_iter,
@@ -244,6 +275,8 @@ class FusedStep:
                 "a receiver is at the Earth's centre or on a satellite (copies "
                 f"{np.flatnonzero(bad_geometry).tolist()})"
             )
+        if predicted is not None and not np.array_equal(predicted, ends):
+            raise RuntimeError("the episode ends known before the navigation kernel differ")
         if cold:
             self._first_epochs(envs, st, t_new, skies, n_sv, los_off, los_flat, outputs, rel, avail)
             return ()
@@ -653,8 +686,7 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
     if threads == 1:
         kernel(0, n_copies, *args)
         return
-    if not _POOL or _POOL[0] != os.getpid():  # none yet, or a forked child's copy
-        _POOL[:] = [os.getpid(), ThreadPoolExecutor(max_workers=max(1, _threads() - 1))]
+    pool = _pool()
     n_chunks = min(4 * threads, max(1, n_copies // MIN_COPIES_PER_THREAD))
     bounds = np.linspace(0, n_copies, n_chunks + 1).astype(int).tolist()
     counter = itertools.count()  # next() is atomic under the GIL
@@ -663,10 +695,81 @@ def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
         while (i := next(counter)) < n_chunks:
             kernel(bounds[i], bounds[i + 1], *args)
 
-    futures = [_POOL[1].submit(work) for _ in range(threads - 1)]
+    futures = [pool.submit(work) for _ in range(threads - 1)]
     work()
     for f in futures:
         f.result()
+
+
+def _pool() -> ThreadPoolExecutor:
+    """This process's thread pool of the fused step (one thread fewer than its cores)."""
+    if not _POOL or _POOL[0] != os.getpid():  # none yet, or a forked child's copy
+        _POOL[:] = [os.getpid(), ThreadPoolExecutor(max_workers=max(1, _threads() - 1))]
+    return _POOL[1]
+
+
+class _Overlap:
+    """A kernel over the copies on the pool's threads and this one, while this thread first
+    does other work (Python, which holds the GIL; the kernels release it).
+
+    The pool's threads take the first copies in contiguous chunks, this thread the last ones
+    after its work; the split balances the cores by the kernel's time per copy and the work's
+    time per unit measured at earlier calls (moving averages). Each copy's arithmetic is the
+    same in any chunk, so the split changes no result.
+    """
+
+    def __init__(self) -> None:
+        self.copy_s: float | None = None  # kernel seconds per copy, this thread's chunk
+        self.unit_s = 0.0  # seconds of work per unit
+
+    def run(
+        self, kernel: Any, n_copies: int, args: tuple, work: Callable[[], None], units: int
+    ) -> None:
+        """``work()``, and ``kernel(k0, k1, *args)`` over all the copies (``units``: the size
+        of the work, in the units its time is averaged by)."""
+        threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
+        if threads == 1:
+            work()
+            kernel(0, n_copies, *args)
+            return
+        copy_s, work_s = self.copy_s, units * self.unit_s
+        if copy_s is None:  # not measured yet: even chunks
+            n_here = n_copies // threads
+        else:  # this thread's share of the work and the copies is the others' share
+            share = (n_copies * copy_s + work_s) / threads
+            n_here = min(n_copies, max(0, round((share - work_s) / copy_s)))
+        n_pool = n_copies - n_here
+        bounds = np.linspace(0, n_pool, threads).astype(int).tolist()
+        chunks = [(a, b) for a, b in itertools.pairwise(bounds) if b > a]
+        started = [threading.Event() for _ in chunks]
+
+        def chunk(i: int, k0: int, k1: int) -> None:
+            started[i].set()
+            kernel(k0, k1, *args)
+
+        futures = [_pool().submit(chunk, i, a, b) for i, (a, b) in enumerate(chunks)]
+        try:
+            for event in started:  # (waiting releases the GIL: the chunks get into the kernel)
+                event.wait()
+            t0 = time.perf_counter()
+            work()
+            t1 = time.perf_counter()
+            if n_here:
+                kernel(n_pool, n_copies, *args)
+            t2 = time.perf_counter()
+        finally:  # the pool's chunks write the same outputs: never leave them running
+            concurrent.futures.wait(futures)
+        for f in futures:
+            f.result()
+        if units:
+            self.unit_s = _moving_average(self.unit_s or None, (t1 - t0) / units)
+        if n_here:
+            self.copy_s = _moving_average(self.copy_s, (t2 - t1) / n_here)
+
+
+def _moving_average(old: float | None, new: float) -> float:
+    """The exponential moving average of the overlap's timings (``new`` alone at first)."""
+    return new if old is None else 0.8 * old + 0.2 * new
 
 
 _EPOCH_FIELDS = tuple(f.name for f in dataclasses.fields(Epoch))

@@ -280,7 +280,16 @@ class BatchedUrbanCanyonEnv:
         if self._needs_reset:
             raise ValueError("step() called before reset(): call reset() first")
         cmd = self._actions(actions)
-        out = self._fused_step.run(self.envs, cmd) if fused_settings(self.config) else None
+        if not fused_settings(self.config):
+            return self._step_copies(cmd)
+        episodes: dict[int, dict[str, Any]] = {}
+
+        def begin(done: np.ndarray) -> None:  # beside the navigation kernel
+            for k in np.flatnonzero(done).tolist():
+                e = self.envs[k]
+                episodes[k] = e.world._new_episode(e._rng)
+
+        out = self._fused_step.run(self.envs, cmd, begin)
         if out is None:
             return self._step_copies(cmd)
         obs, rewards, terminated, truncated, _terms, _in_goal, parts = out
@@ -288,19 +297,23 @@ class BatchedUrbanCanyonEnv:
         final_obs = obs
         obs = self._obs
         obs[:] = final_obs
-        self._reset_copies(np.flatnonzero(terminated | truncated).tolist())
+        done = np.flatnonzero(terminated | truncated).tolist()
+        if sorted(episodes) != done:
+            raise RuntimeError("the episodes begun beside the step are not those it ended")
+        self._reset_copies(done, episodes)
         return obs, rewards, terminated, truncated, info, final_obs
 
-    def _reset_copies(self, done: list[int]) -> None:
+    def _reset_copies(self, done: list[int], episodes: dict[int, dict[str, Any]]) -> None:
         """Automatic reset of the copies ``done`` (the next episode continues each copy's
-        generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs of all of them in
-        the fused step's compiled calls (else each world's own)."""
+        generator): ``UrbanCanyonEnv._reset_arrays``, each next episode as the fused step
+        drew it (``episodes``: ``UrbanWorld._new_episode`` by copy), with the first epochs of
+        all of them in the fused step's compiled calls (else each world's own)."""
         if not done:
             return
         envs = [self.envs[k] for k in done]
-        for e in envs:
+        for k, e in zip(done, envs):
             e._begin_reset(None)
-            e.world._begin_episode(e._rng)
+            e.world._start_episode(episodes[k])
         if not self._fused_step.first_epochs(envs):
             for e in envs:
                 e._epoch = e.world._first_epoch(e._rng)

@@ -317,13 +317,10 @@ def test_step_arrays_equals_step(settings) -> None:
         by_arrays.info_arrays(infos[:2])
 
 
-@pytest.mark.parametrize("n_uavs", [5, 1])
-def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
-    # copy k of a K = 64 batch of urban_canyon_v1 (reward "navigated_distance", computed for
-    # all copies at once) is the batch of one reset with seed + k, bit for bit, over episodes
-    # that end at different steps
-    k_copies, seed, steps = 64, 40, 16
-    settings = {"n_uavs": n_uavs, "max_steps": 10}
+def _v1_batch_and_batches_of_one(
+    k_copies: int, **settings
+) -> tuple[BatchedUrbanCanyonEnv, list[BatchedUrbanCanyonEnv]]:
+    """A batch of ``k_copies`` ``urban_canyon_v1`` swarms and as many batches of one."""
     big = BatchedUrbanCanyonEnv.from_envs(
         [urban_canyon_v1.parallel_env(**settings) for _ in range(k_copies)]
     )
@@ -331,6 +328,28 @@ def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
         BatchedUrbanCanyonEnv.from_envs([urban_canyon_v1.parallel_env(**settings)])
         for _ in range(k_copies)
     ]
+    return big, ones
+
+
+def _assert_copy_is_the_batch_of_one(out, k: int, ref) -> None:
+    """Copy ``k`` of the batched step ``out`` equals the step ``ref`` of a batch of one
+    (``step_arrays`` results), bit for bit."""
+    assert ref.final_obs.tobytes() == out.final_obs[k : k + 1].tobytes()
+    assert ref.obs.tobytes() == out.obs[k : k + 1].tobytes()
+    assert ref.rewards.tobytes() == out.rewards[k : k + 1].tobytes()
+    assert ref.terminated[0] == out.terminated[k]
+    assert ref.truncated[0] == out.truncated[k]
+    for key, arr in out.info.items():
+        assert ref.info[key].tobytes() == arr[k : k + 1].tobytes(), key
+
+
+@pytest.mark.parametrize("n_uavs", [5, 1])
+def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
+    # copy k of a K = 64 batch of urban_canyon_v1 (reward "navigated_distance", computed for
+    # all copies at once) is the batch of one reset with seed + k, bit for bit, over episodes
+    # that end at different steps
+    k_copies, seed, steps = 64, 40, 16
+    big, ones = _v1_batch_and_batches_of_one(k_copies, n_uavs=n_uavs, max_steps=10)
     obs, _ = big.reset(seed=seed)
     for k, one in enumerate(ones):
         assert one.reset(seed=seed + k)[0].tobytes() == obs[k].tobytes()
@@ -340,14 +359,7 @@ def test_v1_copies_of_a_large_batch_equal_batches_of_one(n_uavs) -> None:
         act = rng.uniform(-1.0, 1.0, (k_copies, n_uavs, 3))
         out = big.step_arrays(act)
         for k, one in enumerate(ones):
-            ref = one.step_arrays(act[k : k + 1])
-            assert ref.final_obs.tobytes() == out.final_obs[k : k + 1].tobytes()
-            assert ref.obs.tobytes() == out.obs[k : k + 1].tobytes()
-            assert ref.rewards.tobytes() == out.rewards[k : k + 1].tobytes()
-            assert ref.terminated[0] == out.terminated[k]
-            assert ref.truncated[0] == out.truncated[k]
-            for key, arr in out.info.items():
-                assert ref.info[key].tobytes() == arr[k : k + 1].tobytes(), key
+            _assert_copy_is_the_batch_of_one(out, k, one.step_arrays(act[k : k + 1]))
         if (out.terminated | out.truncated).any():
             end_steps.add(step)
     assert len(end_steps) >= 3  # episodes ended at several different steps
@@ -399,3 +411,53 @@ def test_route_frame_copies_of_a_large_batch_equal_copy_by_copy_environments(mon
     assert big._fused_step.state is not None  # the batch took the fused step
     assert len(end_steps) >= 10  # episodes ended at many different steps
     assert out.obs.shape == (k_copies, n, big.config.obs_dim)
+
+
+@pytest.mark.parametrize("copy_s, unit_s", [(None, 0.0), (1e-6, 1.0), (1e-3, 1e-3)])
+def test_episodes_begun_beside_the_navigation_kernel_are_those_of_batches_of_one(
+    monkeypatch, copy_s, unit_s
+) -> None:
+    # a step draws the next episodes of the copies it ends while the navigation kernel runs,
+    # on a split of the copies between threads that follows earlier timings: every split
+    # (even; all on the pool's threads; a share for the calling thread) gives each copy the
+    # episodes of a batch of one, bit for bit
+    monkeypatch.setattr(_fused, "_threads", lambda: 3)
+    k_copies, seed, n = 16, 7, 3
+    big, ones = _v1_batch_and_batches_of_one(k_copies, n_uavs=n, max_steps=6)
+    big.reset(seed=seed)
+    for k, one in enumerate(ones):
+        one.reset(seed=seed + k)
+    overlap = big._fused_step._overlap
+    rng = np.random.default_rng(seed)
+    resets = 0
+    for _ in range(13):
+        overlap.copy_s, overlap.unit_s = copy_s, unit_s
+        act = rng.uniform(-1.0, 1.0, (k_copies, n, 3))
+        out = big.step_arrays(act)
+        for k, one in enumerate(ones):
+            _assert_copy_is_the_batch_of_one(out, k, one.step_arrays(act[k : k + 1]))
+            assert big.envs[k].state().tobytes() == one.envs[0].state().tobytes()
+        resets += int((out.terminated | out.truncated).sum())
+    assert resets >= 2 * k_copies  # every copy began new episodes (6-step episodes at most)
+
+
+@pytest.mark.parametrize(
+    "copy_s, unit_s, units", [(None, 0.0, 0), (1e-6, 1.0, 3), (1e-3, 1e-3, 5), (1e-3, 0.0, 0)]
+)
+def test_overlap_runs_the_work_once_and_the_kernel_on_every_copy_once(
+    monkeypatch, copy_s, unit_s, units
+) -> None:
+    from numba import njit
+
+    @njit(nogil=True)
+    def mark(k0, k1, out):
+        for k in range(k0, k1):
+            out[k] += 1
+
+    monkeypatch.setattr(_fused, "_threads", lambda: 3)
+    overlap = _fused._Overlap()
+    overlap.copy_s, overlap.unit_s = copy_s, unit_s
+    out, calls = np.zeros(37, dtype=np.int64), []
+    overlap.run(mark, out.shape[0], (out,), lambda: calls.append(1), units)
+    assert calls == [1] and out.tolist() == [1] * out.shape[0]
+    assert overlap.copy_s is None or overlap.copy_s > 0.0  # timings kept for the next split
