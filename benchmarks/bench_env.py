@@ -909,9 +909,9 @@ def section_batched(args, out: dict) -> None:
     cores = 2  # the target machine
     ceiling = cores / compiled if compiled > 0 else float("inf")
     print(
-        f"   compiled kernels: {compiled * 1e6:.0f} us per swarm step "
-        f"({100 * compiled * m * k / wall:.0f}% of the batched step; the largest, {top}, "
-        f"{per_swarm.get(top, 0.0) * 1e6:.0f} us)"
+        f"   compiled kernels: {compiled * 1e6:.0f} us of thread time per swarm step "
+        f"(summed over the threads: {100 * compiled * m * k / wall:.0f}% of the batched step's "
+        f"wall time; the largest, {top}, {per_swarm.get(top, 0.0) * 1e6:.0f} us)"
         f"\n   ceiling with every line of Python free and {cores} cores in perfect parallel: "
         f"{ceiling:,.0f} env-steps/s (= {cores} / compiled time per swarm step)"
     )

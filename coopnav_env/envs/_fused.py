@@ -23,13 +23,12 @@ of sight, the skyline and wall sweep) where the world step calls them, in the sa
 With other settings, or a world it cannot take (a replaced constellation, a sky whose
 satellites are not grouped by constellation), the callers step through ``UrbanWorld.step``
 as before. A reset begins in the copy's own
-Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._new_episode``: city, formation,
-route); the batched environment draws those of the copies a step ends while the step's
-navigation kernel runs on the other cores (:meth:`FusedStep.run`'s ``begin``), then computes
-the first epochs of all the copies it resets at a step in the same kernels
-(:meth:`FusedStep.first_epochs`). The state arrays reload a copy
-whose world changed since the last fused step (a reset, which may bring a new city, a step
-through the other path, an assignment to its world).
+Python (``UrbanCanyonEnv._begin_reset``, ``UrbanWorld._begin_episode``: city, formation,
+route); the batched environment then computes the first epochs of all the copies it resets
+at a step in the same kernels (:meth:`FusedStep.first_epochs`), and does all of it while the
+step's navigation kernel runs on the other cores (:meth:`FusedStep.run`'s ``begin``). The
+state arrays reload a copy whose world changed since the last fused step (a reset, which may
+bring a new city, a step through the other path, an assignment to its world).
 """
 
 from __future__ import annotations
@@ -78,6 +77,7 @@ class FusedStep:
 
     def __init__(self) -> None:
         self.skies = _SkyTable()
+        self.first_skies = _SkyTable()  # those of first epochs (computed beside a step's kernel)
         self.state: _SwarmArrays | None = None
         self._seen: list[tuple] = []
         self._overlap = _Overlap()
@@ -117,9 +117,11 @@ class FusedStep:
 
         ``begin(done)``, when given, is called with the copies whose episodes this step ends
         (``(K,)`` bool: ``terminated | truncated``, known once the UAVs have moved) while the
-        navigation kernel runs on the other cores: the caller draws those copies' next
-        episodes there (Python beside compiled code), before their worlds take this step's
-        final state. Each copy's generator has drawn this step's numbers by then.
+        navigation kernel runs on the other cores: the caller resets those copies there
+        (Python and their first epochs' kernels, on this thread beside the pool's). Each
+        copy's generator has drawn this step's numbers by then; the step leaves the reset
+        copies' worlds and epochs as the reset made them (its results for them are in the
+        returned arrays).
         """
         if not self._load(envs):
             return None
@@ -128,18 +130,20 @@ class FusedStep:
             self._seen = [_fingerprint(e) for e in envs]
         return out
 
-    def first_epochs(self, envs: list[UrbanCanyonEnv]) -> bool:
+    def first_epochs(self, envs: list[UrbanCanyonEnv], serial: bool = False) -> bool:
         """The first epoch of each copy's episode, after ``UrbanCanyonEnv._begin_reset`` and
         ``UrbanWorld._begin_episode`` (what ``UrbanWorld.reset`` computes after them: the
         swarm where it starts, navigation cold-started from the launch positions); sets each
         world's and environment's epoch. False, with nothing changed, if a copy cannot take
-        it (then reset it as usual)."""
+        it (then reset it as usual). ``serial``: the kernels on this thread alone (inside
+        :meth:`run`'s ``begin``, while the pool's threads run the step's kernel)."""
         worlds = [e.world for e in envs]
         if not all(_fused_world(w, cold=True) for w in worlds):
             return False
         n = envs[0].config.n_uavs
         cmd = np.zeros((len(envs), n, 3))
-        return self._epochs(envs, cmd, _SwarmArrays(envs), cold=True) is not None
+        st = _SwarmArrays(envs)
+        return self._epochs(envs, cmd, st, cold=True, serial=serial) is not None
 
     def _epochs(
         self,
@@ -148,8 +152,11 @@ class FusedStep:
         st: Any,
         cold: bool,
         begin: Callable[[np.ndarray], None] | None = None,
+        serial: bool = False,
     ):
-        """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``."""
+        """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``
+        (``serial``: every kernel on this thread)."""
+        chunks = _run_serial if serial else _run_chunks
         cfg = envs[0].config
         n_copies, n = len(envs), cfg.n_uavs
         world0 = envs[0].world
@@ -158,7 +165,8 @@ class FusedStep:
             cmd = _route_commands(envs, cmd, st)
         # the epoch's sky of each copy (its own time)
         t_new = [e.world.t_s if cold else e.world.t_s + dt for e in envs]
-        rows = self.skies.rows(world0, t_new)
+        tab = self.first_skies if cold else self.skies
+        rows = tab.rows(world0, t_new)
         if rows is None:  # a sky whose satellites are not grouped by constellation
             return None
         skies, row, n_sv, n_up = rows
@@ -170,7 +178,6 @@ class FusedStep:
             e._rng.standard_normal(out=z[k, : n_draws[k]])
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         los_off[1:] = (n * n_sv).cumsum()
-        tab = self.skies
         # the records go to the kernels as plain tuples (_run_chunks), each made once here
         sky = tuple(
             _batched_kernels.SkyRows(
@@ -194,7 +201,7 @@ class FusedStep:
         if cold:
             motion_settings = st.first_motion_settings
             nav_settings = st.first_navigation_settings
-        _run_chunks(
+        chunks(
             _batched_kernels.motion_sight_relative,
             n_copies,
             tuple(motion_settings),
@@ -228,22 +235,22 @@ class FusedStep:
         )
         outputs = tuple(_batched_kernels.navigation_outputs(n_copies, n, envs[0]._rays.shape[0]))
         nav_args = (tuple(nav_settings), cities, routes, sky, moved, tuple(inputs), z, outputs)
-        predicted = None
+        predicted, reset = None, None
         if begin is None or cold:
-            _run_chunks(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
+            chunks(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
         else:
             # the episodes this step ends, from the moved swarms (what the kernel computes
             # from the same arrays), begun by the caller while the kernel runs
             predicted = _batched_kernels.episode_ends(
                 pos1, st.goal, hit, float(nav_settings.reward_params[8])
             )
-            done = predicted[:, 0] | predicted[:, 1] | (st.steps + 1 >= cfg.max_steps)
+            reset = predicted[:, 0] | predicted[:, 1] | (st.steps + 1 >= cfg.max_steps)
             self._overlap.run(
                 _batched_kernels.navigation_reward_sensors,
                 n_copies,
                 nav_args,
-                functools.partial(begin, done),
-                int(done.sum()),
+                functools.partial(begin, reset),
+                int(reset.sum()),
             )
         (
             sa_status,
@@ -305,7 +312,7 @@ class FusedStep:
             steps,
             st.obs_params,
         )
-        _run_chunks(
+        chunks(
             _batched_kernels.observations_infos,
             n_copies,
             tuple(st.observation_settings),
@@ -363,6 +370,8 @@ class FusedStep:
             wp_c,
         )
         for k, e in enumerate(envs):
+            if reset is not None and reset[k]:  # reset beside the kernel: its new episode
+                continue
             w = e.world
             w.pos_enu_m, w.vel_enu_mps, w.t_s = pos1[k], vel1[k], t_new[k]
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
@@ -666,6 +675,11 @@ def _threads() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
+
+
+def _run_serial(kernel: Any, n_copies: int, *args: Any) -> None:
+    """``kernel(0, n_copies, *args)``: :func:`_run_chunks` on this thread alone."""
+    kernel(0, n_copies, *args)
 
 
 def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:

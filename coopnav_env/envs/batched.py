@@ -282,43 +282,38 @@ class BatchedUrbanCanyonEnv:
         cmd = self._actions(actions)
         if not fused_settings(self.config):
             return self._step_copies(cmd)
-        episodes: dict[int, dict[str, Any]] = {}
+        reset_obs: dict[int, np.ndarray] = {}
 
         def begin(done: np.ndarray) -> None:  # beside the navigation kernel
-            for k in np.flatnonzero(done).tolist():
-                e = self.envs[k]
-                episodes[k] = e.world._new_episode(e._rng)
+            reset_obs.update(self._reset_copies(np.flatnonzero(done).tolist(), serial=True))
 
         out = self._fused_step.run(self.envs, cmd, begin)
         if out is None:
             return self._step_copies(cmd)
         obs, rewards, terminated, truncated, _terms, _in_goal, parts = out
         info = info_arrays(*parts)
+        if sorted(reset_obs) != np.flatnonzero(terminated | truncated).tolist():
+            raise RuntimeError("the copies reset beside the step are not those it ended")
         final_obs = obs
         obs = self._obs
         obs[:] = final_obs
-        done = np.flatnonzero(terminated | truncated).tolist()
-        if sorted(episodes) != done:
-            raise RuntimeError("the episodes begun beside the step are not those it ended")
-        self._reset_copies(done, episodes)
+        for k, row in reset_obs.items():
+            obs[k] = row
         return obs, rewards, terminated, truncated, info, final_obs
 
-    def _reset_copies(self, done: list[int], episodes: dict[int, dict[str, Any]]) -> None:
+    def _reset_copies(self, done: list[int], serial: bool = False) -> dict[int, np.ndarray]:
         """Automatic reset of the copies ``done`` (the next episode continues each copy's
-        generator): ``UrbanCanyonEnv._reset_arrays``, each next episode as the fused step
-        drew it (``episodes``: ``UrbanWorld._new_episode`` by copy), with the first epochs of
-        all of them in the fused step's compiled calls (else each world's own)."""
-        if not done:
-            return
+        generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs of all of them in
+        the fused step's compiled calls (else each world's own; ``serial``: on this thread
+        alone). Returns each copy's first observations."""
         envs = [self.envs[k] for k in done]
-        for k, e in zip(done, envs):
+        for e in envs:
             e._begin_reset(None)
-            e.world._start_episode(episodes[k])
-        if not self._fused_step.first_epochs(envs):
+            e.world._begin_episode(e._rng)
+        if envs and not self._fused_step.first_epochs(envs, serial=serial):
             for e in envs:
                 e._epoch = e.world._first_epoch(e._rng)
-        for k, e in zip(done, envs):
-            self._obs[k] = e._finish_reset()
+        return {k: e._finish_reset() for k, e in zip(done, envs)}
 
     def _step_copies(
         self, cmd: np.ndarray

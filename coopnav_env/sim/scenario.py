@@ -1611,55 +1611,33 @@ class UrbanWorld:
         start_pos_enu_m: ArrayLike | None = None,
         goal_enu_m: ArrayLike | None = None,
     ) -> None:
-        """:meth:`reset` up to its first epoch: city, clocks, formation, goal, route, priors
-        (the state :meth:`_new_episode` draws, set on this world)."""
-        self._start_episode(self._new_episode(rng, start_pos_enu_m, goal_enu_m))
-
-    def _start_episode(self, state: dict[str, Any]) -> None:
-        """Set the state that begins an episode, as :meth:`_new_episode` drew it."""
-        self.__dict__.update(state)
-
-    def _new_episode(
-        self,
-        rng: np.random.Generator,
-        start_pos_enu_m: ArrayLike | None = None,
-        goal_enu_m: ArrayLike | None = None,
-    ) -> dict[str, Any]:
-        """The state that begins an episode, drawn from ``rng`` without changing the world:
-        the attributes :meth:`_begin_episode` sets (city, start time, true positions and
-        velocities, goal, route, clocks, the first epoch's prior), by name."""
+        """:meth:`reset` up to its first epoch: city, clocks, formation, goal, route, priors."""
         cfg = self.config
         n = cfg.n_uavs
-        city = self.fixed_city if self.fixed_city is not None else make_city(cfg, rng)
-        t_s = episode_start_s(cfg, self.constellation, rng)
+        self.city = self.fixed_city if self.fixed_city is not None else make_city(cfg, rng)
+        city = self.city
+        self.t_s = episode_start_s(cfg, self.constellation, rng)
         margin = cfg.kinematics.uav_radius_m + 1.0
         if isinstance(city, FileCity):
             pos, goal = _file_city_start_goal(city, rng, cfg, start_pos_enu_m, goal_enu_m)
         else:
             pos, goal = self._street_start_goal(city, rng, margin, start_pos_enu_m, goal_enu_m)
-        route_xy_m = street_route(city, pos[:, :2].mean(axis=0), goal[:2])
-        clock_bias_m = draw_clock_biases(rng, n, len(SYSTEMS), cfg.clock_sigma_m)
+        self.goal_enu_m = goal
+        self.route_xy_m = street_route(city, pos[:, :2].mean(axis=0), goal[:2])
+        self.route_tail_m = route_tail_lengths_m(self.route_xy_m)  # route left after each point
+        self.next_wp = np.full(n, min(1, self.route_xy_m.shape[0] - 1), dtype=np.int64)
+        self.start_enu_m = pos.copy()
+        self.pos_enu_m = pos
+        self.vel_enu_mps = np.zeros((n, 3))
+        self.clock_bias_m = draw_clock_biases(rng, n, len(SYSTEMS), cfg.clock_sigma_m)
         if "GAL" in cfg.systems:  # Galileo's clock drawn after the others' (theirs unchanged)
             gal_clock_m = draw_clock_biases(rng, n, 1, cfg.clock_sigma_m)
-            clock_bias_m = np.concatenate([clock_bias_m, gal_clock_m], axis=1)
+            self.clock_bias_m = np.concatenate([self.clock_bias_m, gal_clock_m], axis=1)
         # prior of the dead-reckoning fallback at the first epoch: the known launch position
-        nav_cov_enu_m2 = np.zeros((n, 3, 3))
-        nav_cov_enu_m2[:, _DIAG3, _DIAG3] = 1.0 * cfg.start_prior_sigma_m**2
-        return {
-            "city": city,
-            "t_s": t_s,
-            "goal_enu_m": goal,
-            "route_xy_m": route_xy_m,
-            "route_tail_m": route_tail_lengths_m(route_xy_m),  # route left after each point
-            "next_wp": np.full(n, min(1, route_xy_m.shape[0] - 1), dtype=np.int64),
-            "start_enu_m": pos.copy(),
-            "pos_enu_m": pos,
-            "vel_enu_mps": np.zeros((n, 3)),
-            "clock_bias_m": clock_bias_m,
-            "nav_pos_enu_m": pos.copy(),
-            "nav_cov_enu_m2": nav_cov_enu_m2,
-            "_warm": False,
-        }
+        self.nav_pos_enu_m = pos.copy()
+        self.nav_cov_enu_m2 = np.zeros((n, 3, 3))
+        self.nav_cov_enu_m2[:, _DIAG3, _DIAG3] = 1.0 * cfg.start_prior_sigma_m**2
+        self._warm = False
 
     def _street_start_goal(
         self,

@@ -414,13 +414,13 @@ def test_route_frame_copies_of_a_large_batch_equal_copy_by_copy_environments(mon
 
 
 @pytest.mark.parametrize("copy_s, unit_s", [(None, 0.0), (1e-6, 1.0), (1e-3, 1e-3)])
-def test_episodes_begun_beside_the_navigation_kernel_are_those_of_batches_of_one(
+def test_copies_reset_beside_the_navigation_kernel_equal_batches_of_one(
     monkeypatch, copy_s, unit_s
 ) -> None:
-    # a step draws the next episodes of the copies it ends while the navigation kernel runs,
-    # on a split of the copies between threads that follows earlier timings: every split
-    # (even; all on the pool's threads; a share for the calling thread) gives each copy the
-    # episodes of a batch of one, bit for bit
+    # a step resets the copies it ends (new episode, first epoch) while the navigation kernel
+    # runs, on a split of the copies between threads that follows earlier timings: every
+    # split (even; all on the pool's threads; a share for the calling thread) gives each copy
+    # the episodes of a batch of one, bit for bit
     monkeypatch.setattr(_fused, "_threads", lambda: 3)
     k_copies, seed, n = 16, 7, 3
     big, ones = _v1_batch_and_batches_of_one(k_copies, n_uavs=n, max_steps=6)
