@@ -240,7 +240,7 @@ class FusedStep:
             chunks(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
         else:
             # the episodes this step ends, from the moved swarms (what the kernel computes
-            # from the same arrays), begun by the caller while the kernel runs
+            # from the same arrays): the caller resets those copies while the kernel runs
             predicted = _batched_kernels.episode_ends(
                 pos1, st.goal, hit, float(nav_settings.reward_params[8])
             )
