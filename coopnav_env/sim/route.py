@@ -41,10 +41,13 @@ __all__ = [
 
 
 def _nearest(values: list[float], v: float) -> tuple[float, int]:
-    """The smallest ``|values[i] - v|`` and its first index ``i`` (``inf, -1`` when empty)."""
+    """The smallest ``|values[i] - v|`` and its first index ``i`` (``inf, -1`` when empty;
+    as numpy's ``min`` and ``argmin``, the first NaN where there is one)."""
     best, arg = math.inf, -1
     for i, c in enumerate(values):
         d = abs(c - v)
+        if d != d:
+            return d, i
         if d < best:
             best, arg = d, i
     return best, arg
@@ -79,10 +82,13 @@ def _snapped_ends(
 
 
 def _nearest_pair(values: list[float], a: float, b: float) -> float:
-    """The value with the smallest ``|v - a| + |v - b|`` (the first of equals)."""
+    """The value with the smallest ``|v - a| + |v - b|`` (the first of equals; as numpy's
+    ``argmin``, the first NaN where there is one)."""
     best, arg = math.inf, 0
     for i, v in enumerate(values):
         d = abs(v - a) + abs(v - b)
+        if d != d:
+            return values[i]
         if d < best:
             best, arg = d, i
     return values[arg]

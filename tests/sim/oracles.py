@@ -670,3 +670,53 @@ def street_frames(
     x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
     xy = np.stack([np.where(ns, centre, x_along), np.where(ns, y_along, centre)], axis=1)
     return xy, ns
+
+
+def street_route(city: _city.City, start_xy: ArrayLike, goal_xy: ArrayLike) -> FloatArray:
+    """The definition of ``coopnav_env.sim.route.street_route`` on a grid city in numpy (which
+    the library computes on Python floats): ends snapped to the nearest street centre line
+    (``min``/``argmin``, NaN first), one turn between crossing streets, two through the cross
+    street nearest both ends between parallel ones."""
+    import math
+
+    cx = np.asarray(city.street_centres_x_m, dtype=float).reshape(-1)
+    cy = np.asarray(city.street_centres_y_m, dtype=float).reshape(-1)
+    ends = []
+    for xy in (start_xy, goal_xy):
+        p = np.asarray(xy, dtype=float).reshape(2)
+        dx = np.abs(cx - p[0]) if cx.size else np.array([np.inf])
+        dy = np.abs(cy - p[1]) if cy.size else np.array([np.inf])
+        if dx.min() <= dy.min():
+            ends.append(("ns", float(cx[int(np.argmin(dx))]), float(p[1])))
+        else:
+            ends.append(("ew", float(p[0]), float(cy[int(np.argmin(dy))])))
+    (s_kind, sx, sy), (g_kind, gx, gy) = ends
+    pts = [(sx, sy)]
+    if s_kind == g_kind == "ns":
+        if not math.isclose(sx, gx) and cy.size:
+            b = cy[int(np.argmin(np.abs(cy - sy) + np.abs(cy - gy)))]
+            pts += [(sx, b), (gx, b)]
+    elif s_kind == g_kind == "ew":
+        if not math.isclose(sy, gy) and cx.size:
+            b = cx[int(np.argmin(np.abs(cx - sx) + np.abs(cx - gx)))]
+            pts += [(b, sy), (b, gy)]
+    elif s_kind == "ns":
+        pts.append((sx, gy))
+    else:
+        pts.append((gx, sy))
+    pts.append((gx, gy))
+    out = [pts[0]]
+    for p in pts[1:]:
+        if math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > 1e-6:
+            out.append(p)
+    return np.array(out, dtype=float).reshape(-1, 2)
+
+
+def route_tail_lengths_m(route: ArrayLike) -> FloatArray:
+    """The definition of ``coopnav_env.sim.route.route_tail_lengths_m`` in numpy: the norms
+    of the legs summed from the end."""
+    pts = np.asarray(route, dtype=float).reshape(-1, 2)
+    legs = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    tail = np.zeros(legs.size + 1)
+    tail[:-1] = np.cumsum(legs[::-1])[::-1]
+    return tail

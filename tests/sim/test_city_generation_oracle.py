@@ -1,6 +1,6 @@
-"""Grid-city generation and the street draws of a reset equal their numpy oracles
-(``tests/sim/oracles.py``: the constructors' checked path, ``rng.choice``) bit for bit, and
-leave the generator in the same state."""
+"""Grid-city generation, the street draws of a reset and street routes equal their numpy
+oracles (``tests/sim/oracles.py``: the constructors' checked path, ``rng.choice``, the array
+formulation of the route) bit for bit, and leave the generator in the same state."""
 
 from __future__ import annotations
 
@@ -50,3 +50,21 @@ def test_street_frames_match_rng_choice(config: CityConfig) -> None:
         assert xy.tobytes() == xy_ref.tobytes() and ns.tobytes() == ns_ref.tobytes()
         assert a.random() == b.random()
     assert ns.any() and not ns.all()  # both orientations drawn
+
+
+@pytest.mark.parametrize("config", CONFIGS[:3])
+def test_street_routes_and_their_lengths_match_the_numpy_definition(config: CityConfig) -> None:
+    from coopnav_env.sim.route import route_tail_lengths_m, street_route
+
+    city = generate_city(config, np.random.default_rng(1))
+    x0, x1, y0, y1 = city.extent_m
+    rng = np.random.default_rng(2)
+    ends = [rng.uniform((x0, y0), (x1, y1), size=(2, 2)) for _ in range(300)]
+    ends += [np.array([[np.nan, 3.0], [5.0, 6.0]]), np.array([[3.0, np.nan], [5.0, 6.0]])]
+    ends += [np.array([[np.inf, 0.0], [1.0, 2.0]]), np.array([[1.0, 2.0], [1.0, 2.0]])]
+    for start, goal in ends:
+        route, ref = street_route(city, start, goal), oracles.street_route(city, start, goal)
+        assert route.tobytes() == ref.tobytes()
+        if np.isfinite(route).all():
+            tail = route_tail_lengths_m(route)
+            assert tail.tobytes() == oracles.route_tail_lengths_m(route).tobytes()
