@@ -285,7 +285,7 @@ class BatchedUrbanCanyonEnv:
         reset_obs: dict[int, np.ndarray] = {}
 
         def begin(done: np.ndarray) -> None:  # beside the navigation kernel
-            reset_obs.update(self._reset_copies(np.flatnonzero(done).tolist(), serial=True))
+            reset_obs.update(self._reset_copies(np.flatnonzero(done).tolist()))
 
         out = self._fused_step.run(self.envs, cmd, begin)
         if out is None:
@@ -301,16 +301,16 @@ class BatchedUrbanCanyonEnv:
             obs[k] = row
         return obs, rewards, terminated, truncated, info, final_obs
 
-    def _reset_copies(self, done: list[int], serial: bool = False) -> dict[int, np.ndarray]:
+    def _reset_copies(self, done: list[int]) -> dict[int, np.ndarray]:
         """Automatic reset of the copies ``done`` (the next episode continues each copy's
         generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs of all of them in
-        the fused step's compiled calls (else each world's own; ``serial``: on this thread
-        alone). Returns each copy's first observations."""
+        the fused step's compiled calls on this thread alone (it runs beside the step's
+        navigation kernel; else each world's own). Returns each copy's first observations."""
         envs = [self.envs[k] for k in done]
         for e in envs:
             e._begin_reset(None)
             e.world._begin_episode(e._rng)
-        if envs and not self._fused_step.first_epochs(envs, serial=serial):
+        if envs and not self._fused_step.first_epochs(envs, serial=True):
             for e in envs:
                 e._epoch = e.world._first_epoch(e._rng)
         return {k: e._finish_reset() for k, e in zip(done, envs)}

@@ -40,15 +40,14 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
-def _nearest(values: list[float], v: float) -> tuple[float, int]:
-    """The smallest ``|values[i] - v|`` and its first index ``i`` (``inf, -1`` when empty;
-    as numpy's ``min`` and ``argmin``, the first NaN where there is one)."""
+def _first_min(distances: list[float]) -> tuple[float, int]:
+    """The smallest distance and its first index (``inf, -1`` when empty; as numpy's ``min``
+    and ``argmin``, the first NaN where there is one)."""
     best, arg = math.inf, -1
-    for i, c in enumerate(values):
-        d = abs(c - v)
+    for i, d in enumerate(distances):
         if d != d:
             return d, i
-        if d < best:
+        if d < best or arg < 0:
             best, arg = d, i
     return best, arg
 
@@ -56,8 +55,8 @@ def _nearest(values: list[float], v: float) -> tuple[float, int]:
 def _street_of(x: float, y: float, cx: list[float], cy: list[float]) -> tuple[str, float]:
     """The street a point is on: ``("ns", x_centre)`` or ``("ew", y_centre)``, the nearest
     (a north-south one where both are as near)."""
-    dx, ix = _nearest(cx, x)
-    dy, iy = _nearest(cy, y)
+    dx, ix = _first_min([abs(c - x) for c in cx])
+    dy, iy = _first_min([abs(c - y) for c in cy])
     if dx <= dy:
         return "ns", cx[ix]
     return "ew", cy[iy]
@@ -82,16 +81,8 @@ def _snapped_ends(
 
 
 def _nearest_pair(values: list[float], a: float, b: float) -> float:
-    """The value with the smallest ``|v - a| + |v - b|`` (the first of equals; as numpy's
-    ``argmin``, the first NaN where there is one)."""
-    best, arg = math.inf, 0
-    for i, v in enumerate(values):
-        d = abs(v - a) + abs(v - b)
-        if d != d:
-            return values[i]
-        if d < best:
-            best, arg = d, i
-    return values[arg]
+    """The value with the smallest ``|v - a| + |v - b|`` (:func:`_first_min`'s choice)."""
+    return values[_first_min([abs(v - a) + abs(v - b) for v in values])[1]]
 
 
 def street_route(city: Any, start_xy: ArrayLike, goal_xy: ArrayLike) -> np.ndarray:

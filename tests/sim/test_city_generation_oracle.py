@@ -62,6 +62,7 @@ def test_street_routes_and_their_lengths_match_the_numpy_definition(config: City
     ends = [rng.uniform((x0, y0), (x1, y1), size=(2, 2)) for _ in range(300)]
     ends += [np.array([[np.nan, 3.0], [5.0, 6.0]]), np.array([[3.0, np.nan], [5.0, 6.0]])]
     ends += [np.array([[np.inf, 0.0], [1.0, 2.0]]), np.array([[1.0, 2.0], [1.0, 2.0]])]
+    ends += [np.array([[np.inf, np.inf], [1.0, 2.0]]), np.array([[1.0, 2.0], [-np.inf, 5.0]])]
     for start, goal in ends:
         route, ref = street_route(city, start, goal), oracles.street_route(city, start, goal)
         assert route.tobytes() == ref.tobytes()
