@@ -438,7 +438,13 @@ def cooperative_gauss_newton(
     ``cooperative._structured_normal`` with ``eps_load = lam = 1 F_q`` (the exact model).
 
     Returns ``pos (B, 3), clk (B, n_sys), inv (B, P, P), cross (B, N, P, 3), converged (B,),
-    singular (B,), n_iter (B,)``.
+    singular (B,), n_iter (B,)``; ``cross`` is that of the last update (it is formed only
+    there), undefined for a problem that ends singular before one (its fix fails).
+
+    The sums of the small dense products run in a fixed order, the same for every problem;
+    where several sums are formed together, the summation index is the outer loop, so that
+    they advance side by side instead of one after another (the same numbers, computed with
+    more independent work per step of the processor).
     """
     n_b, n, n_sv = rows.shape
     n_sys = has_clock.shape[1]
@@ -539,14 +545,15 @@ def cooperative_gauss_newton(
             n_c = n_sv
             for k in range(n_sv):
                 cols[k] = k
+        # g3 is zero outside the rows the problem uses, which every iteration writes again;
+        # a_all is read only where g3 is not zero
+        g3[:, :, :] = 0.0
         for it in range(1, max_iter + 1):
             n_iter[b] = it
             sum_p[:, :] = 0.0
             pa_sum[:, :] = 0.0
             pr_sum[:] = 0.0
             atpx[:, :] = 0.0
-            g3[:, :, :] = 0.0
-            a_all[:, :, :] = 0.0
             at_sat = False
             for q in range(n):
                 # the block's rows, in satellite order
@@ -596,58 +603,59 @@ def cooperative_gauss_newton(
                     break
                 # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
                 if q != ref[b]:
+                    # the rows of constellation s are rows i0:i1 (satellite order, system
+                    # sorted): those of satellites start[s] <= k < start[s + 1]
+                    i1 = 0
                     for s in range(n_sys):
+                        i0 = i1
+                        while i1 < m and idx[i1] < start[s + 1]:
+                            i1 += 1
                         dsum = 0.0
                         grp_sum[:] = 0.0
-                        for i in range(m):
-                            k = idx[i]
-                            if start[s] <= k < start[s + 1]:
-                                dsum += w_user[q, k]
-                                for j in range(n_x):
-                                    grp_sum[j] += p0x[i, j]
+                        for i in range(i0, i1):
+                            dsum += w_user[q, idx[i]]
+                            for j in range(n_x):
+                                grp_sum[j] += p0x[i, j]
                         if dsum > 0.0:
                             coef = 1.0 / dsum
-                            for i in range(m):
-                                k = idx[i]
-                                if start[s] <= k < start[s + 1]:
-                                    f = w_user[q, k] * coef
-                                    for j in range(n_x):
-                                        p0x[i, j] -= f * grp_sum[j]
+                            for i in range(i0, i1):
+                                f = w_user[q, idx[i]] * coef
+                                for j in range(n_x):
+                                    p0x[i, j] -= f * grp_sum[j]
                             # - sum over the group's pairs of w_s w_t / d
-                            for i in range(m):
+                            for i in range(i0, i1):
                                 ki = idx[i]
-                                if not start[s] <= ki < start[s + 1]:
-                                    continue
-                                for i2 in range(m):
+                                f = w_user[q, ki] * coef
+                                for i2 in range(i0, i1):
                                     k2 = idx[i2]
-                                    if start[s] <= k2 < start[s + 1]:
-                                        sum_p[ki, k2] -= w_user[q, ki] * coef * w_user[q, k2]
-                # 2. the rank-3 relative-error latent (Woodbury)
+                                    sum_p[ki, k2] -= f * w_user[q, k2]
+                # 2. the rank-3 relative-error latent (Woodbury); each sum of m3 and t3 over
+                # the rows in order, the rows the outer loop
                 for i1 in range(3):
                     for i2 in range(3):
-                        acc = 1.0 if i1 == i2 else 0.0
-                        for i in range(m):
-                            acc += x[i, i1] * p0x[i, i2]
-                        m3[i1, i2] = acc
-                _inv3(m3, m3inv)
-                for i1 in range(3):
+                        m3[i1, i2] = 1.0 if i1 == i2 else 0.0
                     for j in range(p_dim + 1):
-                        acc = 0.0
-                        for i in range(m):
-                            acc += p0x[i, i1] * x[i, 3 + j]
-                        t3[i1, j] = acc
+                        t3[i1, j] = 0.0
+                for i in range(m):
+                    for i1 in range(3):
+                        xi = x[i, i1]
+                        pi = p0x[i, i1]
+                        for i2 in range(3):
+                            m3[i1, i2] += xi * p0x[i, i2]
+                        for j in range(p_dim + 1):
+                            t3[i1, j] += pi * x[i, 3 + j]
+                _inv3(m3, m3inv)
                 for i in range(m):
                     k = idx[i]
-                    for j in range(3):
-                        g3[q, k, j] = (
-                            p0x[i, 0] * m3inv[0, j]
-                            + p0x[i, 1] * m3inv[1, j]
-                            + p0x[i, 2] * m3inv[2, j]
-                        )
+                    p0, p1, p2 = p0x[i, 0], p0x[i, 1], p0x[i, 2]
+                    g0 = p0 * m3inv[0, 0] + p1 * m3inv[1, 0] + p2 * m3inv[2, 0]
+                    g1 = p0 * m3inv[0, 1] + p1 * m3inv[1, 1] + p2 * m3inv[2, 1]
+                    g2 = p0 * m3inv[0, 2] + p1 * m3inv[1, 2] + p2 * m3inv[2, 2]
+                    g3[q, k, 0] = g0
+                    g3[q, k, 1] = g1
+                    g3[q, k, 2] = g2
                     for j in range(p_dim + 1):
-                        px[i, j] = p0x[i, 3 + j] - (
-                            g3[q, k, 0] * t3[0, j] + g3[q, k, 1] * t3[1, j] + g3[q, k, 2] * t3[2, j]
-                        )
+                        px[i, j] = p0x[i, 3 + j] - (g0 * t3[0, j] + g1 * t3[1, j] + g2 * t3[2, j])
                 # accumulate A^T P [A, a], sum_n P_n, sum_n P_n A and P_n a
                 for i in range(m):
                     k = idx[i]
@@ -660,13 +668,10 @@ def cooperative_gauss_newton(
                         pa_sum[k, p] += px[i, p]
                     pr_sum[k] += px[i, p_dim]
                     sum_p[k, k] += w_user[q, k]
+                    g0, g1, g2 = g3[q, k, 0], g3[q, k, 1], g3[q, k, 2]
                     for i2 in range(m):
                         k2 = idx[i2]
-                        sum_p[k, k2] -= (
-                            g3[q, k, 0] * p0x[i2, 0]
-                            + g3[q, k, 1] * p0x[i2, 1]
-                            + g3[q, k, 2] * p0x[i2, 2]
-                        )
+                        sum_p[k, k2] -= g0 * p0x[i2, 0] + g1 * p0x[i2, 1] + g2 * p0x[i2, 2]
             if at_sat and usable[b]:  # reported singular, as the numpy formulation does
                 _unit(inv[b])
                 singular[b] = True
@@ -690,37 +695,28 @@ def cooperative_gauss_newton(
                 for c in range(n_c):
                     k = cols[c]
                     ape[p, c] = pa_sum[k, p] * sig_c[k]
+            # gmat = ape mg^-1, rhs and info: each sum over c2 (c) in order, from its first
+            # term; c2 (c) the outer loop
             for p in range(p_dim):
                 for c in range(n_c):
-                    acc = 0.0
-                    for c2 in range(n_c):
-                        acc += ape[p, c2] * mg_inv[c2, c]
-                    gmat[p, c] = acc
+                    gmat[p, c] = 0.0
+                for c2 in range(n_c):
+                    a = ape[p, c2]
+                    for c in range(n_c):
+                        gmat[p, c] += a * mg_inv[c2, c]
             for p in range(p_dim):
-                acc_r = atpx[p, p_dim]
+                rhs[p] = atpx[p, p_dim]
+                for p2 in range(p_dim):
+                    info[p, p2] = atpx[p, p2]
                 for c in range(n_c):
                     k = cols[c]
-                    acc_r -= gmat[p, c] * sig_c[k] * pr_sum[k]
-                rhs[p] = acc_r
-                for p2 in range(p_dim):
-                    acc = atpx[p, p2]
-                    for c in range(n_c):
-                        acc -= gmat[p, c] * ape[p2, c]
-                    info[p, p2] = acc
+                    g = gmat[p, c]
+                    rhs[p] -= g * sig_c[k] * pr_sum[k]
+                    for p2 in range(p_dim):
+                        info[p, p2] -= g * ape[p2, c]
             for s in range(n_sys):  # unit diagonal for the clocks of constellations not seen
                 if not has_clock[b, s]:
                     info[3 + s, 3 + s] += 1.0
-            # cross terms A^T P~ eps_q = A^T P_q eps_q - G (sig_c P_q eps_q), P_q eps_q = g3_q
-            for q in range(n):
-                for p in range(p_dim):
-                    for j in range(3):
-                        acc = 0.0
-                        for c in range(n_c):
-                            k = cols[c]
-                            gk = g3[q, k, j]
-                            if gk != 0.0:
-                                acc += (a_all[q, k, p] - gmat[p, c] * sig_c[k]) * gk
-                        cross[b, q, p, j] = acc
             singular[b], converged[b] = _gauss_newton_update_into(
                 info,
                 rhs,
@@ -734,6 +730,20 @@ def cooperative_gauss_newton(
                 low_ws,
                 linv_ws,
             )
+            if converged[b] or it == max_iter:
+                # cross terms A^T P~ eps_q = A^T P_q eps_q - G (sig_c P_q eps_q), P_q eps_q =
+                # g3_q, of the iteration that ends (earlier iterations' are never read); each
+                # sum over the satellites c in order, c the outer loop
+                cross[b, :, :, :] = 0.0
+                for q in range(n):
+                    for c in range(n_c):
+                        k = cols[c]
+                        for j in range(3):
+                            gk = g3[q, k, j]
+                            if gk != 0.0:
+                                for p in range(p_dim):
+                                    e = a_all[q, k, p] - gmat[p, c] * sig_c[k]
+                                    cross[b, q, p, j] += e * gk
             if converged[b]:
                 break
     return pos, clk, inv, cross, converged, singular, n_iter
