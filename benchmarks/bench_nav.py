@@ -16,7 +16,9 @@ computation the batched step runs per swarm), then times the kernel on those inp
 * with ``--compare REF``: the same total for the kernels of git revision ``REF``
   (``coopnav_env/nav/_kernels.py`` and ``coopnav_env/sim/_kernels.py`` as committed there,
   loaded beside this checkout's), in alternating rounds in this process, the ratio of the
-  two, and whether both give the same outputs bit for bit on every recorded epoch.
+  two, and whether both give the same outputs bit for bit on every recorded epoch (a
+  revision whose ``epoch_navigation`` took its 39 arguments one by one, before the records
+  of :mod:`coopnav_env.sim._kernels`, gets them so: :func:`positional`).
 
 On a shared machine the best round is the one least disturbed by the neighbours; compare
 figures from one run (ratios) rather than across runs.
@@ -66,7 +68,7 @@ def record_epochs(episodes: int, max_steps: int, seed: int) -> list[tuple]:
     calls: list[tuple] = []
 
     def recording(*args):
-        calls.append(tuple(a.copy() if isinstance(a, np.ndarray) else a for a in args))
+        calls.append(_copied(args))
         return sim_k.epoch_navigation(*args)
 
     saved_settings, saved_kernels = _fused.fused_settings, scenario._sim_kernels
@@ -117,6 +119,50 @@ def best_time(loop: Any, args: tuple, repeats: int) -> float:
 # --------------------------------------------------------------------------------------------
 
 
+def _copied(args: Any) -> Any:
+    """``args`` with every array copied (tuples and records of them, nested)."""
+    if isinstance(args, tuple):
+        return tuple(_copied(a) for a in args)
+    return args.copy() if isinstance(args, np.ndarray) else args
+
+
+def positional(args: tuple) -> tuple:
+    """The records of an ``epoch_navigation`` call (:class:`~coopnav_env.sim._kernels.
+    Geometry`, ``Pseudoranges``, ``Centroids``, ``Solving``, ``Prior``, ``Waypoints``) as the
+    39 positional arguments the kernel took before it took records (revisions before them, for
+    ``--compare``)."""
+    geometry, pseudoranges, centroids, solving, prior, waypoints = args[:6]
+    rel_b, var_b, avail_b, cen, x0_co, ddt, linked, links = centroids
+    max_iter, tol_m, check, r_lo, r_hi, gate_on, gate2 = solving
+    x0, origin, rot, pred_enu, prev_cov, dr_var = prior
+    return (
+        *geometry,
+        *pseudoranges,
+        x0,
+        rel_b,
+        var_b,
+        avail_b,
+        cen,
+        x0_co,
+        ddt,
+        max_iter,
+        tol_m,
+        check,
+        r_lo,
+        r_hi,
+        linked,
+        gate_on,
+        gate2,
+        origin,
+        rot,
+        pred_enu,
+        prev_cov,
+        dr_var,
+        *waypoints,
+        links,
+    )
+
+
 def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
     """The arguments of each stage of ``epoch_navigation`` for the epoch ``args`` (computed
     by the same kernels, in the order ``epoch_navigation`` calls them), and the problem
@@ -161,7 +207,7 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
         next_wp,
         reach_m,
         _avail,
-    ) = args[:39]
+    ) = positional(args)
     st: dict[str, tuple] = {}
     st["pseudoranges"] = (
         range_m,
@@ -416,24 +462,29 @@ def main(argv: list[str] | None = None) -> int:
     print(f"recorded {len(epochs)} epochs in {time.perf_counter() - t0:.1f} s")
 
     variants = {"this checkout": repeater(sim_k.epoch_navigation)}
+    inputs = {"this checkout": epochs}
     if opt.compare:
         other = load_revision(opt.compare)
         variants[opt.compare] = repeater(other.epoch_navigation)
+        # a revision before the records takes the same arguments one by one
+        inputs[opt.compare] = (
+            epochs if hasattr(other, "Geometry") else [positional(a) for a in epochs]
+        )
         same = 0
-        for a in epochs:
-            if _flatten(sim_k.epoch_navigation(*a)) == _flatten(other.epoch_navigation(*a)):
+        for a, b in zip(epochs, inputs[opt.compare], strict=True):
+            if _flatten(sim_k.epoch_navigation(*a)) == _flatten(other.epoch_navigation(*b)):
                 same += 1
         print(f"outputs identical bit for bit to {opt.compare}: {same} of {len(epochs)} epochs")
     t0 = time.perf_counter()
-    for loop in variants.values():
-        loop(1, epochs[0])  # compile
+    for k, loop in variants.items():
+        loop(1, inputs[k][0])  # compile
     print(f"compiled the timing loops in {time.perf_counter() - t0:.1f} s")
 
     best = {k: np.full(len(epochs), np.inf) for k in variants}
     for _ in range(opt.rounds):  # alternating rounds, epoch by epoch
-        for i, a in enumerate(epochs):
+        for i in range(len(epochs)):
             for k, loop in variants.items():
-                best[k][i] = min(best[k][i], best_time(loop, a, opt.repeats))
+                best[k][i] = min(best[k][i], best_time(loop, inputs[k][i], opt.repeats))
     print("\nepoch_navigation, us per swarm-step (mean over epochs of the best round):")
     for k in variants:
         print(f"  {k:>16}: {1e6 * best[k].mean():8.1f}   (median {1e6 * np.median(best[k]):.1f})")

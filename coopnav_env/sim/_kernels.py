@@ -15,6 +15,8 @@ their time in the overhead of many small array operations.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -601,50 +603,84 @@ def line_of_sight(pos, lo, hi, up, order, cot_s, h_dir):
 # --------------------------------------------------------------------------------------------
 
 
+class Geometry(NamedTuple):
+    """The receivers and satellites of an epoch (:func:`epoch_navigation`)."""
+
+    range_m: np.ndarray  # (N, S) receiver-satellite ranges [m]
+    el_deg: np.ndarray  # (N, S) elevations [deg]
+    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
+    system: np.ndarray  # (S,) int64 constellation index, sorted
+    received: np.ndarray  # (N, S) bool
+
+
+class Pseudoranges(NamedTuple):
+    """The measurement model of an epoch and its random draws (:func:`epoch_navigation`)."""
+
+    clock: np.ndarray  # (N, n_sys_all) receiver clock biases [m]
+    iono: np.ndarray  # (n_sys_all,) ionospheric factor per constellation
+    z_common: np.ndarray  # (S,) standard normal draws of the errors common to all receivers
+    z_user: np.ndarray  # (N, S) those of each receiver's own errors
+    extra: np.ndarray  # (N, S) extra (NLOS) bias [m]
+    el_ref: np.ndarray  # (S,) NaN: the mean elevation over the receivers
+    sigma_ure: float
+    tropo: bool
+    differential: bool
+    n_sys: int  # clock states: the constellations flown
+
+
+class Centroids(NamedTuple):
+    """The cooperative problems of an epoch, one per centroid UAV (:func:`epoch_navigation`)."""
+
+    rel: np.ndarray  # (B, N, 3) ECEF relative positions from each centroid UAV [m]
+    var: np.ndarray  # (B, N) their per-axis variances [m^2]
+    avail: np.ndarray  # (B, N) bool
+    cen: np.ndarray  # (B,) int64 centroid UAVs
+    x0: np.ndarray  # (B, 3) ECEF starts of the centroid solves
+    ddt: bool  # the transfer: DDT (else SDT)
+    linked: np.ndarray  # (N,) bool: a UAV with a cooperative solution
+    links: np.ndarray  # (N, N) bool relative links
+
+
+class Solving(NamedTuple):
+    """The solvers' settings and the integrity gate (:func:`epoch_navigation`)."""
+
+    max_iter: int
+    tol_m: float
+    check: bool  # check the fixes' geocentric distance against [r_lo, r_hi]
+    r_lo: float
+    r_hi: float
+    gate_on: bool  # a fix whose 3-D sigma^2 exceeds gate2 is not used
+    gate2: float
+
+
+class Prior(NamedTuple):
+    """The local frame and what is known before the epoch's measurements
+    (:func:`epoch_navigation`)."""
+
+    x0: np.ndarray  # (N, 3) ECEF starts of the standalone solves (the predicted positions)
+    origin: np.ndarray  # (3,) ECEF origin of the ENU frame
+    rot: np.ndarray  # (3, 3) ECEF-to-ENU rotation
+    pred_enu: np.ndarray  # (N, 3) predicted positions (dead reckoning)
+    prev_cov: np.ndarray  # (N, 3, 3) covariances of the previous estimates
+    dr_var: float  # per-axis variance dead reckoning adds over the step
+
+
+class Waypoints(NamedTuple):
+    """The swarm's route and where each UAV is on it (:func:`epoch_navigation`)."""
+
+    route: np.ndarray  # (R, 2) waypoints [m]
+    next_wp: np.ndarray  # (N,) int64
+    reach_m: float
+
+
 @njit(cache=True)
-def epoch_navigation(
-    range_m,  # (N, S) receiver-satellite ranges [m]
-    el_deg,  # (N, S) elevations [deg]
-    sv,  # (S, 3) ECEF
-    system,  # (S,) int64 constellation index, sorted
-    received,  # (N, S) bool
-    clock,  # (N, n_sys_all) receiver clock biases [m]
-    iono,  # (n_sys_all,) iono factor per constellation
-    z_common,  # (S,) standard normal draws
-    z_user,  # (N, S)
-    extra,  # (N, S) extra (NLOS) bias [m]
-    el_ref,  # (S,) NaN: the mean elevation over the receivers
-    sigma_ure,
-    tropo,
-    differential,
-    n_sys,
-    x0,  # (N, 3) ECEF start of the standalone solves (the predicted positions)
-    rel_b,  # (B, N, 3) ECEF relative positions from each centroid UAV
-    var_b,  # (B, N) their per-axis variances
-    avail_b,  # (B, N) bool
-    cen,  # (B,) centroid UAVs
-    x0_co,  # (B, 3)
-    ddt,
-    max_iter,
-    tol_m,
-    check,
-    r_lo,
-    r_hi,
-    linked,  # (N,) bool
-    gate_on,
-    gate2,
-    origin,
-    rot,
-    pred_enu,
-    prev_cov,
-    dr_var,
-    route,  # (k, 2) waypoints
-    next_wp,  # (N,) int64
-    reach_m,
-    avail,  # (N, N) bool relative links
-    fde=None,  # integrity monitoring: None (off) or sim._integrity_kernels' settings tuple
-):
+def epoch_navigation(geometry, pseudoranges, centroids, solving, prior, waypoints, fde=None):
     """``UrbanWorld._epoch`` from the receiver geometry and the random draws to the estimates.
+
+    Takes the records :class:`Geometry`, :class:`Pseudoranges`, :class:`Centroids`,
+    :class:`Solving`, :class:`Prior` and :class:`Waypoints` (each may come as a plain tuple
+    of its fields) and ``fde``: integrity monitoring, None (off) or the settings tuple of
+    :mod:`coopnav_env.sim._integrity_kernels`.
 
     The kernels of the modular path on the same arguments, in its order:
     :func:`coopnav_env.gnss._kernels.pseudorange_model`, the stored observation fields of
@@ -660,6 +696,14 @@ def epoch_navigation(
     epoch_fde`, the kernels of ``fde_standalone`` / ``fde_cooperative``); without it (the
     default) that stage is compiled out and the figures are those of no monitoring.
     """
+    range_m, el_deg, sv, system, received = geometry
+    clock, iono, z_common, z_user, extra, el_ref, sigma_ure, tropo, differential, n_sys = (
+        pseudoranges
+    )
+    rel_b, var_b, avail_b, cen, x0_co, ddt, linked, avail = centroids
+    max_iter, tol_m, check, r_lo, r_hi, gate_on, gate2 = solving
+    x0, origin, rot, pred_enu, prev_cov, dr_var = prior
+    route, next_wp, reach_m = waypoints
     n, s = received.shape
     _sc, _su, _ce, _ue, pr = _gnss_kernels.pseudorange_model(
         range_m,

@@ -1881,44 +1881,51 @@ class UrbanWorld:
             cen, x0_co = np.array([centroid], dtype=np.int64), x0[centroid][None]
         gate = cfg.max_fix_sigma_m
         args = (
-            range_m,
-            el_deg,
-            sv,
-            sky.system_idx,
-            received,
-            self.clock_bias_m,
-            _iono_factors(model),
-            z_common,
-            z_user,
-            np.zeros((n, n_sv)) if bias is None else np.ascontiguousarray(bias, dtype=float),
-            np.full(n_sv, np.nan),
-            float(model.sigma_ure_m),
-            bool(model.tropo),
-            bool(model.differential),
-            self.clock_bias_m.shape[1],  # clock states: the systems, Galileo's if flown
-            x0,
-            np.ascontiguousarray(rel_b),
-            np.ascontiguousarray(var_b),
-            np.ascontiguousarray(avail_b),
-            cen,
-            np.ascontiguousarray(x0_co),
-            cfg.transfer == "ddt",
-            int(cfg.nav_max_iter),
-            1e-4,  # tol_m and plausible radii: the solvers' defaults, as _navigate uses them
-            *_radius_args(PLAUSIBLE_RADIUS_M),
-            linked,
-            gate is not None,
-            float(gate) ** 2 if gate is not None else 0.0,
-            self.origin_ecef_m,
-            self.rot_enu,
-            np.ascontiguousarray(pred_enu, dtype=np.float64),
-            np.ascontiguousarray(self.nav_cov_enu_m2, dtype=np.float64),
-            float(dr_var),
-            np.ascontiguousarray(self.route_xy_m, dtype=np.float64),
-            self.next_wp,
-            float(cfg.route_reach_m),
-            avail,
+            _sim_kernels.Geometry(range_m, el_deg, sv, sky.system_idx, received),
+            _sim_kernels.Pseudoranges(
+                self.clock_bias_m,
+                _iono_factors(model),
+                z_common,
+                z_user,
+                np.zeros((n, n_sv)) if bias is None else np.ascontiguousarray(bias, dtype=float),
+                np.full(n_sv, np.nan),
+                float(model.sigma_ure_m),
+                bool(model.tropo),
+                bool(model.differential),
+                self.clock_bias_m.shape[1],  # clock states: the systems, Galileo's if flown
+            ),
+            _sim_kernels.Centroids(
+                np.ascontiguousarray(rel_b),
+                np.ascontiguousarray(var_b),
+                np.ascontiguousarray(avail_b),
+                cen,
+                np.ascontiguousarray(x0_co),
+                cfg.transfer == "ddt",
+                linked,
+                avail,
+            ),
+            _sim_kernels.Solving(
+                int(cfg.nav_max_iter),
+                1e-4,  # tol_m and plausible radii: the solvers' defaults, as _navigate uses them
+                *_radius_args(PLAUSIBLE_RADIUS_M),
+                gate is not None,
+                float(gate) ** 2 if gate is not None else 0.0,
+            ),
+            _sim_kernels.Prior(
+                x0,
+                self.origin_ecef_m,
+                self.rot_enu,
+                np.ascontiguousarray(pred_enu, dtype=np.float64),
+                np.ascontiguousarray(self.nav_cov_enu_m2, dtype=np.float64),
+                float(dr_var),
+            ),
+            _sim_kernels.Waypoints(
+                np.ascontiguousarray(self.route_xy_m, dtype=np.float64),
+                self.next_wp,
+                float(cfg.route_reach_m),
+            ),
         )
+        args = tuple(tuple(a) for a in args)  # plain tuples: numba types them faster
         if cfg.integrity == "off":
             *out, _none = _sim_kernels.epoch_navigation(*args)
             integrity = None
