@@ -585,26 +585,28 @@ def navigation_reward_sensors(k0, k1, settings, cities, routes, sky, moved, inpu
 def _observe_one(k, settings, routes, inputs, out):
     nr = routes.n_route[k]
     out.obs[k] = _env_kernels.observation_rows(
-        inputs.nav_pos[k],
-        routes.goal[k],
-        inputs.vel[k],
-        inputs.nav_cov[k],
-        inputs.n_sats[k],
-        inputs.n_swarm[k],
-        max(inputs.n_sv[k], 1),
-        inputs.sky_deg[k],
-        inputs.rel[k],
-        inputs.avail[k],
-        np.ascontiguousarray(routes.route[k, :nr]),
-        np.ascontiguousarray(routes.tail[k, :nr]),
-        inputs.next_wp[k],
-        inputs.source[k],
-        inputs.walls[k],
-        inputs.steps[k],
-        inputs.obs_params[k],
-        settings.k_neigh,
-        settings.low,
-        settings.high,
+        _env_kernels.EpochFigures(
+            inputs.nav_pos[k],
+            routes.goal[k],
+            inputs.vel[k],
+            inputs.nav_cov[k],
+            inputs.n_sats[k],
+            inputs.n_swarm[k],
+            max(inputs.n_sv[k], 1),
+            inputs.rel[k],
+            inputs.avail[k],
+            inputs.source[k],
+            inputs.steps[k],
+        ),
+        _env_kernels.Sensors(inputs.sky_deg[k], inputs.walls[k]),
+        _env_kernels.RouteAhead(
+            np.ascontiguousarray(routes.route[k, :nr]),
+            np.ascontiguousarray(routes.tail[k, :nr]),
+            inputs.next_wp[k],
+        ),
+        _env_kernels.ObservationScales(
+            inputs.obs_params[k], settings.k_neigh, settings.low, settings.high
+        ),
     )
     out.floats[k] = _env_kernels.info_floats(
         inputs.pos[k],

@@ -10,6 +10,8 @@ and satellite sectors below have their oracles there too.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -24,30 +26,56 @@ def _clip32(x, lo, hi):
     return np.float32(x)
 
 
+class EpochFigures(NamedTuple):
+    """What the observation reads of a swarm's epoch (:func:`observation_rows`)."""
+
+    nav_pos: np.ndarray  # (n, 3) estimated ENU position
+    goal: np.ndarray  # (3,)
+    vel: np.ndarray  # (n, 3)
+    nav_cov: np.ndarray  # (n, 3, 3) covariance of the estimate (sigma: sqrt of the diagonal)
+    n_sats: np.ndarray  # (n,) int
+    n_swarm: np.ndarray  # (n,) int
+    n_open: int  # satellites above the cut-off (>= 1)
+    rel: np.ndarray  # (n, n, 3) measured relative positions
+    avail: np.ndarray  # (n, n) bool
+    nav_source: np.ndarray  # (n,) int
+    steps: int  # steps of the episode so far
+
+
+class Sensors(NamedTuple):
+    """The horizontal-ray sensors at the true positions (:func:`observation_rows`)."""
+
+    sky_deg: np.ndarray  # (n, A) skyline elevation [deg]
+    walls: np.ndarray  # (n, A) wall distances [m]
+
+
+class RouteAhead(NamedTuple):
+    """The route and each UAV's next waypoint (:func:`observation_rows`)."""
+
+    route: np.ndarray  # (k, 2) waypoints
+    tail: np.ndarray  # (k,) route length after each waypoint
+    wp: np.ndarray  # (n,) next waypoint
+
+
+class ObservationScales(NamedTuple):
+    """The observation's scales and bounds (:func:`observation_rows`)."""
+
+    params: np.ndarray  # (9,) city scale, max speed, sigma max, sensing range, max steps,
+    #                     route scale, altitude min, altitude max, wall scale
+    k_neigh: int  # neighbour slots
+    low: np.ndarray  # (obs_dim,) float64 bounds
+    high: np.ndarray
+
+
 @njit(cache=True)
-def observation_rows(
-    nav_pos,  # (n, 3) estimated ENU position
-    goal,  # (3,)
-    vel,  # (n, 3)
-    nav_cov,  # (n, 3, 3) covariance of the estimate (sigma per axis: sqrt of the diagonal)
-    n_sats,  # (n,) int
-    n_swarm,  # (n,) int
-    n_open,  # int, satellites above the cut-off (>= 1)
-    sky_deg,  # (n, A) skyline elevation
-    rel,  # (n, n, 3) measured relative positions
-    avail,  # (n, n) bool
-    route,  # (k, 2) waypoints
-    tail,  # (k,) route length after each waypoint
-    wp,  # (n,) next waypoint
-    nav_source,  # (n,) int
-    walls,  # (n, A) wall distances
-    steps,  # int
-    params,  # (9,) float: city scale, max speed, sigma max, sensing range, max steps,
-    #          route scale, altitude min, altitude max, wall scale
-    k_neigh,  # int
-    low,  # (obs_dim,) float64 bounds
-    high,
-):
+def observation_rows(epoch, sensors, route_ahead, scales):
+    """Every agent's observation vector, ``(n, obs_dim)`` float32, from the records
+    :class:`EpochFigures`, :class:`Sensors`, :class:`RouteAhead` and
+    :class:`ObservationScales` (each may come as a plain tuple of its fields)."""
+    nav_pos, goal, vel, nav_cov, n_sats, n_swarm, n_open, rel, avail, nav_source, steps = epoch
+    sky_deg, walls = sensors
+    route, tail, wp = route_ahead
+    params, k_neigh, low, high = scales
     n = nav_pos.shape[0]
     n_az = sky_deg.shape[1]
     big, max_speed, sigma_max, max_range = params[0], params[1], params[2], params[3]

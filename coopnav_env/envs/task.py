@@ -401,7 +401,7 @@ class UrbanCanyonTask:
         with the skyline and wall distances at the true positions
         (:meth:`coopnav_env.sim.scenario.UrbanWorld.sky_and_walls`)."""
         sky_deg, walls = world.sky_and_walls(ep.pos_enu_m, self.az_deg)
-        return _kernels.observation_rows(
+        figures = (  # the records of the kernel, as plain tuples (numba types them faster)
             ep.nav_pos_enu_m,
             ep.goal_enu_m,
             ep.vel_enu_mps,
@@ -409,19 +409,16 @@ class UrbanCanyonTask:
             ep.n_sats,
             ep.n_sats_swarm,
             max(ep.n_above_mask, 1),
-            sky_deg,
             ep.rel_enu_m,
             ep.rel_available,
-            world.route_xy_m,
-            world.route_tail_m,
-            ep.next_waypoint,
             ep.nav_source,
-            walls,
             steps,
-            obs_params,
-            self.config.obs_neighbours,
-            self.obs_low,
-            self.obs_high,
+        )
+        return _kernels.observation_rows(
+            figures,
+            (sky_deg, walls),
+            (world.route_xy_m, world.route_tail_m, ep.next_waypoint),
+            (obs_params, self.config.obs_neighbours, self.obs_low, self.obs_high),
         )
 
     def satellite_sectors(self, ep: Epoch) -> np.ndarray:

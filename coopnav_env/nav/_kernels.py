@@ -32,6 +32,8 @@ says how long this takes for all kernels of the package on a 2-core machine).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -1076,31 +1078,49 @@ def isotropic_setup(rel, var, avail, cen):
     return bavail, base, bcov, froot
 
 
+class Measured(NamedTuple):
+    """The swarm's pseudoranges and their error model (:func:`cooperative_isotropic`)."""
+
+    pr: np.ndarray  # (N, S) pseudoranges [m], NaN where not received
+    vis: np.ndarray  # (N, S) bool received
+    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
+    system: np.ndarray  # (S,) constellation index, sorted
+    sigma_user: np.ndarray  # (N, S) receiver-error sigma [m]
+    sig_c: np.ndarray  # (S,) common-error sigma [m]
+    el: np.ndarray  # (N, S) elevations [deg]
+    n_sys: int  # clock states
+
+
+class CentroidProblems(NamedTuple):
+    """One cooperative problem per centroid UAV, with isotropic relative positions
+    (:func:`cooperative_isotropic`)."""
+
+    rel: np.ndarray  # (B, N, 3) position of each UAV relative to centroid UAV cen[b], ECEF
+    var: np.ndarray  # (B, N) per-axis variance of each (covariance var * I)
+    avail: np.ndarray  # (B, N) bool (the centroid UAV's own entry is taken as True)
+    cen: np.ndarray  # (B,) centroid UAV of each problem
+    x0: np.ndarray  # (B, 3) ECEF starts
+    ddt: bool  # the transfer: DDT (else SDT)
+    need_override: int  # the SDT availability rule (-1: 3 + clocks)
+
+
+class SolverLimits(NamedTuple):
+    """When a Gauss-Newton solve stops and which fixes are plausible."""
+
+    max_iter: int
+    tol_m: float  # stop when the position update is below this
+    check: bool  # check the geocentric distance against [lo, hi]
+    lo: float
+    hi: float
+
+
 @njit(cache=True)
-def cooperative_isotropic(
-    pr,  # (N, S) pseudoranges, NaN where not received
-    vis,  # (N, S) bool received
-    sv,  # (S, 3)
-    system,  # (S,) constellation index, sorted
-    sigma_user,  # (N, S)
-    sig_c,  # (S,)
-    el,  # (N, S) [deg]
-    n_sys,
-    rel,  # (B, N, 3) measured position of each UAV relative to centroid UAV cen[b], ECEF
-    var,  # (B, N) per-axis variance of each (covariance var * I)
-    avail,  # (B, N) bool (the centroid UAV's own entry is taken as True)
-    cen,  # (B,) centroid UAV of each problem
-    ddt,
-    need_override,
-    x0,  # (B, 3)
-    max_iter,
-    tol_m,
-    check,
-    lo,
-    hi,
-    with_uavs,
-):
+def cooperative_isotropic(measured, problems, limits, with_uavs):
     """A whole ``solve_cooperative`` (exact covariance, UAV centroids) in one compiled call.
+
+    Takes the records :class:`Measured`, :class:`CentroidProblems` and :class:`SolverLimits`
+    (each may come as a plain tuple of its fields) and ``with_uavs``: every UAV's position
+    and covariance from each centroid as well.
 
     For relative positions with isotropic covariances ``var * I`` (the simulator's relative
     sensing), the same kernels with the same arguments as the Python path of
@@ -1113,6 +1133,9 @@ def cooperative_isotropic(
     Returns ``c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status,
     n_iter`` as :func:`cooperative_finish` plus the largest iteration count.
     """
+    pr, vis, sv, system, sigma_user, sig_c, el, n_sys = measured
+    rel, var, avail, cen, x0, ddt, need_override = problems
+    max_iter, tol_m, check, lo, hi = limits
     n_b, n = avail.shape
     s = vis.shape[1]
     bavail, base, bcov, froot = isotropic_setup(rel, var, avail, cen)

@@ -965,25 +965,29 @@ def _solve_isotropic(
     else:
         cen = np.array([int(centroid)], dtype=np.int64)
         rel_b, var_b, avail_b, x0 = rel_ecef_m[None], var_m2[None], available[None], x0_ecef_m[None]
+    # the kernel's records (_kernels.Measured, CentroidProblems, SolverLimits) as plain
+    # tuples, which numba types faster
     out = _kernels.cooperative_isotropic(
-        obs.pr_m,
-        obs.visible,
-        obs.sv_ecef_m,
-        system,
-        obs.sigma_user_m,
-        obs.sigma_common_m,
-        obs.el_deg,
-        int(obs.n_systems),
-        np.ascontiguousarray(rel_b, dtype=np.float64),
-        np.ascontiguousarray(var_b, dtype=np.float64),
-        np.ascontiguousarray(avail_b, dtype=bool),
-        cen,
-        transfer == "ddt",
-        -1,
-        np.ascontiguousarray(x0, dtype=np.float64),
-        int(max_iter),
-        float(tol_m),
-        *_radius_args(plausible_radius_m),
+        (
+            obs.pr_m,
+            obs.visible,
+            obs.sv_ecef_m,
+            system,
+            obs.sigma_user_m,
+            obs.sigma_common_m,
+            obs.el_deg,
+            int(obs.n_systems),
+        ),
+        (
+            np.ascontiguousarray(rel_b, dtype=np.float64),
+            np.ascontiguousarray(var_b, dtype=np.float64),
+            np.ascontiguousarray(avail_b, dtype=bool),
+            cen,
+            np.ascontiguousarray(x0, dtype=np.float64),
+            transfer == "ddt",
+            -1,
+        ),
+        (int(max_iter), float(tol_m), *_radius_args(plausible_radius_m)),
         not self_centroids,
     )
     return _solution(out[:9], self_centroids, out[9])

@@ -733,26 +733,9 @@ def epoch_navigation(geometry, pseudoranges, centroids, solving, prior, waypoint
         vis, pr, sv, su, _sc, system, n_sys, x0.copy(), max_iter, tol_m, check, r_lo, r_hi
     )
     out = _nav_kernels.cooperative_isotropic(
-        pr,
-        vis,
-        sv,
-        system,
-        su,
-        _sc,
-        el,
-        n_sys,
-        rel_b,
-        var_b,
-        avail_b,
-        cen,
-        ddt,
-        -1,
-        x0_co,
-        max_iter,
-        tol_m,
-        check,
-        r_lo,
-        r_hi,
+        _nav_kernels.Measured(pr, vis, sv, system, su, _sc, el, n_sys),
+        _nav_kernels.CentroidProblems(rel_b, var_b, avail_b, cen, x0_co, ddt, -1),
+        _nav_kernels.SolverLimits(max_iter, tol_m, check, r_lo, r_hi),
         cen.shape[0] == 1,
     )
     if fde is not None:  # updates the solutions in place

@@ -15,8 +15,9 @@ from coopnav_env.nav import _kernels, cooperative
 from tests.nav.scenario import make_scenario
 
 
-def _isotropic_arguments(seed: int, n_uav: int, transfer: str):
-    """The arguments of ``cooperative_isotropic`` for a scenario with every UAV a centroid."""
+def _isotropic_arguments(seed: int, n_uav: int, transfer: str) -> list:
+    """The arguments of ``cooperative_isotropic`` for a scenario with every UAV a centroid:
+    its records ``Measured``, ``CentroidProblems``, ``SolverLimits`` and ``with_uavs``."""
     sc = make_scenario(seed=seed, n_uav=n_uav)
     rng = np.random.default_rng(100 + seed)
     obs, _ = cooperative._sort_by_system(sc.observations(rng))
@@ -27,43 +28,45 @@ def _isotropic_arguments(seed: int, n_uav: int, transfer: str):
     avail = np.ones((n, n), dtype=bool)
     np.fill_diagonal(avail, False)
     return [
-        obs.pr_m,
-        obs.visible,
-        obs.sv_ecef_m,
-        obs.system,
-        obs.sigma_user_m,
-        obs.sigma_common_m,
-        obs.el_deg,
-        int(obs.n_systems),
-        np.ascontiguousarray(sc.relative(rng).rel_ecef_m, dtype=np.float64),
-        var,
-        avail,
-        np.arange(n, dtype=np.int64),
-        transfer == "ddt",
-        -1,
-        sc.pos_ecef + 25.0,
-        8,
-        1e-4,
-        False,
-        0.0,
-        np.inf,
+        _kernels.Measured(
+            obs.pr_m,
+            obs.visible,
+            obs.sv_ecef_m,
+            obs.system,
+            obs.sigma_user_m,
+            obs.sigma_common_m,
+            obs.el_deg,
+            int(obs.n_systems),
+        ),
+        _kernels.CentroidProblems(
+            np.ascontiguousarray(sc.relative(rng).rel_ecef_m, dtype=np.float64),
+            var,
+            avail,
+            np.arange(n, dtype=np.int64),
+            sc.pos_ecef + 25.0,
+            transfer == "ddt",
+            -1,
+        ),
+        _kernels.SolverLimits(8, 1e-4, False, 0.0, np.inf),
         False,
     ]
 
 
 def _with_unseen_satellite(args: list, sigma_common_m: float) -> list:
     """``args`` with one more satellite, of the last constellation, that no UAV receives."""
-    out = list(args)
-    pr, vis, sv, system, su, sc, el = args[:7]
+    pr, vis, sv, system, su, sc, el, n_sys = args[0]
     n = pr.shape[0]
-    out[0] = np.hstack([pr, np.full((n, 1), np.nan)])
-    out[1] = np.hstack([vis, np.zeros((n, 1), dtype=bool)])
-    out[2] = np.vstack([sv, sv[-1:] * 1.01])
-    out[3] = np.append(system, system[-1])
-    out[4] = np.hstack([su, np.full((n, 1), 1.5)])
-    out[5] = np.append(sc, sigma_common_m)
-    out[6] = np.hstack([el, np.full((n, 1), np.nan)])
-    return out
+    measured = _kernels.Measured(
+        np.hstack([pr, np.full((n, 1), np.nan)]),
+        np.hstack([vis, np.zeros((n, 1), dtype=bool)]),
+        np.vstack([sv, sv[-1:] * 1.01]),
+        np.append(system, system[-1]),
+        np.hstack([su, np.full((n, 1), 1.5)]),
+        np.append(sc, sigma_common_m),
+        np.hstack([el, np.full((n, 1), np.nan)]),
+        n_sys,
+    )
+    return [measured, *args[1:]]
 
 
 @pytest.mark.parametrize("seed, n_uav", [(1, 5), (2, 4), (6, 9)])
