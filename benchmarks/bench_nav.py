@@ -252,19 +252,8 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
     )
     pr0 = np.where(vis, pr, 0.0)[None]
     st["co_gauss_newton"] = (
-        pr0,
-        sv,
-        vis,
-        su,
-        _sc,
-        system,
-        used,
-        base,
-        froot,
-        ref,
-        has_clock,
-        ~too_few,
-        x0_co,
+        (pr0, sv, vis, su, _sc, system),
+        (used, base, froot, ref, has_clock, ~too_few, x0_co),
         max_iter,
         tol_m,
     )
@@ -273,20 +262,8 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
     )
     n_nuis = nav_k.n_nuisance(used, system, ref, n_sys)
     st["co_finish"] = (
-        pos,
-        clk,
-        inv,
-        cross,
-        converged,
-        singular,
-        used,
-        n_nuis,
-        too_few,
-        has_clock,
-        base,
-        bcov,
-        froot,
-        bavail,
+        (pos, clk, inv, cross, converged, singular),
+        (used, n_nuis, too_few, has_clock, base, bcov, froot, bavail),
         check,
         r_lo,
         r_hi,

@@ -34,6 +34,10 @@ import numpy as np
 from numba import njit
 
 from coopnav_env.nav._kernels import (
+    Problems,
+    ProblemSetup,
+    Solved,
+    Transferred,
     cooperative_finish,
     cooperative_gauss_newton,
     n_nuisance,
@@ -1295,39 +1299,25 @@ def cooperative_fde(obs, setup, solver, sol, rot, test):
             usable[0] = not too_few[0]
             x0 = c_pos[b : b + 1].copy()
             pos1, clk1, inv1, cross1, conv1, sing1, _it = cooperative_gauss_newton(
-                pr0,
-                sv,
-                vis_b,
-                sigma_user,
-                sig_c,
-                system,
-                used,
-                base[b : b + 1],
-                froot[b : b + 1],
-                ref,
-                has_clock,
-                usable,
-                x0,
+                Transferred(pr0, sv, vis_b, sigma_user, sig_c, system),
+                Problems(used, base[b : b + 1], froot[b : b + 1], ref, has_clock, usable, x0),
                 max_iter,
                 tol_m,
             )
             rows_b = used[0]
             nn = n_nuisance(used, system, ref, n_sys)
             out = cooperative_finish(
-                pos1,
-                clk1,
-                inv1,
-                cross1,
-                conv1,
-                sing1,
-                used,
-                nn,
-                too_few,
-                has_clock,
-                base[b : b + 1],
-                bcov[b : b + 1],
-                froot[b : b + 1],
-                bavail[b : b + 1],
+                Solved(pos1, clk1, inv1, cross1, conv1, sing1),
+                ProblemSetup(
+                    used,
+                    nn,
+                    too_few,
+                    has_clock,
+                    base[b : b + 1],
+                    bcov[b : b + 1],
+                    froot[b : b + 1],
+                    bavail[b : b + 1],
+                ),
                 check,
                 lo,
                 hi,

@@ -415,25 +415,62 @@ def _inv3(m: np.ndarray, out: np.ndarray) -> None:
     out[2, 2] = c22 / det
 
 
+class Transferred(NamedTuple):
+    """The pseudoranges the centroid problems transfer and their error model
+    (:func:`cooperative_gauss_newton`)."""
+
+    pr: np.ndarray  # (B or 1, N, S) pseudoranges [m], 0 where not received
+    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
+    vis: np.ndarray  # (N, S) bool received
+    sigma_user: np.ndarray  # (N, S) receiver-error sigma (any value where not received)
+    sig_c: np.ndarray  # (S,) common-error sigma
+    system: np.ndarray  # (S,) constellation index, sorted
+
+
+class Problems(NamedTuple):
+    """The centroid problems: rows, baselines, clocks and starts
+    (:func:`cooperative_gauss_newton`)."""
+
+    rows: np.ndarray  # (B, N, S) bool measurement used
+    base: np.ndarray  # (B, N, 3) baseline of each UAV from the centroid
+    froot: np.ndarray  # (B, N, 3, 3) square root of its covariance
+    ref: np.ndarray  # (B,) clock reference UAV (carries no nuisance clocks), -1: none
+    has_clock: np.ndarray  # (B, n_sys) bool centroid clock estimable
+    usable: np.ndarray  # (B,) bool
+    x0: np.ndarray  # (B, 3) ECEF starts
+
+
+class Solved(NamedTuple):
+    """What :func:`cooperative_gauss_newton` leaves for :func:`cooperative_finish`."""
+
+    pos: np.ndarray  # (B, 3)
+    clk: np.ndarray  # (B, n_sys)
+    inv: np.ndarray  # (B, P, P) inverse normal matrix at the last update
+    cross: np.ndarray  # (B, N, P, 3)
+    converged: np.ndarray  # (B,) bool
+    singular: np.ndarray  # (B,) bool
+
+
+class ProblemSetup(NamedTuple):
+    """The set-up of the centroid problems that :func:`cooperative_finish` reads."""
+
+    rows: np.ndarray  # (B, N, S) bool measurement used
+    n_nuis: np.ndarray  # (B,) nuisance clocks the rows carry
+    too_few: np.ndarray  # (B,) bool: too few measurements at the set-up
+    has_clock: np.ndarray  # (B, n_sys) bool
+    base: np.ndarray  # (B, N, 3) baselines
+    bcov: np.ndarray  # (B, N, 3, 3) their covariances
+    froot: np.ndarray  # (B, N, 3, 3) and square roots
+    avail: np.ndarray  # (B, N) bool
+
+
 @njit(cache=True)
-def cooperative_gauss_newton(
-    pr: np.ndarray,  # (B or 1, N, S) pseudoranges, 0 where not received
-    sv: np.ndarray,  # (S, 3)
-    vis: np.ndarray,  # (N, S) bool received
-    sigma_user: np.ndarray,  # (N, S) receiver-error sigma (any value where not received)
-    sig_c: np.ndarray,  # (S,) common-error sigma
-    system: np.ndarray,  # (S,) constellation index, sorted
-    rows: np.ndarray,  # (B, N, S) bool measurement used
-    base: np.ndarray,  # (B, N, 3) baseline of each UAV from the centroid
-    froot: np.ndarray,  # (B, N, 3, 3) square root of its covariance
-    ref: np.ndarray,  # (B,) clock reference UAV (carries no nuisance clocks), -1: none
-    has_clock: np.ndarray,  # (B, n_sys) bool centroid clock estimable
-    usable: np.ndarray,  # (B,) bool
-    x0: np.ndarray,  # (B, 3)
-    max_iter: int,
-    tol_m: float,
-):
+def cooperative_gauss_newton(transferred, problems, max_iter, tol_m):
     """Gauss-Newton of the centroid WLS with the exact structured covariance ``C*``.
+
+    Takes the records :class:`Transferred` and :class:`Problems` (each may come as a plain
+    tuple of its fields), the iteration limit and the position update below which a problem
+    has converged [m].
 
     The model of ``cooperative._linearize`` (undifferenced form, one nuisance clock per UAV
     other than the reference and constellation) and the elimination of
@@ -448,6 +485,8 @@ def cooperative_gauss_newton(
     they advance side by side instead of one after another (the same numbers, computed with
     more independent work per step of the processor).
     """
+    pr, sv, vis, sigma_user, sig_c, system = transferred
+    rows, base, froot, ref, has_clock, usable, x0 = problems
     n_b, n, n_sv = rows.shape
     n_sys = has_clock.shape[1]
     p_dim = 3 + n_sys
@@ -929,34 +968,21 @@ def standalone_solve(
 
 
 @njit(cache=True)
-def cooperative_finish(
-    pos,
-    clk,
-    inv,
-    cross,
-    converged,
-    singular,
-    rows,
-    n_nuis,
-    too_few_setup,
-    has_clock,
-    base,
-    bcov,
-    froot,
-    avail,
-    check,
-    lo,
-    hi,
-    with_uavs,
-):
+def cooperative_finish(solved, setup, check, lo, hi, with_uavs):
     """``cooperative._finish``: statuses, centroid outputs and (``with_uavs``) every UAV's
     position, covariance and status from each centroid (Eq. 19-22, Appendix B):
     ``p_q = p* + x_q``, ``H_q = H* + C_d,q + Y + Y^T``, ``Y = [H A^T C~^-1 (1 F_q)]_pos F_q^T``
     (``inv[:3] @ cross @ froot^T`` summed in loops here).
 
+    Takes the records :class:`Solved` and :class:`ProblemSetup` (each may come as a plain
+    tuple of its fields) and the plausibility check of the fixes' geocentric distance
+    (``check``, ``[lo, hi]``).
+
     Returns ``c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status``
     (the UAV arrays empty with ``with_uavs`` False).
     """
+    pos, clk, inv, cross, converged, singular = solved
+    rows, n_nuis, too_few_setup, has_clock, base, bcov, froot, avail = setup
     n_b, n, s = rows.shape
     n_sys = has_clock.shape[1]
     p_dim = inv.shape[1]
@@ -1151,19 +1177,8 @@ def cooperative_isotropic(measured, problems, limits, with_uavs):
     for b in range(n_b):
         usable[b] = not too_few[b]
     pos, clk, inv, cross, converged, singular, iters = cooperative_gauss_newton(
-        pr0,
-        sv,
-        vis,
-        sigma_user,
-        sig_c,
-        system,
-        used,
-        base,
-        froot,
-        ref,
-        has_clock,
-        usable,
-        x0,
+        Transferred(pr0, sv, vis, sigma_user, sig_c, system),
+        Problems(used, base, froot, ref, has_clock, usable, x0),
         max_iter,
         tol_m,
     )
@@ -1173,20 +1188,8 @@ def cooperative_isotropic(measured, problems, limits, with_uavs):
     n_nuis = n_nuisance(used, system, ref, n_sys)
     c_pos, h_star, c_clk, c_status, n_uavs, n_meas, uav_pos, uav_cov, uav_status = (
         cooperative_finish(
-            pos,
-            clk,
-            inv,
-            cross,
-            converged,
-            singular,
-            used,
-            n_nuis,
-            too_few,
-            has_clock,
-            base,
-            bcov,
-            froot,
-            bavail,
+            Solved(pos, clk, inv, cross, converged, singular),
+            ProblemSetup(used, n_nuis, too_few, has_clock, base, bcov, froot, bavail),
             check,
             lo,
             hi,

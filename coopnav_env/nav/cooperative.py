@@ -614,20 +614,25 @@ def _gauss_newton(
     """
     usable = ~st.too_few
     if method == "structured" and covariance == "exact":
+        # the records _kernels.Transferred and Problems, as plain tuples
         pos, clk, inv, cross, converged, singular, iters = _kernels.cooperative_gauss_newton(
-            np.ascontiguousarray(st.pr, dtype=float),
-            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
-            np.ascontiguousarray(obs.visible, dtype=bool),
-            np.ascontiguousarray(obs.sigma_user_m, dtype=float),
-            np.ascontiguousarray(obs.sigma_common_m, dtype=float),
-            np.ascontiguousarray(obs.system, dtype=np.int64),
-            np.ascontiguousarray(st.used),
-            np.ascontiguousarray(st.base, dtype=float),
-            np.ascontiguousarray(st.froot, dtype=float),
-            np.ascontiguousarray(st.ref, dtype=np.int64),
-            np.ascontiguousarray(st.has_clock),
-            np.ascontiguousarray(usable),
-            np.ascontiguousarray(x0, dtype=float),
+            (
+                np.ascontiguousarray(st.pr, dtype=float),
+                np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+                np.ascontiguousarray(obs.visible, dtype=bool),
+                np.ascontiguousarray(obs.sigma_user_m, dtype=float),
+                np.ascontiguousarray(obs.sigma_common_m, dtype=float),
+                np.ascontiguousarray(obs.system, dtype=np.int64),
+            ),
+            (
+                np.ascontiguousarray(st.used),
+                np.ascontiguousarray(st.base, dtype=float),
+                np.ascontiguousarray(st.froot, dtype=float),
+                np.ascontiguousarray(st.ref, dtype=np.int64),
+                np.ascontiguousarray(st.has_clock),
+                np.ascontiguousarray(usable),
+                np.ascontiguousarray(x0, dtype=float),
+            ),
             int(max_iter),
             float(tol_m),
         )
@@ -1013,21 +1018,25 @@ def _finish(
     the UAV outputs and returns ``None`` for them. Computed by the compiled
     :func:`coopnav_env.nav._kernels.cooperative_finish`.
     """
-    out = _kernels.cooperative_finish(
-        np.ascontiguousarray(pos, dtype=float),
-        np.ascontiguousarray(clk, dtype=float),
-        np.ascontiguousarray(inv, dtype=float),
-        np.ascontiguousarray(cross, dtype=float),
-        np.ascontiguousarray(converged, dtype=bool),
-        np.ascontiguousarray(singular, dtype=bool),
-        np.ascontiguousarray(rows, dtype=bool),
-        np.ascontiguousarray(n_nuis, dtype=np.int64),
-        np.ascontiguousarray(st.too_few, dtype=bool),
-        np.ascontiguousarray(st.has_clock, dtype=bool),
-        np.ascontiguousarray(st.base, dtype=float),
-        np.ascontiguousarray(st.bcov, dtype=float),
-        np.ascontiguousarray(st.froot, dtype=float),
-        np.ascontiguousarray(st.avail, dtype=bool),
+    out = _kernels.cooperative_finish(  # the records Solved and ProblemSetup, as plain tuples
+        (
+            np.ascontiguousarray(pos, dtype=float),
+            np.ascontiguousarray(clk, dtype=float),
+            np.ascontiguousarray(inv, dtype=float),
+            np.ascontiguousarray(cross, dtype=float),
+            np.ascontiguousarray(converged, dtype=bool),
+            np.ascontiguousarray(singular, dtype=bool),
+        ),
+        (
+            np.ascontiguousarray(rows, dtype=bool),
+            np.ascontiguousarray(n_nuis, dtype=np.int64),
+            np.ascontiguousarray(st.too_few, dtype=bool),
+            np.ascontiguousarray(st.has_clock, dtype=bool),
+            np.ascontiguousarray(st.base, dtype=float),
+            np.ascontiguousarray(st.bcov, dtype=float),
+            np.ascontiguousarray(st.froot, dtype=float),
+            np.ascontiguousarray(st.avail, dtype=bool),
+        ),
         *_radius_args(plausible_radius_m),
         bool(with_uavs),
     )
