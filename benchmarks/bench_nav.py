@@ -167,47 +167,15 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
     """The arguments of each stage of ``epoch_navigation`` for the epoch ``args`` (computed
     by the same kernels, in the order ``epoch_navigation`` calls them), and the problem
     sizes."""
-    (
-        range_m,
-        el_deg,
-        sv,
-        system,
-        received,
-        clock,
-        iono,
-        z_common,
-        z_user,
-        extra,
-        el_ref,
-        sigma_ure,
-        tropo,
-        differential,
-        n_sys,
-        x0,
-        rel_b,
-        var_b,
-        avail_b,
-        cen,
-        x0_co,
-        ddt,
-        max_iter,
-        tol_m,
-        check,
-        r_lo,
-        r_hi,
-        linked,
-        gate_on,
-        gate2,
-        origin,
-        rot,
-        pred_enu,
-        prev_cov,
-        dr_var,
-        route,
-        next_wp,
-        reach_m,
-        _avail,
-    ) = positional(args)
+    geometry, pseudoranges, centroids, solving, prior, waypoints = args[:6]
+    range_m, el_deg, sv, system, received = geometry
+    clock, iono, z_common, z_user, extra, el_ref, sigma_ure, tropo, differential, n_sys = (
+        pseudoranges
+    )
+    rel_b, var_b, avail_b, cen, x0_co, ddt, linked, _links = centroids
+    max_iter, tol_m, check, r_lo, r_hi, gate_on, gate2 = solving
+    x0, origin, rot, pred_enu, prev_cov, dr_var = prior
+    route, next_wp, reach_m = waypoints
     st: dict[str, tuple] = {}
     st["pseudoranges"] = (
         range_m,
