@@ -644,30 +644,30 @@ def cooperative_gauss_newton(transferred, problems, max_iter, tol_m):
                     break
                 # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
                 if q != ref[b]:
-                    # the rows of constellation s are rows i0:i1 (satellite order, system
+                    # the rows of constellation s are rows r0:r1 (satellite order, system
                     # sorted): those of satellites start[s] <= k < start[s + 1]
-                    i1 = 0
+                    r1 = 0
                     for s in range(n_sys):
-                        i0 = i1
-                        while i1 < m and idx[i1] < start[s + 1]:
-                            i1 += 1
+                        r0 = r1
+                        while r1 < m and idx[r1] < start[s + 1]:
+                            r1 += 1
                         dsum = 0.0
                         grp_sum[:] = 0.0
-                        for i in range(i0, i1):
+                        for i in range(r0, r1):
                             dsum += w_user[q, idx[i]]
                             for j in range(n_x):
                                 grp_sum[j] += p0x[i, j]
                         if dsum > 0.0:
                             coef = 1.0 / dsum
-                            for i in range(i0, i1):
+                            for i in range(r0, r1):
                                 f = w_user[q, idx[i]] * coef
                                 for j in range(n_x):
                                     p0x[i, j] -= f * grp_sum[j]
                             # - sum over the group's pairs of w_s w_t / d
-                            for i in range(i0, i1):
+                            for i in range(r0, r1):
                                 ki = idx[i]
                                 f = w_user[q, ki] * coef
-                                for i2 in range(i0, i1):
+                                for i2 in range(r0, r1):
                                     k2 = idx[i2]
                                     sum_p[ki, k2] -= f * w_user[q, k2]
                 # 2. the rank-3 relative-error latent (Woodbury); each sum of m3 and t3 over
