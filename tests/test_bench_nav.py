@@ -7,23 +7,12 @@ older revision's kernel the 39 arguments in the order it took them (``--compare`
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.benchmark_scripts import load_benchmark
 
-
-def _bench_nav():
-    spec = importlib.util.spec_from_file_location("bench_nav", ROOT / "benchmarks" / "bench_nav.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-bench_nav = _bench_nav()
+bench_nav = load_benchmark("bench_nav")
 
 # epoch_navigation's arguments before it took records, in their order: (record, field)
 OLD_ORDER = [

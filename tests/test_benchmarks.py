@@ -2,24 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.benchmark_scripts import load_benchmark
 
-
-def _bench_env():
-    spec = importlib.util.spec_from_file_location("bench_env", ROOT / "benchmarks" / "bench_env.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-bench_env = _bench_env()
+bench_env = load_benchmark("bench_env")
 
 
 def test_the_benchmark_measures_urban_canyon_v1_without_the_legacy_warning():
