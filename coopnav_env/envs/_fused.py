@@ -130,20 +130,20 @@ class FusedStep:
             self._seen = [_fingerprint(e) for e in envs]
         return out
 
-    def first_epochs(self, envs: list[UrbanCanyonEnv], serial: bool = False) -> bool:
+    def first_epochs(self, envs: list[UrbanCanyonEnv]) -> bool:
         """The first epoch of each copy's episode, after ``UrbanCanyonEnv._begin_reset`` and
         ``UrbanWorld._begin_episode`` (what ``UrbanWorld.reset`` computes after them: the
         swarm where it starts, navigation cold-started from the launch positions); sets each
         world's and environment's epoch. False, with nothing changed, if a copy cannot take
-        it (then reset it as usual). ``serial``: the kernels on this thread alone (inside
-        :meth:`run`'s ``begin``, while the pool's threads run the step's kernel)."""
+        it (then reset it as usual). Its kernels run on this thread alone: it is called
+        inside :meth:`run`'s ``begin``, while the pool's threads run the step's kernel."""
         worlds = [e.world for e in envs]
         if not all(_fused_world(w, cold=True) for w in worlds):
             return False
         n = envs[0].config.n_uavs
         cmd = np.zeros((len(envs), n, 3))
         st = _SwarmArrays(envs)
-        return self._epochs(envs, cmd, st, cold=True, serial=serial) is not None
+        return self._epochs(envs, cmd, st, cold=True) is not None
 
     def _epochs(
         self,
@@ -152,11 +152,10 @@ class FusedStep:
         st: Any,
         cold: bool,
         begin: Callable[[np.ndarray], None] | None = None,
-        serial: bool = False,
     ):
         """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``
-        (``serial``: every kernel on this thread)."""
-        chunks = _run_serial if serial else _run_chunks
+        (``cold``: every kernel on this thread, beside the step's kernel on the pool's)."""
+        chunks = _run_serial if cold else _run_chunks
         cfg = envs[0].config
         n_copies, n = len(envs), cfg.n_uavs
         world0 = envs[0].world
@@ -236,7 +235,7 @@ class FusedStep:
         outputs = tuple(_batched_kernels.navigation_outputs(n_copies, n, envs[0]._rays.shape[0]))
         nav_args = (tuple(nav_settings), cities, routes, sky, moved, tuple(inputs), z, outputs)
         predicted, reset = None, None
-        if begin is None or cold:
+        if begin is None:  # (always so for first epochs)
             chunks(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
         else:
             # the episodes this step ends, from the moved swarms (what the kernel computes

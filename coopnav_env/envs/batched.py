@@ -310,7 +310,7 @@ class BatchedUrbanCanyonEnv:
         for e in envs:
             e._begin_reset(None)
             e.world._begin_episode(e._rng)
-        if envs and not self._fused_step.first_epochs(envs, serial=True):
+        if envs and not self._fused_step.first_epochs(envs):
             for e in envs:
                 e._epoch = e.world._first_epoch(e._rng)
         return {k: e._finish_reset() for k, e in zip(done, envs)}
