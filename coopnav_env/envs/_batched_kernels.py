@@ -14,10 +14,18 @@ rotations and the skyline's ``arctan``, which stay numpy calls on ``(K, ...)`` a
 
 Each swarm ``k`` runs the kernels of the one-swarm step (:mod:`coopnav_env.sim._kernels`,
 :mod:`coopnav_env.gnss._kernels`, :mod:`coopnav_env.envs._kernels`) on its own slices, with
-its own random draws, in a loop over a chunk of the copies (``_fused._run_chunks`` runs the
-chunks on threads): its arithmetic does not depend on ``K`` or on the other swarms, so copy
-``k`` of a batch is bit for bit a separate environment (the tests of
-``tests/envs/test_batched.py`` and ``tests/envs/test_batched_polygons.py`` compare them).
+its own random draws, in a loop over the copies that the call claims: its arithmetic does
+not depend on ``K``, on the other swarms or on the thread that runs it, so copy ``k`` of a
+batch is bit for bit a separate environment (the tests of ``tests/envs/test_batched.py`` and
+``tests/envs/test_batched_polygons.py`` compare them).
+
+The copies are shared between threads without locks (``_fused._run_parallel``): they come
+in segments (:func:`copy_segments`), one per thread of the pool, which takes its segment's
+copies from the front; the calling thread, once it has done its own work, takes copies from
+the back of the segments, the last first, until it meets each segment's thread. A copy
+claimed by both threads at their meeting is computed twice, identically, into the same rows
+(every kernel writes only its copies' rows of its outputs and reads none of them back from
+another copy), so no copy is missed and the split never changes a result.
 
 The kernels take a few typed records (named tuples of arrays and numbers, built where their
 arrays are allocated): each kernel's settings (:class:`MotionSettings`,
@@ -49,6 +57,16 @@ from coopnav_env.envs import _kernels as _env_kernels
 from coopnav_env.gnss import _kernels as _gnss_kernels
 from coopnav_env.sim import _kernels as _sim_kernels
 from coopnav_env.sim import _polygon_kernels as _poly_kernels
+
+
+def copy_segments(n_copies: int, n_segments: int) -> np.ndarray:
+    """The copies ``0 <= k < n_copies`` in ``n_segments`` contiguous segments of about equal
+    size, as the kernels' ``claims`` take them: ``(n_segments, 2)`` int64, each row
+    ``[first, end)``."""
+    if n_segments == 1:  # (every step of a parallel environment: the short way)
+        return np.array([[0, n_copies]], dtype=np.int64)
+    bounds = [n_copies * s // n_segments for s in range(n_segments + 1)]
+    return np.array([bounds[:-1], bounds[1:]], dtype=np.int64).T.copy()
 
 
 class Cities(NamedTuple):
@@ -279,6 +297,44 @@ def _boxes_of(k, cities):
 
 
 @njit(cache=True, inline="always")
+def _next_copy(claims, s, front):
+    """Claim the next copy of segment ``s`` of ``claims`` (:func:`copy_segments`): from its front
+    (``front``) or its back; -1 when the segment has none left."""
+    if front:
+        k = claims[s, 0]
+        if k >= claims[s, 1]:
+            return -1
+        claims[s, 0] = k + 1
+        return k
+    k = claims[s, 1] - 1
+    if k < claims[s, 0]:
+        return -1
+    claims[s, 1] = k
+    return k
+
+
+@njit(cache=True, inline="always")
+def _claim(claims, seg, cursor):
+    """The next copy a kernel's call takes, or -1 when none is left.
+
+    ``claims`` (int64, ``(S, 2)``) holds the segments of the copies still to do, each
+    ``[next, end)`` (:func:`copy_segments`), shared with the threads that run the kernel
+    beside this call and updated as copies are taken. ``seg >= 0``: the copies of segment
+    ``seg``, from its front, in increasing order; ``seg = -1``: the copies left in every
+    segment, from its back, the last segment first (``cursor[0]`` is the segment this call
+    takes from: start it at the last).
+    """
+    if seg >= 0:
+        return _next_copy(claims, seg, True)
+    while cursor[0] >= 0:
+        k = _next_copy(claims, cursor[0], False)
+        if k >= 0:
+            return k
+        cursor[0] -= 1
+    return -1
+
+
+@njit(cache=True, inline="always")
 def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
     n = pos0.shape[1]
     motion = settings.motion
@@ -356,16 +412,18 @@ def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
 
 
 @njit(cache=True, nogil=True)
-def motion_sight_relative(k0, k1, settings, cities, sky, pos0, vel0, cmd, z, out):
-    """Motion, line of sight and relative sensing of the copies ``k0 <= k < k1`` (see the
-    module docstring), written into ``out``.
+def motion_sight_relative(claims, seg, settings, cities, sky, pos0, vel0, cmd, z, out):
+    """Motion, line of sight and relative sensing of the copies that
+    ``claims`` gives this call (see the module docstring), written into ``out``.
 
     Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
 
     Parameters
     ----------
-    k0, k1 : int
-        The copies ``k0 <= k < k1`` of the batch.
+    claims : ndarray of int64, shape (S, 2)
+    seg : int
+        The copies this call takes, shared with the threads that run it beside this call
+        (:func:`_claim`).
     settings : MotionSettings
     cities : Cities
     sky : SkyRows
@@ -380,8 +438,11 @@ def motion_sight_relative(k0, k1, settings, cities, sky, pos0, vel0, cmd, z, out
     """
     settings, cities, sky = MotionSettings(*settings), Cities(*cities), SkyRows(*sky)
     out = Moved(*out)
-    for k in range(k0, k1):
+    cursor = np.full(1, claims.shape[0] - 1)
+    k = _claim(claims, seg, cursor)
+    while k >= 0:
         _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out)
+        k = _claim(claims, seg, cursor)
 
 
 @njit(cache=True, inline="always")
@@ -552,16 +613,18 @@ def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
 
 
 @njit(cache=True, nogil=True)
-def navigation_reward_sensors(k0, k1, settings, cities, routes, sky, moved, inputs, z, out):
-    """Navigation, reward terms and skyline / wall sensors of the copies ``k0 <= k < k1``
-    (module docstring), written into ``out``.
+def navigation_reward_sensors(claims, seg, settings, cities, routes, sky, moved, inputs, z, out):
+    """Navigation, reward terms and skyline / wall sensors of the copies that
+    ``claims`` gives this call (module docstring), written into ``out``.
 
     Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
 
     Parameters
     ----------
-    k0, k1 : int
-        The copies ``k0 <= k < k1`` of the batch.
+    claims : ndarray of int64, shape (S, 2)
+    seg : int
+        The copies this call takes, shared with the threads that run it beside this call
+        (:func:`_claim`).
     settings : NavigationSettings
     cities : Cities
     routes : Routes
@@ -577,8 +640,11 @@ def navigation_reward_sensors(k0, k1, settings, cities, routes, sky, moved, inpu
     settings, cities, routes = NavigationSettings(*settings), Cities(*cities), Routes(*routes)
     sky, moved, inputs = SkyRows(*sky), Moved(*moved), NavigationInputs(*inputs)
     out = Navigated(*out)
-    for k in range(k0, k1):
+    cursor = np.full(1, claims.shape[0] - 1)
+    k = _claim(claims, seg, cursor)
+    while k >= 0:
         _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out)
+        k = _claim(claims, seg, cursor)
 
 
 @njit(cache=True, inline="always")
@@ -619,16 +685,18 @@ def _observe_one(k, settings, routes, inputs, out):
 
 
 @njit(cache=True, nogil=True)
-def observations_infos(k0, k1, settings, routes, inputs, out):
-    """Observations and the infos' real numbers of the copies ``k0 <= k < k1``, written into
-    ``out``.
+def observations_infos(claims, seg, settings, routes, inputs, out):
+    """Observations and the infos' real numbers of the copies that ``claims``
+    gives this call, written into ``out``.
 
     Each record may come as a plain tuple of its fields (as ``_fused.FusedStep`` passes it).
 
     Parameters
     ----------
-    k0, k1 : int
-        The copies ``k0 <= k < k1`` of the batch.
+    claims : ndarray of int64, shape (S, 2)
+    seg : int
+        The copies this call takes, shared with the threads that run it beside this call
+        (:func:`_claim`).
     settings : ObservationSettings
     routes : Routes
     inputs : ObservationInputs
@@ -637,8 +705,11 @@ def observations_infos(k0, k1, settings, routes, inputs, out):
     """
     settings, routes = ObservationSettings(*settings), Routes(*routes)
     inputs, out = ObservationInputs(*inputs), Observed(*out)
-    for k in range(k0, k1):
+    cursor = np.full(1, claims.shape[0] - 1)
+    k = _claim(claims, seg, cursor)
+    while k >= 0:
         _observe_one(k, settings, routes, inputs, out)
+        k = _claim(claims, seg, cursor)
 
 
 @njit(cache=True, nogil=True)

@@ -36,11 +36,9 @@ from __future__ import annotations
 import concurrent.futures
 import dataclasses
 import functools
-import itertools
 import operator
 import os
 import threading
-import time
 import weakref
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -80,7 +78,6 @@ class FusedStep:
         self.first_skies = _SkyTable()  # those of first epochs (computed beside a step's kernel)
         self.state: _SwarmArrays | None = None
         self._seen: list[tuple] = []
-        self._overlap = _Overlap()
 
     def _load(self, envs: list[UrbanCanyonEnv]) -> bool:
         """Make the state arrays those of the copies' worlds; False if one cannot be taken."""
@@ -155,7 +152,7 @@ class FusedStep:
     ):
         """:meth:`run` (``cold`` False) or :meth:`first_epochs` on the state arrays ``st``
         (``cold``: every kernel on this thread, beside the step's kernel on the pool's)."""
-        chunks = _run_serial if cold else _run_chunks
+        run = _run_serial if cold else _run_threads
         cfg = envs[0].config
         n_copies, n = len(envs), cfg.n_uavs
         world0 = envs[0].world
@@ -177,7 +174,7 @@ class FusedStep:
             e._rng.standard_normal(out=z[k, : n_draws[k]])
         los_off = np.zeros(n_copies + 1, dtype=np.int64)
         los_off[1:] = (n * n_sv).cumsum()
-        # the records go to the kernels as plain tuples (_run_chunks), each made once here
+        # the records go to the kernels as plain tuples (_run_threads), each made once here
         sky = tuple(
             _batched_kernels.SkyRows(
                 row, n_sv, n_up, los_off, tab.sv, tab.system, tab.up, tab.order, tab.cot, tab.hdir
@@ -200,7 +197,7 @@ class FusedStep:
         if cold:
             motion_settings = st.first_motion_settings
             nav_settings = st.first_navigation_settings
-        chunks(
+        run(
             _batched_kernels.motion_sight_relative,
             n_copies,
             tuple(motion_settings),
@@ -236,7 +233,7 @@ class FusedStep:
         nav_args = (tuple(nav_settings), cities, routes, sky, moved, tuple(inputs), z, outputs)
         predicted, reset = None, None
         if begin is None:  # (always so for first epochs)
-            chunks(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
+            run(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
         else:
             # the episodes this step ends, from the moved swarms (what the kernel computes
             # from the same arrays): the caller resets those copies while the kernel runs
@@ -244,12 +241,11 @@ class FusedStep:
                 pos1, st.goal, hit, float(nav_settings.reward_params[8])
             )
             reset = predicted[:, 0] | predicted[:, 1] | (st.steps + 1 >= cfg.max_steps)
-            self._overlap.run(
+            _run_parallel(
                 _batched_kernels.navigation_reward_sensors,
                 n_copies,
                 nav_args,
                 functools.partial(begin, reset),
-                int(reset.sum()),
             )
         (
             sa_status,
@@ -311,7 +307,7 @@ class FusedStep:
             steps,
             st.obs_params,
         )
-        chunks(
+        run(
             _batched_kernels.observations_infos,
             n_copies,
             tuple(st.observation_settings),
@@ -677,39 +673,60 @@ def _threads() -> int:
 
 
 def _run_serial(kernel: Any, n_copies: int, *args: Any) -> None:
-    """``kernel(0, n_copies, *args)``: :func:`_run_chunks` on this thread alone."""
-    kernel(0, n_copies, *args)
+    """``kernel`` over every copy on this thread alone (:func:`_run_parallel` without
+    threads)."""
+    kernel(_batched_kernels.copy_segments(n_copies, 1), 0, *args)
 
 
-def _run_chunks(kernel: Any, n_copies: int, *args: Any) -> None:
-    """``kernel(k0, k1, *args)`` over contiguous chunks of the copies, on every core.
+def _run_threads(kernel: Any, n_copies: int, *args: Any) -> None:
+    """``kernel`` over every copy, on every core (:func:`_run_parallel` with no other work)."""
+    _run_parallel(kernel, n_copies, args)
 
-    The kernels release the GIL (``nogil``) and write disjoint rows of their outputs, so
-    chunks run in parallel; each copy's arithmetic is the same in any chunk. This thread and
-    the pool's threads take the chunks one after another from a shared counter (a core that
-    another process holds takes fewer). Threads rather than numba's ``parallel=True``: the
-    OpenMP threading layer numba picks by default competes with PyTorch's own OpenMP pool in
-    one process (a trainer's), which slowed both severalfold in the benchmark.
 
-    The records of :mod:`coopnav_env.envs._batched_kernels` come in ``args`` as plain tuples
-    of their fields (``tuple(record)``), which the kernel names again: numba takes a plain
-    tuple in about half the time of a named one.
+def _run_parallel(
+    kernel: Any, n_copies: int, args: tuple, work: Callable[[], None] | None = None
+) -> None:
+    """``work()`` on this thread while ``kernel`` runs over the copies on the pool's threads,
+    then ``kernel`` on this thread too until every copy is done.
+
+    The copies are split into one segment per thread of the pool
+    (:func:`~coopnav_env.envs._batched_kernels.copy_segments`); each of those threads takes
+    its segment's copies from the front, and this thread, after ``work()``, takes them from
+    the back of the segments until it meets the others. The cores are thus balanced
+    whatever ``work()`` costs, with one call of the kernel per thread. The kernels release
+    the GIL (``nogil``); the pool's threads are inside the kernel before ``work()`` starts,
+    so that Python on this thread never holds them back. Each copy's arithmetic is the same
+    on any thread, so the split changes no result.
+
+    Threads rather than numba's ``parallel=True``: the OpenMP threading layer numba picks by
+    default competes with PyTorch's own OpenMP pool in one process (a trainer's), which
+    slowed both severalfold in the benchmark. The records of
+    :mod:`coopnav_env.envs._batched_kernels` come in ``args`` as plain tuples of their fields
+    (``tuple(record)``), which the kernel names again: numba takes a plain tuple in about
+    half the time of a named one.
     """
     threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
     if threads == 1:
-        kernel(0, n_copies, *args)
+        if work is not None:
+            work()
+        _run_serial(kernel, n_copies, *args)
         return
-    pool = _pool()
-    n_chunks = min(4 * threads, max(1, n_copies // MIN_COPIES_PER_THREAD))
-    bounds = np.linspace(0, n_copies, n_chunks + 1).astype(int).tolist()
-    counter = itertools.count()  # next() is atomic under the GIL
+    claims = _batched_kernels.copy_segments(n_copies, threads - 1)
+    started = [threading.Event() for _ in range(threads - 1)]
 
-    def work() -> None:
-        while (i := next(counter)) < n_chunks:
-            kernel(bounds[i], bounds[i + 1], *args)
+    def front(s: int) -> None:
+        started[s].set()
+        kernel(claims, s, *args)
 
-    futures = [pool.submit(work) for _ in range(threads - 1)]
-    work()
+    futures = [_pool().submit(front, s) for s in range(threads - 1)]
+    try:
+        if work is not None:
+            for event in started:  # (waiting releases the GIL: the threads get into the kernel)
+                event.wait()
+            work()
+        kernel(claims, -1, *args)
+    finally:  # the pool's threads write the same outputs: never leave them running
+        concurrent.futures.wait(futures)
     for f in futures:
         f.result()
 
@@ -719,70 +736,6 @@ def _pool() -> ThreadPoolExecutor:
     if not _POOL or _POOL[0] != os.getpid():  # none yet, or a forked child's copy
         _POOL[:] = [os.getpid(), ThreadPoolExecutor(max_workers=max(1, _threads() - 1))]
     return _POOL[1]
-
-
-class _Overlap:
-    """A kernel over the copies on the pool's threads and this one, while this thread first
-    does other work (Python, which holds the GIL; the kernels release it).
-
-    The pool's threads take the first copies in contiguous chunks, this thread the last ones
-    after its work; the split balances the cores by the kernel's time per copy and the work's
-    time per unit measured at earlier calls (moving averages). Each copy's arithmetic is the
-    same in any chunk, so the split changes no result.
-    """
-
-    def __init__(self) -> None:
-        self.copy_s: float | None = None  # kernel seconds per copy, this thread's chunk
-        self.unit_s = 0.0  # seconds of work per unit
-
-    def run(
-        self, kernel: Any, n_copies: int, args: tuple, work: Callable[[], None], units: int
-    ) -> None:
-        """``work()``, and ``kernel(k0, k1, *args)`` over all the copies (``units``: the size
-        of the work, in the units its time is averaged by)."""
-        threads = min(_threads(), max(1, n_copies // MIN_COPIES_PER_THREAD))
-        if threads == 1:
-            work()
-            kernel(0, n_copies, *args)
-            return
-        copy_s, work_s = self.copy_s, units * self.unit_s
-        if copy_s is None:  # not measured yet: even chunks
-            n_here = n_copies // threads
-        else:  # this thread's share of the work and the copies is the others' share
-            share = (n_copies * copy_s + work_s) / threads
-            n_here = min(n_copies, max(0, round((share - work_s) / copy_s)))
-        n_pool = n_copies - n_here
-        bounds = np.linspace(0, n_pool, threads).astype(int).tolist()
-        chunks = [(a, b) for a, b in itertools.pairwise(bounds) if b > a]
-        started = [threading.Event() for _ in chunks]
-
-        def chunk(i: int, k0: int, k1: int) -> None:
-            started[i].set()
-            kernel(k0, k1, *args)
-
-        futures = [_pool().submit(chunk, i, a, b) for i, (a, b) in enumerate(chunks)]
-        try:
-            for event in started:  # (waiting releases the GIL: the chunks get into the kernel)
-                event.wait()
-            t0 = time.perf_counter()
-            work()
-            t1 = time.perf_counter()
-            if n_here:
-                kernel(n_pool, n_copies, *args)
-            t2 = time.perf_counter()
-        finally:  # the pool's chunks write the same outputs: never leave them running
-            concurrent.futures.wait(futures)
-        for f in futures:
-            f.result()
-        if units:
-            self.unit_s = _moving_average(self.unit_s or None, (t1 - t0) / units)
-        if n_here:
-            self.copy_s = _moving_average(self.copy_s, (t2 - t1) / n_here)
-
-
-def _moving_average(old: float | None, new: float) -> float:
-    """The exponential moving average of the overlap's timings (``new`` alone at first)."""
-    return new if old is None else 0.8 * old + 0.2 * new
 
 
 _EPOCH_FIELDS = tuple(f.name for f in dataclasses.fields(Epoch))

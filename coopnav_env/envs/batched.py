@@ -29,8 +29,8 @@ commands, the base observation with or without the agent index:
 :func:`coopnav_env.envs._fused.fused_settings`), a step of all K copies is three
 compiled calls over the copies (:mod:`coopnav_env.envs._batched_kernels`: motion, line of
 sight and relative sensing; pseudoranges, both solvers, the estimate selection, waypoints,
-reward terms and the skyline and wall sensors; observations and the infos' numbers), run in
-chunks of copies on every core, with the rotations to ECEF and the skyline's ``arctan`` as
+reward terms and the skyline and wall sensors; observations and the infos' numbers), run on
+every core (threads sharing the copies), with the rotations to ECEF and the skyline's ``arctan`` as
 numpy calls on the ``(K, ...)`` arrays between them. Cities of box buildings (the grids) and
 of extruded polygons (generated families, GeoJSON and OpenStreetMap files) both take it.
 Each copy keeps its own city, satellites

@@ -9,9 +9,10 @@ import os
 
 import numpy as np
 import pytest
+from numba import njit
 
 from coopnav_env import urban_canyon_v0, urban_canyon_v1
-from coopnav_env.envs import BatchedUrbanCanyonEnv, _fused
+from coopnav_env.envs import BatchedUrbanCanyonEnv, _batched_kernels, _fused
 from coopnav_env.envs._fused import fused_settings
 from coopnav_env.sim.scenario import Epoch
 
@@ -413,25 +414,22 @@ def test_route_frame_copies_of_a_large_batch_equal_copy_by_copy_environments(mon
     assert out.obs.shape == (k_copies, n, big.config.obs_dim)
 
 
-@pytest.mark.parametrize("copy_s, unit_s", [(None, 0.0), (1e-6, 1.0), (1e-3, 1e-3)])
+@pytest.mark.parametrize("threads", [2, 3, 5])
 def test_copies_reset_beside_the_navigation_kernel_equal_batches_of_one(
-    monkeypatch, copy_s, unit_s
+    monkeypatch, threads
 ) -> None:
     # a step resets the copies it ends (new episode, first epoch) while the navigation kernel
-    # runs, on a split of the copies between threads that follows earlier timings: every
-    # split (even; all on the pool's threads; a share for the calling thread) gives each copy
-    # the episodes of a batch of one, bit for bit
-    monkeypatch.setattr(_fused, "_threads", lambda: 3)
+    # runs on the pool's threads, which share the copies with the calling thread: whichever
+    # thread takes a copy, each copy has the episodes of a batch of one, bit for bit
+    monkeypatch.setattr(_fused, "_threads", lambda: threads)
     k_copies, seed, n = 16, 7, 3
     big, ones = _v1_batch_and_batches_of_one(k_copies, n_uavs=n, max_steps=6)
     big.reset(seed=seed)
     for k, one in enumerate(ones):
         one.reset(seed=seed + k)
-    overlap = big._fused_step._overlap
     rng = np.random.default_rng(seed)
     resets = 0
     for _ in range(13):
-        overlap.copy_s, overlap.unit_s = copy_s, unit_s
         act = rng.uniform(-1.0, 1.0, (k_copies, n, 3))
         out = big.step_arrays(act)
         for k, one in enumerate(ones):
@@ -441,23 +439,51 @@ def test_copies_reset_beside_the_navigation_kernel_equal_batches_of_one(
     assert resets >= 2 * k_copies  # every copy began new episodes (6-step episodes at most)
 
 
-@pytest.mark.parametrize(
-    "copy_s, unit_s, units", [(None, 0.0, 0), (1e-6, 1.0, 3), (1e-3, 1e-3, 5), (1e-3, 0.0, 0)]
-)
-def test_overlap_runs_the_work_once_and_the_kernel_on_every_copy_once(
-    monkeypatch, copy_s, unit_s, units
+@njit(nogil=True)
+def _count_claimed(claims, seg, out, spin):
+    """A kernel that takes its copies as the fused step's kernels do: ``out[k]`` counts the
+    visits of copy ``k``, the order of its last visit in this call and the result of ``spin``
+    iterations of busy work (so that threads meet mid-way)."""
+    cursor = np.full(1, claims.shape[0] - 1)
+    taken = 0
+    k = _batched_kernels._claim(claims, seg, cursor)
+    while k >= 0:
+        x = 0.0
+        for j in range(spin):
+            x += np.sqrt(j + 1.0)
+        out[k, 0] += 1
+        out[k, 1] = taken
+        out[k, 2] = x
+        taken += 1
+        k = _batched_kernels._claim(claims, seg, cursor)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3, 4])
+@pytest.mark.parametrize("n_copies", [1, 8, 37])
+@pytest.mark.parametrize("with_work", [False, True])
+def test_run_parallel_runs_the_work_once_and_every_copy(
+    monkeypatch, threads, n_copies, with_work
 ) -> None:
-    from numba import njit
+    # every copy is computed at least once; only where two threads meet can one take a copy
+    # the other has taken too (each segment has one such meeting: at most twice)
+    monkeypatch.setattr(_fused, "_threads", lambda: threads)
+    out, calls = np.zeros((n_copies, 3)), []
+    work = (lambda: calls.append(1)) if with_work else None
+    _fused._run_parallel(_count_claimed, n_copies, (out, 20_000), work)
+    assert calls == ([1] if with_work else [])
+    visits = out[:, 0]
+    assert np.all(visits >= 1) and np.all(visits <= 2), visits.tolist()
+    assert np.all(out[:, 2] == out[0, 2])  # the same busy work on every thread
 
-    @njit(nogil=True)
-    def mark(k0, k1, out):
-        for k in range(k0, k1):
-            out[k] += 1
 
-    monkeypatch.setattr(_fused, "_threads", lambda: 3)
-    overlap = _fused._Overlap()
-    overlap.copy_s, overlap.unit_s = copy_s, unit_s
-    out, calls = np.zeros(37, dtype=np.int64), []
-    overlap.run(mark, out.shape[0], (out,), lambda: calls.append(1), units)
-    assert calls == [1] and out.tolist() == [1] * out.shape[0]
-    assert overlap.copy_s is None or overlap.copy_s > 0.0  # timings kept for the next split
+def test_claimed_copies_come_from_the_front_of_a_segment_or_the_back_of_all() -> None:
+    claims = _batched_kernels.copy_segments(10, 3)
+    assert claims.tolist() == [[0, 3], [3, 6], [6, 10]]
+    front, back = np.zeros((10, 3)), np.zeros((10, 3))
+    _count_claimed(claims, 1, front, 0)  # segment 1, from its front
+    _count_claimed(claims, -1, back, 0)  # what is left, from the back of the last segment
+    assert np.flatnonzero(front[:, 0]).tolist() == [3, 4, 5]
+    assert front[3:6, 1].tolist() == [0, 1, 2]
+    assert np.flatnonzero(back[:, 0]).tolist() == [0, 1, 2, 6, 7, 8, 9]
+    assert back[[9, 8, 7, 6, 2, 1, 0], 1].tolist() == [0, 1, 2, 3, 4, 5, 6]
+    assert claims.tolist() == [[0, 0], [6, 6], [6, 6]]  # nothing left to claim

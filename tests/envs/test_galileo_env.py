@@ -101,14 +101,14 @@ def test_galileo_epochs_equal_on_the_fused_and_the_modular_navigation(monkeypatc
 
 def test_galileo_episodes_equal_on_the_fused_step_and_the_world_step(monkeypatch) -> None:
     calls = {"fused": 0}
-    run_chunks = _fused._run_chunks
+    run_chunks = _fused._run_threads
 
     def counted(kernel, *args):
         calls["fused"] += kernel is _fused._batched_kernels.navigation_reward_sensors
         return run_chunks(kernel, *args)
 
     def run(fused: bool) -> list:
-        monkeypatch.setattr(_fused, "_run_chunks", counted)
+        monkeypatch.setattr(_fused, "_run_threads", counted)
         if not fused:
             monkeypatch.setattr(_fused, "fused_settings", lambda cfg: False)
         env = urban_canyon_v1.parallel_env(n_uavs=4, max_steps=15, **GALILEO_SKY)
