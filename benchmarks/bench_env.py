@@ -36,7 +36,9 @@ machines):
    itself through its array step (``arrays``: ``BatchedUrbanCanyonEnv.step_arrays``, no
    per-slot info dicts) and VMAS with K batched environments; and the time inside the
    compiled kernels per swarm step (:func:`kernel_timers`), whose inverse times two cores is a
-   ceiling for any batching of this simulation. ``--city`` flies the copies on another city
+   ceiling for any batching of this simulation. ``--scale-copies K2`` also steps K2 copies
+   (the array step, and VMAS) in the same rounds: the cost per swarm step at K2 against K.
+   ``--city`` flies the copies on another city
    (``family:mixed``: a new generated city of extruded polygons every episode; with
    ``--city-pool P``, one of ``P`` cities, all built before timing as in a long training run).
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
@@ -65,6 +67,7 @@ Usage::
     python benchmarks/bench_env.py --sections compare stages --sizes 5 50 --json out.json
     python benchmarks/bench_env.py --sections batch_memory --memory-copies 64 4096
     python benchmarks/bench_env.py --sections batched --city family:mixed --city-pool 200
+    python benchmarks/bench_env.py --sections batched --rounds 3 --scale-copies 256
 
 Needs the ``benchmark`` extra (``pip install -e ".[benchmark]"``: mpe2, vmas) for the
 references; missing ones are reported and skipped. Sections 5-6 need the ``train`` extra.
@@ -885,15 +888,33 @@ def section_batched(args, out: dict) -> None:
     venvs.append(batch)
     if have("vmas"):
         fns["vmas"] = vmas_stepper(n, k)
+    k2 = args.scale_copies
+    copies = dict.fromkeys(fns, k)
+    if k2 is not None:  # the same steppers at K2, in the same alternating rounds
+        fns[f"arrays@{k2}"], big = batch_stepper(n, k2, city_kw)
+        venvs.append(big)
+        if have("vmas"):
+            fns[f"vmas@{k2}"] = vmas_stepper(n, k2)
+        copies |= {name: k2 for name in fns if name.endswith(f"@{k2}")}
     seconds = max(args.seconds, 1.0)
     best = side_by_side(fns, seconds, args.rounds)
-    row = {kind: rate * k for kind, rate in best.items()}
+    row = {kind: rate * copies[kind] for kind, rate in best.items()}
     for kind, rate in row.items():
-        print(f"   {kind:>9}: {rate:8.0f} env-steps/s  ({rate * n:8.0f} agent-steps/s)")
+        print(f"   {kind:>10}: {rate:8.0f} env-steps/s  ({rate * n:8.0f} agent-steps/s)")
     print(f"   batched / supersuit: {row['batched'] / row['supersuit']:.2f}x")
     if "vmas" in row:
         print(f"   batched / vmas: {row['batched'] / row['vmas']:.2f}x")
         print(f"   arrays / vmas: {row['arrays'] / row['vmas']:.2f}x")
+    if k2 is not None:
+        # cost per swarm step at K2 over that at K: K's env-steps/s over K2's
+        print(
+            f"   cost per swarm step, K = {k2} against K = {k}: arrays "
+            f"{row['arrays'] / row[f'arrays@{k2}']:.2f}x"
+            + (f", vmas {row['vmas'] / row[f'vmas@{k2}']:.2f}x" if "vmas" in row else "")
+            + " (below 1: cheaper per swarm at the larger batch)"
+        )
+        if "vmas" in row:
+            print(f"   arrays / vmas at K = {k2}: {row[f'arrays@{k2}'] / row[f'vmas@{k2}']:.2f}x")
     # the compiled part of a batched step: a ceiling for any batching of this Python code
     step = fns["batched"]
     with kernel_timers() as acc:
@@ -920,6 +941,7 @@ def section_batched(args, out: dict) -> None:
     out["batched"] = {
         "n": n,
         "copies": k,
+        "scale_copies": k2,
         "city": args.city,
         "city_pool": args.city_pool,
         "env_steps_per_s": row,
@@ -1148,6 +1170,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     ap.add_argument("--blocks", type=int, nargs="+", default=None, help="4b (3 6 12 24)")
     ap.add_argument("--copies", type=int, default=64, help="K of section 5 (64)")
+    ap.add_argument(
+        "--scale-copies",
+        type=int,
+        default=None,
+        metavar="K2",
+        help="section 5 also steps K2 copies through the array step, and VMAS with K2, in the "
+        "same rounds: the cost per swarm step at K2 against K",
+    )
     ap.add_argument(
         "--city",
         default=None,

@@ -83,3 +83,30 @@ def test_the_arrays_stepper_steps_every_copy_through_step_arrays(monkeypatch):
     # every copy advanced twice, or began a new episode on the way
     assert all(e._steps in (s + 2, 0, 1) for e, s in zip(batch.envs, steps0))
     batch.close()
+
+
+def test_scale_copies_steps_the_larger_batch_in_the_same_rounds(monkeypatch, capsys):
+    import pytest
+
+    if not (bench_env.have("stable_baselines3") and bench_env.have("supersuit")):
+        pytest.skip("section 5 needs the train extra")
+    called = []
+
+    def one_step_each(fns, seconds, rounds):  # every stepper once, at 1 step/s
+        for name, fn in fns.items():
+            fn(1)
+            called.append(name)
+        return dict.fromkeys(fns, 1.0)
+
+    monkeypatch.setattr(bench_env, "side_by_side", one_step_each)
+    args = bench_env.parse_args(
+        ["--sections", "batched", "--copies", "4", "--scale-copies", "8", "--seconds", "0.1"]
+    )
+    out: dict = {}
+    bench_env.section_batched(args, out)
+    rates = out["batched"]["env_steps_per_s"]
+    assert {"arrays", "arrays@8"} <= set(called)
+    # env-steps/s are the batch's steps/s times its copies
+    assert rates["arrays"] == 4.0 and rates["arrays@8"] == 8.0
+    assert out["batched"]["scale_copies"] == 8
+    assert "K = 8 against K = 4: arrays 0.50x" in capsys.readouterr().out
