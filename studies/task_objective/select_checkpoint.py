@@ -67,6 +67,16 @@ def candidates(run: Path, from_steps: int) -> list[tuple[int, Path]]:
     return sorted(out)
 
 
+def run_folders(parser: argparse.ArgumentParser, names: Sequence[str]) -> list[Path]:
+    """``names`` (the ``--runs`` option) as folders; ``parser.error`` (exit 2) naming the first
+    that is not one."""
+    runs = [Path(r) for r in names]
+    for r in runs:
+        if not r.is_dir():
+            parser.error(f"--runs: {r} is not a run folder")
+    return runs
+
+
 def select(
     runs: Sequence[Path], algorithm: str, from_steps: int, seeds: Sequence[int]
 ) -> dict[str, Any]:
@@ -152,10 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.episodes < 2:
         p.error(f"--episodes must be at least 2, got {args.episodes}")
-    runs = [Path(r) for r in args.runs]
-    for r in runs:
-        if not r.is_dir():
-            p.error(f"--runs: {r} is not a run folder")
+    runs = run_folders(p, args.runs)
     out = report_folder(p, args)
     if args.export and not args.overwrite:
         taken = [str(d) for r in runs if (d := Path(args.export) / r.name).exists()]
