@@ -528,16 +528,23 @@ _NOT_FOLLOWED = (type, type(sys), type(len), type(rss_bytes), type(peak_rss_byte
 
 
 def reachable_bytes(
-    root: Any, seen: set[int], bases: list[np.ndarray] | None = None
+    root: Any,
+    seen: set[int],
+    bases: list[Any] | None = None,
+    shared: tuple[type, ...] = (),
 ) -> tuple[int, int]:
     """(bytes, numpy array data bytes) of the objects reachable from ``root`` not in ``seen``.
 
     Follows ``gc.get_referents``, not into classes, modules, functions or code objects (shared
     by every copy); sizes are ``sys.getsizeof`` (an array that owns its data counts its
-    buffer, a view its header). The array a view looks into (its ``base``) is followed, or,
+    buffer, a view its header; an array a compiled kernel made holds its buffer through
+    numba's memory info, and counts it too). The array a view looks into (its ``base``) is
+    followed, or,
     with ``bases`` given, appended to it instead (for the caller to tell a copy's own arrays
-    from the batch's buffers that every copy views). Adds what it visits to ``seen``, so that
-    an object reached again (from another copy, or another attribute) counts once.
+    from the batch's buffers that every copy views), as is an object of one of the types
+    ``shared`` (what every copy of a batch refers to, such as the arrays of a fused step's
+    epochs). Adds what it visits to ``seen``, so that an object reached again (from another
+    copy, or another attribute) counts once.
     """
     total = arrays = 0
     stack = [root]
@@ -545,11 +552,18 @@ def reachable_bytes(
         obj = stack.pop()
         if id(obj) in seen or isinstance(obj, _NOT_FOLLOWED):
             continue
+        if bases is not None and shared and isinstance(obj, shared):
+            bases.append(obj)
+            continue
         seen.add(id(obj))
         total += sys.getsizeof(obj)
         if isinstance(obj, np.ndarray):
-            if obj.base is None:
-                arrays += obj.nbytes if obj.flags.owndata else 0
+            if not isinstance(obj.base, np.ndarray):
+                # its own buffer (in getsizeof), or one it holds through another object
+                # (numba's memory info for an array a compiled kernel made)
+                if obj.base is not None:
+                    total += obj.nbytes
+                arrays += obj.nbytes if obj.flags.owndata or obj.base is not None else 0
             elif bases is None:
                 stack.append(obj.base)
             else:
@@ -564,22 +578,25 @@ def copy_breakdown(
     """What ``envs`` (copies of a batch) hold: (bytes, array bytes) summed over them per part
     of a copy (each attribute of its world, ``world.city``, ..., then each other attribute of
     the environment, ``observation_spaces``, ...; an object shared by two parts or copies
-    counts in the first), and (bytes, array bytes) of the arrays that views of two or more of
-    the copies look into (the batch's buffers, whose size grows with K)."""
+    counts in the first), and (bytes, array bytes) of what two or more of the copies share:
+    the arrays their views look into and the arrays of the fused step's epochs (the batch's
+    buffers, whose size grows with K)."""
+    from coopnav_env.envs._fused import _StepEpochs
+
     parts: dict[str, list[int]] = {}
-    viewed: dict[int, tuple[np.ndarray, set[int], str]] = {}
+    viewed: dict[int, tuple[Any, set[int], str]] = {}
     for c, env in enumerate(envs):
         seen.update({id(env), id(env.__dict__), id(env.world), id(env.world.__dict__)})
         items = [(f"world.{k}", v) for k, v in vars(env.world).items()]
         items += [(k, v) for k, v in vars(env).items() if k != "world"]
         for name, value in items:
-            bases: list[np.ndarray] = []
-            b, a = reachable_bytes(value, seen, bases)
+            bases: list[Any] = []
+            b, a = reachable_bytes(value, seen, bases, (_StepEpochs,))
             acc = parts.setdefault(name, [0, 0])
             acc[0] += b
             acc[1] += a
             for base in bases:
-                while base.base is not None:
+                while isinstance(base, np.ndarray) and isinstance(base.base, np.ndarray):
                     base = base.base
                 viewed.setdefault(id(base), (base, set(), name))[1].add(c)
     shared = [0, 0]

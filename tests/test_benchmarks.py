@@ -41,6 +41,22 @@ def test_reachable_bytes_hands_back_the_array_a_view_looks_into():
     assert a_all == base.nbytes and b_all > base.nbytes
 
 
+def test_reachable_bytes_counts_the_buffer_of_an_array_a_kernel_made():
+    from numba import njit
+
+    @njit
+    def make(n):
+        return np.zeros(n)
+
+    made = make(1000)  # its base is numba's memory info, not an array
+    assert not isinstance(made.base, np.ndarray)
+    _b, a = bench_env.reachable_bytes([made, made[10:]], set())
+    assert a == 8000  # once, the view's header not counted again
+    bases: list[np.ndarray] = []
+    bench_env.reachable_bytes({"view": made[3:]}, set(), bases)
+    assert len(bases) == 1 and bases[0] is made
+
+
 def test_memory_options_default_to_the_issue_sizes():
     args = bench_env.parse_args([])
     assert args.memory_copies == [64, 256, 1024, 4096]
@@ -110,3 +126,22 @@ def test_scale_copies_steps_the_larger_batch_in_the_same_rounds(monkeypatch, cap
     assert rates["arrays"] == 4.0 and rates["arrays@8"] == 8.0
     assert out["batched"]["scale_copies"] == 8
     assert "K = 8 against K = 4: arrays 0.50x" in capsys.readouterr().out
+
+
+def test_copy_breakdown_counts_the_step_arrays_the_copies_share_once():
+    from coopnav_env.envs import BatchedUrbanCanyonEnv
+
+    batch = BatchedUrbanCanyonEnv.from_envs([bench_env.make_urban(2) for _ in range(3)])
+    batch.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        batch.step(rng.uniform(-1.0, 1.0, (3, 2, 3)))
+    parts, (shared_b, shared_a) = bench_env.copy_breakdown(batch.envs, set())
+    # every copy's last epoch views the step's (K, ...) arrays: those are the batch's,
+    # counted once, not in the first copy that reaches them
+    assert parts["world.last"][1] == 0
+    epochs, _k = batch.envs[0].world.last.__dict__["_pending"]  # (not read: no views yet)
+    rows = [a for a in epochs.rows if isinstance(a, np.ndarray)]
+    assert rows and shared_a >= sum(a.nbytes for a in rows)
+    assert shared_b >= shared_a > 0
+    batch.close()
