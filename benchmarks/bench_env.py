@@ -36,8 +36,9 @@ machines):
    itself through its array step (``arrays``: ``BatchedUrbanCanyonEnv.step_arrays``, no
    per-slot info dicts) and VMAS with K batched environments; and the time inside the
    compiled kernels per swarm step (:func:`kernel_timers`), whose inverse times two cores is a
-   ceiling for any batching of this simulation. ``--scale-copies K2`` also steps K2 copies
-   (the array step, and VMAS) in the same rounds: the cost per swarm step at K2 against K.
+   ceiling for any batching of this simulation. The array step and VMAS also step 4 K copies
+   (``--scale-copies K2``; 0: not) in the same rounds: the cost per swarm step at 4 K against
+   K.
    ``--city`` flies the copies on another city
    (``family:mixed``: a new generated city of extruded polygons every episode; with
    ``--city-pool P``, one of ``P`` cities, all built before timing as in a long training run).
@@ -67,7 +68,7 @@ Usage::
     python benchmarks/bench_env.py --sections compare stages --sizes 5 50 --json out.json
     python benchmarks/bench_env.py --sections batch_memory --memory-copies 64 4096
     python benchmarks/bench_env.py --sections batched --city family:mixed --city-pool 200
-    python benchmarks/bench_env.py --sections batched --rounds 3 --scale-copies 256
+    python benchmarks/bench_env.py --sections batched --rounds 3   # K = 64, and 256 beside it
 
 Needs the ``benchmark`` extra (``pip install -e ".[benchmark]"``: mpe2, vmas) for the
 references; missing ones are reported and skipped. Sections 5-6 need the ``train`` extra.
@@ -905,7 +906,7 @@ def section_batched(args, out: dict) -> None:
     venvs.append(batch)
     if have("vmas"):
         fns["vmas"] = vmas_stepper(n, k)
-    k2 = args.scale_copies
+    k2 = args.scale_copies or None
     copies = dict.fromkeys(fns, k)
     if k2 is not None:  # the same steppers at K2, in the same alternating rounds
         fns[f"arrays@{k2}"], big = batch_stepper(n, k2, city_kw)
@@ -1193,7 +1194,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         metavar="K2",
         help="section 5 also steps K2 copies through the array step, and VMAS with K2, in the "
-        "same rounds: the cost per swarm step at K2 against K",
+        "same rounds: the cost per swarm step at K2 against K (default 4 K; 0: not)",
     )
     ap.add_argument(
         "--city",
@@ -1242,6 +1243,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             setattr(args, name, value)
     if quick and args.copies == 64:
         args.copies = 8
+    if args.scale_copies is None:
+        args.scale_copies = 0 if quick else 4 * args.copies
+    if args.scale_copies < 0:
+        ap.error(f"--scale-copies must be >= 0, got {args.scale_copies}")
     return args
 
 

@@ -60,6 +60,8 @@ def test_reachable_bytes_counts_the_buffer_of_an_array_a_kernel_made():
 def test_memory_options_default_to_the_issue_sizes():
     args = bench_env.parse_args([])
     assert args.memory_copies == [64, 256, 1024, 4096]
+    assert (args.copies, args.scale_copies) == (64, 256)  # K = 256 beside K = 64
+    assert bench_env.parse_args(["--quick"]).scale_copies == 0
     assert "batch_memory" in bench_env.SECTIONS
     quick = bench_env.parse_args(["--quick"])
     assert max(quick.memory_copies) < 4096
