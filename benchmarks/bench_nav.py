@@ -243,20 +243,11 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
     else:
         co_pos, co_cov, co_status = co[0], co[1], co[3].copy()
     st["selection"] = (
-        sa[3],
-        sa[0],
-        sa[1],
-        co_status,
-        co_pos,
-        co_cov,
+        (sa[3], sa[0], sa[1], co_status, co_pos, co_cov),
         linked,
-        gate_on,
-        gate2,
-        origin,
-        rot,
-        pred_enu,
-        prev_cov,
-        dr_var,
+        (gate_on, gate2),
+        (origin, rot),
+        (pred_enu, prev_cov, dr_var),
     )
     sel = sim_k.select_navigation(*st["selection"])
     xy = np.ascontiguousarray(sel[6][:, :2])

@@ -341,21 +341,9 @@ def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
     lo, hi = _boxes_of(k, cities)
     is_poly, edges, edge_start, heights, bbox = _polygons_of(k, cities)
     if settings.moving:
+        limits = (motion[0], motion[1], motion[2], motion[3], motion[4], motion[5], motion[6])
         p1, v1, h, s = _sim_kernels.world_motion(
-            pos0[k],
-            vel0[k],
-            cmd[k],
-            motion[0],
-            motion[1],
-            motion[2],
-            motion[3],
-            motion[4],
-            cities.fence_lo[k],
-            cities.fence_hi[k],
-            lo,
-            hi,
-            motion[5],
-            motion[6],
+            pos0[k], vel0[k], cmd[k], limits, (cities.fence_lo[k], cities.fence_hi[k]), (lo, hi)
         )
         if is_poly:  # the motion above met no building: collide with the polygons
             h = _poly_kernels.swept_collisions(

@@ -316,31 +316,56 @@ def _take_fix(pos, cov, i, add, add_var, nav_pos, nav_cov):
             nav_cov[i, a, b] = v
 
 
+class Fixes(NamedTuple):
+    """Each UAV's standalone and cooperative fix of an epoch (:func:`select_navigation`)."""
+
+    sa_status: np.ndarray  # (N,) int64 standalone statuses
+    sa_pos: np.ndarray  # (N, 3) ECEF [m]
+    sa_cov: np.ndarray  # (N, 3, 3) ECEF [m^2]
+    co_status: np.ndarray  # (N,) int64 cooperative statuses
+    co_pos: np.ndarray  # (N, 3) ECEF [m]
+    co_cov: np.ndarray  # (N, 3, 3) ECEF [m^2]
+
+
+class Gate(NamedTuple):
+    """The integrity gate of the estimate selection (:func:`select_navigation`)."""
+
+    on: bool  # a fix whose trace(cov) exceeds max_sigma2 is not used
+    max_sigma2: float  # [m^2]
+
+
+class Frame(NamedTuple):
+    """The local ENU frame (:func:`select_navigation`)."""
+
+    origin: np.ndarray  # (3,) ECEF of the ENU origin [m]
+    rot: np.ndarray  # (3, 3) ECEF-to-ENU rotation
+
+
+class DeadReckoning(NamedTuple):
+    """The estimate of a UAV without a fix (:func:`select_navigation`)."""
+
+    pred_enu: np.ndarray  # (N, 3) predicted positions [m]
+    prev_cov: np.ndarray  # (N, 3, 3) covariances of the previous estimates (ENU) [m^2]
+    dr_var: float  # per-axis variance dead reckoning adds over the step [m^2]
+
+
 @njit(cache=True)
-def select_navigation(
-    sa_status,  # (N,) standalone statuses
-    sa_pos,  # (N, 3) ECEF
-    sa_cov,  # (N, 3, 3) ECEF
-    co_status_raw,  # (N,) cooperative statuses
-    co_pos,
-    co_cov,
-    linked,  # (N,) bool: the UAV has a relative link for the cooperative fix
-    check_sigma,  # bool: integrity gate on
-    max_sigma2,  # gate: trace(cov) <= max_sigma2
-    origin,  # (3,) ECEF of the ENU origin
-    rot,  # (3, 3) ECEF -> ENU
-    pred_enu,  # (N, 3) dead-reckoning prediction
-    prev_cov,  # (N, 3, 3) previous estimate's covariance (ENU)
-    dr_var,  # dead-reckoning variance added per axis
-):
+def select_navigation(fixes, linked, gate, frame, dead_reckoning):
     """The estimate each UAV uses: cooperative, else standalone, else dead reckoning.
 
     ``UrbanWorld._epoch``'s selection (its numpy formulation is ``select_navigation`` of
-    ``tests/sim/oracles.py``): fixes with status OK whose ``trace(cov)`` passes the
-    gate, expressed in ENU (NaN where not used). Status 4 (NO_RELATIVE_POSITION) replaces the
-    cooperative status of an unlinked UAV. Returns ``sa_pos, sa_cov, co_pos, co_cov`` (ENU),
-    ``co_status, source, nav_pos, nav_cov, sa_rejected, co_rejected``.
+    ``tests/sim/oracles.py``) from the records :class:`Fixes`, :class:`Gate`, :class:`Frame`
+    and :class:`DeadReckoning` (each may come as a plain tuple of its fields) and ``linked``
+    ``(N,)`` bool (the UAV has a relative link for the cooperative fix): fixes with status OK
+    whose ``trace(cov)`` passes the gate, expressed in ENU (NaN where not used). Status 4
+    (NO_RELATIVE_POSITION) replaces the cooperative status of an unlinked UAV. Returns
+    ``sa_pos, sa_cov, co_pos, co_cov`` (ENU), ``co_status, source, nav_pos, nav_cov,
+    sa_rejected, co_rejected``.
     """
+    sa_status, sa_pos, sa_cov, co_status_raw, co_pos, co_cov = fixes
+    check_sigma, max_sigma2 = gate
+    origin, rot = frame
+    pred_enu, prev_cov, dr_var = dead_reckoning
     n = sa_status.shape[0]
     sa_pos_e = np.full((n, 3), np.nan)
     sa_cov_e = np.full((n, 3, 3), np.nan)
@@ -508,29 +533,32 @@ def _clip(x, lo, hi):
     return x if x < hi else hi
 
 
+class MotionLimits(NamedTuple):
+    """The kinematics of a motion step (:func:`world_motion`)."""
+
+    v_max: float  # speed limit [m/s]
+    dv_max: float  # largest change of velocity in a step [m/s]
+    dt: float  # step [s]
+    alt_min: float  # altitude band [m]
+    alt_max: float
+    radius: float  # UAV radius [m]
+    min_sep: float  # separation below which two UAVs violate it [m]
+
+
 @njit(cache=True, error_model="numpy")
-def world_motion(
-    pos0,
-    vel0,
-    cmd,
-    v_max,
-    dv_max,
-    dt,
-    alt_min,
-    alt_max,
-    fence_lo,
-    fence_hi,
-    b_lo,
-    b_hi,
-    radius,
-    min_sep,
-):
+def world_motion(pos0, vel0, cmd, limits, fence, boxes):
     """One motion step of ``UrbanWorld.step``: ``swarm.step_kinematics``, the virtual fence
     at the city extent, swept collisions (a colliding UAV stays where it was, at rest) and
     the separation test, with the numpy formulation's operations in its order.
 
-    Returns ``pos1, vel1, hit, sep``.
+    Takes the positions and velocities ``(N, 3)`` before the step, the commands ``cmd (N,
+    3)``, the record :class:`MotionLimits` (or a plain tuple of its fields), the fence
+    ``(lo, hi)`` (each ``(2,)`` east-north [m]) and the box buildings ``(b_lo, b_hi)``
+    (each ``(B, 3)``). Returns ``pos1, vel1, hit, sep``.
     """
+    v_max, dv_max, dt, alt_min, alt_max, radius, min_sep = limits
+    fence_lo, fence_hi = fence
+    b_lo, b_hi = boxes
     n = pos0.shape[0]
     pos1 = np.empty((n, 3))
     vel1 = np.empty((n, 3))
@@ -762,20 +790,11 @@ def epoch_navigation(geometry, pseudoranges, centroids, solving, prior, waypoint
     else:  # "self": UAV q's solution is centroid q's
         co_pos, co_cov, co_status = c_pos, h_star, c_status.copy()
     sel = select_navigation(
-        sa_status,
-        sa_pos,
-        sa_cov,
-        co_status,
-        co_pos,
-        co_cov,
+        (sa_status, sa_pos, sa_cov, co_status, co_pos, co_cov),
         linked,
-        gate_on,
-        gate2,
-        origin,
-        rot,
-        pred_enu,
-        prev_cov,
-        dr_var,
+        (gate_on, gate2),
+        (origin, rot),
+        (pred_enu, prev_cov, dr_var),
     )
     nav_pos = sel[6]
     xy = np.empty((n, 2))

@@ -1054,21 +1054,18 @@ def _world_motion(
         raise ValueError("cmd must be finite")
     polygons = not isinstance(buildings, Buildings)  # a file city's extruded polygons
     r = kin.uav_radius_m
-    pos1, vel1, hit, sep = _sim_kernels.world_motion(
-        pos0,
-        vel0,
-        np.ascontiguousarray(cmd),
+    limits = (
         float(kin.max_speed_mps),
         float(kin.max_accel_mps2 * kin.dt_s),
         float(kin.dt_s),
         float(kin.altitude_min_m),
         float(kin.altitude_max_m),
-        lo,
-        hi,
-        _NO_BOXES if polygons else buildings.min_m,
-        _NO_BOXES if polygons else buildings.max_m,
         float(r),
         float(kin.min_separation_m),
+    )
+    boxes = (_NO_BOXES, _NO_BOXES) if polygons else (buildings.min_m, buildings.max_m)
+    pos1, vel1, hit, sep = _sim_kernels.world_motion(
+        pos0, vel0, np.ascontiguousarray(cmd), limits, (lo, hi), boxes
     )
     if polygons:  # the motion above met no building: collide with the polygons
         hit = buildings.swept_collisions(pos0, pos1, r)
@@ -1958,21 +1955,25 @@ def _select_navigation(world, sa, co, linked, pred_enu, dr_var):
     """
     cfg = world.config
     gate = cfg.max_fix_sigma_m
-    return _sim_kernels.select_navigation(
+    fixes = (
         np.ascontiguousarray(sa.status, dtype=np.int64),
         np.ascontiguousarray(sa.pos_ecef_m, dtype=np.float64),
         np.ascontiguousarray(sa.cov_ecef_m2, dtype=np.float64),
         np.ascontiguousarray(co.status, dtype=np.int64),
         np.ascontiguousarray(co.pos_ecef_m, dtype=np.float64),
         np.ascontiguousarray(co.cov_ecef_m2, dtype=np.float64),
-        np.ascontiguousarray(linked, dtype=bool),
-        gate is not None,
-        float(gate) ** 2 if gate is not None else 0.0,
-        world.origin_ecef_m,
-        world.rot_enu,
+    )
+    dead_reckoning = (
         np.ascontiguousarray(pred_enu, dtype=np.float64),
         np.ascontiguousarray(world.nav_cov_enu_m2, dtype=np.float64),
         float(dr_var),
+    )
+    return _sim_kernels.select_navigation(
+        fixes,
+        np.ascontiguousarray(linked, dtype=bool),
+        (gate is not None, float(gate) ** 2 if gate is not None else 0.0),
+        (world.origin_ecef_m, world.rot_enu),
+        dead_reckoning,
     )
 
 
