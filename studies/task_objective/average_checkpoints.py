@@ -3,11 +3,11 @@
 A PPO run's return wanders between checkpoints, so that its last checkpoint is one draw from
 that wander (:mod:`studies.task_objective.select_checkpoint`). This script takes, per run, the
 uniform average of the actor's parameters over every checkpoint from ``--from-steps`` on and
-the run's final model (stochastic weight averaging applied after training: the checkpoints of
-one run late in its training lie in one region of parameter space, and their average is a
-policy of the same network), and exports it as the policy ``DIR/<run folder name>_avg`` with
-the final model's settings (:func:`coopnav_env.training.torchrl_backend.export_policy`), to be
-compared on the test episodes by ``compare_learned.py``. Nothing is flown here.
+the run's final model (stochastic weight averaging, applied after training: the average of the
+checkpoints' weights is a policy of the same network), and exports it as the policy ``DIR/<run
+folder name>_avg`` with the final model's settings
+(:func:`coopnav_env.training.torchrl_backend.export_policy`), to be compared on the test
+episodes by ``compare_learned.py``. Nothing is flown here.
 
 Example::
 
