@@ -38,10 +38,9 @@ machines):
    compiled kernels per swarm step (:func:`kernel_timers`), whose inverse times two cores is a
    ceiling for any batching of this simulation. The array step and VMAS also step 4 K copies
    (``--scale-copies K2``; 0: not) in the same rounds: the cost per swarm step at 4 K against
-   K.
-   ``--city`` flies the copies on another city
-   (``family:mixed``: a new generated city of extruded polygons every episode; with
-   ``--city-pool P``, one of ``P`` cities, all built before timing as in a long training run).
+   K. ``--city`` flies the copies on another city (``family:mixed``: a new generated city of
+   extruded polygons every episode; with ``--city-pool P``, one of ``P`` cities, all built
+   before timing as in a long training run).
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the
@@ -540,12 +539,11 @@ def reachable_bytes(
     by every copy); sizes are ``sys.getsizeof`` (an array that owns its data counts its
     buffer, a view its header; an array a compiled kernel made holds its buffer through
     numba's memory info, and counts it too). The array a view looks into (its ``base``) is
-    followed, or,
-    with ``bases`` given, appended to it instead (for the caller to tell a copy's own arrays
-    from the batch's buffers that every copy views), as is an object of one of the types
-    ``shared`` (what every copy of a batch refers to, such as the arrays of a fused step's
-    epochs). Adds what it visits to ``seen``, so that an object reached again (from another
-    copy, or another attribute) counts once.
+    followed, or, with ``bases`` given, appended to it instead (for the caller to tell a
+    copy's own arrays from the batch's buffers that every copy views), as is an object of one
+    of the types ``shared`` (what every copy of a batch refers to, such as the arrays of a
+    fused step's epochs). Adds what it visits to ``seen``, so that an object reached again
+    (from another copy, or another attribute) counts once.
     """
     total = arrays = 0
     stack = [root]
