@@ -580,8 +580,11 @@ def copy_breakdown(
     counts in the first), and (bytes, array bytes) of what two or more of the copies share:
     the arrays their views look into and the arrays of the fused step's epochs (the batch's
     buffers, whose size grows with K)."""
-    from coopnav_env.envs._fused import _StepEpochs
-
+    # the object a copy's lazily made epoch reads its fields from (the fused step's arrays,
+    # one for all the copies of a step): of the type its pending fields name
+    step_arrays = tuple(
+        {type(p[0]) for e in envs if (p := vars(e.world.last).get("_pending")) is not None}
+    )
     parts: dict[str, list[int]] = {}
     viewed: dict[int, tuple[Any, set[int], str]] = {}
     for c, env in enumerate(envs):
@@ -590,7 +593,7 @@ def copy_breakdown(
         items += [(k, v) for k, v in vars(env).items() if k != "world"]
         for name, value in items:
             bases: list[Any] = []
-            b, a = reachable_bytes(value, seen, bases, (_StepEpochs,))
+            b, a = reachable_bytes(value, seen, bases, step_arrays)
             acc = parts.setdefault(name, [0, 0])
             acc[0] += b
             acc[1] += a

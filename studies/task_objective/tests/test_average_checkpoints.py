@@ -8,11 +8,11 @@ import torch
 from coopnav_env.agents.marl_policy import load_checked_checkpoint
 from studies.task_objective import average_checkpoints as ac
 from studies.task_objective.compare_learned import fly
-from studies.task_objective.tests.test_select_checkpoint import SEEDS, _run
+from studies.task_objective.tests.test_select_checkpoint import SEEDS, shipped_actors_run
 
 
 def test_the_exported_actor_is_the_mean_of_the_checkpoints_from_the_step_count_on(tmp_path):
-    run = _run(tmp_path)  # checkpoints at 50, 100, 300 agent-steps and a final model at 400
+    run = shipped_actors_run(tmp_path)  # checkpoints at 50, 100, 300 agent-steps, final at 400
     assert ac.main(["--runs", str(run), "--from-steps", "100", "--export", str(tmp_path)]) == 0
     dest = tmp_path / "run_avg"
     got = load_checked_checkpoint(dest / "final_model.pt", "fly")
@@ -36,7 +36,7 @@ def test_the_exported_actor_is_the_mean_of_the_checkpoints_from_the_step_count_o
 
 
 def test_actors_of_different_networks_are_not_averaged(tmp_path):
-    run = _run(tmp_path)
+    run = shipped_actors_run(tmp_path)
     other = run / "checkpoints" / "marl_200_steps.pt"
     d = load_checked_checkpoint(run / "checkpoints" / "marl_100_steps.pt", "fly")
     name = next(iter(d["actor"]))

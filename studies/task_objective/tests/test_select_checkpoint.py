@@ -15,7 +15,7 @@ from studies.task_objective.compare_learned import fly
 SEEDS = [sc.VALIDATION_SEED_START, sc.VALIDATION_SEED_START + 1]
 
 
-def _run(tmp_path, name="run"):
+def shipped_actors_run(tmp_path, name="run"):
     """A run folder whose checkpoints are two shipped route-frame actors and an early one."""
     run = tmp_path / name
     (run / "checkpoints").mkdir(parents=True)
@@ -33,7 +33,7 @@ def _run(tmp_path, name="run"):
 
 
 def test_candidates_start_at_from_steps_and_end_with_the_final_model(tmp_path) -> None:
-    run = _run(tmp_path)
+    run = shipped_actors_run(tmp_path)
     got = sc.candidates(run, from_steps=100)
     assert [s for s, _ in got] == [100, 300, 400]
     assert got[-1][1].name == "final_model.pt"
@@ -42,7 +42,7 @@ def test_candidates_start_at_from_steps_and_end_with_the_final_model(tmp_path) -
 
 
 def test_the_kept_checkpoint_has_the_highest_validation_score(tmp_path) -> None:
-    run = _run(tmp_path)
+    run = shipped_actors_run(tmp_path)
     out, export = tmp_path / "sel", tmp_path / "policies"
     args = ["--runs", str(run), "--from-steps", "100", "--episodes", "2"]
     assert sc.main([*args, "--out", str(out), "--export", str(export)]) == 0
