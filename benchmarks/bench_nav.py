@@ -14,11 +14,12 @@ computation the batched step runs per swarm), then times the kernel on those inp
   the selection and the waypoints; beside them the iterations (per receiver, per centroid)
   and the problem sizes (satellites in the sky, received per UAV, used per centroid);
 * with ``--compare REF``: the same total for the kernels of git revision ``REF``
-  (``coopnav_env/nav/_kernels.py`` and ``coopnav_env/sim/_kernels.py`` as committed there,
-  loaded beside this checkout's), in alternating rounds in this process, the ratio of the
-  two, and whether both give the same outputs bit for bit on every recorded epoch (a
-  revision whose ``epoch_navigation`` took its 39 arguments one by one, before the records
-  of :mod:`coopnav_env.sim._kernels`, gets them so: :func:`positional`).
+  (``coopnav_env/gnss/_kernels.py``, ``coopnav_env/nav/_kernels.py`` and
+  ``coopnav_env/sim/_kernels.py`` as committed there, loaded beside this checkout's), in
+  alternating rounds in this process, the ratio of the two, and whether both give the same
+  outputs bit for bit on every recorded epoch (a revision whose ``epoch_navigation`` took
+  its 39 arguments one by one, before the records of :mod:`coopnav_env.sim._kernels`, gets
+  them so: :func:`positional`).
 
 On a shared machine the best round is the one least disturbed by the neighbours; compare
 figures from one run (ratios) rather than across runs.
@@ -182,34 +183,17 @@ def stage_inputs(args: tuple) -> tuple[dict[str, tuple], dict[str, Any]]:
         el_deg,
         system,
         received,
-        clock,
-        iono,
-        z_common,
-        z_user,
-        extra,
-        el_ref,
-        sigma_ure,
-        tropo,
-        differential,
+        gnss_k.ErrorDraws(clock, z_common, z_user, extra),
+        gnss_k.ErrorBudget(iono, el_ref, sigma_ure, tropo, differential),
     )
     _sc, su_raw, _ce, _ue, pr = gnss_k.pseudorange_model(*st["pseudoranges"])
     vis = np.isfinite(pr)
     su = np.where(vis, su_raw, np.nan)
     el = np.where(vis, el_deg, np.nan)
     st["standalone"] = (
-        vis,
-        pr,
-        sv,
-        su,
-        _sc,
-        system,
-        n_sys,
+        nav_k.Measured(pr, vis, sv, system, su, _sc, el, n_sys),
         x0.copy(),
-        max_iter,
-        tol_m,
-        check,
-        r_lo,
-        r_hi,
+        nav_k.SolverLimits(max_iter, tol_m, check, r_lo, r_hi),
     )
     sa = nav_k.standalone_solve(*st["standalone"])
     _n, s = vis.shape
@@ -329,12 +313,15 @@ STAGE_FUNCS = {
 
 def load_revision(ref: str) -> Any:
     """``coopnav_env/sim/_kernels.py`` of git revision ``ref`` with the
-    ``coopnav_env/nav/_kernels.py`` of that revision, as separate modules; returns the sim
+    ``coopnav_env/gnss/_kernels.py`` and ``coopnav_env/nav/_kernels.py`` of that revision, as
+    separate modules (the sim module's imports of the two rewritten to them, so that it calls
+    the kernels of its own revision, whatever their arguments were there); returns the sim
     module (its ``epoch_navigation``)."""
     tmp = Path(tempfile.mkdtemp(prefix="bench_nav_"))
     tag = "".join(c if c.isalnum() else "_" for c in ref)
     names = {}
     for rel, key in (
+        ("coopnav_env/gnss/_kernels.py", "gnss"),
         ("coopnav_env/nav/_kernels.py", "nav"),
         ("coopnav_env/sim/_kernels.py", "sim"),
     ):
@@ -346,14 +333,15 @@ def load_revision(ref: str) -> Any:
         ).stdout
         names[key] = f"_bench_nav_{tag}_{key}"
         if key == "sim":
-            text = text.replace(
-                "from coopnav_env.nav import _kernels as _nav_kernels",
-                f"import {names['nav']} as _nav_kernels",
-            )
+            for sub in ("gnss", "nav"):
+                text = text.replace(
+                    f"from coopnav_env.{sub} import _kernels as _{sub}_kernels",
+                    f"import {names[sub]} as _{sub}_kernels",
+                )
         (tmp / f"{names[key]}.py").write_text(text)
     sys.path.insert(0, str(tmp))
     mods = {}
-    for key in ("nav", "sim"):
+    for key in ("gnss", "nav", "sim"):
         spec = importlib.util.spec_from_file_location(names[key], tmp / f"{names[key]}.py")
         mod = importlib.util.module_from_spec(spec)
         sys.modules[names[key]] = mod

@@ -555,14 +555,10 @@ def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
             lonely = lonely and not av[i, p]
         out.out_of_contact[k, i] = lonely and n > 1
     pos1 = moved.pos
+    events = _env_kernels.StepEvents(moved.hit[k], moved.sep[k], out.out_of_contact[k])
     if settings.reward_mode == 2:  # navigated distance: nav and progress come from the route after
         t, g, crash, reached = _env_kernels.event_reward_terms(
-            pos1[k],
-            routes.goal[k],
-            moved.hit[k],
-            moved.sep[k],
-            out.out_of_contact[k],
-            settings.reward_params,
+            pos1[k], routes.goal[k], events, settings.reward_params
         )
     else:
         xy_prev = np.empty((n, 2))
@@ -570,17 +566,9 @@ def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
             xy_prev[i, 0] = inputs.pos0[k, i, 0]
             xy_prev[i, 1] = inputs.pos0[k, i, 1]
         t, g, crash, reached = _env_kernels.reward_terms(
-            r_k,
-            t_k,
-            inputs.next_wp[k],
-            xy_prev,
-            pos1[k],
-            routes.goal[k],
-            sel[6],
-            sel[7],
-            moved.hit[k],
-            moved.sep[k],
-            out.out_of_contact[k],
+            _env_kernels.RouteAhead(r_k, t_k, inputs.next_wp[k]),
+            _env_kernels.StepPositions(xy_prev, pos1[k], routes.goal[k], sel[6], sel[7]),
+            events,
             settings.reward_mode == 1,
             settings.reward_params,
         )

@@ -50,7 +50,8 @@ class Sensors(NamedTuple):
 
 
 class RouteAhead(NamedTuple):
-    """The route and each UAV's next waypoint (:func:`observation_rows`)."""
+    """The route and each UAV's next waypoint (:func:`observation_rows`; for
+    :func:`reward_terms` the waypoint that was next at the previous step)."""
 
     route: np.ndarray  # (k, 2) waypoints
     tail: np.ndarray  # (k,) route length after each waypoint
@@ -194,26 +195,38 @@ def _event_terms(terms, collided, separation, out_of_contact, reached, params):
         terms[5, i] = goal_bonus if reached else 0.0
 
 
+class StepPositions(NamedTuple):
+    """Where the swarm was, is and estimates it is, over a step (:func:`reward_terms`)."""
+
+    xy_prev: np.ndarray  # (n, 2) true positions before the step
+    pos: np.ndarray  # (n, 3) true positions after it
+    goal: np.ndarray  # (3,)
+    nav_pos: np.ndarray  # (n, 3) estimate used
+    nav_cov: np.ndarray  # (n, 3, 3) its covariance
+
+
+class StepEvents(NamedTuple):
+    """The step's events of each UAV (:func:`reward_terms`, :func:`event_reward_terms`)."""
+
+    collided: np.ndarray  # (n,) bool
+    separation: np.ndarray  # (n,) bool closer than the minimum separation to another UAV
+    out_of_contact: np.ndarray  # (n,) bool no relative link
+
+
 @njit(cache=True)
-def reward_terms(
-    route,  # (k, 2)
-    tail,  # (k,)
-    wp_prev,  # (n,) next waypoint at the previous step
-    xy_prev,  # (n, 2) true positions before the step
-    pos,  # (n, 3) true positions after it
-    goal,  # (3,)
-    nav_pos,  # (n, 3) estimate used
-    nav_cov,  # (n, 3, 3) its covariance
-    collided,
-    separation,
-    out_of_contact,
-    sigma_reward,  # bool: nav term from the predicted sigma (else from the true error)
-    params,  # (10,) float: see coopnav_env.envs.task.reward_params
-):
+def reward_terms(route_ahead, positions, events, sigma_reward, params):
     """The per-step reward terms (``reward_scheme="per_step"``; its numpy formulation is
     ``reward_terms`` of ``tests/envs/oracles.py``), in the order of ``REWARD_TERMS``, shape
     (6, n); the in-goal flags (n,); whether a UAV collided; whether the swarm reached the
-    goal."""
+    goal.
+
+    Takes the records :class:`RouteAhead` (with the waypoints that were next at the previous
+    step), :class:`StepPositions` and :class:`StepEvents` (each may come as a plain tuple of
+    its fields), ``sigma_reward`` (bool: the nav term from the predicted sigma, else from the
+    true error) and ``params`` (10,) float (see ``coopnav_env.envs.task.reward_params``)."""
+    route, tail, wp_prev = route_ahead
+    xy_prev, pos, goal, nav_pos, nav_cov = positions
+    collided, separation, out_of_contact = events
     n = pos.shape[0]
     w_nav, cap, scale, w_prog, step_len = params[0], params[1], params[2], params[3], params[4]
     terms = np.empty((6, n))
@@ -244,19 +257,17 @@ def reward_terms(
 
 
 @njit(cache=True)
-def event_reward_terms(
-    pos,  # (n, 3) true positions after the step
-    goal,  # (3,)
-    collided,
-    separation,
-    out_of_contact,
-    params,  # (10,) float: see coopnav_env.envs.task.reward_params
-):
+def event_reward_terms(pos, goal, events, params):
     """The reward terms of the step's events (collision, separation, contact, goal) alone, in
     the order of ``REWARD_TERMS``, shape (6, n), with the rows ``nav`` and ``progress`` zero
     (``reward_scheme="navigated_distance"`` computes those from the route); the in-goal flags
     (n,); whether a UAV collided; whether the swarm reached the goal. Rows 2..5 and the flags
-    are those of :func:`reward_terms`, bit for bit."""
+    are those of :func:`reward_terms`, bit for bit.
+
+    Takes the true positions after the step ``pos`` (n, 3), the ``goal`` (3,), the record
+    :class:`StepEvents` (or a plain tuple of its fields) and ``params`` (10,) float (see
+    ``coopnav_env.envs.task.reward_params``)."""
+    collided, separation, out_of_contact = events
     terms = np.zeros((6, pos.shape[0]))
     in_goal, crash, reached = _goal_events(pos, goal, collided, params[8])
     _event_terms(terms, collided, separation, out_of_contact, reached, params)

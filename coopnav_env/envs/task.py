@@ -277,27 +277,23 @@ class UrbanCanyonTask:
         ``progress`` zero, for :meth:`reward` to fill from :func:`navigated_distance`.
         """
         cfg = self.config
+        # the kernels' records (_kernels.RouteAhead, StepPositions, StepEvents) as plain
+        # tuples, which numba types faster
+        events = (ep.collided, ep.separation_violation, ep.out_of_contact)
         if cfg.reward_scheme == "navigated_distance":
             return _kernels.event_reward_terms(
-                ep.pos_enu_m,
-                ep.goal_enu_m,
-                ep.collided,
-                ep.separation_violation,
-                ep.out_of_contact,
-                self.reward_params,
+                ep.pos_enu_m, ep.goal_enu_m, events, self.reward_params
             )
         return _kernels.reward_terms(
-            world.route_xy_m,
-            world.route_tail_m,
-            prev.next_waypoint,
-            prev.pos_enu_m[:, :2],
-            ep.pos_enu_m,
-            ep.goal_enu_m,
-            ep.nav_pos_enu_m,
-            ep.nav_cov_enu_m2,
-            ep.collided,
-            ep.separation_violation,
-            ep.out_of_contact,
+            (world.route_xy_m, world.route_tail_m, prev.next_waypoint),
+            (
+                prev.pos_enu_m[:, :2],
+                ep.pos_enu_m,
+                ep.goal_enu_m,
+                ep.nav_pos_enu_m,
+                ep.nav_cov_enu_m2,
+            ),
+            events,
             cfg.nav_reward == "sigma",
             self.reward_params,
         )

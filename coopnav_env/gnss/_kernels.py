@@ -6,9 +6,16 @@ the range, and the azimuth and elevation in the receiver's ENU frame (whose lati
 longitude it also computes, as ``frames._ecef_to_geodetic`` does). The numpy formulation is
 the reference (``tests/gnss/oracles.py``); the two agree to a few units in the last place
 (the transcendental functions are libm's here and numpy's there), which the tests bound.
+
+:func:`pseudorange_model` computes the error model and pseudoranges of
+``errors._simulate_pseudoranges`` (Eq. 1-8) from an epoch's geometry, its random draws
+(:class:`ErrorDraws`) and the error budget (:class:`ErrorBudget`); its numpy formulation is
+the oracle ``pseudorange_model`` of ``tests/gnss/oracles.py``, to the same few ulps.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -74,31 +81,44 @@ def range_azimuth_elevation(rx, sv, a_m, b_m, f, e2, ep2, n_bowring, azimuth=Tru
     return range_m, az, el, at_centre, zero_range
 
 
+class ErrorDraws(NamedTuple):
+    """The random draws and biases of an epoch's pseudoranges (:func:`pseudorange_model`)."""
+
+    clock: np.ndarray  # (N, n_sys) receiver clock bias per constellation [m]
+    z_common: np.ndarray  # (S,) standard normal draws of the errors common to all receivers
+    z_user: np.ndarray  # (N, S) those of each receiver's own errors
+    extra: np.ndarray  # (N, S) extra (unmodelled, e.g. NLOS) bias [m]
+
+
+class ErrorBudget(NamedTuple):
+    """The error budget the sigmas are computed from (:func:`pseudorange_model`; the
+    kernel's form of ``errors.ErrorModel``)."""
+
+    factors: np.ndarray  # (n_sys,) iono-free noise amplification per constellation (Eq. 8)
+    el_ref: np.ndarray  # (S,) elevation of the common error [deg], NaN: mean over receivers
+    sigma_ure: float  # clock/ephemeris sigma [m] (Eq. 4)
+    tropo: bool  # include the residual troposphere (Eq. 5) in the common error
+    differential: bool  # differential corrections: no common error (sigma 0)
+
+
 @njit(cache=True, error_model="numpy")
-def pseudorange_model(
-    range_m,
-    el,
-    sys_idx,
-    vis,
-    clock,
-    factors,
-    z_common,
-    z_user,
-    extra,
-    el_ref,
-    ure,
-    tropo,
-    differential,
-):
+def pseudorange_model(range_m, el, sys_idx, vis, draws, budget):
     """The error model and pseudoranges of ``errors._simulate_pseudoranges`` (Eq. 1-8).
 
-    ``el_ref`` (S,) is the elevation of the common error (NaN entries: the mean over the
-    receivers, as the numpy formulation's default). Sigmas: common
-    ``hypot(sigma_URE, sigma_tropo(el_ref))`` (0 with differential correction), receiver
-    ``factor_sys * hypot(sigma_MP(el), sigma_noise(el))``; ``pr = range + clock +
-    sigma_common z_common + sigma_user z_user + extra`` where received, NaN elsewhere.
-    Returns ``sigma_common, sigma_user, common_error, user_error, pr``.
+    Takes the geometry ``range_m`` [m] and ``el`` [deg] (N, S), the constellation index
+    ``sys_idx`` (S,) int64 and the received flags ``vis`` (N, S) bool, and the records
+    :class:`ErrorDraws` and :class:`ErrorBudget` (each may come as a plain tuple of its
+    fields).
+
+    ``el_ref`` NaN entries: the common error's elevation is the mean over the receivers (the
+    numpy formulation's default). Sigmas: common ``hypot(sigma_URE, sigma_tropo(el_ref))``
+    (0 with differential correction), receiver ``factor_sys * hypot(sigma_MP(el),
+    sigma_noise(el))``; ``pr = range + clock + sigma_common z_common + sigma_user z_user +
+    extra`` where received, NaN elsewhere. Returns ``sigma_common, sigma_user, common_error,
+    user_error, pr``.
     """
+    clock, z_common, z_user, extra = draws
+    factors, el_ref, ure, tropo, differential = budget
     n, s = el.shape
     sigma_common = np.empty(s)
     common_error = np.empty(s)

@@ -664,20 +664,26 @@ def _pseudorange_model(
     error's elevation is the mean over the receivers.
     """
     n_sv = range_m.shape[1]
+    # the kernel's records (_kernels.ErrorDraws, ErrorBudget) as plain tuples, which numba
+    # types faster
     return _kernels.pseudorange_model(
         range_m,
         el_deg,
         np.ascontiguousarray(sys_idx, dtype=np.int64),
         np.ascontiguousarray(vis, dtype=bool),
-        np.ascontiguousarray(clock, dtype=np.float64),
-        _iono_factors(model),
-        z_common,
-        z_user,
-        np.ascontiguousarray(extra, dtype=float),
-        np.full(n_sv, np.nan) if el_ref is None else np.ascontiguousarray(el_ref, dtype=float),
-        float(model.sigma_ure_m),
-        bool(model.tropo),
-        bool(model.differential),
+        (
+            np.ascontiguousarray(clock, dtype=np.float64),
+            z_common,
+            z_user,
+            np.ascontiguousarray(extra, dtype=float),
+        ),
+        (
+            _iono_factors(model),
+            np.full(n_sv, np.nan) if el_ref is None else np.ascontiguousarray(el_ref, dtype=float),
+            float(model.sigma_ure_m),
+            bool(model.tropo),
+            bool(model.differential),
+        ),
     )
 
 

@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from coopnav_env.nav._kernels import (
+    Measured,
     Problems,
     ProblemSetup,
     Solved,
@@ -1078,8 +1079,10 @@ def standalone_fde(obs, solver, fix, rot, test):
 
     Parameters (grouped)
     --------------------
-    obs : ``(vis, pr, sigma_user, sigma_common, sv, system, n_sys)``, the observations
-    solver : ``(max_iter, tol_m, check, r_lo, r_hi)``, the re-solves' settings
+    obs : ``(vis, pr, sigma_user, sigma_common, sv, system, n_sys, el)``, the observations
+        (``el`` is handed to the re-solves, which do not read it)
+    solver : ``(max_iter, tol_m, check, r_lo, r_hi)``, the re-solves' settings (the fields
+        of :class:`~coopnav_env.nav._kernels.SolverLimits`)
     fix : ``(pos, cov, clock, status, n_used)``, the solver's fixes (R receivers), updated in
         place
     rot : (R, 3, 3) ECEF -> ENU rotations
@@ -1089,8 +1092,7 @@ def standalone_fde(obs, solver, fix, rot, test):
 
     Returns ``istat, detected, n_excl, excluded (R, S), t_stat, dof, h_slope, v_slope``.
     """
-    vis, pr, sigma_user, sigma_common, sv, system, n_sys = obs
-    max_iter, tol_m, check, lo, hi = solver
+    vis, pr, sigma_user, sigma_common, sv, system, n_sys, el = obs
     pos, cov, clock, status, n_used = fix
     positive_only = test[2]
     n_rx, s = vis.shape
@@ -1116,6 +1118,7 @@ def standalone_fde(obs, solver, fix, rot, test):
         vis_r[0] = vis[r]
         pr_r[0] = pr[r]
         su_r = sigma_user[r : r + 1]
+        el_r = el[r : r + 1]
         keep_used = n_used[r]
         t_first, dof_first = np.nan, 0
         while True:
@@ -1145,19 +1148,9 @@ def standalone_fde(obs, solver, fix, rot, test):
             excluded[r, k_s] = True
             n_excl[r] += 1
             p1, c1, k1, st1, nu1, _it = standalone_solve(
-                vis_r,
-                pr_r,
-                sv,
-                su_r,
-                sigma_common,
-                system,
-                n_sys,
+                Measured(pr_r, vis_r, sv, system, su_r, sigma_common, el_r, n_sys),
                 pos[r : r + 1].copy(),
-                max_iter,
-                tol_m,
-                check,
-                lo,
-                hi,
+                solver,
             )
             pos[r] = p1[0]
             cov[r] = c1[0]

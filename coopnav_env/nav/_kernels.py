@@ -916,17 +916,45 @@ def setup_masks(vis, bavail, cen, system, el, n_sys, ddt, need_override):
     return ref, used, has_clock, pivot, too_few
 
 
+class Measured(NamedTuple):
+    """The swarm's pseudoranges and their error model (:func:`standalone_solve`,
+    :func:`cooperative_isotropic`)."""
+
+    pr: np.ndarray  # (N, S) pseudoranges [m], NaN where not received
+    vis: np.ndarray  # (N, S) bool received
+    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
+    system: np.ndarray  # (S,) constellation index (sorted, for the cooperative solve)
+    sigma_user: np.ndarray  # (N, S) receiver-error sigma [m]
+    sig_c: np.ndarray  # (S,) common-error sigma [m]
+    el: np.ndarray  # (N, S) elevations [deg] (the cooperative set-up's DDT pivots)
+    n_sys: int  # clock states
+
+
+class SolverLimits(NamedTuple):
+    """When a Gauss-Newton solve stops and which fixes are plausible."""
+
+    max_iter: int
+    tol_m: float  # stop when the position update is below this
+    check: bool  # check the geocentric distance against [lo, hi]
+    lo: float
+    hi: float
+
+
 @njit(cache=True)
-def standalone_solve(
-    vis, pr_m, sv, sigma_user, sigma_common, system, n_sys, x0, max_iter, tol_m, check, lo, hi
-):
+def standalone_solve(measured, x0, limits):
     """``wls.solve_standalone`` after its argument checks, in one compiled call.
+
+    Takes the records :class:`Measured` (its elevations ``el`` are not read) and
+    :class:`SolverLimits` (each may come as a plain tuple of its fields) and the starts
+    ``x0`` (N, 3) ECEF [m].
 
     Weights ``1 / (sigma_user^2 + sigma_common^2)`` of the received pseudoranges, the
     constellations each receiver sees and the counting rule, :func:`standalone_gauss_newton`,
     :func:`fix_status`, then NaN positions/covariances of failed fixes and NaN clocks of
     constellations not seen. Returns ``pos, cov, clock, status, n_used, n_iter``.
     """
+    pr_m, vis, sv, system, sigma_user, sigma_common, _el, n_sys = measured
+    max_iter, tol_m, check, lo, hi = limits
     n, s = vis.shape
     w = np.zeros((n, s))
     pr = np.zeros((n, s))
@@ -1104,19 +1132,6 @@ def isotropic_setup(rel, var, avail, cen):
     return bavail, base, bcov, froot
 
 
-class Measured(NamedTuple):
-    """The swarm's pseudoranges and their error model (:func:`cooperative_isotropic`)."""
-
-    pr: np.ndarray  # (N, S) pseudoranges [m], NaN where not received
-    vis: np.ndarray  # (N, S) bool received
-    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
-    system: np.ndarray  # (S,) constellation index, sorted
-    sigma_user: np.ndarray  # (N, S) receiver-error sigma [m]
-    sig_c: np.ndarray  # (S,) common-error sigma [m]
-    el: np.ndarray  # (N, S) elevations [deg]
-    n_sys: int  # clock states
-
-
 class CentroidProblems(NamedTuple):
     """One cooperative problem per centroid UAV, with isotropic relative positions
     (:func:`cooperative_isotropic`)."""
@@ -1128,16 +1143,6 @@ class CentroidProblems(NamedTuple):
     x0: np.ndarray  # (B, 3) ECEF starts
     ddt: bool  # the transfer: DDT (else SDT)
     need_override: int  # the SDT availability rule (-1: 3 + clocks)
-
-
-class SolverLimits(NamedTuple):
-    """When a Gauss-Newton solve stops and which fixes are plausible."""
-
-    max_iter: int
-    tol_m: float  # stop when the position update is below this
-    check: bool  # check the geocentric distance against [lo, hi]
-    lo: float
-    hi: float
 
 
 @njit(cache=True)

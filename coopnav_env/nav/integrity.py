@@ -457,7 +457,7 @@ def fde_standalone(
     n_used = np.array(solution.n_used, dtype=np.int64)
     rot = _rotations(enu_rotation, pos)
     istat, detected, n_excl, excl, t_stat, dof, h_sl, v_sl = _ik.standalone_fde(
-        _observation_arrays(obs)[:7],
+        _observation_arrays(obs),
         _solver_settings(max_iter, tol_m, plausible_radius_m),
         (pos, cov, clock, status, n_used),
         rot,

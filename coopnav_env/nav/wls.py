@@ -200,18 +200,21 @@ def _standalone_solve(
     Returns ``pos (n_rx, 3), cov (n_rx, 3, 3), clock (n_rx, n_sys), status (n_rx,),
     n_used (n_rx,), n_iter`` as :class:`StandaloneSolution` holds them.
     """
+    # the kernel's records (_kernels.Measured, SolverLimits) as plain tuples, which numba
+    # types faster
     return _kernels.standalone_solve(
-        np.ascontiguousarray(obs.visible, dtype=bool),
-        np.ascontiguousarray(obs.pr_m, dtype=float),
-        np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
-        np.ascontiguousarray(obs.sigma_user_m, dtype=float),
-        np.ascontiguousarray(obs.sigma_common_m, dtype=float),
-        np.ascontiguousarray(obs.system, dtype=np.int64),
-        int(obs.n_systems),
+        (
+            np.ascontiguousarray(obs.pr_m, dtype=float),
+            np.ascontiguousarray(obs.visible, dtype=bool),
+            np.ascontiguousarray(obs.sv_ecef_m, dtype=float),
+            np.ascontiguousarray(obs.system, dtype=np.int64),
+            np.ascontiguousarray(obs.sigma_user_m, dtype=float),
+            np.ascontiguousarray(obs.sigma_common_m, dtype=float),
+            np.ascontiguousarray(obs.el_deg, dtype=float),
+            int(obs.n_systems),
+        ),
         np.ascontiguousarray(pos),
-        int(max_iter),
-        float(tol_m),
-        *_radius_args(plausible_radius_m),
+        (int(max_iter), float(tol_m), *_radius_args(plausible_radius_m)),
     )
 
 

@@ -87,7 +87,7 @@ def epoch_fde(fde, obs, rel, solver, rot, sa, out):
     for q in range(n):
         rot_n[q] = rot
     sa_istat, sa_det, sa_excl, _ex, _t, sa_dof, sa_h, sa_v = _ik.standalone_fde(
-        obs[:7], solver, sa, rot_n, test
+        obs, solver, sa, rot_n, test
     )
     n_b = cen.shape[0]
     bavail, base, bcov, froot = _nav_kernels.isotropic_setup(rel_b, var_b, avail_b, cen)

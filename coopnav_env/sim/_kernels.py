@@ -738,15 +738,8 @@ def epoch_navigation(geometry, pseudoranges, centroids, solving, prior, waypoint
         el_deg,
         system,
         received,
-        clock,
-        iono,
-        z_common,
-        z_user,
-        extra,
-        el_ref,
-        sigma_ure,
-        tropo,
-        differential,
+        _gnss_kernels.ErrorDraws(clock, z_common, z_user, extra),
+        _gnss_kernels.ErrorBudget(iono, el_ref, sigma_ure, tropo, differential),
     )
     vis = np.empty((n, s), dtype=np.bool_)
     su = np.empty((n, s))
@@ -757,13 +750,15 @@ def epoch_navigation(geometry, pseudoranges, centroids, solving, prior, waypoint
             vis[q, k] = v
             su[q, k] = _su[q, k] if v else np.nan
             el[q, k] = el_deg[q, k] if v else np.nan
+    measured = _nav_kernels.Measured(pr, vis, sv, system, su, _sc, el, n_sys)
+    limits = _nav_kernels.SolverLimits(max_iter, tol_m, check, r_lo, r_hi)
     sa_pos, sa_cov, _clk, sa_status, _n_used, sa_n_iter = _nav_kernels.standalone_solve(
-        vis, pr, sv, su, _sc, system, n_sys, x0.copy(), max_iter, tol_m, check, r_lo, r_hi
+        measured, x0.copy(), limits
     )
     out = _nav_kernels.cooperative_isotropic(
-        _nav_kernels.Measured(pr, vis, sv, system, su, _sc, el, n_sys),
+        measured,
         _nav_kernels.CentroidProblems(rel_b, var_b, avail_b, cen, x0_co, ddt, -1),
-        _nav_kernels.SolverLimits(max_iter, tol_m, check, r_lo, r_hi),
+        limits,
         cen.shape[0] == 1,
     )
     if fde is not None:  # updates the solutions in place
@@ -771,7 +766,7 @@ def epoch_navigation(geometry, pseudoranges, centroids, solving, prior, waypoint
             fde,
             (vis, pr, su, _sc, sv, system, n_sys, el),
             (rel_b, var_b, avail_b, cen, ddt),
-            (max_iter, tol_m, check, r_lo, r_hi),
+            limits,
             rot,
             (sa_pos, sa_cov, _clk, sa_status, _n_used),
             out,

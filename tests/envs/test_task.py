@@ -142,19 +142,19 @@ def test_event_terms_are_the_per_step_kernels_rows() -> None:
         if trial % 3 == 0:
             flags[0][:] = False  # no collision: the swarm may arrive
         full = _kernels.reward_terms(
-            route,
-            tail,
-            rng.integers(0, 4, n),
-            rng.normal(0.0, 20.0, (n, 2)),
-            pos,
-            goal,
-            pos + rng.normal(0.0, 3.0, (n, 3)),
-            np.broadcast_to(np.eye(3), (n, 3, 3)).copy(),
-            *flags,
+            _kernels.RouteAhead(route, tail, rng.integers(0, 4, n)),
+            _kernels.StepPositions(
+                rng.normal(0.0, 20.0, (n, 2)),
+                pos,
+                goal,
+                pos + rng.normal(0.0, 3.0, (n, 3)),
+                np.broadcast_to(np.eye(3), (n, 3, 3)).copy(),
+            ),
+            _kernels.StepEvents(*flags),
             False,
             params,
         )
-        events = _kernels.event_reward_terms(pos, goal, *flags, params)
+        events = _kernels.event_reward_terms(pos, goal, _kernels.StepEvents(*flags), params)
         assert events[0][2:].tobytes() == full[0][2:].tobytes()
         assert not events[0][:2].any()
         assert events[1].tobytes() == full[1].tobytes()
