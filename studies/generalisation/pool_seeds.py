@@ -4,7 +4,8 @@ Reads the per-episode records (``report.json``) of one or more folders written b
 ``run_protocol.py`` (each holding ``grid/``, ``families/`` and ``real/`` suites of city
 folders), takes every policy whose name starts with ``--method-prefix`` as one training seed of
 the method, and writes, per city, the method's mean score, goal rate and cruise spacing, its
-paired score difference from ``--reference`` with a 95 % bootstrap interval over episodes and
+paired score difference from ``--reference`` (a rule, or with a trailing ``*`` another
+method's seeds, pooled the same way) with a 95 % bootstrap interval over episodes and
 seeds (:func:`coopnav_env.training.stats.paired_difference`: runs averaged per episode), and
 its share of the gap from ``--baseline`` to ``--reference``. After the cities of a suite with
 at least two cities, one row ``SUITE: all cities (equal weight)`` gives the same over the whole
@@ -100,7 +101,7 @@ class _Pooled:
     city: str
     runs: tuple[str, ...]
     method: np.ndarray  # (runs, episodes)
-    reference: np.ndarray  # (1, episodes)
+    reference: np.ndarray  # (reference runs, episodes)
     goal: float
     reference_goal: float
     spacing: float
@@ -128,30 +129,39 @@ def _suite_row(suite: str, pooled: list[_Pooled]) -> str:
     )
 
 
+def _reference_runs(policies: dict[str, list[dict]], reference: str) -> list[str]:
+    """The reference's policies: ``reference`` itself, or with a trailing ``*`` every policy
+    whose name starts with the text before it (another method's training seeds)."""
+    if reference.endswith("*"):
+        return sorted(p for p in policies if p.startswith(reference[:-1]))
+    return [reference] if reference in policies else []
+
+
 def _city_row(
     city: str, policies: dict[str, list[dict]], prefix: str, reference: str, baseline: str
 ) -> tuple[str, _Pooled] | None:
     """The table row of one city and its pooled figures (None without the method or the
     reference)."""
     runs = sorted(p for p in policies if p.startswith(prefix))
-    if not runs or reference not in policies:
+    refs = _reference_runs(policies, reference)
+    if not runs or not refs:
         return None
-    seeds = [e["seed"] for e in policies[reference]]
-    for p in runs:
+    seeds = [e["seed"] for e in policies[refs[0]]]
+    for p in (*runs, *refs):
         if [e["seed"] for e in policies[p]] != seeds:
-            raise ValueError(f"{city}: {p!r} flew other episodes than {reference!r}")
+            raise ValueError(f"{city}: {p!r} flew other episodes than {refs[0]!r}")
     method = np.stack([_scores(policies[p]) for p in runs])
-    ref = _scores(policies[reference])[None, :]
+    ref = np.stack([_scores(policies[p]) for p in refs])
     diff, _ = paired_difference(method, ref)
     goal = np.mean([[e["success"] for e in policies[p]] for p in runs])
-    ref_goal = np.mean([e["success"] for e in policies[reference]])
+    ref_goal = np.mean([[e["success"] for e in policies[p]] for p in refs])
     spacing = np.nanmean([[e["cruise_spacing_m"] for e in policies[p]] for p in runs])
     gap = "n/a"
     if baseline in policies:
         base = _scores(policies[baseline])
         size = float(ref.mean() - base.mean())
         if abs(size) >= 0.01:
-            g = gap_closed(method, base, ref[0])
+            g = gap_closed(method, base, ref.mean(axis=0))
             gap = f"{g.value:.2f} [{g.low:.2f}, {g.high:.2f}]"
         else:
             gap = f"n/a (gap {size:+.3f})"
@@ -177,7 +187,12 @@ def main(argv: list[str] | None = None) -> int:
         help="policies whose names start with this are the method's seeds "
         "(mappo:pretrained/families_scratch_s)",
     )
-    ap.add_argument("--reference", default="high_wide_column", help="the rule (high_wide_column)")
+    ap.add_argument(
+        "--reference",
+        default="high_wide_column",
+        help="the policy compared against (high_wide_column); with a trailing '*', every "
+        "policy whose name starts with the text before it, pooled as one method's seeds",
+    )
     ap.add_argument("--baseline", default="column", help="the gap's 0 (column)")
     ap.add_argument("--out", help="markdown file to write (default: print only)")
     args = ap.parse_args(argv)

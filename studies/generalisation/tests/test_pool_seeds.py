@@ -78,3 +78,28 @@ def test_a_suite_row_needs_the_same_seeds_in_every_city(tmp_path) -> None:
     _report(tmp_path / "a", "y", {"rule": _episodes([1.0]), "m_s1": _episodes([1.2])})
     with pytest.raises(ValueError, match="same seeds in every city"):
         pooled_table([tmp_path / "a"], "m_s", "rule", "base")
+
+
+def test_a_reference_with_a_star_pools_another_methods_seeds(tmp_path) -> None:
+    # new seeds 1.5 and 1.3 (mean 1.4) against old seeds 1.1 and 0.9 (mean 1.0): +0.400; the
+    # bootstrap resamples each method's seeds, so a replicate lies in [1.3, 1.5] - [0.9, 1.1];
+    # the old method's goal rate is the mean over its seeds (1 and 0: 0.50)
+    _report(
+        tmp_path / "a",
+        "x",
+        {
+            "new_s0": _episodes([1.5] * 3),
+            "new_s1": _episodes([1.3] * 3),
+            "old_s0": _episodes([1.1] * 3),
+            "old_s1": _episodes([0.9] * 3, success=False),
+        },
+    )
+    table, n = pooled_table([tmp_path / "a"], "new_s", "old_s*", "base")
+    row = table.splitlines()[-1].split("|")
+    assert n == 2 and row[3].strip() == "1.400"
+    value, interval = row[4].strip().split(" ", 1)
+    low, high = (float(x) for x in interval.strip(" []").split(","))
+    assert value == "+0.400" and 0.2 - 1e-9 <= low < 0.4 < high <= 0.6 + 1e-9
+    assert row[5].strip() == "above" and row[6].strip() == "1.00" and row[7].strip() == "0.50"
+    # a star that matches nothing gives no row
+    assert pooled_table([tmp_path / "a"], "new_s", "none_*", "base")[1] == 0
