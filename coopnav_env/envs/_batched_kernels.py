@@ -31,8 +31,9 @@ The kernels take a few typed records (named tuples of arrays and numbers, built 
 arrays are allocated): each kernel's settings (:class:`MotionSettings`,
 :class:`NavigationSettings`, :class:`ObservationSettings`), the copies' :class:`Cities` and
 :class:`Routes`, the epoch's :class:`SkyRows`, the arrays of the step that a kernel reads
-(:class:`Moved`, :class:`NavigationInputs`, :class:`ObservationInputs`) and those it writes
-(:class:`Moved`, :class:`Navigated`, :class:`Observed`).
+(:class:`MotionInputs`, :class:`Moved`, :class:`NavigationInputs`, :class:`ObservationInputs`,
+:class:`DistanceInputs`) and those it writes (:class:`Moved`, :class:`Navigated`,
+:class:`Observed`, :class:`Paid`).
 
 Arrays whose size depends on the swarm are padded: box buildings ``(K, B_max, 3)`` with
 counts ``n_b``; a swarm whose city is extruded polygons (a file or family city) has none, and
@@ -125,6 +126,15 @@ class MotionSettings(NamedTuple):
     moving: bool  # False at an episode's first epoch (the swarm stays where it starts)
 
 
+class MotionInputs(NamedTuple):
+    """The arrays of a step that :func:`motion_sight_relative` reads."""
+
+    pos0: np.ndarray  # (K, N, 3) true positions before the step [m]
+    vel0: np.ndarray  # (K, N, 3) true velocities before the step [m/s]
+    cmd: np.ndarray  # (K, N, 3) clipped commands
+    z: np.ndarray  # (K, L_max) the epoch's standard normal draws
+
+
 class Moved(NamedTuple):
     """What :func:`motion_sight_relative` writes (the swarms after their motion)."""
 
@@ -172,6 +182,7 @@ class NavigationInputs(NamedTuple):
     rel_ecef: np.ndarray  # (K, N, N, 3) relative positions in ECEF ((K, 1, N, 3): shared)
     next_wp: np.ndarray  # (K, N) int64 next waypoints before the step
     clock: np.ndarray  # (K, N, n_sys_all) receiver clock biases [m]
+    z: np.ndarray  # (K, L_max) the epoch's standard normal draws (MotionInputs.z)
 
 
 class Navigated(NamedTuple):
@@ -335,7 +346,8 @@ def _claim(claims, seg, cursor):
 
 
 @njit(cache=True, inline="always")
-def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
+def _motion_one(k, settings, cities, sky, inputs, out):
+    pos0, vel0, cmd, z = inputs.pos0, inputs.vel0, inputs.cmd, inputs.z
     n = pos0.shape[1]
     motion = settings.motion
     lo, hi = _boxes_of(k, cities)
@@ -400,7 +412,7 @@ def _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out):
 
 
 @njit(cache=True, nogil=True)
-def motion_sight_relative(claims, seg, settings, cities, sky, pos0, vel0, cmd, z, out):
+def motion_sight_relative(claims, seg, settings, cities, sky, inputs, out):
     """Motion, line of sight and relative sensing of the copies that
     ``claims`` gives this call (see the module docstring), written into ``out``.
 
@@ -415,27 +427,24 @@ def motion_sight_relative(claims, seg, settings, cities, sky, pos0, vel0, cmd, z
     settings : MotionSettings
     cities : Cities
     sky : SkyRows
-    pos0, vel0 : ndarray, shape (K, N, 3)
-        True positions and velocities before the step.
-    cmd : ndarray, shape (K, N, 3)
-        Clipped commands.
-    z : ndarray, shape (K, L_max)
-        Standard normal draws of the epoch.
+    inputs : MotionInputs
+        The swarms before the step, their commands and the epoch's draws.
     out : Moved
         The arrays written.
     """
     settings, cities, sky = MotionSettings(*settings), Cities(*cities), SkyRows(*sky)
-    out = Moved(*out)
+    inputs, out = MotionInputs(*inputs), Moved(*out)
     cursor = np.full(1, claims.shape[0] - 1)
     k = _claim(claims, seg, cursor)
     while k >= 0:
-        _motion_one(k, settings, cities, sky, pos0, vel0, cmd, z, out)
+        _motion_one(k, settings, cities, sky, inputs, out)
         k = _claim(claims, seg, cursor)
 
 
 @njit(cache=True, inline="always")
-def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
+def _navigate_one(k, settings, cities, routes, sky, moved, inputs, out):
     n = inputs.rx_ecef.shape[1]
+    z = inputs.z
     row = sky.row[k]
     ns = sky.n_sv[k]
     sv = np.ascontiguousarray(sky.sv[row, :ns])
@@ -589,7 +598,7 @@ def _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out):
 
 
 @njit(cache=True, nogil=True)
-def navigation_reward_sensors(claims, seg, settings, cities, routes, sky, moved, inputs, z, out):
+def navigation_reward_sensors(claims, seg, settings, cities, routes, sky, moved, inputs, out):
     """Navigation, reward terms and skyline / wall sensors of the copies that
     ``claims`` gives this call (module docstring), written into ``out``.
 
@@ -608,8 +617,7 @@ def navigation_reward_sensors(claims, seg, settings, cities, routes, sky, moved,
     moved : Moved
         The swarms after :func:`motion_sight_relative`.
     inputs : NavigationInputs
-    z : ndarray, shape (K, L_max)
-        The epoch's standard normal draws.
+        The arrays of the step besides the motion, the epoch's draws among them.
     out : Navigated
         The arrays written.
     """
@@ -619,7 +627,7 @@ def navigation_reward_sensors(claims, seg, settings, cities, routes, sky, moved,
     cursor = np.full(1, claims.shape[0] - 1)
     k = _claim(claims, seg, cursor)
     while k >= 0:
-        _navigate_one(k, settings, cities, routes, sky, moved, inputs, z, out)
+        _navigate_one(k, settings, cities, routes, sky, moved, inputs, out)
         k = _claim(claims, seg, cursor)
 
 
@@ -688,26 +696,39 @@ def observations_infos(claims, seg, settings, routes, inputs, out):
         k = _claim(claims, seg, cursor)
 
 
+class DistanceInputs(NamedTuple):
+    """The arrays of a step that :func:`navigated_distance_terms` reads besides the routes."""
+
+    pos: np.ndarray  # (K, N, 3) true positions after the step [m]
+    nav_pos: np.ndarray  # (K, N, 3) estimates after the step [m] (NaN: none)
+    next_wp: np.ndarray  # (K, N) int64 next waypoints after the step
+    reached: np.ndarray  # (K,) bool the swarm arrived this step
+    unpaid: np.ndarray  # (K, N) route not yet paid before the step [m]
+    route_len: np.ndarray  # (K, N) route length at reset [m] (> 0)
+
+
+class Paid(NamedTuple):
+    """What :func:`navigated_distance_terms` writes."""
+
+    terms: np.ndarray  # (K, 6, N) reward terms: rows 0 (nav) and 1 (progress) written
+    unpaid_after: np.ndarray  # (K, N) route not yet paid after the step [m]
+
+
 @njit(cache=True, nogil=True)
-def navigated_distance_terms(
-    pos,  # (K, N, 3) true positions after the step
-    nav_pos,  # (K, N, 3) estimates after the step (NaN: none)
-    route,  # (K, R_max, 2)
-    tail,  # (K, R_max) route length after each waypoint
-    wp,  # (K, N) next waypoints
-    reached,  # (K,) bool: the swarm arrived this step
-    unpaid,  # (K, N) route not yet paid before the step
-    route_len,  # (K, N) route length at reset (> 0)
-    cap_m,  # nav_reward_cap_m
-    terms,  # output: (K, 6, N); rows 0 (nav) and 1 (progress) written
-    unpaid_after,  # output: (K, N) route not yet paid after the step
-):
+def navigated_distance_terms(routes, inputs, cap_m, out):
     """The terms ``nav`` and ``progress`` of ``reward_scheme="navigated_distance"`` of every
     copy (:func:`coopnav_env.envs.task.navigated_distance`), with the float64 operations of
     its numpy formulation in the same order (the oracle ``navigated_distance_rows`` of
     ``tests/envs/oracles.py``, equal bit for bit): the remaining route is the distance to the
     next waypoint plus the route after it; ``np.clip(x, 0, None)`` is ``np.maximum(x, 0)``;
-    ``np.fmin`` takes the cap where the error is not a number."""
+    ``np.fmin`` takes the cap where the error is not a number.
+
+    Takes the records :class:`Routes` (its ``route`` and ``tail``), :class:`DistanceInputs`
+    and :class:`Paid` (written; each may come as a plain tuple of its fields) and ``cap_m``
+    (``nav_reward_cap_m``)."""
+    route, tail, _n_route, _goal = routes
+    pos, nav_pos, wp, reached, unpaid, route_len = inputs
+    terms, unpaid_after = out
     for k in range(pos.shape[0]):
         for i in range(pos.shape[1]):
             j = wp[k, i]

@@ -203,10 +203,7 @@ class FusedStep:
             tuple(motion_settings),
             cities,
             sky,
-            st.pos,
-            st.vel,
-            cmd,
-            z,
+            tuple(_batched_kernels.MotionInputs(st.pos, st.vel, cmd, z)),
             moved,
         )
         pos1, vel1, hit, sep, los_flat, rel, _var, avail, n_rx = moved_arrays
@@ -227,10 +224,10 @@ class FusedStep:
         else:
             rel_ecef = rel @ rot
         inputs = _batched_kernels.NavigationInputs(
-            st.pos, rx_ecef, pred, x0, st.nav_cov, rel_ecef, st.wp, st.clock
+            st.pos, rx_ecef, pred, x0, st.nav_cov, rel_ecef, st.wp, st.clock, z
         )
         outputs = tuple(_batched_kernels.navigation_outputs(n_copies, n, envs[0]._rays.shape[0]))
-        nav_args = (tuple(nav_settings), cities, routes, sky, moved, tuple(inputs), z, outputs)
+        nav_args = (tuple(nav_settings), cities, routes, sky, moved, tuple(inputs), outputs)
         predicted, reset = None, None
         if begin is None:  # (always so for first epochs)
             run(_batched_kernels.navigation_reward_sensors, n_copies, *nav_args)
@@ -328,17 +325,14 @@ class FusedStep:
         if cfg.reward_scheme == "navigated_distance":
             unpaid = np.empty_like(st.unpaid)
             _batched_kernels.navigated_distance_terms(
-                pos1,
-                nav_pos,
-                st.route,
-                st.tail,
-                wp,
-                ends[:, 1],
-                st.unpaid,
-                st.route_len,
+                routes,
+                tuple(
+                    _batched_kernels.DistanceInputs(
+                        pos1, nav_pos, wp, ends[:, 1], st.unpaid, st.route_len
+                    )
+                ),
                 float(cfg.nav_reward_cap_m),
-                terms,
-                unpaid,
+                (terms, unpaid),  # Paid
             )
         if cfg.nav_team_weight > 0.0:  # _team_mix of each copy
             weight = cfg.nav_team_weight

@@ -21,7 +21,8 @@ Three groups:
   relative errors per block, then one ``S' x S'`` solve for the errors common to all UAVs,
   over the ``S'`` satellites the fix uses), kept here per row because the per-row quantities
   need the blocks themselves. A standalone fix (diagonal covariance) has its own ``O(m)``
-  path, :func:`standalone_statistics`.
+  path, :func:`standalone_statistics`. Their measurements come as the records
+  :class:`FixRows` (:class:`ReceiverRows` for one receiver) and the fix as :class:`FixPoint`.
 * **FDE loops** (:func:`standalone_fde`, :func:`cooperative_fde`): test, identify, exclude,
   re-solve with the solvers' own kernels, until the test passes or redundancy runs out.
 """
@@ -29,6 +30,7 @@ Three groups:
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -381,10 +383,13 @@ def cholesky_inverse3(a00, a10, a11, a20, a21, a22):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa):
-    """``x = info^-1 r`` (``info^-1`` by its upper triangle, :func:`cholesky_inverse3`) and
-    the test statistic ``T = a^T P a - r^T x`` (0 where rounding makes a (near) zero
-    statistic negative)."""
+def _solve3(inverse, r, apa):
+    """``x = info^-1 r`` and the test statistic ``T = a^T P a - r^T x`` (0 where rounding
+    makes a (near) zero statistic negative). ``inverse``: ``info^-1`` by its upper triangle
+    ``(o00, o01, o02, o11, o12, o22)`` (as :func:`cholesky_inverse3` returns it after
+    ``ok``); ``r``: ``(r0, r1, r2)``; ``apa``: ``a^T P a``."""
+    o00, o01, o02, o11, o12, o22 = inverse
+    r0, r1, r2 = r
     x0 = o00 * r0 + o01 * r1 + o02 * r2
     x1 = o01 * r0 + o11 * r1 + o12 * r2
     x2 = o02 * r0 + o12 * r1 + o22 * r2
@@ -473,8 +478,29 @@ def workspace(n, s):
     )
 
 
+class FixRows(NamedTuple):
+    """The measurements of a fix under test and their error model (:func:`problem_statistics`)."""
+
+    pr: np.ndarray  # (N, S) pseudoranges [m] (any value where rows is False)
+    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
+    system: np.ndarray  # (S,) int64 constellation index, sorted
+    n_sys: int  # constellations (clock states)
+    rows: np.ndarray  # (N, S) bool the measurements of the fix
+    w: np.ndarray  # (N, S) inverse variance of each row's per-receiver error [1/m^2]
+    sig_c: np.ndarray  # (S,) sigma of the errors common to all receivers [m] (all zero: none)
+
+
+class FixPoint(NamedTuple):
+    """Where a fix is linearised: its position and its UAVs' relative positions
+    (:func:`problem_statistics`)."""
+
+    pos: np.ndarray  # (3,) the fix (centroid) position, ECEF [m]
+    base: np.ndarray  # (N, 3) offsets of the UAVs from pos, ECEF [m]
+    froot: np.ndarray  # (N, 3, 3) roots of their relative-position error covariances [m]
+
+
 @njit(cache=True)
-def problem_statistics(pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot, positive_only):
+def problem_statistics(fix_rows, point, rot, positive_only):
     """Residual test quantities of one GLS fix (a receiver's or a centroid problem's).
 
     Model (the undifferenced form of ``cooperative._linearize``): row ``(q, k)`` is UAV
@@ -487,13 +513,12 @@ def problem_statistics(pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, 
 
     Parameters
     ----------
-    pr : (N, S) pseudoranges (any value where ``rows`` is False)
-    sv : (S, 3); system : (S,) sorted constellation indices; n_sys : constellations
-    rows : (N, S) bool measurements of the fix
-    w : (N, S) inverse variance of the per-receiver error of each row
-    sig_c : (S,) sigma of the errors common to all receivers (all zero: none)
-    pos : (3,) the fix (centroid) position
-    base : (N, 3) offsets of the UAVs from ``pos``; froot : (N, 3, 3) relative-error roots
+    fix_rows : FixRows
+        The fix's pseudoranges ``pr``, satellites, rows and weights (or a plain tuple of
+        its fields).
+    point : FixPoint
+        The fix position ``pos`` and the UAVs' offsets ``base`` and relative-error roots
+        ``froot`` (or a plain tuple of its fields).
     rot : (3, 3) ECEF -> local ENU rotation (horizontal / vertical split)
     positive_only : identify among positive residuals only (faults known to be positive
         range biases, as NLOS reception)
@@ -509,26 +534,12 @@ def problem_statistics(pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, 
         ``sqrt(non-centrality)``, ``|K_i| / sqrt(R_ii)`` (inf when an unobservable row moves
         the fix).
     """
-    n, s = rows.shape
-    return _statistics(
-        workspace(n, s),
-        pr,
-        sv,
-        system,
-        n_sys,
-        rows,
-        w,
-        sig_c,
-        pos,
-        base,
-        froot,
-        rot,
-        positive_only,
-    )
+    n, s = fix_rows[4].shape
+    return _statistics(workspace(n, s), fix_rows, point, rot, positive_only)
 
 
 @njit(cache=True, error_model="numpy")
-def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot, positive_only):
+def _statistics(ws, fix_rows, point, rot, positive_only):
     """:func:`problem_statistics` in the scratch arrays ``ws`` (:func:`workspace`).
 
     Written for the compiler as much as for the reader: no array views, no ``continue`` or
@@ -563,6 +574,8 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
         t3,
         ddiag,
     ) = ws
+    pr, sv, system, n_sys, rows, w, sig_c = fix_rows
+    pos, base, froot = point
     n, s = rows.shape
     for q in range(n):
         m_q[q] = 0
@@ -864,7 +877,7 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
         v12 = 0.5 * (f12 + f21)
         ok, o00, o01, o02, o11, o12, o22 = cholesky_inverse3(f00, v01, f11, v02, v12, f22)
         if ok:
-            x0, x1, x2, t_stat = _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa)
+            x0, x1, x2, t_stat = _solve3((o00, o01, o02, o11, o12, o22), (r0, r1, r2), apa)
             for q in range(n):
                 for i in range(m_q[q]):
                     t0, t1, t2 = ptx[q, i, 0], ptx[q, i, 1], ptx[q, i, 2]
@@ -874,7 +887,7 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
                     r_ii = ptd[q, i] - (t0 * g0 + t1 * g1 + t2 * g2)
                     ra = ptx[q, i, 3] - (t0 * x0 + t1 * x1 + t2 * x2)
                     k = idx[q, i]
-                    state = _row(state, q, k, r_ii, ra, g0, g1, g2, w[q, k], rot, positive_only)
+                    state = _row(state, q, k, r_ii, ra, (g0, g1, g2), w[q, k], rot, positive_only)
     h_slope, v_slope, q_star, k_star, w_star, _sp = state
     keep_alive(gs, m_q, idx, a_x, pq, pax, ptx, ptd, lam, p0l, g3, wrow, mg, mgi, u_mat, v_mat)
     keep_alive(vloc, mloc, bq, low, linv, loc, t3, ddiag)
@@ -886,11 +899,14 @@ def _statistics(ws, pr, sv, system, n_sys, rows, w, sig_c, pos, base, froot, rot
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _row(state, q, k, r_ii, ra, g0, g1, g2, w_qk, rot, positive_only):
+def _row(state, q, k, r_ii, ra, gain, w_qk, rot, positive_only):
     """One row's share of a test: its slopes (the largest so far) and its normalised residual
     (the identified row so far). ``state``: ``(h_slope, v_slope, q_star, k_star, w_star,
-    star_positive)``; ``g``: the row's ECEF position gain ``K_i``."""
+    star_positive)``; ``q, k``: the row (UAV, satellite); ``r_ii``, ``ra``: its residual
+    variance ``R_ii`` and residual ``(R a)_i``; ``gain``: ``(g0, g1, g2)``, its ECEF position
+    gain ``K_i``; ``w_qk``: its weight."""
     h_slope, v_slope, q_star, k_star, w_star, star_positive = state
+    g0, g1, g2 = gain
     ke = rot[0, 0] * g0 + rot[0, 1] * g1 + rot[0, 2] * g2
     kn = rot[1, 0] * g0 + rot[1, 1] * g1 + rot[1, 2] * g2
     ku = rot[2, 0] * g0 + rot[2, 1] * g1 + rot[2, 2] * g2
@@ -916,22 +932,36 @@ def _row(state, q, k, r_ii, ra, g0, g1, g2, w_qk, rot, positive_only):
     return h_slope, v_slope, q_star, k_star, w_star, star_positive
 
 
+class ReceiverRows(NamedTuple):
+    """The measurements of one receiver's standalone fix under test and their weights
+    (:func:`standalone_statistics`)."""
+
+    pr: np.ndarray  # (S,) pseudoranges [m] (any value where vis is False)
+    sv: np.ndarray  # (S, 3) satellite positions, ECEF [m]
+    system: np.ndarray  # (S,) int64 constellation index
+    n_sys: int  # constellations (clock states)
+    vis: np.ndarray  # (S,) bool the measurements of the fix
+    w: np.ndarray  # (S,) inverse variance of each row's error (common error included) [1/m^2]
+
+
 @njit(cache=True)
-def standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_only, u):
+def standalone_statistics(receiver_rows, pos, rot, positive_only, u):
     """:func:`problem_statistics` of one receiver's standalone fix (diagonal covariance, no
     relative or common-error terms), in ``O(m)``: the clocks are eliminated by weighted mean
     removal per constellation, after which ``P~ = W - w w^T / d`` per group is applied to
-    the design in closed form. ``pr``, ``vis``, ``w``: the receiver's rows (S,); ``u``: (S, 4)
-    scratch. The same quantities as :func:`problem_statistics` (compared in the tests)."""
-    return _standalone_statistics(
-        pr, sv, system, n_sys, vis, w, pos, rot, positive_only, u, np.empty((n_sys, 5))
-    )
+    the design in closed form. Takes the record :class:`ReceiverRows` (or a plain tuple of
+    its fields), the fix ``pos`` (3,) ECEF [m], ``rot`` and ``positive_only`` as
+    :func:`problem_statistics` and the scratch ``u`` (S, 4). The same quantities as
+    :func:`problem_statistics` (compared in the tests)."""
+    n_sys = receiver_rows[3]
+    return _standalone_statistics(receiver_rows, pos, rot, positive_only, u, np.empty((n_sys, 5)))
 
 
 @njit(cache=True, error_model="numpy")
-def _standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_only, u, grp):
+def _standalone_statistics(receiver_rows, pos, rot, positive_only, u, grp):
     """:func:`standalone_statistics` with the group scratch ``grp`` (n_sys, 5) given (each
     constellation's weighted means of ``[A | a]`` and its weight sum): no allocation."""
+    pr, sv, system, n_sys, vis, w = receiver_rows
     s = vis.shape[0]
     n_rows = 0
     n_clocks = 0
@@ -983,7 +1013,7 @@ def _standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_onl
     t_stat = np.nan
     state = (0.0, 0.0, -1, -1, 0.0, False)
     if ok:
-        x0, x1, x2, t_stat = _solve3(o00, o01, o02, o11, o12, o22, r0, r1, r2, apa)
+        x0, x1, x2, t_stat = _solve3((o00, o01, o02, o11, o12, o22), (r0, r1, r2), apa)
         for k in range(s):
             if vis[k]:
                 wk = w[k]
@@ -993,7 +1023,7 @@ def _standalone_statistics(pr, sv, system, n_sys, vis, w, pos, rot, positive_onl
                 g2 = o02 * t0 + o12 * t1 + o22 * t2
                 r_ii = wk - wk * wk / grp[system[k], 4] - (t0 * g0 + t1 * g1 + t2 * g2)
                 ra = wk * u[k, 3] - (t0 * x0 + t1 * x1 + t2 * x2)
-                state = _row(state, 0, k, r_ii, ra, g0, g1, g2, wk, rot, positive_only)
+                state = _row(state, 0, k, r_ii, ra, (g0, g1, g2), wk, rot, positive_only)
     h_slope, v_slope, _q, k_star, w_star, _sp = state
     q_star = 0 if k_star >= 0 else -1
     dof = n_rows - n_clocks - 3
@@ -1112,6 +1142,7 @@ def standalone_fde(obs, solver, fix, rot, test):
     pr_r = np.empty((1, s))
     vis1 = vis_r[0]  # the same memory, 1-D
     pr1 = pr_r[0]
+    rows1 = ReceiverRows(pr1, sv, system, n_sys, vis1, w)  # (updated in place per receiver)
     # the solver's fix, kept from its first detection on (restored if not cleared)
     keep_pos, keep_cov, keep_clk = np.empty(3), np.empty((3, 3)), np.empty(n_sys)
     for r in range(n_rx):
@@ -1129,9 +1160,7 @@ def standalone_fde(obs, solver, fix, rot, test):
                 w[k] = 0.0
                 if vis1[k]:
                     w[k] = 1.0 / (su_r[0, k] ** 2 + sigma_common[k] ** 2)
-            stats = _standalone_statistics(
-                pr1, sv, system, n_sys, vis1, w, pos[r], rot[r], positive_only, u, grp
-            )
+            stats = _standalone_statistics(rows1, pos[r], rot[r], positive_only, u, grp)
             verdict, failed = _record(r, stats, detected[r], n_excl[r], test, figs)
             if failed and not detected[r]:  # the solver's own fix, kept
                 t_first, dof_first = stats[1], stats[2]
@@ -1237,16 +1266,10 @@ def cooperative_fde(obs, setup, solver, sol, rot, test):
                 break
             stats = _statistics(
                 ws,
-                pr_b,
-                sv,
-                system,
-                n_sys,
-                rows_b,
-                w,
-                sig_c,
-                c_pos[b],
-                base[b],
-                froot[b],
+                # FixRows as a plain tuple: pr_b is the caller's array or its copy, whose
+                # layouts (e.g. Fortran and C) a named tuple's type cannot unify
+                (pr_b, sv, system, n_sys, rows_b, w, sig_c),
+                FixPoint(c_pos[b], base[b], froot[b]),
                 rot[b],
                 positive_only,
             )

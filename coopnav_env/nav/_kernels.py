@@ -170,6 +170,16 @@ def _eig_extremes_sym(a: np.ndarray) -> tuple[float, float]:
     return lo, hi
 
 
+class InverseScratch(NamedTuple):
+    """The scratch arrays of :func:`_safe_inverse_into` for a (P, P) matrix (allocated once
+    by the caller instead of at every Gauss-Newton update)."""
+
+    d: np.ndarray  # (P,) square roots of the diagonal (the scaling)
+    scaled: np.ndarray  # (P, P) the matrix scaled to unit diagonal
+    low: np.ndarray  # (P, P) its Cholesky factor (_cholesky_inverse_into)
+    linv: np.ndarray  # (P, P) the factor's inverse
+
+
 @njit(cache=True)
 def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
     """One matrix of ``coopnav_env.nav.wls._safe_inverse``: inverse into ``out``; singular?
@@ -187,7 +197,10 @@ def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
     """
     p = info.shape[0]
     return _safe_inverse_into(
-        info, usable, out, np.empty(p), np.empty((p, p)), np.zeros((p, p)), np.zeros((p, p))
+        info,
+        usable,
+        out,
+        InverseScratch(np.empty(p), np.empty((p, p)), np.zeros((p, p)), np.zeros((p, p))),
     )
 
 
@@ -196,13 +209,11 @@ def _safe_inverse_into(
     info: np.ndarray,
     usable: bool,
     out: np.ndarray,
-    d: np.ndarray,
-    scaled: np.ndarray,
-    low: np.ndarray,
-    linv: np.ndarray,
+    scratch: InverseScratch,
 ) -> bool:
-    """:func:`_safe_inverse_one` in scratch arrays: ``d`` (P,), ``scaled``, ``low`` and
-    ``linv`` (P, P) (allocated once by the caller instead of at every Gauss-Newton update)."""
+    """:func:`_safe_inverse_one` in the scratch arrays ``scratch`` (:class:`InverseScratch`,
+    or a plain tuple of its fields)."""
+    d, scaled, low, linv = scratch
     p = info.shape[0]
     for i in range(p):
         d[i] = np.sqrt(max(info[i, i], 1e-300))
@@ -269,10 +280,12 @@ def _gauss_newton_update(
         pos,
         clock,
         tol_m,
-        np.empty(p_dim),
-        np.empty((p_dim, p_dim)),
-        np.zeros((p_dim, p_dim)),
-        np.zeros((p_dim, p_dim)),
+        InverseScratch(
+            np.empty(p_dim),
+            np.empty((p_dim, p_dim)),
+            np.zeros((p_dim, p_dim)),
+            np.zeros((p_dim, p_dim)),
+        ),
     )
 
 
@@ -285,14 +298,12 @@ def _gauss_newton_update_into(
     pos: np.ndarray,
     clock: np.ndarray,
     tol_m: float,
-    d: np.ndarray,
-    scaled: np.ndarray,
-    low: np.ndarray,
-    linv: np.ndarray,
+    scratch: InverseScratch,
 ) -> tuple[bool, bool]:
-    """:func:`_gauss_newton_update` in the scratch arrays of :func:`_safe_inverse_into`."""
+    """:func:`_gauss_newton_update` in the scratch arrays ``scratch`` of
+    :func:`_safe_inverse_into` (:class:`InverseScratch`, or a plain tuple of its fields)."""
     p_dim = info.shape[0]
-    singular = _safe_inverse_into(info, usable, inv_out, d, scaled, low, linv)
+    singular = _safe_inverse_into(info, usable, inv_out, scratch)
     if not usable or singular:
         return singular, True
     step2 = 0.0
@@ -337,10 +348,12 @@ def standalone_gauss_newton(
     info = np.empty((p_dim, p_dim))
     rhs = np.empty(p_dim)
     g = np.empty(p_dim)
-    d_ws = np.empty(p_dim)  # scratch of the updates (_safe_inverse_into)
-    scaled_ws = np.empty((p_dim, p_dim))
-    low_ws = np.zeros((p_dim, p_dim))
-    linv_ws = np.zeros((p_dim, p_dim))
+    scratch = InverseScratch(  # of the updates (_safe_inverse_into)
+        np.empty(p_dim),
+        np.empty((p_dim, p_dim)),
+        np.zeros((p_dim, p_dim)),
+        np.zeros((p_dim, p_dim)),
+    )
     for r in range(n_rx):
         for it in range(1, max_iter + 1):
             n_iter[r] = it
@@ -379,17 +392,7 @@ def standalone_gauss_newton(
                 if not seen[r, s]:
                     info[3 + s, 3 + s] += 1.0
             singular[r], converged[r] = _gauss_newton_update_into(
-                info,
-                rhs,
-                usable[r],
-                inv[r],
-                pos[r],
-                clock[r],
-                tol_m,
-                d_ws,
-                scaled_ws,
-                low_ws,
-                linv_ws,
+                info, rhs, usable[r], inv[r], pos[r], clock[r], tol_m, scratch
             )
             if converged[r]:
                 break
@@ -549,6 +552,7 @@ def cooperative_gauss_newton(transferred, problems, max_iter, tol_m):
     scaled_ws, o = _take2(fbuf, o, p_dim, p_dim)
     low_ws, o = _take2(fbuf, o, p_dim, p_dim)
     linv_ws, o = _take2(fbuf, o, p_dim, p_dim)
+    scratch = InverseScratch(d_ws, scaled_ws, low_ws, linv_ws)
     idx, oi = _take1(ibuf, oi, n_sv)
     cols, oi = _take1(ibuf, oi, n_sv)  # the satellites of the common-error block
     # contiguous satellite range of each constellation (system is sorted)
@@ -759,17 +763,7 @@ def cooperative_gauss_newton(transferred, problems, max_iter, tol_m):
                 if not has_clock[b, s]:
                     info[3 + s, 3 + s] += 1.0
             singular[b], converged[b] = _gauss_newton_update_into(
-                info,
-                rhs,
-                usable[b],
-                inv[b],
-                pos[b],
-                clk[b],
-                tol_m,
-                d_ws,
-                scaled_ws,
-                low_ws,
-                linv_ws,
+                info, rhs, usable[b], inv[b], pos[b], clk[b], tol_m, scratch
             )
             if converged[b] or it == max_iter:
                 # cross terms A^T P~ eps_q = A^T P_q eps_q - G (sig_c P_q eps_q), P_q eps_q =

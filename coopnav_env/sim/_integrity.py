@@ -98,19 +98,12 @@ def modular_fde(world: Any, obs, sa, co, rel_b, var_b, avail_b, centroid):
     co, co_r = fde_cooperative(obs, rel, co, transfer=cfg.transfer, centroid=centroid, **kw)
 
     def used(source: np.ndarray) -> EpochIntegrity:
+        # the kernel's records (_integrity_kernels.FixIntegrity) as plain tuples
         return unpack(
             used_integrity(
                 np.ascontiguousarray(source, dtype=np.int64),
-                co_r.status,
-                co_r.fault_detected,
-                co_r.n_excluded,
-                co_r.hpl_m,
-                co_r.vpl_m,
-                sa_r.status,
-                sa_r.fault_detected,
-                sa_r.n_excluded,
-                sa_r.hpl_m,
-                sa_r.vpl_m,
+                (co_r.status, co_r.fault_detected, co_r.n_excluded, co_r.hpl_m, co_r.vpl_m),
+                (sa_r.status, sa_r.fault_detected, sa_r.n_excluded, sa_r.hpl_m, sa_r.vpl_m),
             )
         )
 

@@ -8,10 +8,12 @@ the public :func:`~coopnav_env.nav.fde_standalone` and :func:`~coopnav_env.nav.f
 call on the same arguments, so that the modular path of
 :class:`~coopnav_env.sim.scenario.UrbanWorld` (those public functions) gives the same epochs
 bit for bit (``tests/envs/test_integrity_env.py``); :func:`used_integrity` then picks the
-figures of the estimate each UAV uses.
+figures of the estimate each UAV uses from the two solutions' :class:`FixIntegrity`.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -20,15 +22,30 @@ from coopnav_env.nav import _integrity_kernels as _ik
 from coopnav_env.nav import _kernels as _nav_kernels
 
 
+class FixIntegrity(NamedTuple):
+    """The integrity figures of each UAV's fix of one solution (standalone or cooperative)
+    after FDE (:func:`used_integrity`)."""
+
+    istat: np.ndarray  # (N,) int64 IntegrityStatus
+    detected: np.ndarray  # (N,) bool a fault was detected
+    n_excluded: np.ndarray  # (N,) int64 measurements excluded
+    hpl: np.ndarray  # (N,) horizontal protection level [m] (inf: none)
+    vpl: np.ndarray  # (N,) vertical protection level [m] (inf: none)
+
+
 @njit(cache=True)
-def used_integrity(
-    source, co_istat, co_det, co_excl, co_hpl, co_vpl, sa_istat, sa_det, sa_excl, sa_hpl, sa_vpl
-):
+def used_integrity(source, cooperative, standalone):
     """The integrity figures of the estimate each UAV uses (``NavSource``: 0 cooperative,
     1 standalone, 2 dead reckoning: no protection, ``NO_FIX``), packed in one ``(5, N)``
     array (one array to return to Python; :func:`coopnav_env.sim._integrity.unpack`): the
     rows ``hpl, vpl, istat, fault_detected`` (either of the UAV's fixes detected a fault)
-    and ``n_excluded``."""
+    and ``n_excluded``.
+
+    Takes the selection's ``source`` (N,) int64 and the :class:`FixIntegrity` of the
+    cooperative and of the standalone fixes (each may come as a plain tuple of its
+    fields)."""
+    co_istat, co_det, co_excl, co_hpl, co_vpl = cooperative
+    sa_istat, sa_det, sa_excl, sa_hpl, sa_vpl = standalone
     n = source.shape[0]
     out = np.empty((5, n))
     for q in range(n):
@@ -76,8 +93,7 @@ def epoch_fde(fde, obs, rel, solver, rot, sa, out):
     check, r_lo, r_hi)``; ``rot``: the city's ECEF -> ENU rotation; ``sa``: the first five
     outputs of ``standalone_solve``, ``out``: those of ``cooperative_isotropic`` (both updated
     in place). Returns the figures of each UAV's cooperative and standalone fix, the
-    arguments of :func:`used_integrity` after the source: ``co_istat, co_det, co_excl,
-    co_hpl, co_vpl, sa_istat, sa_det, sa_excl, sa_hpl, sa_vpl``.
+    arguments of :func:`used_integrity` after the source: two :class:`FixIntegrity`.
     """
     thr, lam, k_h, k_v, max_excl, positive_only = fde
     rel_b, var_b, avail_b, cen, ddt = rel
@@ -116,4 +132,7 @@ def epoch_fde(fde, obs, rel, solver, rot, sa, out):
     sa_cov = sa[1]
     sa_hpl, sa_vpl = fix_protection_levels(sa_istat, sa_dof, sa_h, sa_v, sa_cov, rot, lam, k_h, k_v)
     co_hpl, co_vpl = fix_protection_levels(co_istat, co_dof, co_h, co_v, co_cov, rot, lam, k_h, k_v)
-    return co_istat, co_det, co_excl, co_hpl, co_vpl, sa_istat, sa_det, sa_excl, sa_hpl, sa_vpl
+    return (
+        FixIntegrity(co_istat, co_det, co_excl, co_hpl, co_vpl),
+        FixIntegrity(sa_istat, sa_det, sa_excl, sa_hpl, sa_vpl),
+    )

@@ -3,17 +3,29 @@
 
 :func:`segment_free` walks the cells a straight leg crosses on the free-space grid;
 :func:`pull_string` keeps, from each waypoint of an A* cell path, the farthest later one a
-straight leg reaches. Their Python oracle is in ``tests/sim/test_route_kernels.py``.
+straight leg reaches. Both take the grid as the record :class:`FreeGrid`. Their Python
+oracle is in ``tests/sim/test_route_kernels.py``.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-__all__ = ["pull_string", "segment_free"]
+__all__ = ["FreeGrid", "pull_string", "segment_free"]
+
+
+class FreeGrid(NamedTuple):
+    """A file city's free-space grid (:func:`segment_free`, :func:`pull_string`)."""
+
+    reachable: np.ndarray  # (ny, nx) bool cells a UAV can reach
+    clear: np.ndarray  # (ny, nx) clearance of each cell [m]
+    x0_m: float  # centre of cell (0, 0), east [m]
+    y0_m: float  # north [m]
+    res_m: float  # cell size [m]
 
 
 @njit(cache=True, inline="always")
@@ -23,10 +35,14 @@ def _cell_ok(reachable, clear, ci, cj, min_clear_m):
 
 
 @njit(cache=True)
-def segment_free(reachable, clear, x0_m, y0_m, res_m, ax, ay, bx, by, min_clear_m):
-    """Whether the straight leg ``a -> b`` [m] crosses reachable cells of clearance at least
-    ``min_clear_m`` only (a grid traversal; a leg through a cell corner checks both cells
-    beside it). ``x0_m``, ``y0_m``: centre of cell (0, 0); ``res_m``: cell size."""
+def segment_free(grid, a, b, min_clear_m):
+    """Whether the straight leg ``a -> b`` (each ``(x, y)`` [m]) crosses reachable cells of
+    clearance at least ``min_clear_m`` only (a grid traversal; a leg through a cell corner
+    checks both cells beside it). ``grid``: the record :class:`FreeGrid` (or a plain tuple
+    of its fields)."""
+    reachable, clear, x0_m, y0_m, res_m = grid
+    ax, ay = a
+    bx, by = b
     u0 = (ax - x0_m) / res_m + 0.5
     v0 = (ay - y0_m) / res_m + 0.5
     u1 = (bx - x0_m) / res_m + 0.5
@@ -60,10 +76,11 @@ def segment_free(reachable, clear, x0_m, y0_m, res_m, ax, ay, bx, by, min_clear_
 
 
 @njit(cache=True)
-def pull_string(pts, clear_along, reachable, clear, x0_m, y0_m, res_m, cap_m):
+def pull_string(pts, clear_along, grid, cap_m):
     """Indices into ``pts`` (k, 2) [m] of the waypoints kept: from each kept one, the farthest
-    later waypoint that a straight leg reaches keeping the least clearance of the path
-    between them (``clear_along``, per waypoint), at most ``cap_m``."""
+    later waypoint that a straight leg reaches on ``grid`` (the record :class:`FreeGrid`, or
+    a plain tuple of its fields) keeping the least clearance of the path between them
+    (``clear_along``, per waypoint), at most ``cap_m``."""
     n = pts.shape[0]
     out = np.empty(n, dtype=np.int64)
     out[0] = 0
@@ -77,18 +94,7 @@ def pull_string(pts, clear_along, reachable, clear, x0_m, y0_m, res_m, cap_m):
                 if clear_along[m] < least:
                     least = clear_along[m]
             need = least if least < cap_m else cap_m
-            if segment_free(
-                reachable,
-                clear,
-                x0_m,
-                y0_m,
-                res_m,
-                pts[i, 0],
-                pts[i, 1],
-                pts[j, 0],
-                pts[j, 1],
-                need,
-            ):
+            if segment_free(grid, (pts[i, 0], pts[i, 1]), (pts[j, 0], pts[j, 1]), need):
                 break
             j -= 1
         out[k] = j

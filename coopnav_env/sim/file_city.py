@@ -1305,11 +1305,13 @@ class FileCity(City):
         kept = pull_string(  # the farthest waypoint reachable in a straight leg, from each
             np.array(pts, dtype=float),
             clear.astype(float),
-            self.reachable,
-            np.ascontiguousarray(grid, dtype=float),
-            float(self.grid_x_m[0]),
-            float(self.grid_y_m[0]),
-            float(self.resolution_m),
+            (  # the kernel's record (_route_kernels.FreeGrid) as a plain tuple
+                self.reachable,
+                np.ascontiguousarray(grid, dtype=float),
+                float(self.grid_x_m[0]),
+                float(self.grid_y_m[0]),
+                float(self.resolution_m),
+            ),
             PREFERRED_CLEARANCE_M,
         )
         out = [pts[k] for k in kept]

@@ -90,6 +90,7 @@ bound on what a real map gives.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -211,19 +212,13 @@ def predicted_line_of_sight(
         return _predict_from_candidates(
             buildings, sky, pos, cov, margin_sigma, max_margin_m, lo, hi
         )
+    # the kernel's records (CandidateMargins, SortedSky) as plain tuples
     return _predict_kernel(
         pos,
         cov,
-        float(margin_sigma),
-        float(max_margin_m),
-        lo,
-        hi,
-        buildings.min_m,
-        buildings.max_m,
-        sky.up,
-        sky.order,
-        sky.cot_s,
-        sky.h_dir,
+        (float(margin_sigma), float(max_margin_m), lo, hi),
+        (buildings.min_m, buildings.max_m),
+        (sky.up, sky.order, sky.cot_s, sky.h_dir),
     )
 
 
@@ -251,12 +246,38 @@ def _predict_from_candidates(
     return pred
 
 
+class CandidateMargins(NamedTuple):
+    """How far the candidates lie from a prediction (:func:`_predict_kernel`)."""
+
+    margin: float  # candidates this many sigma from the prediction (0: the prediction only)
+    cap: float  # cap on each candidate's displacement [m]
+    z_lo: float  # the flight band the altitudes are clamped to [m]
+    z_hi: float
+
+
+class SortedSky(NamedTuple):
+    """The arrays of a :class:`~coopnav_env.sim.city.SkyDirections` (:func:`_predict_kernel`)."""
+
+    up: np.ndarray  # (S,) bool elevation > 0
+    order: np.ndarray  # (n_up,) int64 rising satellites by increasing cot(el)
+    cot_s: np.ndarray  # (n_up,) sorted cot(el): horizontal distance per metre of climb
+    h_dir: np.ndarray  # (n_up, 2) sorted horizontal unit directions (0 at the zenith)
+
+
 @njit(cache=True)
-def _predict_kernel(pos, cov, margin, cap, z_lo, z_hi, b_lo, b_hi, up, order, cot_s, h_dir):
+def _predict_kernel(pos, cov, margins, boxes, sky):
     """:func:`predicted_line_of_sight` in one compiled call: the candidates of
     :func:`candidate_positions` (the 2 x 2 eigen-decomposition in closed form), the inside
     test of :func:`~coopnav_env.sim.city.is_inside_building` and
-    :func:`coopnav_env.sim._kernels.line_of_sight` from the candidates."""
+    :func:`coopnav_env.sim._kernels.line_of_sight` from the candidates.
+
+    Takes the predicted positions ``pos`` (N, 3) ENU [m] and their covariances ``cov`` (N,
+    3, 3) [m^2], the record :class:`CandidateMargins`, the box buildings ``(b_lo, b_hi)``
+    (each (B, 3) ENU [m]) and the record :class:`SortedSky` (each record may come as a plain
+    tuple of its fields)."""
+    margin, cap, z_lo, z_hi = margins
+    b_lo, b_hi = boxes
+    up, order, cot_s, h_dir = sky
     n = pos.shape[0]
     nc = N_CANDIDATES
     cand = np.empty((n * nc, 3))

@@ -83,8 +83,12 @@ def test_navigated_distance_kernel_matches_numpy() -> None:
     unpaid[rng.random((k, n)) < 0.2] = 0.0  # paid off
     terms = np.zeros((k, 6, n))
     after = np.empty((k, n))
+    # the kernel's records (_batched_kernels.Routes, DistanceInputs, Paid) as plain tuples
     _batched_kernels.navigated_distance_terms(
-        pos, nav_pos, route, tail, wp, reached, unpaid, route_len, 25.0, terms, after
+        (route, tail, np.full(k, r), np.zeros((k, 3))),
+        (pos, nav_pos, wp, reached, unpaid, route_len),
+        25.0,
+        (terms, after),
     )
     nav, progress, ref_after = oracles.navigated_distance_rows(
         pos, nav_pos, route, tail, wp, reached, unpaid, route_len, 25.0

@@ -204,7 +204,10 @@ def kernel_statistics(args, froot):
     """The compiled statistics on :func:`_problem_args`'s arguments (it eliminates every
     UAV's clocks itself: no clock estimate, reference or clock columns)."""
     pr, sv, system, rows, w, sig_c, pos, _clk, base = args
-    return ik.problem_statistics(pr, sv, system, 2, rows, w, sig_c, pos, base, froot, ROT, False)
+    # the kernel's records (ik.FixRows, ik.FixPoint) as plain tuples
+    return ik.problem_statistics(
+        (pr, sv, system, 2, rows, w, sig_c), (pos, base, froot), ROT, False
+    )
 
 
 @pytest.mark.parametrize("transfer", ["ddt", "sdt"])
@@ -287,13 +290,9 @@ def test_standalone_statistics_equal_the_dense_reference(q) -> None:
     sol = solve_standalone(sub, sc.pos_ecef[q])
     w = np.nan_to_num(1.0 / (sub.sigma_user_m**2 + sub.sigma_common_m**2))
     pr, zs = np.nan_to_num(sub.pr_m), np.zeros(sub.n_sv)
+    # the kernels' records (ik.ReceiverRows; ik.FixRows, ik.FixPoint) as plain tuples
     fast = ik.standalone_statistics(
-        pr[0],
-        sub.sv_ecef_m,
-        sub.system,
-        2,
-        sub.visible[0],
-        w[0],
+        (pr[0], sub.sv_ecef_m, sub.system, 2, sub.visible[0], w[0]),
         sol.pos_ecef_m[0],
         ROT,
         False,
@@ -301,7 +300,7 @@ def test_standalone_statistics_equal_the_dense_reference(q) -> None:
     )
     pos, base, root = sol.pos_ecef_m[0], np.zeros((1, 3)), np.zeros((1, 3, 3))
     general = ik.problem_statistics(
-        pr, sub.sv_ecef_m, sub.system, 2, sub.visible, w, zs, pos, base, root, ROT, False
+        (pr, sub.sv_ecef_m, sub.system, 2, sub.visible, w, zs), (pos, base, root), ROT, False
     )
     hc = np.ones(2, bool)
     dense = oracles.problem_statistics(

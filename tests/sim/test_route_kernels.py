@@ -70,8 +70,15 @@ def _city():
         return load_file_city(sample_city_path())
 
 
-def _args(city):
-    return (float(city.grid_x_m[0]), float(city.grid_y_m[0]), float(city.resolution_m))
+def _grid(city, clear):
+    """The kernels' record (``_route_kernels.FreeGrid``) as a plain tuple."""
+    return (
+        city.reachable,
+        clear,
+        float(city.grid_x_m[0]),
+        float(city.grid_y_m[0]),
+        float(city.resolution_m),
+    )
 
 
 def test_segment_free_is_the_oracle_on_random_legs() -> None:
@@ -87,7 +94,7 @@ def test_segment_free_is_the_oracle_on_random_legs() -> None:
             b = a + rng.choice([-1.0, 0.0, 1.0], 2) * 25.0
         need = float(rng.choice([0.0, 3.0, 6.0]))
         want = segment_free_oracle(city, a, b, need, grid)
-        got = segment_free(city.reachable, grid, *_args(city), a[0], a[1], b[0], b[1], need)
+        got = segment_free(_grid(city, grid), (a[0], a[1]), (b[0], b[1]), need)
         assert got == want, (a, b, need)
         found.add(want)
     assert found == {True, False}
@@ -104,6 +111,6 @@ def test_pull_string_keeps_the_oracles_waypoints_on_a_routes_cells() -> None:
         pts = np.vstack([*legs, route[-1:]])  # a dense path along the route
         cells = [city._cell(p) for p in pts]
         clear = np.array([grid[r, c] for r, c in cells], dtype=float)
-        got = pull_string(pts, clear, city.reachable, grid, *_args(city), PREFERRED_CLEARANCE_M)
+        got = pull_string(pts, clear, _grid(city, grid), PREFERRED_CLEARANCE_M)
         assert list(got) == pull_string_oracle(city, pts, clear, grid)
         assert len(got) < len(pts)
