@@ -45,7 +45,7 @@ SUITES = ("grid", "families", "real")
 
 def _episodes(folders: list[Path]) -> dict[str, dict[str, dict[str, list[dict]]]]:
     """``suite -> city -> policy -> episodes`` over every folder (a policy met twice must
-    agree), suites in :data:`SUITES` order."""
+    agree in every field both records have), suites in :data:`SUITES` order."""
     out: dict[str, dict[str, dict[str, list[dict]]]] = {}
     for folder in folders:
         for suite in SUITES:
@@ -54,7 +54,7 @@ def _episodes(folders: list[Path]) -> dict[str, dict[str, dict[str, list[dict]]]
                 data = json.loads(report.read_text())
                 per_city = out.setdefault(suite, {}).setdefault(city, {})
                 for policy, eps in data["episodes"].items():
-                    if policy in per_city and per_city[policy] != eps:
+                    if policy in per_city and not _same_episodes(per_city[policy], eps):
                         raise ValueError(
                             f"{report}: the episodes of {policy!r} differ from those of "
                             "another folder: the reports are not of the same protocol"
@@ -63,6 +63,14 @@ def _episodes(folders: list[Path]) -> dict[str, dict[str, dict[str, list[dict]]]
     if not out:
         raise ValueError(f"no report.json under {', '.join(map(str, folders))}")
     return {suite: out[suite] for suite in SUITES if suite in out}
+
+
+def _same_episodes(a: list[dict], b: list[dict]) -> bool:
+    """Whether two reports' records of one policy are the same episodes: equal in every field
+    both have (a report written before a field was added lacks it)."""
+    return len(a) == len(b) and all(
+        all(x[k] == y[k] for k in x.keys() & y.keys()) for x, y in zip(a, b, strict=True)
+    )
 
 
 def _scores(eps: list[dict], key: str = "return") -> np.ndarray:

@@ -103,3 +103,17 @@ def test_a_reference_with_a_star_pools_another_methods_seeds(tmp_path) -> None:
     assert row[5].strip() == "above" and row[6].strip() == "1.00" and row[7].strip() == "0.50"
     # a star that matches nothing gives no row
     assert pooled_table([tmp_path / "a"], "new_s", "none_*", "base")[1] == 0
+
+
+def test_records_from_an_older_report_agree_on_the_fields_both_have(tmp_path) -> None:
+    # the same episodes, one report written before a field was added: pooled; a shared field
+    # that differs is still refused
+    rule = _episodes([1.0, 1.1])
+    newer = [dict(e, cruise_speed_mps=5.0) for e in rule]
+    _report(tmp_path / "a", "x", {"rule": rule, "m_s0": _episodes([1.2, 1.2])})
+    _report(tmp_path / "b", "x", {"rule": newer, "m_s1": _episodes([1.4, 1.4])})
+    assert pooled_table([tmp_path / "a", tmp_path / "b"], "m_s", "rule", "base")[1] == 2
+    changed = [dict(e, cruise_speed_mps=5.0) for e in _episodes([1.0, 1.2])]
+    _report(tmp_path / "c", "x", {"rule": changed, "m_s2": _episodes([1.4, 1.4])})
+    with pytest.raises(ValueError, match="episodes of 'rule' differ"):
+        pooled_table([tmp_path / "b", tmp_path / "c"], "m_s", "rule", "base")
