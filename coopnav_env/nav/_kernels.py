@@ -180,6 +180,12 @@ class InverseScratch(NamedTuple):
     linv: np.ndarray  # (P, P) the factor's inverse
 
 
+@njit(cache=True, inline="always")
+def _inverse_scratch(p: int) -> InverseScratch:
+    """New :class:`InverseScratch` for a (``p``, ``p``) matrix (the factors start at zero)."""
+    return InverseScratch(np.empty(p), np.empty((p, p)), np.zeros((p, p)), np.zeros((p, p)))
+
+
 @njit(cache=True)
 def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
     """One matrix of ``coopnav_env.nav.wls._safe_inverse``: inverse into ``out``; singular?
@@ -195,13 +201,7 @@ def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
     otherwise they decide, as before. Same decisions and the same inverse, without an
     eigen-decomposition per Gauss-Newton iteration of a well-conditioned problem.
     """
-    p = info.shape[0]
-    return _safe_inverse_into(
-        info,
-        usable,
-        out,
-        InverseScratch(np.empty(p), np.empty((p, p)), np.zeros((p, p)), np.zeros((p, p))),
-    )
+    return _safe_inverse_into(info, usable, out, _inverse_scratch(info.shape[0]))
 
 
 @njit(cache=True)
@@ -271,21 +271,8 @@ def _gauss_newton_update(
     (n_sys,) the update. Returns ``(singular, done)``: ``done`` when the problem is unusable
     or singular (no update; the status says why) or the position update is below ``tol_m``.
     """
-    p_dim = info.shape[0]
     return _gauss_newton_update_into(
-        info,
-        rhs,
-        usable,
-        inv_out,
-        pos,
-        clock,
-        tol_m,
-        InverseScratch(
-            np.empty(p_dim),
-            np.empty((p_dim, p_dim)),
-            np.zeros((p_dim, p_dim)),
-            np.zeros((p_dim, p_dim)),
-        ),
+        info, rhs, usable, inv_out, pos, clock, tol_m, _inverse_scratch(info.shape[0])
     )
 
 
@@ -348,12 +335,7 @@ def standalone_gauss_newton(
     info = np.empty((p_dim, p_dim))
     rhs = np.empty(p_dim)
     g = np.empty(p_dim)
-    scratch = InverseScratch(  # of the updates (_safe_inverse_into)
-        np.empty(p_dim),
-        np.empty((p_dim, p_dim)),
-        np.zeros((p_dim, p_dim)),
-        np.zeros((p_dim, p_dim)),
-    )
+    scratch = _inverse_scratch(p_dim)  # of the updates (_safe_inverse_into)
     for r in range(n_rx):
         for it in range(1, max_iter + 1):
             n_iter[r] = it
