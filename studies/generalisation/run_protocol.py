@@ -18,6 +18,17 @@ of the gap from ``--baseline`` (the plain column) to ``per_city_column`` in that
 Writes ``report.md`` and each suite's reports into ``--out``; refuses a folder that holds a
 finished protocol unless ``--overwrite``.
 
+A policy ``masac:FOLDER`` is a MASAC actor saved by ``studies/off_policy/train_masac.py``
+(``FOLDER`` holds ``actor.pt`` and ``actor.json``; it needs BenchMARL's venv, the
+``benchmarl`` extra). Its row is named after the folder (``masac_`` added unless the name
+starts with it). The actor is flown, with torch on one thread, in the environment settings
+of its run except the city and the reward-only team credit (``nav_team_weight``: it moves
+reward between UAVs, not what they see or do, and every row is scored without it). A policy
+given by name carries no run of its own, so every row of that protocol is flown with those
+settings (the suite's overrides): the rules fly as without them (the index only adds
+observation entries, the rules command velocities). The MASAC actors of one protocol must
+share their settings, and no other trained policy may be flown beside them.
+
 Usage::
 
     python studies/generalisation/run_protocol.py --episodes 50 --tune 20
@@ -26,11 +37,15 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import shutil
 import sys
+import tempfile
 import time
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -137,12 +152,92 @@ def gap_markdown(result: SuiteReport, baseline: str) -> str:
     return "\n".join(lines)
 
 
+MASAC_PREFIX = "masac:"
+NOT_FLOWN_WITH = ("city", "constellation", "systems", "nav_team_weight")
+"""Settings of a MASAC run that its actor is not flown with: the suite's city and sky replace
+these and every ``city_*`` key; team credit changes only how reward is shared."""
+
+
+def masac_row_name(spec: str) -> str:
+    """The row name of ``masac:FOLDER``: the folder's name as an identifier, ``masac_`` added
+    unless it starts with it."""
+    folder = Path(spec[len(MASAC_PREFIX) :])
+    name = "".join(c if c.isalnum() else "_" for c in folder.name)
+    return name if name.startswith("masac") else f"masac_{name}"
+
+
+@contextlib.contextmanager
+def masac_policies(specs: Sequence[str]) -> Iterator[tuple[list[str], dict[str, Any]]]:
+    """Register every ``masac:FOLDER`` of ``specs`` as a policy; yields the policy names in
+    order (others unchanged) and the environment settings the actors share (their runs'
+    settings without the city keys; empty without MASAC), with torch on one thread.
+
+    ``ValueError`` for a folder that is not a saved actor, actors of different settings, two
+    folders of one name, or a MASAC actor beside another trained policy (``kind:PATH``).
+    """
+    from coopnav_env.agents import register_policy
+
+    masac = [p for p in specs if p.startswith(MASAC_PREFIX)]
+    if not masac:
+        yield list(specs), {}
+        return
+    others = [p for p in specs if ":" in p and not p.startswith(MASAC_PREFIX)]
+    if others:
+        raise ValueError(
+            f"MASAC actors are flown with their own settings for every row; fly {others} "
+            "in a protocol of their own"
+        )
+    names = [masac_row_name(p) if p in masac else p for p in specs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"two policies would share a row name: {names}")
+    from studies.off_policy.masac import MasacPolicy, load_actor
+    from studies.task_objective.compare_learned import one_torch_thread
+
+    shared: dict[str, Any] | None = None
+    with tempfile.TemporaryDirectory() as scratch, one_torch_thread():
+        for spec, name in zip(specs, names):
+            if spec not in masac:
+                continue
+            module, settings = load_actor(Path(spec[len(MASAC_PREFIX) :]), Path(scratch) / name)
+            env = {
+                k: v
+                for k, v in settings.env.items()
+                if k not in NOT_FLOWN_WITH and not k.startswith("city_")
+            }
+            if shared is not None and env != shared:
+                raise ValueError(f"{spec} was trained with {env}, the other actors with {shared}")
+            shared = env
+
+            def factory(env_: Any, _m=module, _h=settings.hold, _n=name) -> MasacPolicy:
+                return MasacPolicy(_m, env_.possible_agents, _h, _n)
+
+            register_policy(name, factory, overwrite=True)
+        yield names, dict(shared or {})
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     out = Path(args.out)
     if (out / "report.md").exists() and not args.overwrite:
         print(f"{out / 'report.md'} exists: pass --overwrite to replace it", file=sys.stderr)
         return 2
+    try:
+        with masac_policies(args.policies) as (policies, overrides):
+            return run(args, out, policies, overrides, argv)
+    except ValueError as exc:
+        print(f"run_protocol: {exc}", file=sys.stderr)
+        return 2
+
+
+def run(
+    args: argparse.Namespace,
+    out: Path,
+    policies: list[str],
+    overrides: dict[str, Any],
+    argv: list[str] | None,
+) -> int:
+    """Fly the protocol of ``args`` (policies by their row names, every row with the
+    environment settings ``overrides``) and write ``out/report.md``."""
     seeds = heldout_seeds(args.episodes, args.seed_start)
     parts, timing = [], []
     for suite in args.parts:
@@ -150,10 +245,11 @@ def main(argv: list[str] | None = None) -> int:
         if (out / suite).exists():
             shutil.rmtree(out / suite)
         result = evaluate_suite(
-            args.policies,
+            policies,
             seeds,
             suite,
             out / suite,
+            overrides=overrides,
             verbose=True,
             per_city_rule=args.tune,
             compare=args.compare,
@@ -167,10 +263,13 @@ def main(argv: list[str] | None = None) -> int:
     given = argv if argv is not None else sys.argv[1:]
     command = " ".join(["python studies/generalisation/run_protocol.py", *given])
     walls = ", ".join(f"{name} {s / 60:.1f} min" for name, s in timing)
+    flown_with = (
+        f" Every row flown with the MASAC actors' settings {overrides}." if overrides else ""
+    )
     text = (
         "# Generalisation protocol\n\n"
         f"Regenerate: `{command}`. Held-out reset seeds {seeds[0]}..{seeds[-1]}; "
-        f"wall time: {walls}.\n\n" + "\n\n".join(parts) + "\n"
+        f"wall time: {walls}.{flown_with}\n\n" + "\n\n".join(parts) + "\n"
     )
     atomic_write_text(out / "report.md", text)
     print(text)

@@ -1,4 +1,7 @@
-"""Train BenchMARL's MASAC from scratch on ``urban_canyon_v1`` street grids, CPU, one thread.
+"""Train BenchMARL's MASAC from scratch on ``urban_canyon_v1``, CPU, one thread.
+
+The training cities are the environment's random street grids, or those of ``--city`` (e.g.
+``family:mixed``, a new city of every generated family, from ``--city-pool`` seeds).
 
 No warm start and no heuristic in the policy: the actor and the two critics start from random
 weights, and the actor's output is the route-frame command (offset across the street, speed,
@@ -17,6 +20,8 @@ already holds a run (``config.json`` or ``run.json``) is refused, never overwrit
 Example::
 
     python studies/off_policy/train_masac.py --seed 0 --minutes 20 --out runs/masac_s0
+    python studies/off_policy/train_masac.py --seed 0 --minutes 55 --city family:mixed \
+        --city-pool 200 --out runs/masac_families_s0
 """
 
 from __future__ import annotations
@@ -268,6 +273,18 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def check_env(env: dict[str, Any]) -> None:
+    """``ValueError`` naming the setting if the settings ``env`` do not make an
+    ``urban_canyon_v1`` environment (a bad ``--city`` or ``--city-pool``); called before any
+    run folder is written."""
+    from coopnav_env import urban_canyon_v1
+
+    try:
+        urban_canyon_v1.parallel_env(**env).close()
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"bad environment settings {env}: {exc}") from None
+
+
 def _non_negative_int(text: str) -> int:
     value = int(text)
     if value < 0:
@@ -294,6 +311,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr", type=_positive_float, default=d.lr)
     p.add_argument("--alpha-init", type=_positive_float, default=d.alpha_init)
     p.add_argument(
+        "--city",
+        help="the training cities (an urban_canyon_v1 'city' setting, e.g. family:mixed; "
+        "default: the environment's random street grids)",
+    )
+    p.add_argument(
+        "--city-pool",
+        type=_positive_int,
+        help="draw every training city from this many city seeds (urban_canyon_v1's "
+        "'city_pool'; default: a new city every episode)",
+    )
+    p.add_argument(
         "--num-cells",
         type=_positive_int,
         nargs="+",
@@ -309,8 +337,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     try:
         check_run_folder(Path(args.out))
+        cities = {"city": args.city, "city_pool": args.city_pool}
+        cities = {k: v for k, v in cities.items() if v is not None}
+        check_env(cities)
         settings = MasacSettings(
-            env=default_env_config(),
+            env={**default_env_config(), **cities},
             hold=args.hold,
             n_envs=args.n_envs,
             frames_per_batch=args.frames_per_batch,

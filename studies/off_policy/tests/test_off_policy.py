@@ -55,6 +55,21 @@ def test_bad_arguments_are_refused(tmp_path, capsys) -> None:
     assert "holds a finished run" in capsys.readouterr().err
 
 
+def test_a_bad_city_is_refused_before_the_run_folder(tmp_path, capsys) -> None:
+    ok = ["--seed", "0", "--out", str(tmp_path / "r"), "--frames", "8"]
+    args = build_parser().parse_args([*ok, "--city", "family:mixed", "--city-pool", "200"])
+    assert (args.city, args.city_pool) == ("family:mixed", 200)
+    for extra, message in (
+        (["--city", "family:nowhere"], "nowhere"),
+        (["--city-pool", "0"], "must be a positive integer, got 0"),
+    ):
+        with pytest.raises(SystemExit) as info:
+            main([*ok, *extra])
+        assert info.value.code == 2
+        assert message in capsys.readouterr().err
+        assert not (tmp_path / "r").exists()  # nothing written
+
+
 def test_settings_are_checked_and_read_back() -> None:
     s = MasacSettings(env={"n_uavs": 3}, n_envs=2, frames_per_batch=8, num_cells=[16])
     assert MasacSettings.from_json(json.loads(json.dumps(s.to_json()))) == s
