@@ -143,3 +143,23 @@ def test_a_tiny_run_trains_saves_and_flies(tmp_path) -> None:
         assert rows[0]["steps"] > 0 and np.isfinite(rows[0]["score"])
     finally:
         torch.set_num_threads(threads)
+
+
+def test_the_training_curve_finds_quarters_and_the_peak(tmp_path, capsys) -> None:
+    from studies.off_policy.training_curve import curve_summary
+    from studies.off_policy.training_curve import main as curve_main
+
+    returns = [1.0] * 4 + [2.0] * 2 + [0.5] * 2
+    lines = ["iteration,elapsed_s,agent_steps,mean_return"]
+    lines += [f"{i + 1},{60.0 * (i + 1)},{1000 * (i + 1)},{r}" for i, r in enumerate(returns)]
+    path = tmp_path / "progress.csv"
+    path.write_text("\n".join(lines) + "\n")
+    s = curve_summary(path, window=2)
+    assert s["quarters"] == [1.0, 1.0, 2.0, 0.5]
+    peak = (s["peak"], s["peak_minute"], s["peak_agent_steps"], s["last"])
+    assert peak == (2.0, 6.0, 6000.0, 0.5)
+    assert curve_main([str(path), "--window", "2"]) == 0
+    assert "| 8 | 1.00 / 1.00 / 2.00 / 0.50 | 2.000 | 6.0 min" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        curve_main([str(path), "--window", "9"])
+    assert "fewer than 9" in capsys.readouterr().err
