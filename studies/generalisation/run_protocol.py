@@ -221,12 +221,13 @@ def main(argv: list[str] | None = None) -> int:
     if (out / "report.md").exists() and not args.overwrite:
         print(f"{out / 'report.md'} exists: pass --overwrite to replace it", file=sys.stderr)
         return 2
-    try:
-        with masac_policies(args.policies) as (policies, overrides):
-            return run(args, out, policies, overrides, argv)
-    except ValueError as exc:
-        print(f"run_protocol: {exc}", file=sys.stderr)
-        return 2
+    with contextlib.ExitStack() as stack:
+        try:
+            policies, overrides = stack.enter_context(masac_policies(args.policies))
+        except ValueError as exc:  # refused before any episode is flown
+            print(f"run_protocol: {exc}", file=sys.stderr)
+            return 2
+        return run(args, out, policies, overrides, argv)
 
 
 def run(

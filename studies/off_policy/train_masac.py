@@ -20,7 +20,7 @@ already holds a run (``config.json`` or ``run.json``) is refused, never overwrit
 Example::
 
     python studies/off_policy/train_masac.py --seed 0 --minutes 20 --out runs/masac_s0
-    python studies/off_policy/train_masac.py --seed 0 --minutes 55 --city family:mixed \
+    python studies/off_policy/train_masac.py --seed 0 --minutes 50 --city family:mixed \
         --city-pool 200 --out runs/masac_families_s0
 """
 
