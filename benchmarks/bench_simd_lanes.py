@@ -106,7 +106,7 @@ def multiplies(fn) -> dict[str, int]:
     return {"packed": sum(k == "pd" for k in mul), "scalar": sum(k == "sd" for k in mul)}
 
 
-def best_time(fn, args, calls: int) -> float:
+def round_time(fn, args, calls: int) -> float:
     """Seconds per call of ``fn(*args)`` over ``calls`` calls."""
     t0 = time.perf_counter()
     for _ in range(calls):
@@ -141,8 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     same = all(np.array_equal(to_lanes(s, n_lane), lo) for s, lo in zip(s_out, l_out, strict=True))
     best = {"scalar": np.inf, "lanes": np.inf}
     for _ in range(args.rounds):
-        best["scalar"] = min(best["scalar"], best_time(scalar_sums, (x, p0x, *s_out), args.calls))
-        best["lanes"] = min(best["lanes"], best_time(lane_sums, (*l_in, *l_out), args.calls))
+        best["scalar"] = min(best["scalar"], round_time(scalar_sums, (x, p0x, *s_out), args.calls))
+        best["lanes"] = min(best["lanes"], round_time(lane_sums, (*l_in, *l_out), args.calls))
     flops = 2 * m * (9 + 3 * (P + 1) + P * (P + 1))
     print(f"{b} problems of {m} rows, {n_lane} per lane group; identical sums: {same}")
     for name, fn in (("scalar", scalar_sums), ("lanes", lane_sums)):
