@@ -1,7 +1,9 @@
 """Benchmark: the navigation of one swarm-step (``epoch_navigation``) on recorded inputs.
 
 It flies ``urban_canyon_v1`` episodes (default settings: N = 5, GPS + BeiDou, DDT, every UAV
-its own centroid) with the ``waypoint`` heuristic, records the arguments of every call of
+its own centroid) with the ``waypoint`` heuristic (``--policy random``: uniformly random
+commands, as ``bench_env.py`` flies them, whose episodes end at a wall after a few steps and
+so include many first epochs), records the arguments of every call of
 :func:`coopnav_env.sim._kernels.epoch_navigation` (the world's one-call navigation, the same
 computation the batched step runs per swarm), then times the kernel on those inputs:
 
@@ -28,6 +30,7 @@ Usage::
 
     python benchmarks/bench_nav.py                      # about 1-2 minutes after compiling
     python benchmarks/bench_nav.py --episodes 1 --compare main
+    python benchmarks/bench_nav.py --policy random --episodes 40
 """
 
 from __future__ import annotations
@@ -57,10 +60,15 @@ from coopnav_env.sim import _kernels as sim_k
 # --------------------------------------------------------------------------------------------
 
 
-def record_epochs(episodes: int, max_steps: int, seed: int) -> list[tuple]:
+def record_epochs(
+    episodes: int, max_steps: int, seed: int, policy: str = "waypoint"
+) -> list[tuple]:
     """The arguments of every ``epoch_navigation`` call of ``episodes`` v1 episodes flown by
-    the waypoint heuristic (the per-copy step path, whose one-call navigation is that of the
-    batched step), copied."""
+    ``policy`` (``"waypoint"``: the waypoint heuristic; ``"random"``: commands drawn uniformly
+    from [-1, 1] with a generator seeded by ``seed``), through the per-copy step path, whose
+    one-call navigation is that of the batched step; copied."""
+    if policy not in ("waypoint", "random"):
+        raise ValueError(f"policy must be 'waypoint' or 'random', got {policy!r}")
     from coopnav_env import urban_canyon_v1
     from coopnav_env.agents.heuristics import WaypointPolicy
     from coopnav_env.envs import _fused
@@ -80,11 +88,16 @@ def record_epochs(episodes: int, max_steps: int, seed: int) -> list[tuple]:
     scenario._sim_kernels.epoch_navigation = recording
     try:
         env = urban_canyon_v1.parallel_env(max_steps=max_steps)
-        policy = WaypointPolicy(env)
+        heuristic = WaypointPolicy(env)
+        rng = np.random.default_rng(seed)
         for e in range(episodes):
             obs, _ = env.reset(seed=seed + e)
             while env.agents:
-                obs, *_ = env.step(policy.act(obs))
+                if policy == "random":
+                    act = {a: rng.uniform(-1.0, 1.0, 3).astype(np.float32) for a in env.agents}
+                else:
+                    act = heuristic.act(obs)
+                obs, *_ = env.step(act)
     finally:
         _fused.fused_settings, scenario._sim_kernels = saved_settings, saved_kernels
     return calls
@@ -369,6 +382,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=2, help="recorded episodes (default 2)")
     ap.add_argument("--max-steps", type=int, default=200, help="steps per episode (200)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the first episode")
+    ap.add_argument(
+        "--policy",
+        choices=("waypoint", "random"),
+        default="waypoint",
+        help="who flies the recorded episodes: the waypoint heuristic (default) or uniformly "
+        "random commands (the batched benchmark's)",
+    )
     ap.add_argument("--repeats", type=int, default=20, help="calls per round and epoch (20)")
     ap.add_argument("--rounds", type=int, default=3, help="rounds (best counts) (3)")
     ap.add_argument("--every", type=int, default=1, help="time every k-th recorded epoch")
@@ -382,7 +402,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(opt, name)}")
 
     t0 = time.perf_counter()
-    epochs = record_epochs(opt.episodes, opt.max_steps, opt.seed)[:: opt.every]
+    epochs = record_epochs(opt.episodes, opt.max_steps, opt.seed, opt.policy)[:: opt.every]
     print(f"recorded {len(epochs)} epochs in {time.perf_counter() - t0:.1f} s")
 
     variants = {"this checkout": repeater(sim_k.epoch_navigation)}

@@ -86,3 +86,13 @@ def test_the_stages_run_one_after_another_give_the_kernels_selection(epochs):
         for a, b in zip(whole[3], by_stage, strict=True):  # the ten arrays of the selection
             assert a.tobytes() == b.tobytes()
         assert sizes["flops"]["cooperative"] > 0 and sizes["flops"]["standalone"] > 0
+
+
+def test_random_commands_record_the_same_epochs_for_a_seed_and_refuse_other_policies():
+    first = bench_nav.record_epochs(2, 6, 3, "random")
+    again = bench_nav.record_epochs(2, 6, 3, "random")
+    assert len(first) == len(again) >= 4  # two resets' first epochs and some steps
+    for a, b in zip(first, again, strict=True):  # the same commands, hence the same epochs
+        assert a[0][0].tobytes() == b[0][0].tobytes()  # the receivers' ranges
+    with pytest.raises(ValueError, match="'hover'"):
+        bench_nav.record_epochs(1, 6, 0, "hover")

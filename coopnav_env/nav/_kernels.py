@@ -25,6 +25,10 @@ used rows, DDT pivots and availability of the centroid problems), :func:`coopera
 formulation as a test oracle (``tests/nav/oracles.py``), compared in
 ``tests/nav/test_kernels.py``.
 
+The cooperative Gauss-Newton loop is compiled three times from one source: for one and for
+two constellations, whose problem sizes are then compile-time constants, and for any number
+(:func:`cooperative_gauss_newton` picks one; all three give the same bits).
+
 The kernels are compiled on first use and cached on disk beside this file (numba
 ``cache=True``); the first call of a fresh installation compiles them (``docs/performance.md``
 says how long this takes for all kernels of the package on a 2-core machine).
@@ -204,7 +208,7 @@ def _safe_inverse_one(info: np.ndarray, usable: bool, out: np.ndarray) -> bool:
     return _safe_inverse_into(info, usable, out, _inverse_scratch(info.shape[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _safe_inverse_into(
     info: np.ndarray,
     usable: bool,
@@ -276,7 +280,7 @@ def _gauss_newton_update(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _gauss_newton_update_into(
     info: np.ndarray,
     rhs: np.ndarray,
@@ -449,6 +453,322 @@ class ProblemSetup(NamedTuple):
     avail: np.ndarray  # (B, N) bool
 
 
+def _cooperative_gauss_newton_for(fixed_n_sys: int):
+    """The kernel of :func:`cooperative_gauss_newton` compiled for ``fixed_n_sys``
+    constellations (0: as many as ``has_clock`` has columns).
+
+    With the number of constellations a compile-time constant, the sizes of the unknowns
+    (``P = 3 + n_sys``) and of every row's columns are constants too: the compiler unrolls the
+    small loops over them and keeps their indices out of the loads. The arithmetic, and its
+    order, is the same for every ``fixed_n_sys``, so the results are the same bit for bit.
+    """
+
+    def gauss_newton(transferred, problems, max_iter, tol_m):
+        pr, sv, vis, sigma_user, sig_c, system = transferred
+        rows, base, froot, ref, has_clock, usable, x0 = problems
+        n_b, n, n_sv = rows.shape
+        n_sys = has_clock.shape[1] if fixed_n_sys == 0 else fixed_n_sys
+        p_dim = 3 + n_sys
+        n_x = 3 + p_dim + 1  # columns [lam | A | a]
+        fbuf = np.zeros(
+            n * n_sv  # w_user
+            + n_b * (3 + n_sys + p_dim * p_dim + n * p_dim * 3)  # pos, clk, inv, cross
+            + n_sv * (2 * n_x + (p_dim + 1))  # x, p0x, px
+            + n * n_sv * (3 + p_dim)  # g3, a_all
+            + n_sv * (p_dim + 1)  # pa_sum, pr_sum
+            + (p_dim + 3) * (p_dim + 1)  # atpx, t3
+            + 18  # m3, m3inv
+            + n_x  # grp_sum
+            + 2 * p_dim * n_sv  # ape, gmat
+            + 4 * p_dim * p_dim
+            + 2 * p_dim  # info, rhs, d_ws, scaled_ws, low_ws, linv_ws
+            + 5 * n_sv * n_sv  # sum_p, mg, mg_inv, mg_low, mg_linv
+        )
+        ibuf = np.zeros(2 * n_sv + n_sys + 1 + n_b, dtype=np.int64)
+        bbuf = np.zeros(2 * n_b, dtype=np.bool_)
+        o = 0
+        w_user, o = _take2(fbuf, o, n, n_sv)  # 1 / sigma_user^2 of the received pseudoranges
+        for q in range(n):
+            for k in range(n_sv):
+                if vis[q, k]:
+                    w_user[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
+        pos, o = _take2(fbuf, o, n_b, 3)
+        for b in range(n_b):
+            for a in range(3):
+                pos[b, a] = x0[b, a]
+        clk, o = _take2(fbuf, o, n_b, n_sys)
+        inv, o = _take3(fbuf, o, n_b, p_dim, p_dim)
+        cross, o = _take4(fbuf, o, n_b, n, p_dim, 3)
+        converged, ob = _take1(bbuf, 0, n_b)
+        singular, ob = _take1(bbuf, ob, n_b)
+        n_iter, oi = _take1(ibuf, 0, n_b)
+
+        x, o = _take2(fbuf, o, n_sv, n_x)  # one block's rows
+        p0x, o = _take2(fbuf, o, n_sv, n_x)
+        px, o = _take2(fbuf, o, n_sv, p_dim + 1)
+        g3, o = _take3(fbuf, o, n, n_sv, 3)  # P0 lam M3^-1 of every block (for the cross terms)
+        a_all, o = _take3(fbuf, o, n, n_sv, p_dim)
+        sum_p, o = _take2(fbuf, o, n_sv, n_sv)
+        pa_sum, o = _take2(fbuf, o, n_sv, p_dim)
+        pr_sum, o = _take1(fbuf, o, n_sv)
+        atpx, o = _take2(fbuf, o, p_dim, p_dim + 1)
+        m3, o = _take2(fbuf, o, 3, 3)
+        m3inv, o = _take2(fbuf, o, 3, 3)
+        t3, o = _take2(fbuf, o, 3, p_dim + 1)
+        grp_sum, o = _take1(fbuf, o, n_x)
+        mg, o = _take2(fbuf, o, n_sv, n_sv)
+        mg_inv, o = _take2(fbuf, o, n_sv, n_sv)
+        ape, o = _take2(fbuf, o, p_dim, n_sv)
+        gmat, o = _take2(fbuf, o, p_dim, n_sv)
+        info, o = _take2(fbuf, o, p_dim, p_dim)
+        rhs, o = _take1(fbuf, o, p_dim)
+        mg_low, o = _take2(fbuf, o, n_sv, n_sv)  # scratch of the Cholesky inverse of mg
+        mg_linv, o = _take2(fbuf, o, n_sv, n_sv)
+        d_ws, o = _take1(fbuf, o, p_dim)  # scratch of the updates (_safe_inverse_into)
+        scaled_ws, o = _take2(fbuf, o, p_dim, p_dim)
+        low_ws, o = _take2(fbuf, o, p_dim, p_dim)
+        linv_ws, o = _take2(fbuf, o, p_dim, p_dim)
+        scratch = InverseScratch(d_ws, scaled_ws, low_ws, linv_ws)
+        idx, oi = _take1(ibuf, oi, n_sv)
+        cols, oi = _take1(ibuf, oi, n_sv)  # the satellites of the common-error block
+        # contiguous satellite range of each constellation (system is sorted)
+        start, oi = _take1(ibuf, oi, n_sys + 1)
+        assert o == fbuf.shape[0] and oi == ibuf.shape[0]  # every view taken, none overlaps
+        for s in range(n_sys + 1):
+            c = 0
+            for k in range(n_sv):
+                if system[k] < s:
+                    c += 1
+            start[s] = c
+
+        for b in range(n_b):
+            pb = b if pr.shape[0] > 1 else 0
+            # The common-error block over the satellites some UAV uses. A satellite no UAV uses
+            # has zero rows and columns in sum_p, pa_sum and pr_sum (+0.0 exactly), so its row
+            # of mg is that of the identity, its Cholesky factor and inverse rows are unit rows,
+            # and every term it adds below is +0.0 (x - (+0.0) and a sum begun at +0.0 plus
+            # +0.0 are exact): leaving it out changes no bit. Only a non-finite common sigma of
+            # such a satellite would make those terms NaN; then every satellite stays in.
+            n_c = 0
+            all_cols = False
+            for k in range(n_sv):
+                in_use = False
+                for q in range(n):
+                    if rows[b, q, k]:
+                        in_use = True
+                        break
+                if in_use:
+                    cols[n_c] = k
+                    n_c += 1
+                elif not np.isfinite(sig_c[k]):
+                    all_cols = True
+            if all_cols:
+                n_c = n_sv
+                for k in range(n_sv):
+                    cols[k] = k
+            # g3 is zero outside the rows the problem uses, which every iteration writes again;
+            # a_all is read only where g3 is not zero
+            g3[:, :, :] = 0.0
+            for it in range(1, max_iter + 1):
+                n_iter[b] = it
+                sum_p[:, :] = 0.0
+                pa_sum[:, :] = 0.0
+                pr_sum[:] = 0.0
+                atpx[:, :] = 0.0
+                at_sat = False
+                for q in range(n):
+                    # the block's rows, in satellite order
+                    m = 0
+                    for k in range(n_sv):
+                        if rows[b, q, k]:
+                            idx[m] = k
+                            m += 1
+                    if m == 0:
+                        continue
+                    pq0 = pos[b, 0] + base[b, q, 0]
+                    pq1 = pos[b, 1] + base[b, q, 1]
+                    pq2 = pos[b, 2] + base[b, q, 2]
+                    for i in range(m):
+                        k = idx[i]
+                        d0 = sv[k, 0] - pq0
+                        d1 = sv[k, 1] - pq1
+                        d2 = sv[k, 2] - pq2
+                        rng = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                        if rng == 0.0:  # a satellite at the UAV's iterate: no line of sight
+                            at_sat = True
+                            break
+                        u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
+                        for j in range(3):  # lam = u F_q
+                            x[i, j] = (
+                                u0 * froot[b, q, 0, j]
+                                + u1 * froot[b, q, 1, j]
+                                + (u2 * froot[b, q, 2, j])
+                            )
+                        x[i, 3] = -u0
+                        x[i, 4] = -u1
+                        x[i, 5] = -u2
+                        for s in range(n_sys):
+                            x[i, 6 + s] = 0.0
+                        sk = system[k]
+                        res = pr[pb, q, k] - rng
+                        if has_clock[b, sk]:
+                            x[i, 6 + sk] = 1.0
+                            res -= clk[b, sk]
+                        x[i, n_x - 1] = res
+                        wk = w_user[q, k]
+                        for j in range(n_x):
+                            p0x[i, j] = wk * x[i, j]
+                        for j in range(p_dim):
+                            a_all[q, k, j] = x[i, 3 + j]
+                    if at_sat:
+                        break
+                    # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
+                    if q != ref[b]:
+                        # the rows of constellation s are rows r0:r1 (satellite order, system
+                        # sorted): those of satellites start[s] <= k < start[s + 1]
+                        r1 = 0
+                        for s in range(n_sys):
+                            r0 = r1
+                            while r1 < m and idx[r1] < start[s + 1]:
+                                r1 += 1
+                            dsum = 0.0
+                            grp_sum[:] = 0.0
+                            for i in range(r0, r1):
+                                dsum += w_user[q, idx[i]]
+                                for j in range(n_x):
+                                    grp_sum[j] += p0x[i, j]
+                            if dsum > 0.0:
+                                coef = 1.0 / dsum
+                                for i in range(r0, r1):
+                                    f = w_user[q, idx[i]] * coef
+                                    for j in range(n_x):
+                                        p0x[i, j] -= f * grp_sum[j]
+                                # - sum over the group's pairs of w_s w_t / d
+                                for i in range(r0, r1):
+                                    ki = idx[i]
+                                    f = w_user[q, ki] * coef
+                                    for i2 in range(r0, r1):
+                                        k2 = idx[i2]
+                                        sum_p[ki, k2] -= f * w_user[q, k2]
+                    # 2. the rank-3 relative-error latent (Woodbury); each sum of m3 and t3 over
+                    # the rows in order, the rows the outer loop
+                    for i1 in range(3):
+                        for i2 in range(3):
+                            m3[i1, i2] = 1.0 if i1 == i2 else 0.0
+                        for j in range(p_dim + 1):
+                            t3[i1, j] = 0.0
+                    for i in range(m):
+                        for i1 in range(3):
+                            xi = x[i, i1]
+                            pi = p0x[i, i1]
+                            for i2 in range(3):
+                                m3[i1, i2] += xi * p0x[i, i2]
+                            for j in range(p_dim + 1):
+                                t3[i1, j] += pi * x[i, 3 + j]
+                    _inv3(m3, m3inv)
+                    for i in range(m):
+                        k = idx[i]
+                        p0, p1, p2 = p0x[i, 0], p0x[i, 1], p0x[i, 2]
+                        g0 = p0 * m3inv[0, 0] + p1 * m3inv[1, 0] + p2 * m3inv[2, 0]
+                        g1 = p0 * m3inv[0, 1] + p1 * m3inv[1, 1] + p2 * m3inv[2, 1]
+                        g2 = p0 * m3inv[0, 2] + p1 * m3inv[1, 2] + p2 * m3inv[2, 2]
+                        g3[q, k, 0] = g0
+                        g3[q, k, 1] = g1
+                        g3[q, k, 2] = g2
+                        for j in range(p_dim + 1):
+                            px[i, j] = p0x[i, 3 + j] - (
+                                g0 * t3[0, j] + g1 * t3[1, j] + g2 * t3[2, j]
+                            )
+                    # accumulate A^T P [A, a], sum_n P_n, sum_n P_n A and P_n a
+                    for i in range(m):
+                        k = idx[i]
+                        for p in range(p_dim):
+                            ap = x[i, 3 + p]
+                            if ap != 0.0:
+                                for j in range(p_dim + 1):
+                                    atpx[p, j] += ap * px[i, j]
+                        for p in range(p_dim):
+                            pa_sum[k, p] += px[i, p]
+                        pr_sum[k] += px[i, p_dim]
+                        sum_p[k, k] += w_user[q, k]
+                        g0, g1, g2 = g3[q, k, 0], g3[q, k, 1], g3[q, k, 2]
+                        for i2 in range(m):
+                            k2 = idx[i2]
+                            sum_p[k, k2] -= g0 * p0x[i2, 0] + g1 * p0x[i2, 1] + g2 * p0x[i2, 2]
+                if at_sat and usable[b]:  # reported singular, as the numpy formulation does
+                    _unit(inv[b])
+                    singular[b] = True
+                    converged[b] = True
+                    break
+                # 3. the errors common to all UAVs (indices c of cols, satellites k = cols[c])
+                for c in range(n_c):
+                    k = cols[c]
+                    for c2 in range(n_c):
+                        mg[c, c2] = sig_c[k] * sum_p[k, cols[c2]] * sig_c[cols[c2]]
+                    mg[c, c] += 1.0
+                # I + E^T P E is SPD unless inputs are broken
+                if not _cholesky_inverse_leading(mg, n_c, mg_inv, mg_low, mg_linv):
+                    for i in range(p_dim):
+                        for j in range(p_dim):
+                            inv[b, i, j] = 1.0 if i == j else 0.0
+                    singular[b] = True
+                    converged[b] = True
+                    break
+                for p in range(p_dim):
+                    for c in range(n_c):
+                        k = cols[c]
+                        ape[p, c] = pa_sum[k, p] * sig_c[k]
+                # gmat = ape mg^-1, rhs and info: each sum over c2 (c) in order, from its first
+                # term; c2 (c) the outer loop
+                for p in range(p_dim):
+                    for c in range(n_c):
+                        gmat[p, c] = 0.0
+                    for c2 in range(n_c):
+                        a = ape[p, c2]
+                        for c in range(n_c):
+                            gmat[p, c] += a * mg_inv[c2, c]
+                for p in range(p_dim):
+                    rhs[p] = atpx[p, p_dim]
+                    for p2 in range(p_dim):
+                        info[p, p2] = atpx[p, p2]
+                    for c in range(n_c):
+                        k = cols[c]
+                        g = gmat[p, c]
+                        rhs[p] -= g * sig_c[k] * pr_sum[k]
+                        for p2 in range(p_dim):
+                            info[p, p2] -= g * ape[p2, c]
+                for s in range(n_sys):  # unit diagonal for the clocks of constellations not seen
+                    if not has_clock[b, s]:
+                        info[3 + s, 3 + s] += 1.0
+                singular[b], converged[b] = _gauss_newton_update_into(
+                    info, rhs, usable[b], inv[b], pos[b], clk[b], tol_m, scratch
+                )
+                if converged[b] or it == max_iter:
+                    # cross terms A^T P~ eps_q = A^T P_q eps_q - G (sig_c P_q eps_q), P_q eps_q =
+                    # g3_q, of the iteration that ends (earlier iterations' are never read); each
+                    # sum over the satellites c in order, c the outer loop
+                    cross[b, :, :, :] = 0.0
+                    for q in range(n):
+                        for c in range(n_c):
+                            k = cols[c]
+                            for j in range(3):
+                                gk = g3[q, k, j]
+                                if gk != 0.0:
+                                    for p in range(p_dim):
+                                        e = a_all[q, k, p] - gmat[p, c] * sig_c[k]
+                                        cross[b, q, p, j] += e * gk
+                if converged[b]:
+                    break
+        return pos, clk, inv, cross, converged, singular, n_iter
+
+    return njit(cache=True)(gauss_newton)
+
+
+_gauss_newton_1 = _cooperative_gauss_newton_for(1)
+_gauss_newton_2 = _cooperative_gauss_newton_for(2)
+_gauss_newton_any = _cooperative_gauss_newton_for(0)
+
+
 @njit(cache=True)
 def cooperative_gauss_newton(transferred, problems, max_iter, tol_m):
     """Gauss-Newton of the centroid WLS with the exact structured covariance ``C*``.
@@ -469,301 +789,16 @@ def cooperative_gauss_newton(transferred, problems, max_iter, tol_m):
     where several sums are formed together, the summation index is the outer loop, so that
     they advance side by side instead of one after another (the same numbers, computed with
     more independent work per step of the processor).
+
+    Runs the kernel compiled for the problems' number of constellations (one or two; any
+    other number, a kernel that reads it from ``has_clock``).
     """
-    pr, sv, vis, sigma_user, sig_c, system = transferred
-    rows, base, froot, ref, has_clock, usable, x0 = problems
-    n_b, n, n_sv = rows.shape
-    n_sys = has_clock.shape[1]
-    p_dim = 3 + n_sys
-    n_x = 3 + p_dim + 1  # columns [lam | A | a]
-    fbuf = np.zeros(
-        n * n_sv  # w_user
-        + n_b * (3 + n_sys + p_dim * p_dim + n * p_dim * 3)  # pos, clk, inv, cross
-        + n_sv * (2 * n_x + (p_dim + 1))  # x, p0x, px
-        + n * n_sv * (3 + p_dim)  # g3, a_all
-        + n_sv * (p_dim + 1)  # pa_sum, pr_sum
-        + (p_dim + 3) * (p_dim + 1)  # atpx, t3
-        + 18  # m3, m3inv
-        + n_x  # grp_sum
-        + 2 * p_dim * n_sv  # ape, gmat
-        + 4 * p_dim * p_dim
-        + 2 * p_dim  # info, rhs, d_ws, scaled_ws, low_ws, linv_ws
-        + 5 * n_sv * n_sv  # sum_p, mg, mg_inv, mg_low, mg_linv
-    )
-    ibuf = np.zeros(2 * n_sv + n_sys + 1 + n_b, dtype=np.int64)
-    bbuf = np.zeros(2 * n_b, dtype=np.bool_)
-    o = 0
-    w_user, o = _take2(fbuf, o, n, n_sv)  # 1 / sigma_user^2 of the received pseudoranges
-    for q in range(n):
-        for k in range(n_sv):
-            if vis[q, k]:
-                w_user[q, k] = 1.0 / (sigma_user[q, k] * sigma_user[q, k])
-    pos, o = _take2(fbuf, o, n_b, 3)
-    for b in range(n_b):
-        for a in range(3):
-            pos[b, a] = x0[b, a]
-    clk, o = _take2(fbuf, o, n_b, n_sys)
-    inv, o = _take3(fbuf, o, n_b, p_dim, p_dim)
-    cross, o = _take4(fbuf, o, n_b, n, p_dim, 3)
-    converged, ob = _take1(bbuf, 0, n_b)
-    singular, ob = _take1(bbuf, ob, n_b)
-    n_iter, oi = _take1(ibuf, 0, n_b)
-
-    x, o = _take2(fbuf, o, n_sv, n_x)  # one block's rows
-    p0x, o = _take2(fbuf, o, n_sv, n_x)
-    px, o = _take2(fbuf, o, n_sv, p_dim + 1)
-    g3, o = _take3(fbuf, o, n, n_sv, 3)  # P0 lam M3^-1 of every block (for the cross terms)
-    a_all, o = _take3(fbuf, o, n, n_sv, p_dim)
-    sum_p, o = _take2(fbuf, o, n_sv, n_sv)
-    pa_sum, o = _take2(fbuf, o, n_sv, p_dim)
-    pr_sum, o = _take1(fbuf, o, n_sv)
-    atpx, o = _take2(fbuf, o, p_dim, p_dim + 1)
-    m3, o = _take2(fbuf, o, 3, 3)
-    m3inv, o = _take2(fbuf, o, 3, 3)
-    t3, o = _take2(fbuf, o, 3, p_dim + 1)
-    grp_sum, o = _take1(fbuf, o, n_x)
-    mg, o = _take2(fbuf, o, n_sv, n_sv)
-    mg_inv, o = _take2(fbuf, o, n_sv, n_sv)
-    ape, o = _take2(fbuf, o, p_dim, n_sv)
-    gmat, o = _take2(fbuf, o, p_dim, n_sv)
-    info, o = _take2(fbuf, o, p_dim, p_dim)
-    rhs, o = _take1(fbuf, o, p_dim)
-    mg_low, o = _take2(fbuf, o, n_sv, n_sv)  # scratch of the Cholesky inverse of mg
-    mg_linv, o = _take2(fbuf, o, n_sv, n_sv)
-    d_ws, o = _take1(fbuf, o, p_dim)  # scratch of the updates (_safe_inverse_into)
-    scaled_ws, o = _take2(fbuf, o, p_dim, p_dim)
-    low_ws, o = _take2(fbuf, o, p_dim, p_dim)
-    linv_ws, o = _take2(fbuf, o, p_dim, p_dim)
-    scratch = InverseScratch(d_ws, scaled_ws, low_ws, linv_ws)
-    idx, oi = _take1(ibuf, oi, n_sv)
-    cols, oi = _take1(ibuf, oi, n_sv)  # the satellites of the common-error block
-    # contiguous satellite range of each constellation (system is sorted)
-    start, oi = _take1(ibuf, oi, n_sys + 1)
-    assert o == fbuf.shape[0] and oi == ibuf.shape[0]  # every view taken, none overlaps
-    for s in range(n_sys + 1):
-        c = 0
-        for k in range(n_sv):
-            if system[k] < s:
-                c += 1
-        start[s] = c
-
-    for b in range(n_b):
-        pb = b if pr.shape[0] > 1 else 0
-        # The common-error block over the satellites some UAV uses. A satellite no UAV uses
-        # has zero rows and columns in sum_p, pa_sum and pr_sum (+0.0 exactly), so its row
-        # of mg is that of the identity, its Cholesky factor and inverse rows are unit rows,
-        # and every term it adds below is +0.0 (x - (+0.0) and a sum begun at +0.0 plus
-        # +0.0 are exact): leaving it out changes no bit. Only a non-finite common sigma of
-        # such a satellite would make those terms NaN; then every satellite stays in.
-        n_c = 0
-        all_cols = False
-        for k in range(n_sv):
-            in_use = False
-            for q in range(n):
-                if rows[b, q, k]:
-                    in_use = True
-                    break
-            if in_use:
-                cols[n_c] = k
-                n_c += 1
-            elif not np.isfinite(sig_c[k]):
-                all_cols = True
-        if all_cols:
-            n_c = n_sv
-            for k in range(n_sv):
-                cols[k] = k
-        # g3 is zero outside the rows the problem uses, which every iteration writes again;
-        # a_all is read only where g3 is not zero
-        g3[:, :, :] = 0.0
-        for it in range(1, max_iter + 1):
-            n_iter[b] = it
-            sum_p[:, :] = 0.0
-            pa_sum[:, :] = 0.0
-            pr_sum[:] = 0.0
-            atpx[:, :] = 0.0
-            at_sat = False
-            for q in range(n):
-                # the block's rows, in satellite order
-                m = 0
-                for k in range(n_sv):
-                    if rows[b, q, k]:
-                        idx[m] = k
-                        m += 1
-                if m == 0:
-                    continue
-                pq0 = pos[b, 0] + base[b, q, 0]
-                pq1 = pos[b, 1] + base[b, q, 1]
-                pq2 = pos[b, 2] + base[b, q, 2]
-                for i in range(m):
-                    k = idx[i]
-                    d0 = sv[k, 0] - pq0
-                    d1 = sv[k, 1] - pq1
-                    d2 = sv[k, 2] - pq2
-                    rng = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-                    if rng == 0.0:  # a satellite at the UAV's iterate: no line of sight
-                        at_sat = True
-                        break
-                    u0, u1, u2 = d0 / rng, d1 / rng, d2 / rng
-                    for j in range(3):  # lam = u F_q
-                        x[i, j] = (
-                            u0 * froot[b, q, 0, j]
-                            + u1 * froot[b, q, 1, j]
-                            + (u2 * froot[b, q, 2, j])
-                        )
-                    x[i, 3] = -u0
-                    x[i, 4] = -u1
-                    x[i, 5] = -u2
-                    for s in range(n_sys):
-                        x[i, 6 + s] = 0.0
-                    sk = system[k]
-                    res = pr[pb, q, k] - rng
-                    if has_clock[b, sk]:
-                        x[i, 6 + sk] = 1.0
-                        res -= clk[b, sk]
-                    x[i, n_x - 1] = res
-                    wk = w_user[q, k]
-                    for j in range(n_x):
-                        p0x[i, j] = wk * x[i, j]
-                    for j in range(p_dim):
-                        a_all[q, k, j] = x[i, 3 + j]
-                if at_sat:
-                    break
-                # 1. nuisance clocks of a UAV other than the reference: weighted mean removal
-                if q != ref[b]:
-                    # the rows of constellation s are rows r0:r1 (satellite order, system
-                    # sorted): those of satellites start[s] <= k < start[s + 1]
-                    r1 = 0
-                    for s in range(n_sys):
-                        r0 = r1
-                        while r1 < m and idx[r1] < start[s + 1]:
-                            r1 += 1
-                        dsum = 0.0
-                        grp_sum[:] = 0.0
-                        for i in range(r0, r1):
-                            dsum += w_user[q, idx[i]]
-                            for j in range(n_x):
-                                grp_sum[j] += p0x[i, j]
-                        if dsum > 0.0:
-                            coef = 1.0 / dsum
-                            for i in range(r0, r1):
-                                f = w_user[q, idx[i]] * coef
-                                for j in range(n_x):
-                                    p0x[i, j] -= f * grp_sum[j]
-                            # - sum over the group's pairs of w_s w_t / d
-                            for i in range(r0, r1):
-                                ki = idx[i]
-                                f = w_user[q, ki] * coef
-                                for i2 in range(r0, r1):
-                                    k2 = idx[i2]
-                                    sum_p[ki, k2] -= f * w_user[q, k2]
-                # 2. the rank-3 relative-error latent (Woodbury); each sum of m3 and t3 over
-                # the rows in order, the rows the outer loop
-                for i1 in range(3):
-                    for i2 in range(3):
-                        m3[i1, i2] = 1.0 if i1 == i2 else 0.0
-                    for j in range(p_dim + 1):
-                        t3[i1, j] = 0.0
-                for i in range(m):
-                    for i1 in range(3):
-                        xi = x[i, i1]
-                        pi = p0x[i, i1]
-                        for i2 in range(3):
-                            m3[i1, i2] += xi * p0x[i, i2]
-                        for j in range(p_dim + 1):
-                            t3[i1, j] += pi * x[i, 3 + j]
-                _inv3(m3, m3inv)
-                for i in range(m):
-                    k = idx[i]
-                    p0, p1, p2 = p0x[i, 0], p0x[i, 1], p0x[i, 2]
-                    g0 = p0 * m3inv[0, 0] + p1 * m3inv[1, 0] + p2 * m3inv[2, 0]
-                    g1 = p0 * m3inv[0, 1] + p1 * m3inv[1, 1] + p2 * m3inv[2, 1]
-                    g2 = p0 * m3inv[0, 2] + p1 * m3inv[1, 2] + p2 * m3inv[2, 2]
-                    g3[q, k, 0] = g0
-                    g3[q, k, 1] = g1
-                    g3[q, k, 2] = g2
-                    for j in range(p_dim + 1):
-                        px[i, j] = p0x[i, 3 + j] - (g0 * t3[0, j] + g1 * t3[1, j] + g2 * t3[2, j])
-                # accumulate A^T P [A, a], sum_n P_n, sum_n P_n A and P_n a
-                for i in range(m):
-                    k = idx[i]
-                    for p in range(p_dim):
-                        ap = x[i, 3 + p]
-                        if ap != 0.0:
-                            for j in range(p_dim + 1):
-                                atpx[p, j] += ap * px[i, j]
-                    for p in range(p_dim):
-                        pa_sum[k, p] += px[i, p]
-                    pr_sum[k] += px[i, p_dim]
-                    sum_p[k, k] += w_user[q, k]
-                    g0, g1, g2 = g3[q, k, 0], g3[q, k, 1], g3[q, k, 2]
-                    for i2 in range(m):
-                        k2 = idx[i2]
-                        sum_p[k, k2] -= g0 * p0x[i2, 0] + g1 * p0x[i2, 1] + g2 * p0x[i2, 2]
-            if at_sat and usable[b]:  # reported singular, as the numpy formulation does
-                _unit(inv[b])
-                singular[b] = True
-                converged[b] = True
-                break
-            # 3. the errors common to all UAVs (indices c of cols, satellites k = cols[c])
-            for c in range(n_c):
-                k = cols[c]
-                for c2 in range(n_c):
-                    mg[c, c2] = sig_c[k] * sum_p[k, cols[c2]] * sig_c[cols[c2]]
-                mg[c, c] += 1.0
-            # I + E^T P E is SPD unless inputs are broken
-            if not _cholesky_inverse_leading(mg, n_c, mg_inv, mg_low, mg_linv):
-                for i in range(p_dim):
-                    for j in range(p_dim):
-                        inv[b, i, j] = 1.0 if i == j else 0.0
-                singular[b] = True
-                converged[b] = True
-                break
-            for p in range(p_dim):
-                for c in range(n_c):
-                    k = cols[c]
-                    ape[p, c] = pa_sum[k, p] * sig_c[k]
-            # gmat = ape mg^-1, rhs and info: each sum over c2 (c) in order, from its first
-            # term; c2 (c) the outer loop
-            for p in range(p_dim):
-                for c in range(n_c):
-                    gmat[p, c] = 0.0
-                for c2 in range(n_c):
-                    a = ape[p, c2]
-                    for c in range(n_c):
-                        gmat[p, c] += a * mg_inv[c2, c]
-            for p in range(p_dim):
-                rhs[p] = atpx[p, p_dim]
-                for p2 in range(p_dim):
-                    info[p, p2] = atpx[p, p2]
-                for c in range(n_c):
-                    k = cols[c]
-                    g = gmat[p, c]
-                    rhs[p] -= g * sig_c[k] * pr_sum[k]
-                    for p2 in range(p_dim):
-                        info[p, p2] -= g * ape[p2, c]
-            for s in range(n_sys):  # unit diagonal for the clocks of constellations not seen
-                if not has_clock[b, s]:
-                    info[3 + s, 3 + s] += 1.0
-            singular[b], converged[b] = _gauss_newton_update_into(
-                info, rhs, usable[b], inv[b], pos[b], clk[b], tol_m, scratch
-            )
-            if converged[b] or it == max_iter:
-                # cross terms A^T P~ eps_q = A^T P_q eps_q - G (sig_c P_q eps_q), P_q eps_q =
-                # g3_q, of the iteration that ends (earlier iterations' are never read); each
-                # sum over the satellites c in order, c the outer loop
-                cross[b, :, :, :] = 0.0
-                for q in range(n):
-                    for c in range(n_c):
-                        k = cols[c]
-                        for j in range(3):
-                            gk = g3[q, k, j]
-                            if gk != 0.0:
-                                for p in range(p_dim):
-                                    e = a_all[q, k, p] - gmat[p, c] * sig_c[k]
-                                    cross[b, q, p, j] += e * gk
-            if converged[b]:
-                break
-    return pos, clk, inv, cross, converged, singular, n_iter
+    n_sys = problems[4].shape[1]  # has_clock
+    if n_sys == 2:
+        return _gauss_newton_2(transferred, problems, max_iter, tol_m)
+    if n_sys == 1:
+        return _gauss_newton_1(transferred, problems, max_iter, tol_m)
+    return _gauss_newton_any(transferred, problems, max_iter, tol_m)
 
 
 @njit(cache=True)

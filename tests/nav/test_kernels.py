@@ -340,3 +340,55 @@ def test_fix_status_kernel_equals_numpy(radius):
     assert fast[0].dtype == ref[0].dtype and np.array_equal(fast[0], ref[0])
     assert np.array_equal(fast[1], ref[1])
     assert len(set(ref[0].tolist())) >= 4  # most statuses occur
+
+
+def _relabelled(transferred, problems, n_sys):
+    """The centroid problems ``transferred, problems`` with the satellites split into
+    ``n_sys`` constellations (contiguous, sorted, as the kernel expects) and one clock column
+    per constellation."""
+    pr, sv, vis, sigma_user, sig_c, _system = transferred
+    rows, base, froot, ref, _has_clock, usable, x0 = problems
+    n_sv = sv.shape[0]
+    system = np.minimum(np.arange(n_sv) * n_sys // n_sv, n_sys - 1).astype(np.int64)
+    has_clock = np.ones((rows.shape[0], n_sys), dtype=bool)
+    return (pr, sv, vis, sigma_user, sig_c, system), (
+        rows,
+        base,
+        froot,
+        ref,
+        has_clock,
+        usable,
+        x0,
+    )
+
+
+def test_cooperative_kernel_compiled_per_constellation_count_is_the_same(monkeypatch):
+    """The Gauss-Newton kernel compiled for one or two constellations (a compile-time
+    constant) gives the bits of the one that reads the count from its arguments."""
+    from coopnav_env.nav import _kernels
+
+    calls = []
+    kernel = _kernels.cooperative_gauss_newton
+
+    def recording(*args):
+        calls.append(args)
+        return kernel(*args)
+
+    monkeypatch.setattr(cooperative._kernels, "cooperative_gauss_newton", recording)
+    for seed, transfer in ((1, "ddt"), (3, "sdt"), (6, "ddt")):
+        sc = make_scenario(seed=seed)
+        rng = np.random.default_rng(seed)
+        obs = sc.observations(rng)
+        solve_cooperative(obs, sc.relative(rng), transfer=transfer, x0_ecef_m=sc.pos_ecef[0])
+    assert len(calls) == 3
+    iterations = 0
+    for transferred, problems, max_iter, tol_m in calls:
+        for n_sys in (1, 2, 3):
+            t, p = _relabelled(transferred, problems, n_sys)
+            fast = kernel(t, p, max_iter, tol_m)
+            ref = _kernels._gauss_newton_any(t, p, max_iter, tol_m)
+            for a, b in zip(fast, ref, strict=True):
+                assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+            assert fast[1].shape[1] == n_sys
+            iterations += int(fast[6].sum())
+    assert iterations > 3 * 3 * 5  # every problem iterated at least once
