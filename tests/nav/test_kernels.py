@@ -381,14 +381,12 @@ def test_cooperative_kernel_compiled_per_constellation_count_is_the_same(monkeyp
         obs = sc.observations(rng)
         solve_cooperative(obs, sc.relative(rng), transfer=transfer, x0_ecef_m=sc.pos_ecef[0])
     assert len(calls) == 3
-    iterations = 0
     for transferred, problems, max_iter, tol_m in calls:
-        for n_sys in (1, 2, 3):
+        for n_sys in (1, 2, 3):  # (three: the general build on both sides)
             t, p = _relabelled(transferred, problems, n_sys)
             fast = kernel(t, p, max_iter, tol_m)
             ref = _kernels._gauss_newton_any(t, p, max_iter, tol_m)
             for a, b in zip(fast, ref, strict=True):
                 assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
             assert fast[1].shape[1] == n_sys
-            iterations += int(fast[6].sum())
-    assert iterations > 3 * 3 * 5  # every problem iterated at least once
+            assert fast[6].min() >= 1 and fast[6].max() >= 2  # iterated, past a first update
