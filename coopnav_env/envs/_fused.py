@@ -127,20 +127,25 @@ class FusedStep:
             self._seen = [_fingerprint(e) for e in envs]
         return out
 
-    def first_epochs(self, envs: list[UrbanCanyonEnv]) -> bool:
-        """The first epoch of each copy's episode, after ``UrbanCanyonEnv._begin_reset`` and
-        ``UrbanWorld._begin_episode`` (what ``UrbanWorld.reset`` computes after them: the
-        swarm where it starts, navigation cold-started from the launch positions); sets each
-        world's and environment's epoch. False, with nothing changed, if a copy cannot take
-        it (then reset it as usual). Its kernels run on this thread alone: it is called
-        inside :meth:`run`'s ``begin``, while the pool's threads run the step's kernel."""
+    def first_epochs(self, envs: list[UrbanCanyonEnv]) -> tuple[np.ndarray, np.ndarray] | None:
+        """The first epoch of each copy's episode, after ``UrbanCanyonEnv._begin_reset``,
+        ``UrbanWorld._begin_episode`` and ``UrbanCanyonEnv._episode_scales`` (what
+        ``UrbanWorld.reset`` computes after them: the swarm where it starts, navigation
+        cold-started from the launch positions); sets each world's and environment's epoch.
+
+        Returns the copies' first observations ``(R, N, obs_dim)`` float32 and each UAV's
+        remaining route at the first epoch ``(R, N)`` [m] (what ``UrbanCanyonEnv.
+        _finish_reset`` computes copy by copy, the same numbers bit for bit), or None, with
+        nothing changed, if a copy cannot take it (then reset it as usual). Its kernels run on
+        this thread alone: it is called inside :meth:`run`'s ``begin``, while the pool's
+        threads run the step's kernel."""
         worlds = [e.world for e in envs]
         if not all(_fused_world(w, cold=True) for w in worlds):
-            return False
+            return None
         n = envs[0].config.n_uavs
         cmd = np.zeros((len(envs), n, 3))
         st = _SwarmArrays(envs)
-        return self._epochs(envs, cmd, st, cold=True) is not None
+        return self._epochs(envs, cmd, st, cold=True)
 
     def _epochs(
         self,
@@ -278,9 +283,8 @@ class FusedStep:
             raise RuntimeError("the episode ends known before the navigation kernel differ")
         if cold:
             self._first_epochs(envs, st, t_new, skies, n_sv, los_off, los_flat, outputs, rel, avail)
-            return ()
         sky_deg = np.degrees(np.arctan(tan_max))
-        steps = st.steps + 1
+        steps = st.steps if cold else st.steps + 1  # (a first epoch's: 0)
         observed = _batched_kernels.Observed(
             obs=np.empty((n_copies, n, cfg.obs_base_dim), dtype=np.float32),
             floats=np.empty((n_copies, 8, n)),
@@ -317,6 +321,8 @@ class FusedStep:
             obs = np.concatenate(
                 [obs, np.broadcast_to(np.eye(n, dtype=np.float32), (n_copies, n, n))], axis=2
             )
+        if cold:  # the first observations, and each UAV's route at the first epoch
+            return obs, _remaining_routes_m(st.route, st.tail, pos1, wp)
         # the copies' worlds and epochs (what their own step would have left)
         pos_c, vel_c, wp_c, goal_c = pos1.copy(), vel1.copy(), wp.copy(), st.goal.copy()
         # the reward of every copy at once (UrbanCanyonEnv._step_arrays' arithmetic, each
@@ -406,6 +412,18 @@ class FusedStep:
             w.nav_pos_enu_m, w.nav_cov_enu_m2, w.next_wp = nav_pos[k], nav_cov[k], wp[k]
             w._warm = True
             w.last = e._epoch = _StepEpoch.of(epochs, k)
+
+
+def _remaining_routes_m(
+    route: np.ndarray, tail: np.ndarray, pos: np.ndarray, next_wp: np.ndarray
+) -> np.ndarray:
+    """Each UAV's remaining route ``(K, N)`` [m] from the copies' padded routes ``(K, R, 2)``
+    and route tails ``(K, R)``, true positions ``(K, N, 3)`` and next waypoints ``(K, N)``:
+    :func:`coopnav_env.sim.route.remaining_route_m` of every copy at once (the same numpy
+    operations on each element, so the same numbers bit for bit)."""
+    k = np.arange(pos.shape[0])[:, None]
+    d = np.linalg.norm(pos[:, :, :2] - route[k, next_wp], axis=2)
+    return d + tail[k, next_wp]
 
 
 class _EpochRows(NamedTuple):

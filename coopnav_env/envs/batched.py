@@ -303,17 +303,24 @@ class BatchedUrbanCanyonEnv:
 
     def _reset_copies(self, done: list[int]) -> dict[int, np.ndarray]:
         """Automatic reset of the copies ``done`` (the next episode continues each copy's
-        generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs of all of them in
-        the fused step's compiled calls on this thread alone (it runs beside the step's
-        navigation kernel; else each world's own). Returns each copy's first observations."""
+        generator): ``UrbanCanyonEnv._reset_arrays`` with the first epochs, first
+        observations and route lengths of all of them in the fused step's compiled calls on
+        this thread alone (it runs beside the step's navigation kernel; else each world's
+        own). Returns each copy's first observations."""
         envs = [self.envs[k] for k in done]
         for e in envs:
             e._begin_reset(None)
             e.world._begin_episode(e._rng)
-        if envs and not self._fused_step.first_epochs(envs):
+            e._episode_scales()
+        first = self._fused_step.first_epochs(envs) if envs else None
+        if first is None:
             for e in envs:
                 e._epoch = e.world._first_epoch(e._rng)
-        return {k: e._finish_reset() for k, e in zip(done, envs)}
+            return {k: e._finish_reset() for k, e in zip(done, envs)}
+        obs, route_m = first
+        return {
+            k: e._finish_reset((obs[i], route_m[i])) for i, (k, e) in enumerate(zip(done, envs))
+        }
 
     def _step_copies(
         self, cmd: np.ndarray

@@ -258,6 +258,13 @@ class UrbanCanyonTask:
         route_m = remaining_route_m(
             world.route_xy_m, ep.pos_enu_m[:, :2], ep.next_waypoint, world.route_tail_m
         )
+        return UrbanCanyonTask.unpaid_route(route_m)
+
+    @staticmethod
+    def unpaid_route(route_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The route lengths (at least 1e-9 m) and the part not yet paid (a copy) of each
+        UAV's remaining route ``route_m`` ``(N,)`` [m] at an episode's first epoch: what
+        :meth:`route_lengths` returns."""
         return np.maximum(route_m, 1e-9), route_m.copy()
 
     # ---- reward and episode end -------------------------------------------------------------

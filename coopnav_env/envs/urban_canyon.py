@@ -252,9 +252,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._steps = 0
         self._route_offset_cap_m = None
 
-    def _finish_reset(self) -> np.ndarray:
-        """:meth:`_reset_arrays` after the world's first epoch (``_epoch``): the episode's
-        scales and route lengths, and the observations."""
+    def _episode_scales(self) -> None:
+        """The scales of a new episode from its city (after the world's
+        ``_begin_episode``): the route-frame offset check or cap, the city scale and the
+        observation kernel's scales."""
         if self.config.action_frame == "route":
             if isinstance(self.world.city, FileCity):  # no single street width: the route's
                 self._route_offset_cap_m = route_offset_room_m(
@@ -265,8 +266,22 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._city_scale_m = city_scale_m(self.world)
         # the observation kernel's scales (the city scale changes with the city)
         self._obs_params = self.task.observation_params(self._city_scale_m)
+
+    def _finish_reset(self, first: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """:meth:`_reset_arrays` after the world's first epoch (``_epoch``): the episode's
+        scales (:meth:`_episode_scales`) and route lengths, and the observations.
+
+        ``first``: the first observations ``(N, obs_dim)`` and each UAV's remaining route
+        ``(N,)`` [m] that the batched environment's fused first epochs computed, after
+        :meth:`_episode_scales` (then only the rest is done here)."""
+        if first is None:
+            self._episode_scales()
         self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
         # reward_scheme="navigated_distance": each UAV's route length and the part not yet paid
+        if first is not None:
+            obs, route_m = first
+            self._route_m, self._unpaid_m = self.task.unpaid_route(route_m)
+            return obs
         self._route_m, self._unpaid_m = self.task.route_lengths(self.world, self._epoch)
         return self._observation_array()
 

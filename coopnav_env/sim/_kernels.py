@@ -62,6 +62,49 @@ def grid_boxes(bx0, by0, split_along_x, weights, weight_sums, heights, block_m, 
     return lo, hi
 
 
+@njit(cache=True)
+def street_frames(cdf, u_street, u_along, centres, n_x, extent, margin_m):
+    """Street points ``xy (n, 2)`` [m] and whether each lies on a north-south street
+    ``(n,)``, from the streets' cumulative length distribution ``cdf (S,)`` (the ``n_x``
+    north-south streets first, then the east-west ones), their centre lines ``centres (S,)``
+    [m], the city's ``extent (x0, x1, y0, y1)`` [m] and ``n`` uniform draws each: the street
+    ``u_street`` picks (``np.searchsorted(cdf, u, side="right")``) and the fraction
+    ``u_along`` of the street's length less ``margin_m`` at either end. The arithmetic of the
+    numpy definition (``tests/sim/oracles.py``, ``street_frames``), in its order."""
+    x0, x1, y0, y1 = extent
+    street = np.searchsorted(cdf, u_street, side="right")
+    n = street.shape[0]
+    xy = np.empty((n, 2))
+    ns = np.empty(n, dtype=np.bool_)
+    y_start, y_span = y0 + margin_m, y1 - y0 - 2.0 * margin_m
+    x_start, x_span = x0 + margin_m, x1 - x0 - 2.0 * margin_m
+    for i in range(n):
+        s = street[i]
+        ns[i] = s < n_x
+        if ns[i]:
+            xy[i, 0] = centres[s]
+            xy[i, 1] = y_start + u_along[i] * y_span
+        else:
+            xy[i, 0] = x_start + u_along[i] * x_span
+            xy[i, 1] = centres[s]
+    return xy, ns
+
+
+@njit(cache=True)
+def far_candidate(cand, centre, min_m):
+    """The index of the first candidate point ``cand (n, 2)`` at least ``min_m`` [m] from
+    ``centre (2,)``, or where none is, of the farthest (the first of equals): ``(d >=
+    min_m).argmax()`` and ``d.argmax()`` of the distances ``d = np.hypot(...)``."""
+    far, far_d = 0, -np.inf
+    for j in range(cand.shape[0]):
+        d = np.hypot(cand[j, 0] - centre[0], cand[j, 1] - centre[1])
+        if d >= min_m:
+            return j
+        if d > far_d or (d != d and far_d == far_d):  # numpy's argmax: the first NaN
+            far, far_d = j, d
+    return far
+
+
 @njit(cache=True, inline="always")
 def _fmax(a, b):
     """``numpy.maximum`` of two floats (``max`` differs for signed zeros: max(-0., 0.) = -0.)."""

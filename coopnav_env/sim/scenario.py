@@ -1003,7 +1003,30 @@ def _street_frames(
     street orientation returned so that a formation can be laid along it.
     """
     x0, x1, y0, y1 = city.extent_m
+    cdf, centres = _street_distribution(city)
+    u_street = rng.random(n)
+    u_along = rng.random(n)
+    extent = (float(x0), float(x1), float(y0), float(y1))
+    return _sim_kernels.street_frames(
+        cdf, u_street, u_along, centres, city.street_centres_x_m.size, extent, float(margin_m)
+    )
+
+
+_STREET_DISTRIBUTIONS: dict[tuple, tuple] = {}
+"""``(id(street_x), id(street_y), extent) -> (street_x, street_y, cdf, centres)`` of
+:func:`_street_distribution` (the entry keeps the arrays, so their ids stay theirs)."""
+
+
+def _street_distribution(city: City) -> tuple[FloatArray, FloatArray]:
+    """The cumulative distribution of a city's streets weighted by their lengths (the
+    north-south streets first) and their centre lines, ``(S,)`` each; remembered per pair of
+    street arrays and extent (every grid city of one configuration shares its streets)."""
+    x0, x1, y0, y1 = city.extent_m
     cx, cy = city.street_centres_x_m, city.street_centres_y_m
+    key = (id(cx), id(cy), x0, x1, y0, y1)
+    hit = _STREET_DISTRIBUTIONS.get(key)
+    if hit is not None and hit[0] is cx and hit[1] is cy:
+        return hit[2], hit[3]
     lengths = np.empty(cx.size + cy.size)
     lengths[: cx.size] = y1 - y0
     lengths[cx.size :] = x1 - x0
@@ -1011,16 +1034,13 @@ def _street_frames(
     # distribution and the same uniform draws (one rng.random(n)), so the same streets
     cdf = (lengths / lengths.sum()).cumsum()
     cdf /= cdf[-1]
-    street = cdf.searchsorted(rng.random(n), side="right")
-    along01 = rng.random(n)
-    ns = street < cx.size
-    centre = np.concatenate([cx, cy])[street]
-    y_along = y0 + margin_m + along01 * (y1 - y0 - 2.0 * margin_m)
-    x_along = x0 + margin_m + along01 * (x1 - x0 - 2.0 * margin_m)
-    xy = np.empty((n, 2))
-    xy[:, 0] = np.where(ns, centre, x_along)
-    xy[:, 1] = np.where(ns, y_along, centre)
-    return xy, ns
+    centres = np.concatenate([cx, cy])
+    cdf.setflags(write=False)
+    centres.setflags(write=False)
+    if len(_STREET_DISTRIBUTIONS) >= 64:  # cities of many street layouts: start again
+        _STREET_DISTRIBUTIONS.clear()
+    _STREET_DISTRIBUTIONS[key] = (cx, cy, cdf, centres)
+    return cdf, centres
 
 
 _NO_BOXES = np.zeros((0, 3))
@@ -1656,11 +1676,8 @@ class UrbanWorld:
                 raise ValueError(f"start_pos_enu_m must be finite with shape ({n}, 3)")
         if goal_enu_m is None:
             centre = pos[:, :2].mean(axis=0)
-            d = cand[1:] - centre
-            dist = np.hypot(d[:, 0], d[:, 1])
-            pick = int((dist >= cfg.goal_distance_min_m).argmax())  # the first far enough
-            if not dist[pick] >= cfg.goal_distance_min_m:  # none: the farthest
-                pick = int(dist.argmax())
+            # the first candidate far enough from the formation, else the farthest
+            pick = _sim_kernels.far_candidate(cand[1:], centre, float(cfg.goal_distance_min_m))
             goal = np.array([*cand[1 + pick].tolist(), float(cfg.start_altitude_m)])
         else:
             goal = np.array(goal_enu_m, dtype=float)

@@ -487,3 +487,25 @@ def test_claimed_copies_come_from_the_front_of_a_segment_or_the_back_of_all() ->
     assert np.flatnonzero(back[:, 0]).tolist() == [0, 1, 2, 6, 7, 8, 9]
     assert back[[9, 8, 7, 6, 2, 1, 0], 1].tolist() == [0, 1, 2, 3, 4, 5, 6]
     assert claims.tolist() == [[0, 0], [6, 6], [6, 6]]  # nothing left to claim
+
+
+def test_remaining_routes_of_a_batch_equal_each_copys() -> None:
+    # the first epochs' route lengths of the copies reset at a step (padded routes of
+    # different lengths) equal remaining_route_m of each copy, bit for bit
+    from coopnav_env.sim.route import remaining_route_m, route_tail_lengths_m
+
+    rng = np.random.default_rng(9)
+    k_copies, n, r_max = 7, 5, 4
+    route, tail = np.zeros((k_copies, r_max, 2)), np.zeros((k_copies, r_max))
+    pos = rng.uniform(-200.0, 200.0, (k_copies, n, 3))
+    wp = np.empty((k_copies, n), dtype=np.int64)
+    routes = []
+    for k in range(k_copies):
+        r = rng.uniform(-200.0, 200.0, (1 + k % r_max, 2))
+        routes.append(r)
+        route[k, : len(r)], tail[k, : len(r)] = r, route_tail_lengths_m(r)
+        wp[k] = rng.integers(0, len(r), n)
+    out = _fused._remaining_routes_m(route, tail, pos, wp)
+    for k, r in enumerate(routes):
+        ref = remaining_route_m(r, pos[k, :, :2], wp[k], route_tail_lengths_m(r))
+        assert out[k].tobytes() == ref.tobytes()

@@ -1,12 +1,14 @@
-"""Grid-city generation, the street draws of a reset and street routes equal their numpy
-oracles (``tests/sim/oracles.py``: the constructors' checked path, ``rng.choice``, the array
-formulation of the route) bit for bit, and leave the generator in the same state."""
+"""Grid-city generation, the street draws of a reset, its choice of a goal and street routes
+equal their numpy oracles (``tests/sim/oracles.py``: the constructors' checked path,
+``rng.choice``, ``argmax`` over the distances, the array formulation of the route) bit for
+bit, and leave the generator in the same state."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from coopnav_env.sim import _kernels as sim_kernels
 from coopnav_env.sim import scenario
 from coopnav_env.sim.city import CityConfig, generate_city
 from tests.sim import oracles
@@ -50,6 +52,38 @@ def test_street_frames_match_rng_choice(config: CityConfig) -> None:
         assert xy.tobytes() == xy_ref.tobytes() and ns.tobytes() == ns_ref.tobytes()
         assert a.random() == b.random()
     assert ns.any() and not ns.all()  # both orientations drawn
+
+
+def test_street_frames_of_cities_with_other_streets_match_rng_choice() -> None:
+    # the streets' distribution is remembered per city layout: cities of several layouts,
+    # drawn in turn, each get their own streets
+    cities = [generate_city(config, np.random.default_rng(3)) for config in CONFIGS[:3]]
+    for seed in range(30):
+        city = cities[seed % len(cities)]
+        a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+        xy, ns = scenario._street_frames(city, a, 64, 2.0)
+        xy_ref, ns_ref = oracles.street_frames(city, b, 64, 2.0)
+        assert xy.tobytes() == xy_ref.tobytes() and ns.tobytes() == ns_ref.tobytes()
+
+
+def test_far_candidate_is_the_first_far_enough_else_the_first_farthest() -> None:
+    # the goal of a reset: numpy's (d >= min).argmax(), and d.argmax() where none is far
+    # enough, over distances with ties (repeated candidates)
+    rng = np.random.default_rng(5)
+    fallbacks = 0
+    for _ in range(300):
+        cand = rng.uniform(-300.0, 300.0, (int(rng.integers(1, 30)), 2))
+        cand = np.concatenate([cand, cand[::2]])  # equal distances, later in the list
+        centre = rng.uniform(-50.0, 50.0, 2)
+        d = cand - centre
+        dist = np.hypot(d[:, 0], d[:, 1])
+        min_m = float(rng.choice([0.0, float(np.median(dist)), float(dist.max()) + 1.0]))
+        pick = int((dist >= min_m).argmax())
+        if not dist[pick] >= min_m:
+            pick = int(dist.argmax())
+            fallbacks += 1
+        assert sim_kernels.far_candidate(cand, centre, min_m) == pick
+    assert fallbacks > 50  # the farthest taken where none was far enough
 
 
 @pytest.mark.parametrize("config", CONFIGS[:3])
