@@ -919,7 +919,9 @@ _ONE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 def step_one(env: UrbanCanyonEnv, cmd: np.ndarray):
     """``UrbanCanyonEnv._step_arrays`` as a batch of one (the batched environment's step),
-    or None where the settings or the world are outside the fused step."""
+    followed by the parts of the step's infos (:func:`info_arrays`' arguments, for
+    ``UrbanCanyonEnv._infos_of_arrays``), or None where the settings or the world are outside
+    the fused step."""
     if not fused_settings(env.config):
         return None
     fused = _ONE.get(env)
@@ -928,12 +930,12 @@ def step_one(env: UrbanCanyonEnv, cmd: np.ndarray):
     out = fused.run([env], np.ascontiguousarray(cmd, dtype=np.float64)[None])
     if out is None:
         return None
-    obs, rewards, terminated, truncated, terms, in_goal, _parts = out
+    obs, rewards, terminated, truncated, terms, in_goal, parts = out
     if env.render_mode is not None:
         env._trail.append(env._epoch.pos_enu_m)
         env._trail = env._trail[-60:]
     terms_d = dict(zip(REWARD_TERMS, terms[0]))
-    return obs[0], rewards[0], bool(terminated[0]), bool(truncated[0]), terms_d, in_goal[0]
+    return obs[0], rewards[0], bool(terminated[0]), bool(truncated[0]), terms_d, in_goal[0], parts
 
 
 class _SwarmArrays:

@@ -30,7 +30,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -154,6 +154,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._rng: np.random.Generator | None = None  # created at the first reset
         self._epoch: Epoch | None = None
         self._steps = 0
+        # the info arrays of the fused step just taken (read once by step())
+        self._info_parts: tuple | None = None
         self._trail: list[np.ndarray] = []
         self._window: Any = None
 
@@ -251,6 +253,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self.agents = self.possible_agents[:]
         self._steps = 0
         self._route_offset_cap_m = None
+        self._info_parts = None
 
     def _episode_scales(self) -> None:
         """The scales of a new episode from its city (after the world's
@@ -316,7 +319,8 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         cmd = self._action_array(actions)
         obs_arr, reward, terminated, truncated, terms, in_goal = self._step_arrays(cmd)
         obs = dict(zip(self.possible_agents, obs_arr))
-        infos = self._infos(terms, in_goal)
+        parts, self._info_parts = self._info_parts, None
+        infos = self._infos(terms, in_goal) if parts is None else self._infos_of_arrays(parts)
         agents = self.agents
         rewards = dict(zip(agents, reward.tolist()))
         terms_d = dict.fromkeys(agents, terminated)
@@ -341,7 +345,9 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
 
         fused = step_one(self, cmd)
         if fused is not None:  # the step of BatchedUrbanCanyonEnv, as a batch of one
-            return fused
+            *out, self._info_parts = fused
+            return tuple(out)
+        self._info_parts = None
         cfg = self.config
         prev = self._epoch
         if cfg.action_frame == "route":
@@ -436,12 +442,6 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         averaging.
         """
         ep = self._epoch
-        rows = self._info_floats().tolist()
-        # a missing fix: its flag False and its error NO_FIX_ERROR_M (on N Python floats:
-        # cheaper than numpy's isfinite and where)
-        fix_rows = [[math.isfinite(x) for x in rows[1]], [math.isfinite(x) for x in rows[2]]]
-        for r, fixed in zip((1, 2), fix_rows):
-            rows[r] = [x if f else NO_FIX_ERROR_M for x, f in zip(rows[r], fixed)]
         # rows of Python ints and bools (tolist per array: no stacked copy)
         ints = [
             a.tolist()
@@ -465,7 +465,59 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
                 ep.out_of_contact,
             )
         ]
-        n = ep.n_uavs
+        term_rows = [np.asarray(v, dtype=float).tolist() for v in terms.values()]
+        cols = self._info_columns(
+            self._info_floats().tolist(), ints, int(ep.n_above_mask), bools, list(terms), term_rows
+        )
+        if self.config.integrity != "off":
+            cols.update(self._integrity_infos())
+        if self.config.nlos_exclusion != "off":
+            cols["n_map_excluded"] = ep.map_excluded.sum(axis=1).tolist()
+        keys = list(cols)
+        return {
+            a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
+        }
+
+    def _infos_of_arrays(self, parts: tuple) -> dict[str, dict]:
+        """:meth:`_infos` of the step that the fused step just took, from its arrays (the
+        parts of :func:`coopnav_env.envs._fused.info_arrays`, a batch of one): the same
+        numbers, without making the step's :class:`~coopnav_env.sim.scenario.Epoch` (the
+        fused step's settings have neither integrity monitoring nor the map exclusion)."""
+        floats, ints, flags, terms, _steps = parts
+        n_sats, n_swarm, n_open, co_status, sa_status, source, wp = ints
+        cols = self._info_columns(
+            floats[0].tolist(),
+            [a[0].tolist() for a in (n_sats, n_swarm, co_status, sa_status, source, wp)],
+            int(n_open[0]),
+            [a[0].tolist() for a in flags],
+            REWARD_TERMS,
+            terms[0].tolist(),
+        )
+        keys = list(cols)
+        return {
+            a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
+        }
+
+    def _info_columns(
+        self,
+        rows: list[list[float]],
+        ints: list[list[int]],
+        n_above_mask: int,
+        bools: list[list[bool]],
+        term_names: Sequence[str],
+        term_rows: list[list[float]],
+    ) -> dict[str, list]:
+        """The infos' columns, each a list of N Python numbers: from the real numbers of
+        :func:`coopnav_env.envs._kernels.info_floats` (8 rows), the satellites received by
+        each UAV and by the swarm, the statuses, sources and next waypoints (6 rows), the
+        satellites above the mask, the rejection, goal, collision, separation and contact
+        flags (6 rows) and the reward terms by name."""
+        n = len(rows[0])
+        # a missing fix: its flag False and its error NO_FIX_ERROR_M (on N Python floats:
+        # cheaper than numpy's isfinite and where)
+        fix_rows = [[math.isfinite(x) for x in rows[1]], [math.isfinite(x) for x in rows[2]]]
+        for r, fixed in zip((1, 2), fix_rows):
+            rows[r] = [x if f else NO_FIX_ERROR_M for x, f in zip(rows[r], fixed)]
         cols = {
             "nav_error_m": rows[0],
             "coop_error_m": rows[1],
@@ -478,7 +530,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "sig_3d_m": rows[6],
             "n_sats": ints[0],
             "n_sats_swarm": ints[1],
-            "n_sats_open_sky": [int(ep.n_above_mask)] * n,
+            "n_sats_open_sky": [n_above_mask] * n,
             "coop_status": ints[2],
             "standalone_status": ints[3],
             "nav_source": ints[4],
@@ -491,17 +543,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             "separation_violation": bools[4],
             "out_of_contact": bools[5],
         }
-        for t, v in terms.items():  # REWARD_TERMS, then "integrity" when it is on
-            cols[f"reward_{t}"] = np.asarray(v, dtype=float).tolist()
+        for t, v in zip(term_names, term_rows):  # REWARD_TERMS, then "integrity" when it is on
+            cols[f"reward_{t}"] = v
         cols["step"] = [self._steps] * n
-        if self.config.integrity != "off":
-            cols.update(self._integrity_infos())
-        if self.config.nlos_exclusion != "off":
-            cols["n_map_excluded"] = ep.map_excluded.sum(axis=1).tolist()
-        keys = list(cols)
-        return {
-            a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
-        }
+        return cols
 
     def _integrity_infos(self) -> dict[str, list]:
         """The integrity figures of the estimate each UAV uses (``integrity`` on): protection

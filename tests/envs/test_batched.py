@@ -509,3 +509,33 @@ def test_remaining_routes_of_a_batch_equal_each_copys() -> None:
     for k, r in enumerate(routes):
         ref = remaining_route_m(r, pos[k, :, :2], wp[k], route_tail_lengths_m(r))
         assert out[k].tobytes() == ref.tobytes()
+
+
+def test_step_infos_from_the_fused_arrays_equal_the_epochs() -> None:
+    # the parallel environment's step builds its infos from the fused step's arrays; the
+    # infos of the same step built from its epoch are the same numbers of the same types
+    from coopnav_env.envs.task import REWARD_TERMS
+
+    env = urban_canyon_v1.parallel_env(n_uavs=4, max_steps=12)
+    env.reset(seed=3)
+    agents = env.possible_agents
+    rng = np.random.default_rng(3)
+    missing_fixes = 0
+    for _ in range(40):
+        act = {a: rng.uniform(-1.0, 1.0, 3) for a in env.agents}
+        _, _, _, _, infos = env.step(act)
+        terms = {t: np.array([infos[a][f"reward_{t}"] for a in agents]) for t in REWARD_TERMS}
+        in_goal = np.array([infos[a]["in_goal"] for a in agents])
+        ref = env._infos(terms, in_goal)
+        assert list(ref) == list(infos)
+        for a in agents:
+            assert list(ref[a]) == list(infos[a])
+            for key, value in ref[a].items():
+                assert type(infos[a][key]) is type(value) and infos[a][key] == value, key
+        missing_fixes += sum(
+            not infos[a]["coop_fix"] or not infos[a]["standalone_fix"] for a in agents
+        )
+        if not env.agents:
+            env.reset()
+    assert missing_fixes > 0  # steps with a missing fix (its error -1, its flag False) too
+    assert env._info_parts is None  # read once, by the step that made them
