@@ -36,11 +36,14 @@ machines):
    itself through its array step (``arrays``: ``BatchedUrbanCanyonEnv.step_arrays``, no
    per-slot info dicts) and VMAS with K batched environments; and the time inside the
    compiled kernels per swarm step (:func:`kernel_timers`), whose inverse times two cores is a
-   ceiling for any batching of this simulation. The array step and VMAS also step 4 K copies
-   (``--scale-copies K2``; 0: not) in the same rounds: the cost per swarm step at 4 K against
-   K. ``--city`` flies the copies on another city (``family:mixed``: a new generated city of
-   extruded polygons every episode; with ``--city-pool P``, one of ``P`` cities, all built
-   before timing as in a long training run).
+   ceiling for any batching of this simulation, and where an array step's time goes
+   (:func:`array_step_timeline`: its three compiled calls, the automatic resets on the
+   calling thread beside the navigation kernel, the Python outside them). The array step and
+   VMAS also step 4 K copies (``--scale-copies K2``; 0: not) in the same rounds: the cost per
+   swarm step at 4 K against K. ``--city`` flies the copies on another city
+   (``family:mixed``: a new generated city of extruded polygons every episode; with
+   ``--city-pool P``, one of ``P`` cities, all built before timing as in a long training
+   run).
 6. **PPO training throughput** (agent-steps/s of ``coopnav train``'s own ``train()``, the
    packaged hyperparameters, no behaviour cloning) with each vector environment, and the share
    of the time in SB3's gradient updates (``PPO.train``), whose inverse is a ceiling for the
@@ -380,6 +383,50 @@ def kernel_timers() -> contextlib.AbstractContextManager[dict[str, float]]:
             (name, mod, name) for name, fn in vars(mod).items() if isinstance(fn, CPUDispatcher)
         ]
     return timed_attributes(targets)
+
+
+def array_step_timeline(
+    step: Callable[[int], None], seconds: float, min_steps: int = 3
+) -> dict[str, float]:
+    """Where a step of a batched environment goes, ms per step, over ``seconds`` (at least
+    ``min_steps`` steps) of ``step(1)``.
+
+    Keys: each compiled call that runs on every core (``motion_sight_relative``,
+    ``navigation_reward_sensors``, ``observations_infos``: the wall time of its window, from
+    the call to the last copy done); ``resets``, the automatic resets, which the calling
+    thread runs inside the navigation window while the pool's threads run the kernel (their
+    first epochs' kernels included); ``python``, the rest of the step: Python outside the
+    compiled calls, while the other cores wait; ``step``, the whole step.
+    """
+    from coopnav_env.envs import _fused
+    from coopnav_env.envs.batched import BatchedUrbanCanyonEnv
+
+    windows: dict[str, float] = {}
+    run_parallel = _fused._run_parallel
+
+    def timed(kernel: Any, n_copies: int, args: tuple, work: Any = None) -> None:
+        t0 = time.perf_counter()
+        try:
+            run_parallel(kernel, n_copies, args, work)
+        finally:
+            name = kernel.__name__
+            windows[name] = windows.get(name, 0.0) + time.perf_counter() - t0
+
+    _fused._run_parallel = timed
+    try:
+        with timed_attributes([("resets", BatchedUrbanCanyonEnv, "_reset_copies")]) as acc:
+            steps, t0 = 0, time.perf_counter()
+            while time.perf_counter() - t0 < seconds or steps < min_steps:
+                step(1)
+                steps += 1
+            wall = time.perf_counter() - t0
+    finally:
+        _fused._run_parallel = run_parallel
+    ms = {name: v / steps * 1e3 for name, v in windows.items()}
+    ms["resets"] = acc.get("resets", 0.0) / steps * 1e3
+    ms["step"] = wall / steps * 1e3
+    ms["python"] = ms["step"] - sum(ms[name] for name in windows)
+    return ms
 
 
 def stage_profile(n: int, seconds: float, **env_kw: Any) -> dict[str, Any]:
@@ -955,6 +1002,16 @@ def section_batched(args, out: dict) -> None:
         f"\n   ceiling with every line of Python free and {cores} cores in perfect parallel: "
         f"{ceiling:,.0f} env-steps/s (= {cores} / compiled time per swarm step)"
     )
+    timeline = array_step_timeline(fns["arrays"], seconds)
+    print(
+        f"   where an array step goes (ms per step of K = {k}): motion "
+        f"{timeline.get('motion_sight_relative', 0.0):.2f}, navigation "
+        f"{timeline.get('navigation_reward_sensors', 0.0):.2f} (the automatic resets "
+        f"{timeline['resets']:.2f} of it, on the calling thread beside the kernel), "
+        f"observations {timeline.get('observations_infos', 0.0):.2f}, Python outside the "
+        f"compiled calls {timeline['python']:.2f} (the other cores waiting); "
+        f"step {timeline['step']:.2f}"
+    )
     for venv in venvs:
         venv.close()
     out["batched"] = {
@@ -967,6 +1024,7 @@ def section_batched(args, out: dict) -> None:
         "compiled_s_per_swarm_step": compiled,
         "compiled_by_kernel_s_per_swarm_step": per_swarm,
         "ceiling_env_steps_per_s_2_cores": ceiling,
+        "array_step_ms": timeline,
     }
 
 

@@ -147,3 +147,20 @@ def test_copy_breakdown_counts_the_step_arrays_the_copies_share_once():
     assert rows and shared_a >= sum(a.nbytes for a in rows)
     assert shared_b >= shared_a > 0
     batch.close()
+
+
+def test_array_step_timeline_splits_the_step_and_counts_the_resets():
+    from coopnav_env.envs import _fused
+
+    step, batch = bench_env.batch_stepper(3, 8)
+    run_parallel = _fused._run_parallel
+    ms = bench_env.array_step_timeline(step, 0.0, min_steps=12)
+    assert _fused._run_parallel is run_parallel  # the timer is taken off again
+    windows = ("motion_sight_relative", "navigation_reward_sensors", "observations_infos")
+    assert set(windows) <= set(ms)
+    # the windows and the Python outside them make up the step; the resets run inside the
+    # navigation window (random commands crash copies within a few steps: there are some)
+    assert abs(sum(ms[w] for w in windows) + ms["python"] - ms["step"]) < 1e-9
+    assert ms["python"] > 0.0 and all(ms[w] > 0.0 for w in windows)
+    assert 0.0 < ms["resets"] < ms["navigation_reward_sensors"]
+    batch.close()
