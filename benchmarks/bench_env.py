@@ -398,9 +398,13 @@ def array_step_timeline(
     first epochs' kernels included); ``python``, the rest of the step: Python outside the
     compiled calls, while the other cores wait; ``step``, the whole step.
     """
-    from coopnav_env.envs import _fused
+    import importlib
+
     from coopnav_env.envs.batched import BatchedUrbanCanyonEnv
 
+    # the fused step's runner of the compiled calls, wrapped for the run (the package's
+    # internals, instrumented as kernel_timers instruments its kernels)
+    _fused = importlib.import_module("coopnav_env.envs._fused")
     windows: dict[str, float] = {}
     run_parallel = _fused._run_parallel
 

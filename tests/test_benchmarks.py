@@ -150,8 +150,9 @@ def test_copy_breakdown_counts_the_step_arrays_the_copies_share_once():
 
 
 def test_array_step_timeline_splits_the_step_and_counts_the_resets():
-    from coopnav_env.envs import _fused
+    import importlib
 
+    _fused = importlib.import_module("coopnav_env.envs._fused")
     step, batch = bench_env.batch_stepper(3, 8)
     run_parallel = _fused._run_parallel
     ms = bench_env.array_step_timeline(step, 0.0, min_steps=12)
