@@ -242,6 +242,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         """Reset (as :meth:`reset`) and return the observations as one ``(N, obs_dim)`` array."""
         self._begin_reset(seed)
         self._epoch = self.world.reset(self._rng)
+        self._episode_scales()
         return self._finish_reset()
 
     def _begin_reset(self, seed: int | None) -> None:
@@ -271,14 +272,12 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
         self._obs_params = self.task.observation_params(self._city_scale_m)
 
     def _finish_reset(self, first: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
-        """:meth:`_reset_arrays` after the world's first epoch (``_epoch``): the episode's
-        scales (:meth:`_episode_scales`) and route lengths, and the observations.
+        """:meth:`_reset_arrays` after the world's first epoch (``_epoch``) and
+        :meth:`_episode_scales`: the episode's route lengths and the observations.
 
         ``first``: the first observations ``(N, obs_dim)`` and each UAV's remaining route
-        ``(N,)`` [m] that the batched environment's fused first epochs computed, after
-        :meth:`_episode_scales` (then only the rest is done here)."""
-        if first is None:
-            self._episode_scales()
+        ``(N,)`` [m] that the batched environment's fused first epochs computed (then they
+        are taken as they are)."""
         self._trail = [self._epoch.pos_enu_m] if self.render_mode is not None else []
         # reward_scheme="navigated_distance": each UAV's route length and the part not yet paid
         if first is not None:
@@ -473,10 +472,7 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             cols.update(self._integrity_infos())
         if self.config.nlos_exclusion != "off":
             cols["n_map_excluded"] = ep.map_excluded.sum(axis=1).tolist()
-        keys = list(cols)
-        return {
-            a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
-        }
+        return self._per_agent(cols)
 
     def _infos_of_arrays(self, parts: tuple) -> dict[str, dict]:
         """:meth:`_infos` of the step that the fused step just took, from its arrays (the
@@ -493,6 +489,10 @@ class UrbanCanyonEnv(ParallelEnv, EzPickle):
             REWARD_TERMS,
             terms[0].tolist(),
         )
+        return self._per_agent(cols)
+
+    def _per_agent(self, cols: dict[str, list]) -> dict[str, dict]:
+        """Each agent's flat info dictionary from the columns ``key -> N values``."""
         keys = list(cols)
         return {
             a: dict(zip(keys, row)) for a, row in zip(self.possible_agents, zip(*cols.values()))
