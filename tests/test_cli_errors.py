@@ -401,10 +401,26 @@ def test_start_hold_decisions_must_leave_decisions_to_learn(files, capsys):
     assert "got 1000000" in err and not (files / "hold").exists()
 
 
-def _python(code: str) -> subprocess.CompletedProcess:
+def _sigint_by_default() -> None:
+    """In the child before it runs: SIGINT to its default disposition, so that Python installs
+    its own handler whatever the test runner inherited (a shell starting a job in the
+    background, ``cmd &``, has it ignored, and Python then leaves it ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _run_child(argv: list[str]) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT
+        argv,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        preexec_fn=_sigint_by_default,
     )
+
+
+def _python(code: str) -> subprocess.CompletedProcess:
+    return _run_child([sys.executable, "-c", code])
 
 
 def test_an_interrupt_while_the_command_loads_the_package_is_one_line():
@@ -446,9 +462,7 @@ def test_a_worker_process_of_the_command_keeps_python_s_interrupt_handling():
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "worker_probe.py"
         path.write_text(code)
-        res = subprocess.run(
-            [sys.executable, str(path)], capture_output=True, text=True, timeout=300, cwd=ROOT
-        )
+        res = _run_child([sys.executable, str(path)])
     assert res.returncode == 0, res.stderr
 
 
