@@ -408,14 +408,14 @@ def _sigint_by_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def _run_child(argv: list[str]) -> subprocess.CompletedProcess:
+def _sigint_ignored() -> None:
+    """In the child before it runs: SIGINT ignored, as a shell leaves it for ``cmd &``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_child(argv: list[str], start=_sigint_by_default) -> subprocess.CompletedProcess:
     return subprocess.run(
-        argv,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        preexec_fn=_sigint_by_default,
+        argv, capture_output=True, text=True, timeout=300, cwd=ROOT, preexec_fn=start
     )
 
 
@@ -444,6 +444,26 @@ def test_an_interrupt_while_the_command_loads_the_package_is_one_line():
         "assert signal.getsignal(signal.SIGINT) is signal.default_int_handler\n"
     )
     assert _python(after).returncode == 0
+
+
+def test_a_command_started_with_the_interrupt_ignored_keeps_it_ignored():
+    """``nohup coopnav train ... &``: the shell has the command ignore SIGINT. Neither the
+    package's start-up handling nor ``main`` installs a handler over that, so a Ctrl-C meant
+    for the shell's foreground job does not reach the background run."""
+    code = (
+        "import os, signal, sys, time\n"
+        "sys.argv[0] = '/venv/bin/coopnav'\n"
+        "import coopnav_env\n"
+        "assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN\n"
+        "from coopnav_env.training.cli import main\n"
+        "main([])\n"
+        "assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "time.sleep(0.2)\n"
+    )
+    res = _run_child([sys.executable, "-c", code], start=_sigint_ignored)
+    assert res.returncode == 0, res.stderr
+    assert "interrupted" not in res.stderr, res.stderr
 
 
 def test_a_worker_process_of_the_command_keeps_python_s_interrupt_handling():
