@@ -1025,7 +1025,7 @@ def _street_distribution(city: City) -> tuple[FloatArray, FloatArray]:
     cx, cy = city.street_centres_x_m, city.street_centres_y_m
     key = (id(cx), id(cy), x0, x1, y0, y1)
     hit = _STREET_DISTRIBUTIONS.get(key)
-    if hit is not None and hit[0] is cx and hit[1] is cy:
+    if hit is not None:  # (the entry holds cx and cy: no other array can have their ids)
         return hit[2], hit[3]
     lengths = np.empty(cx.size + cy.size)
     lengths[: cx.size] = y1 - y0
